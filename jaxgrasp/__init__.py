@@ -1,0 +1,56 @@
+"""jaxgrasp: energy-tolerance grasp stability (Tsuji et al.) as a batched, differentiable JAX evaluator.
+
+Importing jaxgrasp turns on JAX's 64-bit mode (``jax_enable_x64``): results are float64
+without the user touching JAX's configuration. Every public function takes and returns
+SI units (m, Pa, N, kg, J, rad).
+
+Quick start::
+
+    import jaxgrasp
+    grasp = jaxgrasp.presets.cube(young_modulus=6e5, initial_deformation=0.002)
+    result = jaxgrasp.evaluate(grasp)
+    result.value, result.status_name   # J, 'stable'
+"""
+
+import jax as _jax
+
+_jax.config.update("jax_enable_x64", True)
+
+from . import presets  # noqa: E402
+from .evaluate import EvaluateOptions, evaluate  # noqa: E402
+from .grasp import STANDARD_GRAVITY, Grasp  # noqa: E402
+from .gripfile import grasp_from_dict, grasp_to_dict, load, save  # noqa: E402
+from .model import KINDS  # noqa: E402
+from .result import (  # noqa: E402
+    INFEASIBLE,
+    NOT_CONVERGED,
+    STABLE,
+    STATUS_NAMES,
+    UNSTABLE,
+    Evaluation,
+)
+from .solver import SolverOptions  # noqa: E402
+from .validation import GraspValueError  # noqa: E402
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Grasp",
+    "STANDARD_GRAVITY",
+    "evaluate",
+    "EvaluateOptions",
+    "SolverOptions",
+    "Evaluation",
+    "STATUS_NAMES",
+    "STABLE",
+    "UNSTABLE",
+    "INFEASIBLE",
+    "NOT_CONVERGED",
+    "KINDS",
+    "load",
+    "save",
+    "grasp_from_dict",
+    "grasp_to_dict",
+    "presets",
+    "GraspValueError",
+]

@@ -1,0 +1,113 @@
+"""The grasp: a pytree of every physical parameter, in SI units.
+
+A :class:`Grasp` holds ``N >= 2`` contacts between soft hemispherical fingertips and a
+rigid object. Every field is an array, so a grasp can be passed through ``jax.jit``,
+``jax.vmap`` (add a leading batch axis to any field) and ``jax.grad``.
+
+Frames and conventions (paper, Sec. V): the object frame has its origin at the object's
+centre of mass; contact positions and outward surface normals are given in that frame.
+In the initial grasping state each fingertip is pressed ``initial_deformation`` into its
+contact surface along the normal.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["Grasp", "STANDARD_GRAVITY"]
+
+STANDARD_GRAVITY = (0.0, 0.0, -9.81)
+"""Default gravity vector, m/s^2, object frame."""
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Grasp:
+    """All parameters of one grasp (SI units). Build it with :meth:`Grasp.create`.
+
+    Attributes:
+        positions: ``(N, 3)`` contact positions, m, object frame (origin at the centre of mass).
+        normals: ``(N, 3)`` outward surface normals at the contacts (need not be unit length;
+            the model normalises them).
+        initial_deformation: ``(N,)`` fingertip deformation in the initial state, m, in
+            ``(0, radius)``.
+        radius: ``(N,)`` fingertip hemisphere radius, m.
+        young_modulus: ``(N,)`` Young's modulus of the fingertip material, Pa.
+        friction: ``(N,)`` static friction coefficient, dimensionless.
+        max_force: ``(N,)`` upper limit of the normal contact force, N.
+        mass: ``()`` object mass, kg.
+        gravity: ``(3,)`` gravitational acceleration, m/s^2, object frame.
+
+    Any field may carry extra leading batch axes for ``jax.vmap``.
+    """
+
+    positions: Any
+    normals: Any
+    initial_deformation: Any
+    radius: Any
+    young_modulus: Any
+    friction: Any
+    max_force: Any
+    mass: Any
+    gravity: Any
+
+    @property
+    def num_contacts(self) -> int:
+        """Number of contacts ``N`` (static)."""
+        return int(jnp.shape(self.positions)[-2])
+
+    @classmethod
+    def create(
+        cls,
+        positions,
+        normals,
+        initial_deformation,
+        *,
+        radius,
+        young_modulus,
+        friction,
+        max_force,
+        mass=0.0,
+        gravity=STANDARD_GRAVITY,
+    ) -> "Grasp":
+        """Build a validated grasp, broadcasting per-fingertip scalars to all contacts.
+
+        Args:
+            positions: ``(N, 3)`` contact positions, m.
+            normals: ``(N, 3)`` outward normals (normalised here).
+            initial_deformation: scalar or ``(N,)``, m.
+            radius, young_modulus, friction, max_force: scalar (same for every contact)
+                or ``(N,)``; units m, Pa, -, N.
+            mass: kg (default 0).
+            gravity: ``(3,)`` m/s^2 (default ``(0, 0, -9.81)``).
+
+        Raises:
+            GraspValueError: a field is malformed; the message names the field and value.
+        """
+        from .validation import check_grasp_inputs
+
+        fields = check_grasp_inputs(
+            positions=positions,
+            normals=normals,
+            initial_deformation=initial_deformation,
+            radius=radius,
+            young_modulus=young_modulus,
+            friction=friction,
+            max_force=max_force,
+            mass=mass,
+            gravity=gravity,
+        )
+        return cls(**{k: jnp.asarray(v, dtype=jnp.float64) for k, v in fields.items()})
+
+    def replace(self, **changes) -> "Grasp":
+        """Return a copy with some fields replaced (no validation: for traced values)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_numpy(self) -> dict[str, np.ndarray]:
+        """Fields as a dict of NumPy arrays (for files and reports)."""
+        return {f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)}

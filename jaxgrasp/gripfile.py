@@ -1,0 +1,345 @@
+"""Grasp files: TOML or JSON, SI units.
+
+Format (TOML; JSON is the same structure as one object with keys ``fingertip``,
+``object`` and ``contacts``)::
+
+    [fingertip]              # defaults for every contact; may be overridden per contact
+    radius = 0.025           # m
+    young_modulus = 2e5      # Pa
+    friction = 0.5           # static friction coefficient, dimensionless
+    max_force = 15.0         # N, upper limit of each normal contact force
+
+    [object]                 # optional
+    mass = 0.1               # kg, default 0
+    gravity = [0, 0, -9.81]  # m/s^2, object frame, default (0, 0, -9.81)
+
+    [[contacts]]             # one table per contact, at least 2
+    position = [0.05, 0, 0]      # m, object frame, origin at the centre of mass
+    normal = [1, 0, 0]           # outward surface normal (any non-zero length)
+    initial_deformation = 0.002  # m, in (0, radius)
+    # radius / young_modulus / friction / max_force here override [fingertip]
+
+Each fingertip key must be given in ``[fingertip]`` or in every contact. Unknown keys,
+wrong types (booleans are not numbers), malformed files and physically invalid values
+all raise :class:`~jaxgrasp.validation.GraspValueError` with a one-line message
+prefixed by the file name.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tomllib
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from .grasp import Grasp
+from .validation import GraspValueError
+
+__all__ = ["load", "save", "grasp_from_dict", "grasp_to_dict", "to_toml"]
+
+TOP_KEYS = ("fingertip", "object", "contacts")
+FINGERTIP_KEYS = ("radius", "young_modulus", "friction", "max_force")
+OBJECT_KEYS = ("mass", "gravity")
+CONTACT_REQUIRED = ("position", "normal", "initial_deformation")
+CONTACT_KEYS = CONTACT_REQUIRED + FINGERTIP_KEYS
+DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
+
+_UNIT_COMMENTS = {
+    "radius": "m",
+    "young_modulus": "Pa",
+    "friction": "static friction coefficient",
+    "max_force": "N",
+    "mass": "kg",
+    "gravity": "m/s^2, object frame",
+    "position": "m, object frame",
+    "normal": "outward surface normal",
+    "initial_deformation": "m",
+}
+
+
+# ----------------------------------------------------------------------------- parsing
+
+
+def _show(value: Any, limit: int = 60) -> str:
+    """One-line text of a parsed value for error messages (JSON-like, truncated)."""
+    try:
+        text = json.dumps(value, ensure_ascii=False, allow_nan=True)
+    except (TypeError, ValueError, OverflowError, RecursionError):
+        text = repr(value)
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _number(value: Any, path: str) -> float:
+    if not _is_number(value):
+        kind = "a boolean" if isinstance(value, bool) else type(value).__name__
+        raise GraspValueError(f"{path} = {_show(value)} must be a number (got {kind})")
+    try:
+        return float(value)
+    except OverflowError:
+        raise GraspValueError(f"{path} = {_show(value)} is too large to be a finite number") from None
+
+
+def _vector3(value: Any, path: str) -> list[float]:
+    if (
+        not isinstance(value, (list, tuple))
+        or len(value) != 3
+        or not all(_is_number(v) for v in value)
+    ):
+        raise GraspValueError(f"{path} = {_show(value)} must be a list of 3 numbers")
+    return [_number(v, f"{path}[{k}]") for k, v in enumerate(value)]
+
+
+def _check_keys(table: Mapping, allowed: tuple[str, ...], where: str) -> None:
+    for key in table:
+        if key not in allowed:
+            raise GraspValueError(
+                f"unknown key {key!r} {where}; expected one of {', '.join(allowed)}"
+            )
+
+
+def _table(value: Any, path: str) -> Mapping:
+    if not isinstance(value, Mapping):
+        raise GraspValueError(f"{path} = {_show(value)} must be a table (object)")
+    return value
+
+
+def _grasp_kwargs(data: Any) -> dict[str, Any]:
+    """Turn a parsed file into keyword arguments for :meth:`Grasp.create`."""
+    if not isinstance(data, Mapping):
+        raise GraspValueError(
+            f"the top level must be a table (object) with keys {', '.join(TOP_KEYS)}, "
+            f"got {_show(data)}"
+        )
+    _check_keys(data, TOP_KEYS, "at top level")
+
+    fingertip = _table(data.get("fingertip", {}), "fingertip")
+    _check_keys(fingertip, FINGERTIP_KEYS, "in [fingertip]")
+    defaults = {k: _number(v, f"fingertip.{k}") for k, v in fingertip.items()}
+
+    obj = _table(data.get("object", {}), "object")
+    _check_keys(obj, OBJECT_KEYS, "in [object]")
+    mass = _number(obj["mass"], "object.mass") if "mass" in obj else 0.0
+    gravity = _vector3(obj["gravity"], "object.gravity") if "gravity" in obj else list(DEFAULT_GRAVITY)
+
+    if "contacts" not in data:
+        raise GraspValueError("no contacts: give at least 2 [[contacts]] tables")
+    contacts = data["contacts"]
+    if not isinstance(contacts, (list, tuple)) or not all(isinstance(c, Mapping) for c in contacts):
+        raise GraspValueError(
+            f"contacts = {_show(contacts)} must be a list of tables ([[contacts]])"
+        )
+    if len(contacts) == 0:
+        raise GraspValueError("contacts is empty: give at least 2 [[contacts]] tables")
+
+    positions, normals, deformations = [], [], []
+    per_tip: dict[str, list[float]] = {k: [] for k in FINGERTIP_KEYS}
+    overridden = {k: False for k in FINGERTIP_KEYS}
+    for i, contact in enumerate(contacts):
+        where = f"contacts[{i}]"
+        _check_keys(contact, CONTACT_KEYS, f"in {where}")
+        for key in CONTACT_REQUIRED:
+            if key not in contact:
+                raise GraspValueError(f"{where} is missing key {key!r}")
+        positions.append(_vector3(contact["position"], f"{where}.position"))
+        normals.append(_vector3(contact["normal"], f"{where}.normal"))
+        deformations.append(_number(contact["initial_deformation"], f"{where}.initial_deformation"))
+        for key in FINGERTIP_KEYS:
+            if key in contact:
+                per_tip[key].append(_number(contact[key], f"{where}.{key}"))
+                overridden[key] = True
+            elif key in defaults:
+                per_tip[key].append(defaults[key])
+            else:
+                raise GraspValueError(
+                    f"{where} has no {key!r} and [fingertip] does not give one; "
+                    f"give {key} in [fingertip] or in every contact"
+                )
+
+    kwargs: dict[str, Any] = dict(
+        positions=positions,
+        normals=normals,
+        initial_deformation=deformations,
+        mass=mass,
+        gravity=gravity,
+    )
+    for key in FINGERTIP_KEYS:
+        # a value taken only from [fingertip] is passed as a scalar, so error messages
+        # name it without a contact index
+        kwargs[key] = per_tip[key] if overridden[key] else defaults[key]
+    return kwargs
+
+
+def grasp_from_dict(data: Mapping, source: str = "<dict>") -> Grasp:
+    """Build a validated :class:`Grasp` from a parsed grasp file (TOML/JSON structure).
+
+    Args:
+        data: ``{"fingertip": {...}, "object": {...}, "contacts": [{...}, ...]}``, SI units.
+        source: name used as the prefix of error messages (a file name).
+
+    Raises:
+        GraspValueError: anything wrong with the data; message ``"<source>: <problem>"``.
+    """
+    try:
+        return Grasp.create(**_grasp_kwargs(data))
+    except GraspValueError as exc:
+        raise GraspValueError(f"{source}: {exc}") from None
+    except RecursionError:
+        raise GraspValueError(f"{source}: data nested too deeply") from None
+
+
+def _format(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in (".toml", ".json"):
+        raise GraspValueError(
+            f"{path}: unknown grasp file type {path.suffix!r}; use .toml or .json"
+        )
+    return suffix[1:]
+
+
+def load(path: str | os.PathLike) -> Grasp:
+    """Read a grasp file (``.toml`` or ``.json``, SI units) and return a validated :class:`Grasp`.
+
+    Raises:
+        GraspValueError: missing/unreadable file, unknown extension, malformed TOML/JSON,
+            or invalid content; the message is one line starting with the file name.
+    """
+    path = Path(path)
+    fmt = _format(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise GraspValueError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise GraspValueError(f"{path}: cannot read file ({exc.strerror or exc})") from None
+    try:
+        if fmt == "toml":
+            data = tomllib.loads(raw.decode("utf-8"))
+        else:
+            data = json.loads(raw)
+    except UnicodeDecodeError as exc:
+        raise GraspValueError(f"{path}: not valid UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except ValueError as exc:  # TOMLDecodeError, JSONDecodeError, int-too-long
+        kind = "TOML" if fmt == "toml" else "JSON"
+        raise GraspValueError(f"{path}: malformed {kind}: {exc}") from None
+    except RecursionError:
+        raise GraspValueError(f"{path}: malformed {fmt.upper()}: nested too deeply") from None
+    return grasp_from_dict(data, source=str(path))
+
+
+# ----------------------------------------------------------------------------- writing
+
+
+def _floats(arr: np.ndarray) -> list[float]:
+    return [float(x) for x in np.asarray(arr, dtype=np.float64).reshape(-1)]
+
+
+def grasp_to_dict(grasp: Grasp) -> dict[str, Any]:
+    """The file structure of a single (unbatched) grasp, as plain Python floats.
+
+    Per-fingertip values equal across all contacts go into ``"fingertip"``; the others
+    are written per contact. ``grasp_from_dict(grasp_to_dict(g))`` reproduces ``g``.
+    """
+    fields = grasp.to_numpy()
+    pos = np.asarray(fields["positions"], dtype=np.float64)
+    if pos.ndim != 2 or pos.shape[-1] != 3:
+        raise GraspValueError(
+            f"grasp_to_dict needs a single grasp with positions of shape (N, 3), got {pos.shape}"
+        )
+    n = pos.shape[0]
+
+    def per_contact(name: str) -> np.ndarray:
+        arr = np.asarray(fields[name], dtype=np.float64)
+        try:
+            return np.broadcast_to(arr, (n,))
+        except ValueError:
+            raise GraspValueError(
+                f"grasp_to_dict needs {name} of shape ({n},), got {arr.shape}"
+            ) from None
+
+    normals = np.broadcast_to(np.asarray(fields["normals"], dtype=np.float64), (n, 3))
+    dr = per_contact("initial_deformation")
+    fingertip: dict[str, float] = {}
+    varying: dict[str, np.ndarray] = {}
+    for key in FINGERTIP_KEYS:
+        arr = per_contact(key)
+        if np.array_equal(arr, np.full(n, arr[0])) and n > 0:
+            fingertip[key] = float(arr[0])
+        else:
+            varying[key] = arr
+    contacts = []
+    for i in range(n):
+        c: dict[str, Any] = {
+            "position": _floats(pos[i]),
+            "normal": _floats(normals[i]),
+            "initial_deformation": float(dr[i]),
+        }
+        for key, arr in varying.items():
+            c[key] = float(arr[i])
+        contacts.append(c)
+    out: dict[str, Any] = {}
+    if fingertip:
+        out["fingertip"] = fingertip
+    out["object"] = {
+        "mass": float(np.asarray(fields["mass"], dtype=np.float64)),
+        "gravity": _floats(fields["gravity"]),
+    }
+    out["contacts"] = contacts
+    return out
+
+
+def _toml_float(x: float) -> str:
+    if math.isnan(x):
+        return "nan"
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return repr(float(x))  # repr round-trips exactly and is valid TOML ("1e-05", "0.5")
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_float(v) for v in value) + "]"
+    return _toml_float(value)
+
+
+def _toml_lines(table: Mapping[str, Any]) -> list[str]:
+    lines = []
+    for key, value in table.items():
+        line = f"{key} = {_toml_value(value)}"
+        comment = _UNIT_COMMENTS.get(key)
+        lines.append(f"{line:<44} # {comment}" if comment else line)
+    return lines
+
+
+def to_toml(grasp: Grasp) -> str:
+    """TOML text of a grasp (the fixed grasp-file structure; floats written with ``repr``)."""
+    d = grasp_to_dict(grasp)
+    lines = ["# Grasp file (jaxgrasp). SI units: m, Pa, N, kg, m/s^2; object frame at the centre of mass."]
+    if "fingertip" in d:
+        lines += ["", "[fingertip]"] + _toml_lines(d["fingertip"])
+    lines += ["", "[object]"] + _toml_lines(d["object"])
+    for contact in d["contacts"]:
+        lines += ["", "[[contacts]]"] + _toml_lines(contact)
+    return "\n".join(lines) + "\n"
+
+
+def save(grasp: Grasp, path: str | os.PathLike) -> None:
+    """Write a single grasp to ``path`` (``.toml`` or ``.json`` by extension, SI units).
+
+    Floats are written so that :func:`load` reproduces the grasp bit for bit.
+    """
+    path = Path(path)
+    fmt = _format(path)
+    if fmt == "toml":
+        text = to_toml(grasp)
+    else:
+        text = json.dumps(grasp_to_dict(grasp), indent=2) + "\n"
+    path.write_text(text, encoding="utf-8")

@@ -1,0 +1,162 @@
+"""The potential field of a soft-fingertip grasp (Tsuji et al., eq. 3-21), in pure JAX.
+
+All functions here work in internal units (mm, N, N/mm^2, mJ; see :mod:`jaxgrasp.units`)
+on a :class:`ModelParams`, and take the object's pose change ``x = (dp, w)``:
+``dp`` (3,) translation in mm, ``w`` (3,) rotation vector in rad. They are pure,
+and compose with ``jit``, ``vmap``, ``grad`` and ``hessian``, including at ``x = 0``.
+
+Constraint margins are returned *scaled* so that each is ~1 in the initial state and
+``>= 0`` means satisfied. Positive scale factors do not move the feasible set, the
+minimisers or the minimum energies; they only condition the solver. The scale factors
+depend on the parameters only through ``stop_gradient`` constants, so derivatives with
+respect to the parameters (envelope theorem) see the unscaled constraints times a
+constant, which leaves the value's gradient exact.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from .grasp import Grasp
+from .units import M_TO_MM, PA_TO_MPA
+
+__all__ = [
+    "ModelParams",
+    "model_params",
+    "rotation_matrix",
+    "contact_kinematics",
+    "potential_energy",
+    "constraint_margins",
+    "energy_scale",
+    "KINDS",
+]
+
+KINDS = ("slip", "max_force")
+"""Boundary kinds, in the order used by every ``(2, N)`` array of the library."""
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class ModelParams:
+    """A grasp in internal units (mm, N, N/mm^2). Built by :func:`model_params`."""
+
+    c: Any  # (N, 3) contact positions, mm
+    n: Any  # (N, 3) unit outward normals
+    dr: Any  # (N,) initial deformation, mm
+    r: Any  # (N,) fingertip radius, mm
+    E: Any  # (N,) Young's modulus, N/mm^2
+    mu: Any  # (N,) friction coefficient
+    fmax: Any  # (N,) normal force limit, N
+    weight: Any  # (3,) m * g_vec, N
+
+
+def model_params(grasp: Grasp) -> ModelParams:
+    """Convert an SI :class:`~jaxgrasp.Grasp` to internal units, normalising normals."""
+    n = jnp.asarray(grasp.normals)
+    n = n / jnp.linalg.norm(n, axis=-1, keepdims=True)
+    return ModelParams(
+        c=jnp.asarray(grasp.positions) * M_TO_MM,
+        n=n,
+        dr=jnp.asarray(grasp.initial_deformation) * M_TO_MM,
+        r=jnp.asarray(grasp.radius) * M_TO_MM,
+        E=jnp.asarray(grasp.young_modulus) * PA_TO_MPA,
+        mu=jnp.asarray(grasp.friction),
+        fmax=jnp.asarray(grasp.max_force),
+        weight=jnp.asarray(grasp.mass)[..., None] * jnp.asarray(grasp.gravity),
+    )
+
+
+def rotation_matrix(w):
+    """Rodrigues' formula ``R = I + A K + B K^2`` for a rotation vector ``w`` (3,), rad.
+
+    Uses the series of ``A = sin t / t`` and ``B = (1 - cos t) / t^2`` below
+    ``t^2 < 1e-6`` with the double-``where`` trick, so that value, gradient and Hessian
+    are finite and exact at ``w = 0``.
+    """
+    t2 = jnp.dot(w, w)
+    small = t2 < 1e-6
+    t2_safe = jnp.where(small, 1.0, t2)
+    t = jnp.sqrt(t2_safe)
+    a = jnp.where(small, 1.0 - t2 / 6.0 + t2 * t2 / 120.0, jnp.sin(t) / t)
+    b = jnp.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - jnp.cos(t)) / t2_safe)
+    k = jnp.array(
+        [
+            [0.0, -w[2], w[1]],
+            [w[2], 0.0, -w[0]],
+            [-w[1], w[0], 0.0],
+        ],
+        dtype=w.dtype,
+    )
+    return jnp.eye(3, dtype=w.dtype) + a * k + b * (k @ k)
+
+
+def contact_kinematics(x, p: ModelParams):
+    """Fingertip deformations for pose change ``x = (dp [mm], w [rad])``, eq. 11-16.
+
+    Returns ``(d, cphi, dt2, theta)``, each ``(N,)``: normal deformation ``d`` (mm,
+    eq. 13), ``cos(phi)`` (eq. 14; ``arccos`` is never taken), squared tangential
+    deformation ``dt^2`` (mm^2, eq. 15; the norm is never taken) and torsion angle
+    ``theta`` (rad, eq. 16: the rotation vector of ``R_i^T dR R_i`` is ``R_i^T w``, whose
+    normal component is ``w . n_i``).
+    """
+    dp, w = x[:3], x[3:]
+    rot = rotation_matrix(w)
+    u = p.c @ (rot - jnp.eye(3, dtype=x.dtype)).T + dp  # (N, 3) contact displacement
+    rn = p.n @ rot.T  # (N, 3) rotated normals
+    cphi = jnp.sum(p.n * rn, axis=-1)
+    d = p.r - jnp.sum(((p.r - p.dr)[:, None] * p.n - u) * rn, axis=-1)
+    un = jnp.sum(p.n * u, axis=-1)
+    dt2 = jnp.sum(u * u, axis=-1) - un * un
+    theta = p.n @ w
+    return d, cphi, dt2, theta
+
+
+def potential_energy(x, p: ModelParams):
+    """Potential energy ``U`` of the grasp system, mJ (eq. 3, 5, 7, 17-19).
+
+    ``U = sum_i pi E_i (d^3 / (3 cos^2 phi) + d dt^2 + d^2 (r - d/3) theta^2) - (m g_vec) . dp``,
+    zero gravitational energy at the initial state. For ``d_i < 0`` (outside the
+    contact-keeping constraint, where the paper's formulas do not apply) the fingertip is
+    taken as not touching: its deformation enters as ``max(d_i, 0)``. This leaves ``U``
+    unchanged on the feasible set and bounded below outside it, which the solver needs.
+    """
+    d, cphi, dt2, theta = contact_kinematics(x, p)
+    dp = jnp.maximum(d, 0.0)
+    elastic = jnp.pi * p.E * (
+        dp**3 / (3.0 * cphi**2) + dp * dt2 + dp**2 * (p.r - dp / 3.0) * theta**2
+    )
+    return jnp.sum(elastic) - jnp.dot(p.weight, x[:3])
+
+
+def energy_scale(p: ModelParams):
+    """A constant energy scale, mJ: the elastic energy of the initial state (no gradient)."""
+    return jax.lax.stop_gradient(jnp.sum(jnp.pi * p.E * p.dr**3 / 3.0))
+
+
+def constraint_margins(x, p: ModelParams):
+    """Scaled constraint margins ``(3, N)``, ``>= 0`` where satisfied.
+
+    Rows, for each contact ``i``:
+
+    0. contact kept: ``d_i / dr_i``;
+    1. no slip (Howe-Cutkosky with torsion, eq. 9 divided by ``(pi E d)^2`` and by
+       ``(mu dr)^2``): ``(mu^2 d^2 / cos^4 phi - 4 dt^2
+       - (225/16) d (r - d/3)^2 theta^2 / (mu^2 (2r - d))) / (mu dr)^2``. This form is
+       independent of ``E`` and has no ``1/e^2`` singularity at ``d -> 0``;
+    2. normal force below its limit (eq. 21): ``(sqrt(f_max / (pi E)) cos phi - d) / dr``.
+    """
+    d, cphi, dt2, theta = contact_kinematics(x, p)
+    dr = jax.lax.stop_gradient(p.dr)
+    mu_dr2 = jax.lax.stop_gradient((p.mu * p.dr) ** 2)
+    contact = d / dr
+    slip = (
+        p.mu**2 * d**2 / cphi**4
+        - 4.0 * dt2
+        - (225.0 / 16.0) * d * (p.r - d / 3.0) ** 2 * theta**2 / (p.mu**2 * (2.0 * p.r - d))
+    ) / mu_dr2
+    force = (jnp.sqrt(p.fmax / (jnp.pi * p.E)) * cphi - d) / dr
+    return jnp.stack([contact, slip, force])

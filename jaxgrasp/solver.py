@@ -1,0 +1,241 @@
+"""A batched augmented-Lagrangian solver for small smooth programs.
+
+Solves, for one lane,
+
+    minimise f(x)  subject to  g_i(x) >= 0 (i not k),  g_k(x) = 0 (at most one equality),
+
+where the equality, if any, is one of the constraint functions picked by a one-hot
+``eq_mask``: problems with different equalities then share one code path, so every
+problem of a grasp, every start and every grasp run as lanes of one ``vmap``.
+
+Method (Powell-Hestenes-Rockafellar augmented Lagrangian, Nocedal & Wright Sec. 17.4):
+
+    phi(x) = f + nu h + rho/2 h^2 + 1/(2 rho) sum_i (max(0, lam_i - rho g_i)^2 - lam_i^2)
+
+is minimised by Newton's method with the exact Hessian (eigenvalues mirrored and floored,
+so every step is a descent direction) and a backtracking line search evaluated on a fixed
+ladder of step lengths; then ``lam <- max(0, lam - rho g)``, ``nu <- nu + rho h``, and
+``rho`` grows when the violation does not fall fast enough. The inner and outer loops are
+flattened into one ``lax.while_loop`` whose body does either a Newton step or a multiplier
+update, so lanes that need different iteration counts do not wait on nested loops.
+
+Each lane ends with a status and its KKT residuals at ``(x, lam, nu)``:
+stationarity ``|grad f + nu grad h - sum lam grad g|_inf``, feasibility
+``max(|h|, max(-g_i, 0))`` and complementarity ``max |lam_i g_i|``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["SolverOptions", "SolverResult", "solve", "CONVERGED", "INFEASIBLE", "NOT_CONVERGED", "NO_START"]
+
+CONVERGED = 0
+"""KKT conditions hold within tolerance."""
+INFEASIBLE = 1
+"""The constraint violation stagnated above ``infeasible_tol`` at the largest penalty."""
+NOT_CONVERGED = 2
+"""The step budget ran out before either of the above."""
+NO_START = 3
+"""No starting point was found (used by the evaluator for boundary starts)."""
+
+LANE_STATUS_NAMES = ("converged", "infeasible", "not_converged", "no_start")
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverOptions:
+    """Static settings of :func:`solve` (hashable; all quantities in the scaled units).
+
+    Attributes:
+        tol: KKT tolerance on stationarity, feasibility and complementarity.
+        max_steps: budget of loop steps (Newton steps plus multiplier updates) per lane.
+        max_inner: Newton steps before a multiplier update is forced.
+        rho0: initial penalty.
+        rho_growth: factor by which the penalty grows when the violation stalls.
+        rho_max: largest penalty.
+        infeasible_tol: a lane whose violation stays above this at ``rho_max`` is infeasible.
+        max_step: largest Newton step (inf-norm, scaled variables).
+        line_search_steps: number of step lengths ``1, 1/2, 1/4, ...`` tried per Newton step.
+    """
+
+    tol: float = 1e-10
+    max_steps: int = 300
+    max_inner: int = 40
+    rho0: float = 10.0
+    rho_growth: float = 10.0
+    rho_max: float = 1e10
+    infeasible_tol: float = 1e-7
+    max_step: float = 5.0
+    line_search_steps: int = 16
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class SolverResult:
+    """Outcome of one lane (leading batch axes under ``vmap``).
+
+    Attributes:
+        x: final point.
+        lam: inequality multipliers, ``>= 0`` (zero at the equality's index).
+        nu: equality multiplier (0 when there is no equality).
+        objective: ``f(x)``.
+        status: :data:`CONVERGED`, :data:`INFEASIBLE` or :data:`NOT_CONVERGED`.
+        stationarity, feasibility, complementarity: KKT residuals at ``(x, lam, nu)``.
+        steps: loop steps taken.
+    """
+
+    x: Any
+    lam: Any
+    nu: Any
+    objective: Any
+    status: Any
+    stationarity: Any
+    feasibility: Any
+    complementarity: Any
+    steps: Any
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class _State:
+    x: Any
+    lam: Any
+    nu: Any
+    rho: Any
+    inner: Any  # Newton steps since the last multiplier update
+    prev_viol: Any
+    steps: Any
+    status: Any  # NOT_CONVERGED while running
+    stationarity: Any
+    feasibility: Any
+    complementarity: Any
+
+
+def _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask):
+    gx = g(x)
+    h = jnp.sum(eq_mask * gx)
+    shifted = jnp.where(eq_mask > 0, 0.0, jnp.maximum(0.0, lam - rho * gx))
+    ineq = jnp.sum(shifted**2 - lam**2) / (2.0 * rho)
+    return f(x) + nu * h + 0.5 * rho * h * h + ineq
+
+
+def solve(
+    f: Callable,
+    g: Callable,
+    x0,
+    eq_mask,
+    nu0=0.0,
+    options: SolverOptions = SolverOptions(),
+) -> SolverResult:
+    """Solve one lane; ``vmap`` it for many.
+
+    Args:
+        f: objective, ``(n,) -> ()``.
+        g: constraint margins, ``(n,) -> (m,)``, feasible where ``>= 0``.
+        x0: ``(n,)`` starting point.
+        eq_mask: ``(m,)`` one-hot vector selecting the equality constraint, or zeros.
+        nu0: initial equality multiplier.
+        options: :class:`SolverOptions`.
+    """
+    x0 = jnp.asarray(x0)
+    eq_mask = jnp.asarray(eq_mask, dtype=x0.dtype)
+    m = eq_mask.shape[-1]
+    o = options
+    alphas = 0.5 ** jnp.arange(o.line_search_steps, dtype=x0.dtype)
+
+    def phi(x, lam, nu, rho):
+        return _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask)
+
+    grad_phi = jax.grad(phi)
+    hess_phi = jax.hessian(phi)
+
+    def newton_step(s: _State, gphi):
+        hmat = hess_phi(s.x, s.lam, s.nu, s.rho)
+        hmat = 0.5 * (hmat + hmat.T)
+        evals, evecs = jnp.linalg.eigh(hmat)
+        aevals = jnp.abs(evals)
+        floor = 1e-10 * jnp.maximum(jnp.max(aevals), 1e-30)
+        aevals = jnp.maximum(aevals, floor)
+        p = -evecs @ ((evecs.T @ gphi) / aevals)
+        p = p * jnp.minimum(1.0, o.max_step / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
+        phi0 = phi(s.x, s.lam, s.nu, s.rho)
+        slope = jnp.dot(gphi, p)
+        trial = jax.vmap(lambda a: phi(s.x + a * p, s.lam, s.nu, s.rho))(alphas)
+        trial = jnp.where(jnp.isfinite(trial), trial, jnp.inf)
+        armijo = trial <= phi0 + 1e-4 * alphas * slope
+        first = jnp.argmax(armijo)
+        best = jnp.argmin(trial)
+        idx = jnp.where(jnp.any(armijo), first, best)
+        improve = trial[idx] <= phi0
+        x_new = jnp.where(improve, s.x + alphas[idx] * p, s.x)
+        # A step that cannot decrease phi ends the inner loop (numerically converged).
+        inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
+        return dataclasses.replace(s, x=x_new, inner=inner)
+
+    def multiplier_update(s: _State, gphi):
+        gx = g(s.x)
+        is_eq = eq_mask > 0
+        h = jnp.sum(eq_mask * gx)
+        lam = jnp.where(is_eq, 0.0, jnp.maximum(0.0, s.lam - s.rho * gx))
+        nu = s.nu + s.rho * h
+        viol = jnp.maximum(jnp.abs(h), jnp.max(jnp.where(is_eq, 0.0, jnp.maximum(-gx, 0.0))))
+        comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gx)))
+        stat = jnp.max(jnp.abs(gphi))
+        converged = (stat <= o.tol) & (viol <= o.tol) & (comp <= o.tol)
+        stalled = viol > 0.25 * s.prev_viol
+        at_max = s.rho >= o.rho_max
+        infeasible = at_max & (viol > o.infeasible_tol) & (viol >= 0.5 * s.prev_viol)
+        rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
+        status = jnp.where(converged, CONVERGED, jnp.where(infeasible, INFEASIBLE, NOT_CONVERGED)).astype(jnp.int32)
+        return dataclasses.replace(
+            s,
+            lam=lam,
+            nu=nu,
+            rho=rho,
+            inner=jnp.zeros_like(s.inner),
+            prev_viol=viol,
+            status=status,
+            stationarity=stat,
+            feasibility=viol,
+            complementarity=comp,
+        )
+
+    def body(s: _State) -> _State:
+        gphi = grad_phi(s.x, s.lam, s.nu, s.rho)
+        inner_done = (jnp.max(jnp.abs(gphi)) <= o.tol) | (s.inner >= o.max_inner)
+        s_new = jax.lax.cond(inner_done, multiplier_update, newton_step, s, gphi)
+        return dataclasses.replace(s_new, steps=s.steps + 1)
+
+    def cond(s: _State):
+        return (s.status == NOT_CONVERGED) & (s.steps < o.max_steps)
+
+    dtype = x0.dtype
+    init = _State(
+        x=x0,
+        lam=jnp.zeros(m, dtype),
+        nu=jnp.asarray(nu0, dtype),
+        rho=jnp.asarray(o.rho0, dtype),
+        inner=jnp.asarray(0, jnp.int32),
+        prev_viol=jnp.asarray(jnp.inf, dtype),
+        steps=jnp.asarray(0, jnp.int32),
+        status=jnp.asarray(NOT_CONVERGED, jnp.int32),
+        stationarity=jnp.asarray(jnp.inf, dtype),
+        feasibility=jnp.asarray(jnp.inf, dtype),
+        complementarity=jnp.asarray(jnp.inf, dtype),
+    )
+    s = jax.lax.while_loop(cond, body, init)
+    return SolverResult(
+        x=s.x,
+        lam=s.lam,
+        nu=s.nu,
+        objective=f(s.x),
+        status=s.status,
+        stationarity=s.stationarity,
+        feasibility=s.feasibility,
+        complementarity=s.complementarity,
+        steps=s.steps,
+    )
