@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 from functools import partial
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -38,7 +39,7 @@ from .model import constraint_margins, energy_scale, model_params, potential_ene
 from .result import Evaluation
 from .units import M_TO_MM, MJ_TO_J
 
-__all__ = ["EvaluateOptions", "evaluate"]
+__all__ = ["EvaluateOptions", "evaluate", "solve_programs", "Programs"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -124,65 +125,134 @@ def _ray_start(gk, z0, v, t_grid, bisection_steps):
     return z0 + hi * v, found
 
 
-@partial(jax.jit, static_argnames="options")
-def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
-    p = model_params(grasp)
-    ps = jax.lax.stop_gradient(p)  # what the solver sees
-    n = p.c.shape[0]
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Programs:
+    """Every program of one grasp as solved, lane by lane (internal, scaled units).
+
+    The pose variable of every program is ``z = (dp [mm], lever * w [mm])``.
+
+    Attributes:
+        equilibrium: :class:`~jaxgrasp.solver.SolverResult` of the equilibrium problem.
+        boundary: :class:`~jaxgrasp.solver.SolverResult` with a leading lane axis
+            ``(2N * D,)``: lane ``b * D + s`` is start ``s`` of boundary problem
+            ``b = kind * N + contact``.
+        start: ``(2N * D, 6)`` starting points of the boundary lanes.
+        found: ``(2N * D,)`` whether the start search crossed the boundary (lanes where it
+            did not carry status :data:`~jaxgrasp.solver.NO_START`).
+        constraint_index: ``(2N * D,)`` index ``k`` of the equality in the flattened
+            ``(3N,)`` constraint vector (``N + b``).
+        lever: ``()`` mm, the length that scales rotations.
+        scale: ``()`` mJ, the energy scale dividing the objective.
+    """
+
+    equilibrium: S.SolverResult
+    boundary: S.SolverResult
+    start: Any
+    found: Any
+    constraint_index: Any
+    lever: Any
+    scale: Any
+
+
+class _Problem:
+    """Scaled objective and constraints of a grasp as functions of ``z`` and the params."""
+
+    def __init__(self, p):
+        self.n = p.c.shape[0]
+        self.scale = energy_scale(p)  # mJ, constant
+        # Scaled pose z = (dp [mm], lever * w [mm]): rotations and translations move the
+        # contacts by comparable amounts.
+        self.lever = jax.lax.stop_gradient(
+            jnp.maximum(jnp.max(jnp.linalg.norm(p.c, axis=-1)), jnp.max(p.r))
+        )
+
+    def to_pose(self, z):
+        return jnp.concatenate([z[:3], z[3:] / self.lever])
+
+    def f(self, z, q):
+        return potential_energy(self.to_pose(z), q) / self.scale
+
+    def g(self, z, q):
+        return constraint_margins(self.to_pose(z), q).reshape(-1)
+
+    def lagrangian(self, z, lam, nu, eq_mask, q):
+        gz = self.g(z, q)
+        return self.f(z, q) + nu * jnp.sum(eq_mask * gz) - jnp.sum(lam * gz)
+
+
+def _solve_programs(p, prob: _Problem, options: EvaluateOptions) -> Programs:
+    ps = jax.lax.stop_gradient(p)  # the solver never sees a derivative
+    n = prob.n
     m = 3 * n
-    scale = energy_scale(p)  # mJ, constant
-    # Scaled pose z = (dp [mm], lever * w [mm]): rotations and translations move the
-    # contacts by comparable amounts.
-    lever = jax.lax.stop_gradient(
-        jnp.maximum(jnp.max(jnp.linalg.norm(p.c, axis=-1)), jnp.max(p.r))
-    )
-
-    def to_pose(z):
-        return jnp.concatenate([z[:3], z[3:] / lever])
-
-    def f(z, q):
-        return potential_energy(to_pose(z), q) / scale
-
-    def g(z, q):
-        return constraint_margins(to_pose(z), q).reshape(-1)
-
-    def lagrangian(z, lam, nu, eq_mask, q):
-        gz = g(z, q)
-        return f(z, q) + nu * jnp.sum(eq_mask * gz) - jnp.sum(lam * gz)
-
     sopt = options.solver
-    zeros_mask = jnp.zeros(m, p.c.dtype)
+    f = lambda z: prob.f(z, ps)
+    g = lambda z: prob.g(z, ps)
+    dtype = p.c.dtype
 
     # --- equilibrium problem, from the initial grasping state
-    eq = S.solve(lambda z: f(z, ps), lambda z: g(z, ps), jnp.zeros(6, p.c.dtype), zeros_mask, 0.0, sopt)
+    eq = S.solve(f, g, jnp.zeros(6, dtype), jnp.zeros(m, dtype), 0.0, sopt)
     z_eq = eq.x
 
     # --- boundary problems: constraint index k = n + b for b in [0, 2n) (slip rows, then force)
-    dirs = jnp.asarray(options.directions(), p.c.dtype)
+    dirs = jnp.asarray(options.directions(), dtype)
     num_dirs = dirs.shape[0]
     t_max = options.ray_length * jnp.max(ps.r)
     t_grid = t_max * 2.0 ** (-(options.ray_points - 1 - jnp.arange(options.ray_points)) / 4.0)
-    ks = n + jnp.arange(2 * n)
-    lane_k = jnp.repeat(ks, num_dirs)
+    lane_k = jnp.repeat(n + jnp.arange(2 * n), num_dirs)
     lane_v = jnp.tile(dirs, (2 * n, 1))
 
     def start(k, v):
-        gk = lambda z: g(z, ps)[k]
+        gk = lambda z: g(z)[k]
         on_boundary = gk(z_eq) <= 0.0
         z0, found = _ray_start(gk, z_eq, v, t_grid, options.bisection_steps)
         z0 = jnp.where(on_boundary, z_eq, z0)
         found = found | on_boundary
         # least-squares estimate of the equality multiplier: grad f + nu grad h = 0
-        gf = jax.grad(f)(z0, ps)
+        gf = jax.grad(f)(z0)
         gh = jax.grad(gk)(z0)
         nu0 = -jnp.dot(gf, gh) / jnp.maximum(jnp.dot(gh, gh), 1e-300)
         return z0, found, nu0
 
     z0s, found, nu0s = jax.vmap(start)(lane_k, lane_v)
-    masks = jax.nn.one_hot(lane_k, m, dtype=p.c.dtype)
-    lanes = jax.vmap(
-        lambda z0, mask, nu0: S.solve(lambda z: f(z, ps), lambda z: g(z, ps), z0, mask, nu0, sopt)
-    )(z0s, masks, nu0s)
+    # Without a converged equilibrium there is nothing to start from: skip every lane.
+    found = found & (eq.status == S.CONVERGED)
+    masks = jax.nn.one_hot(lane_k, m, dtype=dtype)
+    lanes = jax.vmap(lambda z0, mask, nu0, act: S.solve(f, g, z0, mask, nu0, sopt, act))(
+        z0s, masks, nu0s, found
+    )
+    return Programs(
+        equilibrium=eq,
+        boundary=lanes,
+        start=z0s,
+        found=found,
+        constraint_index=lane_k,
+        lever=prob.lever,
+        scale=prob.scale,
+    )
+
+
+@partial(jax.jit, static_argnames="options")
+def solve_programs(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Programs:
+    """Solve every program of ``grasp`` and return them lane by lane (for diagnostics and
+    benchmarks; :func:`evaluate` is this plus the reduction to one value)."""
+    p = model_params(grasp)
+    return _solve_programs(p, _Problem(p), options)
+
+
+@partial(jax.jit, static_argnames="options")
+def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
+    p = model_params(grasp)
+    prob = _Problem(p)
+    n = prob.n
+    m = 3 * n
+    scale = prob.scale
+    progs = _solve_programs(p, prob, options)
+    eq, lanes, found = progs.equilibrium, progs.boundary, progs.found
+    z_eq = eq.x
+    num_dirs = options.directions().shape[0]
+    ks = n + jnp.arange(2 * n)
+    zeros_mask = jnp.zeros(m, p.c.dtype)
     lane_status = jnp.where(found, lanes.status, S.NO_START)
     lane_energy = jnp.where(lane_status == S.CONVERGED, lanes.objective, jnp.inf)
 
@@ -204,7 +274,7 @@ def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
 
     # --- energies with envelope-theorem derivatives (mJ)
     def energy(z, lam, nu, mask, objective):
-        lag = lagrangian(jax.lax.stop_gradient(z), lam, nu, mask, p)
+        lag = prob.lagrangian(jax.lax.stop_gradient(z), lam, nu, mask, p)
         return scale * (jax.lax.stop_gradient(objective) + lag - jax.lax.stop_gradient(lag))
 
     u_eq = energy(z_eq, eq.lam, eq.nu, zeros_mask, eq.objective)
@@ -213,7 +283,7 @@ def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
     u_b = jnp.where(reached, u_b, jnp.inf)
 
     # --- grasp status and value
-    margins_eq = g(z_eq, ps).reshape(3, n)
+    margins_eq = jax.lax.stop_gradient(prob.g(z_eq, p)).reshape(3, n)
     on_boundary = jnp.min(margins_eq[1:]) <= options.boundary_tol
     b_limit = jnp.argmin(u_b)
     any_reached = jnp.any(reached)
@@ -239,8 +309,8 @@ def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
         return jnp.stack([r.stationarity, r.feasibility, r.complementarity], axis=-1)
 
     lane_kkt = kkt(lanes)[pick]
-    eq_pose = to_pose(z_eq)
-    b_pose = jax.vmap(to_pose)(b_z)
+    eq_pose = prob.to_pose(z_eq)
+    b_pose = jax.vmap(prob.to_pose)(b_z)
     return Evaluation(
         value=value * MJ_TO_J,
         status=status,
