@@ -1,0 +1,183 @@
+"""Session-wide helpers that keep the suite fast.
+
+jaxgrasp's ``evaluate`` costs tens of seconds to compile per number of contacts ``N``
+and about a second per grasp to run, so:
+
+* :func:`evaluate_many` evaluates lists of grasps through ONE ``jax.jit(jax.vmap(...))``
+  per ``N``. Batches are cut into chunks of one size per ``N`` (padded by repeating the
+  last grasp), so every call with the same ``N`` reuses the same executable. Results are
+  cached per grasp for the whole session.
+* :func:`ipopt_reference` runs the independent CasADi/Ipopt reference
+  (``tests/ipopt_reference.py``) in a separate worker process, so that Ipopt runs while
+  JAX compiles. Submit early (``ipopt_reference.submit``), collect late
+  (``ipopt_reference.get``). Results are cached per (grasp, n_starts, seed).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import multiprocessing
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxgrasp  # turns on jax_enable_x64 by itself (tested in test_evaluate.py)
+
+TESTS_DIR = Path(__file__).resolve().parent
+if str(TESTS_DIR) not in sys.path:  # so that the Ipopt worker can import the reference
+    sys.path.insert(0, str(TESTS_DIR))
+
+GRASP_FIELDS = (
+    "positions",
+    "normals",
+    "initial_deformation",
+    "radius",
+    "young_modulus",
+    "friction",
+    "max_force",
+    "mass",
+    "gravity",
+)
+
+# Largest batch per compiled call. The batch size for each N is fixed by the first call
+# with that N (its grasps in balanced chunks of at most CHUNK), so every N compiles once.
+# Padding costs about one grasp evaluation per unused slot: pass all grasps of an N in
+# the first call.
+CHUNK = 16
+
+
+def grasp_key(grasp) -> tuple:
+    """A hashable, exact key of a grasp's field values."""
+    out = []
+    for name in GRASP_FIELDS:
+        a = np.asarray(getattr(grasp, name), dtype=np.float64)
+        out.append((name, a.shape, a.tobytes()))
+    return tuple(out)
+
+
+def grasp_to_numpy(grasp) -> dict:
+    return {name: np.asarray(getattr(grasp, name), dtype=np.float64) for name in GRASP_FIELDS}
+
+
+def stack(grasps):
+    """Stack a list of same-``N`` grasps into one batched grasp (leading axis)."""
+    return jax.tree_util.tree_map(lambda *x: jnp.stack(x), *grasps)
+
+
+def unstack(tree, i):
+    """Element ``i`` of a batched pytree."""
+    return jax.tree_util.tree_map(lambda a: a[i], tree)
+
+
+class BatchEvaluator:
+    """``jax.jit(jax.vmap(jaxgrasp.evaluate))`` with one executable per contact count."""
+
+    def __init__(self, chunk: int = CHUNK):
+        self.chunk = chunk
+        self._chunk_n: dict[int, int] = {}  # batch size used for each N (fixed at first use)
+        # evaluate() skips input validation when traced, so the lambda is vmappable.
+        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)))
+        self._cache: dict = {}
+        self.calls = 0
+
+    def __call__(self, grasps):
+        grasps = list(grasps)
+        todo: dict[int, dict] = {}  # N -> {key: grasp}, insertion-ordered
+        for g in grasps:
+            k = grasp_key(g)
+            if k not in self._cache:
+                todo.setdefault(g.num_contacts, {}).setdefault(k, g)
+        for n, by_key in sorted(todo.items()):
+            items = list(by_key.items())
+            if n not in self._chunk_n:  # balanced chunks of at most self.chunk grasps
+                parts = -(-len(items) // self.chunk)
+                self._chunk_n[n] = -(-len(items) // parts)
+            chunk = self._chunk_n[n]
+            for start in range(0, len(items), chunk):
+                part = items[start : start + chunk]
+                gs = [g for _, g in part]
+                gs = gs + [gs[-1]] * (chunk - len(gs))
+                res = jax.tree_util.tree_map(np.asarray, self._fn(stack(gs)))
+                self.calls += 1
+                for i, (k, _) in enumerate(part):
+                    self._cache[k] = unstack(res, i)
+        return [self._cache[grasp_key(g)] for g in grasps]
+
+
+@pytest.fixture(scope="session")
+def evaluate_many():
+    """``evaluate_many(grasps) -> [Evaluation, ...]`` (NumPy leaves), batched and cached.
+
+    Pass every grasp of a test module in as few calls as possible; grasps may have
+    different contact counts (they are grouped by ``N``).
+    """
+    return BatchEvaluator()
+
+
+class IpoptReference:
+    """Cached, asynchronous access to ``ipopt_reference.reference_evaluate``."""
+
+    def __init__(self):
+        import ipopt_reference  # tests/ipopt_reference.py (needs casadi)
+
+        self._run = ipopt_reference.reference_evaluate  # pickled by name for the worker
+        self._futures: dict = {}
+        self._pool = None
+        try:
+            ctx = multiprocessing.get_context("spawn")  # never fork a process running JAX
+            self._pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=ctx)
+        except Exception:  # pragma: no cover - no process pool: run in-process
+            self._pool = None
+
+    def submit(self, grasps, n_starts: int = 24, seed: int = 0) -> None:
+        """Start the reference runs of ``grasps`` (a grasp or a list) without waiting."""
+        if not isinstance(grasps, (list, tuple)):
+            grasps = [grasps]
+        for g in grasps:
+            key = (grasp_key(g), n_starts, seed)
+            if key in self._futures:
+                continue
+            fields = grasp_to_numpy(g)
+            if self._pool is not None:
+                try:
+                    self._futures[key] = self._pool.submit(self._run, fields, n_starts=n_starts, seed=seed)
+                    continue
+                except Exception:  # pragma: no cover - broken pool: fall back
+                    self._pool = None
+            fut = concurrent.futures.Future()
+            fut.set_result(self._run(fields, n_starts=n_starts, seed=seed))
+            self._futures[key] = fut
+
+    def get(self, grasp, n_starts: int = 24, seed: int = 0) -> dict:
+        """The reference result of ``grasp`` (waits for it; submits it if needed)."""
+        self.submit(grasp, n_starts, seed)
+        key = (grasp_key(grasp), n_starts, seed)
+        try:
+            return self._futures[key].result()
+        except concurrent.futures.BrokenExecutor:  # pragma: no cover - worker died: retry here
+            self._pool = None
+            del self._futures[key]
+            self.submit(grasp, n_starts, seed)
+            return self._futures[key].result()
+
+    def close(self):
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+@pytest.fixture(scope="session")
+def ipopt_reference():
+    """An :class:`IpoptReference` (``.submit(grasps)``, ``.get(grasp) -> dict``), or
+    ``None`` where CasADi is not installed (tests that need it then skip themselves)."""
+    try:
+        import casadi  # noqa: F401
+    except ImportError:
+        yield None
+        return
+    ref = IpoptReference()
+    yield ref
+    ref.close()

@@ -1,0 +1,193 @@
+"""Tests of the ``jaxgrasp`` command line (``jaxgrasp.cli``).
+
+Most calls run ``jaxgrasp.cli.main`` in-process (the evaluator compiles once per session);
+one test runs the installed console script in a subprocess.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import pytest
+
+import jaxgrasp
+from jaxgrasp import cli
+
+ROOT = Path(__file__).resolve().parent.parent
+CUBE_TOML = ROOT / "examples" / "cube.toml"
+PRESET_ARGS = ["evaluate", "--preset", "cube", "--young-modulus", "6e5", "--initial-deformation", "0.002", "--json"]
+_CACHE_OPTIONS = (
+    "jax_compilation_cache_dir",
+    "jax_persistent_cache_min_compile_time_secs",
+    "jax_persistent_cache_min_entry_size_bytes",
+)
+
+
+@pytest.fixture(scope="module")
+def cache_dir(tmp_path_factory):
+    """A compilation-cache folder shared by the in-process runs and the subprocess.
+
+    ``main`` turns on JAX's persistent compilation cache (a process-wide setting); the
+    previous settings are restored after this module so the rest of the session is
+    unaffected.
+    """
+    saved = {k: getattr(jax.config, k) for k in _CACHE_OPTIONS}
+    yield tmp_path_factory.mktemp("jaxgrasp-xla-cache")
+    for k, v in saved.items():
+        jax.config.update(k, v)
+
+
+@pytest.fixture
+def run_cli(cache_dir, capsys, monkeypatch):
+    """``run_cli(argv) -> (exit code, stdout, stderr)``, in-process."""
+    monkeypatch.setenv("JAXGRASP_CACHE_DIR", str(cache_dir))
+
+    def run(argv):
+        capsys.readouterr()  # drop anything printed before
+        rc = cli.main([str(a) for a in argv])
+        out = capsys.readouterr()
+        return rc, out.out, out.err
+
+    return run
+
+
+@pytest.fixture(scope="module")
+def expected_cube(preset_json):
+    """What the CLI must print for the paper's cube at E = 6e5 Pa, dr = 2 mm.
+
+    Computed after the first CLI run, so that the CLI is what compiles the evaluator,
+    with the compilation cache on: the subprocess test then finds it cached.
+    """
+    return jaxgrasp.evaluate(jaxgrasp.presets.cube(6e5, 0.002)).to_dict()
+
+
+@pytest.fixture(scope="module")
+def preset_json(cache_dir):
+    """JSON printed by an in-process ``jaxgrasp evaluate --preset cube ... --json``."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("JAXGRASP_CACHE_DIR", str(cache_dir))
+    try:
+        import io
+        from contextlib import redirect_stderr, redirect_stdout
+
+        out, err = io.StringIO(), io.StringIO()
+        with redirect_stdout(out), redirect_stderr(err):
+            rc = cli.main(PRESET_ARGS)
+    finally:
+        mp.undo()
+    return rc, out.getvalue(), err.getvalue()
+
+
+def test_evaluate_preset_json(preset_json, expected_cube):
+    rc, out, err = preset_json
+    assert rc == 0, err
+    assert err == ""
+    d = json.loads(out)
+    for key in ("value", "status", "equilibrium_energy", "limiting", "boundaries"):
+        assert key in d
+    assert set(d["limiting"]) == {"kind", "contact"}
+    assert d["limiting"]["kind"] in jaxgrasp.KINDS and d["limiting"]["contact"] in (0, 1)
+    assert len(d["boundaries"]) == 4
+    for b in d["boundaries"]:
+        assert {"kind", "contact", "energy", "translation", "rotation"} <= set(b)
+        assert len(b["translation"]) == 3 and len(b["rotation"]) == 3
+    assert {(b["kind"], b["contact"]) for b in d["boundaries"]} == {
+        (k, j) for k in jaxgrasp.KINDS for j in (0, 1)
+    }
+    assert d["status"] == "stable"
+    # exactly the library's numbers (JSON round-trips floats exactly)
+    assert d == expected_cube
+    assert d["value"] == expected_cube["value"] and d["value"] > 0
+
+
+def test_evaluate_file_matches_preset(run_cli, preset_json):
+    rc, out, err = run_cli(["evaluate", CUBE_TOML, "--json"])
+    assert rc == 0, err
+    assert json.loads(out) == json.loads(preset_json[1])
+
+
+def test_evaluate_summary_text(run_cli, expected_cube):
+    rc, out, err = run_cli(["evaluate", CUBE_TOML])
+    assert rc == 0, err
+    assert "status: stable" in out
+    assert f"{expected_cube['value']:.6e}" in out
+    lim = expected_cube["limiting"]
+    assert f"{lim['kind']} of contact {lim['contact']}" in out
+
+
+def test_overrides_apply(run_cli):
+    """--mass etc. reach the grasp: the heavy cube is reported unstable with value 0."""
+    rc, out, err = run_cli(["evaluate", "--preset", "cube", "--mass", "1.0", "--json"])
+    assert rc == 0, err
+    d = json.loads(out)
+    assert d["status"] == "unstable" and d["value"] == 0.0 and d["limiting"] is None
+
+
+@pytest.mark.parametrize(
+    "argv, mentions",
+    [
+        (["evaluate", "/nonexistent/dir/grasp.toml"], "no such file"),
+        (["evaluate", "--preset", "cube", "--initial-deformation", "0.025"], "initial_deformation"),
+        (["evaluate", "--preset", "cube", "--initial-deformation", "0.03"], "initial_deformation"),
+        (["evaluate", "--preset", "cube", "--young-modulus=-2e5"], "young_modulus"),
+        (["evaluate", "--preset", "cube", "--young-modulus", "-200000"], "young_modulus"),
+        (["evaluate", "--preset", "cube", "--bogus-option"], "--bogus-option"),
+        (["evaluate"], "--preset"),
+        (["evaluate", CUBE_TOML, "--preset", "cube"], "--preset"),
+        (["evaluate", "--preset", "sphere"], "sphere"),
+        (["evaluate", "--preset", "cube", "--young-modulus", "stiff"], "stiff"),
+        ([], "evaluate"),
+    ],
+    ids=[
+        "missing-file",
+        "dr-equals-radius",
+        "dr-above-radius",
+        "negative-E",
+        "negative-E-int",
+        "unknown-option",
+        "no-source",
+        "two-sources",
+        "unknown-preset",
+        "non-numeric",
+        "no-command",
+    ],
+)
+def test_bad_input_exit_2_one_line(run_cli, argv, mentions):
+    rc, out, err = run_cli(argv)
+    assert rc == 2, (out, err)
+    assert out == ""
+    assert "Traceback" not in err
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("jaxgrasp: error:"), err
+    assert mentions in lines[0]
+
+
+def test_console_script_subprocess(cache_dir, preset_json):
+    """The installed entry point (or ``python -m jaxgrasp.cli``) prints the same JSON."""
+    script = Path(sys.executable).with_name("jaxgrasp")
+    if script.exists():
+        cmd = [str(script)]
+    elif shutil.which("jaxgrasp"):
+        cmd = [shutil.which("jaxgrasp")]
+    else:
+        cmd = [sys.executable, "-m", "jaxgrasp.cli"]
+    env = dict(os.environ, JAXGRASP_CACHE_DIR=str(cache_dir))
+    proc = subprocess.run(
+        cmd + ["evaluate", str(CUBE_TOML), "--json"],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=str(ROOT),
+        timeout=540,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "Traceback" not in proc.stderr
+    assert json.loads(proc.stdout) == json.loads(preset_json[1])
+    assert any(cache_dir.iterdir()), "the compilation cache folder was not used"
