@@ -324,6 +324,7 @@ def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
         boundary_rotation=b_pose[:, 3:].reshape(2, n, 3),
         boundary_status=b_status.astype(jnp.int32).reshape(2, n),
         equilibrium_status=eq.status,
+        equilibrium_margins=margins_eq,
         kkt=jnp.concatenate([kkt(eq)[None], jnp.where(reached[:, None], lane_kkt, jnp.nan)]),
         steps=jnp.concatenate([eq.steps[None], lanes.steps[pick]]),
     )

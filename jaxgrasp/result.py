@@ -58,6 +58,10 @@ class Evaluation:
         boundary_status: ``(2, N)`` int, solver status of each boundary problem
             (0 converged, 1 infeasible = unreachable, 2 not converged).
         equilibrium_status: ``()`` int, solver status of the equilibrium problem.
+        equilibrium_margins: ``(3, N)`` scaled constraint margins at the equilibrium (or,
+            for an infeasible grasp, at the least-violating pose found), rows: contact
+            kept ``d / dr``, no slip, force below its limit; ``>= 0`` where satisfied
+            (:func:`jaxgrasp.model.constraint_margins`).
         kkt: ``(1 + 2N, 3)`` KKT residuals (stationarity, feasibility, complementarity,
             in the solver's scaled units) of the equilibrium problem (row 0) and of the
             kept start of each boundary problem (rows ``1 + kind * N + contact``).
@@ -76,6 +80,7 @@ class Evaluation:
     boundary_rotation: Any
     boundary_status: Any
     equilibrium_status: Any
+    equilibrium_margins: Any
     kkt: Any
     steps: Any
 
