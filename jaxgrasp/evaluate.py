@@ -17,9 +17,22 @@ runs as a lane of one ``vmap`` of :func:`jaxgrasp.solver.solve`.
 Derivatives of ``value`` (and of every energy) are exact and cheap: by the envelope
 theorem, the derivative of ``min_x U(x; theta)`` is the partial derivative of the
 Lagrangian at the solution ``(x*, lam*, nu*)`` held fixed. The solver runs on
-``stop_gradient`` parameters; the energies are then re-expressed as
-``stop_gradient(U*) + (L(theta) - stop_gradient(L(theta)))``, whose value is ``U*`` and
-whose derivative is ``dL/dtheta``. The solver's iterations are never differentiated.
+``stop_gradient`` parameters and its iterations are never differentiated; each minimum
+energy is then passed through :func:`envelope_energy`, a ``jax.custom_jvp`` function
+whose value is the solver's ``U*`` and whose tangent is ``dL/dtheta . dtheta`` at the fixed
+solution. ``jax.grad``, ``jax.jacfwd``, ``jax.jvp`` and their ``vmap`` all go through that
+rule. The derivative is that of the *selected* boundary: where two boundaries tie for the
+minimum (e.g. the two contacts of a symmetric grasp) ``value`` has a kink and the
+gradient is that of the one reported in ``limiting_*`` (a one-sided derivative).
+
+Where ``value`` is 0 because the grasp is unstable or infeasible, its gradient is exactly 0
+(never NaN): the Lagrangian of a discarded problem is evaluated at a safe point (the
+initial state, zero multipliers) so that no non-finite partial derivative can leak into
+the zero cotangent.
+
+With ``EvaluateOptions(smooth_min_temperature=T)`` the hard minimum over boundaries is
+replaced by a soft minimum (log-sum-exp, temperature ``T`` in J): see
+:class:`EvaluateOptions`.
 """
 
 from __future__ import annotations
@@ -39,7 +52,7 @@ from .model import constraint_margins, energy_scale, model_params, potential_ene
 from .result import Evaluation
 from .units import M_TO_MM, MJ_TO_J
 
-__all__ = ["EvaluateOptions", "evaluate", "solve_programs", "Programs"]
+__all__ = ["EvaluateOptions", "evaluate", "solve_programs", "Programs", "envelope_energy", "soft_minimum"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,6 +70,22 @@ class EvaluateOptions:
         bisection_steps: bisection steps onto the boundary.
         boundary_tol: a slip or force-limit margin (scaled) at most this at the
             equilibrium means the equilibrium is on a boundary: status unstable.
+        smooth_min_temperature: ``None`` (default) for the paper's hard minimum over
+            boundaries. A temperature ``T > 0`` in J replaces it by the soft minimum
+
+                ``value = max(0, -T log sum_b exp(-(U_b - U0) / T))``
+
+            over the reachable boundaries ``b`` (computed stably, relative to the hard
+            minimum; unreachable boundaries are left out). Its gradient is the
+            softmin-weighted mean of the boundaries' gradients, so it is continuous where
+            the limiting boundary switches (useful for gradient-based tuning). It is
+            biased low: with ``K`` reachable boundaries,
+            ``hard - T log K <= value <= hard``, where ``hard`` is the value without
+            smoothing (equality on the right when one boundary dominates by many ``T``).
+            Choose ``T`` well below the values of interest (e.g. 1% of them).
+            ``Evaluation.value`` is then the smoothed value; ``limiting_kind`` and
+            ``limiting_contact`` still name the hard minimiser and every other field is
+            unchanged.
     """
 
     solver: S.SolverOptions = S.SolverOptions()
@@ -66,6 +95,19 @@ class EvaluateOptions:
     ray_points: int = 48
     bisection_steps: int = 60
     boundary_tol: float = 1e-8
+    smooth_min_temperature: float | None = None
+
+    def __post_init__(self):
+        t = self.smooth_min_temperature
+        if t is not None:
+            try:
+                ok = float(t) > 0.0 and np.isfinite(float(t)) and not isinstance(t, bool)
+            except (TypeError, ValueError):
+                ok = False
+            if not ok:
+                raise ValueError(
+                    f"smooth_min_temperature must be None or a finite number > 0 (J), got {t!r}"
+                )
 
     def directions(self) -> np.ndarray:
         """``(12 + num_random_starts, 6)`` unit start directions in the scaled pose space."""
@@ -181,6 +223,38 @@ class _Problem:
         return self.f(z, q) + nu * jnp.sum(eq_mask * gz) - jnp.sum(lam * gz)
 
 
+@jax.custom_jvp
+def envelope_energy(params, z, lam, nu, eq_mask, objective):
+    """A program's minimum energy with its envelope-theorem derivative, mJ.
+
+    ``objective`` is the solver's scaled minimum ``f(z*) = U(z*) / scale`` of the program
+    with constraints ``g(z; params) >= 0`` and equality row ``eq_mask``, attained at
+    ``z`` with multipliers ``lam`` (inequalities) and ``nu`` (equality). Returns
+    ``scale * objective``; its tangent in ``params`` is
+
+        ``scale * dL/dparams . dparams``,  ``L = f(z) + nu h(z) - lam . g(z)``
+
+    with ``(z, lam, nu)`` held fixed (envelope theorem, valid at a regular KKT point).
+    Tangents of ``z``, ``lam``, ``nu``, ``eq_mask`` and ``objective`` are ignored: they
+    are the solver's outputs, which are never differentiated. Works under ``jax.grad``,
+    ``jax.jacfwd``, ``jax.jvp`` and ``jax.vmap`` (``params`` is a :class:`ModelParams`).
+    """
+    return energy_scale(params) * objective
+
+
+@envelope_energy.defjvp
+def _envelope_energy_jvp(primals, tangents):
+    params, z, lam, nu, eq_mask, objective = primals
+    dparams = tangents[0]
+    scale = energy_scale(params)
+
+    def lagrangian(q):
+        return _Problem(q).lagrangian(z, lam, nu, eq_mask, q)
+
+    _, dl = jax.jvp(lagrangian, (params,), (dparams,))
+    return scale * objective, scale * dl
+
+
 def _solve_programs(p, prob: _Problem, options: EvaluateOptions) -> Programs:
     ps = jax.lax.stop_gradient(p)  # the solver never sees a derivative
     n = prob.n
@@ -218,8 +292,9 @@ def _solve_programs(p, prob: _Problem, options: EvaluateOptions) -> Programs:
     # Without a converged equilibrium there is nothing to start from: skip every lane.
     found = found & (eq.status == S.CONVERGED)
     masks = jax.nn.one_hot(lane_k, m, dtype=dtype)
-    lanes = jax.vmap(lambda z0, mask, nu0, act: S.solve(f, g, z0, mask, nu0, sopt, act))(
-        z0s, masks, nu0s, found
+    # Every lane shares this grasp's parameters (closed over), so theta is empty.
+    lanes = S.solve_lanes(
+        lambda z, _: f(z), lambda z, _: g(z), (), z0s, masks, nu0s, found, sopt
     )
     return Programs(
         equilibrium=eq,
@@ -240,13 +315,29 @@ def solve_programs(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -
     return _solve_programs(p, _Problem(p), options)
 
 
+def soft_minimum(du, mask, temperature):
+    """``-T log sum_{b in mask} exp(-du_b / T)``, computed stably; ``+inf`` for an empty mask.
+
+    Entries outside ``mask`` (or infinite) are left out and get a zero gradient. Bias:
+    ``min(du) - T log K <= result <= min(du)`` with ``K`` the number of entries kept.
+    """
+    du = jnp.asarray(du)
+    mask = mask & jnp.isfinite(du)
+    ref = jax.lax.stop_gradient(jnp.min(jnp.where(mask, du, jnp.inf)))
+    any_kept = jnp.any(mask)
+    ref_safe = jnp.where(any_kept, ref, 0.0)
+    shifted = jnp.where(mask, du, ref_safe) - ref_safe  # >= 0 where kept, 0 elsewhere
+    w = jnp.where(mask, jnp.exp(-shifted / temperature), 0.0)  # in [0, 1]; 1 at the min
+    total = jnp.where(any_kept, jnp.sum(w), 1.0)
+    return jnp.where(any_kept, ref_safe - temperature * jnp.log(total), jnp.inf)
+
+
 @partial(jax.jit, static_argnames="options")
 def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
     p = model_params(grasp)
     prob = _Problem(p)
     n = prob.n
     m = 3 * n
-    scale = prob.scale
     progs = _solve_programs(p, prob, options)
     eq, lanes, found = progs.equilibrium, progs.boundary, progs.found
     z_eq = eq.x
@@ -269,26 +360,16 @@ def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
         return a[pick]
 
     b_z = jnp.where(reached[:, None], take(lanes.x), z_eq)
-    b_lam = jnp.where(reached[:, None], take(lanes.lam), 0.0)
-    b_nu = jnp.where(reached, take(lanes.nu), 0.0)
-
-    # --- energies with envelope-theorem derivatives (mJ)
-    def energy(z, lam, nu, mask, objective):
-        lag = prob.lagrangian(jax.lax.stop_gradient(z), lam, nu, mask, p)
-        return scale * (jax.lax.stop_gradient(objective) + lag - jax.lax.stop_gradient(lag))
-
-    u_eq = energy(z_eq, eq.lam, eq.nu, zeros_mask, eq.objective)
+    b_x, b_lam, b_nu = take(lanes.x), take(lanes.lam), take(lanes.nu)
     b_obj = jnp.where(reached, take(lanes.objective), eq.objective)
-    u_b = jax.vmap(energy)(b_z, b_lam, b_nu, jax.nn.one_hot(ks, m, dtype=p.c.dtype), b_obj)
-    u_b = jnp.where(reached, u_b, jnp.inf)
+    b_masks = jax.nn.one_hot(ks, m, dtype=p.c.dtype)
 
-    # --- grasp status and value
+    # --- grasp status (from the solver's outputs only: no derivative)
     margins_eq = jax.lax.stop_gradient(prob.g(z_eq, p)).reshape(3, n)
     on_boundary = jnp.min(margins_eq[1:]) <= options.boundary_tol
-    b_limit = jnp.argmin(u_b)
     any_reached = jnp.any(reached)
     any_unsettled = jnp.any(b_status == S.NOT_CONVERGED)
-    raw = jnp.where(any_reached, u_b[b_limit], u_eq) - u_eq
+    b_limit = jnp.argmin(jnp.where(reached, b_obj, jnp.inf))
     status = jnp.select(
         [
             eq.status == S.INFEASIBLE,
@@ -300,6 +381,49 @@ def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
         R.STABLE,
     ).astype(jnp.int32)
     keep_value = (status == R.STABLE) | (status == R.NOT_CONVERGED)
+
+    # --- energies with envelope-theorem derivatives (mJ). A program whose solution is not
+    # used is differentiated at a safe point (initial state, zero multipliers), where the
+    # Lagrangian's partials are finite: a zero cotangent then gives an exact zero.
+    def finite(*xs):
+        return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in xs]))
+
+    eq_finite = finite(z_eq, eq.lam, eq.nu)
+    b_finite = jax.vmap(finite)(b_x, b_lam, b_nu)
+
+    def energies(use_eq, use_b):
+        u_eq = envelope_energy(
+            p,
+            jnp.where(use_eq, z_eq, 0.0),
+            jnp.where(use_eq, eq.lam, 0.0),
+            jnp.where(use_eq, eq.nu, 0.0),
+            zeros_mask,
+            eq.objective,
+        )
+        u_b = jax.vmap(envelope_energy, in_axes=(None, 0, 0, 0, 0, 0))(
+            p,
+            jnp.where(use_b[:, None], b_x, 0.0),
+            jnp.where(use_b[:, None], b_lam, 0.0),
+            jnp.where(use_b, b_nu, 0.0),
+            b_masks,
+            b_obj,
+        )
+        return u_eq, jnp.where(reached, u_b, jnp.inf)
+
+    # reported energies: derivative wherever the program was solved
+    u_eq, u_b = energies(eq_finite, reached & b_finite)
+    # the value's energies: derivative only where the value uses them
+    v_eq, v_b = energies(keep_value & eq_finite, keep_value & reached & b_finite)
+
+    # --- value: hard (or soft) minimum over the reachable boundaries, above U0
+    if options.smooth_min_temperature is None:
+        raw = jnp.where(any_reached, v_b[b_limit] - v_eq, 0.0)
+    else:
+        raw = jnp.where(
+            any_reached,
+            soft_minimum(v_b - v_eq, reached, options.smooth_min_temperature / MJ_TO_J),
+            0.0,
+        )
     value = jnp.where(keep_value, jnp.maximum(raw, 0.0), 0.0)
     has_limit = keep_value & any_reached
     limiting_kind = jnp.where(has_limit, b_limit // n, -1).astype(jnp.int32)

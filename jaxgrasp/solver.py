@@ -32,7 +32,16 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
-__all__ = ["SolverOptions", "SolverResult", "solve", "CONVERGED", "INFEASIBLE", "NOT_CONVERGED", "NO_START"]
+__all__ = [
+    "SolverOptions",
+    "SolverResult",
+    "solve",
+    "solve_lanes",
+    "CONVERGED",
+    "INFEASIBLE",
+    "NOT_CONVERGED",
+    "NO_START",
+]
 
 CONVERGED = 0
 """KKT conditions hold within tolerance."""
@@ -65,6 +74,8 @@ class SolverOptions:
             gradient (inf-norm) is below this times the violation.
         max_step: largest Newton step (inf-norm, scaled variables).
         line_search_steps: number of step lengths ``1, 1/2, 1/4, ...`` tried per Newton step.
+        slot_fraction: :func:`solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
+            flight (finished lanes hand their slot to the next).
     """
 
     tol: float = 1e-10
@@ -78,6 +89,7 @@ class SolverOptions:
     inner_tol_factor: float = 1e-2
     max_step: float = 5.0
     line_search_steps: int = 16
+    slot_fraction: float = 0.125
 
 
 @jax.tree_util.register_dataclass
@@ -113,6 +125,7 @@ class _State:
     lam: Any
     nu: Any
     rho: Any
+    eq_mask: Any
     inner: Any  # Newton steps since the last multiplier update
     prev_viol: Any
     steps: Any
@@ -136,41 +149,37 @@ def _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask):
     return f(x) + nu * h + 0.5 * rho * h * h + ineq
 
 
-def solve(
-    f: Callable,
-    g: Callable,
-    x0,
-    eq_mask,
-    nu0=0.0,
-    options: SolverOptions = SolverOptions(),
-    active=True,
-) -> SolverResult:
-    """Solve one lane; ``vmap`` it for many.
-
-    Args:
-        f: objective, ``(n,) -> ()``.
-        g: constraint margins, ``(n,) -> (m,)``, feasible where ``>= 0``.
-        x0: ``(n,)`` starting point.
-        eq_mask: ``(m,)`` one-hot vector selecting the equality constraint, or zeros.
-        nu0: initial equality multiplier.
-        options: :class:`SolverOptions`.
-        active: ``False`` skips the lane (it ends at once with status :data:`NO_START`),
-            so that lanes without a start do not hold a batch's loop open.
-    """
+def _init(x0, eq_mask, nu0, active, o: SolverOptions) -> _State:
     x0 = jnp.asarray(x0)
-    eq_mask = jnp.asarray(eq_mask, dtype=x0.dtype)
-    m = eq_mask.shape[-1]
-    o = options
-    alphas = 0.5 ** jnp.arange(o.line_search_steps, dtype=x0.dtype)
+    dtype = x0.dtype
+    eq_mask = jnp.asarray(eq_mask, dtype)
+    return _State(
+        x=x0,
+        lam=jnp.zeros(eq_mask.shape, dtype),
+        nu=jnp.asarray(nu0, dtype),
+        rho=jnp.asarray(o.rho0, dtype),
+        eq_mask=eq_mask,
+        inner=jnp.asarray(0, jnp.int32),
+        prev_viol=jnp.asarray(jnp.inf, dtype),
+        steps=jnp.asarray(0, jnp.int32),
+        status=jnp.where(active, NOT_CONVERGED, NO_START).astype(jnp.int32),
+        stationarity=jnp.asarray(jnp.inf, dtype),
+        feasibility=jnp.asarray(jnp.inf, dtype),
+        complementarity=jnp.asarray(jnp.inf, dtype),
+    )
+
+
+def _step(f, g, s: _State, o: SolverOptions) -> _State:
+    """One loop step of one lane: a Newton step on phi, or a multiplier update once the
+    inner solve is done. A finished lane is returned unchanged."""
+    eq_mask = s.eq_mask
+    alphas = 0.5 ** jnp.arange(o.line_search_steps, dtype=s.x.dtype)
 
     def phi(x, lam, nu, rho):
         return _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask)
 
-    grad_phi = jax.grad(phi)
-    hess_phi = jax.hessian(phi)
-
     def newton_step(s: _State, gphi):
-        hmat = hess_phi(s.x, s.lam, s.nu, s.rho)
+        hmat = jax.hessian(phi)(s.x, s.lam, s.nu, s.rho)
         hmat = 0.5 * (hmat + hmat.T)
         evals, evecs = jnp.linalg.eigh(hmat)
         aevals = jnp.abs(evals)
@@ -218,7 +227,7 @@ def solve(
             stationary_violation | (at_max & (viol >= 0.5 * s.prev_viol))
         )
         rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
-        status = jnp.where(converged, CONVERGED, jnp.where(infeasible, INFEASIBLE, NOT_CONVERGED)).astype(jnp.int32)
+        status = jnp.where(converged, CONVERGED, jnp.where(infeasible, INFEASIBLE, NOT_CONVERGED))
         return dataclasses.replace(
             s,
             lam=lam,
@@ -226,40 +235,29 @@ def solve(
             rho=rho,
             inner=jnp.zeros_like(s.inner),
             prev_viol=viol,
-            status=status,
+            status=status.astype(jnp.int32),
             stationarity=stat,
             feasibility=viol,
             complementarity=comp,
         )
 
-    def body(s: _State) -> _State:
-        gphi = grad_phi(s.x, s.lam, s.nu, s.rho)
-        # Inexact inner solves: while the violation is large, a rough minimiser of phi
-        # is enough to update the multipliers; the tolerance tightens to tol as the
-        # violation vanishes.
-        inner_tol = jnp.maximum(o.tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
-        inner_done = (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
-        s_new = jax.lax.cond(inner_done, multiplier_update, newton_step, s, gphi)
-        return dataclasses.replace(s_new, steps=s.steps + 1)
+    gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
+    # Inexact inner solves: while the violation is large, a rough minimiser of phi
+    # is enough to update the multipliers; the tolerance tightens to tol as the
+    # violation vanishes.
+    inner_tol = jnp.maximum(o.tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
+    inner_done = (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
+    s_new = jax.lax.cond(inner_done, multiplier_update, newton_step, s, gphi)
+    s_new = dataclasses.replace(s_new, steps=s.steps + 1)
+    running = _running(s, o)
+    return jax.tree_util.tree_map(lambda a, b: jnp.where(running, a, b), s_new, s)
 
-    def cond(s: _State):
-        return (s.status == NOT_CONVERGED) & (s.steps < o.max_steps)
 
-    dtype = x0.dtype
-    init = _State(
-        x=x0,
-        lam=jnp.zeros(m, dtype),
-        nu=jnp.asarray(nu0, dtype),
-        rho=jnp.asarray(o.rho0, dtype),
-        inner=jnp.asarray(0, jnp.int32),
-        prev_viol=jnp.asarray(jnp.inf, dtype),
-        steps=jnp.asarray(0, jnp.int32),
-        status=jnp.where(active, NOT_CONVERGED, NO_START).astype(jnp.int32),
-        stationarity=jnp.asarray(jnp.inf, dtype),
-        feasibility=jnp.asarray(jnp.inf, dtype),
-        complementarity=jnp.asarray(jnp.inf, dtype),
-    )
-    s = jax.lax.while_loop(cond, body, init)
+def _running(s: _State, o: SolverOptions):
+    return (s.status == NOT_CONVERGED) & (s.steps < o.max_steps)
+
+
+def _result(f, s: _State) -> SolverResult:
     return SolverResult(
         x=s.x,
         lam=s.lam,
@@ -271,3 +269,105 @@ def solve(
         complementarity=s.complementarity,
         steps=s.steps,
     )
+
+
+def solve(
+    f: Callable,
+    g: Callable,
+    x0,
+    eq_mask,
+    nu0=0.0,
+    options: SolverOptions = SolverOptions(),
+    active=True,
+) -> SolverResult:
+    """Solve one lane (``vmap`` it for many, or use :func:`solve_lanes`).
+
+    Args:
+        f: objective, ``(n,) -> ()``.
+        g: constraint margins, ``(n,) -> (m,)``, feasible where ``>= 0``.
+        x0: ``(n,)`` starting point.
+        eq_mask: ``(m,)`` one-hot vector selecting the equality constraint, or zeros.
+        nu0: initial equality multiplier.
+        options: :class:`SolverOptions`.
+        active: ``False`` skips the lane (it ends at once with status :data:`NO_START`).
+    """
+    s = _init(x0, eq_mask, nu0, active, options)
+    s = jax.lax.while_loop(lambda s: _running(s, options), lambda s: _step(f, g, s, options), s)
+    return _result(f, s)
+
+
+def solve_lanes(
+    f: Callable,
+    g: Callable,
+    theta,
+    x0,
+    eq_mask,
+    nu0,
+    active,
+    options: SolverOptions = SolverOptions(),
+) -> SolverResult:
+    """Solve a batch of lanes with early exit of finished lanes (leading axis ``L``).
+
+    Lanes of one ``vmap`` advance in lockstep, so a plain batched loop costs
+    ``L * max(steps)`` although most lanes finish early (or never start). Here a work
+    queue keeps ``W = ceil(slot_fraction * L)`` slots busy: each loop step advances
+    every slot; a slot whose lane has finished writes it back and takes the next lane
+    not yet started (active lanes only). One ``while_loop`` with static shapes, so this
+    composes with ``jit`` and ``vmap``; the cost is near ``sum(steps) + W * max(steps)``
+    lane-steps instead of ``L * max(steps)``. Each lane's result is what :func:`solve`
+    gives.
+
+    Args:
+        f: objective ``(x, theta_lane) -> ()``.
+        g: constraint margins ``(x, theta_lane) -> (m,)``.
+        theta: pytree of per-lane problem data, leading axis ``L`` (may be empty).
+        x0: ``(L, n)`` starting points.
+        eq_mask: ``(L, m)`` one-hot equality selectors (rows of zeros: no equality).
+        nu0: ``(L,)`` initial equality multipliers.
+        active: ``(L,)`` bool; inactive lanes end at once with status :data:`NO_START`.
+        options: :class:`SolverOptions`.
+    """
+    o = options
+    num_lanes = x0.shape[0]
+    width = max(1, min(num_lanes, -(-int(o.slot_fraction * num_lanes * 1e6) // 1_000_000)))
+    states = jax.vmap(lambda x, m, nu, a: _init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
+    # The queue: active lanes first, in order; only those are ever loaded into a slot.
+    queue = jnp.argsort(~jnp.asarray(active), stable=True)
+    num_active = jnp.sum(jnp.asarray(active, jnp.int32))
+
+    def take(tree, idx):
+        return jax.tree_util.tree_map(lambda a: a[idx], tree)
+
+    def step_all(slots, idx):
+        th = take(theta, idx)
+        return jax.vmap(lambda s, t: _step(lambda x: f(x, t), lambda x: g(x, t), s, o))(slots, th)
+
+    def running(slots):
+        return jax.vmap(lambda s: _running(s, o))(slots)
+
+    def body(carry):
+        states, slots, idx, ptr = carry
+        slots = step_all(slots, idx)
+        states = jax.tree_util.tree_map(lambda a, b: a.at[idx].set(b), states, slots)
+        done = ~running(slots)
+        # the k-th finished slot takes queue[ptr + k], while lanes remain
+        rank = jnp.cumsum(done) - 1
+        cand = ptr + rank
+        refill = done & (cand < num_active)
+        new_idx = jnp.where(refill, queue[jnp.minimum(cand, num_lanes - 1)], idx)
+        slots = jax.tree_util.tree_map(
+            lambda a, b: jnp.where(refill.reshape((-1,) + (1,) * (a.ndim - 1)), b, a),
+            slots,
+            take(states, new_idx),
+        )
+        ptr = ptr + jnp.sum(refill)
+        return states, slots, new_idx, ptr
+
+    def cond(carry):
+        _, slots, _, _ = carry
+        return jnp.any(running(slots))
+
+    idx0 = queue[:width]
+    ptr0 = jnp.minimum(jnp.asarray(width), num_active)
+    states, _, _, _ = jax.lax.while_loop(cond, body, (states, take(states, idx0), idx0, ptr0))
+    return jax.vmap(lambda s, t: _result(lambda x: f(x, t), s))(states, take(theta, jnp.arange(num_lanes)))
