@@ -60,7 +60,8 @@ class SolverOptions:
     """Static settings of :func:`solve` (hashable; all quantities in the scaled units).
 
     Attributes:
-        tol: KKT tolerance on stationarity, feasibility and complementarity.
+        tol: KKT tolerance on stationarity, feasibility and complementarity (float64;
+            in lower precision it is raised to ``1e3 * eps`` of the dtype).
         max_steps: budget of loop steps (Newton steps plus multiplier updates) per lane.
         max_inner: Newton steps before a multiplier update is forced.
         inner_tol_factor: inner solves stop at stationarity
@@ -169,10 +170,18 @@ def _init(x0, eq_mask, nu0, active, o: SolverOptions) -> _State:
     )
 
 
+def _tolerances(dtype, o: SolverOptions):
+    """``(tol, infeasible_tol, rounding)`` for ``dtype``: the options' values, raised to
+    what the precision can reach (float32: tol ~1.2e-4, infeasible_tol ~1.2e-3)."""
+    eps = float(jnp.finfo(dtype).eps)
+    return max(o.tol, 1e3 * eps), max(o.infeasible_tol, 1e4 * eps), 100.0 * eps
+
+
 def _step(f, g, s: _State, o: SolverOptions) -> _State:
     """One loop step of one lane: a Newton step on phi, or a multiplier update once the
     inner solve is done. A finished lane is returned unchanged."""
     eq_mask = s.eq_mask
+    tol, infeasible_tol, rounding = _tolerances(s.x.dtype, o)
     alphas = 0.5 ** jnp.arange(o.line_search_steps, dtype=s.x.dtype)
 
     def phi(x, lam, nu, rho):
@@ -194,7 +203,7 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
         # Armijo, with slack for rounding: near a minimiser at a large penalty the decrease
         # a Newton step promises is below phi's rounding error, and a strict test would
         # reject the very steps that converge.
-        slack = 1e-14 * (jnp.abs(phi0) + 1.0)
+        slack = rounding * (jnp.abs(phi0) + 1.0)
         armijo = trial <= phi0 + 1e-4 * alphas * slope + slack
         first = jnp.argmax(armijo)
         best = jnp.argmin(trial)
@@ -214,7 +223,7 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
         viol = jnp.maximum(jnp.abs(h), jnp.max(jnp.where(is_eq, 0.0, jnp.maximum(-gx, 0.0))))
         comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gx)))
         stat = jnp.max(jnp.abs(gphi))
-        converged = (stat <= o.tol) & (viol <= o.tol) & (comp <= o.tol)
+        converged = (stat <= tol) & (viol <= tol) & (comp <= tol)
         stalled = viol > 0.25 * s.prev_viol
         at_max = s.rho >= o.rho_max
         # Infeasible: the violation stays above infeasible_tol at a point where the
@@ -223,7 +232,7 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
         # the largest penalty.
         grad_v = jax.grad(lambda x: _violation(g, x, eq_mask))(s.x)
         stationary_violation = jnp.max(jnp.abs(grad_v)) <= o.infeasible_stationarity * viol
-        infeasible = (viol > o.infeasible_tol) & (
+        infeasible = (viol > infeasible_tol) & (
             stationary_violation | (at_max & (viol >= 0.5 * s.prev_viol))
         )
         rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
@@ -245,7 +254,7 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
     # Inexact inner solves: while the violation is large, a rough minimiser of phi
     # is enough to update the multipliers; the tolerance tightens to tol as the
     # violation vanishes.
-    inner_tol = jnp.maximum(o.tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
+    inner_tol = jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
     inner_done = (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
     s_new = jax.lax.cond(inner_done, multiplier_update, newton_step, s, gphi)
     s_new = dataclasses.replace(s_new, steps=s.steps + 1)
