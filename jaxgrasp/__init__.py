@@ -30,6 +30,7 @@ from .result import (  # noqa: E402
     Evaluation,
 )
 from .solver import SolverOptions  # noqa: E402
+from .sweep import PARAMETERS, SweepResult, sweep  # noqa: E402
 from .validation import GraspValueError  # noqa: E402
 
 __version__ = "0.1.0"
@@ -52,5 +53,8 @@ __all__ = [
     "grasp_from_dict",
     "grasp_to_dict",
     "presets",
+    "sweep",
+    "SweepResult",
+    "PARAMETERS",
     "GraspValueError",
 ]

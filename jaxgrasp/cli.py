@@ -88,6 +88,8 @@ def load_grasp(args, overrides: bool = True):
 def _format_summary(d: dict, source: str) -> str:
     lines = [f"grasp: {source}"]
     lines.append(f"status: {d['status']}")
+    if d.get("explanation"):
+        lines.append(f"explanation: {d['explanation']}")
     lines.append(f"value: {d['value']:.6e} J   (least energy that makes a fingertip slip or overload)")
     lim = d["limiting"]
     if lim is not None:
@@ -155,4 +157,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # Run through the package module, so that exception classes are the package's own.
+    from jaxgrasp.cli import main as _main
+
+    sys.exit(_main())

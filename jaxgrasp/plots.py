@@ -1,0 +1,323 @@
+"""Plots of sweep results (matplotlib, Agg backend: no display needed).
+
+Conventions of every plot here:
+
+* the evaluation value is drawn in mJ (labelled), parameters in readable units (mm,
+  kPa, kg, N; labelled);
+* a line joins only points whose value can be trusted (stable and unstable ones);
+  it is broken at infeasible and not-converged points;
+* infeasible points (no stable equilibrium at all) are NOT drawn as zero values: they
+  are marked ``x`` in the curve's colour in a grey band below the value axis' zero (one
+  row per curve), outside the value scale;
+* unstable points (value 0 because the equilibrium lies on a boundary) are open circles
+  at value 0;
+* not-converged points are open grey diamonds at their (untrusted) value;
+* figures are built on the Agg canvas directly (``matplotlib.figure.Figure``), so
+  pyplot's global backend is never touched.
+* points whose value is set by a fingertip's force limit (``max_force``) carry a small
+  filled triangle; the others are set by slip.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+from .result import INFEASIBLE, NOT_CONVERGED, STABLE, UNSTABLE
+
+__all__ = ["plot_sweep", "plot_max_over", "plot_max", "new_figure", "DISPLAY", "J_TO_MJ"]
+
+J_TO_MJ = 1e3
+"""Energy: J to mJ (plots show the value in mJ)."""
+
+DISPLAY = {
+    # name: (factor from SI, unit shown, label, symbol)
+    "initial_deformation": (1e3, "mm", "initial deformation", "Δr"),
+    "young_modulus": (1e-3, "kPa", "Young's modulus", "E"),
+    "mass": (1.0, "kg", "object mass", "m"),
+    "friction": (1.0, "", "friction coefficient", "μ"),
+    "max_force": (1.0, "N", "force limit", "f_max"),
+    "radius": (1e3, "mm", "fingertip radius", "r"),
+}
+"""How each parameter is shown: SI value times factor, in the given unit."""
+
+VALUE_LABEL = "evaluation value ΔU_min [mJ]"
+_MAX_FORCE = 1  # limiting_kind code of the force-limit boundary
+_LINESTYLES = ["-", "--", ":", "-."]
+
+
+def _axis_label(name: str) -> str:
+    f, unit, label, sym = DISPLAY.get(name, (1.0, "", name, name))
+    return f"{label} {sym} [{unit}]" if unit else f"{label} {sym}"
+
+
+def _fmt(name: str, x: float) -> str:
+    f, unit, label, sym = DISPLAY.get(name, (1.0, "", name, name))
+    return f"{sym} = {x * f:.4g}" + (f" {unit}" if unit else "")
+
+
+def new_figure(**kwargs) -> Figure:
+    """A figure on the Agg canvas (no pyplot, no display)."""
+    fig = Figure(**kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig, path):
+    if path is not None:
+        fig.savefig(path, dpi=150, bbox_inches="tight")
+    return fig
+
+
+def _draw_curve(ax, x, value, status, kind, *, color, linestyle, label):
+    """One curve with the status conventions of this module (value in J, x in display units).
+
+    Returns the x of the infeasible points (for :func:`_infeasible_band`)."""
+    value = np.asarray(value, dtype=float)
+    status = np.asarray(status)
+    kind = np.asarray(kind)
+    y = value * J_TO_MJ
+    ok = (status == STABLE) | (status == UNSTABLE)
+    ax.plot(x, np.where(ok, y, np.nan), color=color, linestyle=linestyle, lw=1.6, label=label)
+    m = status == STABLE  # small dots, so that a stable point between gaps still shows
+    ax.plot(x[m], y[m], ".", color=color, ms=3, ls="none")
+    m = (status == STABLE) & (kind == _MAX_FORCE)
+    if np.any(m):
+        ax.plot(x[m], y[m], "^", color=color, ms=4, ls="none")
+    m = status == UNSTABLE
+    if np.any(m):
+        ax.plot(x[m], np.zeros(np.sum(m)), "o", mfc="white", mec=color, ms=6, mew=1.4, ls="none")
+    m = status == NOT_CONVERGED
+    if np.any(m):
+        ax.plot(x[m], y[m], "D", mfc="none", mec="0.45", ms=6, mew=1.2, ls="none")
+    return x[status == INFEASIBLE]  # drawn by _infeasible_band, below the zero line
+
+
+def _infeasible_band(axes, entries, n_rows):
+    """Mark infeasible points with ``x`` in a grey band below value 0, one row per curve.
+
+    ``entries``: per axes, a list of ``(x, color, row)``. The value axis keeps its ticks at
+    ``>= 0`` only; the band is not part of the value scale.
+    """
+    if not any(len(x) for per_ax in entries for x, _, _ in per_ax):
+        for ax in axes:
+            ax.set_ylim(bottom=0.0)
+        return
+    top = max(ax.get_ylim()[1] for ax in axes)
+    frac = min(0.06 + 0.012 * n_rows, 0.2)
+    bottom = -frac * top
+    for ax, per_ax in zip(axes, entries):
+        ax.axhspan(bottom, 0.0, color="0.93", zorder=0, lw=0)
+        ax.axhline(0.0, color="0.55", lw=0.7, zorder=1)
+        ax.text(0.005, bottom * 0.5, "infeasible", transform=ax.get_yaxis_transform(), fontsize=7,
+                color="0.35", va="center", ha="left", zorder=1)
+        for x, color, row in per_ax:
+            if len(x):
+                y = bottom * (row + 0.5) / max(n_rows, 1)
+                ax.plot(x, np.full(len(x), y), "x", color=color, ms=4.5, mew=1.2, ls="none", zorder=3)
+    for ax in axes:
+        ax.set_ylim(bottom, top)
+        ax.set_yticks([t for t in ax.get_yticks() if 0.0 <= t <= top])
+        ax.set_ylim(bottom, top)
+
+
+def _status_legend(ax, status, kind):
+    s = np.asarray(status)
+    handles = [Line2D([], [], color="k", lw=1.6, label="stable (value set by slip)")]
+    if np.any((s == STABLE) & (np.asarray(kind) == _MAX_FORCE)):
+        handles.append(
+            Line2D([], [], color="k", marker="^", ms=4, ls="none", label="value set by force limit")
+        )
+    if np.any(s == UNSTABLE):
+        handles.append(
+            Line2D([], [], marker="o", mfc="white", mec="k", ms=6, ls="none", label="unstable (value 0)")
+        )
+    if np.any(s == INFEASIBLE):
+        handles.append(
+            Line2D(
+                [], [], marker="x", color="k", ms=5, ls="none",
+                label="infeasible: no stable equilibrium\n(in the grey band below 0)",
+            )
+        )
+    if np.any(s == NOT_CONVERGED):
+        handles.append(
+            Line2D(
+                [], [], marker="D", mfc="none", mec="0.45", ms=6, ls="none", label="not converged (untrusted)"
+            )
+        )
+    return handles
+
+
+def _pick_roles(names, x, curves, panels):
+    names = list(names)
+    if x is None:
+        x = "initial_deformation" if "initial_deformation" in names else names[0]
+    rest = [n for n in names if n != x]
+    if curves is None:
+        curves = "young_modulus" if "young_modulus" in rest else (rest[0] if rest else None)
+    rest = [n for n in rest if n != curves]
+    if panels is None:
+        panels = "mass" if "mass" in rest else (rest[0] if rest else None)
+    rest = [n for n in rest if n != panels]
+    return x, curves, panels, rest
+
+
+def plot_sweep(result, path=None, *, x=None, curves=None, panels=None, title=None, max_panels=12):
+    """Value against one parameter, one curve per value of another, panels for a third.
+
+    Defaults: ``x`` is ``initial_deformation`` (else the first axis), ``curves``
+    ``young_modulus`` (else the next axis), ``panels`` ``mass`` (else the next axis).
+    Any further axes become more panels (one per combination, at most ``max_panels``).
+
+    Args:
+        result: a :class:`~jaxgrasp.sweep.SweepResult`.
+        path: where to save the figure (PNG, ...); ``None`` returns it open.
+        title: figure title.
+
+    Returns:
+        The matplotlib ``Figure``.
+    """
+    if not result.axes:
+        raise ValueError("plot_sweep needs a sweep with at least one axis")
+    x, curves, panels, rest = _pick_roles(result.names, x, curves, panels)
+    order = [x] + ([curves] if curves else []) + ([panels] if panels else []) + rest
+    perm = [result.names.index(n) for n in order]
+    arrs = {
+        f: np.transpose(np.asarray(getattr(result, f)), perm)
+        for f in ("value", "status", "limiting_kind")
+    }
+    shape = arrs["value"].shape
+    n_curves = shape[1] if curves else 1
+    panel_names = ([panels] if panels else []) + rest
+    panel_index = list(itertools.product(*[range(len(result.axes[n])) for n in panel_names]))
+    truncated = len(panel_index) > max_panels
+    panel_index = panel_index[:max_panels]
+    n_p = len(panel_index)
+    ncols = min(n_p, 3)
+    nrows = math.ceil(n_p / ncols)
+    fig = new_figure(figsize=(6.4 * ncols, 4.4 * nrows))
+    axs = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
+    xf = DISPLAY.get(x, (1.0,))[0]
+    xs = np.asarray(result.axes[x]) * xf
+    cmap = matplotlib.colormaps.get_cmap("viridis")
+    used_axes, band = [], []
+    for p, pidx in enumerate(panel_index):
+        ax = axs[p // ncols][p % ncols]
+        used_axes.append(ax)
+        band.append([])
+        for c in range(n_curves):
+            sel = (slice(None), c, *pidx) if curves else (slice(None), *pidx)
+            color = cmap(0.9 * c / max(n_curves - 1, 1))
+            label = _fmt(curves, result.axes[curves][c]) if curves else None
+            x_inf = _draw_curve(
+                ax,
+                xs,
+                arrs["value"][sel],
+                arrs["status"][sel],
+                arrs["limiting_kind"][sel],
+                color=color,
+                linestyle="-",
+                label=label,
+            )
+            band[-1].append((x_inf, color, c))
+        ax.set_xlabel(_axis_label(x))
+        if p % ncols == 0:
+            ax.set_ylabel(VALUE_LABEL)
+        ax.grid(True, alpha=0.3)
+        if panel_names:
+            text = ", ".join(_fmt(n, result.axes[n][i]) for n, i in zip(panel_names, pidx))
+            ax.set_title(text, fontsize=10)
+    for ax in used_axes:
+        ax.set_ylim(bottom=0.0)
+    _infeasible_band(used_axes, band, n_curves)
+    for p in range(n_p, nrows * ncols):
+        axs[p // ncols][p % ncols].set_visible(False)
+    ax0 = axs[0][0]
+    curve_handles, _ = ax0.get_legend_handles_labels()
+    handles = curve_handles + _status_legend(ax0, arrs["status"], arrs["limiting_kind"])
+    fig.legend(handles=handles, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=9, frameon=False)
+    if title or truncated:
+        t = title or ""
+        if truncated:
+            t += f" (first {max_panels} panels shown)"
+        fig.suptitle(t)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_max_over(result, path=None, *, over="initial_deformation", x=None, curves=None, title=None):
+    """Maximum value over one axis (paper's Fig. 7), with the maximising parameter below.
+
+    Top panel: ``max over <over>`` of the value against ``x`` (default
+    ``young_modulus``), one curve per value of ``curves`` (default ``mass`` if swept, else
+    the remaining axis). Bottom panel: the maximising value of ``over`` (e.g. the optimal
+    initial deformation). Status conventions as in :func:`plot_sweep`, for the maximising
+    point.
+    """
+    reduced, arg = result.max_over(over)
+    return plot_max(reduced, arg, path, over=over, x=x, curves=curves, title=title)
+
+
+def plot_max(reduced, best, path=None, *, over="initial_deformation", x=None, curves=None, title=None):
+    """Like :func:`plot_max_over`, from an already reduced result.
+
+    Args:
+        reduced: a :class:`~jaxgrasp.sweep.SweepResult` of the maximising points (one or
+            two axes), e.g. the first output of ``SweepResult.max_over``.
+        best: the maximising value of parameter ``over`` at each of its points (SI).
+    """
+    arg = np.asarray(best)
+    names = list(reduced.names)
+    if not names:
+        raise ValueError("plot_max_over needs a sweep with at least two axes")
+    if x is None:
+        x = "young_modulus" if "young_modulus" in names else names[0]
+    rest = [n for n in names if n != x]
+    if curves is None:
+        curves = "mass" if "mass" in rest else (rest[0] if rest else None)
+    rest = [n for n in rest if n != curves]
+    if rest:
+        raise ValueError(f"plot_max_over: too many axes left ({', '.join(rest)}); reduce them first")
+    order = [x] + ([curves] if curves else [])
+    perm = [names.index(n) for n in order]
+    val = np.transpose(np.asarray(reduced.value), perm)
+    st = np.transpose(np.asarray(reduced.status), perm)
+    kd = np.transpose(np.asarray(reduced.limiting_kind), perm)
+    am = np.transpose(np.asarray(arg), perm)
+    if not curves:
+        val, st, kd, am = val[:, None], st[:, None], kd[:, None], am[:, None]
+    n_curves = val.shape[1]
+    fig = new_figure(figsize=(6.4, 6.4))
+    ax, ax2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2.2, 1]})
+    xs = np.asarray(reduced.axes[x]) * DISPLAY.get(x, (1.0,))[0]
+    of = DISPLAY.get(over, (1.0,))[0]
+    cmap = matplotlib.colormaps.get_cmap("plasma")
+    band = []
+    for c in range(n_curves):
+        color = cmap(0.85 * c / max(n_curves - 1, 1)) if n_curves > 1 else "C0"
+        ls = _LINESTYLES[c % len(_LINESTYLES)]
+        label = _fmt(curves, reduced.axes[curves][c]) if curves else None
+        x_inf = _draw_curve(ax, xs, val[:, c], st[:, c], kd[:, c], color=color, linestyle=ls, label=label)
+        band.append((x_inf, color, c))
+        ok = st[:, c] == STABLE
+        ax2.plot(xs, np.where(ok, am[:, c] * of, np.nan), ls=ls, marker="o", ms=3, color=color)
+    ax.set_ylabel(f"max over {DISPLAY.get(over, (0, '', over, over))[3]} of value [mJ]")
+    ax.set_ylim(bottom=0.0)
+    _infeasible_band([ax], [band], n_curves)
+    ax.grid(True, alpha=0.3)
+    curve_handles, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=curve_handles + _status_legend(ax, st, kd), fontsize=8)
+    ax2.set_xlabel(_axis_label(x))
+    f_o, unit_o, _, sym_o = DISPLAY.get(over, (1.0, "", over, over))
+    ax2.set_ylabel(f"best {sym_o} [{unit_o}]" if unit_o else f"best {sym_o}")
+    ax2.grid(True, alpha=0.3)
+    if title:
+        ax.set_title(title, fontsize=11)
+    fig.tight_layout()
+    return _save(fig, path)

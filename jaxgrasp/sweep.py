@@ -1,0 +1,454 @@
+"""Parameter sweeps: evaluate one grasp over a Cartesian grid of its scalar parameters.
+
+::
+
+    import numpy as np, jaxgrasp
+    result = jaxgrasp.sweep(
+        jaxgrasp.presets.cube(),
+        young_modulus=np.linspace(2e5, 1e6, 9),         # Pa
+        initial_deformation=np.linspace(1e-3, 5e-3, 41),  # m, every contact at once
+    )
+    result.value.shape          # (9, 41), J
+    result.to_csv("sweep.csv")  # one row per grid point, SI units in the column names
+
+The grid points are evaluated as lanes of ``jax.jit(jax.vmap(evaluate))`` in chunks of
+``chunk_size`` points; the last chunk is padded to the same size, so one sweep compiles
+once (and a later sweep of a grasp with the same number of contacts, the same options and
+the same chunk size reuses that compilation). Memory is bounded by the chunk size, not by
+the grid size.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+import time
+from typing import Any, Callable, Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import result as R
+from .evaluate import EvaluateOptions
+from .evaluate import evaluate as _evaluate_one
+from .grasp import Grasp
+from .model import KINDS
+from .validation import GraspValueError, _as_float_array, check_grasp_inputs, format_value
+
+__all__ = ["sweep", "SweepResult", "PARAMETERS", "DEFAULT_CHUNK_SIZE"]
+
+DEFAULT_CHUNK_SIZE = 4096
+"""Default number of grid points evaluated per compiled batch."""
+
+
+@dataclasses.dataclass(frozen=True)
+class _Param:
+    unit: str  # SI unit ('' for dimensionless)
+    per_contact: bool  # one value per contact in the Grasp (the sweep sets all at once)
+    allow_zero: bool  # 0 allowed (only mass); negative values never are
+
+
+PARAMETERS: dict[str, _Param] = {
+    "young_modulus": _Param("Pa", True, False),
+    "initial_deformation": _Param("m", True, False),
+    "mass": _Param("kg", False, True),
+    "friction": _Param("", True, False),
+    "max_force": _Param("N", True, False),
+    "radius": _Param("m", True, False),
+}
+"""Sweepable parameters: name -> (SI unit, per-contact?, zero allowed?).
+
+A per-contact parameter is set to the same value at every contact of a grid point."""
+
+_RESULT_FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
+_RESULT_UNITS = {"value": "J", "equilibrium_energy": "J"}
+
+
+def column_name(name: str) -> str:
+    """CSV column name with its SI unit: ``young_modulus_Pa``, ``mass_kg``, ``value_J``."""
+    unit = PARAMETERS[name].unit if name in PARAMETERS else _RESULT_UNITS.get(name, "")
+    return f"{name}_{unit}" if unit else name
+
+
+# --------------------------------------------------------------------------- result
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SweepResult:
+    """Evaluation of a grasp over a parameter grid (SI units); a JAX pytree.
+
+    Every array is shaped like the grid, ``(len(ax1), len(ax2), ...)``, in the order the
+    axes were given to :func:`sweep`.
+
+    Attributes:
+        axes: dict parameter name -> 1-D float64 array of its grid values (SI units), in
+            the order given.
+        value: evaluation value ``Delta U_min``, J (0 where unstable or infeasible).
+        status: int codes :data:`jaxgrasp.STABLE` ... :data:`jaxgrasp.NOT_CONVERGED`
+            (names in :data:`jaxgrasp.STATUS_NAMES`).
+        limiting_kind: 0 slip, 1 max_force, -1 none (names in :data:`jaxgrasp.KINDS`).
+        limiting_contact: 0-based contact of the limiting boundary, -1 none.
+        equilibrium_energy: ``min U`` over the equilibrium region, J.
+        compile_seconds: time spent compiling the batched evaluator in this sweep (0 when
+            a compilation was reused). Static (not a pytree leaf).
+        run_seconds: time spent evaluating the chunks. Static (not a pytree leaf).
+
+    As a pytree, the leaves are the axis arrays (in grid order) and the five result
+    arrays; the axis names and timings are static.
+    """
+
+    axes: dict
+    value: Any
+    status: Any
+    limiting_kind: Any
+    limiting_contact: Any
+    equilibrium_energy: Any
+    compile_seconds: float = 0.0
+    run_seconds: float = 0.0
+
+    # ---- shape and names
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Axis names, in grid order."""
+        return tuple(self.axes)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Grid shape ``(len(ax1), len(ax2), ...)``."""
+        return tuple(len(a) for a in self.axes.values())
+
+    @property
+    def size(self) -> int:
+        """Number of grid points."""
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    @property
+    def status_names(self) -> np.ndarray:
+        """``status`` as an array of names (``'stable'``, ...)."""
+        return np.asarray(R.STATUS_NAMES, dtype=object)[np.asarray(self.status)]
+
+    @property
+    def limiting_kind_names(self) -> np.ndarray:
+        """``limiting_kind`` as an array of names (``'slip'``, ``'max_force'``, ``'none'``)."""
+        names = np.asarray(tuple(KINDS) + ("none",), dtype=object)
+        return names[np.asarray(self.limiting_kind)]  # -1 -> last entry, 'none'
+
+    def grid(self) -> dict[str, np.ndarray]:
+        """Each axis' value at every grid point: dict name -> array shaped like the grid."""
+        mesh = np.meshgrid(*self.axes.values(), indexing="ij") if self.axes else []
+        return dict(zip(self.axes, mesh))
+
+    def counts(self) -> dict[str, int]:
+        """Number of grid points of each status, by name."""
+        s = np.asarray(self.status).ravel()
+        return {name: int(np.sum(s == code)) for code, name in enumerate(R.STATUS_NAMES)}
+
+    def best(self) -> dict | None:
+        """The grid point of highest value among trusted results (not ``not_converged``).
+
+        Returns ``None`` when every point is not_converged, else a dict with ``index``
+        (grid index tuple), ``value`` (J), ``status``, ``limiting_kind`` and
+        ``limiting_contact`` (names / int) and the point's parameters by name (SI).
+        """
+        v = np.where(np.asarray(self.status) == R.NOT_CONVERGED, -np.inf, np.asarray(self.value))
+        if v.size == 0 or not np.any(np.isfinite(v)):
+            return None
+        idx = np.unravel_index(int(np.argmax(v)), v.shape)
+        out = {"index": tuple(int(i) for i in idx), "value": float(self.value[idx])}
+        out.update({name: float(ax[i]) for (name, ax), i in zip(self.axes.items(), idx)})
+        out["status"] = R.STATUS_NAMES[int(self.status[idx])]
+        out["limiting_kind"] = str(self.limiting_kind_names[idx])
+        out["limiting_contact"] = int(self.limiting_contact[idx])
+        return out
+
+    def max_over(self, name: str) -> tuple["SweepResult", np.ndarray]:
+        """Maximise the value over one axis (e.g. Fig. 7: best initial deformation per E).
+
+        Not-converged points are skipped unless every point along the axis is one.
+
+        Returns:
+            ``(reduced, argmax)``: a :class:`SweepResult` without axis ``name`` whose
+            entries are those of the maximising grid point, and the maximising value of
+            parameter ``name`` at every remaining grid point.
+        """
+        if name not in self.axes:
+            raise KeyError(f"no axis {name!r}; axes: {', '.join(self.axes)}")
+        k = list(self.axes).index(name)
+        value = np.asarray(self.value)
+        trusted = np.where(np.asarray(self.status) == R.NOT_CONVERGED, -np.inf, value)
+        none_trusted = np.all(np.isneginf(trusted), axis=k, keepdims=True)
+        score = np.where(none_trusted, value, trusted)
+        arg = np.argmax(score, axis=k)
+        take = lambda a: np.take_along_axis(np.asarray(a), np.expand_dims(arg, k), axis=k).squeeze(k)
+        axes = {n: a for n, a in self.axes.items() if n != name}
+        reduced = SweepResult(
+            axes=axes,
+            **{f: take(getattr(self, f)) for f in _RESULT_FIELDS},
+            compile_seconds=self.compile_seconds,
+            run_seconds=self.run_seconds,
+        )
+        return reduced, np.asarray(self.axes[name])[arg]
+
+    # ---- files
+    def to_csv(self, path) -> None:
+        """Write a tidy CSV: one row per grid point (C order: last axis fastest).
+
+        Columns: each axis with its SI unit (``young_modulus_Pa``, ``initial_deformation_m``,
+        ``mass_kg``, ``friction``, ``max_force_N``, ``radius_m``), then ``value_J``,
+        ``status`` (name), ``limiting_kind`` (``slip``/``max_force``/``none``),
+        ``limiting_contact`` (-1 for none) and ``equilibrium_energy_J``. Floats are
+        written with 17 significant digits (they read back exactly).
+        """
+        grid = self.grid()
+        cols = [column_name(n) for n in self.axes] + [
+            column_name("value"),
+            "status",
+            "limiting_kind",
+            "limiting_contact",
+            column_name("equilibrium_energy"),
+        ]
+        flat = {n: g.ravel() for n, g in grid.items()}
+        value = np.asarray(self.value).ravel()
+        status = self.status_names.ravel()
+        kind = self.limiting_kind_names.ravel()
+        contact = np.asarray(self.limiting_contact).ravel()
+        energy = np.asarray(self.equilibrium_energy).ravel()
+        fmt = lambda x: repr(float(x))
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(cols)
+            for i in range(value.size):
+                row = [fmt(flat[n][i]) for n in self.axes]
+                row += [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
+                w.writerow(row)
+
+    def to_npz(self, path) -> None:
+        """Write a ``.npz``: ``axis_names``, ``axis_<name>`` (1-D, SI), the grid-shaped
+        result arrays, ``status_names``, ``kind_names`` and the timings.
+
+        Read it back with :meth:`from_npz`. No pickled objects (``allow_pickle=False``).
+        """
+        arrays = {
+            "axis_names": np.asarray(self.names, dtype=str),
+            "status_names": np.asarray(R.STATUS_NAMES, dtype=str),
+            "kind_names": np.asarray(KINDS, dtype=str),
+            "compile_seconds": np.float64(self.compile_seconds),
+            "run_seconds": np.float64(self.run_seconds),
+        }
+        for n, a in self.axes.items():
+            arrays[f"axis_{n}"] = np.asarray(a, dtype=np.float64)
+        for f in _RESULT_FIELDS:
+            arrays[f] = np.asarray(getattr(self, f))
+        np.savez(path, **arrays)
+
+    @classmethod
+    def from_npz(cls, path) -> "SweepResult":
+        """Read a file written by :meth:`to_npz`."""
+        with np.load(path, allow_pickle=False) as z:
+            names = [str(n) for n in z["axis_names"]]
+            return cls(
+                axes={n: np.array(z[f"axis_{n}"]) for n in names},
+                **{f: np.array(z[f]) for f in _RESULT_FIELDS},
+                compile_seconds=float(z["compile_seconds"]),
+                run_seconds=float(z["run_seconds"]),
+            )
+
+    def __repr__(self) -> str:
+        axes = ", ".join(f"{n}[{len(a)}]" for n, a in self.axes.items())
+        counts = ", ".join(f"{k} {v}" for k, v in self.counts().items() if v)
+        return f"SweepResult({axes or 'no axes'}; {counts})"
+
+
+def _flatten(r: SweepResult):
+    # axes as a tuple (not a dict, whose keys JAX would sort): the order is the grid's
+    children = (tuple(r.axes.values()), *(getattr(r, f) for f in _RESULT_FIELDS))
+    return children, (tuple(r.axes), r.compile_seconds, r.run_seconds)
+
+
+def _unflatten(aux, children):
+    names, compile_seconds, run_seconds = aux
+    axes, *arrays = children
+    return SweepResult(
+        dict(zip(names, axes)),
+        *arrays,
+        compile_seconds=compile_seconds,
+        run_seconds=run_seconds,
+    )
+
+
+jax.tree_util.register_pytree_node(SweepResult, _flatten, _unflatten)
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _check_axes(base: dict[str, np.ndarray], axes: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """Validate the axes against the (validated) base grasp fields; one-line errors."""
+    valid = ", ".join(PARAMETERS)
+    out: dict[str, np.ndarray] = {}
+    for name, values in axes.items():
+        if name not in PARAMETERS:
+            raise GraspValueError(f"cannot sweep unknown parameter {name!r}; valid parameters: {valid}")
+        param = PARAMETERS[name]
+        unit = f" {param.unit}" if param.unit else ""
+        a = _as_float_array(f"sweep axis {name}", values)
+        if a.ndim > 1:
+            raise GraspValueError(
+                f"sweep axis {name} must be a number or a 1-D sequence of numbers, got shape {a.shape}"
+            )
+        a = np.atleast_1d(a).astype(np.float64)
+        if a.size == 0:
+            raise GraspValueError(f"sweep axis {name} is empty: give at least one value")
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            i = int(bad[0])
+            raise GraspValueError(f"sweep axis {name}[{i}] = {format_value(a[i])}{unit} must be finite")
+        bad = np.flatnonzero(a < 0 if param.allow_zero else a <= 0)
+        if bad.size:
+            i = int(bad[0])
+            rule = ">= 0" if param.allow_zero else "positive"
+            raise GraspValueError(f"sweep axis {name}[{i}] = {format_value(a[i])}{unit} must be {rule}")
+        out[name] = a
+    # every grid point must keep 0 < initial_deformation < radius at every contact
+    dr = out.get("initial_deformation", base["initial_deformation"])
+    r = out.get("radius", base["radius"])
+    dr_max, r_min = float(np.max(dr)), float(np.min(r))
+    if not dr_max < r_min:
+        where_dr = ("sweep axis " if "initial_deformation" in out else "the grasp's ") + "initial_deformation"
+        where_r = ("sweep axis " if "radius" in out else "the grasp's ") + "radius"
+        raise GraspValueError(
+            f"initial_deformation must be < radius at every grid point, but {where_dr} reaches "
+            f"{format_value(dr_max)} m and {where_r} goes down to {format_value(r_min)} m"
+        )
+    return out
+
+
+# --------------------------------------------------------------------------- compiled batch
+
+_COMPILED: dict = {}
+
+
+def _batched_fn(options: EvaluateOptions):
+    def one(g: Grasp):
+        r = _evaluate_one(g, options)
+        return tuple(getattr(r, f) for f in _RESULT_FIELDS)
+
+    return jax.jit(jax.vmap(one))
+
+
+def _compiled(options: EvaluateOptions, n_contacts: int, chunk: int):
+    """The batched evaluator for ``chunk`` grasps of ``n_contacts``; (fn, compile seconds)."""
+    key = (options, n_contacts, chunk, jax.config.jax_enable_x64)
+    hit = _COMPILED.get(key)
+    if hit is not None:
+        return hit, 0.0
+    f64 = jnp.float64
+    sds = lambda *s: jax.ShapeDtypeStruct((chunk, *s), f64)
+    spec = Grasp(
+        positions=sds(n_contacts, 3),
+        normals=sds(n_contacts, 3),
+        initial_deformation=sds(n_contacts),
+        radius=sds(n_contacts),
+        young_modulus=sds(n_contacts),
+        friction=sds(n_contacts),
+        max_force=sds(n_contacts),
+        mass=sds(),
+        gravity=sds(3),
+    )
+    t0 = time.perf_counter()
+    fn = _batched_fn(options).lower(spec).compile()
+    seconds = time.perf_counter() - t0
+    if len(_COMPILED) >= 16:
+        _COMPILED.pop(next(iter(_COMPILED)))
+    _COMPILED[key] = fn
+    return fn, seconds
+
+
+# --------------------------------------------------------------------------- sweep
+
+
+def sweep(
+    grasp: Grasp,
+    /,
+    *,
+    options: EvaluateOptions = EvaluateOptions(),
+    chunk_size: int = DEFAULT_CHUNK_SIZE,
+    progress: Callable[[int, int], Any] | None = None,
+    **axes,
+) -> SweepResult:
+    """Evaluate ``grasp`` at every point of the Cartesian grid of ``axes``.
+
+    Args:
+        grasp: the base :class:`~jaxgrasp.Grasp` (SI units); parameters not swept keep
+            its values.
+        options: :class:`~jaxgrasp.EvaluateOptions` for every evaluation.
+        chunk_size: grid points per compiled batch (bounds memory). The batch size used is
+            ``min(chunk_size, number of points)``; the last chunk is padded to it.
+        progress: optional ``progress(done, total)`` called after each chunk with the
+            numbers of grid points done and in all.
+        **axes: ``name=values`` for any of :data:`PARAMETERS` (``young_modulus`` Pa,
+            ``initial_deformation`` m, ``mass`` kg, ``friction``, ``max_force`` N,
+            ``radius`` m); ``values`` is a number or a 1-D sequence. Per-contact
+            parameters are set at every contact at once. The grid's axes follow the
+            keyword order.
+
+    Returns:
+        A :class:`SweepResult` whose arrays have shape ``(len(ax1), len(ax2), ...)``;
+        every entry equals :func:`jaxgrasp.evaluate` of that grid point's grasp.
+
+    Raises:
+        GraspValueError: before anything is compiled, for an invalid base grasp, an unknown
+            parameter name, an empty, non-numeric, non-finite or out-of-range axis, or a
+            grid point with ``initial_deformation >= radius``; the message is one line.
+    """
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
+        raise GraspValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    if not isinstance(grasp, Grasp):
+        raise GraspValueError(f"sweep needs a jaxgrasp.Grasp, got {type(grasp).__name__}")
+    try:
+        base = check_grasp_inputs(**grasp.to_numpy())
+    except GraspValueError as exc:
+        raise GraspValueError(f"base grasp: {exc}") from None
+    axes = _check_axes(base, axes)
+    n_contacts = base["positions"].shape[0]
+    shape = tuple(a.size for a in axes.values())
+    total = int(math.prod(shape))
+    chunk = int(min(chunk_size, total))
+    fn, compile_seconds = _compiled(options, n_contacts, chunk)
+
+    # the grasp's own values (not the validated copies, whose normals are re-normalised),
+    # so that every grid point is exactly the grasp evaluate() would see
+    raw = grasp.to_numpy()
+    own = {k: np.broadcast_to(np.asarray(raw[k], dtype=np.float64), v.shape) for k, v in base.items()}
+    batch_base = {k: np.broadcast_to(v, (chunk, *v.shape)) for k, v in own.items()}
+    template = Grasp(**{k: jnp.asarray(v) for k, v in batch_base.items()})
+    outs = {f: [] for f in _RESULT_FIELDS}
+    run_seconds = 0.0
+    for start in range(0, total, chunk):
+        stop = min(start + chunk, total)
+        idx = np.minimum(np.arange(start, start + chunk), total - 1)  # pad with the last point
+        changes = {}
+        grid_idx = np.unravel_index(idx, shape) if axes else ()
+        for (name, values), i_ax in zip(axes.items(), grid_idx):
+            v = values[i_ax]
+            if PARAMETERS[name].per_contact:
+                v = np.broadcast_to(v[:, None], (chunk, n_contacts))
+            changes[name] = jnp.asarray(v, dtype=jnp.float64)
+        batch = template.replace(**changes)
+        t0 = time.perf_counter()
+        res = jax.device_get(fn(batch))
+        run_seconds += time.perf_counter() - t0
+        for f, a in zip(_RESULT_FIELDS, res):
+            outs[f].append(np.asarray(a)[: stop - start])
+        if progress is not None:
+            progress(stop, total)
+
+    arrays = {f: np.concatenate(outs[f]).reshape(shape) for f in _RESULT_FIELDS}
+    return SweepResult(
+        axes=dict(axes),
+        **arrays,
+        compile_seconds=compile_seconds,
+        run_seconds=run_seconds,
+    )

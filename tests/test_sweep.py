@@ -1,0 +1,307 @@
+"""Tests for jaxgrasp.sweep, the ``jaxgrasp sweep`` command and the sweep plots.
+
+Compilation dominates the cost, so every cube sweep here uses batches of 6 grid points
+(one compilation of the batched cube evaluator, shared with the CLI test which runs
+in-process); the prism needs one more, and the point-by-point check one unbatched.
+"""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import csv
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import jaxgrasp
+from jaxgrasp import cli
+from jaxgrasp.evaluate import evaluate
+from jaxgrasp.presets import cube, prism
+from jaxgrasp.result import INFEASIBLE, STABLE, STATUS_NAMES
+from jaxgrasp.sweep import PARAMETERS, SweepResult, sweep
+from jaxgrasp.validation import GraspValueError
+
+CHUNK = 6
+E_AXIS = np.array([2e5, 1e6])  # Pa
+DR_AXIS = np.array([1.0, 2.0, 3.0, 4.0, 4.5, 4.7, 4.85]) * 1e-3  # m; 14 points: 3 chunks, last padded
+MAX_FORCE = jaxgrasp.KINDS.index("max_force")
+
+
+@pytest.fixture(scope="module")
+def cube_sweep():
+    calls = []
+    res = sweep(
+        cube(),
+        young_modulus=E_AXIS,
+        initial_deformation=DR_AXIS,
+        chunk_size=CHUNK,
+        progress=lambda done, total: calls.append((done, total)),
+    )
+    return res, calls
+
+
+# ---------------------------------------------------------------- equality and shapes
+
+
+def test_shapes_axes_and_progress(cube_sweep):
+    res, calls = cube_sweep
+    assert isinstance(res, SweepResult)
+    assert res.names == ("young_modulus", "initial_deformation")
+    np.testing.assert_array_equal(res.axes["young_modulus"], E_AXIS)
+    np.testing.assert_array_equal(res.axes["initial_deformation"], DR_AXIS)
+    for f in ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy"):
+        assert np.shape(getattr(res, f)) == (2, 7), f
+    assert calls == [(6, 14), (12, 14), (14, 14)]
+    assert sum(res.counts().values()) == 14
+
+
+def test_sweep_equals_point_by_point_evaluate(cube_sweep):
+    res, _ = cube_sweep
+    for i, E in enumerate(E_AXIS):
+        for j, dr in enumerate(DR_AXIS[:3]):
+            ev = evaluate(cube(young_modulus=E, initial_deformation=dr))
+            # Batched and single-grasp XLA kernels round differently; the solver stops at
+            # a 1e-10 KKT tolerance, so agreement is ~1e-11 relative, not bit for bit.
+            np.testing.assert_allclose(res.value[i, j], float(ev.value), rtol=1e-9, atol=1e-15)
+            np.testing.assert_allclose(
+                res.equilibrium_energy[i, j], float(ev.equilibrium_energy), rtol=1e-9, atol=1e-15
+            )
+            assert res.status[i, j] == int(ev.status)
+            assert res.limiting_kind[i, j] == int(ev.limiting_kind)
+            assert res.limiting_contact[i, j] == int(ev.limiting_contact)
+
+
+def test_shape_follows_axis_order(cube_sweep):
+    res, _ = cube_sweep
+    swapped = sweep(cube(), initial_deformation=DR_AXIS[:3], young_modulus=E_AXIS, chunk_size=CHUNK)
+    assert swapped.names == ("initial_deformation", "young_modulus")
+    assert swapped.value.shape == (3, 2)
+    np.testing.assert_allclose(swapped.value, res.value[:, :3].T, rtol=1e-12, atol=1e-18)
+    np.testing.assert_array_equal(swapped.status, res.status[:, :3].T)
+    np.testing.assert_array_equal(swapped.limiting_kind, res.limiting_kind[:, :3].T)
+
+
+# ---------------------------------------------------------------- files
+
+
+def test_csv_one_row_per_point_with_units(cube_sweep, tmp_path):
+    res, _ = cube_sweep
+    path = tmp_path / "s.csv"
+    res.to_csv(path)
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == [
+        "young_modulus_Pa",
+        "initial_deformation_m",
+        "value_J",
+        "status",
+        "limiting_kind",
+        "limiting_contact",
+        "equilibrium_energy_J",
+    ]
+    assert len(rows) == res.size == 14
+    # C order: last axis fastest; values read back exactly
+    k = 0
+    for i, E in enumerate(E_AXIS):
+        for j, dr in enumerate(DR_AXIS):
+            row = rows[k]
+            assert float(row["young_modulus_Pa"]) == E
+            assert float(row["initial_deformation_m"]) == dr
+            assert float(row["value_J"]) == res.value[i, j]
+            assert row["status"] == STATUS_NAMES[res.status[i, j]]
+            assert row["limiting_kind"] in ("slip", "max_force", "none")
+            assert int(row["limiting_contact"]) == res.limiting_contact[i, j]
+            k += 1
+
+
+def test_npz_round_trip_and_plot(cube_sweep, tmp_path):
+    res, _ = cube_sweep
+    res.to_npz(tmp_path / "s.npz")
+    back = SweepResult.from_npz(tmp_path / "s.npz")
+    assert back.names == res.names
+    for f in ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy"):
+        np.testing.assert_array_equal(getattr(back, f), getattr(res, f))
+    from jaxgrasp.plots import plot_max_over, plot_sweep
+
+    plot_sweep(res, tmp_path / "s.png")
+    plot_max_over(res, tmp_path / "m.png")
+    assert (tmp_path / "s.png").stat().st_size > 1000
+    assert (tmp_path / "m.png").stat().st_size > 1000
+
+
+def test_pytree_keeps_axis_order(cube_sweep):
+    res, _ = cube_sweep
+    leaves, tree = jax.tree_util.tree_flatten(res)
+    back = jax.tree_util.tree_unflatten(tree, leaves)
+    assert back.names == res.names
+
+
+# ---------------------------------------------------------------- the paper's findings
+
+
+def test_cube_value_rises_with_dr_at_soft_fingertips(cube_sweep):
+    res, _ = cube_sweep
+    i = 0  # E = 2e5 Pa
+    assert np.all(res.status[i, :3] == STABLE)
+    v = res.value[i, :3]  # dr = 1, 2, 3 mm
+    assert v[0] < v[1] < v[2]
+
+
+def test_cube_value_falls_after_maximum_because_of_force_limit(cube_sweep):
+    res, _ = cube_sweep
+    for i in range(len(E_AXIS)):
+        v = res.value[i]
+        k = int(np.argmax(v))
+        assert k < len(DR_AXIS) - 1, "the maximum must not be at the largest dr"
+        after = slice(k + 1, None)
+        assert np.all(v[after] < v[k])
+        limited = (res.status[i, after] == STABLE) & (res.limiting_kind[i, after] == MAX_FORCE)
+        infeasible = res.status[i, after] == INFEASIBLE
+        assert np.all(limited | infeasible), (res.status[i], res.limiting_kind[i])
+    # at E = 2e5 Pa the fall is a force-limited one before infeasibility
+    assert np.any((res.status[0] == STABLE) & (res.limiting_kind[0] == MAX_FORCE))
+
+
+def test_cube_max_value_falls_as_E_grows(cube_sweep):
+    res, _ = cube_sweep
+    reduced, best_dr = res.max_over("initial_deformation")
+    assert reduced.names == ("young_modulus",)
+    assert reduced.value[0] > reduced.value[1] > 0
+    assert best_dr[0] > best_dr[1]
+
+
+def test_prism_heavier_object_lower_value():
+    res = sweep(prism(), mass=[0.0, 0.2], young_modulus=2e5, initial_deformation=3e-3)
+    assert res.value.shape == (2, 1, 1)
+    assert np.all(res.status == STABLE)
+    assert res.value[1, 0, 0] < res.value[0, 0, 0]
+
+
+# ---------------------------------------------------------------- validation (no compilation)
+
+
+@pytest.mark.parametrize(
+    "axes, match",
+    [
+        ({"stiffness": [1.0]}, "unknown parameter 'stiffness'.*young_modulus, initial_deformation, mass"),
+        ({"young_modulus": []}, "young_modulus is empty"),
+        ({"young_modulus": [2e5, np.nan]}, r"young_modulus\[1\] = nan Pa must be finite"),
+        ({"young_modulus": [2e5, np.inf]}, r"young_modulus\[1\] = inf Pa must be finite"),
+        ({"young_modulus": [-2e5]}, "must be positive"),
+        ({"friction": [0.0, 0.5]}, r"friction\[0\] = 0 must be positive"),
+        ({"max_force": 0}, "must be positive"),
+        ({"mass": [0.0, -0.1]}, r"mass\[1\] = -0.1 kg must be >= 0"),
+        ({"initial_deformation": [1e-3, 0.025]}, "initial_deformation must be < radius"),
+        ({"radius": [0.0015]}, "initial_deformation must be < radius"),
+        ({"initial_deformation": [0.0]}, "must be positive"),
+        ({"young_modulus": "abc"}, "must be a number"),
+        ({"young_modulus": [[1e5, 2e5]]}, "1-D"),
+    ],
+)
+def test_bad_axes_raise_one_line(axes, match):
+    with pytest.raises(GraspValueError, match=match) as info:
+        sweep(cube(), **axes)
+    assert "\n" not in str(info.value)
+
+
+def test_bad_chunk_size():
+    with pytest.raises(GraspValueError, match="chunk_size"):
+        sweep(cube(), mass=[0.0], chunk_size=0)
+
+
+def test_parameters_have_units():
+    assert PARAMETERS["young_modulus"].unit == "Pa"
+    assert PARAMETERS["initial_deformation"].unit == "m"
+    assert PARAMETERS["mass"].unit == "kg"
+
+
+# ---------------------------------------------------------------- CLI
+
+
+@pytest.fixture
+def run_cli(monkeypatch, capsys):
+    monkeypatch.setattr(cli, "enable_compilation_cache", lambda: None)  # no global side effect
+
+    def run(*argv):
+        rc = cli.main(list(argv))
+        out, err = capsys.readouterr()
+        return rc, out, err
+
+    return run
+
+
+def test_cli_sweep_writes_files(run_cli, tmp_path, cube_sweep):
+    out = tmp_path / "out"
+    rc, stdout, stderr = run_cli(
+        "sweep", "--preset", "cube", "--young-modulus", "2e5,6e5", "--initial-deformation", "1e-3:3e-3:3",
+        "--out", str(out),
+    )
+    assert rc == 0, stderr
+    assert stderr == ""  # one chunk: no progress lines
+    for name in ("sweep.npz", "sweep.csv", "sweep.png"):
+        assert (out / name).stat().st_size > 0, name
+    lines = stdout.strip().splitlines()
+    assert len(lines) == 1 and "6 points" in lines[0] and "stable" in lines[0] and "best" in lines[0]
+    res = SweepResult.from_npz(out / "sweep.npz")
+    assert res.value.shape == (2, 3)
+    np.testing.assert_allclose(res.axes["initial_deformation"], [1e-3, 2e-3, 3e-3])
+    with open(out / "sweep.csv", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == 6
+    # same points as the library sweep
+    np.testing.assert_allclose(res.value[0], cube_sweep[0].value[0, :3], rtol=1e-12, atol=1e-18)
+
+
+@pytest.mark.parametrize(
+    "spec",
+    [
+        ["--young-modulus", "1:2:0"],
+        ["--young-modulus", "abc"],
+        ["--young-modulus=-2e5"],
+        ["--mass=-1"],
+        ["--initial-deformation", "1e-3:5e-3"],
+        ["--initial-deformation", "0.03"],
+        ["--friction", "nan"],
+        ["--max-force", "1,,2"],
+        ["--stiffness", "1"],
+        ["--young-modulus", "1:2:2.5"],
+    ],
+)
+def test_cli_bad_spec_exits_2_with_one_line(run_cli, tmp_path, spec):
+    rc, stdout, stderr = run_cli("sweep", "--preset", "cube", *spec, "--out", str(tmp_path / "o"))
+    assert rc == 2
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("jaxgrasp: error: "), stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_cli_bad_spec_subprocess(tmp_path):
+    p = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from jaxgrasp.cli import main; sys.exit(main())",
+            "sweep",
+            "--young-modulus",
+            "1:2:0",
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert p.returncode == 2
+    assert p.stderr.count("\n") == 1 and p.stderr.startswith("jaxgrasp: error: ")
+
+
+def test_parse_axis_spec():
+    from jaxgrasp.sweep_cli import parse_axis_spec
+
+    np.testing.assert_allclose(parse_axis_spec("--x", "1e-3:5e-3:5"), [1e-3, 2e-3, 3e-3, 4e-3, 5e-3])
+    np.testing.assert_array_equal(parse_axis_spec("--x", "0,0.1, 0.2"), [0.0, 0.1, 0.2])
+    np.testing.assert_array_equal(parse_axis_spec("--x", "2e5"), [2e5])
+    with pytest.raises(cli.UsageError, match="empty"):
+        parse_axis_spec("--x", "1:2:0")
