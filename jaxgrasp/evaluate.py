@@ -272,7 +272,7 @@ def _solve_programs(p, prob: _Problem, options: EvaluateOptions) -> Programs:
     dirs = jnp.asarray(options.directions(), dtype)
     num_dirs = dirs.shape[0]
     t_max = options.ray_length * jnp.max(ps.r)
-    t_grid = t_max * 2.0 ** (-(options.ray_points - 1 - jnp.arange(options.ray_points)) / 4.0)
+    t_grid = t_max * 2.0 ** (-(options.ray_points - 1 - jnp.arange(options.ray_points, dtype=dtype)) / 4.0)
     lane_k = jnp.repeat(n + jnp.arange(2 * n), num_dirs)
     lane_v = jnp.tile(dirs, (2 * n, 1))
 
