@@ -31,6 +31,7 @@ from .result import (  # noqa: E402
 )
 from .solver import SolverOptions  # noqa: E402
 from .sweep import PARAMETERS, SweepResult, sweep  # noqa: E402
+from .tune import TuneResult, tune  # noqa: E402
 from .validation import GraspValueError  # noqa: E402
 
 __version__ = "0.1.0"
@@ -56,5 +57,7 @@ __all__ = [
     "sweep",
     "SweepResult",
     "PARAMETERS",
+    "tune",
+    "TuneResult",
     "GraspValueError",
 ]

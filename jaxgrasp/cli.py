@@ -1,4 +1,4 @@
-"""The ``jaxgrasp`` command line: ``jaxgrasp evaluate``, ``jaxgrasp sweep``.
+"""The ``jaxgrasp`` command line: ``jaxgrasp evaluate``, ``jaxgrasp sweep``, ``jaxgrasp tune``.
 
 Every error in the input (bad file, bad value, bad option) prints one line
 ``jaxgrasp: error: ...`` on stderr and exits with status 2, never a traceback.
@@ -129,12 +129,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_overrides(ev)
     ev.add_argument("--json", action="store_true", help="print a JSON object instead")
     ev.set_defaults(func=_cmd_evaluate)
-    try:
-        from .sweep_cli import add_sweep_parser
-    except ImportError:  # pragma: no cover - sweep command not installed
-        pass
-    else:
-        add_sweep_parser(sub)
+    from .sweep_cli import add_sweep_parser
+    from .tune_cli import add_tune_parser
+
+    add_sweep_parser(sub)
+    add_tune_parser(sub)
     return parser
 
 
@@ -145,7 +144,7 @@ def main(argv=None) -> int:
     try:
         args = parser.parse_args(argv)
         if args.command is None:
-            raise UsageError("choose a command: evaluate or sweep (see 'jaxgrasp --help')")
+            raise UsageError("choose a command: evaluate, sweep or tune (see 'jaxgrasp --help')")
         enable_compilation_cache()
         return args.func(args)
     except (UsageError, GraspValueError) as exc:

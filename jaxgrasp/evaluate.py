@@ -332,9 +332,20 @@ def soft_minimum(du, mask, temperature):
     return jnp.where(any_kept, ref_safe - temperature * jnp.log(total), jnp.inf)
 
 
-@partial(jax.jit, static_argnames="options")
 def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
+    # The smoothing temperature is a traced argument: evaluations with and without
+    # smoothing, or with different temperatures, share one compilation.
+    t = options.smooth_min_temperature
+    if t is not None:
+        options = dataclasses.replace(options, smooth_min_temperature=None)
+    temperature = np.float64(0.0 if t is None else float(t) / MJ_TO_J)  # mJ; 0: hard minimum
+    return _evaluate_jit(grasp, temperature, options)
+
+
+@partial(jax.jit, static_argnames="options")
+def _evaluate_jit(grasp: Grasp, temperature, options: EvaluateOptions) -> Evaluation:
     p = model_params(grasp)
+    temperature = jnp.asarray(temperature, p.c.dtype)  # float32 grasps stay float32
     prob = _Problem(p)
     n = prob.n
     m = 3 * n
@@ -416,14 +427,10 @@ def _evaluate(grasp: Grasp, options: EvaluateOptions) -> Evaluation:
     v_eq, v_b = energies(keep_value & eq_finite, keep_value & reached & b_finite)
 
     # --- value: hard (or soft) minimum over the reachable boundaries, above U0
-    if options.smooth_min_temperature is None:
-        raw = jnp.where(any_reached, v_b[b_limit] - v_eq, 0.0)
-    else:
-        raw = jnp.where(
-            any_reached,
-            soft_minimum(v_b - v_eq, reached, options.smooth_min_temperature / MJ_TO_J),
-            0.0,
-        )
+    hard = v_b[b_limit] - v_eq
+    smooth = temperature > 0.0
+    soft = soft_minimum(v_b - v_eq, reached, jnp.where(smooth, temperature, 1.0))
+    raw = jnp.where(any_reached, jnp.where(smooth, soft, hard), 0.0)
     value = jnp.where(keep_value, jnp.maximum(raw, 0.0), 0.0)
     has_limit = keep_value & any_reached
     limiting_kind = jnp.where(has_limit, b_limit // n, -1).astype(jnp.int32)
