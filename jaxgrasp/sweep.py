@@ -15,20 +15,34 @@ The grid points are evaluated as lanes of ``jax.jit(jax.vmap(evaluate))`` in chu
 ``chunk_size`` points; the last chunk is padded to the same size, so one sweep compiles
 once (and a later sweep of a grasp with the same number of contacts, the same options and
 the same chunk size reuses that compilation). Memory is bounded by the chunk size, not by
-the grid size.
+the grid size: apart from the result arrays (5 numbers per grid point) nothing grows with
+the grid, and no device buffer outlives its chunk.
+
+Each chunk is sharded along its batch axis over all ``jax.devices()`` (a 1-D
+``jax.sharding.Mesh`` with axis ``'batch'``; the chunk is rounded up to a multiple of the
+device count), so one call uses every GPU of a machine, or every device of several hosts
+after ``jax.distributed.initialize()``. Results are gathered to the host.
+
+With :func:`set_export_cache_dir` (the CLI sets it) the traced program is kept on disk
+with ``jax.export``, so that a later process skips tracing :func:`jaxgrasp.evaluate`.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import hashlib
 import math
+import os
 import time
+from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
 
 from . import result as R
 from .evaluate import EvaluateOptions
@@ -37,7 +51,7 @@ from .grasp import Grasp
 from .model import KINDS
 from .validation import GraspValueError, _as_float_array, check_grasp_inputs, format_value
 
-__all__ = ["sweep", "SweepResult", "PARAMETERS", "DEFAULT_CHUNK_SIZE"]
+__all__ = ["sweep", "SweepResult", "PARAMETERS", "DEFAULT_CHUNK_SIZE", "batch_size", "set_export_cache_dir"]
 
 DEFAULT_CHUNK_SIZE = 4096
 """Default number of grid points evaluated per compiled batch."""
@@ -94,6 +108,7 @@ class SweepResult:
         compile_seconds: time spent compiling the batched evaluator in this sweep (0 when
             a compilation was reused). Static (not a pytree leaf).
         run_seconds: time spent evaluating the chunks. Static (not a pytree leaf).
+        devices: number of devices the batch was sharded over. Static (not a pytree leaf).
 
     As a pytree, the leaves are the axis arrays (in grid order) and the five result
     arrays; the axis names and timings are static.
@@ -107,6 +122,7 @@ class SweepResult:
     equilibrium_energy: Any
     compile_seconds: float = 0.0
     run_seconds: float = 0.0
+    devices: int = 1
 
     # ---- shape and names
     @property
@@ -188,6 +204,7 @@ class SweepResult:
             **{f: take(getattr(self, f)) for f in _RESULT_FIELDS},
             compile_seconds=self.compile_seconds,
             run_seconds=self.run_seconds,
+            devices=self.devices,
         )
         return reduced, np.asarray(self.axes[name])[arg]
 
@@ -226,7 +243,7 @@ class SweepResult:
 
     def to_npz(self, path) -> None:
         """Write a ``.npz``: ``axis_names``, ``axis_<name>`` (1-D, SI), the grid-shaped
-        result arrays, ``status_names``, ``kind_names`` and the timings.
+        result arrays, ``status_names``, ``kind_names``, the timings and ``devices``.
 
         Read it back with :meth:`from_npz`. No pickled objects (``allow_pickle=False``).
         """
@@ -236,6 +253,7 @@ class SweepResult:
             "kind_names": np.asarray(KINDS, dtype=str),
             "compile_seconds": np.float64(self.compile_seconds),
             "run_seconds": np.float64(self.run_seconds),
+            "devices": np.int64(self.devices),
         }
         for n, a in self.axes.items():
             arrays[f"axis_{n}"] = np.asarray(a, dtype=np.float64)
@@ -253,6 +271,7 @@ class SweepResult:
                 **{f: np.array(z[f]) for f in _RESULT_FIELDS},
                 compile_seconds=float(z["compile_seconds"]),
                 run_seconds=float(z["run_seconds"]),
+                devices=int(z["devices"]) if "devices" in z.files else 1,
             )
 
     def __repr__(self) -> str:
@@ -264,17 +283,18 @@ class SweepResult:
 def _flatten(r: SweepResult):
     # axes as a tuple (not a dict, whose keys JAX would sort): the order is the grid's
     children = (tuple(r.axes.values()), *(getattr(r, f) for f in _RESULT_FIELDS))
-    return children, (tuple(r.axes), r.compile_seconds, r.run_seconds)
+    return children, (tuple(r.axes), r.compile_seconds, r.run_seconds, r.devices)
 
 
 def _unflatten(aux, children):
-    names, compile_seconds, run_seconds = aux
+    names, compile_seconds, run_seconds, devices = aux
     axes, *arrays = children
     return SweepResult(
         dict(zip(names, axes)),
         *arrays,
         compile_seconds=compile_seconds,
         run_seconds=run_seconds,
+        devices=devices,
     )
 
 
@@ -328,37 +348,127 @@ def _check_axes(base: dict[str, np.ndarray], axes: Mapping[str, Any]) -> dict[st
 # --------------------------------------------------------------------------- compiled batch
 
 _COMPILED: dict = {}
+_EXPORT_DIR: Path | None = None
+_STATS = {"traced": 0, "deserialized": 0, "cache_errors": 0}  # what _compiled did (tests)
 
 
-def _batched_fn(options: EvaluateOptions):
-    def one(g: Grasp):
-        r = _evaluate_one(g, options)
+def set_export_cache_dir(path) -> None:
+    """Keep the sweep's traced program (``jax.export``) in folder ``path``; ``None``: don't.
+
+    A later process building the same batched evaluator (same jaxgrasp source, JAX
+    version, options, contact count, chunk, devices and precision) deserializes it
+    instead of tracing :func:`jaxgrasp.evaluate` in Python again (5-15 s), so that with
+    JAX's persistent compilation cache the whole compile step is a cache load. A missing,
+    stale or corrupt file is ignored (the program is traced and the file rewritten). The
+    CLI turns this on next to its compilation cache.
+    """
+    global _EXPORT_DIR
+    _EXPORT_DIR = None if path is None else Path(path)
+
+
+_GRASP_FIELDS = tuple(f.name for f in dataclasses.fields(Grasp))
+
+
+def _batched_fn(options: EvaluateOptions, sharding=None):
+    # arrays in, arrays out (no Grasp pytree), so that jax.export can serialize it
+    def one(*fields):
+        r = _evaluate_one(Grasp(*fields), options)
         return tuple(getattr(r, f) for f in _RESULT_FIELDS)
 
-    return jax.jit(jax.vmap(one))
+    if sharding is None:
+        return jax.jit(jax.vmap(one))
+    return jax.jit(jax.vmap(one), in_shardings=sharding, out_shardings=sharding)
 
 
-def _compiled(options: EvaluateOptions, n_contacts: int, chunk: int):
-    """The batched evaluator for ``chunk`` grasps of ``n_contacts``; (fn, compile seconds)."""
-    key = (options, n_contacts, chunk, jax.config.jax_enable_x64)
+def _source_digest() -> str:
+    """Hash of jaxgrasp's own source files (an editable install keeps its version number)."""
+    h = hashlib.sha256()
+    for f in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def _export_path(key: tuple) -> Path | None:
+    if _EXPORT_DIR is None:
+        return None
+    import jaxlib
+
+    text = repr((key, _source_digest(), jax.__version__, jaxlib.__version__, jax.default_backend()))
+    return _EXPORT_DIR / f"sweep-{hashlib.sha256(text.encode()).hexdigest()[:32]}.jaxexport"
+
+
+def _load_exported(path: Path, spec, n_devices: int):
+    """The exported program at ``path`` if it fits ``spec`` and the devices, else ``None``."""
+    try:
+        exp = jax.export.deserialize(bytearray(path.read_bytes()))
+        want = [(tuple(s.shape), np.dtype(s.dtype)) for s in jax.tree_util.tree_leaves(spec)]
+        have = [(tuple(a.shape), np.dtype(a.dtype)) for a in exp.in_avals]
+        if have != want or exp.nr_devices != n_devices or len(exp.out_avals) != len(_RESULT_FIELDS):
+            raise ValueError("stale exported sweep program")
+        if jax.default_backend() not in exp.platforms:
+            raise ValueError("exported for another platform")
+        return exp
+    except FileNotFoundError:
+        return None
+    except Exception:  # corrupt, stale, or from an incompatible JAX: trace again
+        _STATS["cache_errors"] += 1
+        return None
+
+
+def _save_exported(path: Path, exp) -> None:
+    try:
+        data = exp.serialize()  # needs the 'flatbuffers' package
+    except Exception:  # e.g. ImportError: keep working, trace every time
+        _STATS["cache_errors"] += 1
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".tmp{os.getpid()}")
+        tmp.write_bytes(data)
+        os.replace(tmp, path)  # atomic: a concurrent reader sees the old file or the new one
+    except OSError:
+        pass  # no writable cache: trace every time
+
+
+def _mesh(devices) -> Mesh:
+    return Mesh(np.asarray(devices), ("batch",))
+
+
+def _compiled(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None):
+    """The batched evaluator for ``chunk`` grasps of ``n_contacts``; (fn, compile seconds).
+
+    ``fn`` takes the :class:`Grasp` fields (in field order) of a batch, each sharded along
+    its first axis over ``devices`` (default ``jax.devices()``; ``chunk`` must be a
+    multiple of their number), and returns the result fields, sharded the same way.
+    """
+    devices = tuple(jax.devices() if devices is None else devices)
+    if chunk % len(devices):
+        raise ValueError(f"chunk {chunk} is not a multiple of the {len(devices)} devices")
+    key = (options, n_contacts, chunk, jax.config.jax_enable_x64, tuple(d.id for d in devices))
     hit = _COMPILED.get(key)
     if hit is not None:
         return hit, 0.0
     f64 = jnp.float64
-    sds = lambda *s: jax.ShapeDtypeStruct((chunk, *s), f64)
-    spec = Grasp(
-        positions=sds(n_contacts, 3),
-        normals=sds(n_contacts, 3),
-        initial_deformation=sds(n_contacts),
-        radius=sds(n_contacts),
-        young_modulus=sds(n_contacts),
-        friction=sds(n_contacts),
-        max_force=sds(n_contacts),
-        mass=sds(),
-        gravity=sds(3),
-    )
+    sharding = NamedSharding(_mesh(devices), P("batch"))
+    sds = lambda *s: jax.ShapeDtypeStruct((chunk, *s), f64, sharding=sharding)
+    per_field = dict(positions=(n_contacts, 3), normals=(n_contacts, 3), mass=(), gravity=(3,))
+    spec = tuple(sds(*per_field.get(f, (n_contacts,))) for f in _GRASP_FIELDS)
     t0 = time.perf_counter()
-    fn = _batched_fn(options).lower(spec).compile()
+    path = _export_path((options, n_contacts, chunk, jax.config.jax_enable_x64, len(devices)))
+    if path is None:
+        fn = _batched_fn(options, sharding).lower(*spec).compile()
+        _STATS["traced"] += 1
+    else:
+        exp = _load_exported(path, spec, len(devices))
+        if exp is None:
+            exp = jax.export.export(_batched_fn(options, sharding))(*spec)
+            _save_exported(path, exp)
+            _STATS["traced"] += 1
+        else:
+            _STATS["deserialized"] += 1
+        # the XLA compilation of the exported program hits JAX's persistent cache, if on
+        fn = jax.jit(exp.call, in_shardings=sharding, out_shardings=sharding).lower(*spec).compile()
     seconds = time.perf_counter() - t0
     if len(_COMPILED) >= 16:
         _COMPILED.pop(next(iter(_COMPILED)))
@@ -376,6 +486,7 @@ def sweep(
     options: EvaluateOptions = EvaluateOptions(),
     chunk_size: int = DEFAULT_CHUNK_SIZE,
     progress: Callable[[int, int], Any] | None = None,
+    devices=None,
     **axes,
 ) -> SweepResult:
     """Evaluate ``grasp`` at every point of the Cartesian grid of ``axes``.
@@ -385,9 +496,13 @@ def sweep(
             its values.
         options: :class:`~jaxgrasp.EvaluateOptions` for every evaluation.
         chunk_size: grid points per compiled batch (bounds memory). The batch size used is
-            ``min(chunk_size, number of points)``; the last chunk is padded to it.
+            ``min(chunk_size, number of points)`` rounded up to a multiple of the number
+            of devices (:func:`batch_size`); the last chunk is padded to it.
         progress: optional ``progress(done, total)`` called after each chunk with the
             numbers of grid points done and in all.
+        devices: the devices the batch is sharded over (default: all of
+            ``jax.devices()``, which after ``jax.distributed.initialize()`` spans every
+            host). The batch is rounded up to a multiple of their number.
         **axes: ``name=values`` for any of :data:`PARAMETERS` (``young_modulus`` Pa,
             ``initial_deformation`` m, ``mass`` kg, ``friction``, ``max_force`` N,
             ``radius`` m); ``values`` is a number or a 1-D sequence. Per-contact
@@ -412,43 +527,75 @@ def sweep(
     except GraspValueError as exc:
         raise GraspValueError(f"base grasp: {exc}") from None
     axes = _check_axes(base, axes)
+    devices = tuple(jax.devices() if devices is None else devices)
+    if not devices:
+        raise GraspValueError("sweep needs at least one device")
     n_contacts = base["positions"].shape[0]
     shape = tuple(a.size for a in axes.values())
     total = int(math.prod(shape))
-    chunk = int(min(chunk_size, total))
-    fn, compile_seconds = _compiled(options, n_contacts, chunk)
+    chunk = batch_size(chunk_size, total, len(devices))
+    fn, compile_seconds = _compiled(options, n_contacts, chunk, devices)
+    sharding = NamedSharding(_mesh(devices), P("batch"))
 
     # the grasp's own values (not the validated copies, whose normals are re-normalised),
     # so that every grid point is exactly the grasp evaluate() would see
     raw = grasp.to_numpy()
     own = {k: np.broadcast_to(np.asarray(raw[k], dtype=np.float64), v.shape) for k, v in base.items()}
-    batch_base = {k: np.broadcast_to(v, (chunk, *v.shape)) for k, v in own.items()}
-    template = Grasp(**{k: jnp.asarray(v) for k, v in batch_base.items()})
-    outs = {f: [] for f in _RESULT_FIELDS}
+    # host-side output arrays, filled chunk by chunk: the only O(grid) memory of a sweep
+    outs: dict[str, np.ndarray] = {}
     run_seconds = 0.0
     for start in range(0, total, chunk):
         stop = min(start + chunk, total)
         idx = np.minimum(np.arange(start, start + chunk), total - 1)  # pad with the last point
-        changes = {}
+        fields = {k: np.broadcast_to(v, (chunk, *v.shape)) for k, v in own.items()}
         grid_idx = np.unravel_index(idx, shape) if axes else ()
         for (name, values), i_ax in zip(axes.items(), grid_idx):
             v = values[i_ax]
             if PARAMETERS[name].per_contact:
                 v = np.broadcast_to(v[:, None], (chunk, n_contacts))
-            changes[name] = jnp.asarray(v, dtype=jnp.float64)
-        batch = template.replace(**changes)
+            fields[name] = v
+        batch = [_put(fields[k], sharding) for k in _GRASP_FIELDS]
         t0 = time.perf_counter()
-        res = jax.device_get(fn(batch))
+        res = [_gather(a) for a in fn(*batch)]
         run_seconds += time.perf_counter() - t0
+        del batch  # no device buffer outlives its chunk
         for f, a in zip(_RESULT_FIELDS, res):
-            outs[f].append(np.asarray(a)[: stop - start])
+            if f not in outs:
+                outs[f] = np.empty((total, *a.shape[1:]), dtype=a.dtype)
+            outs[f][start:stop] = a[: stop - start]
         if progress is not None:
             progress(stop, total)
 
-    arrays = {f: np.concatenate(outs[f]).reshape(shape) for f in _RESULT_FIELDS}
+    arrays = {f: outs[f].reshape(shape) for f in _RESULT_FIELDS}
     return SweepResult(
         axes=dict(axes),
         **arrays,
         compile_seconds=compile_seconds,
         run_seconds=run_seconds,
+        devices=len(devices),
     )
+
+
+def batch_size(chunk_size: int, total: int, n_devices: int = 1) -> int:
+    """The batch one compiled call evaluates: ``min(chunk_size, total)`` rounded up to a
+    multiple of ``n_devices`` (each device gets ``batch / n_devices`` lanes)."""
+    chunk = max(1, min(int(chunk_size), int(total)))
+    return -(-chunk // n_devices) * n_devices
+
+
+def _put(a: np.ndarray, sharding) -> jax.Array:
+    """Host array -> global array sharded along its first axis (each process supplies its
+    own devices' slices, so this works unchanged across hosts)."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    if jax.process_count() == 1:
+        return jax.device_put(a, sharding)
+    return jax.make_array_from_callback(a.shape, sharding, lambda i: a[i])
+
+
+def _gather(x) -> np.ndarray:
+    """Global (sharded) result array -> the whole array as NumPy on this host."""
+    if getattr(x, "is_fully_addressable", True):
+        return np.asarray(jax.device_get(x))
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.process_allgather(x, tiled=True))

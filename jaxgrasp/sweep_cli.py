@@ -131,7 +131,9 @@ def _fmt_param(name: str, x: float) -> str:
 
 
 def _cmd_sweep(args) -> int:
-    from .sweep import sweep
+    import jax
+
+    from .sweep import batch_size, sweep
 
     given = {n: getattr(args, n) for n in _AXIS_OPTIONS if getattr(args, n) is not None}
     paper = not given
@@ -147,13 +149,15 @@ def _cmd_sweep(args) -> int:
 
     total = int(np.prod([a.size for a in axes.values()]))
     chunk = args.chunk_size if args.chunk_size is not None else _auto_chunk(total)
-    chunk = min(chunk, total)
+    n_devices = jax.device_count()
+    chunk = batch_size(chunk, total, n_devices)  # a multiple of the device count
     nchunks = math.ceil(total / chunk)
     show = not args.quiet and nchunks > 1
     t_start = time.perf_counter()
     if show:
+        on = f" on {n_devices} devices" if n_devices > 1 else ""
         print(
-            f"jaxgrasp: sweeping {total} points in {nchunks} chunks of {chunk} "
+            f"jaxgrasp: sweeping {total} points in {nchunks} chunks of {chunk}{on} "
             "(the first chunk includes compilation)",
             file=sys.stderr,
             flush=True,

@@ -1,0 +1,173 @@
+"""Sharding a sweep over several devices, and the sweep's on-disk exported program.
+
+JAX fixes its device count when it starts, so every sweep here runs in a subprocess:
+``XLA_FLAGS=--xla_force_host_platform_device_count=2`` gives two CPU devices. Compiling
+costs about a minute on a 2-core machine, so the grid is tiny (2 E x 3 dr, 6 points) and
+the 1-device and 2-device processes run side by side.
+
+Checked:
+
+* with 2 devices the sweep's compiled input/output shardings span both devices and the
+  result records ``devices == 2``;
+* its values, statuses and limiting boundaries equal a 1-device sweep of the same grid
+  (statuses exactly, energies to 1e-12 relative);
+* a later process with the same cache folders deserializes the exported program instead
+  of tracing (``jax.export``) and gives bit-identical results; a corrupt file falls back
+  to tracing, again with identical results.
+
+Multi-host (``jax.distributed``) is not tested here: it needs several processes with a
+coordinator; the code path (``make_array_from_callback``, ``process_allgather``) is only
+taken when ``jax.process_count() > 1``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from jaxgrasp.sweep import batch_size
+
+FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
+
+WORKER = textwrap.dedent(
+    r"""
+    import json, sys, time
+    from pathlib import Path
+    import numpy as np
+    import jax
+    import jaxgrasp
+    from jaxgrasp.evaluate import EvaluateOptions
+
+    S = sys.modules["jaxgrasp.sweep"]
+    cfg = json.loads(sys.argv[1])
+    if cfg.get("xla_cache"):
+        jax.config.update("jax_compilation_cache_dir", cfg["xla_cache"])
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    if cfg.get("export_dir"):
+        S.set_export_cache_dir(cfg["export_dir"])
+    E = np.array([2e5, 1e6])
+    DR = np.array([1e-3, 3e-3, 4.9e-3])
+    out = {"device_count": jax.device_count(), "runs": []}
+    for k, step in enumerate(cfg["steps"]):
+        if step == "corrupt":
+            files = sorted(Path(cfg["export_dir"]).glob("*.jaxexport"))
+            for f in files:
+                f.write_bytes(f.read_bytes()[:100] + b"not a flatbuffer")
+            S._COMPILED.clear()
+            out["corrupted"] = len(files)
+            continue
+        before = dict(S._STATS)
+        r = jaxgrasp.sweep(jaxgrasp.presets.cube(), young_modulus=E, initial_deformation=DR)
+        chunk = S.batch_size(S.DEFAULT_CHUNK_SIZE, r.size, jax.device_count())
+        fn, _ = S._compiled(EvaluateOptions(), 2, chunk)  # the one the sweep used (memoised)
+        shardings = jax.tree_util.tree_leaves(fn.input_shardings) + jax.tree_util.tree_leaves(
+            fn.output_shardings
+        )
+        np.savez(cfg["out"] + f"_{k}.npz", **{f: np.asarray(getattr(r, f)) for f in %(fields)r})
+        out["runs"].append({
+            "devices": r.devices,
+            "sharding_devices": sorted({len(s.device_set) for s in shardings}),
+            "compile_seconds": r.compile_seconds,
+            "stats": {n: S._STATS[n] - before[n] for n in S._STATS},
+        })
+    print("RESULT " + json.dumps(out))
+    """
+    % {"fields": FIELDS}
+)
+
+
+def _start(n_devices: int, cfg: dict) -> subprocess.Popen:
+    env = dict(os.environ)
+    flags = env.get("XLA_FLAGS", "").replace("--xla_force_host_platform_device_count", "--ignored")
+    env["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={n_devices}".strip()
+    env["JAX_PLATFORMS"] = "cpu"
+    return subprocess.Popen(
+        [sys.executable, "-c", WORKER, json.dumps(cfg)],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _finish(proc: subprocess.Popen) -> dict:
+    stdout, stderr = proc.communicate(timeout=600)
+    assert proc.returncode == 0, stderr[-3000:]
+    line = [s for s in stdout.splitlines() if s.startswith("RESULT ")][-1]
+    return json.loads(line[len("RESULT ") :])
+
+
+def _load(prefix: str, k: int) -> dict:
+    with np.load(f"{prefix}_{k}.npz") as z:
+        return {f: np.array(z[f]) for f in FIELDS}
+
+
+def _assert_same(a: dict, b: dict, rtol: float) -> None:
+    for f in ("status", "limiting_kind", "limiting_contact"):
+        np.testing.assert_array_equal(a[f], b[f], err_msg=f)
+    for f in ("value", "equilibrium_energy"):
+        np.testing.assert_allclose(a[f], b[f], rtol=rtol, atol=0, err_msg=f)
+
+
+def test_batch_size_is_a_multiple_of_the_devices():
+    assert batch_size(4096, 369, 1) == 369
+    assert batch_size(4096, 369, 2) == 370
+    assert batch_size(62, 369, 2) == 62
+    assert batch_size(61, 369, 4) == 64
+    assert batch_size(4096, 1, 8) == 8
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("sharding")
+    cache = {"xla_cache": str(tmp / "xla"), "export_dir": str(tmp / "xla" / "jaxgrasp-export")}
+    # side by side: a plain 1-device sweep (traced, no caches) and a 2-device one that
+    # exports its program and fills the caches
+    one = _start(1, {"steps": ["sweep"], "out": str(tmp / "one")})
+    two = _start(2, {"steps": ["sweep"], "out": str(tmp / "two"), **cache})
+    r_one, r_two = _finish(one), _finish(two)
+    # a later process: loads the exported program, then falls back after corruption
+    again = _finish(_start(2, {"steps": ["sweep", "corrupt", "sweep"], "out": str(tmp / "again"), **cache}))
+    return {"tmp": tmp, "one": r_one, "two": r_two, "again": again}
+
+
+def test_two_devices_are_used(runs):
+    assert runs["one"]["device_count"] == 1
+    assert runs["one"]["runs"][0]["devices"] == 1
+    assert runs["two"]["device_count"] == 2
+    run = runs["two"]["runs"][0]
+    assert run["devices"] == 2
+    assert run["sharding_devices"] == [2]  # every input and output spans both devices
+    assert run["stats"]["traced"] == 1
+
+
+def test_two_devices_equal_one_device(runs):
+    tmp = runs["tmp"]
+    _assert_same(_load(str(tmp / "two"), 0), _load(str(tmp / "one"), 0), rtol=1e-12)
+    status = _load(str(tmp / "one"), 0)["status"]
+    assert len(np.unique(status)) >= 2  # the tiny grid has more than one status
+
+
+def test_exported_program_is_reused_bit_for_bit(runs):
+    tmp = runs["tmp"]
+    first = runs["again"]["runs"][0]
+    assert first["stats"] == {"traced": 0, "deserialized": 1, "cache_errors": 0}
+    assert first["devices"] == 2
+    assert first["compile_seconds"] < runs["two"]["runs"][0]["compile_seconds"]
+    _assert_same(_load(str(tmp / "again"), 0), _load(str(tmp / "two"), 0), rtol=0)
+
+
+def test_corrupt_exported_program_falls_back_to_tracing(runs):
+    tmp = runs["tmp"]
+    assert runs["again"]["corrupted"] == 1
+    # step 1 was the corruption; step 2 the sweep after it
+    second = runs["again"]["runs"][1]
+    assert second["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 1}
+    _assert_same(_load(str(tmp / "again"), 2), _load(str(tmp / "two"), 0), rtol=0)
