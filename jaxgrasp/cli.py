@@ -27,7 +27,9 @@ class _Parser(argparse.ArgumentParser):
 def enable_compilation_cache() -> None:
     """Use JAX's persistent compilation cache so a repeated command does not recompile.
 
-    The cache lives in ``$JAXGRASP_CACHE_DIR`` or ``~/.cache/jaxgrasp/xla``.
+    The cache lives in ``$JAXGRASP_CACHE_DIR`` or ``~/.cache/jaxgrasp/xla``. Sweeps also
+    keep their traced programs (``jax.export``) in its subfolder ``jaxgrasp-export``, so a
+    repeated sweep neither traces in Python nor compiles in XLA.
     """
     import jax
 
@@ -39,6 +41,9 @@ def enable_compilation_cache() -> None:
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    from .sweep import set_export_cache_dir
+
+    set_export_cache_dir(Path(path) / "jaxgrasp-export")
 
 
 def _add_grasp_source(p: argparse.ArgumentParser) -> None:
