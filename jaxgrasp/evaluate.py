@@ -64,12 +64,16 @@ class EvaluateOptions:
         num_random_starts: random start directions per boundary problem, on top of the 12
             coordinate half-axes.
         seed: seed of those random directions (fixed, so results are reproducible).
-        ray_length: how far a start search walks from the equilibrium, in fingertip radii
-            (translations; rotations by the same arc length at the grasp's lever arm).
+        ray_length: how far a start search walks from the equilibrium: translations up to
+            ``ray_length`` fingertip radii, rotations up to ``ray_length`` rad or that
+            many radii of arc at the grasp's lever arm, whichever is larger.
         ray_points: points of the geometric grid on which the crossing is looked for.
         bisection_steps: bisection steps onto the boundary.
         boundary_tol: a slip or force-limit margin (scaled) at most this at the
-            equilibrium means the equilibrium is on a boundary: status unstable.
+            equilibrium, or a boundary energy at most this (relative to the energy
+            scale) above ``U0``, means the equilibrium is on a boundary: status unstable.
+            Also the feasibility a stalled lane must reach for its energy to count as an
+            estimate.
         smooth_min_temperature: ``None`` (default) for the paper's hard minimum over
             boundaries. A temperature ``T > 0`` in J replaces it by the soft minimum
 
@@ -271,12 +275,17 @@ def _solve_programs(p, prob: _Problem, options: EvaluateOptions) -> Programs:
     # --- boundary problems: constraint index k = n + b for b in [0, 2n) (slip rows, then force)
     dirs = jnp.asarray(options.directions(), dtype)
     num_dirs = dirs.shape[0]
-    t_max = options.ray_length * jnp.max(ps.r)
-    t_grid = t_max * 2.0 ** (-(options.ray_points - 1 - jnp.arange(options.ray_points, dtype=dtype)) / 4.0)
+    # A ray walks until its translation reaches ray_length radii or its rotation reaches
+    # ray_length rad, whichever is farther: torsion slip needs a rotation angle that does
+    # not shrink with the lever arm (contacts far from the centre of mass).
+    rot = jnp.linalg.norm(dirs[:, 3:], axis=1)
+    t_max = options.ray_length * jnp.maximum(jnp.max(ps.r), prob.lever * rot)  # (D,) mm
+    unit_grid = 2.0 ** (-(options.ray_points - 1 - jnp.arange(options.ray_points, dtype=dtype)) / 4.0)
     lane_k = jnp.repeat(n + jnp.arange(2 * n), num_dirs)
     lane_v = jnp.tile(dirs, (2 * n, 1))
+    lane_t = jnp.tile(t_max[:, None] * unit_grid, (2 * n, 1))
 
-    def start(k, v):
+    def start(k, v, t_grid):
         gk = lambda z: g(z)[k]
         on_boundary = gk(z_eq) <= 0.0
         z0, found = _ray_start(gk, z_eq, v, t_grid, options.bisection_steps)
@@ -288,7 +297,7 @@ def _solve_programs(p, prob: _Problem, options: EvaluateOptions) -> Programs:
         nu0 = -jnp.dot(gf, gh) / jnp.maximum(jnp.dot(gh, gh), 1e-300)
         return z0, found, nu0
 
-    z0s, found, nu0s = jax.vmap(start)(lane_k, lane_v)
+    z0s, found, nu0s = jax.vmap(start)(lane_k, lane_v, lane_t)
     # Without a converged equilibrium there is nothing to start from: skip every lane.
     found = found & (eq.status == S.CONVERGED)
     masks = jax.nn.one_hot(lane_k, m, dtype=dtype)
@@ -365,6 +374,15 @@ def _evaluate_jit(grasp: Grasp, temperature, options: EvaluateOptions) -> Evalua
     reached = jnp.isfinite(jnp.min(lane_energy, axis=1))
     unreachable = jnp.all((lane_status == S.INFEASIBLE) | (lane_status == S.NO_START), axis=1)
     b_status = jnp.where(reached, S.CONVERGED, jnp.where(unreachable, S.INFEASIBLE, S.NOT_CONVERGED))
+    # without a converged equilibrium no boundary problem was started
+    b_status = jnp.where(eq.status == S.CONVERGED, b_status, S.NO_START)
+    # Lowest feasible point of each boundary problem among lanes that did not converge
+    # (e.g. degenerate active constraints, where multipliers grow without bound): an
+    # estimate of that boundary's energy, used to tell whether it could be limiting.
+    stalled_feasible = (lane_status == S.NOT_CONVERGED) & (
+        lanes.feasibility.reshape(2 * n, num_dirs) <= options.boundary_tol
+    )
+    b_estimate = jnp.min(jnp.where(stalled_feasible, lanes.objective.reshape(2 * n, num_dirs), jnp.inf), axis=1)
     pick = jnp.arange(2 * n) * num_dirs + best
 
     def take(a):
@@ -377,18 +395,34 @@ def _evaluate_jit(grasp: Grasp, temperature, options: EvaluateOptions) -> Evalua
 
     # --- grasp status (from the solver's outputs only: no derivative)
     margins_eq = jax.lax.stop_gradient(prob.g(z_eq, p)).reshape(3, n)
-    on_boundary = jnp.min(margins_eq[1:]) <= options.boundary_tol
+    load_margins = margins_eq[1:]  # slip and force-limit rows
+    on_boundary = jnp.min(load_margins) <= options.boundary_tol
+    # An equilibrium problem that stalled (no KKT certificate: degenerate active constraints
+    # make the multipliers grow without bound) at a feasible pose pressing a slip or force
+    # constraint with a positive multiplier is on that boundary as well.
+    stalled_on_boundary = (
+        (eq.status == S.NOT_CONVERGED)
+        & (eq.feasibility <= options.boundary_tol)
+        & jnp.any((load_margins <= options.boundary_tol) & (eq.lam.reshape(3, n)[1:] > 0.0))
+    )
     any_reached = jnp.any(reached)
-    any_unsettled = jnp.any(b_status == S.NOT_CONVERGED)
     b_limit = jnp.argmin(jnp.where(reached, b_obj, jnp.inf))
+    hard_scaled = b_obj[b_limit] - eq.objective  # value / energy scale
+    # a boundary reached within the solver's accuracy of U0: the equilibrium is on it
+    zero_value = any_reached & (hard_scaled <= options.boundary_tol)
+    # a boundary problem that did not settle decides the status only if it could be
+    # limiting: no feasible point of it found, or one within 10 % of the value
+    could_limit = ~(jnp.isfinite(b_estimate) & (b_estimate - eq.objective > 1.1 * hard_scaled))
+    any_unsettled = jnp.any((b_status == S.NOT_CONVERGED) & (could_limit | ~any_reached))
     status = jnp.select(
         [
             eq.status == S.INFEASIBLE,
+            stalled_on_boundary,
             eq.status != S.CONVERGED,
-            on_boundary,
+            on_boundary | zero_value,
             any_unsettled | ~any_reached,
         ],
-        [R.INFEASIBLE, R.NOT_CONVERGED, R.UNSTABLE, R.NOT_CONVERGED],
+        [R.INFEASIBLE, R.UNSTABLE, R.NOT_CONVERGED, R.UNSTABLE, R.NOT_CONVERGED],
         R.STABLE,
     ).astype(jnp.int32)
     keep_value = (status == R.STABLE) | (status == R.NOT_CONVERGED)

@@ -48,6 +48,10 @@ UNITS = {
 NORMAL_MIN_NORM = 1e-12
 """A normal shorter than this (absolute) is treated as zero."""
 
+MIN_ENERGY_SCALE = 1e-150
+"""Smallest ``young_modulus * initial_deformation**3`` (J) of a contact: the solver scales
+energies by the initial elastic energy, which must stay far from float64 underflow."""
+
 COINCIDENT_DISTANCE = 1e-12
 """Two contacts closer than this, m, are at the same position."""
 
@@ -243,6 +247,17 @@ def check_grasp_inputs(
             raise GraspValueError(
                 f"{label} = {format_value(dr_n[i])} m must be in "
                 f"(0, {rlabel} = {format_value(radius_n[i])} m)"
+            )
+    # The solver divides by the initial elastic energy ~ E dr^3: it must not underflow.
+    e_n = np.broadcast_to(arrs["young_modulus"], (n,))
+    with np.errstate(under="ignore", over="ignore"):
+        energy = e_n * dr_n**3
+    for i in range(n):
+        if not energy[i] >= MIN_ENERGY_SCALE:
+            raise GraspValueError(
+                f"contact {i}: young_modulus * initial_deformation^3 = "
+                f"{format_value(e_n[i])} Pa * ({format_value(dr_n[i])} m)^3 is below "
+                f"{MIN_ENERGY_SCALE:g} J, too small to evaluate in floating point"
             )
 
     # scaled norm: no overflow for huge components, no underflow for tiny ones
