@@ -51,10 +51,37 @@ from .grasp import Grasp
 from .model import KINDS
 from .validation import GraspValueError, _as_float_array, check_grasp_inputs, format_value
 
-__all__ = ["sweep", "SweepResult", "PARAMETERS", "DEFAULT_CHUNK_SIZE", "batch_size", "set_export_cache_dir"]
+__all__ = [
+    "sweep",
+    "SweepResult",
+    "PARAMETERS",
+    "DEFAULT_CHUNK_SIZE",
+    "ACCELERATOR_CHUNK_SIZE",
+    "default_chunk_size",
+    "batch_size",
+    "set_export_cache_dir",
+]
 
-DEFAULT_CHUNK_SIZE = 4096
-"""Default number of grid points evaluated per compiled batch."""
+DEFAULT_CHUNK_SIZE = 64
+"""Default grid points per compiled batch and per CPU device (see :func:`default_chunk_size`).
+
+Measured on a 2-core CPU with the cube (``experiments/sweep_100k.log``): a larger batch is
+slower per grasp (the lanes of a batch iterate until its slowest converges) and needs
+about 1.5 MiB of XLA temporaries per grid point (385 MiB at 256; 6.0 GiB at 4096, where
+the process peaked at 7.5 GiB), more contacts proportionally more."""
+
+ACCELERATOR_CHUNK_SIZE = 1024
+"""Default grid points per compiled batch and per GPU/TPU device (about 1.5 GiB of
+temporaries for the cube; not measured on a GPU here: tune ``chunk_size`` there)."""
+
+
+def default_chunk_size(devices=None) -> int:
+    """The default batch of :func:`sweep`: :data:`DEFAULT_CHUNK_SIZE` per CPU device,
+    :data:`ACCELERATOR_CHUNK_SIZE` per GPU/TPU device, times the number of ``devices``
+    (default ``jax.devices()``)."""
+    devices = tuple(jax.devices() if devices is None else devices)
+    per = DEFAULT_CHUNK_SIZE if devices[0].platform == "cpu" else ACCELERATOR_CHUNK_SIZE
+    return per * len(devices)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -484,7 +511,7 @@ def sweep(
     /,
     *,
     options: EvaluateOptions = EvaluateOptions(),
-    chunk_size: int = DEFAULT_CHUNK_SIZE,
+    chunk_size: int | None = None,
     progress: Callable[[int, int], Any] | None = None,
     devices=None,
     **axes,
@@ -495,7 +522,8 @@ def sweep(
         grasp: the base :class:`~jaxgrasp.Grasp` (SI units); parameters not swept keep
             its values.
         options: :class:`~jaxgrasp.EvaluateOptions` for every evaluation.
-        chunk_size: grid points per compiled batch (bounds memory). The batch size used is
+        chunk_size: grid points per compiled batch (bounds memory); default
+            :func:`default_chunk_size` (64 per CPU device, 1024 per GPU). The batch size used is
             ``min(chunk_size, number of points)`` rounded up to a multiple of the number
             of devices (:func:`batch_size`); the last chunk is padded to it.
         progress: optional ``progress(done, total)`` called after each chunk with the
@@ -518,7 +546,9 @@ def sweep(
             parameter name, an empty, non-numeric, non-finite or out-of-range axis, or a
             grid point with ``initial_deformation >= radius``; the message is one line.
     """
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
+    if chunk_size is not None and (
+        isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1
+    ):
         raise GraspValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     if not isinstance(grasp, Grasp):
         raise GraspValueError(f"sweep needs a jaxgrasp.Grasp, got {type(grasp).__name__}")
@@ -533,6 +563,8 @@ def sweep(
     n_contacts = base["positions"].shape[0]
     shape = tuple(a.size for a in axes.values())
     total = int(math.prod(shape))
+    if chunk_size is None:
+        chunk_size = default_chunk_size(devices)
     chunk = batch_size(chunk_size, total, len(devices))
     fn, compile_seconds = _compiled(options, n_contacts, chunk, devices)
     sharding = NamedSharding(_mesh(devices), P("batch"))

@@ -34,7 +34,6 @@ PAPER_AXES = {
 }
 """The grid of the paper's Fig. 6 (used when no axis is given)."""
 
-_MAX_AUTO_CHUNK = 4096
 _MIN_AUTO_CHUNK = 64
 _AUTO_CHUNKS = 10  # aim for about this many progress steps on a long sweep
 
@@ -110,15 +109,19 @@ def add_sweep_parser(sub) -> None:
         type=int,
         default=None,
         metavar="N",
-        help="grid points per compiled batch (default: about a tenth of the grid, 64..4096)",
+        help=(
+            "grid points per compiled batch (default: about a tenth of the grid, "
+            "at most 64 per CPU device, 1024 per GPU)"
+        ),
     )
     sp.add_argument("--no-plot", action="store_true", help="do not write sweep.png")
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
     sp.set_defaults(func=_cmd_sweep, default_preset="cube")
 
 
-def _auto_chunk(total: int) -> int:
-    chunk = min(_MAX_AUTO_CHUNK, max(_MIN_AUTO_CHUNK, math.ceil(total / _AUTO_CHUNKS)))
+def _auto_chunk(total: int, cap: int = 64) -> int:
+    """About a tenth of the grid, at least 64, at most ``cap`` (jaxgrasp.sweep.default_chunk_size)."""
+    chunk = min(cap, max(_MIN_AUTO_CHUNK, math.ceil(total / _AUTO_CHUNKS)))
     nchunks = math.ceil(total / chunk)
     return max(1, math.ceil(total / nchunks))  # same number of chunks, least padding
 
@@ -133,7 +136,7 @@ def _fmt_param(name: str, x: float) -> str:
 def _cmd_sweep(args) -> int:
     import jax
 
-    from .sweep import batch_size, sweep
+    from .sweep import batch_size, default_chunk_size, sweep
 
     given = {n: getattr(args, n) for n in _AXIS_OPTIONS if getattr(args, n) is not None}
     paper = not given
@@ -148,7 +151,7 @@ def _cmd_sweep(args) -> int:
         raise UsageError(f"--out {str(out)!r} exists and is not a folder")
 
     total = int(np.prod([a.size for a in axes.values()]))
-    chunk = args.chunk_size if args.chunk_size is not None else _auto_chunk(total)
+    chunk = args.chunk_size if args.chunk_size is not None else _auto_chunk(total, default_chunk_size())
     n_devices = jax.device_count()
     chunk = batch_size(chunk, total, n_devices)  # a multiple of the device count
     nchunks = math.ceil(total / chunk)

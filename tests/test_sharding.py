@@ -65,7 +65,7 @@ WORKER = textwrap.dedent(
             continue
         before = dict(S._STATS)
         r = jaxgrasp.sweep(jaxgrasp.presets.cube(), young_modulus=E, initial_deformation=DR)
-        chunk = S.batch_size(S.DEFAULT_CHUNK_SIZE, r.size, jax.device_count())
+        chunk = S.batch_size(S.default_chunk_size(), r.size, jax.device_count())
         fn, _ = S._compiled(EvaluateOptions(), 2, chunk)  # the one the sweep used (memoised)
         shardings = jax.tree_util.tree_leaves(fn.input_shardings) + jax.tree_util.tree_leaves(
             fn.output_shardings
