@@ -187,7 +187,7 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
     def phi(x, lam, nu, rho):
         return _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask)
 
-    def newton_step(s: _State, gphi):
+    def newton_step(s: _State, gphi, needs_step):
         hmat = jax.hessian(phi)(s.x, s.lam, s.nu, s.rho)
         hmat = 0.5 * (hmat + hmat.T)
         evals, evecs = jnp.linalg.eigh(hmat)
@@ -198,23 +198,44 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
         p = p * jnp.minimum(1.0, o.max_step / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
         phi0 = phi(s.x, s.lam, s.nu, s.rho)
         slope = jnp.dot(gphi, p)
-        trial = jax.vmap(lambda a: phi(s.x + a * p, s.lam, s.nu, s.rho))(alphas)
-        trial = jnp.where(jnp.isfinite(trial), trial, jnp.inf)
         # Armijo, with slack for rounding: near a minimiser at a large penalty the decrease
         # a Newton step promises is below phi's rounding error, and a strict test would
         # reject the very steps that converge.
         slack = rounding * (jnp.abs(phi0) + 1.0)
-        armijo = trial <= phi0 + 1e-4 * alphas * slope + slack
-        first = jnp.argmax(armijo)
-        best = jnp.argmin(trial)
-        idx = jnp.where(jnp.any(armijo), first, best)
-        improve = armijo[idx] | (trial[idx] < phi0)
+        # Backtracking on the ladder alphas[0], alphas[1], ...: the first step length that
+        # passes Armijo is taken; if none does, the one with the lowest phi. The ladder is
+        # walked lazily (a while loop that stops once every lane has its step), which
+        # gives the same step as evaluating the whole ladder: almost every Newton step
+        # takes the first or second length. Lanes that do not take a Newton step this
+        # loop step start as done.
+        def ls_cond(c):
+            k, found = c[0], c[1]
+            return (k < o.line_search_steps) & ~found
+
+        def ls_body(c):
+            k, found, first, best, best_val = c
+            a = alphas[k]
+            t = phi(s.x + a * p, s.lam, s.nu, s.rho)
+            t = jnp.where(jnp.isfinite(t), t, jnp.inf)
+            ok = t <= phi0 + 1e-4 * a * slope + slack
+            first = jnp.where(ok, k, first)
+            better = t < best_val
+            best = jnp.where(better, k, best)
+            best_val = jnp.where(better, t, best_val)
+            return k + 1, found | ok, first, best, best_val
+
+        zero = jnp.asarray(0, jnp.int32)
+        _, armijo, first, best, best_val = jax.lax.while_loop(
+            ls_cond, ls_body, (zero, ~needs_step, zero, zero, jnp.asarray(jnp.inf, s.x.dtype))
+        )
+        idx = jnp.where(armijo, first, best)
+        improve = armijo | (best_val < phi0)
         x_new = jnp.where(improve, s.x + alphas[idx] * p, s.x)
         # A step that cannot decrease phi ends the inner loop (numerically converged).
         inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
         return dataclasses.replace(s, x=x_new, inner=inner)
 
-    def multiplier_update(s: _State, gphi):
+    def multiplier_update(s: _State, gphi, needs_step):
         gx = g(s.x)
         is_eq = eq_mask > 0
         h = jnp.sum(eq_mask * gx)
@@ -256,9 +277,9 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
     # violation vanishes.
     inner_tol = jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
     inner_done = (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
-    s_new = jax.lax.cond(inner_done, multiplier_update, newton_step, s, gphi)
-    s_new = dataclasses.replace(s_new, steps=s.steps + 1)
     running = _running(s, o)
+    s_new = jax.lax.cond(inner_done, multiplier_update, newton_step, s, gphi, running & ~inner_done)
+    s_new = dataclasses.replace(s_new, steps=s.steps + 1)
     return jax.tree_util.tree_map(lambda a, b: jnp.where(running, a, b), s_new, s)
 
 
