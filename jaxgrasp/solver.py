@@ -347,6 +347,13 @@ def solve_lanes(
     lane-steps instead of ``L * max(steps)``. Each lane's result is what :func:`solve`
     gives.
 
+    Under ``jax.vmap`` (e.g. one call per grasp, vmapped over grasps) the batch axis is
+    folded into the lane axis (``custom_vmap``): all ``B * L`` lanes share one queue
+    of ``ceil(slot_fraction * B * L)`` slots, instead of ``B`` queues advancing in
+    lockstep until the slowest of them is empty. Results are the same lane by lane.
+    ``f`` and ``g`` must therefore take every lane-dependent quantity through ``theta``
+    (they must not close over traced values).
+
     Args:
         f: objective ``(x, theta_lane) -> ()``.
         g: constraint margins ``(x, theta_lane) -> (m,)``.
@@ -357,7 +364,31 @@ def solve_lanes(
         active: ``(L,)`` bool; inactive lanes end at once with status :data:`NO_START`.
         options: :class:`SolverOptions`.
     """
-    o = options
+
+    @jax.custom_batching.custom_vmap
+    def run(theta, x0, eq_mask, nu0, active):
+        return _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, options)
+
+    @run.def_vmap
+    def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active):
+        num_lanes = x0.shape[1] if in_batched[1] else x0.shape[0]
+
+        def flat(a, batched):
+            a = jnp.asarray(a)
+            if not batched:
+                a = jnp.broadcast_to(a, (axis_size,) + a.shape)
+            return a.reshape((axis_size * num_lanes,) + a.shape[2:])
+
+        args = (theta, x0, eq_mask, nu0, active)
+        flat_args = jax.tree_util.tree_map(flat, args, tuple(in_batched))
+        out = run(*flat_args)  # a nested vmap folds into this call in turn
+        out = jax.tree_util.tree_map(lambda a: a.reshape((axis_size, num_lanes) + a.shape[1:]), out)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active))
+
+
+def _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
     num_lanes = x0.shape[0]
     width = max(1, min(num_lanes, -(-int(o.slot_fraction * num_lanes * 1e6) // 1_000_000)))
     states = jax.vmap(lambda x, m, nu, a: _init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
