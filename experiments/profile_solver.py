@@ -136,6 +136,8 @@ def main():
     ap.add_argument("--compare", type=Path)
     ap.add_argument("--parts", action="store_true")
     ap.add_argument("--no-solve", action="store_true")
+    ap.add_argument("--slot-fraction", type=float, default=None)
+    ap.add_argument("--max-steps", type=int, default=None)
     args = ap.parse_args()
     print(f"jaxgrasp from {jaxgrasp.__file__}; load {os.getloadavg()}")
     if args.parts:
@@ -143,6 +145,12 @@ def main():
     if args.no_solve:
         return
     opts = EvaluateOptions()
+    if args.slot_fraction is not None:
+        import dataclasses
+        opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, slot_fraction=args.slot_fraction))
+    if args.max_steps is not None:
+        import dataclasses
+        opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, max_steps=args.max_steps))
     b = batch(args.scene, args.grasps_E, args.grasps_dr)
     fn = jax.vmap(lambda g: solve_programs(g, opts))
     t0 = time.perf_counter()

@@ -90,7 +90,7 @@ class SolverOptions:
     inner_tol_factor: float = 1e-2
     max_step: float = 5.0
     line_search_steps: int = 16
-    slot_fraction: float = 0.125
+    slot_fraction: float = 0.0625
 
 
 @jax.tree_util.register_dataclass
