@@ -271,16 +271,31 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
             complementarity=comp,
         )
 
-    gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
-    # Inexact inner solves: while the violation is large, a rough minimiser of phi
-    # is enough to update the multipliers; the tolerance tightens to tol as the
-    # violation vanishes.
-    inner_tol = jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
-    inner_done = (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
+    def gradient_and_inner_done(s: _State):
+        gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
+        # Inexact inner solves: while the violation is large, a rough minimiser of phi
+        # is enough to update the multipliers; the tolerance tightens to tol as the
+        # violation vanishes.
+        inner_tol = jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
+        inner_done = (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
+        return gphi, inner_done
+
+    def select(pred, a, b):
+        return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
+
+    # A multiplier update, where the inner solve is done, then a Newton step where the
+    # (updated) inner solve is not: the sequence of updates and the step count of a lane
+    # are those of one kind of update per loop step, but under vmap (where both kinds are
+    # computed for every lane) a lane no longer spends a whole loop step on an update.
     running = _running(s, o)
-    s_new = jax.lax.cond(inner_done, multiplier_update, newton_step, s, gphi, running & ~inner_done)
-    s_new = dataclasses.replace(s_new, steps=s.steps + 1)
-    return jax.tree_util.tree_map(lambda a, b: jnp.where(running, a, b), s_new, s)
+    gphi, inner_done = gradient_and_inner_done(s)
+    update = running & inner_done
+    s_upd = multiplier_update(s, gphi, update)
+    s1 = select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
+    gphi1, inner_done1 = gradient_and_inner_done(s1)
+    newton = running & _running(s1, o) & ~inner_done1
+    s_newton = newton_step(s1, gphi1, newton)
+    return select(newton, dataclasses.replace(s_newton, steps=s1.steps + 1), s1)
 
 
 def _running(s: _State, o: SolverOptions):
