@@ -138,6 +138,7 @@ def main():
     ap.add_argument("--no-solve", action="store_true")
     ap.add_argument("--slot-fraction", type=float, default=None)
     ap.add_argument("--max-steps", type=int, default=None)
+    ap.add_argument("--max-slots", type=int, default=None)
     args = ap.parse_args()
     print(f"jaxgrasp from {jaxgrasp.__file__}; load {os.getloadavg()}")
     if args.parts:
@@ -148,6 +149,9 @@ def main():
     if args.slot_fraction is not None:
         import dataclasses
         opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, slot_fraction=args.slot_fraction))
+    if args.max_slots is not None:
+        import dataclasses
+        opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, max_slots=args.max_slots))
     if args.max_steps is not None:
         import dataclasses
         opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, max_steps=args.max_steps))

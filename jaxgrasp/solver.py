@@ -76,7 +76,10 @@ class SolverOptions:
         max_step: largest Newton step (inf-norm, scaled variables).
         line_search_steps: number of step lengths ``1, 1/2, 1/4, ...`` tried per Newton step.
         slot_fraction: :func:`solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
-            flight (finished lanes hand their slot to the next).
+            flight (finished lanes hand their slot to the next), at most ``max_slots``.
+        max_slots: upper bound on those slots. A loop step over a few hundred lanes keeps
+            its working set in the CPU caches; over thousands it runs at memory speed and
+            costs much more per lane.
     """
 
     tol: float = 1e-10
@@ -91,6 +94,7 @@ class SolverOptions:
     max_step: float = 5.0
     line_search_steps: int = 16
     slot_fraction: float = 0.0625
+    max_slots: int = 128
 
 
 @jax.tree_util.register_dataclass
@@ -355,7 +359,7 @@ def solve_lanes(
 
     Lanes of one ``vmap`` advance in lockstep, so a plain batched loop costs
     ``L * max(steps)`` although most lanes finish early (or never start). Here a work
-    queue keeps ``W = ceil(slot_fraction * L)`` slots busy: each loop step advances
+    queue keeps ``W = min(ceil(slot_fraction * L), max_slots)`` slots busy: each loop step advances
     every slot; a slot whose lane has finished writes it back and takes the next lane
     not yet started (active lanes only). One ``while_loop`` with static shapes, so this
     composes with ``jit`` and ``vmap``; the cost is near ``sum(steps) + W * max(steps)``
@@ -364,7 +368,7 @@ def solve_lanes(
 
     Under ``jax.vmap`` (e.g. one call per grasp, vmapped over grasps) the batch axis is
     folded into the lane axis (``custom_vmap``): all ``B * L`` lanes share one queue
-    of ``ceil(slot_fraction * B * L)`` slots, instead of ``B`` queues advancing in
+    of ``min(ceil(slot_fraction * B * L), max_slots)`` slots, instead of ``B`` queues advancing in
     lockstep until the slowest of them is empty. Results are the same lane by lane.
     ``f`` and ``g`` must therefore take every lane-dependent quantity through ``theta``
     (they must not close over traced values).
@@ -405,7 +409,7 @@ def solve_lanes(
 
 def _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
     num_lanes = x0.shape[0]
-    width = max(1, min(num_lanes, -(-int(o.slot_fraction * num_lanes * 1e6) // 1_000_000)))
+    width = max(1, min(num_lanes, o.max_slots, -(-int(o.slot_fraction * num_lanes * 1e6) // 1_000_000)))
     states = jax.vmap(lambda x, m, nu, a: _init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
     # The queue: active lanes first, in order; only those are ever loaded into a slot.
     queue = jnp.argsort(~jnp.asarray(active), stable=True)
