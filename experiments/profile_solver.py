@@ -139,6 +139,7 @@ def main():
     ap.add_argument("--slot-fraction", type=float, default=None)
     ap.add_argument("--max-steps", type=int, default=None)
     ap.add_argument("--max-slots", type=int, default=None)
+    ap.add_argument("--solver-opt", action="append", default=[], help="SolverOptions field=value (float)")
     args = ap.parse_args()
     print(f"jaxgrasp from {jaxgrasp.__file__}; load {os.getloadavg()}")
     if args.parts:
@@ -152,6 +153,11 @@ def main():
     if args.max_slots is not None:
         import dataclasses
         opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, max_slots=args.max_slots))
+    for kv in args.solver_opt:
+        import dataclasses
+        k, v = kv.split("=")
+        typ = type(getattr(opts.solver, k))
+        opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, **{k: typ(float(v))}))
     if args.max_steps is not None:
         import dataclasses
         opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, max_steps=args.max_steps))
