@@ -16,8 +16,9 @@ is minimised by Newton's method with the exact Hessian (eigenvalues mirrored and
 so every step is a descent direction) and a backtracking line search evaluated on a fixed
 ladder of step lengths; then ``lam <- max(0, lam - rho g)``, ``nu <- nu + rho h``, and
 ``rho`` grows when the violation does not fall fast enough. The inner and outer loops are
-flattened into one ``lax.while_loop`` whose body does either a Newton step or a multiplier
-update, so lanes that need different iteration counts do not wait on nested loops.
+flattened into one ``lax.while_loop`` whose body does a multiplier update where the inner
+solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
+need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
 
 Each lane ends with a status and its KKT residuals at ``(x, lam, nu)``:
 stationarity ``|grad f + nu grad h - sum lam grad g|_inf``, feasibility
@@ -109,7 +110,7 @@ class SolverResult:
         objective: ``f(x)``.
         status: :data:`CONVERGED`, :data:`INFEASIBLE` or :data:`NOT_CONVERGED`.
         stationarity, feasibility, complementarity: KKT residuals at ``(x, lam, nu)``.
-        steps: loop steps taken.
+        steps: Newton steps plus multiplier updates taken.
     """
 
     x: Any
