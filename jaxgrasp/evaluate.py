@@ -201,6 +201,22 @@ class Programs:
     scale: Any
 
 
+def _to_pose(z, lever):
+    return jnp.concatenate([z[:3], z[3:] / lever])
+
+
+def _lane_f(z, theta):
+    """Scaled objective of a boundary lane; ``theta = (params, lever, scale)``."""
+    q, lever, scale = theta
+    return potential_energy(_to_pose(z, lever), q) / scale
+
+
+def _lane_g(z, theta):
+    """Scaled constraint margins ``(3N,)`` of a boundary lane; ``theta`` as :func:`_lane_f`."""
+    q, lever, _ = theta
+    return constraint_margins(_to_pose(z, lever), q).reshape(-1)
+
+
 class _Problem:
     """Scaled objective and constraints of a grasp as functions of ``z`` and the params."""
 
@@ -214,7 +230,7 @@ class _Problem:
         )
 
     def to_pose(self, z):
-        return jnp.concatenate([z[:3], z[3:] / self.lever])
+        return _to_pose(z, self.lever)
 
     def f(self, z, q):
         return potential_energy(self.to_pose(z), q) / self.scale
@@ -301,10 +317,13 @@ def _solve_programs(p, prob: _Problem, options: EvaluateOptions) -> Programs:
     # Without a converged equilibrium there is nothing to start from: skip every lane.
     found = found & (eq.status == S.CONVERGED)
     masks = jax.nn.one_hot(lane_k, m, dtype=dtype)
-    # Every lane shares this grasp's parameters (closed over), so theta is empty.
-    lanes = S.solve_lanes(
-        lambda z, _: f(z), lambda z, _: g(z), (), z0s, masks, nu0s, found, sopt
+    # Every lane gets this grasp's parameters as its theta (not closed over): under a vmap
+    # over grasps, solve_lanes then runs the lanes of all grasps in one work queue.
+    num_lanes = lane_k.shape[0]
+    theta = jax.tree_util.tree_map(
+        lambda a: jnp.broadcast_to(a, (num_lanes,) + jnp.shape(a)), (ps, prob.lever, prob.scale)
     )
+    lanes = S.solve_lanes(_lane_f, _lane_g, theta, z0s, masks, nu0s, found, sopt)
     return Programs(
         equilibrium=eq,
         boundary=lanes,

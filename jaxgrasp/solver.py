@@ -16,8 +16,9 @@ is minimised by Newton's method with the exact Hessian (eigenvalues mirrored and
 so every step is a descent direction) and a backtracking line search evaluated on a fixed
 ladder of step lengths; then ``lam <- max(0, lam - rho g)``, ``nu <- nu + rho h``, and
 ``rho`` grows when the violation does not fall fast enough. The inner and outer loops are
-flattened into one ``lax.while_loop`` whose body does either a Newton step or a multiplier
-update, so lanes that need different iteration counts do not wait on nested loops.
+flattened into one ``lax.while_loop`` whose body does a multiplier update where the inner
+solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
+need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
 
 Each lane ends with a status and its KKT residuals at ``(x, lam, nu)``:
 stationarity ``|grad f + nu grad h - sum lam grad g|_inf``, feasibility
@@ -76,7 +77,10 @@ class SolverOptions:
         max_step: largest Newton step (inf-norm, scaled variables).
         line_search_steps: number of step lengths ``1, 1/2, 1/4, ...`` tried per Newton step.
         slot_fraction: :func:`solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
-            flight (finished lanes hand their slot to the next).
+            flight (finished lanes hand their slot to the next), at most ``max_slots``.
+        max_slots: upper bound on those slots. A loop step over a few hundred lanes keeps
+            its working set in the CPU caches; over thousands it runs at memory speed and
+            costs much more per lane.
     """
 
     tol: float = 1e-10
@@ -90,7 +94,8 @@ class SolverOptions:
     inner_tol_factor: float = 1e-2
     max_step: float = 5.0
     line_search_steps: int = 16
-    slot_fraction: float = 0.125
+    slot_fraction: float = 0.0625
+    max_slots: int = 128
 
 
 @jax.tree_util.register_dataclass
@@ -105,7 +110,7 @@ class SolverResult:
         objective: ``f(x)``.
         status: :data:`CONVERGED`, :data:`INFEASIBLE` or :data:`NOT_CONVERGED`.
         stationarity, feasibility, complementarity: KKT residuals at ``(x, lam, nu)``.
-        steps: loop steps taken.
+        steps: Newton steps plus multiplier updates taken.
     """
 
     x: Any
@@ -187,7 +192,7 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
     def phi(x, lam, nu, rho):
         return _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask)
 
-    def newton_step(s: _State, gphi):
+    def newton_step(s: _State, gphi, needs_step):
         hmat = jax.hessian(phi)(s.x, s.lam, s.nu, s.rho)
         hmat = 0.5 * (hmat + hmat.T)
         evals, evecs = jnp.linalg.eigh(hmat)
@@ -198,23 +203,44 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
         p = p * jnp.minimum(1.0, o.max_step / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
         phi0 = phi(s.x, s.lam, s.nu, s.rho)
         slope = jnp.dot(gphi, p)
-        trial = jax.vmap(lambda a: phi(s.x + a * p, s.lam, s.nu, s.rho))(alphas)
-        trial = jnp.where(jnp.isfinite(trial), trial, jnp.inf)
         # Armijo, with slack for rounding: near a minimiser at a large penalty the decrease
         # a Newton step promises is below phi's rounding error, and a strict test would
         # reject the very steps that converge.
         slack = rounding * (jnp.abs(phi0) + 1.0)
-        armijo = trial <= phi0 + 1e-4 * alphas * slope + slack
-        first = jnp.argmax(armijo)
-        best = jnp.argmin(trial)
-        idx = jnp.where(jnp.any(armijo), first, best)
-        improve = armijo[idx] | (trial[idx] < phi0)
+        # Backtracking on the ladder alphas[0], alphas[1], ...: the first step length that
+        # passes Armijo is taken; if none does, the one with the lowest phi. The ladder is
+        # walked lazily (a while loop that stops once every lane has its step), which
+        # gives the same step as evaluating the whole ladder: almost every Newton step
+        # takes the first or second length. Lanes that do not take a Newton step this
+        # loop step start as done.
+        def ls_cond(c):
+            k, found = c[0], c[1]
+            return (k < o.line_search_steps) & ~found
+
+        def ls_body(c):
+            k, found, first, best, best_val = c
+            a = alphas[k]
+            t = phi(s.x + a * p, s.lam, s.nu, s.rho)
+            t = jnp.where(jnp.isfinite(t), t, jnp.inf)
+            ok = t <= phi0 + 1e-4 * a * slope + slack
+            first = jnp.where(ok, k, first)
+            better = t < best_val
+            best = jnp.where(better, k, best)
+            best_val = jnp.where(better, t, best_val)
+            return k + 1, found | ok, first, best, best_val
+
+        zero = jnp.asarray(0, jnp.int32)
+        _, armijo, first, best, best_val = jax.lax.while_loop(
+            ls_cond, ls_body, (zero, ~needs_step, zero, zero, jnp.asarray(jnp.inf, s.x.dtype))
+        )
+        idx = jnp.where(armijo, first, best)
+        improve = armijo | (best_val < phi0)
         x_new = jnp.where(improve, s.x + alphas[idx] * p, s.x)
         # A step that cannot decrease phi ends the inner loop (numerically converged).
         inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
         return dataclasses.replace(s, x=x_new, inner=inner)
 
-    def multiplier_update(s: _State, gphi):
+    def multiplier_update(s: _State, gphi, needs_step):
         gx = g(s.x)
         is_eq = eq_mask > 0
         h = jnp.sum(eq_mask * gx)
@@ -250,16 +276,31 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
             complementarity=comp,
         )
 
-    gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
-    # Inexact inner solves: while the violation is large, a rough minimiser of phi
-    # is enough to update the multipliers; the tolerance tightens to tol as the
-    # violation vanishes.
-    inner_tol = jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
-    inner_done = (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
-    s_new = jax.lax.cond(inner_done, multiplier_update, newton_step, s, gphi)
-    s_new = dataclasses.replace(s_new, steps=s.steps + 1)
+    def gradient_and_inner_done(s: _State):
+        gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
+        # Inexact inner solves: while the violation is large, a rough minimiser of phi
+        # is enough to update the multipliers; the tolerance tightens to tol as the
+        # violation vanishes.
+        inner_tol = jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
+        inner_done = (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
+        return gphi, inner_done
+
+    def select(pred, a, b):
+        return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
+
+    # A multiplier update, where the inner solve is done, then a Newton step where the
+    # (updated) inner solve is not: the sequence of updates and the step count of a lane
+    # are those of one kind of update per loop step, but under vmap (where both kinds are
+    # computed for every lane) a lane no longer spends a whole loop step on an update.
     running = _running(s, o)
-    return jax.tree_util.tree_map(lambda a, b: jnp.where(running, a, b), s_new, s)
+    gphi, inner_done = gradient_and_inner_done(s)
+    update = running & inner_done
+    s_upd = multiplier_update(s, gphi, update)
+    s1 = select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
+    gphi1, inner_done1 = gradient_and_inner_done(s1)
+    newton = running & _running(s1, o) & ~inner_done1
+    s_newton = newton_step(s1, gphi1, newton)
+    return select(newton, dataclasses.replace(s_newton, steps=s1.steps + 1), s1)
 
 
 def _running(s: _State, o: SolverOptions):
@@ -319,12 +360,19 @@ def solve_lanes(
 
     Lanes of one ``vmap`` advance in lockstep, so a plain batched loop costs
     ``L * max(steps)`` although most lanes finish early (or never start). Here a work
-    queue keeps ``W = ceil(slot_fraction * L)`` slots busy: each loop step advances
+    queue keeps ``W = min(ceil(slot_fraction * L), max_slots)`` slots busy: each loop step advances
     every slot; a slot whose lane has finished writes it back and takes the next lane
     not yet started (active lanes only). One ``while_loop`` with static shapes, so this
     composes with ``jit`` and ``vmap``; the cost is near ``sum(steps) + W * max(steps)``
     lane-steps instead of ``L * max(steps)``. Each lane's result is what :func:`solve`
     gives.
+
+    Under ``jax.vmap`` (e.g. one call per grasp, vmapped over grasps) the batch axis is
+    folded into the lane axis (``custom_vmap``): all ``B * L`` lanes share one queue
+    of ``min(ceil(slot_fraction * B * L), max_slots)`` slots, instead of ``B`` queues advancing in
+    lockstep until the slowest of them is empty. Results are the same lane by lane.
+    ``f`` and ``g`` must therefore take every lane-dependent quantity through ``theta``
+    (they must not close over traced values).
 
     Args:
         f: objective ``(x, theta_lane) -> ()``.
@@ -336,9 +384,33 @@ def solve_lanes(
         active: ``(L,)`` bool; inactive lanes end at once with status :data:`NO_START`.
         options: :class:`SolverOptions`.
     """
-    o = options
+
+    @jax.custom_batching.custom_vmap
+    def run(theta, x0, eq_mask, nu0, active):
+        return _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, options)
+
+    @run.def_vmap
+    def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active):
+        num_lanes = x0.shape[1] if in_batched[1] else x0.shape[0]
+
+        def flat(a, batched):
+            a = jnp.asarray(a)
+            if not batched:
+                a = jnp.broadcast_to(a, (axis_size,) + a.shape)
+            return a.reshape((axis_size * num_lanes,) + a.shape[2:])
+
+        args = (theta, x0, eq_mask, nu0, active)
+        flat_args = jax.tree_util.tree_map(flat, args, tuple(in_batched))
+        out = run(*flat_args)  # a nested vmap folds into this call in turn
+        out = jax.tree_util.tree_map(lambda a: a.reshape((axis_size, num_lanes) + a.shape[1:]), out)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active))
+
+
+def _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
     num_lanes = x0.shape[0]
-    width = max(1, min(num_lanes, -(-int(o.slot_fraction * num_lanes * 1e6) // 1_000_000)))
+    width = max(1, min(num_lanes, o.max_slots, -(-int(o.slot_fraction * num_lanes * 1e6) // 1_000_000)))
     states = jax.vmap(lambda x, m, nu, a: _init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
     # The queue: active lanes first, in order; only those are ever loaded into a slot.
     queue = jnp.argsort(~jnp.asarray(active), stable=True)
@@ -372,11 +444,28 @@ def solve_lanes(
         ptr = ptr + jnp.sum(refill)
         return states, slots, new_idx, ptr
 
+    # The tail: once the queue is empty and at most width // 8 slots still run (e.g. a few
+    # lanes that take the whole step budget), the running slots move to a loop of
+    # width // 8 slots, so that they no longer drag the idle slots through every step.
+    tail = width // 8 if width // 8 >= 4 else None
+
     def cond(carry):
+        _, slots, _, ptr = carry
+        r = running(slots)
+        if tail is None:
+            return jnp.any(r)
+        return jnp.any(r) & ((ptr < num_active) | (jnp.sum(r.astype(jnp.int32)) > tail))
+
+    def tail_cond(carry):
         _, slots, _, _ = carry
         return jnp.any(running(slots))
 
     idx0 = queue[:width]
     ptr0 = jnp.minimum(jnp.asarray(width), num_active)
-    states, _, _, _ = jax.lax.while_loop(cond, body, (states, take(states, idx0), idx0, ptr0))
+    carry = jax.lax.while_loop(cond, body, (states, take(states, idx0), idx0, ptr0))
+    if tail is not None:
+        states, slots, idx, ptr = carry
+        keep = jnp.argsort(~running(slots), stable=True)[:tail]  # running slots first
+        carry = jax.lax.while_loop(tail_cond, body, (states, take(slots, keep), idx[keep], ptr))
+    states = carry[0]
     return jax.vmap(lambda s, t: _result(lambda x: f(x, t), s))(states, take(theta, jnp.arange(num_lanes)))
