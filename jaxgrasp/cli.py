@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 from pathlib import Path
@@ -17,6 +18,18 @@ EXIT_USAGE = 2
 
 class UsageError(Exception):
     """A problem with the command line or its input; reported in one line, exit 2."""
+
+
+def parse_number(option: str, text: str, what: str = "value") -> float:
+    """``text`` as a finite float; a :class:`UsageError` naming ``option`` otherwise."""
+    t = text.strip()
+    try:
+        x = float(t)
+    except ValueError:
+        raise UsageError(f"{option}: {what} {t!r} is not a number") from None
+    if not math.isfinite(x):
+        raise UsageError(f"{option}: {what} {t!r} must be finite")
+    return x
 
 
 class _Parser(argparse.ArgumentParser):

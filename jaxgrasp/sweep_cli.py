@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import UsageError, _add_grasp_source, load_grasp
+from .cli import UsageError, _add_grasp_source, load_grasp, parse_number
 
 __all__ = ["add_sweep_parser", "parse_axis_spec", "PAPER_AXES"]
 
@@ -38,17 +38,6 @@ _MIN_AUTO_CHUNK = 64
 _AUTO_CHUNKS = 10  # aim for about this many progress steps on a long sweep
 
 
-def _number(option: str, text: str, what: str = "value") -> float:
-    t = text.strip()
-    try:
-        x = float(t)
-    except ValueError:
-        raise UsageError(f"{option}: {what} {t!r} is not a number") from None
-    if not math.isfinite(x):
-        raise UsageError(f"{option}: {what} {t!r} must be finite")
-    return x
-
-
 def parse_axis_spec(option: str, spec: str) -> np.ndarray:
     """Parse ``start:stop:count``, ``a,b,c`` or ``x`` into a 1-D float array.
 
@@ -62,8 +51,8 @@ def parse_axis_spec(option: str, spec: str) -> np.ndarray:
         parts = text.split(":")
         if len(parts) != 3:
             raise UsageError(f"{option}: range {spec!r} must be START:STOP:COUNT (e.g. 1e-3:5e-3:41)")
-        start = _number(option, parts[0], "start")
-        stop = _number(option, parts[1], "stop")
+        start = parse_number(option, parts[0], "start")
+        stop = parse_number(option, parts[1], "stop")
         c = parts[2].strip()
         try:
             count = int(c)
@@ -77,7 +66,7 @@ def parse_axis_spec(option: str, spec: str) -> np.ndarray:
     items = text.split(",")
     if any(not s.strip() for s in items):
         raise UsageError(f"{option}: list {spec!r} has an empty item")
-    return np.asarray([_number(option, s) for s in items], dtype=np.float64)
+    return np.asarray([parse_number(option, s) for s in items], dtype=np.float64)
 
 
 def add_sweep_parser(sub) -> None:

@@ -13,20 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import UsageError, _add_grasp_source, load_grasp
+from .cli import UsageError, _add_grasp_source, load_grasp, parse_number
 
 __all__ = ["add_tune_parser", "parse_bounds"]
-
-
-def _number(option: str, text: str, what: str) -> float:
-    t = text.strip()
-    try:
-        x = float(t)
-    except ValueError:
-        raise UsageError(f"{option}: {what} {t!r} is not a number") from None
-    if not math.isfinite(x):
-        raise UsageError(f"{option}: {what} {t!r} must be finite")
-    return x
 
 
 def parse_bounds(items) -> dict:
@@ -46,9 +35,9 @@ def parse_bounds(items) -> dict:
             parts = spec.split(":")
             if len(parts) != 2:
                 raise UsageError(f"--bounds: {item!r} must be NAME=LO:HI")
-            out[name] = (_number("--bounds", parts[0], "lower bound"), _number("--bounds", parts[1], "upper bound"))
+            out[name] = (parse_number("--bounds", parts[0], "lower bound"), parse_number("--bounds", parts[1], "upper bound"))
         else:
-            out[name] = _number("--bounds", spec, "half-width")
+            out[name] = parse_number("--bounds", spec, "half-width")
     return out
 
 
