@@ -181,3 +181,46 @@ def ipopt_reference():
     ref = IpoptReference()
     yield ref
     ref.close()
+
+
+# ----------------------------------------------------------------------------- CLI runs
+_CACHE_OPTIONS = (
+    "jax_compilation_cache_dir",
+    "jax_persistent_cache_min_compile_time_secs",
+    "jax_persistent_cache_min_entry_size_bytes",
+)
+
+
+@pytest.fixture(scope="module")
+def cache_dir(tmp_path_factory):
+    """A compilation-cache folder for ``jaxgrasp.cli.main`` (and its subprocesses).
+
+    ``main`` turns on JAX's persistent compilation cache and the sweeps' exported-program
+    folder (process-wide settings); both are restored after the module so the rest of the
+    session is unaffected.
+    """
+    import importlib
+
+    sweep = importlib.import_module("jaxgrasp.sweep")  # the module, not jaxgrasp.sweep()
+    saved = {k: getattr(jax.config, k) for k in _CACHE_OPTIONS}
+    saved_export = sweep._EXPORT_DIR
+    yield tmp_path_factory.mktemp("jaxgrasp-xla-cache")
+    for k, v in saved.items():
+        jax.config.update(k, v)
+    sweep.set_export_cache_dir(saved_export)
+
+
+@pytest.fixture
+def run_cli(cache_dir, capsys, monkeypatch):
+    """``run_cli(argv) -> (exit code, stdout, stderr)``: ``jaxgrasp.cli.main``, in-process."""
+    from jaxgrasp import cli
+
+    monkeypatch.setenv("JAXGRASP_CACHE_DIR", str(cache_dir))
+
+    def run(argv):
+        capsys.readouterr()  # drop anything printed before
+        rc = cli.main([str(a) for a in argv])
+        out = capsys.readouterr()
+        return rc, out.out, out.err
+
+    return run

@@ -13,7 +13,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import jax
 import pytest
 
 import jaxgrasp
@@ -22,39 +21,6 @@ from jaxgrasp import cli
 ROOT = Path(__file__).resolve().parent.parent
 CUBE_TOML = ROOT / "examples" / "cube.toml"
 PRESET_ARGS = ["evaluate", "--preset", "cube", "--young-modulus", "6e5", "--initial-deformation", "0.002", "--json"]
-_CACHE_OPTIONS = (
-    "jax_compilation_cache_dir",
-    "jax_persistent_cache_min_compile_time_secs",
-    "jax_persistent_cache_min_entry_size_bytes",
-)
-
-
-@pytest.fixture(scope="module")
-def cache_dir(tmp_path_factory):
-    """A compilation-cache folder shared by the in-process runs and the subprocess.
-
-    ``main`` turns on JAX's persistent compilation cache (a process-wide setting); the
-    previous settings are restored after this module so the rest of the session is
-    unaffected.
-    """
-    saved = {k: getattr(jax.config, k) for k in _CACHE_OPTIONS}
-    yield tmp_path_factory.mktemp("jaxgrasp-xla-cache")
-    for k, v in saved.items():
-        jax.config.update(k, v)
-
-
-@pytest.fixture
-def run_cli(cache_dir, capsys, monkeypatch):
-    """``run_cli(argv) -> (exit code, stdout, stderr)``, in-process."""
-    monkeypatch.setenv("JAXGRASP_CACHE_DIR", str(cache_dir))
-
-    def run(argv):
-        capsys.readouterr()  # drop anything printed before
-        rc = cli.main([str(a) for a in argv])
-        out = capsys.readouterr()
-        return rc, out.out, out.err
-
-    return run
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,6 @@ the model needs nothing else. They are evaluated, not rejected.
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 import os
@@ -32,20 +31,13 @@ import sys
 import tempfile
 from pathlib import Path
 
-import jax
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import jaxgrasp
-from jaxgrasp import cli
 
 EXAMPLES = int(os.environ.get("JAXGRASP_FUZZ_EXAMPLES", "60"))
-_CACHE_OPTIONS = (
-    "jax_compilation_cache_dir",
-    "jax_persistent_cache_min_compile_time_secs",
-    "jax_persistent_cache_min_entry_size_bytes",
-)
 
 
 def base_doc() -> dict:
@@ -234,28 +226,6 @@ def build(edits):
 
 
 # ----------------------------------------------------------------------------- running
-@pytest.fixture(scope="module")
-def cache_dir(tmp_path_factory):
-    """A compilation-cache folder for ``main`` (process-wide JAX setting, restored after)."""
-    saved = {k: getattr(jax.config, k) for k in _CACHE_OPTIONS}
-    yield tmp_path_factory.mktemp("jaxgrasp-xla-cache-fuzz")
-    for k, v in saved.items():
-        jax.config.update(k, v)
-
-
-@pytest.fixture
-def run_cli(cache_dir, capsys, monkeypatch):
-    monkeypatch.setenv("JAXGRASP_CACHE_DIR", str(cache_dir))
-
-    def run(argv):
-        capsys.readouterr()
-        rc = cli.main([str(a) for a in argv])
-        out = capsys.readouterr()
-        return rc, out.out, out.err
-
-    return run
-
-
 WORK = Path(tempfile.mkdtemp(prefix="jaxgrasp-fuzz-"))
 EVALUATED: list[str] = []  # descriptions of the fuzz inputs that were evaluated (rc 0)
 
