@@ -234,7 +234,7 @@ def compare(params, progs, evals, sample, ipopt_recs, same_tol, energy_tol):
               "jax_only_converged": 0, "jax_only_converged_above_problem_min": 0, "ipopt_only_converged": 0, "neither_converged": 0,
               "neither_jax_infeasible": 0}
     ipopt_status = {}
-    same_energy_rel, same_dist, diff_cases, model_rel = [], [], [], []
+    same_energy_rel, same_dist, diff_cases = [], [], []
     worst_same = []
     vals = {"grasps": 0, "status_agree": 0, "both_stable": 0}
     value_rel, value_cases, status_mismatch = [], [], []

@@ -119,7 +119,6 @@ def parts(scene, ne, ndr, lanes=4096, repeats=5):
         "16 phi values (line search)": jax.jit(jax.vmap(lambda x, m: jax.vmap(lambda a: phi(x + a, m))(
             0.5 ** jnp.arange(16.0)))),
     }
-    hess = getattr(S, "_hessian", None)
     print(f"per-lane cost on {lanes} lanes ({scene}), microseconds:")
     for name, fn in fns.items():
         _, w, _ = timed(fn, z, masks, repeats=repeats)
@@ -147,14 +146,13 @@ def main():
     if args.no_solve:
         return
     opts = EvaluateOptions()
+    import dataclasses
+
     if args.slot_fraction is not None:
-        import dataclasses
         opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, slot_fraction=args.slot_fraction))
     if args.max_slots is not None:
-        import dataclasses
         opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, max_slots=args.max_slots))
     for kv in args.solver_opt:
-        import dataclasses
         k, v = kv.split("=")
         typ = type(getattr(opts.solver, k))
         opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, **{k: typ(float(v))}))
