@@ -1,0 +1,80 @@
+"""Every status and kind code of jaxgrasp, as named integer enums with a message each.
+
+Arrays carry the integer codes (so they live inside ``jit``/``vmap`` results); these
+enums give the codes names and one-line meanings. A member *is* its integer
+(``enum.IntEnum``), so ``result.status == GraspStatus.STABLE`` works on arrays, and
+``GraspStatus(int(code)).label`` is the name written to files and JSON.
+
+Four kinds of code, never to be mixed up (they share some names, not their numbers):
+
+* :class:`LaneStatus`: how one solver lane (one program from one start) ended;
+* :class:`GraspStatus`: what an evaluation says of a grasp;
+* :class:`BoundaryKind`: which boundary of the equilibrium region (eq. 20, 21);
+* :class:`Constraint`: the rows of :func:`jaxgrasp.model.constraint_margins`.
+"""
+
+from __future__ import annotations
+
+import enum
+
+__all__ = ["LaneStatus", "GraspStatus", "BoundaryKind", "Constraint", "NO_BOUNDARY"]
+
+
+class _Coded(enum.IntEnum):
+    """An integer code with a lower-case ``label`` and a one-line ``message``."""
+
+    def __new__(cls, value: int, message: str):
+        obj = int.__new__(cls, value)
+        obj._value_ = value
+        obj.message = message
+        return obj
+
+    @property
+    def label(self) -> str:
+        """The name used in files, JSON and messages (``'not_converged'``)."""
+        return self.name.lower()
+
+    @classmethod
+    def labels(cls) -> tuple[str, ...]:
+        """Every label, indexed by code (codes are ``0, 1, 2, ...``)."""
+        return tuple(m.label for m in cls)
+
+
+class LaneStatus(_Coded):
+    """How one lane of :func:`jaxgrasp.solver.solve` ended."""
+
+    CONVERGED = 0, "KKT conditions hold within tolerance"
+    INFEASIBLE = 1, "the constraint violation stagnated above infeasible_tol: no feasible point"
+    NOT_CONVERGED = 2, "the step budget ran out before the lane converged or proved infeasible"
+    NO_START = 3, "the lane was not run (no starting point was found, or it was inactive)"
+
+
+class GraspStatus(_Coded):
+    """What :func:`jaxgrasp.evaluate` says of a grasp."""
+
+    STABLE = 0, "the equilibrium lies inside the equilibrium region: value > 0"
+    UNSTABLE = 1, (
+        "the equilibrium lies on a boundary (a fingertip is about to slip or is at its "
+        "force limit): value 0"
+    )
+    INFEASIBLE = 2, "no pose satisfies every constraint (no stable equilibrium at all): value 0"
+    NOT_CONVERGED = 3, "the solver did not settle a problem the value depends on: do not trust the value"
+
+
+class BoundaryKind(_Coded):
+    """A boundary of the equilibrium region; the first axis of every ``(2, N)`` array."""
+
+    SLIP = 0, "the contact's friction is at its limit (Howe-Cutkosky with torsion, eq. 20)"
+    MAX_FORCE = 1, "the contact's normal force is at its limit (eq. 21)"
+
+
+NO_BOUNDARY = -1
+"""``limiting_kind`` and ``limiting_contact`` where no boundary limits the value."""
+
+
+class Constraint(_Coded):
+    """Rows of the ``(3, N)`` constraint margins, ``>= 0`` where satisfied."""
+
+    CONTACT = 0, "the fingertip keeps touching: d / dr >= 0"
+    SLIP = 1, "no slip: friction carries the tangential force and torsion (eq. 9)"
+    FORCE = 2, "the normal force stays below its limit (eq. 21)"
