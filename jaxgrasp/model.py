@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from .grasp import Grasp
+from .status import BoundaryKind
 from .units import M_TO_MM, PA_TO_MPA
 
 __all__ = [
@@ -35,8 +36,9 @@ __all__ = [
     "KINDS",
 ]
 
-KINDS = ("slip", "max_force")
-"""Boundary kinds, in the order used by every ``(2, N)`` array of the library."""
+KINDS = BoundaryKind.labels()
+"""Boundary kind names (``"slip"``, ``"max_force"``), indexed by
+:class:`~jaxgrasp.status.BoundaryKind`: the order of every ``(2, N)`` array of the library."""
 
 
 @jax.tree_util.register_dataclass
@@ -140,7 +142,7 @@ def energy_scale(p: ModelParams):
 def constraint_margins(x, p: ModelParams):
     """Scaled constraint margins ``(3, N)``, ``>= 0`` where satisfied.
 
-    Rows, for each contact ``i``:
+    Rows (:class:`~jaxgrasp.status.Constraint`), for each contact ``i``:
 
     0. contact kept: ``d_i / dr_i``;
     1. no slip (Howe-Cutkosky with torsion, eq. 9 divided by ``(pi E d)^2`` and by

@@ -9,23 +9,17 @@ from typing import Any
 import jax
 import numpy as np
 
-from .model import KINDS
-from .solver import LANE_STATUS_NAMES
+from .status import NO_BOUNDARY, BoundaryKind, Constraint, GraspStatus, LaneStatus
 
 __all__ = ["Evaluation", "STATUS_NAMES", "STABLE", "UNSTABLE", "INFEASIBLE", "NOT_CONVERGED"]
 
-STABLE = 0
-"""The equilibrium lies inside the equilibrium region: ``value > 0``."""
-UNSTABLE = 1
-"""The equilibrium lies on a boundary (a fingertip is about to slip or is at its force
-limit): ``value = 0``."""
-INFEASIBLE = 2
-"""No pose satisfies every constraint (no stable equilibrium at all): ``value = 0``."""
-NOT_CONVERGED = 3
-"""The solver did not settle a problem the value depends on: do not trust ``value``."""
+STABLE = GraspStatus.STABLE
+UNSTABLE = GraspStatus.UNSTABLE
+INFEASIBLE = GraspStatus.INFEASIBLE
+NOT_CONVERGED = GraspStatus.NOT_CONVERGED
 
-STATUS_NAMES = ("stable", "unstable", "infeasible", "not_converged")
-"""Grasp status names, indexed by the integer codes above."""
+STATUS_NAMES = GraspStatus.labels()
+"""Grasp status names, indexed by the :class:`~jaxgrasp.status.GraspStatus` codes."""
 
 
 @jax.tree_util.register_dataclass
@@ -34,16 +28,18 @@ class Evaluation:
     """Energy-tolerance evaluation of one grasp (SI units; add leading axes under ``vmap``).
 
     ``N`` is the number of contacts; every ``(2, N, ...)`` array is indexed
-    ``[kind, contact]`` with kind 0 = ``slip`` (eq. 20) and 1 = ``max_force`` (eq. 21).
+    ``[kind, contact]`` by :class:`~jaxgrasp.status.BoundaryKind`: 0 = ``slip`` (eq. 20),
+    1 = ``max_force`` (eq. 21).
 
     Attributes:
         value: ``()`` evaluation value ``Delta U_min`` of eq. 1, J: the least energy that
             brings the object from its equilibrium to a boundary of the equilibrium region.
             0 when ``status`` is unstable or infeasible.
-        status: ``()`` int, one of :data:`STABLE`, :data:`UNSTABLE`, :data:`INFEASIBLE`,
-            :data:`NOT_CONVERGED` (names in :data:`STATUS_NAMES`).
-        limiting_kind: ``()`` int, kind of the boundary that sets ``value`` (0 slip,
-            1 max_force), -1 when there is none.
+        status: ``()`` int, a :class:`~jaxgrasp.status.GraspStatus` code: :data:`STABLE`,
+            :data:`UNSTABLE`, :data:`INFEASIBLE` or :data:`NOT_CONVERGED` (names in
+            :data:`STATUS_NAMES`).
+        limiting_kind: ``()`` int, :class:`~jaxgrasp.status.BoundaryKind` of the boundary
+            that sets ``value`` (0 slip, 1 max_force), -1 (``NO_BOUNDARY``) when there is none.
         limiting_contact: ``()`` int, 0-based contact of that boundary, -1 when none.
         equilibrium_energy: ``()`` J, ``min U`` over the equilibrium region (energy zero
             at the initial grasping state's gravitational potential).
@@ -54,10 +50,9 @@ class Evaluation:
         boundary_translation: ``(2, N, 3)`` m, pose of each boundary minimum (the
             equilibrium pose where the boundary cannot be reached).
         boundary_rotation: ``(2, N, 3)`` rad, likewise.
-        boundary_status: ``(2, N)`` int, solver status of each boundary problem
-            (0 converged, 1 infeasible = unreachable, 2 not converged, 3 not started
-            because the equilibrium problem did not converge); names in
-            :data:`jaxgrasp.solver.LANE_STATUS_NAMES`.
+        boundary_status: ``(2, N)`` int, :class:`~jaxgrasp.status.LaneStatus` of each
+            boundary problem (converged; infeasible = unreachable; not converged; no start
+            because the equilibrium problem did not converge).
         equilibrium_status: ``()`` int, solver status of the equilibrium problem.
         equilibrium_margins: ``(3, N)`` scaled constraint margins at the equilibrium (or,
             for an infeasible grasp, at the least-violating pose found), rows: contact
@@ -88,7 +83,7 @@ class Evaluation:
     @property
     def status_name(self) -> str:
         """Name of ``status`` (for an unbatched, concrete result)."""
-        return STATUS_NAMES[int(self.status)]
+        return GraspStatus(int(self.status)).label
 
     def tolerates(self, kinetic_energy, potential_energy=None):
         """Stable-grasp condition with kinetic energy, eq. 2: ``U + K < min U + value``.
@@ -131,27 +126,29 @@ class Evaluation:
         n = a.boundary_energy.shape[-1]
         boundaries = []
         for j in range(n):
-            for k, kind in enumerate(KINDS):
-                e = float(a.boundary_energy[k, j])
+            for kind in BoundaryKind:
+                e = float(a.boundary_energy[kind, j])
                 boundaries.append(
                     {
-                        "kind": kind,
+                        "kind": kind.label,
                         "contact": j,
                         "energy": e if math.isfinite(e) else None,
-                        "status": LANE_STATUS_NAMES[int(a.boundary_status[k, j])],
-                        "translation": a.boundary_translation[k, j].tolist(),
-                        "rotation": a.boundary_rotation[k, j].tolist(),
+                        "status": LaneStatus(int(a.boundary_status[kind, j])).label,
+                        "translation": a.boundary_translation[kind, j].tolist(),
+                        "rotation": a.boundary_rotation[kind, j].tolist(),
                     }
                 )
         kind = int(a.limiting_kind)
         return {
             "value": float(a.value),
-            "status": STATUS_NAMES[int(a.status)],
+            "status": GraspStatus(int(a.status)).label,
             "equilibrium_energy": float(a.equilibrium_energy),
             "equilibrium_translation": a.equilibrium_translation.tolist(),
             "equilibrium_rotation": a.equilibrium_rotation.tolist(),
             "limiting": (
-                {"kind": KINDS[kind], "contact": int(a.limiting_contact)} if kind >= 0 else None
+                {"kind": BoundaryKind(kind).label, "contact": int(a.limiting_contact)}
+                if kind != NO_BOUNDARY
+                else None
             ),
             "boundaries": boundaries,
             "explanation": _explain(a, 1e-8),
@@ -166,14 +163,16 @@ deformation counts as released (no longer pressing) in :meth:`Evaluation.explain
 
 
 def _boundary_phrase(kind: int, contact: int) -> str:
-    return f"slip of contact {contact}" if kind == 0 else f"the force limit of contact {contact}"
+    if kind == BoundaryKind.SLIP:
+        return f"slip of contact {contact}"
+    return f"the force limit of contact {contact}"
 
 
 def _margin_phrase(row: int, contact: int, margin: float) -> str:
     """What a violated (or active) margin means, in words."""
-    if row == 0:
+    if row == Constraint.CONTACT:
         return f"contact {contact} is lost (fingertip deformation d/dr = {margin:.3g})"
-    if row == 1:
+    if row == Constraint.SLIP:
         return f"contact {contact} slips: friction cannot carry the load (slip margin {margin:.3g})"
     return f"the normal force of contact {contact} exceeds its limit (force margin {margin:.3g})"
 
@@ -184,110 +183,125 @@ def _list(items: list[str]) -> str:
     return ", ".join(items[:-1]) + " and " + items[-1]
 
 
-def _explain(a, tol: float) -> str:
-    """The text of :meth:`Evaluation.explain` for a NumPy-leaved, unbatched result."""
-    status = int(a.status)
+def _unsettled(a) -> list[tuple[int, int]]:
+    """``(kind, contact)`` of every boundary problem that did not settle."""
+    bs = np.asarray(a.boundary_status)
+    n = bs.shape[-1]
+    return [(k, j) for k in BoundaryKind for j in range(n) if int(bs[k, j]) == LaneStatus.NOT_CONVERGED]
+
+
+def _explain_stable(a, tol: float) -> str:
+    k, j = int(a.limiting_kind), int(a.limiting_contact)
+    value = float(a.value)
+    if not value > 0.0:
+        return (
+            f"stable, but with value 0 J: the equilibrium is within rounding of "
+            f"{_boundary_phrase(k, j)}; treat the grasp as unstable."
+        )
+    text = (
+        f"stable: {value:.4g} J must be added to make a fingertip fail; "
+        f"limited by {_boundary_phrase(k, j)}"
+    )
+    be = np.asarray(a.boundary_energy, dtype=np.float64)
+    u0 = float(a.equilibrium_energy)
+    ties = [
+        _boundary_phrase(kk, jj)
+        for kk in BoundaryKind
+        for jj in range(be.shape[-1])
+        if (kk, jj) != (k, j) and np.isfinite(be[kk, jj]) and abs((be[kk, jj] - u0) - value) <= 1e-6 * value
+    ]
+    if ties:
+        text += f" (tied with {_list(ties)})"
+    unsettled = _unsettled(a)
+    if unsettled:
+        text += (
+            f"; the boundary problem of {_list([_boundary_phrase(kk, jj) for kk, jj in unsettled])} "
+            "did not settle, but its best feasible point lies more than 10% above the value, "
+            "so it does not limit"
+        )
+    return text + "."
+
+
+def _explain_unstable(a, tol: float) -> str:
     margins = np.asarray(a.equilibrium_margins, dtype=np.float64)
     n = margins.shape[-1]
-    value = float(a.value)
-    be = np.asarray(a.boundary_energy, dtype=np.float64)
-    bs = np.asarray(a.boundary_status)
-    u0 = float(a.equilibrium_energy)
-
-    if status == STABLE:
-        k, j = int(a.limiting_kind), int(a.limiting_contact)
-        if not value > 0.0:
-            return (
-                f"stable, but with value 0 J: the equilibrium is within rounding of "
-                f"{_boundary_phrase(k, j)}; treat the grasp as unstable."
-            )
-        text = (
-            f"stable: {value:.4g} J must be added to make a fingertip fail; "
-            f"limited by {_boundary_phrase(k, j)}"
+    lost = [j for j in range(n) if margins[Constraint.CONTACT, j] <= _RELEASED]
+    if lost:
+        tips = _list([f"contact {j}" for j in lost])
+        return (
+            f"unstable: at the equilibrium {tips} {'is' if len(lost) == 1 else 'are'} released "
+            f"(deformation d/dr = {float(np.max(margins[Constraint.CONTACT, lost])):.2g}, so the "
+            "fingertip slips at the slightest load): the fingertips cannot press the object in "
+            "place; value 0."
         )
-        ties = [
-            _boundary_phrase(kk, jj)
-            for kk in range(2)
-            for jj in range(n)
-            if (kk, jj) != (k, j) and np.isfinite(be[kk, jj]) and abs((be[kk, jj] - u0) - value) <= 1e-6 * value
-        ]
-        if ties:
-            text += f" (tied with {_list(ties)})"
-        unsettled = [(kk, jj) for kk in range(2) for jj in range(n) if int(bs[kk, jj]) == 2]
-        if unsettled:
-            text += (
-                f"; the boundary problem of {_list([_boundary_phrase(kk, jj) for kk, jj in unsettled])} "
-                "did not settle, but its best feasible point lies more than 10% above the value, "
-                "so it does not limit"
-            )
-        return text + "."
+    rows = (Constraint.SLIP, Constraint.FORCE)
+    active = [(row, j) for j in range(n) for row in rows if margins[row, j] <= tol]
+    if not active:  # on a boundary by less than the evaluator's tolerance
+        row, j = np.unravel_index(int(np.argmin(margins[Constraint.SLIP :])), margins[Constraint.SLIP :].shape)
+        active = [(int(row) + Constraint.SLIP, int(j))]
+    slips = [j for row, j in active if row == Constraint.SLIP]
+    forces = [j for row, j in active if row == Constraint.FORCE]
+    parts = []
+    if slips:
+        parts.append(
+            f"the slip boundary of {_list([f'contact {j}' for j in slips])}: "
+            "friction cannot carry the load with any margin"
+        )
+    if forces:
+        parts.append(
+            f"the force limit of {_list([f'contact {j}' for j in forces])}: "
+            "the fingertip is already pressed to its normal force limit"
+        )
+    return "unstable: the equilibrium lies on " + "; and on ".join(parts) + "; value 0."
 
-    if status == UNSTABLE:
-        active = []
-        lost = []
-        for j in range(n):
-            if margins[0, j] <= _RELEASED:
-                lost.append(j)
-                continue
-            for row in (1, 2):
-                if margins[row, j] <= tol:
-                    active.append((row, j))
-        if lost:
-            tips = _list([f"contact {j}" for j in lost])
-            return (
-                f"unstable: at the equilibrium {tips} {'is' if len(lost) == 1 else 'are'} released "
-                f"(deformation d/dr = {float(np.max(margins[0, lost])):.2g}, so the fingertip slips at "
-                "the slightest load): the fingertips cannot press the object in place; value 0."
-            )
-        if not active:  # on a boundary by less than the evaluator's tolerance
-            row, j = np.unravel_index(int(np.argmin(margins[1:])), margins[1:].shape)
-            active = [(int(row) + 1, int(j))]
-        slips = [j for row, j in active if row == 1]
-        forces = [j for row, j in active if row == 2]
-        parts = []
-        if slips:
-            parts.append(
-                f"the slip boundary of {_list([f'contact {j}' for j in slips])}: "
-                "friction cannot carry the load with any margin"
-            )
-        if forces:
-            parts.append(
-                f"the force limit of {_list([f'contact {j}' for j in forces])}: "
-                "the fingertip is already pressed to its normal force limit"
-            )
-        return "unstable: the equilibrium lies on " + "; and on ".join(parts) + "; value 0."
 
-    if status == INFEASIBLE:
-        flat = margins.reshape(-1)
-        order = [int(i) for i in np.argsort(flat) if flat[i] < -tol]
-        if not order:
-            return (
-                "infeasible: no pose satisfies every constraint (the solver could not reach one "
-                "from the initial grasping state); value 0."
-            )
-        worst = [_margin_phrase(i // n, i % n, float(flat[i])) for i in order[:2]]
-        more = len(order) - len(worst)
-        text = "infeasible: no pose satisfies every constraint; at the least-violating pose found " + _list(worst)
-        if more > 0:
-            text += f" ({more} more constraint{'s' if more > 1 else ''} violated)"
-        return text + "; value 0."
+def _explain_infeasible(a, tol: float) -> str:
+    margins = np.asarray(a.equilibrium_margins, dtype=np.float64)
+    n = margins.shape[-1]
+    flat = margins.reshape(-1)
+    order = [int(i) for i in np.argsort(flat) if flat[i] < -tol]
+    if not order:
+        return (
+            "infeasible: no pose satisfies every constraint (the solver could not reach one "
+            "from the initial grasping state); value 0."
+        )
+    worst = [_margin_phrase(i // n, i % n, float(flat[i])) for i in order[:2]]
+    more = len(order) - len(worst)
+    text = "infeasible: no pose satisfies every constraint; at the least-violating pose found " + _list(worst)
+    if more > 0:
+        text += f" ({more} more constraint{'s' if more > 1 else ''} violated)"
+    return text + "; value 0."
 
-    # not converged
-    if int(a.equilibrium_status) != 0:
+
+def _explain_not_converged(a, tol: float) -> str:
+    if int(a.equilibrium_status) != LaneStatus.CONVERGED:
         return (
             "not converged: the equilibrium problem did not settle "
             f"(solver status {int(a.equilibrium_status)}); the value is not to be trusted."
         )
-    unsettled = [(k, j) for k in range(2) for j in range(n) if int(bs[k, j]) == 2]
+    unsettled = _unsettled(a)
     if unsettled:
         names = _list([_boundary_phrase(k, j) for k, j in unsettled[:3]])
         if len(unsettled) > 3:
             names += f" and {len(unsettled) - 3} more"
         return (
             f"not converged: the boundary problem{'s' if len(unsettled) > 1 else ''} of {names} "
-            f"did not settle; the value {value:.4g} J is only an upper estimate, not to be trusted."
+            f"did not settle; the value {float(a.value):.4g} J is only an upper estimate, not to be trusted."
         )
     return (
         "not converged: no boundary of the equilibrium region could be reached from the "
         "equilibrium (every start search failed); the value is not to be trusted."
     )
+
+
+_EXPLAIN = {
+    GraspStatus.STABLE: _explain_stable,
+    GraspStatus.UNSTABLE: _explain_unstable,
+    GraspStatus.INFEASIBLE: _explain_infeasible,
+    GraspStatus.NOT_CONVERGED: _explain_not_converged,
+}
+
+
+def _explain(a, tol: float) -> str:
+    """The text of :meth:`Evaluation.explain` for a NumPy-leaved, unbatched result."""
+    return _EXPLAIN[GraspStatus(int(a.status))](a, tol)

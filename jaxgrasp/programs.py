@@ -1,0 +1,225 @@
+"""The 1 + 2N programs of a grasp (eq. 1), their starts, and solving them as solver lanes.
+
+* the *equilibrium* problem ``U0 = min U`` subject to every contact, friction and
+  force-limit constraint, solved from the initial grasping state;
+* for each contact ``j`` a *slip* problem (friction of ``j`` as an equality) and a
+  *max_force* problem (force limit of ``j`` as an equality), each with every other
+  constraint kept.
+
+Every program has the same scaled objective and constraints (:func:`objective`,
+:func:`constraints`), in the scaled pose ``z = (dp [mm], lever * w [mm])`` so that
+rotations and translations move the contacts by comparable amounts, with the energy
+divided by the initial elastic energy. A boundary program is one equality row of the
+same constraint vector (``eq_mask``), so every program of every grasp runs as a lane of
+one :func:`jaxgrasp.lanes.solve_lanes` call.
+
+Boundary problems are non-convex, so each is solved from several starts (the caller
+keeps the lowest converged energy): a start is found by walking from the equilibrium
+along a direction until the boundary's constraint is crossed, then bisecting onto it,
+along the 12 coordinate half-axes of the scaled pose space plus
+``EvaluateOptions.num_random_starts`` seeded random directions.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import partial
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from .grasp import Grasp
+from .solver import solve_lanes  # TEMP until lanes.py lands
+from .model import ModelParams, constraint_margins, energy_scale, model_params, potential_energy
+from .options import EvaluateOptions
+from .solver import SolverResult, solve
+from .status import LaneStatus
+
+__all__ = [
+    "ProgramData",
+    "program_data",
+    "to_pose",
+    "objective",
+    "constraints",
+    "lagrangian",
+    "Programs",
+    "solve_programs",
+    "programs_of",
+]
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class ProgramData:
+    """What the programs of one grasp depend on (a pytree; one per lane under ``solve_lanes``).
+
+    Attributes:
+        params: the grasp in internal units (:class:`~jaxgrasp.model.ModelParams`).
+        lever: ``()`` mm, the length that scales rotations in ``z`` (no gradient).
+        scale: ``()`` mJ, the energy scale dividing the objective (no gradient).
+    """
+
+    params: ModelParams
+    lever: Any
+    scale: Any
+
+
+def program_data(p: ModelParams) -> ProgramData:
+    """The scaling of ``p``'s programs: lever = largest contact distance or radius, scale =
+    initial elastic energy; both constants (``stop_gradient``)."""
+    lever = jax.lax.stop_gradient(jnp.maximum(jnp.max(jnp.linalg.norm(p.c, axis=-1)), jnp.max(p.r)))
+    return ProgramData(params=p, lever=lever, scale=energy_scale(p))
+
+
+def to_pose(z, lever):
+    """Scaled pose ``z = (dp [mm], lever * w [mm])`` -> pose change ``x = (dp [mm], w [rad])``."""
+    return jnp.concatenate([z[:3], z[3:] / lever])
+
+
+def objective(z, data: ProgramData):
+    """Scaled potential energy ``U(z) / scale`` (dimensionless), ``z`` of shape ``(6,)``."""
+    return potential_energy(to_pose(z, data.lever), data.params) / data.scale
+
+
+def constraints(z, data: ProgramData):
+    """Scaled constraint margins ``(3N,)``, rows of :func:`~jaxgrasp.model.constraint_margins`
+    flattened (index ``row * N + contact``), ``>= 0`` where satisfied."""
+    return constraint_margins(to_pose(z, data.lever), data.params).reshape(-1)
+
+
+def lagrangian(z, lam, nu, eq_mask, data: ProgramData):
+    """``L = f(z) + nu h(z) - lam . g(z)`` of the program with equality row ``eq_mask``."""
+    gz = constraints(z, data)
+    return objective(z, data) + nu * jnp.sum(eq_mask * gz) - jnp.sum(lam * gz)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Programs:
+    """Every program of one grasp as solved, lane by lane (internal, scaled units).
+
+    The pose variable of every program is ``z = (dp [mm], lever * w [mm])``. With ``N``
+    contacts and ``D`` starts per boundary problem (``EvaluateOptions.num_starts``):
+
+    Attributes:
+        equilibrium: :class:`~jaxgrasp.solver.SolverResult` of the equilibrium problem.
+        boundary: :class:`~jaxgrasp.solver.SolverResult` with a leading lane axis
+            ``(2N * D,)``: lane ``b * D + s`` is start ``s`` of boundary problem
+            ``b = kind * N + contact``.
+        start: ``(2N * D, 6)`` starting points of the boundary lanes.
+        found: ``(2N * D,)`` whether the start search crossed the boundary (lanes where it
+            did not carry status :attr:`~jaxgrasp.status.LaneStatus.NO_START`).
+        constraint_index: ``(2N * D,)`` index ``k`` of the equality in the flattened
+            ``(3N,)`` constraint vector (``N + b``).
+        lever: ``()`` mm, the length that scales rotations.
+        scale: ``()`` mJ, the energy scale dividing the objective.
+    """
+
+    equilibrium: SolverResult
+    boundary: SolverResult
+    start: Any
+    found: Any
+    constraint_index: Any
+    lever: Any
+    scale: Any
+
+
+def _ray_start(gk, z0, v, t_grid, bisection_steps):
+    """First crossing of ``gk >= 0`` -> ``< 0`` along ``z0 + t v``; returns (z, found)."""
+    vals = jax.vmap(lambda t: gk(z0 + t * v))(t_grid)
+    crossed = vals < 0.0  # NaN (invalid pose) never counts as a crossing
+    found = jnp.any(crossed)
+    j = jnp.argmax(crossed)
+    lo = jnp.where(j == 0, 0.0, t_grid[jnp.maximum(j - 1, 0)])
+    hi = t_grid[j]
+
+    def bisect(_, bounds):
+        lo, hi = bounds
+        mid = 0.5 * (lo + hi)
+        neg = gk(z0 + mid * v) < 0.0
+        return jnp.where(neg, lo, mid), jnp.where(neg, mid, hi)
+
+    lo, hi = jax.lax.fori_loop(0, bisection_steps, bisect, (lo, hi))
+    return z0 + hi * v, found
+
+
+def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
+    """Start of every boundary lane: ``(k, z0, found, nu0)``, each with leading axis ``2N * D``.
+
+    ``k`` is the lane's equality row in the ``(3N,)`` constraints (slip rows, then force
+    rows), ``z0`` the crossing of that constraint along the lane's direction from ``z_eq``
+    (``z_eq`` itself where the equilibrium is already on it), ``nu0`` the least-squares
+    equality multiplier there.
+    """
+    n = data.params.c.shape[0]
+    dtype = data.params.c.dtype
+    f = lambda z: objective(z, data)
+    g = lambda z: constraints(z, data)
+    dirs = jnp.asarray(options.directions(), dtype)
+    num_dirs = dirs.shape[0]
+    # A ray walks until its translation reaches ray_length radii or its rotation reaches
+    # ray_length rad, whichever is farther: torsion slip needs a rotation angle that does
+    # not shrink with the lever arm (contacts far from the centre of mass).
+    rot = jnp.linalg.norm(dirs[:, 3:], axis=1)
+    t_max = options.ray_length * jnp.maximum(jnp.max(data.params.r), data.lever * rot)  # (D,) mm
+    unit_grid = 2.0 ** (-(options.ray_points - 1 - jnp.arange(options.ray_points, dtype=dtype)) / 4.0)
+    lane_k = jnp.repeat(n + jnp.arange(2 * n), num_dirs)
+    lane_v = jnp.tile(dirs, (2 * n, 1))
+    lane_t = jnp.tile(t_max[:, None] * unit_grid, (2 * n, 1))
+
+    def start(k, v, t_grid):
+        gk = lambda z: g(z)[k]
+        on_boundary = gk(z_eq) <= 0.0
+        z0, found = _ray_start(gk, z_eq, v, t_grid, options.bisection_steps)
+        z0 = jnp.where(on_boundary, z_eq, z0)
+        found = found | on_boundary
+        # least-squares estimate of the equality multiplier: grad f + nu grad h = 0
+        gf = jax.grad(f)(z0)
+        gh = jax.grad(gk)(z0)
+        nu0 = -jnp.dot(gf, gh) / jnp.maximum(jnp.dot(gh, gh), 1e-300)
+        return z0, found, nu0
+
+    z0s, found, nu0s = jax.vmap(start)(lane_k, lane_v, lane_t)
+    return lane_k, z0s, found, nu0s
+
+
+def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
+    """Solve every program of the grasp ``p`` (traceable; the solver sees no derivative)."""
+    data = program_data(jax.lax.stop_gradient(p))
+    n = data.params.c.shape[0]
+    dtype = data.params.c.dtype
+    sopt = options.solver
+    eq = solve(
+        lambda z: objective(z, data),
+        lambda z: constraints(z, data),
+        jnp.zeros(6, dtype),
+        jnp.zeros(3 * n, dtype),
+        0.0,
+        sopt,
+    )
+    lane_k, z0s, found, nu0s = _boundary_starts(data, eq.x, options)
+    # Without a converged equilibrium there is nothing to start from: skip every lane.
+    found = found & (eq.status == LaneStatus.CONVERGED)
+    masks = jax.nn.one_hot(lane_k, 3 * n, dtype=dtype)
+    # Every lane gets this grasp's data as its theta (not closed over): under a vmap
+    # over grasps, solve_lanes then runs the lanes of all grasps in one work queue.
+    num_lanes = lane_k.shape[0]
+    theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (num_lanes,) + jnp.shape(a)), data)
+    lanes = solve_lanes(objective, constraints, theta, z0s, masks, nu0s, found, sopt)
+    return Programs(
+        equilibrium=eq,
+        boundary=lanes,
+        start=z0s,
+        found=found,
+        constraint_index=lane_k,
+        lever=data.lever,
+        scale=data.scale,
+    )
+
+
+@partial(jax.jit, static_argnames="options")
+def solve_programs(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Programs:
+    """Solve every program of ``grasp`` and return them lane by lane (for diagnostics and
+    benchmarks; :func:`jaxgrasp.evaluate` is this plus the reduction to one value)."""
+    return programs_of(model_params(grasp), options)
