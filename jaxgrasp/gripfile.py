@@ -36,29 +36,18 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from .fields import FIELD, FIELDS, FINGERTIP
 from .grasp import Grasp
 from .validation import GraspValueError
 
 __all__ = ["load", "save", "grasp_from_dict", "grasp_to_dict", "to_toml"]
 
 TOP_KEYS = ("fingertip", "object", "contacts")
-FINGERTIP_KEYS = ("radius", "young_modulus", "friction", "max_force")
-OBJECT_KEYS = ("mass", "gravity")
-CONTACT_REQUIRED = ("position", "normal", "initial_deformation")
+FINGERTIP_KEYS = tuple(FIELD[name].file_key for name in FINGERTIP)
+OBJECT_KEYS = tuple(f.file_key for f in FIELDS if f.file_section == "object")
+CONTACT_REQUIRED = tuple(f.file_key for f in FIELDS if f.file_section == "contacts")
 CONTACT_KEYS = CONTACT_REQUIRED + FINGERTIP_KEYS
-DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
-
-_UNIT_COMMENTS = {
-    "radius": "m",
-    "young_modulus": "Pa",
-    "friction": "static friction coefficient",
-    "max_force": "N",
-    "mass": "kg",
-    "gravity": "m/s^2, object frame",
-    "position": "m, object frame",
-    "normal": "outward surface normal",
-    "initial_deformation": "m",
-}
+_COMMENTS = {f.file_key: f.comment for f in FIELDS}
 
 
 # ----------------------------------------------------------------------------- parsing
@@ -112,6 +101,13 @@ def _table(value: Any, path: str) -> Mapping:
     return value
 
 
+def _value(field, value: Any, path: str):
+    """A file value of ``field``: a 3-vector for vector fields, else a number."""
+    if field.shape in ("points", "directions", "vector"):
+        return _vector3(value, path)
+    return _number(value, path)
+
+
 def _grasp_kwargs(data: Any) -> dict[str, Any]:
     """Turn a parsed file into keyword arguments for :meth:`Grasp.create`."""
     if not isinstance(data, Mapping):
@@ -120,16 +116,20 @@ def _grasp_kwargs(data: Any) -> dict[str, Any]:
             f"got {_show(data)}"
         )
     _check_keys(data, TOP_KEYS, "at top level")
-
     fingertip = _table(data.get("fingertip", {}), "fingertip")
     _check_keys(fingertip, FINGERTIP_KEYS, "in [fingertip]")
     defaults = {k: _number(v, f"fingertip.{k}") for k, v in fingertip.items()}
-
     obj = _table(data.get("object", {}), "object")
     _check_keys(obj, OBJECT_KEYS, "in [object]")
-    mass = _number(obj["mass"], "object.mass") if "mass" in obj else 0.0
-    gravity = _vector3(obj["gravity"], "object.gravity") if "gravity" in obj else list(DEFAULT_GRAVITY)
+    kwargs: dict[str, Any] = {}
+    for f in FIELDS:
+        if f.file_section == "object":
+            kwargs[f.name] = _value(f, obj[f.file_key], f"object.{f.file_key}") if f.file_key in obj else f.default
+    kwargs.update(_contact_kwargs(_contact_tables(data), defaults))
+    return kwargs
 
+
+def _contact_tables(data: Mapping) -> list:
     if "contacts" not in data:
         raise GraspValueError("no contacts: give at least 2 [[contacts]] tables")
     contacts = data["contacts"]
@@ -139,43 +139,39 @@ def _grasp_kwargs(data: Any) -> dict[str, Any]:
         )
     if len(contacts) == 0:
         raise GraspValueError("contacts is empty: give at least 2 [[contacts]] tables")
+    return list(contacts)
 
-    positions, normals, deformations = [], [], []
-    per_tip: dict[str, list[float]] = {k: [] for k in FINGERTIP_KEYS}
-    overridden = {k: False for k in FINGERTIP_KEYS}
+
+def _contact_kwargs(contacts: list, defaults: dict) -> dict[str, Any]:
+    """The per-contact fields of the contact tables, with ``[fingertip]`` ``defaults``."""
+    per_contact = [f for f in FIELDS if f.file_section in ("contacts", "fingertip")]
+    values: dict[str, list] = {f.name: [] for f in per_contact}
+    overridden = {key: False for key in FINGERTIP_KEYS}
     for i, contact in enumerate(contacts):
         where = f"contacts[{i}]"
         _check_keys(contact, CONTACT_KEYS, f"in {where}")
         for key in CONTACT_REQUIRED:
             if key not in contact:
                 raise GraspValueError(f"{where} is missing key {key!r}")
-        positions.append(_vector3(contact["position"], f"{where}.position"))
-        normals.append(_vector3(contact["normal"], f"{where}.normal"))
-        deformations.append(_number(contact["initial_deformation"], f"{where}.initial_deformation"))
-        for key in FINGERTIP_KEYS:
+        for f in per_contact:
+            key = f.file_key
             if key in contact:
-                per_tip[key].append(_number(contact[key], f"{where}.{key}"))
-                overridden[key] = True
+                values[f.name].append(_value(f, contact[key], f"{where}.{key}"))
+                if key in overridden:
+                    overridden[key] = True
             elif key in defaults:
-                per_tip[key].append(defaults[key])
+                values[f.name].append(defaults[key])
             else:
                 raise GraspValueError(
                     f"{where} has no {key!r} and [fingertip] does not give one; "
                     f"give {key} in [fingertip] or in every contact"
                 )
-
-    kwargs: dict[str, Any] = dict(
-        positions=positions,
-        normals=normals,
-        initial_deformation=deformations,
-        mass=mass,
-        gravity=gravity,
-    )
-    for key in FINGERTIP_KEYS:
-        # a value taken only from [fingertip] is passed as a scalar, so error messages
-        # name it without a contact index
-        kwargs[key] = per_tip[key] if overridden[key] else defaults[key]
-    return kwargs
+    # a value taken only from [fingertip] is passed as a scalar, so error messages
+    # name it without a contact index
+    for f in per_contact:
+        if f.file_section == "fingertip" and not overridden[f.file_key]:
+            values[f.name] = defaults[f.file_key]
+    return values
 
 
 def grasp_from_dict(data: Mapping, source: str = "<dict>") -> Grasp:
@@ -314,7 +310,7 @@ def _toml_lines(table: Mapping[str, Any]) -> list[str]:
     lines = []
     for key, value in table.items():
         line = f"{key} = {_toml_value(value)}"
-        comment = _UNIT_COMMENTS.get(key)
+        comment = _COMMENTS.get(key)
         lines.append(f"{line:<44} # {comment}" if comment else line)
     return lines
 

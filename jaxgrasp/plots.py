@@ -29,37 +29,33 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from .result import INFEASIBLE, NOT_CONVERGED, STABLE, UNSTABLE
+from .fields import FIELD
+from .status import BoundaryKind, GraspStatus
+from .units import MJ_TO_J
 
-__all__ = ["plot_sweep", "plot_max_over", "plot_max", "new_figure", "DISPLAY", "J_TO_MJ"]
+__all__ = ["plot_sweep", "plot_max_over", "plot_max", "new_figure", "J_TO_MJ"]
 
-J_TO_MJ = 1e3
+
+J_TO_MJ = 1.0 / MJ_TO_J
 """Energy: J to mJ (plots show the value in mJ)."""
 
-DISPLAY = {
-    # name: (factor from SI, unit shown, label, symbol)
-    "initial_deformation": (1e3, "mm", "initial deformation", "Δr"),
-    "young_modulus": (1e-3, "kPa", "Young's modulus", "E"),
-    "mass": (1.0, "kg", "object mass", "m"),
-    "friction": (1.0, "", "friction coefficient", "μ"),
-    "max_force": (1.0, "N", "force limit", "f_max"),
-    "radius": (1e3, "mm", "fingertip radius", "r"),
-}
-"""How each parameter is shown: SI value times factor, in the given unit."""
-
 VALUE_LABEL = "evaluation value ΔU_min [mJ]"
-_MAX_FORCE = 1  # limiting_kind code of the force-limit boundary
 _LINESTYLES = ["-", "--", ":", "-."]
 
 
 def _axis_label(name: str) -> str:
-    f, unit, label, sym = DISPLAY.get(name, (1.0, "", name, name))
-    return f"{label} {sym} [{unit}]" if unit else f"{label} {sym}"
+    return FIELD[name].label
+
+
+def _scale(name: str) -> float:
+    """Factor from SI to the unit a plot shows ``name`` in (mm, kPa, ...)."""
+    return FIELD[name].display[0]
 
 
 def _fmt(name: str, x: float) -> str:
-    f, unit, label, sym = DISPLAY.get(name, (1.0, "", name, name))
-    return f"{sym} = {x * f:.4g}" + (f" {unit}" if unit else "")
+    field = FIELD[name]
+    factor, unit = field.display
+    return f"{field.symbol} = {x * factor:.4g}" + (f" {unit}" if unit else "")
 
 
 def new_figure(**kwargs) -> Figure:
@@ -83,20 +79,20 @@ def _draw_curve(ax, x, value, status, kind, *, color, linestyle, label):
     status = np.asarray(status)
     kind = np.asarray(kind)
     y = value * J_TO_MJ
-    ok = (status == STABLE) | (status == UNSTABLE)
+    ok = (status == GraspStatus.STABLE) | (status == GraspStatus.UNSTABLE)
     ax.plot(x, np.where(ok, y, np.nan), color=color, linestyle=linestyle, lw=1.6, label=label)
-    m = status == STABLE  # small dots, so that a stable point between gaps still shows
+    m = status == GraspStatus.STABLE  # small dots, so that a stable point between gaps still shows
     ax.plot(x[m], y[m], ".", color=color, ms=3, ls="none")
-    m = (status == STABLE) & (kind == _MAX_FORCE)
+    m = (status == GraspStatus.STABLE) & (kind == BoundaryKind.MAX_FORCE)
     if np.any(m):
         ax.plot(x[m], y[m], "^", color=color, ms=4, ls="none")
-    m = status == UNSTABLE
+    m = status == GraspStatus.UNSTABLE
     if np.any(m):
         ax.plot(x[m], np.zeros(np.sum(m)), "o", mfc="white", mec=color, ms=6, mew=1.4, ls="none")
-    m = status == NOT_CONVERGED
+    m = status == GraspStatus.NOT_CONVERGED
     if np.any(m):
         ax.plot(x[m], y[m], "D", mfc="none", mec="0.45", ms=6, mew=1.2, ls="none")
-    return x[status == INFEASIBLE]  # drawn by _infeasible_band, below the zero line
+    return x[status == GraspStatus.INFEASIBLE]  # drawn by _infeasible_band, below the zero line
 
 
 def _infeasible_band(axes, entries, n_rows):
@@ -130,22 +126,22 @@ def _infeasible_band(axes, entries, n_rows):
 def _status_legend(ax, status, kind):
     s = np.asarray(status)
     handles = [Line2D([], [], color="k", lw=1.6, label="stable (value set by slip)")]
-    if np.any((s == STABLE) & (np.asarray(kind) == _MAX_FORCE)):
+    if np.any((s == GraspStatus.STABLE) & (np.asarray(kind) == BoundaryKind.MAX_FORCE)):
         handles.append(
             Line2D([], [], color="k", marker="^", ms=4, ls="none", label="value set by force limit")
         )
-    if np.any(s == UNSTABLE):
+    if np.any(s == GraspStatus.UNSTABLE):
         handles.append(
             Line2D([], [], marker="o", mfc="white", mec="k", ms=6, ls="none", label="unstable (value 0)")
         )
-    if np.any(s == INFEASIBLE):
+    if np.any(s == GraspStatus.INFEASIBLE):
         handles.append(
             Line2D(
                 [], [], marker="x", color="k", ms=5, ls="none",
                 label="infeasible: no stable equilibrium\n(in the grey band below 0)",
             )
         )
-    if np.any(s == NOT_CONVERGED):
+    if np.any(s == GraspStatus.NOT_CONVERGED):
         handles.append(
             Line2D(
                 [], [], marker="D", mfc="none", mec="0.45", ms=6, ls="none", label="not converged (untrusted)"
@@ -203,36 +199,14 @@ def plot_sweep(result, path=None, *, x=None, curves=None, panels=None, title=Non
     nrows = math.ceil(n_p / ncols)
     fig = new_figure(figsize=(6.4 * ncols, 4.4 * nrows))
     axs = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
-    xf = DISPLAY.get(x, (1.0,))[0]
-    xs = np.asarray(result.axes[x]) * xf
-    cmap = matplotlib.colormaps.get_cmap("viridis")
+    xs = np.asarray(result.axes[x]) * _scale(x)
     used_axes, band = [], []
     for p, pidx in enumerate(panel_index):
         ax = axs[p // ncols][p % ncols]
         used_axes.append(ax)
-        band.append([])
-        for c in range(n_curves):
-            sel = (slice(None), c, *pidx) if curves else (slice(None), *pidx)
-            color = cmap(0.9 * c / max(n_curves - 1, 1))
-            label = _fmt(curves, result.axes[curves][c]) if curves else None
-            x_inf = _draw_curve(
-                ax,
-                xs,
-                arrs["value"][sel],
-                arrs["status"][sel],
-                arrs["limiting_kind"][sel],
-                color=color,
-                linestyle="-",
-                label=label,
-            )
-            band[-1].append((x_inf, color, c))
-        ax.set_xlabel(_axis_label(x))
+        band.append(_draw_panel(ax, result, arrs, xs, x, curves, n_curves, panel_names, pidx))
         if p % ncols == 0:
             ax.set_ylabel(VALUE_LABEL)
-        ax.grid(True, alpha=0.3)
-        if panel_names:
-            text = ", ".join(_fmt(n, result.axes[n][i]) for n, i in zip(panel_names, pidx))
-            ax.set_title(text, fontsize=10)
     for ax in used_axes:
         ax.set_ylim(bottom=0.0)
     _infeasible_band(used_axes, band, n_curves)
@@ -249,6 +223,34 @@ def plot_sweep(result, path=None, *, x=None, curves=None, panels=None, title=Non
         fig.suptitle(t)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def _draw_panel(ax, result, arrs, xs, x, curves, n_curves, panel_names, pidx):
+    """One panel of :func:`plot_sweep`: a curve per value of ``curves`` at panel index
+    ``pidx``; returns the infeasible points per curve for :func:`_infeasible_band`."""
+    cmap = matplotlib.colormaps.get_cmap("viridis")
+    band = []
+    for c in range(n_curves):
+        sel = (slice(None), c, *pidx) if curves else (slice(None), *pidx)
+        color = cmap(0.9 * c / max(n_curves - 1, 1))
+        label = _fmt(curves, result.axes[curves][c]) if curves else None
+        x_inf = _draw_curve(
+            ax,
+            xs,
+            arrs["value"][sel],
+            arrs["status"][sel],
+            arrs["limiting_kind"][sel],
+            color=color,
+            linestyle="-",
+            label=label,
+        )
+        band.append((x_inf, color, c))
+    ax.set_xlabel(_axis_label(x))
+    ax.grid(True, alpha=0.3)
+    if panel_names:
+        text = ", ".join(_fmt(n, result.axes[n][i]) for n, i in zip(panel_names, pidx))
+        ax.set_title(text, fontsize=10)
+    return band
 
 
 def plot_max_over(result, path=None, *, over="initial_deformation", x=None, curves=None, title=None):
@@ -295,8 +297,8 @@ def plot_max(reduced, best, path=None, *, over="initial_deformation", x=None, cu
     n_curves = val.shape[1]
     fig = new_figure(figsize=(6.4, 6.4))
     ax, ax2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2.2, 1]})
-    xs = np.asarray(reduced.axes[x]) * DISPLAY.get(x, (1.0,))[0]
-    of = DISPLAY.get(over, (1.0,))[0]
+    xs = np.asarray(reduced.axes[x]) * _scale(x)
+    of = _scale(over)
     cmap = matplotlib.colormaps.get_cmap("plasma")
     band = []
     for c in range(n_curves):
@@ -305,16 +307,16 @@ def plot_max(reduced, best, path=None, *, over="initial_deformation", x=None, cu
         label = _fmt(curves, reduced.axes[curves][c]) if curves else None
         x_inf = _draw_curve(ax, xs, val[:, c], st[:, c], kd[:, c], color=color, linestyle=ls, label=label)
         band.append((x_inf, color, c))
-        ok = st[:, c] == STABLE
+        ok = st[:, c] == GraspStatus.STABLE
         ax2.plot(xs, np.where(ok, am[:, c] * of, np.nan), ls=ls, marker="o", ms=3, color=color)
-    ax.set_ylabel(f"max over {DISPLAY.get(over, (0, '', over, over))[3]} of value [mJ]")
+    ax.set_ylabel(f"max over {FIELD[over].symbol} of value [mJ]")
     ax.set_ylim(bottom=0.0)
     _infeasible_band([ax], [band], n_curves)
     ax.grid(True, alpha=0.3)
     curve_handles, _ = ax.get_legend_handles_labels()
     ax.legend(handles=curve_handles + _status_legend(ax, st, kd), fontsize=8)
     ax2.set_xlabel(_axis_label(x))
-    f_o, unit_o, _, sym_o = DISPLAY.get(over, (1.0, "", over, over))
+    sym_o, unit_o = FIELD[over].symbol, FIELD[over].display[1]
     ax2.set_ylabel(f"best {sym_o} [{unit_o}]" if unit_o else f"best {sym_o}")
     ax2.grid(True, alpha=0.3)
     if title:

@@ -14,36 +14,9 @@ from typing import Any
 import jax
 import numpy as np
 
+from .fields import DEFAULT_GRAVITY, DEFAULT_MASS, FIELD, FIELDS, NAMES, PER_CONTACT
+
 __all__ = ["GraspValueError", "check_grasp_inputs", "format_value"]
-
-PER_FINGERTIP = ("initial_deformation", "radius", "young_modulus", "friction", "max_force")
-"""Fields with one value per contact (a scalar is broadcast to every contact)."""
-
-FIELDS = (
-    "positions",
-    "normals",
-    "initial_deformation",
-    "radius",
-    "young_modulus",
-    "friction",
-    "max_force",
-    "mass",
-    "gravity",
-)
-"""The :class:`Grasp` field names, in order."""
-
-UNITS = {
-    "positions": "m",
-    "normals": "",
-    "initial_deformation": "m",
-    "radius": "m",
-    "young_modulus": "Pa",
-    "friction": "",
-    "max_force": "N",
-    "mass": "kg",
-    "gravity": "m/s^2",
-}
-"""SI unit of each field (empty: dimensionless)."""
 
 NORMAL_MIN_NORM = 1e-12
 """A normal shorter than this (absolute) is treated as zero."""
@@ -80,7 +53,7 @@ def format_value(value: Any) -> str:
 
 
 def _with_unit(text: str, field: str) -> str:
-    unit = UNITS.get(field, "")
+    unit = FIELD[field].unit if field in FIELD else ""
     return f"{text} {unit}" if unit else text
 
 
@@ -145,8 +118,8 @@ def check_grasp_inputs(
     young_modulus,
     friction,
     max_force,
-    mass=0.0,
-    gravity=(0.0, 0.0, -9.81),
+    mass=DEFAULT_MASS,
+    gravity=DEFAULT_GRAVITY,
 ) -> dict[str, np.ndarray]:
     """Validate and normalise the fields of one grasp (concrete values only).
 
@@ -160,6 +133,8 @@ def check_grasp_inputs(
         max_force: scalar or ``(N,)``, N, ``> 0``.
         mass: scalar, kg, ``>= 0``.
         gravity: ``(3,)``, m/s^2.
+
+    (Units, shapes and ranges are those of :data:`jaxgrasp.fields.FIELDS`.)
 
     Returns:
         A dict with exactly the :class:`Grasp` field names: float64 arrays, per-fingertip
@@ -181,6 +156,21 @@ def check_grasp_inputs(
         mass=mass,
         gravity=gravity,
     )
+    _reject_tracers(given)
+    arrs = {name: _as_float_array(name, value) for name, value in given.items()}
+    n = _check_shapes(arrs)
+    for name in NAMES:
+        _check_finite(name, arrs[name])
+    _check_ranges(arrs)
+    out = {name: np.array(np.broadcast_to(arrs[name], (n,)), dtype=np.float64) for name in PER_CONTACT}
+    _check_deformation(out, arrs)
+    out["normals"] = _unit_normals(arrs["normals"])
+    _check_distinct(arrs["positions"])
+    out.update(positions=arrs["positions"], mass=arrs["mass"], gravity=arrs["gravity"])
+    return {name: out[name] for name in NAMES}
+
+
+def _reject_tracers(given: dict) -> None:
     for name, value in given.items():
         if _is_tracer(value):
             raise GraspValueError(
@@ -189,70 +179,64 @@ def check_grasp_inputs(
                 "grasp.replace(...) on a grasp created outside"
             )
 
-    arrs = {name: _as_float_array(name, value) for name, value in given.items()}
 
-    # --- shapes -------------------------------------------------------------------
+def _check_shapes(arrs: dict) -> int:
+    """Check every field's shape against the table; returns the number of contacts ``N``."""
     pos = arrs["positions"]
     if pos.ndim != 2 or pos.shape[1] != 3:
         raise GraspValueError(f"positions must have shape (N, 3), got shape {pos.shape}")
     n = pos.shape[0]
     if n < 2:
         raise GraspValueError(f"need at least 2 contacts, got {n}")
-    nrm = arrs["normals"]
-    if nrm.shape != (n, 3):
-        raise GraspValueError(
-            f"normals must have shape ({n}, 3) like positions, got shape {nrm.shape}"
-        )
-    original_ndim = {}
-    for name in PER_FINGERTIP:
-        a = arrs[name]
-        original_ndim[name] = a.ndim
-        if a.shape not in ((), (n,)):
+    for field in FIELDS:
+        shape = arrs[field.name].shape
+        if field.shape == "directions" and shape != (n, 3):
             raise GraspValueError(
-                f"{name} must be a scalar or have shape ({n},) (one per contact), "
-                f"got shape {a.shape}"
+                f"{field.name} must have shape ({n}, 3) like positions, got shape {shape}"
             )
-    if arrs["mass"].shape != ():
-        raise GraspValueError(f"mass must be a scalar, got shape {arrs['mass'].shape}")
-    if arrs["gravity"].shape != (3,):
-        raise GraspValueError(f"gravity must have shape (3,), got shape {arrs['gravity'].shape}")
+        if field.shape == "per_contact" and shape not in ((), (n,)):
+            raise GraspValueError(
+                f"{field.name} must be a scalar or have shape ({n},) (one per contact), "
+                f"got shape {shape}"
+            )
+        if field.shape == "scalar" and shape != ():
+            raise GraspValueError(f"{field.name} must be a scalar, got shape {shape}")
+        if field.shape == "vector" and shape != (3,):
+            raise GraspValueError(f"{field.name} must have shape (3,), got shape {shape}")
+    return n
 
-    # --- finiteness -----------------------------------------------------------------
-    for name in FIELDS:
-        _check_finite(name, arrs[name])
 
-    # --- physical rules ---------------------------------------------------------------
-    for name in ("radius", "young_modulus", "friction", "max_force"):
-        a = arrs[name]
+def _check_ranges(arrs: dict) -> None:
+    """Each field with a minimum respects it (:attr:`Field.rule`)."""
+    for field in FIELDS:
+        if field.minimum is None or field.name == "initial_deformation":
+            continue  # the deformation's range depends on the radius: _check_deformation
+        a = arrs[field.name]
         flat = np.atleast_1d(a)
-        bad = np.flatnonzero(~(flat > 0))
+        bad = np.flatnonzero(~field.allows(flat))
         if bad.size:
             i = int(bad[0])
-            label = _index_name(name, original_ndim[name], i)
+            label = _index_name(field.name, a.ndim, i)
             raise GraspValueError(
-                f"{label} = {_with_unit(format_value(flat[i]), name)} must be positive and finite"
+                f"{label} = {_with_unit(format_value(flat[i]), field.name)} must be {field.rule} and finite"
             )
-    if not arrs["mass"] >= 0:
-        raise GraspValueError(
-            f"mass = {_with_unit(format_value(arrs['mass']), 'mass')} must be >= 0 and finite"
-        )
 
-    radius_n = np.broadcast_to(arrs["radius"], (n,))
-    dr = arrs["initial_deformation"]
-    dr_n = np.broadcast_to(dr, (n,))
-    for i in range(n):
+
+def _check_deformation(out: dict, arrs: dict) -> None:
+    """``0 < initial_deformation < radius`` at every contact, and an initial elastic energy
+    ``E dr^3`` far from float64 underflow (the solver divides by it)."""
+    dr_n, radius_n, e_n = out["initial_deformation"], out["radius"], out["young_modulus"]
+    for i in range(dr_n.shape[0]):
         if not (0 < dr_n[i] < radius_n[i]):
-            label = _index_name("initial_deformation", original_ndim["initial_deformation"], i)
-            rlabel = _index_name("radius", original_ndim["radius"], i)
+            label = _index_name("initial_deformation", arrs["initial_deformation"].ndim, i)
+            rlabel = _index_name("radius", arrs["radius"].ndim, i)
             raise GraspValueError(
                 f"{label} = {format_value(dr_n[i])} m must be in "
                 f"(0, {rlabel} = {format_value(radius_n[i])} m)"
             )
-    # The solver divides by the initial elastic energy ~ E dr^3: it must not underflow.
-    e_n = np.broadcast_to(arrs["young_modulus"], (n,))
     with np.errstate(under="ignore", over="ignore"):
         energy = e_n * dr_n**3
-    for i in range(n):
+    for i in range(dr_n.shape[0]):
         if not energy[i] >= MIN_ENERGY_SCALE:
             raise GraspValueError(
                 f"contact {i}: young_modulus * initial_deformation^3 = "
@@ -260,11 +244,14 @@ def check_grasp_inputs(
                 f"{MIN_ENERGY_SCALE:g} J, too small to evaluate in floating point"
             )
 
+
+def _unit_normals(nrm: np.ndarray) -> np.ndarray:
+    """Normals divided by their norm (kept bit for bit within :data:`_UNIT_TOLERANCE`)."""
     # scaled norm: no overflow for huge components, no underflow for tiny ones
     peak = np.max(np.abs(nrm), axis=1)
     safe = np.where(peak > 0, peak, 1.0)
     norms = peak * np.linalg.norm(nrm / safe[:, None], axis=1)
-    for i in range(n):
+    for i in range(nrm.shape[0]):
         if not norms[i] > NORMAL_MIN_NORM:
             raise GraspValueError(
                 f"normals[{i}] = {format_value(nrm[i])} must be a non-zero vector "
@@ -273,7 +260,10 @@ def check_grasp_inputs(
     unit = nrm.copy()
     rescale = np.abs(norms - 1.0) > _UNIT_TOLERANCE
     unit[rescale] = (nrm[rescale] / peak[rescale, None]) / (norms[rescale] / peak[rescale])[:, None]
+    return unit
 
+
+def _check_distinct(pos: np.ndarray) -> None:
     with np.errstate(over="ignore", invalid="ignore"):
         diff = pos[:, None, :] - pos[None, :, :]
         dist = np.sqrt(np.sum(diff * diff, axis=-1))
@@ -284,13 +274,3 @@ def check_grasp_inputs(
             f"positions[{i}] = positions[{j}] = {format_value(pos[i])} m: two contacts at the "
             f"same position (distance < {COINCIDENT_DISTANCE:g} m)"
         )
-
-    out = {
-        "positions": pos,
-        "normals": unit,
-        "mass": arrs["mass"],
-        "gravity": arrs["gravity"],
-    }
-    for name in PER_FINGERTIP:
-        out[name] = np.array(np.broadcast_to(arrs[name], (n,)), dtype=np.float64)
-    return {name: out[name] for name in FIELDS}
