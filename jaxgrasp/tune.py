@@ -38,30 +38,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import result as R
-from .evaluate import EvaluateOptions, _evaluate_jit
+from .evaluate import EvaluateOptions, evaluate_compiled
+from .fields import FIELD, TUNABLE
 from .grasp import Grasp
 from .result import Evaluation
+from .status import GraspStatus
 from .units import MJ_TO_J
 from .validation import GraspValueError, check_grasp_inputs
 
 __all__ = ["tune", "TuneResult", "TUNABLE", "METHODS", "parse_param", "default_bounds", "plot_history"]
 
-PER_CONTACT = ("initial_deformation", "young_modulus", "friction", "max_force", "radius")
+PER_CONTACT = tuple(name for name in TUNABLE if FIELD[name].shape == "per_contact")
 """Per-contact scalar fields: one tuned value per contact, or one shared (``NAME:shared``)."""
-
-TUNABLE = PER_CONTACT + ("positions", "mass")
-"""Every parameter :func:`tune` accepts (``positions``: each contact moves within its face)."""
-
-UNITS = {
-    "initial_deformation": "m",
-    "young_modulus": "Pa",
-    "friction": "",
-    "max_force": "N",
-    "radius": "m",
-    "positions": "m",
-    "mass": "kg",
-}
 
 METHODS = ("scipy_lbfgsb", "jaxopt_lbfgsb", "projected_gradient")
 """Optimisers, all on the same compiled value and envelope gradient: SciPy's L-BFGS-B
@@ -166,7 +154,7 @@ def _field_checks(name: str, lo, hi, grasp: Grasp):
         return
     if np.any(lo <= 0):
         raise GraspValueError(
-            f"tune: bounds of {name!r} must be > 0 {UNITS[name]}".rstrip() + f", got lower bound {lo.min():g}"
+            f"tune: bounds of {name!r} must be > 0 {FIELD[name].unit}".rstrip() + f", got lower bound {lo.min():g}"
         )
     if name == "initial_deformation" and np.any(hi >= a["radius"]):
         raise GraspValueError(
@@ -206,7 +194,7 @@ def _bounds_for(spec: _Spec, grasp: Grasp, given) -> tuple[np.ndarray, np.ndarra
         given = default_bounds(grasp, name)
         if given is None:
             raise GraspValueError(
-                f"tune: give bounds for {name!r} ({UNITS[name] or 'dimensionless'}), e.g. "
+                f"tune: give bounds for {name!r} ({FIELD[name].unit or 'dimensionless'}), e.g. "
                 f"bounds={{{name!r}: (lo, hi)}}; only 'initial_deformation' has defaults"
             )
         lo, hi = given
@@ -275,7 +263,7 @@ def _compiled(specs: tuple[_Spec, ...], options: EvaluateOptions):
     """``vg(u, data) -> ((objective, (value_J, Evaluation)), grad)``, jitted once per key."""
 
     def objective(u, data):
-        ev = _evaluate_jit(_apply(specs, u, data), data["temperature"], options)
+        ev = evaluate_compiled(_apply(specs, u, data), data["temperature"], options)
         v = jnp.where(jnp.isfinite(ev.value), ev.value, 0.0)
         return -v / data["value_scale"], ev
 
@@ -417,6 +405,33 @@ def tune(
             (value 0: unstable or infeasible), where the gradient is 0 and there is
             nothing to follow; the message names the status.
     """
+    grasp = _checked_grasp(grasp, method, maxiter)
+    specs = _specs(params)
+    box = _Box.build(specs, grasp, bounds)
+    t = options.smooth_min_temperature
+    hard_options = dataclasses.replace(options, smooth_min_temperature=None)
+    data = {
+        "grasp": grasp,
+        "lo": tuple(jnp.asarray(v) for v in box.los),
+        "hi": tuple(jnp.asarray(v) for v in box.his),
+        "basis": jnp.asarray(face_basis(grasp.normals)),
+        "temperature": jnp.float64(0.0 if t is None else t / MJ_TO_J),
+        "value_scale": jnp.float64(1.0),
+    }
+    vg = _compiled(specs, hard_options)
+    rec = _Record.start(vg, box, data)
+    data["value_scale"] = jnp.float64(rec.initial_value)
+    run = dict(maxiter=maxiter, tol=tol, ftol=ftol, patience=patience, callback=callback)
+    if method == "scipy_lbfgsb":
+        status, iters, evals = _run_scipy(vg, box.u0, data, rec, **run)
+    else:
+        status, iters, evals = _run_jaxopt(_jaxopt_solver(specs, hard_options, method), box.u0, data, rec, **run)
+    message = _STOP_MESSAGES[status].format(ftol=ftol, patience=patience, maxiter=maxiter)
+    return _result(specs, grasp, box, data, rec, status, iters, evals, method, message)
+
+
+def _checked_grasp(grasp: Grasp, method: str, maxiter) -> Grasp:
+    """The validated float64 grasp :func:`tune` starts from; one-line errors for bad calls."""
     if not isinstance(grasp, Grasp):
         raise GraspValueError(f"tune: expected a jaxgrasp.Grasp, got {type(grasp).__name__}")
     if np.ndim(grasp.mass) != 0:
@@ -426,121 +441,109 @@ def tune(
         raise GraspValueError(f"tune: unknown method {method!r}; choose from {', '.join(METHODS)}")
     if not (isinstance(maxiter, (int, np.integer)) and not isinstance(maxiter, bool) and maxiter >= 1):
         raise GraspValueError(f"tune: maxiter must be an integer >= 1, got {maxiter!r}")
-    specs = _specs(params)
-    bounds = dict(bounds or {})
-    known = {s.name for s in specs} | {s.label for s in specs}
-    extra = sorted(k for k in bounds if k not in known)
-    if extra:
-        raise GraspValueError(f"tune: bounds given for {extra[0]!r}, which is not tuned")
-    n = grasp.num_contacts
+    return grasp
 
-    los, his, x0s = [], [], []
-    clipped = []
-    for spec in specs:
-        given = bounds.get(spec.label, bounds.get(spec.name))
-        lo, hi = _bounds_for(spec, grasp, given)
-        x0 = _start(spec, grasp)
-        if np.any(x0 < lo) or np.any(x0 > hi):
-            clipped.append(spec.label)
-        los.append(lo)
-        his.append(hi)
-        x0s.append(np.clip(x0, lo, hi))
-    u0 = np.concatenate([(x - lo) / (hi - lo) for x, lo, hi in zip(x0s, los, his)])
 
-    t = options.smooth_min_temperature
-    hard_options = dataclasses.replace(options, smooth_min_temperature=None)
-    data = {
-        "grasp": grasp,
-        "lo": tuple(jnp.asarray(v) for v in los),
-        "hi": tuple(jnp.asarray(v) for v in his),
-        "basis": jnp.asarray(face_basis(grasp.normals)),
-        "temperature": jnp.float64(0.0 if t is None else t / MJ_TO_J),
-        "value_scale": jnp.float64(1.0),
-    }
-    vg = _compiled(specs, hard_options)
+@dataclasses.dataclass(frozen=True)
+class _Box:
+    """The tuned parameters' bounds and start: ``los``/``his``/``x0s`` per spec (SI),
+    ``u0`` the start mapped to ``[0, 1]``, ``clipped`` the labels whose start was clipped."""
 
-    (_, ev0), _ = vg(jnp.asarray(u0), data)
-    v0 = float(ev0.value)
-    s0 = int(ev0.status)
-    if not (v0 > 0.0 and math.isfinite(v0)):
-        where = f" after clipping {', '.join(clipped)} to its bounds" if clipped else ""
-        raise GraspValueError(
-            f"tune: the starting grasp{where} has value {v0:g} J (status {R.STATUS_NAMES[s0]}): "
-            "its gradient is 0, so there is nothing to follow; start from a stable grasp"
-        )
-    data["value_scale"] = jnp.float64(v0)
+    los: tuple
+    his: tuple
+    x0s: tuple
+    u0: np.ndarray
+    clipped: tuple
 
-    box = (jnp.zeros_like(jnp.asarray(u0)), jnp.ones_like(jnp.asarray(u0)))
-    history = [v0]
-    hstatus = [s0]
-    best = (v0, np.asarray(u0), ev0)
-    status = "max_iterations"
-    iters = 0
-    stall = 0
+    @classmethod
+    def build(cls, specs, grasp: Grasp, bounds) -> "_Box":
+        bounds = dict(bounds or {})
+        known = {s.name for s in specs} | {s.label for s in specs}
+        extra = sorted(k for k in bounds if k not in known)
+        if extra:
+            raise GraspValueError(f"tune: bounds given for {extra[0]!r}, which is not tuned")
+        los, his, x0s, clipped = [], [], [], []
+        for spec in specs:
+            lo, hi = _bounds_for(spec, grasp, bounds.get(spec.label, bounds.get(spec.name)))
+            x0 = _start(spec, grasp)
+            if np.any(x0 < lo) or np.any(x0 > hi):
+                clipped.append(spec.label)
+            los.append(lo)
+            his.append(hi)
+            x0s.append(np.clip(x0, lo, hi))
+        u0 = np.concatenate([(x - lo) / (hi - lo) for x, lo, hi in zip(x0s, los, his)])
+        return cls(tuple(los), tuple(his), tuple(x0s), u0, tuple(clipped))
 
-    def record(u, ev):
-        nonlocal best
+    def params(self, u) -> list[np.ndarray]:
+        """Each spec's vector (SI) at the normalised parameters ``u``."""
+        out, off = [], 0
+        for lo, hi in zip(self.los, self.his):
+            k = lo.shape[0]
+            out.append(lo + (hi - lo) * u[off : off + k])
+            off += k
+        return out
+
+
+class _Record:
+    """The value and status of every iterate, and the best trusted one."""
+
+    def __init__(self, v0: float, u0, ev0):
+        self.history = [v0]
+        self.statuses = [int(ev0.status)]
+        self.best = (v0, np.asarray(u0), ev0)
+
+    @property
+    def initial_value(self) -> float:
+        return self.history[0]
+
+    @classmethod
+    def start(cls, vg, box: _Box, data) -> "_Record":
+        """Evaluate the start; a start without a positive value is an error."""
+        (_, ev0), _ = vg(jnp.asarray(box.u0), data)
+        v0 = float(ev0.value)
+        if not (v0 > 0.0 and math.isfinite(v0)):
+            where = f" after clipping {', '.join(box.clipped)} to its bounds" if box.clipped else ""
+            raise GraspValueError(
+                f"tune: the starting grasp{where} has value {v0:g} J "
+                f"(status {GraspStatus(int(ev0.status)).label}): "
+                "its gradient is 0, so there is nothing to follow; start from a stable grasp"
+            )
+        return cls(v0, box.u0, ev0)
+
+    def add(self, u, ev) -> float:
+        """Record an iterate; returns its value, J."""
         v = float(ev.value)
-        history.append(v)
-        hstatus.append(int(ev.status))
-        if int(ev.status) in (R.STABLE, R.NOT_CONVERGED) and v > best[0]:
-            best = (v, np.asarray(u), ev)
+        s = int(ev.status)
+        self.history.append(v)
+        self.statuses.append(s)
+        if s in (GraspStatus.STABLE, GraspStatus.NOT_CONVERGED) and v > self.best[0]:
+            self.best = (v, np.asarray(u), ev)
         return v
 
-    if method == "scipy_lbfgsb":
-        status, iters, evals = _run_scipy(vg, u0, box, data, maxiter, tol, ftol, patience, record, callback)
-    else:
-        solver = _jaxopt_solver(specs, hard_options, method)
-        u = jnp.asarray(u0)
-        state = solver.init_state(u, box, data)
-        evals = 1
-        for it in range(1, maxiter + 1):
-            u_prev = u
-            prev_best = best[0]
-            u, state = solver.update(u, state, box, data)
-            iters = it
-            v = record(u, state.aux)
-            if callback is not None:
-                callback(it, v, np.asarray(u))
-            stall = stall + 1 if best[0] <= prev_best * (1.0 + ftol) else 0
-            if float(state.error) <= tol:
-                status = "converged"
-                break
-            if bool(getattr(state, "failed_linesearch", False)) and np.array_equal(
-                np.asarray(u), np.asarray(u_prev)
-            ):
-                status = "line_search_failed"
-                break
-            if stall >= patience:
-                status = "stalled"
-                break
-        evals = int(getattr(state, "num_fun_eval", iters + 1))
 
-    v_best, u_best, ev_best = best
+_STOP_MESSAGES = {
+    "converged": "the projected gradient vanished",
+    "stalled": "no relative improvement above {ftol:g} in {patience} iterations "
+    "(typically a maximum on a kink, where the limiting boundary switches)",
+    "max_iterations": "stopped after maxiter={maxiter} iterations",
+    "line_search_failed": "the line search found no better point (a kink of the value, or noise)",
+}
+
+
+def _result(specs, grasp, box: _Box, data, rec: _Record, status, iters, evals, method, message) -> TuneResult:
+    """The :class:`TuneResult` of a finished search."""
+    v_best, u_best, ev_best = rec.best
     tuned = _apply(specs, jnp.asarray(u_best), data)
     tuned = jax.tree_util.tree_map(lambda a: jnp.asarray(np.asarray(a)), tuned)
-    x_best, off = [], 0
-    for lo, hi in zip(los, his):
-        k = lo.shape[0]
-        x_best.append(lo + (hi - lo) * u_best[off : off + k])
-        off += k
-    hist = np.asarray(history, dtype=np.float64)
-    hst = np.asarray(hstatus, dtype=np.int32)
-    n_nc = int(np.sum(hst == R.NOT_CONVERGED))
-    messages = {
-        "converged": "the projected gradient vanished",
-        "stalled": f"no relative improvement above {ftol:g} in {patience} iterations "
-        "(typically a maximum on a kink, where the limiting boundary switches)",
-        "max_iterations": f"stopped after maxiter={maxiter} iterations",
-        "line_search_failed": "the line search found no better point (a kink of the value, or noise)",
-    }
-    msg = messages[status]
-    if clipped:
-        msg += f"; start of {', '.join(clipped)} clipped to its bounds"
+    hst = np.asarray(rec.statuses, dtype=np.int32)
+    n_nc = int(np.sum(hst == GraspStatus.NOT_CONVERGED))
+    if box.clipped:
+        message += f"; start of {', '.join(box.clipped)} clipped to its bounds"
     if n_nc:
-        msg += f"; {n_nc} iterate(s) had not-converged evaluations"
+        message += f"; {n_nc} iterate(s) had not-converged evaluations"
+    n = grasp.num_contacts
     bounds_used = {}
-    for s, lo, hi in zip(specs, los, his):
+    for s, lo, hi in zip(specs, box.los, box.his):
         if s.name == "positions":
             bounds_used[s.label] = (lo.reshape(n, 2), hi.reshape(n, 2))
         elif lo.size == 1:
@@ -550,11 +553,11 @@ def tune(
     return TuneResult(
         grasp=tuned,
         value=v_best,
-        initial_value=v0,
-        history=hist,
+        initial_value=rec.initial_value,
+        history=np.asarray(rec.history, dtype=np.float64),
         history_status=hst,
-        params=_labelled_params(specs, tuned, x_best),
-        initial_params=_labelled_params(specs, grasp, x0s),
+        params=_labelled_params(specs, tuned, box.params(u_best)),
+        initial_params=_labelled_params(specs, grasp, box.x0s),
         bounds=bounds_used,
         evaluation=jax.tree_util.tree_map(np.asarray, ev_best),
         status=status,
@@ -563,8 +566,35 @@ def tune(
         evaluations=int(evals) + 1,
         not_converged_evaluations=n_nc,
         method=method,
-        message=msg,
+        message=message,
     )
+
+
+def _run_jaxopt(solver, u0, data, rec: _Record, *, maxiter, tol, ftol, patience, callback):
+    """A jaxopt solver's iterations, one record each; ``(status, iterations, evaluations)``."""
+    box = (jnp.zeros_like(jnp.asarray(u0)), jnp.ones_like(jnp.asarray(u0)))
+    u = jnp.asarray(u0)
+    state = solver.init_state(u, box, data)
+    status, iters, stall = "max_iterations", 0, 0
+    for it in range(1, maxiter + 1):
+        u_prev = u
+        prev_best = rec.best[0]
+        u, state = solver.update(u, state, box, data)
+        iters = it
+        v = rec.add(u, state.aux)
+        if callback is not None:
+            callback(it, v, np.asarray(u))
+        stall = stall + 1 if rec.best[0] <= prev_best * (1.0 + ftol) else 0
+        if float(state.error) <= tol:
+            status = "converged"
+            break
+        if bool(getattr(state, "failed_linesearch", False)) and np.array_equal(np.asarray(u), np.asarray(u_prev)):
+            status = "line_search_failed"
+            break
+        if stall >= patience:
+            status = "stalled"
+            break
+    return status, iters, int(getattr(state, "num_fun_eval", iters + 1))
 
 
 @lru_cache(maxsize=32)
@@ -582,8 +612,10 @@ def _jaxopt_solver(specs: tuple[_Spec, ...], options: EvaluateOptions, method: s
     )
 
 
-def _run_scipy(vg, u0, box, data, maxiter, tol, ftol, patience, record, callback):
-    """SciPy's L-BFGS-B on the compiled value and gradient, one record per iteration."""
+def _run_scipy(vg, u0, data, rec: _Record, *, maxiter, tol, ftol, patience, callback):
+    """SciPy's L-BFGS-B on the compiled value and gradient in ``[0, 1]^k``, one record per
+    iteration; ``(status, iterations, evaluations)``. (``patience`` is jaxopt's: SciPy
+    stops on ``ftol`` itself.)"""
     import scipy.optimize
 
     last = {}
@@ -603,7 +635,7 @@ def _run_scipy(vg, u0, box, data, maxiter, tol, ftol, patience, record, callback
         else:
             count["evals"] += 1
             (_, ev), _ = vg(jnp.asarray(xk), data)
-        v = record(xk, ev)
+        v = rec.add(xk, ev)
         if callback is not None:
             callback(count["it"], v, xk)
 
@@ -612,7 +644,7 @@ def _run_scipy(vg, u0, box, data, maxiter, tol, ftol, patience, record, callback
         np.asarray(u0, dtype=np.float64),
         jac=True,
         method="L-BFGS-B",
-        bounds=list(zip(np.asarray(box[0]), np.asarray(box[1]))),
+        bounds=[(0.0, 1.0)] * len(u0),
         callback=cb,
         options={"maxiter": maxiter, "gtol": tol, "ftol": ftol},
     )
@@ -641,7 +673,7 @@ def plot_history(result: TuneResult, path=None, *, title: str | None = None):
     it = np.arange(result.history.size)
     mj = result.history / MJ_TO_J
     ax.plot(it, np.maximum.accumulate(mj), "-", color="C0", label="best so far")
-    ok = result.history_status != R.NOT_CONVERGED
+    ok = result.history_status != GraspStatus.NOT_CONVERGED
     ax.plot(it[ok], mj[ok], "o", color="C0", ms=4, label="iterate")
     if np.any(~ok):
         ax.plot(it[~ok], mj[~ok], "o", mfc="none", color="C3", ms=5, label="iterate (not converged)")
