@@ -1,8 +1,12 @@
 """jaxgrasp: energy-tolerance grasp stability (Tsuji et al.) as a batched, differentiable JAX evaluator.
 
-Importing jaxgrasp turns on JAX's 64-bit mode (``jax_enable_x64``): results are float64
-without the user touching JAX's configuration. Every public function takes and returns
-SI units (m, Pa, N, kg, J, rad).
+Importing jaxgrasp turns on JAX's 64-bit mode (``jax_enable_x64``) for the whole process,
+so that results are float64 without the user touching JAX's configuration, also where the
+user's own ``jit``/``vmap``/``grad`` trace :func:`evaluate` (JAX fixes dtypes when it
+traces, in the caller's mode: ``experiments/x64_scope.py`` measures what a narrower scope
+breaks). Set the environment variable ``JAX_ENABLE_X64`` (to ``0`` or ``1``) before
+importing to keep JAX's own setting: with ``JAX_ENABLE_X64=0`` jaxgrasp computes in
+float32. Every public function takes and returns SI units (m, Pa, N, kg, J, rad).
 
 Quick start::
 
@@ -12,15 +16,20 @@ Quick start::
     result.value, result.status_name   # J, 'stable'
 """
 
+import os as _os
+
 import jax as _jax
 
-_jax.config.update("jax_enable_x64", True)
+if "JAX_ENABLE_X64" not in _os.environ:  # an explicit choice of the user's stands
+    _jax.config.update("jax_enable_x64", True)
 
 from . import presets  # noqa: E402
-from .evaluate import EvaluateOptions, evaluate  # noqa: E402
+from .evaluate import evaluate  # noqa: E402
+from .options import EvaluateOptions  # noqa: E402
 from .grasp import STANDARD_GRAVITY, Grasp  # noqa: E402
 from .gripfile import grasp_from_dict, grasp_to_dict, load, save  # noqa: E402
 from .model import KINDS  # noqa: E402
+from .status import BoundaryKind, GraspStatus, LaneStatus  # noqa: E402
 from .result import (  # noqa: E402
     INFEASIBLE,
     NOT_CONVERGED,
@@ -49,6 +58,9 @@ __all__ = [
     "INFEASIBLE",
     "NOT_CONVERGED",
     "KINDS",
+    "GraspStatus",
+    "LaneStatus",
+    "BoundaryKind",
     "load",
     "save",
     "grasp_from_dict",

@@ -19,16 +19,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .fields import DEFAULT_GRAVITY, DEFAULT_MASS
+
 __all__ = ["Grasp", "STANDARD_GRAVITY"]
 
-STANDARD_GRAVITY = (0.0, 0.0, -9.81)
-"""Default gravity vector, m/s^2, object frame."""
+STANDARD_GRAVITY = DEFAULT_GRAVITY
+"""Default gravity vector, m/s^2, object frame (:data:`jaxgrasp.fields.DEFAULT_GRAVITY`)."""
 
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Grasp:
     """All parameters of one grasp (SI units). Build it with :meth:`Grasp.create`.
+
+    The fields, their units, shapes and allowed ranges are listed once, in
+    :data:`jaxgrasp.fields.FIELDS`; in short:
 
     Attributes:
         positions: ``(N, 3)`` contact positions, m, object frame (origin at the centre of mass).
@@ -72,8 +77,8 @@ class Grasp:
         young_modulus,
         friction,
         max_force,
-        mass=0.0,
-        gravity=STANDARD_GRAVITY,
+        mass=DEFAULT_MASS,
+        gravity=DEFAULT_GRAVITY,
     ) -> "Grasp":
         """Build a validated grasp, broadcasting per-fingertip scalars to all contacts.
 
@@ -102,7 +107,8 @@ class Grasp:
             mass=mass,
             gravity=gravity,
         )
-        return cls(**{k: jnp.asarray(v, dtype=jnp.float64) for k, v in fields.items()})
+        dtype = jax.dtypes.canonicalize_dtype(jnp.float64)  # float32 where x64 is off
+        return cls(**{k: jnp.asarray(v, dtype=dtype) for k, v in fields.items()})
 
     def replace(self, **changes) -> "Grasp":
         """Return a copy with some fields replaced (no validation: for traced values)."""
