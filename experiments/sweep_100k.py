@@ -106,7 +106,7 @@ def main() -> None:
     import jax
 
     import jaxgrasp
-    from jaxgrasp.cli import enable_compilation_cache
+    from jaxgrasp.cache import enable_compilation_cache
     from jaxgrasp.evaluate import EvaluateOptions
     from jaxgrasp.sweep_cli import _auto_chunk
 
@@ -150,7 +150,7 @@ def main() -> None:
 
     sampler.reset()
     t0 = time.perf_counter()
-    fn, comp = S._compiled(EvaluateOptions(), 2, chunk)  # memoised: the sweep below reuses it
+    fn, comp = S.compiled_evaluator(EvaluateOptions(), 2, chunk)  # memoised: the sweep below reuses it
     say(f"compile for chunk {chunk}: {comp:.1f} s (wall {time.perf_counter() - t0:.1f} s), "
         f"peak RSS while compiling {sampler.peak:.0f} MiB")
     try:

@@ -9,9 +9,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
-from pathlib import Path
+
+from .cache import enable_compilation_cache
 
 EXIT_USAGE = 2
 
@@ -35,28 +35,6 @@ def parse_number(option: str, text: str, what: str = "value") -> float:
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line instead of usage + message
         raise UsageError(f"{message} (see '{self.prog} --help')")
-
-
-def enable_compilation_cache() -> None:
-    """Use JAX's persistent compilation cache so a repeated command does not recompile.
-
-    The cache lives in ``$JAXGRASP_CACHE_DIR`` or ``~/.cache/jaxgrasp/xla``. Sweeps also
-    keep their traced programs (``jax.export``) in its subfolder ``jaxgrasp-export``, so a
-    repeated sweep neither traces in Python nor compiles in XLA.
-    """
-    import jax
-
-    path = os.environ.get("JAXGRASP_CACHE_DIR") or str(Path.home() / ".cache" / "jaxgrasp" / "xla")
-    try:
-        Path(path).mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return  # no writable cache: compile every time
-    jax.config.update("jax_compilation_cache_dir", path)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    from .sweep import set_export_cache_dir
-
-    set_export_cache_dir(Path(path) / "jaxgrasp-export")
 
 
 def _add_grasp_source(p: argparse.ArgumentParser) -> None:

@@ -23,19 +23,17 @@ Each chunk is sharded along its batch axis over all ``jax.devices()`` (a 1-D
 device count), so one call uses every GPU of a machine, or every device of several hosts
 after ``jax.distributed.initialize()``. Results are gathered to the host.
 
-With :func:`set_export_cache_dir` (the CLI sets it) the traced program is kept on disk
-with ``jax.export``, so that a later process skips tracing :func:`jaxgrasp.evaluate`.
+The compiled batched evaluator comes from :mod:`jaxgrasp.cache`: memoised in the process
+and, with :func:`jaxgrasp.cache.set_export_dir` (the CLI sets it), kept on disk with
+``jax.export``, so that a later process skips tracing :func:`jaxgrasp.evaluate`.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
-import hashlib
 import math
-import os
 import time
-from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import jax
@@ -44,6 +42,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from . import cache
 from . import result as R
 from .evaluate import EvaluateOptions
 from .evaluate import evaluate as _evaluate_one
@@ -59,7 +58,8 @@ __all__ = [
     "ACCELERATOR_CHUNK_SIZE",
     "default_chunk_size",
     "batch_size",
-    "set_export_cache_dir",
+    "column_name",
+    "compiled_evaluator",
 ]
 
 DEFAULT_CHUNK_SIZE = 64
@@ -374,25 +374,6 @@ def _check_axes(base: dict[str, np.ndarray], axes: Mapping[str, Any]) -> dict[st
 
 # --------------------------------------------------------------------------- compiled batch
 
-_COMPILED: dict = {}
-_EXPORT_DIR: Path | None = None
-_STATS = {"traced": 0, "deserialized": 0, "cache_errors": 0}  # what _compiled did (tests)
-
-
-def set_export_cache_dir(path) -> None:
-    """Keep the sweep's traced program (``jax.export``) in folder ``path``; ``None``: don't.
-
-    A later process building the same batched evaluator (same jaxgrasp source, JAX
-    version, options, contact count, chunk, devices and precision) deserializes it
-    instead of tracing :func:`jaxgrasp.evaluate` in Python again (5-15 s), so that with
-    JAX's persistent compilation cache the whole compile step is a cache load. A missing,
-    stale or corrupt file is ignored (the program is traced and the file rewritten). The
-    CLI turns this on next to its compilation cache.
-    """
-    global _EXPORT_DIR
-    _EXPORT_DIR = None if path is None else Path(path)
-
-
 _GRASP_FIELDS = tuple(f.name for f in dataclasses.fields(Grasp))
 
 
@@ -407,100 +388,44 @@ def _batched_fn(options: EvaluateOptions, sharding=None):
     return jax.jit(jax.vmap(one), in_shardings=sharding, out_shardings=sharding)
 
 
-def _source_digest() -> str:
-    """Hash of jaxgrasp's own source files (an editable install keeps its version number)."""
-    h = hashlib.sha256()
-    for f in sorted(Path(__file__).resolve().parent.glob("*.py")):
-        h.update(f.name.encode())
-        h.update(f.read_bytes())
-    return h.hexdigest()
-
-
-def _export_path(key: tuple) -> Path | None:
-    if _EXPORT_DIR is None:
-        return None
-    import jaxlib
-
-    text = repr((key, _source_digest(), jax.__version__, jaxlib.__version__, jax.default_backend()))
-    return _EXPORT_DIR / f"sweep-{hashlib.sha256(text.encode()).hexdigest()[:32]}.jaxexport"
-
-
-def _load_exported(path: Path, spec, n_devices: int):
-    """The exported program at ``path`` if it fits ``spec`` and the devices, else ``None``."""
-    try:
-        exp = jax.export.deserialize(bytearray(path.read_bytes()))
-        want = [(tuple(s.shape), np.dtype(s.dtype)) for s in jax.tree_util.tree_leaves(spec)]
-        have = [(tuple(a.shape), np.dtype(a.dtype)) for a in exp.in_avals]
-        if have != want or exp.nr_devices != n_devices or len(exp.out_avals) != len(_RESULT_FIELDS):
-            raise ValueError("stale exported sweep program")
-        if jax.default_backend() not in exp.platforms:
-            raise ValueError("exported for another platform")
-        return exp
-    except FileNotFoundError:
-        return None
-    except Exception:  # corrupt, stale, or from an incompatible JAX: trace again
-        _STATS["cache_errors"] += 1
-        return None
-
-
-def _save_exported(path: Path, exp) -> None:
-    try:
-        data = exp.serialize()  # needs the 'flatbuffers' package
-    except Exception:  # e.g. ImportError: keep working, trace every time
-        _STATS["cache_errors"] += 1
-        return
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_bytes(data)
-        os.replace(tmp, path)  # atomic: a concurrent reader sees the old file or the new one
-    except OSError:
-        pass  # no writable cache: trace every time
-
-
 def _mesh(devices) -> Mesh:
     return Mesh(np.asarray(devices), ("batch",))
 
 
-def _compiled(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None):
-    """The batched evaluator for ``chunk`` grasps of ``n_contacts``; (fn, compile seconds).
+def _batch_spec(n_contacts: int, chunk: int, sharding) -> tuple:
+    """The :class:`Grasp` fields of a batch of ``chunk`` grasps, as ``ShapeDtypeStruct``."""
+    per_field = dict(positions=(n_contacts, 3), normals=(n_contacts, 3), mass=(), gravity=(3,))
+    return tuple(
+        jax.ShapeDtypeStruct((chunk, *per_field.get(f, (n_contacts,))), jnp.float64, sharding=sharding)
+        for f in _GRASP_FIELDS
+    )
+
+
+def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None):
+    """The batched evaluator for ``chunk`` grasps of ``n_contacts``; ``(fn, compile seconds)``.
 
     ``fn`` takes the :class:`Grasp` fields (in field order) of a batch, each sharded along
     its first axis over ``devices`` (default ``jax.devices()``; ``chunk`` must be a
-    multiple of their number), and returns the result fields, sharded the same way.
+    multiple of their number), and returns the result fields (``value``, ``status``,
+    ``limiting_kind``, ``limiting_contact``, ``equilibrium_energy``), sharded the same
+    way. It comes from :func:`jaxgrasp.cache.compiled`: memoised in the process (0
+    seconds on a hit) and exported to disk where that is turned on.
     """
     devices = tuple(jax.devices() if devices is None else devices)
     if chunk % len(devices):
         raise ValueError(f"chunk {chunk} is not a multiple of the {len(devices)} devices")
-    key = (options, n_contacts, chunk, jax.config.jax_enable_x64, tuple(d.id for d in devices))
-    hit = _COMPILED.get(key)
-    if hit is not None:
-        return hit, 0.0
-    f64 = jnp.float64
+    x64 = jax.config.jax_enable_x64
     sharding = NamedSharding(_mesh(devices), P("batch"))
-    sds = lambda *s: jax.ShapeDtypeStruct((chunk, *s), f64, sharding=sharding)
-    per_field = dict(positions=(n_contacts, 3), normals=(n_contacts, 3), mass=(), gravity=(3,))
-    spec = tuple(sds(*per_field.get(f, (n_contacts,))) for f in _GRASP_FIELDS)
-    t0 = time.perf_counter()
-    path = _export_path((options, n_contacts, chunk, jax.config.jax_enable_x64, len(devices)))
-    if path is None:
-        fn = _batched_fn(options, sharding).lower(*spec).compile()
-        _STATS["traced"] += 1
-    else:
-        exp = _load_exported(path, spec, len(devices))
-        if exp is None:
-            exp = jax.export.export(_batched_fn(options, sharding))(*spec)
-            _save_exported(path, exp)
-            _STATS["traced"] += 1
-        else:
-            _STATS["deserialized"] += 1
-        # the XLA compilation of the exported program hits JAX's persistent cache, if on
-        fn = jax.jit(exp.call, in_shardings=sharding, out_shardings=sharding).lower(*spec).compile()
-    seconds = time.perf_counter() - t0
-    if len(_COMPILED) >= 16:
-        _COMPILED.pop(next(iter(_COMPILED)))
-    _COMPILED[key] = fn
-    return fn, seconds
+    return cache.compiled(
+        ("sweep", options, n_contacts, chunk, x64, tuple(d.id for d in devices)),
+        lambda: _batched_fn(options, sharding),
+        _batch_spec(n_contacts, chunk, sharding),
+        name="sweep",
+        export_key=(options, n_contacts, chunk, x64, len(devices)),
+        sharding=sharding,
+        n_devices=len(devices),
+        n_outputs=len(_RESULT_FIELDS),
+    )
 
 
 # --------------------------------------------------------------------------- sweep
@@ -566,7 +491,7 @@ def sweep(
     if chunk_size is None:
         chunk_size = default_chunk_size(devices)
     chunk = batch_size(chunk_size, total, len(devices))
-    fn, compile_seconds = _compiled(options, n_contacts, chunk, devices)
+    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices)
     sharding = NamedSharding(_mesh(devices), P("batch"))
 
     # the grasp's own values (not the validated copies, whose normals are re-normalised),
