@@ -106,9 +106,9 @@ def main() -> None:
     import jax
 
     import jaxgrasp
-    from jaxgrasp.cli import enable_compilation_cache
+    from jaxgrasp.cache import enable_compilation_cache
+    from jaxgrasp.cli.sweep import auto_chunk
     from jaxgrasp.evaluate import EvaluateOptions
-    from jaxgrasp.sweep_cli import _auto_chunk
 
     S = sys.modules["jaxgrasp.sweep"]
     if not args.no_cache:
@@ -125,7 +125,7 @@ def main() -> None:
     ref_rate = None
     if not args.no_reference:
         E9, dr41 = np.linspace(2e5, 1e6, 9), np.linspace(1e-3, 5e-3, 41)
-        chunk = _auto_chunk(E9.size * dr41.size)
+        chunk = auto_chunk(E9.size * dr41.size)
         sampler.reset()
         t0 = time.perf_counter()
         r = jaxgrasp.sweep(cube, young_modulus=E9, initial_deformation=dr41, chunk_size=chunk)
@@ -150,7 +150,7 @@ def main() -> None:
 
     sampler.reset()
     t0 = time.perf_counter()
-    fn, comp = S._compiled(EvaluateOptions(), 2, chunk)  # memoised: the sweep below reuses it
+    fn, comp = S.compiled_evaluator(EvaluateOptions(), 2, chunk)  # memoised: the sweep below reuses it
     say(f"compile for chunk {chunk}: {comp:.1f} s (wall {time.perf_counter() - t0:.1f} s), "
         f"peak RSS while compiling {sampler.peak:.0f} MiB")
     try:

@@ -23,19 +23,17 @@ Each chunk is sharded along its batch axis over all ``jax.devices()`` (a 1-D
 device count), so one call uses every GPU of a machine, or every device of several hosts
 after ``jax.distributed.initialize()``. Results are gathered to the host.
 
-With :func:`set_export_cache_dir` (the CLI sets it) the traced program is kept on disk
-with ``jax.export``, so that a later process skips tracing :func:`jaxgrasp.evaluate`.
+The compiled batched evaluator comes from :mod:`jaxgrasp.cache`: memoised in the process
+and, with :func:`jaxgrasp.cache.set_export_dir` (the CLI sets it), kept on disk with
+``jax.export``, so that a later process skips tracing :func:`jaxgrasp.evaluate`.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
-import hashlib
 import math
-import os
 import time
-from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import jax
@@ -44,11 +42,12 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from . import result as R
+from . import cache
 from .evaluate import EvaluateOptions
 from .evaluate import evaluate as _evaluate_one
+from .fields import FIELD, SWEEPABLE, Field
 from .grasp import Grasp
-from .model import KINDS
+from .status import BoundaryKind, GraspStatus
 from .validation import GraspValueError, _as_float_array, check_grasp_inputs, format_value
 
 __all__ = [
@@ -59,7 +58,8 @@ __all__ = [
     "ACCELERATOR_CHUNK_SIZE",
     "default_chunk_size",
     "batch_size",
-    "set_export_cache_dir",
+    "column_name",
+    "compiled_evaluator",
 ]
 
 DEFAULT_CHUNK_SIZE = 64
@@ -84,22 +84,9 @@ def default_chunk_size(devices=None) -> int:
     return per * len(devices)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Param:
-    unit: str  # SI unit ('' for dimensionless)
-    per_contact: bool  # one value per contact in the Grasp (the sweep sets all at once)
-    allow_zero: bool  # 0 allowed (only mass); negative values never are
-
-
-PARAMETERS: dict[str, _Param] = {
-    "young_modulus": _Param("Pa", True, False),
-    "initial_deformation": _Param("m", True, False),
-    "mass": _Param("kg", False, True),
-    "friction": _Param("", True, False),
-    "max_force": _Param("N", True, False),
-    "radius": _Param("m", True, False),
-}
-"""Sweepable parameters: name -> (SI unit, per-contact?, zero allowed?).
+PARAMETERS: dict[str, Field] = {name: FIELD[name] for name in SWEEPABLE}
+"""Sweepable parameters: name -> its :class:`jaxgrasp.fields.Field` (``.unit`` SI unit,
+``.per_contact``, ``.rule`` and ``.allows(x)`` its allowed range).
 
 A per-contact parameter is set to the same value at every contact of a grid point."""
 
@@ -127,9 +114,10 @@ class SweepResult:
         axes: dict parameter name -> 1-D float64 array of its grid values (SI units), in
             the order given.
         value: evaluation value ``Delta U_min``, J (0 where unstable or infeasible).
-        status: int codes :data:`jaxgrasp.STABLE` ... :data:`jaxgrasp.NOT_CONVERGED`
-            (names in :data:`jaxgrasp.STATUS_NAMES`).
-        limiting_kind: 0 slip, 1 max_force, -1 none (names in :data:`jaxgrasp.KINDS`).
+        status: :class:`~jaxgrasp.status.GraspStatus` codes (``STABLE`` ...
+            ``NOT_CONVERGED``; names ``GraspStatus.labels()``).
+        limiting_kind: :class:`~jaxgrasp.status.BoundaryKind` codes (0 slip, 1 max_force),
+            -1 none (names ``BoundaryKind.labels()``).
         limiting_contact: 0-based contact of the limiting boundary, -1 none.
         equilibrium_energy: ``min U`` over the equilibrium region, J.
         compile_seconds: time spent compiling the batched evaluator in this sweep (0 when
@@ -170,12 +158,12 @@ class SweepResult:
     @property
     def status_names(self) -> np.ndarray:
         """``status`` as an array of names (``'stable'``, ...)."""
-        return np.asarray(R.STATUS_NAMES, dtype=object)[np.asarray(self.status)]
+        return np.asarray(GraspStatus.labels(), dtype=object)[np.asarray(self.status)]
 
     @property
     def limiting_kind_names(self) -> np.ndarray:
         """``limiting_kind`` as an array of names (``'slip'``, ``'max_force'``, ``'none'``)."""
-        names = np.asarray(tuple(KINDS) + ("none",), dtype=object)
+        names = np.asarray(BoundaryKind.labels() + ("none",), dtype=object)
         return names[np.asarray(self.limiting_kind)]  # -1 -> last entry, 'none'
 
     def grid(self) -> dict[str, np.ndarray]:
@@ -186,7 +174,7 @@ class SweepResult:
     def counts(self) -> dict[str, int]:
         """Number of grid points of each status, by name."""
         s = np.asarray(self.status).ravel()
-        return {name: int(np.sum(s == code)) for code, name in enumerate(R.STATUS_NAMES)}
+        return {code.label: int(np.sum(s == code)) for code in GraspStatus}
 
     def best(self) -> dict | None:
         """The grid point of highest value among trusted results (not ``not_converged``).
@@ -195,13 +183,13 @@ class SweepResult:
         (grid index tuple), ``value`` (J), ``status``, ``limiting_kind`` and
         ``limiting_contact`` (names / int) and the point's parameters by name (SI).
         """
-        v = np.where(np.asarray(self.status) == R.NOT_CONVERGED, -np.inf, np.asarray(self.value))
+        v = np.where(np.asarray(self.status) == GraspStatus.NOT_CONVERGED, -np.inf, np.asarray(self.value))
         if v.size == 0 or not np.any(np.isfinite(v)):
             return None
         idx = np.unravel_index(int(np.argmax(v)), v.shape)
         out = {"index": tuple(int(i) for i in idx), "value": float(self.value[idx])}
         out.update({name: float(ax[i]) for (name, ax), i in zip(self.axes.items(), idx)})
-        out["status"] = R.STATUS_NAMES[int(self.status[idx])]
+        out["status"] = GraspStatus(int(self.status[idx])).label
         out["limiting_kind"] = str(self.limiting_kind_names[idx])
         out["limiting_contact"] = int(self.limiting_contact[idx])
         return out
@@ -220,7 +208,7 @@ class SweepResult:
             raise KeyError(f"no axis {name!r}; axes: {', '.join(self.axes)}")
         k = list(self.axes).index(name)
         value = np.asarray(self.value)
-        trusted = np.where(np.asarray(self.status) == R.NOT_CONVERGED, -np.inf, value)
+        trusted = np.where(np.asarray(self.status) == GraspStatus.NOT_CONVERGED, -np.inf, value)
         none_trusted = np.all(np.isneginf(trusted), axis=k, keepdims=True)
         score = np.where(none_trusted, value, trusted)
         arg = np.argmax(score, axis=k)
@@ -276,8 +264,8 @@ class SweepResult:
         """
         arrays = {
             "axis_names": np.asarray(self.names, dtype=str),
-            "status_names": np.asarray(R.STATUS_NAMES, dtype=str),
-            "kind_names": np.asarray(KINDS, dtype=str),
+            "status_names": np.asarray(GraspStatus.labels(), dtype=str),
+            "kind_names": np.asarray(BoundaryKind.labels(), dtype=str),
             "compile_seconds": np.float64(self.compile_seconds),
             "run_seconds": np.float64(self.run_seconds),
             "devices": np.int64(self.devices),
@@ -333,65 +321,51 @@ jax.tree_util.register_pytree_node(SweepResult, _flatten, _unflatten)
 
 def _check_axes(base: dict[str, np.ndarray], axes: Mapping[str, Any]) -> dict[str, np.ndarray]:
     """Validate the axes against the (validated) base grasp fields; one-line errors."""
-    valid = ", ".join(PARAMETERS)
-    out: dict[str, np.ndarray] = {}
-    for name, values in axes.items():
-        if name not in PARAMETERS:
-            raise GraspValueError(f"cannot sweep unknown parameter {name!r}; valid parameters: {valid}")
-        param = PARAMETERS[name]
-        unit = f" {param.unit}" if param.unit else ""
-        a = _as_float_array(f"sweep axis {name}", values)
-        if a.ndim > 1:
-            raise GraspValueError(
-                f"sweep axis {name} must be a number or a 1-D sequence of numbers, got shape {a.shape}"
-            )
-        a = np.atleast_1d(a).astype(np.float64)
-        if a.size == 0:
-            raise GraspValueError(f"sweep axis {name} is empty: give at least one value")
-        bad = np.flatnonzero(~np.isfinite(a))
-        if bad.size:
-            i = int(bad[0])
-            raise GraspValueError(f"sweep axis {name}[{i}] = {format_value(a[i])}{unit} must be finite")
-        bad = np.flatnonzero(a < 0 if param.allow_zero else a <= 0)
-        if bad.size:
-            i = int(bad[0])
-            rule = ">= 0" if param.allow_zero else "positive"
-            raise GraspValueError(f"sweep axis {name}[{i}] = {format_value(a[i])}{unit} must be {rule}")
-        out[name] = a
-    # every grid point must keep 0 < initial_deformation < radius at every contact
-    dr = out.get("initial_deformation", base["initial_deformation"])
-    r = out.get("radius", base["radius"])
-    dr_max, r_min = float(np.max(dr)), float(np.min(r))
-    if not dr_max < r_min:
-        where_dr = ("sweep axis " if "initial_deformation" in out else "the grasp's ") + "initial_deformation"
-        where_r = ("sweep axis " if "radius" in out else "the grasp's ") + "radius"
-        raise GraspValueError(
-            f"initial_deformation must be < radius at every grid point, but {where_dr} reaches "
-            f"{format_value(dr_max)} m and {where_r} goes down to {format_value(r_min)} m"
-        )
+    out = {name: _check_axis(name, values) for name, values in axes.items()}
+    _check_deformation_below_radius(base, out)
     return out
 
 
+def _check_axis(name: str, values: Any) -> np.ndarray:
+    """One axis as a 1-D float64 array, finite and within its field's range."""
+    if name not in PARAMETERS:
+        valid = ", ".join(PARAMETERS)
+        raise GraspValueError(f"cannot sweep unknown parameter {name!r}; valid parameters: {valid}")
+    field = PARAMETERS[name]
+    unit = f" {field.unit}" if field.unit else ""
+    a = _as_float_array(f"sweep axis {name}", values)
+    if a.ndim > 1:
+        raise GraspValueError(
+            f"sweep axis {name} must be a number or a 1-D sequence of numbers, got shape {a.shape}"
+        )
+    a = np.atleast_1d(a).astype(np.float64)
+    if a.size == 0:
+        raise GraspValueError(f"sweep axis {name} is empty: give at least one value")
+    for rule, ok in (("finite", np.isfinite), (field.rule, field.allows)):
+        bad = np.flatnonzero(~ok(a))
+        if bad.size:
+            i = int(bad[0])
+            raise GraspValueError(f"sweep axis {name}[{i}] = {format_value(a[i])}{unit} must be {rule}")
+    return a
+
+
+def _check_deformation_below_radius(base: dict[str, np.ndarray], axes: dict[str, np.ndarray]) -> None:
+    """Every grid point must keep ``initial_deformation < radius`` at every contact."""
+    dr = axes.get("initial_deformation", base["initial_deformation"])
+    r = axes.get("radius", base["radius"])
+    dr_max, r_min = float(np.max(dr)), float(np.min(r))
+    if dr_max < r_min:
+        return
+    where_dr = ("sweep axis " if "initial_deformation" in axes else "the grasp's ") + "initial_deformation"
+    where_r = ("sweep axis " if "radius" in axes else "the grasp's ") + "radius"
+    dr_unit, r_unit = FIELD["initial_deformation"].unit, FIELD["radius"].unit
+    raise GraspValueError(
+        f"initial_deformation must be < radius at every grid point, but {where_dr} reaches "
+        f"{format_value(dr_max)} {dr_unit} and {where_r} goes down to {format_value(r_min)} {r_unit}"
+    )
+
+
 # --------------------------------------------------------------------------- compiled batch
-
-_COMPILED: dict = {}
-_EXPORT_DIR: Path | None = None
-_STATS = {"traced": 0, "deserialized": 0, "cache_errors": 0}  # what _compiled did (tests)
-
-
-def set_export_cache_dir(path) -> None:
-    """Keep the sweep's traced program (``jax.export``) in folder ``path``; ``None``: don't.
-
-    A later process building the same batched evaluator (same jaxgrasp source, JAX
-    version, options, contact count, chunk, devices and precision) deserializes it
-    instead of tracing :func:`jaxgrasp.evaluate` in Python again (5-15 s), so that with
-    JAX's persistent compilation cache the whole compile step is a cache load. A missing,
-    stale or corrupt file is ignored (the program is traced and the file rewritten). The
-    CLI turns this on next to its compilation cache.
-    """
-    global _EXPORT_DIR
-    _EXPORT_DIR = None if path is None else Path(path)
-
 
 _GRASP_FIELDS = tuple(f.name for f in dataclasses.fields(Grasp))
 
@@ -407,100 +381,44 @@ def _batched_fn(options: EvaluateOptions, sharding=None):
     return jax.jit(jax.vmap(one), in_shardings=sharding, out_shardings=sharding)
 
 
-def _source_digest() -> str:
-    """Hash of jaxgrasp's own source files (an editable install keeps its version number)."""
-    h = hashlib.sha256()
-    for f in sorted(Path(__file__).resolve().parent.glob("*.py")):
-        h.update(f.name.encode())
-        h.update(f.read_bytes())
-    return h.hexdigest()
-
-
-def _export_path(key: tuple) -> Path | None:
-    if _EXPORT_DIR is None:
-        return None
-    import jaxlib
-
-    text = repr((key, _source_digest(), jax.__version__, jaxlib.__version__, jax.default_backend()))
-    return _EXPORT_DIR / f"sweep-{hashlib.sha256(text.encode()).hexdigest()[:32]}.jaxexport"
-
-
-def _load_exported(path: Path, spec, n_devices: int):
-    """The exported program at ``path`` if it fits ``spec`` and the devices, else ``None``."""
-    try:
-        exp = jax.export.deserialize(bytearray(path.read_bytes()))
-        want = [(tuple(s.shape), np.dtype(s.dtype)) for s in jax.tree_util.tree_leaves(spec)]
-        have = [(tuple(a.shape), np.dtype(a.dtype)) for a in exp.in_avals]
-        if have != want or exp.nr_devices != n_devices or len(exp.out_avals) != len(_RESULT_FIELDS):
-            raise ValueError("stale exported sweep program")
-        if jax.default_backend() not in exp.platforms:
-            raise ValueError("exported for another platform")
-        return exp
-    except FileNotFoundError:
-        return None
-    except Exception:  # corrupt, stale, or from an incompatible JAX: trace again
-        _STATS["cache_errors"] += 1
-        return None
-
-
-def _save_exported(path: Path, exp) -> None:
-    try:
-        data = exp.serialize()  # needs the 'flatbuffers' package
-    except Exception:  # e.g. ImportError: keep working, trace every time
-        _STATS["cache_errors"] += 1
-        return
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_bytes(data)
-        os.replace(tmp, path)  # atomic: a concurrent reader sees the old file or the new one
-    except OSError:
-        pass  # no writable cache: trace every time
-
-
 def _mesh(devices) -> Mesh:
     return Mesh(np.asarray(devices), ("batch",))
 
 
-def _compiled(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None):
-    """The batched evaluator for ``chunk`` grasps of ``n_contacts``; (fn, compile seconds).
+def _batch_spec(n_contacts: int, chunk: int, sharding) -> tuple:
+    """The :class:`Grasp` fields of a batch of ``chunk`` grasps, as ``ShapeDtypeStruct``."""
+    per_field = dict(positions=(n_contacts, 3), normals=(n_contacts, 3), mass=(), gravity=(3,))
+    return tuple(
+        jax.ShapeDtypeStruct((chunk, *per_field.get(f, (n_contacts,))), jnp.float64, sharding=sharding)
+        for f in _GRASP_FIELDS
+    )
+
+
+def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None):
+    """The batched evaluator for ``chunk`` grasps of ``n_contacts``; ``(fn, compile seconds)``.
 
     ``fn`` takes the :class:`Grasp` fields (in field order) of a batch, each sharded along
     its first axis over ``devices`` (default ``jax.devices()``; ``chunk`` must be a
-    multiple of their number), and returns the result fields, sharded the same way.
+    multiple of their number), and returns the result fields (``value``, ``status``,
+    ``limiting_kind``, ``limiting_contact``, ``equilibrium_energy``), sharded the same
+    way. It comes from :func:`jaxgrasp.cache.compiled`: memoised in the process (0
+    seconds on a hit) and exported to disk where that is turned on.
     """
     devices = tuple(jax.devices() if devices is None else devices)
     if chunk % len(devices):
         raise ValueError(f"chunk {chunk} is not a multiple of the {len(devices)} devices")
-    key = (options, n_contacts, chunk, jax.config.jax_enable_x64, tuple(d.id for d in devices))
-    hit = _COMPILED.get(key)
-    if hit is not None:
-        return hit, 0.0
-    f64 = jnp.float64
+    x64 = jax.config.jax_enable_x64
     sharding = NamedSharding(_mesh(devices), P("batch"))
-    sds = lambda *s: jax.ShapeDtypeStruct((chunk, *s), f64, sharding=sharding)
-    per_field = dict(positions=(n_contacts, 3), normals=(n_contacts, 3), mass=(), gravity=(3,))
-    spec = tuple(sds(*per_field.get(f, (n_contacts,))) for f in _GRASP_FIELDS)
-    t0 = time.perf_counter()
-    path = _export_path((options, n_contacts, chunk, jax.config.jax_enable_x64, len(devices)))
-    if path is None:
-        fn = _batched_fn(options, sharding).lower(*spec).compile()
-        _STATS["traced"] += 1
-    else:
-        exp = _load_exported(path, spec, len(devices))
-        if exp is None:
-            exp = jax.export.export(_batched_fn(options, sharding))(*spec)
-            _save_exported(path, exp)
-            _STATS["traced"] += 1
-        else:
-            _STATS["deserialized"] += 1
-        # the XLA compilation of the exported program hits JAX's persistent cache, if on
-        fn = jax.jit(exp.call, in_shardings=sharding, out_shardings=sharding).lower(*spec).compile()
-    seconds = time.perf_counter() - t0
-    if len(_COMPILED) >= 16:
-        _COMPILED.pop(next(iter(_COMPILED)))
-    _COMPILED[key] = fn
-    return fn, seconds
+    return cache.compiled(
+        ("sweep", options, n_contacts, chunk, x64, tuple(d.id for d in devices)),
+        lambda: _batched_fn(options, sharding),
+        _batch_spec(n_contacts, chunk, sharding),
+        name="sweep",
+        export_key=(options, n_contacts, chunk, x64, len(devices)),
+        sharding=sharding,
+        n_devices=len(devices),
+        n_outputs=len(_RESULT_FIELDS),
+    )
 
 
 # --------------------------------------------------------------------------- sweep
@@ -546,6 +464,34 @@ def sweep(
             parameter name, an empty, non-numeric, non-finite or out-of-range axis, or a
             grid point with ``initial_deformation >= radius``; the message is one line.
     """
+    base, axes = _check_inputs(grasp, chunk_size, axes)
+    devices = tuple(jax.devices() if devices is None else devices)
+    if not devices:
+        raise GraspValueError("sweep needs at least one device")
+    n_contacts = base["positions"].shape[0]
+    total = int(math.prod(a.size for a in axes.values()))
+    if chunk_size is None:
+        chunk_size = default_chunk_size(devices)
+    chunk = batch_size(chunk_size, total, len(devices))
+    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices)
+    sharding = NamedSharding(_mesh(devices), P("batch"))
+
+    # the grasp's own values (not the validated copies, whose normals are re-normalised),
+    # so that every grid point is exactly the grasp evaluate() would see
+    raw = grasp.to_numpy()
+    own = {k: np.broadcast_to(np.asarray(raw[k], dtype=np.float64), v.shape) for k, v in base.items()}
+    arrays, run_seconds = _run_chunks(fn, own, axes, chunk, sharding, progress)
+    return SweepResult(
+        axes=dict(axes),
+        **arrays,
+        compile_seconds=compile_seconds,
+        run_seconds=run_seconds,
+        devices=len(devices),
+    )
+
+
+def _check_inputs(grasp, chunk_size, axes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The validated base grasp's fields and the validated axes; one-line errors."""
     if chunk_size is not None and (
         isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1
     ):
@@ -556,36 +502,36 @@ def sweep(
         base = check_grasp_inputs(**grasp.to_numpy())
     except GraspValueError as exc:
         raise GraspValueError(f"base grasp: {exc}") from None
-    axes = _check_axes(base, axes)
-    devices = tuple(jax.devices() if devices is None else devices)
-    if not devices:
-        raise GraspValueError("sweep needs at least one device")
-    n_contacts = base["positions"].shape[0]
+    return base, _check_axes(base, axes)
+
+
+def _chunk_fields(own: dict, axes: dict, start: int, chunk: int) -> dict[str, np.ndarray]:
+    """The :class:`Grasp` fields of grid points ``start .. start + chunk - 1`` (C order),
+    the points past the end padded with the last one."""
     shape = tuple(a.size for a in axes.values())
     total = int(math.prod(shape))
-    if chunk_size is None:
-        chunk_size = default_chunk_size(devices)
-    chunk = batch_size(chunk_size, total, len(devices))
-    fn, compile_seconds = _compiled(options, n_contacts, chunk, devices)
-    sharding = NamedSharding(_mesh(devices), P("batch"))
+    n_contacts = own["positions"].shape[0]
+    idx = np.minimum(np.arange(start, start + chunk), total - 1)  # pad with the last point
+    fields = {k: np.broadcast_to(v, (chunk, *v.shape)) for k, v in own.items()}
+    grid_idx = np.unravel_index(idx, shape) if axes else ()
+    for (name, values), i_ax in zip(axes.items(), grid_idx):
+        v = values[i_ax]
+        if PARAMETERS[name].per_contact:
+            v = np.broadcast_to(v[:, None], (chunk, n_contacts))
+        fields[name] = v
+    return fields
 
-    # the grasp's own values (not the validated copies, whose normals are re-normalised),
-    # so that every grid point is exactly the grasp evaluate() would see
-    raw = grasp.to_numpy()
-    own = {k: np.broadcast_to(np.asarray(raw[k], dtype=np.float64), v.shape) for k, v in base.items()}
+
+def _run_chunks(fn, own: dict, axes: dict, chunk: int, sharding, progress):
+    """Evaluate every grid point, ``chunk`` at a time; (grid-shaped results, run seconds)."""
+    shape = tuple(a.size for a in axes.values())
+    total = int(math.prod(shape))
     # host-side output arrays, filled chunk by chunk: the only O(grid) memory of a sweep
     outs: dict[str, np.ndarray] = {}
     run_seconds = 0.0
     for start in range(0, total, chunk):
         stop = min(start + chunk, total)
-        idx = np.minimum(np.arange(start, start + chunk), total - 1)  # pad with the last point
-        fields = {k: np.broadcast_to(v, (chunk, *v.shape)) for k, v in own.items()}
-        grid_idx = np.unravel_index(idx, shape) if axes else ()
-        for (name, values), i_ax in zip(axes.items(), grid_idx):
-            v = values[i_ax]
-            if PARAMETERS[name].per_contact:
-                v = np.broadcast_to(v[:, None], (chunk, n_contacts))
-            fields[name] = v
+        fields = _chunk_fields(own, axes, start, chunk)
         batch = [_put(fields[k], sharding) for k in _GRASP_FIELDS]
         t0 = time.perf_counter()
         res = [_gather(a) for a in fn(*batch)]
@@ -597,15 +543,7 @@ def sweep(
             outs[f][start:stop] = a[: stop - start]
         if progress is not None:
             progress(stop, total)
-
-    arrays = {f: outs[f].reshape(shape) for f in _RESULT_FIELDS}
-    return SweepResult(
-        axes=dict(axes),
-        **arrays,
-        compile_seconds=compile_seconds,
-        run_seconds=run_seconds,
-        devices=len(devices),
-    )
+    return {f: outs[f].reshape(shape) for f in _RESULT_FIELDS}, run_seconds
 
 
 def batch_size(chunk_size: int, total: int, n_devices: int = 1) -> int:

@@ -199,15 +199,14 @@ def cache_dir(tmp_path_factory):
     folder (process-wide settings); both are restored after the module so the rest of the
     session is unaffected.
     """
-    import importlib
+    from jaxgrasp import cache
 
-    sweep = importlib.import_module("jaxgrasp.sweep")  # the module, not jaxgrasp.sweep()
     saved = {k: getattr(jax.config, k) for k in _CACHE_OPTIONS}
-    saved_export = sweep._EXPORT_DIR
+    saved_export = cache.export_dir()
     yield tmp_path_factory.mktemp("jaxgrasp-xla-cache")
     for k, v in saved.items():
         jax.config.update(k, v)
-    sweep.set_export_cache_dir(saved_export)
+    cache.set_export_dir(saved_export)
 
 
 @pytest.fixture

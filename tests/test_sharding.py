@@ -42,6 +42,7 @@ WORKER = textwrap.dedent(
     import numpy as np
     import jax
     import jaxgrasp
+    from jaxgrasp import cache
     from jaxgrasp.evaluate import EvaluateOptions
 
     S = sys.modules["jaxgrasp.sweep"]
@@ -51,7 +52,7 @@ WORKER = textwrap.dedent(
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     if cfg.get("export_dir"):
-        S.set_export_cache_dir(cfg["export_dir"])
+        cache.set_export_dir(cfg["export_dir"])
     E = np.array([2e5, 1e6])
     DR = np.array([1e-3, 3e-3, 4.9e-3])
     out = {"device_count": jax.device_count(), "runs": []}
@@ -60,13 +61,13 @@ WORKER = textwrap.dedent(
             files = sorted(Path(cfg["export_dir"]).glob("*.jaxexport"))
             for f in files:
                 f.write_bytes(f.read_bytes()[:100] + b"not a flatbuffer")
-            S._COMPILED.clear()
+            cache.clear_compiled()
             out["corrupted"] = len(files)
             continue
-        before = dict(S._STATS)
+        before = cache.stats()
         r = jaxgrasp.sweep(jaxgrasp.presets.cube(), young_modulus=E, initial_deformation=DR)
         chunk = S.batch_size(S.default_chunk_size(), r.size, jax.device_count())
-        fn, _ = S._compiled(EvaluateOptions(), 2, chunk)  # the one the sweep used (memoised)
+        fn, _ = S.compiled_evaluator(EvaluateOptions(), 2, chunk)  # the one the sweep used (memoised)
         shardings = jax.tree_util.tree_leaves(fn.input_shardings) + jax.tree_util.tree_leaves(
             fn.output_shardings
         )
@@ -75,7 +76,7 @@ WORKER = textwrap.dedent(
             "devices": r.devices,
             "sharding_devices": sorted({len(s.device_set) for s in shardings}),
             "compile_seconds": r.compile_seconds,
-            "stats": {n: S._STATS[n] - before[n] for n in S._STATS},
+            "stats": {n: v - before[n] for n, v in cache.stats().items()},
         })
     print("RESULT " + json.dumps(out))
     """

@@ -298,7 +298,7 @@ def test_cli_bad_spec_subprocess(tmp_path):
 
 
 def test_parse_axis_spec():
-    from jaxgrasp.sweep_cli import parse_axis_spec
+    from jaxgrasp.cli.sweep import parse_axis_spec
 
     np.testing.assert_allclose(parse_axis_spec("--x", "1e-3:5e-3:5"), [1e-3, 2e-3, 3e-3, 4e-3, 5e-3])
     np.testing.assert_array_equal(parse_axis_spec("--x", "0,0.1, 0.2"), [0.0, 0.1, 0.2])

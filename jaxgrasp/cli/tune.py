@@ -13,9 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import UsageError, _add_grasp_source, load_grasp, parse_number
+from ..fields import TUNABLE
+from .common import UsageError, add_grasp_source, grasp_source, load_grasp, parse_number
 
-__all__ = ["add_tune_parser", "parse_bounds"]
+__all__ = ["add_parser", "run", "parse_bounds"]
 
 
 def parse_bounds(items) -> dict:
@@ -41,9 +42,9 @@ def parse_bounds(items) -> dict:
     return out
 
 
-def add_tune_parser(sub) -> None:
+def add_parser(sub) -> None:
     """Add the ``tune`` command to the ``jaxgrasp`` sub-parsers."""
-    from .tune import METHODS, TUNABLE
+    from ..tune import METHODS
 
     sp = sub.add_parser(
         "tune",
@@ -62,7 +63,7 @@ def add_tune_parser(sub) -> None:
             "initial_deformation:shared --bounds initial_deformation=0.001:0.005 --out tuned.toml"
         ),
     )
-    _add_grasp_source(sp)
+    add_grasp_source(sp)
     sp.add_argument(
         "--param",
         action="append",
@@ -89,14 +90,36 @@ def add_tune_parser(sub) -> None:
     )
     sp.add_argument("--no-plot", action="store_true", help="do not write the .png plot")
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    sp.set_defaults(func=_cmd_tune)
+    sp.set_defaults(func=run)
 
 
-def _cmd_tune(args) -> int:
-    from .evaluate import EvaluateOptions
-    from .gripfile import save
-    from .tune import plot_history, tune
+def run(args) -> int:
+    """Tune the grasp of the command line; write it (and a plot) and print one summary line."""
+    from ..evaluate import EvaluateOptions
+    from ..tune import tune
 
+    out = _check_options(args)
+    bounds = parse_bounds(args.bounds)
+    params = args.param or ["initial_deformation"]
+    grasp = load_grasp(args, overrides=False)
+    source = grasp_source(args)
+    options = EvaluateOptions(smooth_min_temperature=args.smooth_min_temperature)
+    progress = _progress_printer(args.quiet)
+    res = tune(grasp, params, bounds, maxiter=args.maxiter, options=options, method=args.method, callback=progress)
+    _write_outputs(res, out, None if args.no_plot else f"jaxgrasp tune: {source}")
+    tuned = "; ".join(f"{k} = {_fmt(v)}" for k, v in res.params.items() if k != "positions")
+    if "positions" in res.params:
+        tuned = (tuned + "; " if tuned else "") + "positions moved"
+    print(
+        f"tune {source}: value {res.initial_value:.6e} J -> {res.value:.6e} J "
+        f"(x{res.gain:.4f}, {res.iterations} iterations, {res.status}); {tuned}; wrote {out}"
+        + ("" if args.no_plot else f", {out.with_suffix('.png')}")
+    )
+    return 0
+
+
+def _check_options(args) -> Path:
+    """Reject a bad ``--out``, ``--maxiter`` or ``--smooth-min-temperature``; the out path."""
     out = Path(args.out)
     if out.suffix.lower() not in (".toml", ".json"):
         raise UsageError(f"--out {str(out)!r}: the tuned grasp file must end in .toml or .json")
@@ -107,16 +130,15 @@ def _cmd_tune(args) -> int:
     t = args.smooth_min_temperature
     if t is not None and not (math.isfinite(t) and t > 0):
         raise UsageError(f"--smooth-min-temperature must be a finite number > 0 (J), got {t}")
-    bounds = parse_bounds(args.bounds)
-    params = args.param or ["initial_deformation"]
-    grasp = load_grasp(args, overrides=False)
-    source = args.file or f"preset {args.preset}"
-    options = EvaluateOptions(smooth_min_temperature=t)
+    return out
 
+
+def _progress_printer(quiet: bool):
+    """``callback(iteration, value, u)`` of :func:`jaxgrasp.tune`: one line per iteration."""
     t0 = time.perf_counter()
 
     def progress(it, value, _u):
-        if not args.quiet:
+        if not quiet:
             el = time.perf_counter() - t0
             note = " (includes compilation)" if it == 1 else ""
             print(
@@ -125,24 +147,22 @@ def _cmd_tune(args) -> int:
                 flush=True,
             )
 
-    res = tune(grasp, params, bounds, maxiter=args.maxiter, options=options, method=args.method, callback=progress)
+    return progress
+
+
+def _write_outputs(res, out: Path, title: str | None) -> None:
+    """Write the tuned grasp to ``out`` and (with a ``title``) its history plot beside it."""
+    from ..gripfile import save
+    from ..tune import plot_history
+
     try:
         if out.parent and not out.parent.exists():
             out.parent.mkdir(parents=True, exist_ok=True)
         save(res.grasp, out)
-        if not args.no_plot:
-            plot_history(res, out.with_suffix(".png"), title=f"jaxgrasp tune: {source}")
+        if title is not None:
+            plot_history(res, out.with_suffix(".png"), title=title)
     except OSError as exc:
         raise UsageError(f"cannot write {str(out)!r}: {exc.strerror or exc}") from None
-    tuned = "; ".join(f"{k} = {_fmt(v)}" for k, v in res.params.items() if k != "positions")
-    if "positions" in res.params:
-        tuned = (tuned + "; " if tuned else "") + "positions moved"
-    print(
-        f"tune {source}: value {res.initial_value:.6e} J -> {res.value:.6e} J "
-        f"(x{res.gain:.4f}, {res.iterations} iterations, {res.status}); {tuned}; wrote {out}"
-        + ("" if args.no_plot else f", {out.with_suffix('.png')}")
-    )
-    return 0
 
 
 def _fmt(v) -> str:

@@ -1,0 +1,98 @@
+"""What every ``jaxgrasp`` sub-command shares: one-line errors, numbers, the grasp to use.
+
+Every error in the input (bad file, bad value, bad option) is a :class:`UsageError` (or a
+:class:`~jaxgrasp.validation.GraspValueError`), which :func:`jaxgrasp.cli.main` prints as
+one line ``jaxgrasp: error: ...`` on stderr, exiting with :data:`EXIT_USAGE`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from ..fields import FIELD, SWEEPABLE
+from ..presets import PRESETS
+
+__all__ = [
+    "EXIT_USAGE",
+    "UsageError",
+    "Parser",
+    "parse_number",
+    "OVERRIDES",
+    "add_grasp_source",
+    "add_overrides",
+    "grasp_source",
+    "load_grasp",
+]
+
+EXIT_USAGE = 2
+"""Exit status of a command whose input is wrong."""
+
+OVERRIDES = SWEEPABLE
+"""Fields one number sets for the whole grasp (every contact at once), in option order:
+``jaxgrasp evaluate --young-modulus PA ...`` and the sweep's axes."""
+
+
+class UsageError(Exception):
+    """A problem with the command line or its input; reported in one line, exit 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one :class:`UsageError` line, not usage + message."""
+
+    def error(self, message):
+        raise UsageError(f"{message} (see '{self.prog} --help')")
+
+
+def parse_number(option: str, text: str, what: str = "value") -> float:
+    """``text`` as a finite float; a :class:`UsageError` naming ``option`` otherwise."""
+    t = text.strip()
+    try:
+        x = float(t)
+    except ValueError:
+        raise UsageError(f"{option}: {what} {t!r} is not a number") from None
+    if not math.isfinite(x):
+        raise UsageError(f"{option}: {what} {t!r} must be finite")
+    return x
+
+
+def add_grasp_source(p: argparse.ArgumentParser) -> None:
+    """The grasp to use: a positional ``file`` or ``--preset NAME``."""
+    p.add_argument("file", nargs="?", help="grasp file (.toml or .json, SI units)")
+    p.add_argument("--preset", choices=list(PRESETS), help="one of the paper's grasps instead of a file")
+
+
+def add_overrides(p: argparse.ArgumentParser) -> None:
+    """``--young-modulus PA`` etc.: one number for a field of the whole grasp (:data:`OVERRIDES`)."""
+    for name in OVERRIDES:
+        field = FIELD[name]
+        p.add_argument(field.option, dest=name, type=float, metavar=field.metavar, help=field.help)
+
+
+def grasp_source(args) -> str:
+    """The grasp's name in messages: the file, or ``preset cube``."""
+    return args.file or f"preset {args.preset}"
+
+
+def load_grasp(args, overrides: bool = True):
+    """The grasp named on the command line (file or preset), with overrides applied."""
+    import numpy as np
+
+    from ..grasp import Grasp
+    from ..gripfile import load
+    from ..validation import check_grasp_inputs
+
+    if (args.file is None) == (args.preset is None):
+        if args.file is None and getattr(args, "default_preset", None):
+            args.preset = args.default_preset
+        else:
+            raise UsageError(f"give either a grasp FILE or --preset {'|'.join(PRESETS)}")
+    grasp = load(args.file) if args.file is not None else PRESETS[args.preset]()
+    if not overrides:
+        return grasp
+    fields = grasp.to_numpy()
+    for name in OVERRIDES:
+        value = getattr(args, name, None)
+        if value is not None:
+            fields[name] = np.full_like(fields[name], value)
+    return Grasp(**check_grasp_inputs(**fields))

@@ -1,0 +1,255 @@
+"""``jaxgrasp sweep``: evaluate a grasp over a grid of parameters; write npz, csv and a plot.
+
+Axis specs (SI units): ``start:stop:count`` (inclusive ``linspace``), a comma list
+``0,0.1,0.2`` or a single number. With no axis at all the paper's Fig. 6 grid is swept
+(E 2e5..1e6 Pa x 9, initial deformation 1..5 mm x 41); with no grasp, preset ``cube``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..fields import FIELD
+from ..status import NO_BOUNDARY
+from .common import OVERRIDES, UsageError, add_grasp_source, grasp_source, load_grasp, parse_number
+
+__all__ = ["add_parser", "run", "parse_axis_spec", "auto_chunk", "AXES", "PAPER_AXES"]
+
+AXES = OVERRIDES
+"""The parameters a sweep can vary (:data:`jaxgrasp.fields.SWEEPABLE`), in option order."""
+
+PAPER_AXES = {
+    "young_modulus": "2e5:1e6:9",
+    "initial_deformation": "1e-3:5e-3:41",
+}
+"""The grid of the paper's Fig. 6 (used when no axis is given)."""
+
+MIN_AUTO_CHUNK = 64
+"""The smallest batch :func:`auto_chunk` picks (smaller ones cost more per grasp)."""
+AUTO_CHUNKS = 10
+"""About this many progress steps on a long sweep (:func:`auto_chunk`)."""
+
+FIG6_TITLE = "Fig. 6: evaluation value for each Young's modulus and initial deformation (cube)"
+
+
+def parse_axis_spec(option: str, spec: str) -> np.ndarray:
+    """Parse ``start:stop:count``, ``a,b,c`` or ``x`` into a 1-D float array.
+
+    Raises:
+        UsageError: malformed spec (one line, naming the option).
+    """
+    text = spec.strip()
+    if not text:
+        raise UsageError(f"{option}: empty value; give START:STOP:COUNT, a comma list or a number")
+    if ":" in text:
+        return _parse_range(option, spec, text)
+    items = text.split(",")
+    if any(not s.strip() for s in items):
+        raise UsageError(f"{option}: list {spec!r} has an empty item")
+    return np.asarray([parse_number(option, s) for s in items], dtype=np.float64)
+
+
+def _parse_range(option: str, spec: str, text: str) -> np.ndarray:
+    parts = text.split(":")
+    if len(parts) != 3:
+        raise UsageError(f"{option}: range {spec!r} must be START:STOP:COUNT (e.g. 1e-3:5e-3:41)")
+    start = parse_number(option, parts[0], "start")
+    stop = parse_number(option, parts[1], "stop")
+    c = parts[2].strip()
+    try:
+        count = int(c)
+    except ValueError:
+        raise UsageError(f"{option}: count {c!r} of range {spec!r} must be a whole number") from None
+    if count < 1:
+        raise UsageError(f"{option}: range {spec!r} is empty (count {count}); the count must be >= 1")
+    if count == 1 and start != stop:
+        raise UsageError(f"{option}: range {spec!r} has count 1 but start != stop; give a single number")
+    return np.linspace(start, stop, count)
+
+
+def add_parser(sub) -> None:
+    """Add the ``sweep`` command to the ``jaxgrasp`` sub-parsers."""
+    sp = sub.add_parser(
+        "sweep",
+        help="evaluate a grasp over a grid of parameters (npz, csv, png)",
+        description=(
+            "Evaluate a grasp over the Cartesian grid of the given parameter axes; write "
+            "DIR/sweep.npz, DIR/sweep.csv (one row per grid point, SI units) and DIR/sweep.png."
+        ),
+        epilog=(
+            "SPEC is START:STOP:COUNT (inclusive), a comma list or a number, in SI units. "
+            "Without a grasp: preset cube. Without any axis: the paper's Fig. 6 grid "
+            f"(--young-modulus {PAPER_AXES['young_modulus']} "
+            f"--initial-deformation {PAPER_AXES['initial_deformation']}). "
+            "Example: jaxgrasp sweep --preset prism --young-modulus 2e5:1e6:5 "
+            "--initial-deformation 1e-3:5e-3:41 --mass 0,0.1,0.2 --out out/"
+        ),
+    )
+    add_grasp_source(sp)
+    for name in AXES:
+        field = FIELD[name]
+        sp.add_argument(field.option, dest=name, metavar="SPEC", help=f"{field.help} (axis spec)")
+    sp.add_argument(
+        "--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)"
+    )
+    sp.add_argument(
+        "--chunk-size",
+        type=int,
+        default=None,
+        metavar="N",
+        help=(
+            "grid points per compiled batch (default: about a tenth of the grid, "
+            "at most 64 per CPU device, 1024 per GPU)"
+        ),
+    )
+    sp.add_argument("--no-plot", action="store_true", help="do not write sweep.png")
+    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    sp.set_defaults(func=run, default_preset="cube")
+
+
+def auto_chunk(total: int, cap: int = 64) -> int:
+    """About a tenth of the grid, at least 64, at most ``cap`` (jaxgrasp.sweep.default_chunk_size)."""
+    chunk = min(cap, max(MIN_AUTO_CHUNK, math.ceil(total / AUTO_CHUNKS)))
+    nchunks = math.ceil(total / chunk)
+    return max(1, math.ceil(total / nchunks))  # same number of chunks, least padding
+
+
+# --------------------------------------------------------------------------- the command
+
+
+def run(args) -> int:
+    """Sweep the grasp of the command line; write the files and print one summary line."""
+    from ..sweep import sweep
+
+    axes, paper = _parse_axes(args)
+    if args.chunk_size is not None and args.chunk_size < 1:
+        raise UsageError(f"--chunk-size must be >= 1, got {args.chunk_size}")
+    grasp = load_grasp(args, overrides=False)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {str(out)!r} exists and is not a folder")
+
+    plan = _plan_chunks(int(np.prod([a.size for a in axes.values()])), args.chunk_size)
+    progress = _Progress(plan, show=not args.quiet and plan.nchunks > 1)
+    progress.start()
+    # validation errors (GraspValueError) surface before any compilation
+    result = sweep(grasp, chunk_size=plan.chunk, progress=progress, **axes)
+    wall = time.perf_counter() - progress.t_start
+
+    title = f"jaxgrasp sweep: {grasp_source(args)}"
+    if paper and args.preset == "cube" and args.file is None:
+        title = FIG6_TITLE
+    written = _write_outputs(result, out, None if args.no_plot else title)
+    print(_summary_line(result, grasp_source(args), wall, out, written))
+    return 0
+
+
+def _parse_axes(args) -> tuple[dict[str, np.ndarray], bool]:
+    """The axes given on the command line, or the paper's; (axes, whether the paper's)."""
+    given = {n: getattr(args, n) for n in AXES if getattr(args, n) is not None}
+    paper = not given
+    specs = dict(PAPER_AXES) if paper else given
+    return {n: parse_axis_spec(FIELD[n].option, s) for n, s in specs.items()}, paper
+
+
+@dataclasses.dataclass(frozen=True)
+class _Plan:
+    total: int  # grid points
+    chunk: int  # grid points per compiled batch, a multiple of n_devices
+    nchunks: int
+    n_devices: int
+
+
+def _plan_chunks(total: int, chunk_size: int | None) -> _Plan:
+    """The batch of ``--chunk-size`` (default :func:`auto_chunk`), a multiple of the devices."""
+    import jax
+
+    from ..sweep import batch_size, default_chunk_size
+
+    chunk = chunk_size if chunk_size is not None else auto_chunk(total, default_chunk_size())
+    n_devices = jax.device_count()
+    chunk = batch_size(chunk, total, n_devices)
+    return _Plan(total, chunk, math.ceil(total / chunk), n_devices)
+
+
+class _Progress:
+    """``progress(done, total)`` of :func:`jaxgrasp.sweep.sweep`: one line per chunk on stderr."""
+
+    def __init__(self, plan: _Plan, show: bool):
+        self.plan = plan
+        self.show = show
+        self.t_start = time.perf_counter()
+
+    def start(self) -> None:
+        """The line before the first chunk (how many points, chunks and devices)."""
+        self.t_start = time.perf_counter()
+        if self.show:
+            p = self.plan
+            on = f" on {p.n_devices} devices" if p.n_devices > 1 else ""
+            self._say(
+                f"jaxgrasp: sweeping {p.total} points in {p.nchunks} chunks of {p.chunk}{on} "
+                "(the first chunk includes compilation)"
+            )
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.show:
+            k = math.ceil(done / self.plan.chunk)
+            el = time.perf_counter() - self.t_start
+            self._say(f"jaxgrasp: chunk {k}/{self.plan.nchunks} ({done}/{total} points), elapsed {el:.1f} s")
+
+    @staticmethod
+    def _say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+
+def _write_outputs(result, out: Path, title: str | None) -> list[str]:
+    """Write ``sweep.npz``, ``sweep.csv`` and (with a ``title``) ``sweep.png``; their names."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"cannot create --out folder {str(out)!r}: {exc.strerror}") from None
+    result.to_npz(out / "sweep.npz")
+    result.to_csv(out / "sweep.csv")
+    written = ["sweep.npz", "sweep.csv"]
+    if title is not None:
+        from ..plots import plot_sweep
+
+        plot_sweep(result, out / "sweep.png", title=title)
+        written.append("sweep.png")
+    return written
+
+
+def _fmt_param(name: str, x: float) -> str:
+    unit = FIELD[name].unit
+    return f"{name}={x:.6g}" + (f" {unit}" if unit else "")
+
+
+def _best_text(result) -> str:
+    best = result.best()
+    if best is None:
+        return "best: none (no converged point)"
+    where = ", ".join(_fmt_param(n, best[n]) for n in result.axes)
+    lim = (
+        f"{best['limiting_kind']} of contact {best['limiting_contact']}"
+        if best["limiting_contact"] != NO_BOUNDARY
+        else best["status"]
+    )
+    return f"best {best['value']:.6e} J at {where} ({lim})"
+
+
+def _summary_line(result, source: str, wall: float, out: Path, written: list[str]) -> str:
+    c = result.counts()
+    shape = " x ".join(f"{len(a)} {n}" for n, a in result.axes.items())
+    return (
+        f"sweep {source}: {result.size} points ({shape}); "
+        f"stable {c['stable']}, unstable {c['unstable']}, infeasible {c['infeasible']}, "
+        f"not_converged {c['not_converged']}; {_best_text(result)}; "
+        f"wall {wall:.1f} s (compile {result.compile_seconds:.1f} s, run {result.run_seconds:.1f} s); "
+        f"wrote {out}/{{{','.join(written)}}}"
+    )
