@@ -43,17 +43,9 @@ def cube(
         gravity: gravitational acceleration, m/s^2, object frame.
     """
     h = SIDE / 2
-    return Grasp.create(
-        positions=[[h, 0.0, 0.0], [-h, 0.0, 0.0]],
-        normals=[[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]],
-        initial_deformation=initial_deformation,
-        radius=FINGERTIP_RADIUS,
-        young_modulus=young_modulus,
-        friction=FRICTION,
-        max_force=MAX_FORCE,
-        mass=mass,
-        gravity=gravity,
-    )
+    positions = [[h, 0.0, 0.0], [-h, 0.0, 0.0]]
+    normals = [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]]
+    return _paper_grasp(positions, normals, young_modulus, initial_deformation, mass, gravity)
 
 
 def prism(
@@ -82,9 +74,16 @@ def prism(
     """
     a = SIDE / (2.0 * math.sqrt(3.0))  # inradius, m
     s = math.sqrt(3.0) / 2.0
+    positions = [[a, 0.0, 0.0], [-a / 2, SIDE / 4, 0.0], [-a / 2, -SIDE / 4, 0.0]]
+    normals = [[1.0, 0.0, 0.0], [-0.5, s, 0.0], [-0.5, -s, 0.0]]
+    return _paper_grasp(positions, normals, young_modulus, initial_deformation, mass, gravity)
+
+
+def _paper_grasp(positions, normals, young_modulus, initial_deformation, mass, gravity) -> Grasp:
+    """A grasp with the paper's fingertips (radius, friction, force limit)."""
     return Grasp.create(
-        positions=[[a, 0.0, 0.0], [-a / 2, SIDE / 4, 0.0], [-a / 2, -SIDE / 4, 0.0]],
-        normals=[[1.0, 0.0, 0.0], [-0.5, s, 0.0], [-0.5, -s, 0.0]],
+        positions=positions,
+        normals=normals,
         initial_deformation=initial_deformation,
         radius=FINGERTIP_RADIUS,
         young_modulus=young_modulus,

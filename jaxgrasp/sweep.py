@@ -48,7 +48,7 @@ from .evaluate import evaluate as _evaluate_one
 from .fields import FIELD, SWEEPABLE, Field
 from .grasp import Grasp
 from .status import BoundaryKind, GraspStatus
-from .validation import GraspValueError, _as_float_array, check_grasp_inputs, format_value
+from .validation import GraspValueError, as_float_array, check_grasp_inputs, format_value
 
 __all__ = [
     "sweep",
@@ -333,7 +333,7 @@ def _check_axis(name: str, values: Any) -> np.ndarray:
         raise GraspValueError(f"cannot sweep unknown parameter {name!r}; valid parameters: {valid}")
     field = PARAMETERS[name]
     unit = f" {field.unit}" if field.unit else ""
-    a = _as_float_array(f"sweep axis {name}", values)
+    a = as_float_array(f"sweep axis {name}", values)
     if a.ndim > 1:
         raise GraspValueError(
             f"sweep axis {name} must be a number or a 1-D sequence of numbers, got shape {a.shape}"

@@ -14,9 +14,9 @@ from typing import Any
 import jax
 import numpy as np
 
-from .fields import DEFAULT_GRAVITY, DEFAULT_MASS, FIELD, FIELDS, NAMES, PER_CONTACT
+from .fields import FIELD, FIELDS, NAMES, PER_CONTACT
 
-__all__ = ["GraspValueError", "check_grasp_inputs", "format_value"]
+__all__ = ["GraspValueError", "check_grasp_inputs", "format_value", "as_float_array"]
 
 NORMAL_MIN_NORM = 1e-12
 """A normal shorter than this (absolute) is treated as zero."""
@@ -65,7 +65,7 @@ def _is_tracer(value: Any) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
 
 
-def _as_float_array(name: str, value: Any) -> np.ndarray:
+def as_float_array(name: str, value: Any) -> np.ndarray:
     """Convert to float64, rejecting non-numeric, boolean, complex and ragged input."""
     try:
         raw = np.asarray(value)
@@ -109,55 +109,34 @@ def _index_name(name: str, original_ndim: int, i: int) -> str:
     return f"{name}[{i}]" if original_ndim > 0 else name
 
 
-def check_grasp_inputs(
-    *,
-    positions,
-    normals,
-    initial_deformation,
-    radius,
-    young_modulus,
-    friction,
-    max_force,
-    mass=DEFAULT_MASS,
-    gravity=DEFAULT_GRAVITY,
-) -> dict[str, np.ndarray]:
+def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     """Validate and normalise the fields of one grasp (concrete values only).
 
-    Args:
-        positions: ``(N, 3)`` contact positions, m, object frame.
-        normals: ``(N, 3)`` outward surface normals (any non-zero length).
-        initial_deformation: scalar or ``(N,)``, m, each in ``(0, radius)``.
-        radius: scalar or ``(N,)``, m, ``> 0``.
-        young_modulus: scalar or ``(N,)``, Pa, ``> 0``.
-        friction: scalar or ``(N,)``, dimensionless, ``> 0``.
-        max_force: scalar or ``(N,)``, N, ``> 0``.
-        mass: scalar, kg, ``>= 0``.
-        gravity: ``(3,)``, m/s^2.
-
-    (Units, shapes and ranges are those of :data:`jaxgrasp.fields.FIELDS`.)
+    Keyword arguments are the :class:`Grasp` fields by name, with the units, shapes and
+    ranges of :data:`jaxgrasp.fields.FIELDS`: ``positions`` ``(N, 3)`` m; ``normals``
+    ``(N, 3)`` (any non-zero length); ``initial_deformation`` m in ``(0, radius)``,
+    ``radius`` m, ``young_modulus`` Pa, ``friction``, ``max_force`` N, each a scalar or
+    ``(N,)`` and ``> 0``; ``mass`` kg ``>= 0`` and ``gravity`` ``(3,)`` m/s^2 may be left
+    out (defaults ``0`` and ``(0, 0, -9.81)``).
 
     Returns:
         A dict with exactly the :class:`Grasp` field names: float64 arrays, per-fingertip
         fields broadcast to ``(N,)``, normals of unit length.
 
     Raises:
-        GraspValueError: a field is not numeric, has the wrong shape, is not finite or
-            breaks a physical rule; or a value is a JAX tracer (use ``Grasp(...)`` or
-            ``grasp.replace(...)`` inside ``jit``).
+        GraspValueError: a field is unknown, missing, not numeric, has the wrong shape, is
+            not finite or breaks a physical rule; or a value is a JAX tracer (use
+            ``Grasp(...)`` or ``grasp.replace(...)`` inside ``jit``).
     """
-    given = dict(
-        positions=positions,
-        normals=normals,
-        initial_deformation=initial_deformation,
-        radius=radius,
-        young_modulus=young_modulus,
-        friction=friction,
-        max_force=max_force,
-        mass=mass,
-        gravity=gravity,
-    )
+    unknown = sorted(set(given) - set(NAMES))
+    if unknown:
+        raise GraspValueError(f"unknown grasp field {unknown[0]!r}; the fields are {', '.join(NAMES)}")
+    missing = [f.name for f in FIELDS if f.name not in given and f.default is None]
+    if missing:
+        raise GraspValueError(f"grasp field {missing[0]!r} is missing")
+    given = {f.name: given.get(f.name, f.default) for f in FIELDS}
     _reject_tracers(given)
-    arrs = {name: _as_float_array(name, value) for name, value in given.items()}
+    arrs = {name: as_float_array(name, value) for name, value in given.items()}
     n = _check_shapes(arrs)
     for name in NAMES:
         _check_finite(name, arrs[name])

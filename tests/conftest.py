@@ -31,17 +31,7 @@ TESTS_DIR = Path(__file__).resolve().parent
 if str(TESTS_DIR) not in sys.path:  # so that the Ipopt worker can import the reference
     sys.path.insert(0, str(TESTS_DIR))
 
-GRASP_FIELDS = (
-    "positions",
-    "normals",
-    "initial_deformation",
-    "radius",
-    "young_modulus",
-    "friction",
-    "max_force",
-    "mass",
-    "gravity",
-)
+GRASP_FIELDS = jaxgrasp.fields.NAMES
 
 # Largest batch per compiled call. The batch size for each N is fixed by the first call
 # with that N (its grasps in balanced chunks of at most CHUNK), so every N compiles once.
