@@ -58,8 +58,6 @@ with ``projection_box``. On the cube's shared deformation (optimum on a kink) Sc
 L-BFGS-B stops in ~7 iterations, ``jaxopt.LBFGSB`` needs ~30 (short steps near the kink)
 and compiles its update separately, and projected gradient oscillates around the kink."""
 
-STATUSES = ("converged", "stalled", "max_iterations", "line_search_failed")
-
 
 # ----------------------------------------------------------------------------- specs
 
