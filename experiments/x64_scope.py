@@ -98,10 +98,11 @@ def main() -> None:
         print(f"{name:<42} {cells[0]:<34} {cells[1]}")
     print(
         "\nDecision: JAX fixes dtypes when it traces, in the caller's mode. With a scoped x64, "
-        "every snippet where the user's own jit/vmap/grad traces evaluate (or the user builds "
-        "arrays) computes in float32 or fails, so float64 by default needs the process-wide "
-        "flag. jaxgrasp keeps it, documents it at the top of the README, and leaves an "
-        "explicit JAX_ENABLE_X64 in the environment alone (tests/test_x64.py)."
+        "the user's own jax.jit and jax.grad of evaluate mix float32 and float64 and fail "
+        "(plain calls and vmap work), and the user's own arrays are float32; float64 by "
+        "default therefore needs the process-wide flag. jaxgrasp keeps it, documents it at "
+        "the top of the README, and leaves an explicit JAX_ENABLE_X64 in the environment "
+        "alone (tests/test_x64.py)."
     )
 
 
