@@ -48,6 +48,7 @@ import numpy as np
 from . import result as R
 from . import solver as S
 from .grasp import Grasp
+from .lanes import solve_lanes
 from .model import constraint_margins, energy_scale, model_params, potential_energy
 from .result import Evaluation
 from .units import M_TO_MM, MJ_TO_J
@@ -323,7 +324,7 @@ def _solve_programs(p, prob: _Problem, options: EvaluateOptions) -> Programs:
     theta = jax.tree_util.tree_map(
         lambda a: jnp.broadcast_to(a, (num_lanes,) + jnp.shape(a)), (ps, prob.lever, prob.scale)
     )
-    lanes = S.solve_lanes(_lane_f, _lane_g, theta, z0s, masks, nu0s, found, sopt)
+    lanes = solve_lanes(_lane_f, _lane_g, theta, z0s, masks, nu0s, found, sopt)
     return Programs(
         equilibrium=eq,
         boundary=lanes,

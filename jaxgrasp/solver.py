@@ -23,6 +23,10 @@ need different iteration counts do not wait on nested loops. ``steps`` counts bo
 Each lane ends with a status and its KKT residuals at ``(x, lam, nu)``:
 stationarity ``|grad f + nu grad h - sum lam grad g|_inf``, feasibility
 ``max(|h|, max(-g_i, 0))`` and complementarity ``max |lam_i g_i|``.
+
+:func:`solve` runs one lane; its pieces :func:`init`, :func:`step`, :func:`running` and
+:func:`to_result` are public so that the work queue of :mod:`jaxgrasp.lanes`, which runs
+many lanes with early exit, can drive them.
 """
 
 from __future__ import annotations
@@ -36,8 +40,12 @@ import jax.numpy as jnp
 __all__ = [
     "SolverOptions",
     "SolverResult",
+    "SolverState",
     "solve",
-    "solve_lanes",
+    "init",
+    "step",
+    "running",
+    "to_result",
     "CONVERGED",
     "INFEASIBLE",
     "NOT_CONVERGED",
@@ -76,7 +84,7 @@ class SolverOptions:
             gradient (inf-norm) is below this times the violation.
         max_step: largest Newton step (inf-norm, scaled variables).
         line_search_steps: number of step lengths ``1, 1/2, 1/4, ...`` tried per Newton step.
-        slot_fraction: :func:`solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
+        slot_fraction: :func:`jaxgrasp.lanes.solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
             flight (finished lanes hand their slot to the next), at most ``max_slots``.
         max_slots: upper bound on those slots. A loop step over a few hundred lanes keeps
             its working set in the CPU caches; over thousands it runs at memory speed and
@@ -126,16 +134,34 @@ class SolverResult:
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class _State:
+class SolverState:
+    """Loop state of one lane (leading batch axes under ``vmap``): ``n`` variables, ``m``
+    constraint rows, scaled units.
+
+    Attributes:
+        x: ``(n,)`` current point.
+        lam: ``(m,)`` inequality multipliers, ``>= 0`` (zero at the equality's index).
+        nu: ``()`` equality multiplier.
+        rho: ``()`` penalty.
+        eq_mask: ``(m,)`` one-hot equality selector, or zeros.
+        inner: ``()`` int32, Newton steps since the last multiplier update.
+        prev_viol: ``()`` constraint violation at the last multiplier update (``inf`` before
+            the first).
+        steps: ``()`` int32, Newton steps plus multiplier updates taken.
+        status: ``()`` int32 lane status, :data:`NOT_CONVERGED` while running.
+        stationarity, feasibility, complementarity: ``()`` KKT residuals at the last
+            multiplier update (``inf`` before the first).
+    """
+
     x: Any
     lam: Any
     nu: Any
     rho: Any
     eq_mask: Any
-    inner: Any  # Newton steps since the last multiplier update
+    inner: Any
     prev_viol: Any
     steps: Any
-    status: Any  # NOT_CONVERGED while running
+    status: Any
     stationarity: Any
     feasibility: Any
     complementarity: Any
@@ -155,11 +181,12 @@ def _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask):
     return f(x) + nu * h + 0.5 * rho * h * h + ineq
 
 
-def _init(x0, eq_mask, nu0, active, o: SolverOptions) -> _State:
+def init(x0, eq_mask, nu0, active, o: SolverOptions) -> SolverState:
+    """The state of a lane before its first step (arguments as :func:`solve`)."""
     x0 = jnp.asarray(x0)
     dtype = x0.dtype
     eq_mask = jnp.asarray(eq_mask, dtype)
-    return _State(
+    return SolverState(
         x=x0,
         lam=jnp.zeros(eq_mask.shape, dtype),
         nu=jnp.asarray(nu0, dtype),
@@ -182,7 +209,7 @@ def _tolerances(dtype, o: SolverOptions):
     return max(o.tol, 1e3 * eps), max(o.infeasible_tol, 1e4 * eps), 100.0 * eps
 
 
-def _step(f, g, s: _State, o: SolverOptions) -> _State:
+def step(f, g, s: SolverState, o: SolverOptions) -> SolverState:
     """One loop step of one lane: a Newton step on phi, or a multiplier update once the
     inner solve is done. A finished lane is returned unchanged."""
     eq_mask = s.eq_mask
@@ -192,7 +219,7 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
     def phi(x, lam, nu, rho):
         return _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask)
 
-    def newton_step(s: _State, gphi, needs_step):
+    def newton_step(s: SolverState, gphi, needs_step):
         hmat = jax.hessian(phi)(s.x, s.lam, s.nu, s.rho)
         hmat = 0.5 * (hmat + hmat.T)
         evals, evecs = jnp.linalg.eigh(hmat)
@@ -240,7 +267,7 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
         inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
         return dataclasses.replace(s, x=x_new, inner=inner)
 
-    def multiplier_update(s: _State, gphi, needs_step):
+    def multiplier_update(s: SolverState, gphi, needs_step):
         gx = g(s.x)
         is_eq = eq_mask > 0
         h = jnp.sum(eq_mask * gx)
@@ -276,7 +303,7 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
             complementarity=comp,
         )
 
-    def gradient_and_inner_done(s: _State):
+    def gradient_and_inner_done(s: SolverState):
         gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
         # Inexact inner solves: while the violation is large, a rough minimiser of phi
         # is enough to update the multipliers; the tolerance tightens to tol as the
@@ -292,22 +319,24 @@ def _step(f, g, s: _State, o: SolverOptions) -> _State:
     # (updated) inner solve is not: the sequence of updates and the step count of a lane
     # are those of one kind of update per loop step, but under vmap (where both kinds are
     # computed for every lane) a lane no longer spends a whole loop step on an update.
-    running = _running(s, o)
+    is_running = running(s, o)
     gphi, inner_done = gradient_and_inner_done(s)
-    update = running & inner_done
+    update = is_running & inner_done
     s_upd = multiplier_update(s, gphi, update)
     s1 = select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
     gphi1, inner_done1 = gradient_and_inner_done(s1)
-    newton = running & _running(s1, o) & ~inner_done1
+    newton = is_running & running(s1, o) & ~inner_done1
     s_newton = newton_step(s1, gphi1, newton)
     return select(newton, dataclasses.replace(s_newton, steps=s1.steps + 1), s1)
 
 
-def _running(s: _State, o: SolverOptions):
+def running(s: SolverState, o: SolverOptions):
+    """``()`` bool: whether the lane still steps (not finished, step budget left)."""
     return (s.status == NOT_CONVERGED) & (s.steps < o.max_steps)
 
 
-def _result(f, s: _State) -> SolverResult:
+def to_result(f, s: SolverState) -> SolverResult:
+    """The :class:`SolverResult` of a lane's final state (``f`` as in :func:`solve`)."""
     return SolverResult(
         x=s.x,
         lam=s.lam,
@@ -330,7 +359,9 @@ def solve(
     options: SolverOptions = SolverOptions(),
     active=True,
 ) -> SolverResult:
-    """Solve one lane (``vmap`` it for many, or use :func:`solve_lanes`).
+    """Solve one lane (``vmap`` it for many, or use :func:`jaxgrasp.lanes.solve_lanes`).
+
+    ``init``, then ``step`` while ``running``, then ``to_result``.
 
     Args:
         f: objective, ``(n,) -> ()``.
@@ -341,131 +372,6 @@ def solve(
         options: :class:`SolverOptions`.
         active: ``False`` skips the lane (it ends at once with status :data:`NO_START`).
     """
-    s = _init(x0, eq_mask, nu0, active, options)
-    s = jax.lax.while_loop(lambda s: _running(s, options), lambda s: _step(f, g, s, options), s)
-    return _result(f, s)
-
-
-def solve_lanes(
-    f: Callable,
-    g: Callable,
-    theta,
-    x0,
-    eq_mask,
-    nu0,
-    active,
-    options: SolverOptions = SolverOptions(),
-) -> SolverResult:
-    """Solve a batch of lanes with early exit of finished lanes (leading axis ``L``).
-
-    Lanes of one ``vmap`` advance in lockstep, so a plain batched loop costs
-    ``L * max(steps)`` although most lanes finish early (or never start). Here a work
-    queue keeps ``W = min(ceil(slot_fraction * L), max_slots)`` slots busy: each loop step advances
-    every slot; a slot whose lane has finished writes it back and takes the next lane
-    not yet started (active lanes only). One ``while_loop`` with static shapes, so this
-    composes with ``jit`` and ``vmap``; the cost is near ``sum(steps) + W * max(steps)``
-    lane-steps instead of ``L * max(steps)``. Each lane's result is what :func:`solve`
-    gives.
-
-    Under ``jax.vmap`` (e.g. one call per grasp, vmapped over grasps) the batch axis is
-    folded into the lane axis (``custom_vmap``): all ``B * L`` lanes share one queue
-    of ``min(ceil(slot_fraction * B * L), max_slots)`` slots, instead of ``B`` queues advancing in
-    lockstep until the slowest of them is empty. Results are the same lane by lane.
-    ``f`` and ``g`` must therefore take every lane-dependent quantity through ``theta``
-    (they must not close over traced values).
-
-    Args:
-        f: objective ``(x, theta_lane) -> ()``.
-        g: constraint margins ``(x, theta_lane) -> (m,)``.
-        theta: pytree of per-lane problem data, leading axis ``L`` (may be empty).
-        x0: ``(L, n)`` starting points.
-        eq_mask: ``(L, m)`` one-hot equality selectors (rows of zeros: no equality).
-        nu0: ``(L,)`` initial equality multipliers.
-        active: ``(L,)`` bool; inactive lanes end at once with status :data:`NO_START`.
-        options: :class:`SolverOptions`.
-    """
-
-    @jax.custom_batching.custom_vmap
-    def run(theta, x0, eq_mask, nu0, active):
-        return _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, options)
-
-    @run.def_vmap
-    def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active):
-        num_lanes = x0.shape[1] if in_batched[1] else x0.shape[0]
-
-        def flat(a, batched):
-            a = jnp.asarray(a)
-            if not batched:
-                a = jnp.broadcast_to(a, (axis_size,) + a.shape)
-            return a.reshape((axis_size * num_lanes,) + a.shape[2:])
-
-        args = (theta, x0, eq_mask, nu0, active)
-        flat_args = jax.tree_util.tree_map(flat, args, tuple(in_batched))
-        out = run(*flat_args)  # a nested vmap folds into this call in turn
-        out = jax.tree_util.tree_map(lambda a: a.reshape((axis_size, num_lanes) + a.shape[1:]), out)
-        return out, jax.tree_util.tree_map(lambda _: True, out)
-
-    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active))
-
-
-def _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
-    num_lanes = x0.shape[0]
-    width = max(1, min(num_lanes, o.max_slots, -(-int(o.slot_fraction * num_lanes * 1e6) // 1_000_000)))
-    states = jax.vmap(lambda x, m, nu, a: _init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
-    # The queue: active lanes first, in order; only those are ever loaded into a slot.
-    queue = jnp.argsort(~jnp.asarray(active), stable=True)
-    num_active = jnp.sum(jnp.asarray(active, jnp.int32))
-
-    def take(tree, idx):
-        return jax.tree_util.tree_map(lambda a: a[idx], tree)
-
-    def step_all(slots, idx):
-        th = take(theta, idx)
-        return jax.vmap(lambda s, t: _step(lambda x: f(x, t), lambda x: g(x, t), s, o))(slots, th)
-
-    def running(slots):
-        return jax.vmap(lambda s: _running(s, o))(slots)
-
-    def body(carry):
-        states, slots, idx, ptr = carry
-        slots = step_all(slots, idx)
-        states = jax.tree_util.tree_map(lambda a, b: a.at[idx].set(b), states, slots)
-        done = ~running(slots)
-        # the k-th finished slot takes queue[ptr + k], while lanes remain
-        rank = jnp.cumsum(done) - 1
-        cand = ptr + rank
-        refill = done & (cand < num_active)
-        new_idx = jnp.where(refill, queue[jnp.minimum(cand, num_lanes - 1)], idx)
-        slots = jax.tree_util.tree_map(
-            lambda a, b: jnp.where(refill.reshape((-1,) + (1,) * (a.ndim - 1)), b, a),
-            slots,
-            take(states, new_idx),
-        )
-        ptr = ptr + jnp.sum(refill)
-        return states, slots, new_idx, ptr
-
-    # The tail: once the queue is empty and at most width // 8 slots still run (e.g. a few
-    # lanes that take the whole step budget), the running slots move to a loop of
-    # width // 8 slots, so that they no longer drag the idle slots through every step.
-    tail = width // 8 if width // 8 >= 4 else None
-
-    def cond(carry):
-        _, slots, _, ptr = carry
-        r = running(slots)
-        if tail is None:
-            return jnp.any(r)
-        return jnp.any(r) & ((ptr < num_active) | (jnp.sum(r.astype(jnp.int32)) > tail))
-
-    def tail_cond(carry):
-        _, slots, _, _ = carry
-        return jnp.any(running(slots))
-
-    idx0 = queue[:width]
-    ptr0 = jnp.minimum(jnp.asarray(width), num_active)
-    carry = jax.lax.while_loop(cond, body, (states, take(states, idx0), idx0, ptr0))
-    if tail is not None:
-        states, slots, idx, ptr = carry
-        keep = jnp.argsort(~running(slots), stable=True)[:tail]  # running slots first
-        carry = jax.lax.while_loop(tail_cond, body, (states, take(slots, keep), idx[keep], ptr))
-    states = carry[0]
-    return jax.vmap(lambda s, t: _result(lambda x: f(x, t), s))(states, take(theta, jnp.arange(num_lanes)))
+    s = init(x0, eq_mask, nu0, active, options)
+    s = jax.lax.while_loop(lambda s: running(s, options), lambda s: step(f, g, s, options), s)
+    return to_result(f, s)
