@@ -51,6 +51,7 @@ from .grasp import Grasp
 from .lanes import solve_lanes
 from .model import constraint_margins, energy_scale, model_params, potential_energy
 from .result import Evaluation
+from .status import LaneStatus
 from .units import M_TO_MM, MJ_TO_J
 
 __all__ = ["EvaluateOptions", "evaluate", "solve_programs", "Programs", "envelope_energy", "soft_minimum"]
@@ -186,7 +187,7 @@ class Programs:
             ``b = kind * N + contact``.
         start: ``(2N * D, 6)`` starting points of the boundary lanes.
         found: ``(2N * D,)`` whether the start search crossed the boundary (lanes where it
-            did not carry status :data:`~jaxgrasp.solver.NO_START`).
+            did not carry status ``LaneStatus.NO_START``).
         constraint_index: ``(2N * D,)`` index ``k`` of the equality in the flattened
             ``(3N,)`` constraint vector (``N + b``).
         lever: ``()`` mm, the length that scales rotations.
@@ -316,7 +317,7 @@ def _solve_programs(p, prob: _Problem, options: EvaluateOptions) -> Programs:
 
     z0s, found, nu0s = jax.vmap(start)(lane_k, lane_v, lane_t)
     # Without a converged equilibrium there is nothing to start from: skip every lane.
-    found = found & (eq.status == S.CONVERGED)
+    found = found & (eq.status == LaneStatus.CONVERGED)
     masks = jax.nn.one_hot(lane_k, m, dtype=dtype)
     # Every lane gets this grasp's parameters as its theta (not closed over): under a vmap
     # over grasps, solve_lanes then runs the lanes of all grasps in one work queue.
@@ -384,22 +385,22 @@ def _evaluate_jit(grasp: Grasp, temperature, options: EvaluateOptions) -> Evalua
     num_dirs = options.directions().shape[0]
     ks = n + jnp.arange(2 * n)
     zeros_mask = jnp.zeros(m, p.c.dtype)
-    lane_status = jnp.where(found, lanes.status, S.NO_START)
-    lane_energy = jnp.where(lane_status == S.CONVERGED, lanes.objective, jnp.inf)
+    lane_status = jnp.where(found, lanes.status, LaneStatus.NO_START)
+    lane_energy = jnp.where(lane_status == LaneStatus.CONVERGED, lanes.objective, jnp.inf)
 
     # --- keep the lowest converged start of each boundary problem
     lane_status = lane_status.reshape(2 * n, num_dirs)
     lane_energy = lane_energy.reshape(2 * n, num_dirs)
     best = jnp.argmin(lane_energy, axis=1)
     reached = jnp.isfinite(jnp.min(lane_energy, axis=1))
-    unreachable = jnp.all((lane_status == S.INFEASIBLE) | (lane_status == S.NO_START), axis=1)
-    b_status = jnp.where(reached, S.CONVERGED, jnp.where(unreachable, S.INFEASIBLE, S.NOT_CONVERGED))
+    unreachable = jnp.all((lane_status == LaneStatus.INFEASIBLE) | (lane_status == LaneStatus.NO_START), axis=1)
+    b_status = jnp.where(reached, LaneStatus.CONVERGED, jnp.where(unreachable, LaneStatus.INFEASIBLE, LaneStatus.NOT_CONVERGED))
     # without a converged equilibrium no boundary problem was started
-    b_status = jnp.where(eq.status == S.CONVERGED, b_status, S.NO_START)
+    b_status = jnp.where(eq.status == LaneStatus.CONVERGED, b_status, LaneStatus.NO_START)
     # Lowest feasible point of each boundary problem among lanes that did not converge
     # (e.g. degenerate active constraints, where multipliers grow without bound): an
     # estimate of that boundary's energy, used to tell whether it could be limiting.
-    stalled_feasible = (lane_status == S.NOT_CONVERGED) & (
+    stalled_feasible = (lane_status == LaneStatus.NOT_CONVERGED) & (
         lanes.feasibility.reshape(2 * n, num_dirs) <= options.boundary_tol
     )
     b_estimate = jnp.min(jnp.where(stalled_feasible, lanes.objective.reshape(2 * n, num_dirs), jnp.inf), axis=1)
@@ -421,7 +422,7 @@ def _evaluate_jit(grasp: Grasp, temperature, options: EvaluateOptions) -> Evalua
     # make the multipliers grow without bound) at a feasible pose pressing a slip or force
     # constraint with a positive multiplier is on that boundary as well.
     stalled_on_boundary = (
-        (eq.status == S.NOT_CONVERGED)
+        (eq.status == LaneStatus.NOT_CONVERGED)
         & (eq.feasibility <= options.boundary_tol)
         & jnp.any((load_margins <= options.boundary_tol) & (eq.lam.reshape(3, n)[1:] > 0.0))
     )
@@ -433,12 +434,12 @@ def _evaluate_jit(grasp: Grasp, temperature, options: EvaluateOptions) -> Evalua
     # a boundary problem that did not settle decides the status only if it could be
     # limiting: no feasible point of it found, or one within 10 % of the value
     could_limit = ~(jnp.isfinite(b_estimate) & (b_estimate - eq.objective > 1.1 * hard_scaled))
-    any_unsettled = jnp.any((b_status == S.NOT_CONVERGED) & (could_limit | ~any_reached))
+    any_unsettled = jnp.any((b_status == LaneStatus.NOT_CONVERGED) & (could_limit | ~any_reached))
     status = jnp.select(
         [
-            eq.status == S.INFEASIBLE,
+            eq.status == LaneStatus.INFEASIBLE,
             stalled_on_boundary,
-            eq.status != S.CONVERGED,
+            eq.status != LaneStatus.CONVERGED,
             on_boundary | zero_value,
             any_unsettled | ~any_reached,
         ],

@@ -57,7 +57,8 @@ def solve_lanes(
         x0: ``(L, n)`` starting points.
         eq_mask: ``(L, m)`` one-hot equality selectors (rows of zeros: no equality).
         nu0: ``(L,)`` initial equality multipliers.
-        active: ``(L,)`` bool; inactive lanes end at once with status :data:`NO_START`.
+        active: ``(L,)`` bool; inactive lanes end at once with status
+            ``LaneStatus.NO_START``.
         options: :class:`~jaxgrasp.solver.SolverOptions`.
 
     Returns:

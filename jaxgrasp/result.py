@@ -10,7 +10,7 @@ import jax
 import numpy as np
 
 from .model import KINDS
-from .solver import LANE_STATUS_NAMES
+from .status import LaneStatus
 
 __all__ = ["Evaluation", "STATUS_NAMES", "STABLE", "UNSTABLE", "INFEASIBLE", "NOT_CONVERGED"]
 
@@ -57,7 +57,7 @@ class Evaluation:
         boundary_status: ``(2, N)`` int, solver status of each boundary problem
             (0 converged, 1 infeasible = unreachable, 2 not converged, 3 not started
             because the equilibrium problem did not converge); names in
-            :data:`jaxgrasp.solver.LANE_STATUS_NAMES`.
+            :meth:`jaxgrasp.status.LaneStatus.labels`.
         equilibrium_status: ``()`` int, solver status of the equilibrium problem.
         equilibrium_margins: ``(3, N)`` scaled constraint margins at the equilibrium (or,
             for an infeasible grasp, at the least-violating pose found), rows: contact
@@ -138,7 +138,7 @@ class Evaluation:
                         "kind": kind,
                         "contact": j,
                         "energy": e if math.isfinite(e) else None,
-                        "status": LANE_STATUS_NAMES[int(a.boundary_status[k, j])],
+                        "status": LaneStatus.labels()[int(a.boundary_status[k, j])],
                         "translation": a.boundary_translation[k, j].tolist(),
                         "rotation": a.boundary_rotation[k, j].tolist(),
                     }

@@ -37,6 +37,8 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
+from .status import LaneStatus
+
 __all__ = [
     "SolverOptions",
     "SolverResult",
@@ -46,22 +48,7 @@ __all__ = [
     "step",
     "running",
     "to_result",
-    "CONVERGED",
-    "INFEASIBLE",
-    "NOT_CONVERGED",
-    "NO_START",
 ]
-
-CONVERGED = 0
-"""KKT conditions hold within tolerance."""
-INFEASIBLE = 1
-"""The constraint violation stagnated above ``infeasible_tol`` at the largest penalty."""
-NOT_CONVERGED = 2
-"""The step budget ran out before either of the above."""
-NO_START = 3
-"""No starting point was found (used by the evaluator for boundary starts)."""
-
-LANE_STATUS_NAMES = ("converged", "infeasible", "not_converged", "no_start")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,7 +103,8 @@ class SolverResult:
         lam: inequality multipliers, ``>= 0`` (zero at the equality's index).
         nu: equality multiplier (0 when there is no equality).
         objective: ``f(x)``.
-        status: :data:`CONVERGED`, :data:`INFEASIBLE` or :data:`NOT_CONVERGED`.
+        status: ``()`` int32 :class:`~jaxgrasp.status.LaneStatus` (``NO_START`` for an
+            inactive lane).
         stationarity, feasibility, complementarity: KKT residuals at ``(x, lam, nu)``.
         steps: Newton steps plus multiplier updates taken.
     """
@@ -148,7 +136,8 @@ class SolverState:
         prev_viol: ``()`` constraint violation at the last multiplier update (``inf`` before
             the first).
         steps: ``()`` int32, Newton steps plus multiplier updates taken.
-        status: ``()`` int32 lane status, :data:`NOT_CONVERGED` while running.
+        status: ``()`` int32 :class:`~jaxgrasp.status.LaneStatus`, ``NOT_CONVERGED``
+            while running.
         stationarity, feasibility, complementarity: ``()`` KKT residuals at the last
             multiplier update (``inf`` before the first).
     """
@@ -195,7 +184,7 @@ def init(x0, eq_mask, nu0, active, o: SolverOptions) -> SolverState:
         inner=jnp.asarray(0, jnp.int32),
         prev_viol=jnp.asarray(jnp.inf, dtype),
         steps=jnp.asarray(0, jnp.int32),
-        status=jnp.where(active, NOT_CONVERGED, NO_START).astype(jnp.int32),
+        status=jnp.where(active, LaneStatus.NOT_CONVERGED, LaneStatus.NO_START).astype(jnp.int32),
         stationarity=jnp.asarray(jnp.inf, dtype),
         feasibility=jnp.asarray(jnp.inf, dtype),
         complementarity=jnp.asarray(jnp.inf, dtype),
@@ -289,7 +278,11 @@ def step(f, g, s: SolverState, o: SolverOptions) -> SolverState:
             stationary_violation | (at_max & (viol >= 0.5 * s.prev_viol))
         )
         rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
-        status = jnp.where(converged, CONVERGED, jnp.where(infeasible, INFEASIBLE, NOT_CONVERGED))
+        status = jnp.where(
+            converged,
+            LaneStatus.CONVERGED,
+            jnp.where(infeasible, LaneStatus.INFEASIBLE, LaneStatus.NOT_CONVERGED),
+        )
         return dataclasses.replace(
             s,
             lam=lam,
@@ -332,7 +325,7 @@ def step(f, g, s: SolverState, o: SolverOptions) -> SolverState:
 
 def running(s: SolverState, o: SolverOptions):
     """``()`` bool: whether the lane still steps (not finished, step budget left)."""
-    return (s.status == NOT_CONVERGED) & (s.steps < o.max_steps)
+    return (s.status == LaneStatus.NOT_CONVERGED) & (s.steps < o.max_steps)
 
 
 def to_result(f, s: SolverState) -> SolverResult:
@@ -370,7 +363,7 @@ def solve(
         eq_mask: ``(m,)`` one-hot vector selecting the equality constraint, or zeros.
         nu0: initial equality multiplier.
         options: :class:`SolverOptions`.
-        active: ``False`` skips the lane (it ends at once with status :data:`NO_START`).
+        active: ``False`` skips the lane (it ends at once with status ``LaneStatus.NO_START``).
     """
     s = init(x0, eq_mask, nu0, active, options)
     s = jax.lax.while_loop(lambda s: running(s, options), lambda s: step(f, g, s, options), s)
