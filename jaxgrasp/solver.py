@@ -32,6 +32,7 @@ many lanes with early exit, can drive them.
 from __future__ import annotations
 
 import dataclasses
+from functools import partial
 from typing import Any, Callable
 
 import jax
@@ -99,14 +100,14 @@ class SolverResult:
     """Outcome of one lane (leading batch axes under ``vmap``).
 
     Attributes:
-        x: final point.
-        lam: inequality multipliers, ``>= 0`` (zero at the equality's index).
-        nu: equality multiplier (0 when there is no equality).
-        objective: ``f(x)``.
+        x: ``(n,)`` final point.
+        lam: ``(m,)`` inequality multipliers, ``>= 0`` (zero at the equality's index).
+        nu: ``()`` equality multiplier (0 when there is no equality).
+        objective: ``()`` ``f(x)``.
         status: ``()`` int32 :class:`~jaxgrasp.status.LaneStatus` (``NO_START`` for an
             inactive lane).
-        stationarity, feasibility, complementarity: KKT residuals at ``(x, lam, nu)``.
-        steps: Newton steps plus multiplier updates taken.
+        stationarity, feasibility, complementarity: ``()`` KKT residuals at ``(x, lam, nu)``.
+        steps: ``()`` int32, Newton steps plus multiplier updates taken.
     """
 
     x: Any
@@ -198,129 +199,179 @@ def _tolerances(dtype, o: SolverOptions):
     return max(o.tol, 1e3 * eps), max(o.infeasible_tol, 1e4 * eps), 100.0 * eps
 
 
+def _newton_direction(phi, s: SolverState, gphi, o: SolverOptions):
+    """``(n,)`` Newton direction on phi at ``s.x``, a descent direction.
+
+    The exact Hessian's eigenvalues are mirrored (``|e|``) and floored at ``1e-10`` of the
+    largest, and the step is capped at ``max_step`` (inf-norm).
+    """
+    hmat = jax.hessian(phi)(s.x, s.lam, s.nu, s.rho)
+    hmat = 0.5 * (hmat + hmat.T)
+    evals, evecs = jnp.linalg.eigh(hmat)
+    aevals = jnp.abs(evals)
+    floor = 1e-10 * jnp.maximum(jnp.max(aevals), 1e-30)
+    aevals = jnp.maximum(aevals, floor)
+    p = -evecs @ ((evecs.T @ gphi) / aevals)
+    return p * jnp.minimum(1.0, o.max_step / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
+
+
+def _line_search(merit, x, p, gphi, needs_step, o: SolverOptions):
+    """Backtracking along ``p`` on the ladder of step lengths ``1, 1/2, 1/4, ...``.
+
+    Args:
+        merit: phi as a function of the point, ``(n,) -> ()``.
+        x: ``(n,)`` current point.
+        p: ``(n,)`` descent direction.
+        gphi: ``(n,)`` gradient of phi at ``x``.
+        needs_step: ``()`` bool; where ``False`` no step length is tried.
+
+    Returns:
+        ``(x_new, improve)``: ``x_new`` ``(n,)`` is ``x + alpha p`` for the first ``alpha``
+        that passes Armijo, else for the one with the lowest phi; ``x`` itself where no
+        ``alpha`` lowers phi (``improve``, ``()`` bool, is then ``False``).
+    """
+    _, _, rounding = _tolerances(x.dtype, o)
+    alphas = 0.5 ** jnp.arange(o.line_search_steps, dtype=x.dtype)
+    phi0 = merit(x)
+    slope = jnp.dot(gphi, p)
+    # Armijo, with slack for rounding: near a minimiser at a large penalty the decrease
+    # a Newton step promises is below phi's rounding error, and a strict test would
+    # reject the very steps that converge.
+    slack = rounding * (jnp.abs(phi0) + 1.0)
+
+    # The ladder is walked lazily (a while loop that stops once every lane has its step),
+    # which gives the same step as evaluating the whole ladder: almost every Newton step
+    # takes the first or second length. Lanes that do not take a Newton step this loop
+    # step start as done.
+    def cond(c):
+        k, found = c[0], c[1]
+        return (k < o.line_search_steps) & ~found
+
+    def body(c):
+        k, found, first, best, best_val = c
+        a = alphas[k]
+        t = merit(x + a * p)
+        t = jnp.where(jnp.isfinite(t), t, jnp.inf)
+        ok = t <= phi0 + 1e-4 * a * slope + slack
+        first = jnp.where(ok, k, first)
+        better = t < best_val
+        best = jnp.where(better, k, best)
+        best_val = jnp.where(better, t, best_val)
+        return k + 1, found | ok, first, best, best_val
+
+    zero = jnp.asarray(0, jnp.int32)
+    _, armijo, first, best, best_val = jax.lax.while_loop(
+        cond, body, (zero, ~needs_step, zero, zero, jnp.asarray(jnp.inf, x.dtype))
+    )
+    idx = jnp.where(armijo, first, best)
+    improve = armijo | (best_val < phi0)
+    return jnp.where(improve, x + alphas[idx] * p, x), improve
+
+
+def _newton_step(phi, s: SolverState, gphi, needs_step, o: SolverOptions) -> SolverState:
+    """A damped Newton step on phi from ``s`` (``gphi``: ``(n,)`` gradient of phi at ``s.x``)."""
+    p = _newton_direction(phi, s, gphi, o)
+    x_new, improve = _line_search(lambda x: phi(x, s.lam, s.nu, s.rho), s.x, p, gphi, needs_step, o)
+    # A step that cannot decrease phi ends the inner loop (numerically converged).
+    inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
+    return dataclasses.replace(s, x=x_new, inner=inner)
+
+
+def _lane_status(g, s: SolverState, stat, viol, comp, o: SolverOptions):
+    """``()`` :class:`~jaxgrasp.status.LaneStatus` after a multiplier update, from the KKT
+    residuals ``stat``, ``viol``, ``comp`` at ``s.x`` and the violation ``s.prev_viol``
+    before it: converged, infeasible, or not converged (yet)."""
+    tol, infeasible_tol, _ = _tolerances(s.x.dtype, o)
+    converged = (stat <= tol) & (viol <= tol) & (comp <= tol)
+    at_max = s.rho >= o.rho_max
+    # Infeasible: the violation stays above infeasible_tol at a point where the
+    # violation measure v = |h|^2/2 + sum min(g_i, 0)^2/2 is stationary (a local
+    # minimiser of the violation, which no penalty can push further), or it stalls at
+    # the largest penalty.
+    grad_v = jax.grad(lambda x: _violation(g, x, s.eq_mask))(s.x)
+    stationary_violation = jnp.max(jnp.abs(grad_v)) <= o.infeasible_stationarity * viol
+    infeasible = (viol > infeasible_tol) & (
+        stationary_violation | (at_max & (viol >= 0.5 * s.prev_viol))
+    )
+    return jnp.where(
+        converged,
+        LaneStatus.CONVERGED,
+        jnp.where(infeasible, LaneStatus.INFEASIBLE, LaneStatus.NOT_CONVERGED),
+    )
+
+
+def _multiplier_update(g, s: SolverState, gphi, o: SolverOptions) -> SolverState:
+    """The multiplier and penalty update ending an inner solve, with the lane's new status
+    and KKT residuals (``gphi``: ``(n,)`` gradient of phi at ``s.x``)."""
+    gx = g(s.x)
+    is_eq = s.eq_mask > 0
+    h = jnp.sum(s.eq_mask * gx)
+    lam = jnp.where(is_eq, 0.0, jnp.maximum(0.0, s.lam - s.rho * gx))
+    nu = s.nu + s.rho * h
+    viol = jnp.maximum(jnp.abs(h), jnp.max(jnp.where(is_eq, 0.0, jnp.maximum(-gx, 0.0))))
+    comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gx)))
+    stat = jnp.max(jnp.abs(gphi))
+    stalled = viol > 0.25 * s.prev_viol
+    rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
+    return dataclasses.replace(
+        s,
+        lam=lam,
+        nu=nu,
+        rho=rho,
+        inner=jnp.zeros_like(s.inner),
+        prev_viol=viol,
+        status=_lane_status(g, s, stat, viol, comp, o).astype(jnp.int32),
+        stationarity=stat,
+        feasibility=viol,
+        complementarity=comp,
+    )
+
+
+def _inner_done(phi, s: SolverState, o: SolverOptions):
+    """``(gphi, done)``: the ``(n,)`` gradient of phi at ``s.x`` and whether the inner
+    solve is done (``()`` bool: stationary enough, or ``max_inner`` Newton steps taken)."""
+    tol, _, _ = _tolerances(s.x.dtype, o)
+    gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
+    # Inexact inner solves: while the violation is large, a rough minimiser of phi
+    # is enough to update the multipliers; the tolerance tightens to tol as the
+    # violation vanishes.
+    inner_tol = jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
+    return gphi, (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
+
+
+def _select(pred, a, b):
+    return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
+
+
 def step(f, g, s: SolverState, o: SolverOptions) -> SolverState:
-    """One loop step of one lane: a Newton step on phi, or a multiplier update once the
-    inner solve is done. A finished lane is returned unchanged."""
-    eq_mask = s.eq_mask
-    tol, infeasible_tol, rounding = _tolerances(s.x.dtype, o)
-    alphas = 0.5 ** jnp.arange(o.line_search_steps, dtype=s.x.dtype)
+    """One loop step of one lane: a multiplier update where the inner solve is done, then
+    a Newton step on phi where the (updated) inner solve is not. A finished lane is
+    returned unchanged.
 
-    def phi(x, lam, nu, rho):
-        return _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask)
+    Stages, in order: :func:`_inner_done`; :func:`_multiplier_update` (status from
+    :func:`_lane_status`); :func:`_inner_done` again; :func:`_newton_step`
+    (:func:`_newton_direction`, then :func:`_line_search`).
 
-    def newton_step(s: SolverState, gphi, needs_step):
-        hmat = jax.hessian(phi)(s.x, s.lam, s.nu, s.rho)
-        hmat = 0.5 * (hmat + hmat.T)
-        evals, evecs = jnp.linalg.eigh(hmat)
-        aevals = jnp.abs(evals)
-        floor = 1e-10 * jnp.maximum(jnp.max(aevals), 1e-30)
-        aevals = jnp.maximum(aevals, floor)
-        p = -evecs @ ((evecs.T @ gphi) / aevals)
-        p = p * jnp.minimum(1.0, o.max_step / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
-        phi0 = phi(s.x, s.lam, s.nu, s.rho)
-        slope = jnp.dot(gphi, p)
-        # Armijo, with slack for rounding: near a minimiser at a large penalty the decrease
-        # a Newton step promises is below phi's rounding error, and a strict test would
-        # reject the very steps that converge.
-        slack = rounding * (jnp.abs(phi0) + 1.0)
-        # Backtracking on the ladder alphas[0], alphas[1], ...: the first step length that
-        # passes Armijo is taken; if none does, the one with the lowest phi. The ladder is
-        # walked lazily (a while loop that stops once every lane has its step), which
-        # gives the same step as evaluating the whole ladder: almost every Newton step
-        # takes the first or second length. Lanes that do not take a Newton step this
-        # loop step start as done.
-        def ls_cond(c):
-            k, found = c[0], c[1]
-            return (k < o.line_search_steps) & ~found
-
-        def ls_body(c):
-            k, found, first, best, best_val = c
-            a = alphas[k]
-            t = phi(s.x + a * p, s.lam, s.nu, s.rho)
-            t = jnp.where(jnp.isfinite(t), t, jnp.inf)
-            ok = t <= phi0 + 1e-4 * a * slope + slack
-            first = jnp.where(ok, k, first)
-            better = t < best_val
-            best = jnp.where(better, k, best)
-            best_val = jnp.where(better, t, best_val)
-            return k + 1, found | ok, first, best, best_val
-
-        zero = jnp.asarray(0, jnp.int32)
-        _, armijo, first, best, best_val = jax.lax.while_loop(
-            ls_cond, ls_body, (zero, ~needs_step, zero, zero, jnp.asarray(jnp.inf, s.x.dtype))
-        )
-        idx = jnp.where(armijo, first, best)
-        improve = armijo | (best_val < phi0)
-        x_new = jnp.where(improve, s.x + alphas[idx] * p, s.x)
-        # A step that cannot decrease phi ends the inner loop (numerically converged).
-        inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
-        return dataclasses.replace(s, x=x_new, inner=inner)
-
-    def multiplier_update(s: SolverState, gphi, needs_step):
-        gx = g(s.x)
-        is_eq = eq_mask > 0
-        h = jnp.sum(eq_mask * gx)
-        lam = jnp.where(is_eq, 0.0, jnp.maximum(0.0, s.lam - s.rho * gx))
-        nu = s.nu + s.rho * h
-        viol = jnp.maximum(jnp.abs(h), jnp.max(jnp.where(is_eq, 0.0, jnp.maximum(-gx, 0.0))))
-        comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gx)))
-        stat = jnp.max(jnp.abs(gphi))
-        converged = (stat <= tol) & (viol <= tol) & (comp <= tol)
-        stalled = viol > 0.25 * s.prev_viol
-        at_max = s.rho >= o.rho_max
-        # Infeasible: the violation stays above infeasible_tol at a point where the
-        # violation measure v = |h|^2/2 + sum min(g_i, 0)^2/2 is stationary (a local
-        # minimiser of the violation, which no penalty can push further), or it stalls at
-        # the largest penalty.
-        grad_v = jax.grad(lambda x: _violation(g, x, eq_mask))(s.x)
-        stationary_violation = jnp.max(jnp.abs(grad_v)) <= o.infeasible_stationarity * viol
-        infeasible = (viol > infeasible_tol) & (
-            stationary_violation | (at_max & (viol >= 0.5 * s.prev_viol))
-        )
-        rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
-        status = jnp.where(
-            converged,
-            LaneStatus.CONVERGED,
-            jnp.where(infeasible, LaneStatus.INFEASIBLE, LaneStatus.NOT_CONVERGED),
-        )
-        return dataclasses.replace(
-            s,
-            lam=lam,
-            nu=nu,
-            rho=rho,
-            inner=jnp.zeros_like(s.inner),
-            prev_viol=viol,
-            status=status.astype(jnp.int32),
-            stationarity=stat,
-            feasibility=viol,
-            complementarity=comp,
-        )
-
-    def gradient_and_inner_done(s: SolverState):
-        gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
-        # Inexact inner solves: while the violation is large, a rough minimiser of phi
-        # is enough to update the multipliers; the tolerance tightens to tol as the
-        # violation vanishes.
-        inner_tol = jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
-        inner_done = (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
-        return gphi, inner_done
-
-    def select(pred, a, b):
-        return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
-
+    Args:
+        f: objective, ``(n,) -> ()``.
+        g: constraint margins, ``(n,) -> (m,)``, feasible where ``>= 0``.
+        s: the lane's state.
+        o: :class:`SolverOptions`.
+    """
+    phi = partial(_augmented_lagrangian, f, g, eq_mask=s.eq_mask)  # (x, lam, nu, rho) -> ()
     # A multiplier update, where the inner solve is done, then a Newton step where the
     # (updated) inner solve is not: the sequence of updates and the step count of a lane
     # are those of one kind of update per loop step, but under vmap (where both kinds are
     # computed for every lane) a lane no longer spends a whole loop step on an update.
     is_running = running(s, o)
-    gphi, inner_done = gradient_and_inner_done(s)
+    gphi, inner_done = _inner_done(phi, s, o)
     update = is_running & inner_done
-    s_upd = multiplier_update(s, gphi, update)
-    s1 = select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
-    gphi1, inner_done1 = gradient_and_inner_done(s1)
+    s_upd = _multiplier_update(g, s, gphi, o)
+    s1 = _select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
+    gphi1, inner_done1 = _inner_done(phi, s1, o)
     newton = is_running & running(s1, o) & ~inner_done1
-    s_newton = newton_step(s1, gphi1, newton)
-    return select(newton, dataclasses.replace(s_newton, steps=s1.steps + 1), s1)
+    s_newton = _newton_step(phi, s1, gphi1, newton, o)
+    return _select(newton, dataclasses.replace(s_newton, steps=s1.steps + 1), s1)
 
 
 def running(s: SolverState, o: SolverOptions):
