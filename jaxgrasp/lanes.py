@@ -141,6 +141,7 @@ def _to_tail(q: _Queue, tail: int, o: SolverOptions) -> _Queue:
 
 
 def _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
+    """:func:`solve_lanes` on one flat batch of ``L`` lanes: the queue loop, then the tail."""
     num_lanes = x0.shape[0]
     width = _num_slots(num_lanes, o)
     states = jax.vmap(lambda x, m, nu, a: solver.init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
