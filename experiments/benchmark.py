@@ -73,7 +73,7 @@ import jax.numpy as jnp  # noqa: E402
 
 import jaxgrasp  # noqa: E402
 from jaxgrasp import result as R  # noqa: E402
-from jaxgrasp import solver as S  # noqa: E402
+from jaxgrasp.status import LaneStatus  # noqa: E402
 from jaxgrasp.evaluate import EvaluateOptions, solve_programs  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
 from tests.ipopt_reference import FEAS_TOL, _Model  # noqa: E402
@@ -242,7 +242,7 @@ def compare(params, progs, evals, sample, ipopt_recs, same_tol, energy_tol):
         lever = float(progs.lever[i])
         scale = float(progs.scale[i])
         # lowest converged jaxgrasp energy of each boundary problem (constraint index)
-        conv_i = progs.found[i] & (progs.boundary.status[i] == S.CONVERGED)
+        conv_i = progs.found[i] & (progs.boundary.status[i] == LaneStatus.CONVERGED)
         prob_min = {}
         for lane in np.flatnonzero(conv_i):
             k = int(progs.constraint_index[i, lane])
@@ -250,7 +250,7 @@ def compare(params, progs, evals, sample, ipopt_recs, same_tol, energy_tol):
         pairs = [(progs.equilibrium, None, rec["eq"])] + [(progs.boundary, r["lane"], r) for r in rec["lanes"]]
         for res, lane, ip in pairs:
             idx = (i,) if lane is None else (i, lane)
-            j_conv = int(res.status[idx]) == S.CONVERGED
+            j_conv = int(res.status[idx]) == LaneStatus.CONVERGED
             j_U = float(res.objective[idx]) * scale
             j_z = np.asarray(res.x[idx])
             counts["programs"] += 1
@@ -282,7 +282,7 @@ def compare(params, progs, evals, sample, ipopt_recs, same_tol, energy_tol):
                 counts["ipopt_only_converged"] += 1
             else:
                 counts["neither_converged"] += 1
-                if int(res.status[idx]) == S.INFEASIBLE:
+                if int(res.status[idx]) == LaneStatus.INFEASIBLE:
                     counts["neither_jax_infeasible"] += 1
         # grasp value
         st_i, v_i = ipopt_value(rec, n)
@@ -351,9 +351,9 @@ def run_scene(name, params, grasps, opts, args):
     out["jaxgrasp"] = {"programs": programs, "equilibrium_programs": len(grasps), "active_boundary_lanes": num_active,
                        "compile_s": t_compile, "first_run_s": t_first, "first_call_s": t_compile + t_first,
                        "load_at_compile": la,
-                       "equilibrium_converged": int((progs.equilibrium.status == S.CONVERGED).sum()),
-                       "boundary_lane_status": {S.LANE_STATUS_NAMES[s]: int(c) for s, c in
-                                                enumerate(np.bincount(np.where(progs.found, progs.boundary.status, S.NO_START).ravel(), minlength=4))}}
+                       "equilibrium_converged": int((progs.equilibrium.status == LaneStatus.CONVERGED).sum()),
+                       "boundary_lane_status": {LaneStatus.labels()[s]: int(c) for s, c in
+                                                enumerate(np.bincount(np.where(progs.found, progs.boundary.status, LaneStatus.NO_START).ravel(), minlength=4))}}
     log(f"{name}: jaxgrasp compile {t_compile:.1f} s, first run {t_first:.2f} s, {programs} programs")
 
     # --- jaxgrasp.evaluate batch (values for the comparison; compile time recorded)
@@ -413,8 +413,8 @@ def run_scene(name, params, grasps, opts, args):
                             "steady_median_cpu_s": statistics.median(j_cpu), "programs_per_s": j_rate,
                             "programs_per_cpu_s": programs / statistics.median(j_cpu),
                             "deterministic": bool(same),
-                            "converged_programs": int((progs.equilibrium.status == S.CONVERGED).sum()
-                                                      + ((progs.boundary.status == S.CONVERGED) & progs.found).sum())})
+                            "converged_programs": int((progs.equilibrium.status == LaneStatus.CONVERGED).sum()
+                                                      + ((progs.boundary.status == LaneStatus.CONVERGED) & progs.found).sum())})
     out["ipopt"] = {"sample_grasps": len(sample), "sample_indices": sample.tolist(),
                     "sampled": len(sample) < len(grasps),
                     "programs": ip_programs, "converged_programs": ip_conv,
@@ -447,7 +447,7 @@ def check_reduction(progs, evals) -> float:
     """Max relative difference between evaluate's value and min(converged lane energy) -
     equilibrium energy from solve_programs, over grasps evaluate calls stable."""
     worst = 0.0
-    conv = progs.found & (progs.boundary.status == S.CONVERGED)
+    conv = progs.found & (progs.boundary.status == LaneStatus.CONVERGED)
     for i in np.flatnonzero(evals.status == R.STABLE):
         ub = np.where(conv[i], progs.boundary.objective[i], np.inf).min()
         v = (ub - progs.equilibrium.objective[i]) * progs.scale[i] * 1e-3

@@ -28,6 +28,7 @@ import numpy as np
 import jaxgrasp
 from jaxgrasp import solver as S
 from jaxgrasp.evaluate import EvaluateOptions, _Problem, solve_programs
+from jaxgrasp.status import LaneStatus
 from jaxgrasp.model import model_params
 
 
@@ -96,7 +97,7 @@ def main(argv=None):
     def run_newton(grasp):
         f, g, progs, masks, nu0 = lanes_for(grasp)
         r = jax.vmap(lambda z0, m, nu: S.solve(f, g, z0, m, nu, sopt))(progs.start, masks, nu0)
-        return r.objective, r.status == S.CONVERGED, progs.found
+        return r.objective, r.status == LaneStatus.CONVERGED, progs.found
 
     def run_lbfgs(grasp):
         f, g, progs, masks, nu0 = lanes_for(grasp)

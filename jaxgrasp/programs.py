@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from .grasp import Grasp
-from .solver import solve_lanes  # TEMP until lanes.py lands
+from .lanes import solve_lanes
 from .model import ModelParams, constraint_margins, energy_scale, model_params, potential_energy
 from .options import EvaluateOptions
 from .solver import SolverResult, solve

@@ -23,37 +23,33 @@ need different iteration counts do not wait on nested loops. ``steps`` counts bo
 Each lane ends with a status and its KKT residuals at ``(x, lam, nu)``:
 stationarity ``|grad f + nu grad h - sum lam grad g|_inf``, feasibility
 ``max(|h|, max(-g_i, 0))`` and complementarity ``max |lam_i g_i|``.
+
+:func:`solve` runs one lane; its pieces :func:`init`, :func:`step`, :func:`running` and
+:func:`to_result` are public so that the work queue of :mod:`jaxgrasp.lanes`, which runs
+many lanes with early exit, can drive them.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from functools import partial
 from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
 
+from .status import LaneStatus
+
 __all__ = [
     "SolverOptions",
     "SolverResult",
+    "SolverState",
     "solve",
-    "solve_lanes",
-    "CONVERGED",
-    "INFEASIBLE",
-    "NOT_CONVERGED",
-    "NO_START",
+    "init",
+    "step",
+    "running",
+    "to_result",
 ]
-
-CONVERGED = 0
-"""KKT conditions hold within tolerance."""
-INFEASIBLE = 1
-"""The constraint violation stagnated above ``infeasible_tol`` at the largest penalty."""
-NOT_CONVERGED = 2
-"""The step budget ran out before either of the above."""
-NO_START = 3
-"""No starting point was found (used by the evaluator for boundary starts)."""
-
-LANE_STATUS_NAMES = ("converged", "infeasible", "not_converged", "no_start")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,7 +72,7 @@ class SolverOptions:
             gradient (inf-norm) is below this times the violation.
         max_step: largest Newton step (inf-norm, scaled variables).
         line_search_steps: number of step lengths ``1, 1/2, 1/4, ...`` tried per Newton step.
-        slot_fraction: :func:`solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
+        slot_fraction: :func:`jaxgrasp.lanes.solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
             flight (finished lanes hand their slot to the next), at most ``max_slots``.
         max_slots: upper bound on those slots. A loop step over a few hundred lanes keeps
             its working set in the CPU caches; over thousands it runs at memory speed and
@@ -104,13 +100,14 @@ class SolverResult:
     """Outcome of one lane (leading batch axes under ``vmap``).
 
     Attributes:
-        x: final point.
-        lam: inequality multipliers, ``>= 0`` (zero at the equality's index).
-        nu: equality multiplier (0 when there is no equality).
-        objective: ``f(x)``.
-        status: :data:`CONVERGED`, :data:`INFEASIBLE` or :data:`NOT_CONVERGED`.
-        stationarity, feasibility, complementarity: KKT residuals at ``(x, lam, nu)``.
-        steps: Newton steps plus multiplier updates taken.
+        x: ``(n,)`` final point.
+        lam: ``(m,)`` inequality multipliers, ``>= 0`` (zero at the equality's index).
+        nu: ``()`` equality multiplier (0 when there is no equality).
+        objective: ``()`` ``f(x)``.
+        status: ``()`` int32 :class:`~jaxgrasp.status.LaneStatus` (``NO_START`` for an
+            inactive lane).
+        stationarity, feasibility, complementarity: ``()`` KKT residuals at ``(x, lam, nu)``.
+        steps: ``()`` int32, Newton steps plus multiplier updates taken.
     """
 
     x: Any
@@ -126,16 +123,35 @@ class SolverResult:
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class _State:
+class SolverState:
+    """Loop state of one lane (leading batch axes under ``vmap``): ``n`` variables, ``m``
+    constraint rows, scaled units.
+
+    Attributes:
+        x: ``(n,)`` current point.
+        lam: ``(m,)`` inequality multipliers, ``>= 0`` (zero at the equality's index).
+        nu: ``()`` equality multiplier.
+        rho: ``()`` penalty.
+        eq_mask: ``(m,)`` one-hot equality selector, or zeros.
+        inner: ``()`` int32, Newton steps since the last multiplier update.
+        prev_viol: ``()`` constraint violation at the last multiplier update (``inf`` before
+            the first).
+        steps: ``()`` int32, Newton steps plus multiplier updates taken.
+        status: ``()`` int32 :class:`~jaxgrasp.status.LaneStatus`, ``NOT_CONVERGED``
+            while running.
+        stationarity, feasibility, complementarity: ``()`` KKT residuals at the last
+            multiplier update (``inf`` before the first).
+    """
+
     x: Any
     lam: Any
     nu: Any
     rho: Any
     eq_mask: Any
-    inner: Any  # Newton steps since the last multiplier update
+    inner: Any
     prev_viol: Any
     steps: Any
-    status: Any  # NOT_CONVERGED while running
+    status: Any
     stationarity: Any
     feasibility: Any
     complementarity: Any
@@ -155,11 +171,12 @@ def _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask):
     return f(x) + nu * h + 0.5 * rho * h * h + ineq
 
 
-def _init(x0, eq_mask, nu0, active, o: SolverOptions) -> _State:
+def init(x0, eq_mask, nu0, active, o: SolverOptions) -> SolverState:
+    """The state of a lane before its first step (arguments as :func:`solve`)."""
     x0 = jnp.asarray(x0)
     dtype = x0.dtype
     eq_mask = jnp.asarray(eq_mask, dtype)
-    return _State(
+    return SolverState(
         x=x0,
         lam=jnp.zeros(eq_mask.shape, dtype),
         nu=jnp.asarray(nu0, dtype),
@@ -168,7 +185,7 @@ def _init(x0, eq_mask, nu0, active, o: SolverOptions) -> _State:
         inner=jnp.asarray(0, jnp.int32),
         prev_viol=jnp.asarray(jnp.inf, dtype),
         steps=jnp.asarray(0, jnp.int32),
-        status=jnp.where(active, NOT_CONVERGED, NO_START).astype(jnp.int32),
+        status=jnp.where(active, LaneStatus.NOT_CONVERGED, LaneStatus.NO_START).astype(jnp.int32),
         stationarity=jnp.asarray(jnp.inf, dtype),
         feasibility=jnp.asarray(jnp.inf, dtype),
         complementarity=jnp.asarray(jnp.inf, dtype),
@@ -182,132 +199,188 @@ def _tolerances(dtype, o: SolverOptions):
     return max(o.tol, 1e3 * eps), max(o.infeasible_tol, 1e4 * eps), 100.0 * eps
 
 
-def _step(f, g, s: _State, o: SolverOptions) -> _State:
-    """One loop step of one lane: a Newton step on phi, or a multiplier update once the
-    inner solve is done. A finished lane is returned unchanged."""
-    eq_mask = s.eq_mask
-    tol, infeasible_tol, rounding = _tolerances(s.x.dtype, o)
-    alphas = 0.5 ** jnp.arange(o.line_search_steps, dtype=s.x.dtype)
+def _newton_direction(phi, s: SolverState, gphi, o: SolverOptions):
+    """``(n,)`` Newton direction on phi at ``s.x``, a descent direction.
 
-    def phi(x, lam, nu, rho):
-        return _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask)
+    The exact Hessian's eigenvalues are mirrored (``|e|``) and floored at ``1e-10`` of the
+    largest, and the step is capped at ``max_step`` (inf-norm).
+    """
+    hmat = jax.hessian(phi)(s.x, s.lam, s.nu, s.rho)
+    hmat = 0.5 * (hmat + hmat.T)
+    evals, evecs = jnp.linalg.eigh(hmat)
+    aevals = jnp.abs(evals)
+    floor = 1e-10 * jnp.maximum(jnp.max(aevals), 1e-30)
+    aevals = jnp.maximum(aevals, floor)
+    p = -evecs @ ((evecs.T @ gphi) / aevals)
+    return p * jnp.minimum(1.0, o.max_step / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
 
-    def newton_step(s: _State, gphi, needs_step):
-        hmat = jax.hessian(phi)(s.x, s.lam, s.nu, s.rho)
-        hmat = 0.5 * (hmat + hmat.T)
-        evals, evecs = jnp.linalg.eigh(hmat)
-        aevals = jnp.abs(evals)
-        floor = 1e-10 * jnp.maximum(jnp.max(aevals), 1e-30)
-        aevals = jnp.maximum(aevals, floor)
-        p = -evecs @ ((evecs.T @ gphi) / aevals)
-        p = p * jnp.minimum(1.0, o.max_step / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
-        phi0 = phi(s.x, s.lam, s.nu, s.rho)
-        slope = jnp.dot(gphi, p)
-        # Armijo, with slack for rounding: near a minimiser at a large penalty the decrease
-        # a Newton step promises is below phi's rounding error, and a strict test would
-        # reject the very steps that converge.
-        slack = rounding * (jnp.abs(phi0) + 1.0)
-        # Backtracking on the ladder alphas[0], alphas[1], ...: the first step length that
-        # passes Armijo is taken; if none does, the one with the lowest phi. The ladder is
-        # walked lazily (a while loop that stops once every lane has its step), which
-        # gives the same step as evaluating the whole ladder: almost every Newton step
-        # takes the first or second length. Lanes that do not take a Newton step this
-        # loop step start as done.
-        def ls_cond(c):
-            k, found = c[0], c[1]
-            return (k < o.line_search_steps) & ~found
 
-        def ls_body(c):
-            k, found, first, best, best_val = c
-            a = alphas[k]
-            t = phi(s.x + a * p, s.lam, s.nu, s.rho)
-            t = jnp.where(jnp.isfinite(t), t, jnp.inf)
-            ok = t <= phi0 + 1e-4 * a * slope + slack
-            first = jnp.where(ok, k, first)
-            better = t < best_val
-            best = jnp.where(better, k, best)
-            best_val = jnp.where(better, t, best_val)
-            return k + 1, found | ok, first, best, best_val
+def _line_search(merit, x, p, gphi, needs_step, o: SolverOptions):
+    """Backtracking along ``p`` on the ladder of step lengths ``1, 1/2, 1/4, ...``.
 
-        zero = jnp.asarray(0, jnp.int32)
-        _, armijo, first, best, best_val = jax.lax.while_loop(
-            ls_cond, ls_body, (zero, ~needs_step, zero, zero, jnp.asarray(jnp.inf, s.x.dtype))
-        )
-        idx = jnp.where(armijo, first, best)
-        improve = armijo | (best_val < phi0)
-        x_new = jnp.where(improve, s.x + alphas[idx] * p, s.x)
-        # A step that cannot decrease phi ends the inner loop (numerically converged).
-        inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
-        return dataclasses.replace(s, x=x_new, inner=inner)
+    Args:
+        merit: phi as a function of the point, ``(n,) -> ()``.
+        x: ``(n,)`` current point.
+        p: ``(n,)`` descent direction.
+        gphi: ``(n,)`` gradient of phi at ``x``.
+        needs_step: ``()`` bool; where ``False`` no step length is tried.
 
-    def multiplier_update(s: _State, gphi, needs_step):
-        gx = g(s.x)
-        is_eq = eq_mask > 0
-        h = jnp.sum(eq_mask * gx)
-        lam = jnp.where(is_eq, 0.0, jnp.maximum(0.0, s.lam - s.rho * gx))
-        nu = s.nu + s.rho * h
-        viol = jnp.maximum(jnp.abs(h), jnp.max(jnp.where(is_eq, 0.0, jnp.maximum(-gx, 0.0))))
-        comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gx)))
-        stat = jnp.max(jnp.abs(gphi))
-        converged = (stat <= tol) & (viol <= tol) & (comp <= tol)
-        stalled = viol > 0.25 * s.prev_viol
-        at_max = s.rho >= o.rho_max
-        # Infeasible: the violation stays above infeasible_tol at a point where the
-        # violation measure v = |h|^2/2 + sum min(g_i, 0)^2/2 is stationary (a local
-        # minimiser of the violation, which no penalty can push further), or it stalls at
-        # the largest penalty.
-        grad_v = jax.grad(lambda x: _violation(g, x, eq_mask))(s.x)
-        stationary_violation = jnp.max(jnp.abs(grad_v)) <= o.infeasible_stationarity * viol
-        infeasible = (viol > infeasible_tol) & (
-            stationary_violation | (at_max & (viol >= 0.5 * s.prev_viol))
-        )
-        rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
-        status = jnp.where(converged, CONVERGED, jnp.where(infeasible, INFEASIBLE, NOT_CONVERGED))
-        return dataclasses.replace(
-            s,
-            lam=lam,
-            nu=nu,
-            rho=rho,
-            inner=jnp.zeros_like(s.inner),
-            prev_viol=viol,
-            status=status.astype(jnp.int32),
-            stationarity=stat,
-            feasibility=viol,
-            complementarity=comp,
-        )
+    Returns:
+        ``(x_new, improve)``: ``x_new`` ``(n,)`` is ``x + alpha p`` for the first ``alpha``
+        that passes Armijo, else for the one with the lowest phi; ``x`` itself where no
+        ``alpha`` lowers phi (``improve``, ``()`` bool, is then ``False``).
+    """
+    _, _, rounding = _tolerances(x.dtype, o)
+    alphas = 0.5 ** jnp.arange(o.line_search_steps, dtype=x.dtype)
+    phi0 = merit(x)
+    slope = jnp.dot(gphi, p)
+    # Armijo, with slack for rounding: near a minimiser at a large penalty the decrease
+    # a Newton step promises is below phi's rounding error, and a strict test would
+    # reject the very steps that converge.
+    slack = rounding * (jnp.abs(phi0) + 1.0)
 
-    def gradient_and_inner_done(s: _State):
-        gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
-        # Inexact inner solves: while the violation is large, a rough minimiser of phi
-        # is enough to update the multipliers; the tolerance tightens to tol as the
-        # violation vanishes.
-        inner_tol = jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
-        inner_done = (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
-        return gphi, inner_done
+    # The ladder is walked lazily (a while loop that stops once every lane has its step),
+    # which gives the same step as evaluating the whole ladder: almost every Newton step
+    # takes the first or second length. Lanes that do not take a Newton step this loop
+    # step start as done.
+    def cond(c):
+        k, found = c[0], c[1]
+        return (k < o.line_search_steps) & ~found
 
-    def select(pred, a, b):
-        return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
+    def body(c):
+        k, found, first, best, best_val = c
+        a = alphas[k]
+        t = merit(x + a * p)
+        t = jnp.where(jnp.isfinite(t), t, jnp.inf)
+        ok = t <= phi0 + 1e-4 * a * slope + slack
+        first = jnp.where(ok, k, first)
+        better = t < best_val
+        best = jnp.where(better, k, best)
+        best_val = jnp.where(better, t, best_val)
+        return k + 1, found | ok, first, best, best_val
 
+    zero = jnp.asarray(0, jnp.int32)
+    _, armijo, first, best, best_val = jax.lax.while_loop(
+        cond, body, (zero, ~needs_step, zero, zero, jnp.asarray(jnp.inf, x.dtype))
+    )
+    idx = jnp.where(armijo, first, best)
+    improve = armijo | (best_val < phi0)
+    return jnp.where(improve, x + alphas[idx] * p, x), improve
+
+
+def _newton_step(phi, s: SolverState, gphi, needs_step, o: SolverOptions) -> SolverState:
+    """A damped Newton step on phi from ``s`` (``gphi``: ``(n,)`` gradient of phi at ``s.x``)."""
+    p = _newton_direction(phi, s, gphi, o)
+    x_new, improve = _line_search(lambda x: phi(x, s.lam, s.nu, s.rho), s.x, p, gphi, needs_step, o)
+    # A step that cannot decrease phi ends the inner loop (numerically converged).
+    inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
+    return dataclasses.replace(s, x=x_new, inner=inner)
+
+
+def _lane_status(g, s: SolverState, stat, viol, comp, o: SolverOptions):
+    """``()`` :class:`~jaxgrasp.status.LaneStatus` after a multiplier update, from the KKT
+    residuals ``stat``, ``viol``, ``comp`` at ``s.x`` and the violation ``s.prev_viol``
+    before it: converged, infeasible, or not converged (yet)."""
+    tol, infeasible_tol, _ = _tolerances(s.x.dtype, o)
+    converged = (stat <= tol) & (viol <= tol) & (comp <= tol)
+    at_max = s.rho >= o.rho_max
+    # Infeasible: the violation stays above infeasible_tol at a point where the
+    # violation measure v = |h|^2/2 + sum min(g_i, 0)^2/2 is stationary (a local
+    # minimiser of the violation, which no penalty can push further), or it stalls at
+    # the largest penalty.
+    grad_v = jax.grad(lambda x: _violation(g, x, s.eq_mask))(s.x)
+    stationary_violation = jnp.max(jnp.abs(grad_v)) <= o.infeasible_stationarity * viol
+    infeasible = (viol > infeasible_tol) & (
+        stationary_violation | (at_max & (viol >= 0.5 * s.prev_viol))
+    )
+    return jnp.where(
+        converged,
+        LaneStatus.CONVERGED,
+        jnp.where(infeasible, LaneStatus.INFEASIBLE, LaneStatus.NOT_CONVERGED),
+    )
+
+
+def _multiplier_update(g, s: SolverState, gphi, o: SolverOptions) -> SolverState:
+    """The multiplier and penalty update ending an inner solve, with the lane's new status
+    and KKT residuals (``gphi``: ``(n,)`` gradient of phi at ``s.x``)."""
+    gx = g(s.x)
+    is_eq = s.eq_mask > 0
+    h = jnp.sum(s.eq_mask * gx)
+    lam = jnp.where(is_eq, 0.0, jnp.maximum(0.0, s.lam - s.rho * gx))
+    nu = s.nu + s.rho * h
+    viol = jnp.maximum(jnp.abs(h), jnp.max(jnp.where(is_eq, 0.0, jnp.maximum(-gx, 0.0))))
+    comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gx)))
+    stat = jnp.max(jnp.abs(gphi))
+    stalled = viol > 0.25 * s.prev_viol
+    rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
+    return dataclasses.replace(
+        s,
+        lam=lam,
+        nu=nu,
+        rho=rho,
+        inner=jnp.zeros_like(s.inner),
+        prev_viol=viol,
+        status=_lane_status(g, s, stat, viol, comp, o).astype(jnp.int32),
+        stationarity=stat,
+        feasibility=viol,
+        complementarity=comp,
+    )
+
+
+def _inner_done(phi, s: SolverState, o: SolverOptions):
+    """``(gphi, done)``: the ``(n,)`` gradient of phi at ``s.x`` and whether the inner
+    solve is done (``()`` bool: stationary enough, or ``max_inner`` Newton steps taken)."""
+    tol, _, _ = _tolerances(s.x.dtype, o)
+    gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
+    # Inexact inner solves: while the violation is large, a rough minimiser of phi
+    # is enough to update the multipliers; the tolerance tightens to tol as the
+    # violation vanishes.
+    inner_tol = jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
+    return gphi, (jnp.max(jnp.abs(gphi)) <= inner_tol) | (s.inner >= o.max_inner)
+
+
+def _select(pred, a, b):
+    return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
+
+
+def step(f, g, s: SolverState, o: SolverOptions) -> SolverState:
+    """One loop step of one lane: a multiplier update where the inner solve is done, then
+    a Newton step on phi where the (updated) inner solve is not. A finished lane is
+    returned unchanged.
+
+    Stages, in order: :func:`_inner_done`; :func:`_multiplier_update` (status from
+    :func:`_lane_status`); :func:`_inner_done` again; :func:`_newton_step`
+    (:func:`_newton_direction`, then :func:`_line_search`).
+
+    Args:
+        f: objective, ``(n,) -> ()``.
+        g: constraint margins, ``(n,) -> (m,)``, feasible where ``>= 0``.
+        s: the lane's state.
+        o: :class:`SolverOptions`.
+    """
+    phi = partial(_augmented_lagrangian, f, g, eq_mask=s.eq_mask)  # (x, lam, nu, rho) -> ()
     # A multiplier update, where the inner solve is done, then a Newton step where the
     # (updated) inner solve is not: the sequence of updates and the step count of a lane
     # are those of one kind of update per loop step, but under vmap (where both kinds are
     # computed for every lane) a lane no longer spends a whole loop step on an update.
-    running = _running(s, o)
-    gphi, inner_done = gradient_and_inner_done(s)
-    update = running & inner_done
-    s_upd = multiplier_update(s, gphi, update)
-    s1 = select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
-    gphi1, inner_done1 = gradient_and_inner_done(s1)
-    newton = running & _running(s1, o) & ~inner_done1
-    s_newton = newton_step(s1, gphi1, newton)
-    return select(newton, dataclasses.replace(s_newton, steps=s1.steps + 1), s1)
+    is_running = running(s, o)
+    gphi, inner_done = _inner_done(phi, s, o)
+    update = is_running & inner_done
+    s_upd = _multiplier_update(g, s, gphi, o)
+    s1 = _select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
+    gphi1, inner_done1 = _inner_done(phi, s1, o)
+    newton = is_running & running(s1, o) & ~inner_done1
+    s_newton = _newton_step(phi, s1, gphi1, newton, o)
+    return _select(newton, dataclasses.replace(s_newton, steps=s1.steps + 1), s1)
 
 
-def _running(s: _State, o: SolverOptions):
-    return (s.status == NOT_CONVERGED) & (s.steps < o.max_steps)
+def running(s: SolverState, o: SolverOptions):
+    """``()`` bool: whether the lane still steps (not finished, step budget left)."""
+    return (s.status == LaneStatus.NOT_CONVERGED) & (s.steps < o.max_steps)
 
 
-def _result(f, s: _State) -> SolverResult:
+def to_result(f, s: SolverState) -> SolverResult:
+    """The :class:`SolverResult` of a lane's final state (``f`` as in :func:`solve`)."""
     return SolverResult(
         x=s.x,
         lam=s.lam,
@@ -330,7 +403,9 @@ def solve(
     options: SolverOptions = SolverOptions(),
     active=True,
 ) -> SolverResult:
-    """Solve one lane (``vmap`` it for many, or use :func:`solve_lanes`).
+    """Solve one lane (``vmap`` it for many, or use :func:`jaxgrasp.lanes.solve_lanes`).
+
+    ``init``, then ``step`` while ``running``, then ``to_result``.
 
     Args:
         f: objective, ``(n,) -> ()``.
@@ -339,133 +414,8 @@ def solve(
         eq_mask: ``(m,)`` one-hot vector selecting the equality constraint, or zeros.
         nu0: initial equality multiplier.
         options: :class:`SolverOptions`.
-        active: ``False`` skips the lane (it ends at once with status :data:`NO_START`).
+        active: ``False`` skips the lane (it ends at once with status ``LaneStatus.NO_START``).
     """
-    s = _init(x0, eq_mask, nu0, active, options)
-    s = jax.lax.while_loop(lambda s: _running(s, options), lambda s: _step(f, g, s, options), s)
-    return _result(f, s)
-
-
-def solve_lanes(
-    f: Callable,
-    g: Callable,
-    theta,
-    x0,
-    eq_mask,
-    nu0,
-    active,
-    options: SolverOptions = SolverOptions(),
-) -> SolverResult:
-    """Solve a batch of lanes with early exit of finished lanes (leading axis ``L``).
-
-    Lanes of one ``vmap`` advance in lockstep, so a plain batched loop costs
-    ``L * max(steps)`` although most lanes finish early (or never start). Here a work
-    queue keeps ``W = min(ceil(slot_fraction * L), max_slots)`` slots busy: each loop step advances
-    every slot; a slot whose lane has finished writes it back and takes the next lane
-    not yet started (active lanes only). One ``while_loop`` with static shapes, so this
-    composes with ``jit`` and ``vmap``; the cost is near ``sum(steps) + W * max(steps)``
-    lane-steps instead of ``L * max(steps)``. Each lane's result is what :func:`solve`
-    gives.
-
-    Under ``jax.vmap`` (e.g. one call per grasp, vmapped over grasps) the batch axis is
-    folded into the lane axis (``custom_vmap``): all ``B * L`` lanes share one queue
-    of ``min(ceil(slot_fraction * B * L), max_slots)`` slots, instead of ``B`` queues advancing in
-    lockstep until the slowest of them is empty. Results are the same lane by lane.
-    ``f`` and ``g`` must therefore take every lane-dependent quantity through ``theta``
-    (they must not close over traced values).
-
-    Args:
-        f: objective ``(x, theta_lane) -> ()``.
-        g: constraint margins ``(x, theta_lane) -> (m,)``.
-        theta: pytree of per-lane problem data, leading axis ``L`` (may be empty).
-        x0: ``(L, n)`` starting points.
-        eq_mask: ``(L, m)`` one-hot equality selectors (rows of zeros: no equality).
-        nu0: ``(L,)`` initial equality multipliers.
-        active: ``(L,)`` bool; inactive lanes end at once with status :data:`NO_START`.
-        options: :class:`SolverOptions`.
-    """
-
-    @jax.custom_batching.custom_vmap
-    def run(theta, x0, eq_mask, nu0, active):
-        return _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, options)
-
-    @run.def_vmap
-    def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active):
-        num_lanes = x0.shape[1] if in_batched[1] else x0.shape[0]
-
-        def flat(a, batched):
-            a = jnp.asarray(a)
-            if not batched:
-                a = jnp.broadcast_to(a, (axis_size,) + a.shape)
-            return a.reshape((axis_size * num_lanes,) + a.shape[2:])
-
-        args = (theta, x0, eq_mask, nu0, active)
-        flat_args = jax.tree_util.tree_map(flat, args, tuple(in_batched))
-        out = run(*flat_args)  # a nested vmap folds into this call in turn
-        out = jax.tree_util.tree_map(lambda a: a.reshape((axis_size, num_lanes) + a.shape[1:]), out)
-        return out, jax.tree_util.tree_map(lambda _: True, out)
-
-    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active))
-
-
-def _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
-    num_lanes = x0.shape[0]
-    width = max(1, min(num_lanes, o.max_slots, -(-int(o.slot_fraction * num_lanes * 1e6) // 1_000_000)))
-    states = jax.vmap(lambda x, m, nu, a: _init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
-    # The queue: active lanes first, in order; only those are ever loaded into a slot.
-    queue = jnp.argsort(~jnp.asarray(active), stable=True)
-    num_active = jnp.sum(jnp.asarray(active, jnp.int32))
-
-    def take(tree, idx):
-        return jax.tree_util.tree_map(lambda a: a[idx], tree)
-
-    def step_all(slots, idx):
-        th = take(theta, idx)
-        return jax.vmap(lambda s, t: _step(lambda x: f(x, t), lambda x: g(x, t), s, o))(slots, th)
-
-    def running(slots):
-        return jax.vmap(lambda s: _running(s, o))(slots)
-
-    def body(carry):
-        states, slots, idx, ptr = carry
-        slots = step_all(slots, idx)
-        states = jax.tree_util.tree_map(lambda a, b: a.at[idx].set(b), states, slots)
-        done = ~running(slots)
-        # the k-th finished slot takes queue[ptr + k], while lanes remain
-        rank = jnp.cumsum(done) - 1
-        cand = ptr + rank
-        refill = done & (cand < num_active)
-        new_idx = jnp.where(refill, queue[jnp.minimum(cand, num_lanes - 1)], idx)
-        slots = jax.tree_util.tree_map(
-            lambda a, b: jnp.where(refill.reshape((-1,) + (1,) * (a.ndim - 1)), b, a),
-            slots,
-            take(states, new_idx),
-        )
-        ptr = ptr + jnp.sum(refill)
-        return states, slots, new_idx, ptr
-
-    # The tail: once the queue is empty and at most width // 8 slots still run (e.g. a few
-    # lanes that take the whole step budget), the running slots move to a loop of
-    # width // 8 slots, so that they no longer drag the idle slots through every step.
-    tail = width // 8 if width // 8 >= 4 else None
-
-    def cond(carry):
-        _, slots, _, ptr = carry
-        r = running(slots)
-        if tail is None:
-            return jnp.any(r)
-        return jnp.any(r) & ((ptr < num_active) | (jnp.sum(r.astype(jnp.int32)) > tail))
-
-    def tail_cond(carry):
-        _, slots, _, _ = carry
-        return jnp.any(running(slots))
-
-    idx0 = queue[:width]
-    ptr0 = jnp.minimum(jnp.asarray(width), num_active)
-    carry = jax.lax.while_loop(cond, body, (states, take(states, idx0), idx0, ptr0))
-    if tail is not None:
-        states, slots, idx, ptr = carry
-        keep = jnp.argsort(~running(slots), stable=True)[:tail]  # running slots first
-        carry = jax.lax.while_loop(tail_cond, body, (states, take(slots, keep), idx[keep], ptr))
-    states = carry[0]
-    return jax.vmap(lambda s, t: _result(lambda x: f(x, t), s))(states, take(theta, jnp.arange(num_lanes)))
+    s = init(x0, eq_mask, nu0, active, options)
+    s = jax.lax.while_loop(lambda s: running(s, options), lambda s: step(f, g, s, options), s)
+    return to_result(f, s)

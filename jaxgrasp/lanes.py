@@ -1,0 +1,172 @@
+"""A work queue that runs many lanes of the solver, finished lanes handing their slot on.
+
+:func:`solve_lanes` gives each lane what :func:`jaxgrasp.solver.solve` gives it, but
+advances only a few slots per loop step instead of every lane in lockstep; under
+``jax.vmap`` it folds the batch axis into its lanes (``custom_vmap``), so the lanes of
+every grasp of a batch share one queue. It drives the solver through its pieces
+:func:`~jaxgrasp.solver.init`, :func:`~jaxgrasp.solver.step`,
+:func:`~jaxgrasp.solver.running` and :func:`~jaxgrasp.solver.to_result`.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from . import solver
+from .solver import SolverOptions, SolverResult
+
+__all__ = ["solve_lanes"]
+
+
+def solve_lanes(
+    f: Callable,
+    g: Callable,
+    theta,
+    x0,
+    eq_mask,
+    nu0,
+    active,
+    options: SolverOptions = SolverOptions(),
+) -> SolverResult:
+    """Solve a batch of lanes with early exit of finished lanes (leading axis ``L``).
+
+    Lanes of one ``vmap`` advance in lockstep, so a plain batched loop costs
+    ``L * max(steps)`` although most lanes finish early (or never start). Here a work
+    queue keeps ``W = min(ceil(slot_fraction * L), max_slots)`` slots busy: each loop step advances
+    every slot; a slot whose lane has finished writes it back and takes the next lane
+    not yet started (active lanes only). One ``while_loop`` with static shapes, so this
+    composes with ``jit`` and ``vmap``; the cost is near ``sum(steps) + W * max(steps)``
+    lane-steps instead of ``L * max(steps)``. Each lane's result is what
+    :func:`jaxgrasp.solver.solve` gives.
+
+    Under ``jax.vmap`` (e.g. one call per grasp, vmapped over grasps) the batch axis is
+    folded into the lane axis (``custom_vmap``): all ``B * L`` lanes share one queue
+    of ``min(ceil(slot_fraction * B * L), max_slots)`` slots, instead of ``B`` queues advancing in
+    lockstep until the slowest of them is empty. Results are the same lane by lane.
+    ``f`` and ``g`` must therefore take every lane-dependent quantity through ``theta``
+    (they must not close over traced values).
+
+    Args:
+        f: objective ``(x, theta_lane) -> ()``.
+        g: constraint margins ``(x, theta_lane) -> (m,)``.
+        theta: pytree of per-lane problem data, leading axis ``L`` (may be empty).
+        x0: ``(L, n)`` starting points.
+        eq_mask: ``(L, m)`` one-hot equality selectors (rows of zeros: no equality).
+        nu0: ``(L,)`` initial equality multipliers.
+        active: ``(L,)`` bool; inactive lanes end at once with status
+            ``LaneStatus.NO_START``.
+        options: :class:`~jaxgrasp.solver.SolverOptions`.
+
+    Returns:
+        :class:`~jaxgrasp.solver.SolverResult` with leading axis ``L``.
+    """
+
+    @jax.custom_batching.custom_vmap
+    def run(theta, x0, eq_mask, nu0, active):
+        return _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, options)
+
+    @run.def_vmap
+    def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active):
+        num_lanes = x0.shape[1] if in_batched[1] else x0.shape[0]
+
+        def flat(a, batched):
+            a = jnp.asarray(a)
+            if not batched:
+                a = jnp.broadcast_to(a, (axis_size,) + a.shape)
+            return a.reshape((axis_size * num_lanes,) + a.shape[2:])
+
+        args = (theta, x0, eq_mask, nu0, active)
+        flat_args = jax.tree_util.tree_map(flat, args, tuple(in_batched))
+        out = run(*flat_args)  # a nested vmap folds into this call in turn
+        out = jax.tree_util.tree_map(lambda a: a.reshape((axis_size, num_lanes) + a.shape[1:]), out)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active))
+
+
+class _Queue(NamedTuple):
+    """Loop carry of the queue: ``L`` lanes, ``W`` slots."""
+
+    states: Any  # SolverState, leading axis L: every lane, as last written back
+    slots: Any  # SolverState, leading axis W: the lanes in flight
+    idx: Any  # (W,) int: the lane each slot holds
+    ptr: Any  # () int: how many lanes of the queue order have been loaded into a slot
+
+
+def _take(tree, idx):
+    return jax.tree_util.tree_map(lambda a: a[idx], tree)
+
+
+def _num_slots(num_lanes: int, o: SolverOptions) -> int:
+    """``W = min(ceil(slot_fraction * L), max_slots, L)``, at least 1 (static)."""
+    return max(1, min(num_lanes, o.max_slots, -(-int(o.slot_fraction * num_lanes * 1e6) // 1_000_000)))
+
+
+def _running_slots(slots, o: SolverOptions):
+    """``(W,)`` bool: which slots still step."""
+    return jax.vmap(lambda s: solver.running(s, o))(slots)
+
+
+def _advance(f, g, theta, order, num_active, o: SolverOptions, q: _Queue) -> _Queue:
+    """One loop step: every slot steps and is written back; finished slots are refilled.
+
+    ``order`` is the ``(L,)`` queue order of the lanes, its first ``num_active`` entries the
+    active lanes.
+    """
+    th = _take(theta, q.idx)
+    slots = jax.vmap(lambda s, t: solver.step(lambda x: f(x, t), lambda x: g(x, t), s, o))(q.slots, th)
+    states = jax.tree_util.tree_map(lambda a, b: a.at[q.idx].set(b), q.states, slots)
+    done = ~_running_slots(slots, o)
+    # the k-th finished slot takes order[ptr + k], while lanes remain
+    rank = jnp.cumsum(done) - 1
+    cand = q.ptr + rank
+    refill = done & (cand < num_active)
+    new_idx = jnp.where(refill, order[jnp.minimum(cand, order.shape[0] - 1)], q.idx)
+    slots = jax.tree_util.tree_map(
+        lambda a, b: jnp.where(refill.reshape((-1,) + (1,) * (a.ndim - 1)), b, a),
+        slots,
+        _take(states, new_idx),
+    )
+    return _Queue(states, slots, new_idx, q.ptr + jnp.sum(refill))
+
+
+def _to_tail(q: _Queue, tail: int, o: SolverOptions) -> _Queue:
+    """The queue with only ``tail`` slots, the running ones first (the others idle)."""
+    keep = jnp.argsort(~_running_slots(q.slots, o), stable=True)[:tail]  # running slots first
+    return _Queue(q.states, _take(q.slots, keep), q.idx[keep], q.ptr)
+
+
+def _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
+    """:func:`solve_lanes` on one flat batch of ``L`` lanes: the queue loop, then the tail."""
+    num_lanes = x0.shape[0]
+    width = _num_slots(num_lanes, o)
+    states = jax.vmap(lambda x, m, nu, a: solver.init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
+    # The queue: active lanes first, in order; only those are ever loaded into a slot.
+    order = jnp.argsort(~jnp.asarray(active), stable=True)
+    num_active = jnp.sum(jnp.asarray(active, jnp.int32))
+    advance = partial(_advance, f, g, theta, order, num_active, o)
+
+    # The tail: once the queue is empty and at most width // 8 slots still run (e.g. a few
+    # lanes that take the whole step budget), the running slots move to a loop of
+    # width // 8 slots, so that they no longer drag the idle slots through every step.
+    tail = width // 8 if width // 8 >= 4 else None
+
+    def cond(q: _Queue):
+        r = _running_slots(q.slots, o)
+        if tail is None:
+            return jnp.any(r)
+        return jnp.any(r) & ((q.ptr < num_active) | (jnp.sum(r.astype(jnp.int32)) > tail))
+
+    idx0 = order[:width]
+    ptr0 = jnp.minimum(jnp.asarray(width), num_active)
+    q = jax.lax.while_loop(cond, advance, _Queue(states, _take(states, idx0), idx0, ptr0))
+    if tail is not None:
+        q = jax.lax.while_loop(lambda q: jnp.any(_running_slots(q.slots, o)), advance, _to_tail(q, tail, o))
+    # theta taken by lane index, as the slots take it: f then compiles as in the loop (given
+    # theta itself, XLA simplifies across its broadcasts and rounds f(x) differently).
+    th = _take(theta, jnp.arange(num_lanes))
+    return jax.vmap(lambda s, t: solver.to_result(lambda x: f(x, t), s))(q.states, th)

@@ -1,0 +1,290 @@
+"""The augmented-Lagrangian solver and its work queue on their own, without grasp physics.
+
+Small programs in ``x = (x0, x1, x2)`` with three constraint rows (``>= 0`` where
+feasible) whose KKT points are derived by hand below. The sign convention is the
+solver's: the Lagrangian is ``f + nu h - lam . g`` with ``h`` the row picked by
+``eq_mask``, so at a KKT point ``grad f + nu grad h - sum_i lam_i grad g_i = 0`` and
+``lam >= 0``.
+
+Every program is a branch of one ``lax.switch`` whose index (and a shift of ``x``) is
+lane data, so a whole batch of them is one compilation (under ``vmap`` every branch is
+computed and the lane's own is selected), and :func:`solve_lanes`, which takes lane data
+through ``theta`` only, runs the same programs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from functools import partial
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgrasp.lanes import solve_lanes  # importing jaxgrasp turns on float64
+from jaxgrasp.solver import SolverOptions, SolverResult, solve
+from jaxgrasp.status import LaneStatus
+
+SQRT2 = math.sqrt(2.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    """``min f(x)`` s.t. ``g(x) >= 0``, row ``eq_row`` (if any) ``= 0`` instead, from ``x0``;
+    its expected status and, where ``x`` is given, its KKT point and objective."""
+
+    f: Callable  # (3,) -> ()
+    g: Callable  # (3,) -> (3,)
+    x0: tuple
+    eq_row: int | None = None
+    x: tuple | None = None  # expected minimiser, multipliers and objective (None: not checked)
+    lam: tuple = (0.0, 0.0, 0.0)
+    nu: float = 0.0
+    objective: float | None = None
+    status: LaneStatus = LaneStatus.CONVERGED
+    active: bool = True
+
+
+def _sq(v):
+    return jnp.dot(v, v)
+
+
+CASES = {
+    # Unconstrained minimum (1, 2, -1) inside the ball |x|^2 <= 9: no multiplier.
+    "inactive_inequality": Case(
+        f=lambda x: _sq(x - jnp.array([1.0, 2.0, -1.0])),
+        g=lambda x: jnp.stack([9.0 - _sq(x), x[2] + 5.0, 5.0 - x[2]]),
+        x0=(0.0, 0.0, 0.0),
+        x=(1.0, 2.0, -1.0),
+        objective=0.0,
+    ),
+    # Projection of a = (2, 2, 0) onto the unit ball: x = a / |a|, and
+    # 2 (x - a) + 2 lam x = 0 gives 1 + lam = |a| = 2 sqrt 2.
+    "active_circle": Case(
+        f=lambda x: _sq(x - jnp.array([2.0, 2.0, 0.0])),
+        g=lambda x: jnp.stack([1.0 - _sq(x), x[2] + 5.0, 5.0 - x[2]]),
+        x0=(0.0, 0.0, 0.0),
+        x=(1.0 / SQRT2, 1.0 / SQRT2, 0.0),
+        lam=(2.0 * SQRT2 - 1.0, 0.0, 0.0),
+        objective=(2.0 * SQRT2 - 1.0) ** 2,
+    ),
+    # Projection of (3, 1) onto the half-plane x0 + x1 <= 2: x = (2, 0); grad f = (-2, -2)
+    # and grad g0 = (-1, -1) give lam = 2.
+    "active_linear": Case(
+        f=lambda x: (x[0] - 3.0) ** 2 + (x[1] - 1.0) ** 2 + x[2] ** 2,
+        g=lambda x: jnp.stack([2.0 - x[0] - x[1], x[2] + 1.0, 4.0 - x[2]]),
+        x0=(0.0, 0.0, 0.5),
+        x=(2.0, 0.0, 0.0),
+        lam=(2.0, 0.0, 0.0),
+        objective=2.0,
+    ),
+    # min x0^2 + 2 x1^2 + (x2 - 1)^2 on x0 + x1 = 3: 2 x0 + nu = 0, 4 x1 + nu = 0 give
+    # x = (2, 1, 1), nu = -4, f = 6; the ball row (10 - 6 = 4) and x2 + 2 are inactive.
+    "equality": Case(
+        f=lambda x: x[0] ** 2 + 2.0 * x[1] ** 2 + (x[2] - 1.0) ** 2,
+        g=lambda x: jnp.stack([10.0 - _sq(x), x[0] + x[1] - 3.0, x[2] + 2.0]),
+        x0=(0.0, 0.0, 0.0),
+        eq_row=1,
+        x=(2.0, 1.0, 1.0),
+        nu=-4.0,
+        objective=6.0,
+    ),
+    # min |x - (1, 2, 3)|^2 on x0 + x1 + x2 = 3, x2 <= 1 (active), x0 >= -5 (inactive):
+    # x = (0.5, 1.5, 1); grad f = (-1, -1, -4), so -1 + nu = 0 and -4 + nu + lam2 = 0:
+    # nu = 1, lam2 = 3; f = 0.25 + 0.25 + 4.
+    "mixed": Case(
+        f=lambda x: _sq(x - jnp.array([1.0, 2.0, 3.0])),
+        g=lambda x: jnp.stack([x[0] + 5.0, x[0] + x[1] + x[2] - 3.0, 1.0 - x[2]]),
+        x0=(0.0, 0.0, 0.0),
+        eq_row=1,
+        x=(0.5, 1.5, 1.0),
+        lam=(0.0, 0.0, 3.0),
+        nu=1.0,
+        objective=4.5,
+    ),
+    # Rosenbrock's valley (non-convex, indefinite Hessian at the start) from its classic
+    # start (-1.2, 1): minimum (1, 1, 0) inside the ball |x|^2 <= 4.
+    "rosenbrock": Case(
+        f=lambda x: (1.0 - x[0]) ** 2 + 100.0 * (x[1] - x[0] ** 2) ** 2 + x[2] ** 2,
+        g=lambda x: jnp.stack([4.0 - _sq(x), x[2] + 1.0, 1.0 - x[2]]),
+        x0=(-1.2, 1.0, 0.5),
+        x=(1.0, 1.0, 0.0),
+        objective=0.0,
+    ),
+    # A saddle, -x0 x1, on the disc x0^2 + x1^2 <= 2: local minimum (1, 1, 0) in the
+    # start's quadrant, grad f = (-1, -1, 0) = lam0 grad g0 = lam0 (-2, -2, 0): lam0 = 1/2.
+    # The Lagrangian's Hessian along the circle, direction (1, -1, 0), is 4 > 0.
+    "saddle_on_circle": Case(
+        f=lambda x: -x[0] * x[1] + x[2] ** 2,
+        g=lambda x: jnp.stack([2.0 - x[0] ** 2 - x[1] ** 2, x[2] + 1.0, 1.0 - x[2]]),
+        x0=(0.5, 0.3, 0.2),
+        x=(1.0, 1.0, 0.0),
+        lam=(0.5, 0.0, 0.0),
+        objective=-1.0,
+    ),
+    # x0 >= 1 and x0 <= -1: no feasible point (the least violation is at x0 = 0).
+    "infeasible": Case(
+        f=lambda x: _sq(x),
+        g=lambda x: jnp.stack([x[0] - 1.0, -x[0] - 1.0, x[1] + 10.0]),
+        x0=(3.0, 1.0, 0.0),
+        status=LaneStatus.INFEASIBLE,
+    ),
+    # An inactive lane is not run at all.
+    "inactive_lane": Case(
+        f=lambda x: _sq(x - 1.0),
+        g=lambda x: jnp.stack([1.0 - _sq(x), x[1] + 1.0, x[2] + 1.0]),
+        x0=(0.3, -0.2, 0.1),
+        status=LaneStatus.NO_START,
+        active=False,
+    ),
+}
+NAMES = tuple(CASES)
+
+
+def _lane_functions(names):
+    """``(f, g)`` of lanes whose ``theta`` picks one of the programs ``names`` (index
+    ``theta["kind"]``) and moves it by ``theta["shift"]`` (``(3,)``: x* moves by it)."""
+    fs = [CASES[n].f for n in names]
+    gs = [CASES[n].g for n in names]
+
+    def f(x, theta):
+        return jax.lax.switch(theta["kind"], fs, x - theta["shift"])
+
+    def g(x, theta):
+        return jax.lax.switch(theta["kind"], gs, x - theta["shift"])
+
+    return f, g
+
+
+@partial(jax.jit, static_argnames=("names", "options"))
+def _solve_batch(names, theta, x0, eq_mask, nu0, active, options):
+    """``vmap`` of :func:`solve` over lanes (the reference for the work queue)."""
+    f, g = _lane_functions(names)
+
+    def one(t, x, m, nu, a):
+        return solve(lambda z: f(z, t), lambda z: g(z, t), x, m, nu, options, a)
+
+    return jax.vmap(one)(theta, x0, eq_mask, nu0, active)
+
+
+@pytest.fixture(scope="module")
+def known():
+    """Every case of :data:`CASES` solved by :func:`solve`, one lane each, in one batch."""
+    cases = [CASES[n] for n in NAMES]
+    theta = {"kind": jnp.arange(len(cases)), "shift": jnp.zeros((len(cases), 3))}
+    eq_mask = jnp.array([np.eye(3)[c.eq_row] if c.eq_row is not None else np.zeros(3) for c in cases])
+    x0 = jnp.array([c.x0 for c in cases])
+    active = jnp.array([c.active for c in cases])
+    res = _solve_batch(NAMES, theta, x0, eq_mask, jnp.zeros(len(cases)), active, SolverOptions())
+    assert res.x.dtype == jnp.float64
+    return {n: jax.tree_util.tree_map(lambda a, i=i: np.asarray(a[i]), res) for i, n in enumerate(NAMES)}
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_status(known, name):
+    assert LaneStatus(int(known[name].status)) == CASES[name].status
+
+
+@pytest.mark.parametrize("name", [n for n in NAMES if CASES[n].x is not None])
+def test_known_kkt_point(known, name):
+    c, r = CASES[name], known[name]
+    np.testing.assert_allclose(r.x, c.x, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(r.lam, c.lam, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(r.nu, c.nu, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(r.objective, c.objective, rtol=0, atol=1e-9)
+    assert max(r.stationarity, r.feasibility, r.complementarity) <= SolverOptions().tol
+    assert 0 < r.steps <= SolverOptions().max_steps
+
+
+def test_infeasible_program(known):
+    r = known["infeasible"]
+    assert r.feasibility > SolverOptions().infeasible_tol
+    assert 1 < r.steps < SolverOptions().max_steps  # it had to walk to x0 = 0 first
+
+
+def test_inactive_lane_is_not_run(known):
+    r = known["inactive_lane"]
+    assert int(r.steps) == 0
+    np.testing.assert_array_equal(r.x, CASES["inactive_lane"].x0)
+
+
+# --- the work queue: solve_lanes must give every lane what solve gives it
+
+# 32 slots for 96 lanes (for 288 under an outer vmap): finished lanes hand their slot on,
+# and the last lanes run in the tail loop of 32 // 8 = 4 slots. A small step budget makes
+# some lanes run to it while others finish in a few steps.
+QUEUE_OPTIONS = SolverOptions(max_steps=40, slot_fraction=1.0 / 3.0, max_slots=32)
+NUM_LANES = 96
+# Fewer programs than above (each is a branch every lane computes): a quick one, one with
+# an equality and two active rows, a non-convex valley and an infeasible one.
+QUEUE_CASES = ("active_linear", "mixed", "rosenbrock", "infeasible")
+
+
+def _lane_batch(seed: int):
+    """``NUM_LANES`` distinct lanes: programs of :data:`QUEUE_CASES` drawn at random,
+    each shifted and started elsewhere, with an equality row (or none) and its initial
+    multiplier drawn at random, and about one lane in six inactive."""
+    rng = np.random.default_rng(seed)
+    kind = rng.integers(0, len(QUEUE_CASES), NUM_LANES)
+    shift = rng.uniform(-3.0, 3.0, (NUM_LANES, 3))
+    x0 = shift + rng.normal(0.0, 1.5, (NUM_LANES, 3))
+    rows = rng.integers(-1, 3, NUM_LANES)  # -1: no equality
+    eq_mask = np.where(rows[:, None] >= 0, np.eye(3)[np.maximum(rows, 0)], 0.0)
+    nu0 = np.where(rows >= 0, rng.normal(0.0, 0.5, NUM_LANES), 0.0)
+    active = rng.uniform(size=NUM_LANES) > 1.0 / 6.0
+    theta = {"kind": jnp.asarray(kind), "shift": jnp.asarray(shift)}
+    return theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active)
+
+
+def _assert_same_lanes(got: SolverResult, want: SolverResult):
+    """Every field equal lane by lane: the integers exactly, the floats to 1e-12 (the queue
+    runs the same arithmetic compiled for another batch width, which may round apart)."""
+    for field in dataclasses.fields(SolverResult):
+        a = np.asarray(getattr(got, field.name))
+        b = np.asarray(getattr(want, field.name))
+        assert a.shape == b.shape, field.name
+        if np.issubdtype(b.dtype, np.floating):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12, err_msg=field.name)
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=field.name)
+
+
+def _queue_is_exercised(ref: SolverResult):
+    """The batch makes the queue work: more active lanes than slots (refills), step
+    counts from a few to the budget (the tail), and every status."""
+    steps, status = np.asarray(ref.steps), np.asarray(ref.status)
+    ran = status != LaneStatus.NO_START
+    assert np.sum(ran) > QUEUE_OPTIONS.max_slots
+    assert np.min(steps[ran]) <= 5
+    for s in LaneStatus:
+        assert np.any(status == s), s.label
+    assert np.any(steps == QUEUE_OPTIONS.max_steps)
+
+
+def _queue(theta, x0, eq_mask, nu0, active):
+    f, g = _lane_functions(QUEUE_CASES)
+    return solve_lanes(f, g, theta, x0, eq_mask, nu0, active, QUEUE_OPTIONS)
+
+
+def test_solve_lanes_equals_vmap_of_solve():
+    lanes = _lane_batch(0)
+    want = _solve_batch(QUEUE_CASES, *lanes, QUEUE_OPTIONS)
+    _queue_is_exercised(want)
+    _assert_same_lanes(jax.jit(_queue)(*lanes), want)
+
+
+def test_solve_lanes_under_outer_vmap():
+    """An outer ``vmap`` folds its batch into the lanes (``custom_vmap``): one queue of 32
+    slots for 3 x 96 lanes, each lane still what ``solve`` gives it. The equality rows are
+    shared by the batch (not batched), the rest differs."""
+    batches = [_lane_batch(seed) for seed in (1, 2, 3)]
+    eq_mask = batches[0][2]
+    theta, x0, _, nu0, active = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *batches)
+    got = jax.jit(jax.vmap(_queue, in_axes=(0, 0, None, 0, 0)))(theta, x0, eq_mask, nu0, active)
+    for b, (t, x, _, nu, a) in enumerate(batches):
+        want = _solve_batch(QUEUE_CASES, t, x, eq_mask, nu, a, QUEUE_OPTIONS)
+        _queue_is_exercised(want)
+        _assert_same_lanes(jax.tree_util.tree_map(lambda a: a[b], got), want)
