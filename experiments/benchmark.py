@@ -74,7 +74,8 @@ import jax.numpy as jnp  # noqa: E402
 import jaxgrasp  # noqa: E402
 from jaxgrasp import result as R  # noqa: E402
 from jaxgrasp.status import LaneStatus  # noqa: E402
-from jaxgrasp.evaluate import EvaluateOptions, solve_programs  # noqa: E402
+from jaxgrasp import EvaluateOptions
+from jaxgrasp.programs import solve_programs  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
 from tests.ipopt_reference import FEAS_TOL, _Model  # noqa: E402
 

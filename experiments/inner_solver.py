@@ -27,7 +27,8 @@ import numpy as np
 
 import jaxgrasp
 from jaxgrasp import solver as S
-from jaxgrasp.evaluate import EvaluateOptions, _Problem, solve_programs
+from jaxgrasp import EvaluateOptions
+from jaxgrasp.programs import constraints, objective, program_data, solve_programs
 from jaxgrasp.status import LaneStatus
 from jaxgrasp.model import model_params
 
@@ -36,7 +37,7 @@ def lbfgs_al(f, g, x0, eq_mask, nu0, o: S.SolverOptions, outer=40):
     """PHR augmented Lagrangian with jaxopt.LBFGS inner solves (one lane)."""
 
     def phi(x, lam, nu, rho):
-        return S._augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask)
+        return S.augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask)
 
     solver = jaxopt.LBFGS(fun=phi, maxiter=200, tol=o.tol)
 
@@ -83,11 +84,11 @@ def main(argv=None):
 
     def lanes_for(grasp):
         p = model_params(grasp)
-        prob = _Problem(p)
+        data = program_data(p)
         progs = solve_programs(grasp, opts)
-        masks = jax.nn.one_hot(progs.constraint_index, 3 * prob.n)
-        f = lambda z: prob.f(z, p)  # noqa: E731
-        g = lambda z: prob.g(z, p)  # noqa: E731
+        masks = jax.nn.one_hot(progs.constraint_index, 3 * p.c.shape[0])
+        f = lambda z: objective(z, data)  # noqa: E731
+        g = lambda z: constraints(z, data)  # noqa: E731
         # the evaluator's multiplier estimate at each start
         gf = jax.vmap(jax.grad(f))(progs.start)
         gh = jax.vmap(lambda z, k: jax.grad(lambda y: g(y)[k])(z))(progs.start, progs.constraint_index)

@@ -27,7 +27,8 @@ import jax.numpy as jnp  # noqa: E402
 
 import jaxgrasp  # noqa: E402
 from jaxgrasp import solver as S  # noqa: E402
-from jaxgrasp.evaluate import EvaluateOptions, _Problem, solve_programs  # noqa: E402
+from jaxgrasp import EvaluateOptions
+from jaxgrasp.programs import constraints, objective, program_data, solve_programs  # noqa: E402
 from jaxgrasp.model import model_params  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
 
@@ -98,17 +99,17 @@ def parts(scene, ne, ndr, lanes=4096, repeats=5):
     g0 = jax.tree_util.tree_map(lambda a: a[0], batch(scene, ne, ndr))
     progs = solve_programs(g0, opts)
     p = model_params(g0)
-    prob = _Problem(p)
+    data = program_data(p)
     L = progs.start.shape[0]
     reps = -(-lanes // L)
     z = jnp.tile(progs.start, (reps, 1))[:lanes]
-    masks = jnp.tile(jax.nn.one_hot(progs.constraint_index, 3 * prob.n), (reps, 1))[:lanes]
+    masks = jnp.tile(jax.nn.one_hot(progs.constraint_index, 3 * p.c.shape[0]), (reps, 1))[:lanes]
     lam = jnp.full(masks.shape, 0.1)
-    f = lambda z: prob.f(z, p)
-    g = lambda z: prob.g(z, p)
+    f = lambda z: objective(z, data)
+    g = lambda z: constraints(z, data)
 
     def phi(x, m):
-        return S._augmented_lagrangian(f, g, x, lam[0], 0.3, 100.0, m)
+        return S.augmented_lagrangian(f, g, x, lam[0], 0.3, 100.0, m)
 
     fns = {
         "f + g (value of phi)": jax.jit(jax.vmap(phi)),

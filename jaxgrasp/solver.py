@@ -49,6 +49,7 @@ __all__ = [
     "step",
     "running",
     "to_result",
+    "augmented_lagrangian",
 ]
 
 
@@ -163,7 +164,9 @@ def _violation(g, x, eq_mask):
     return 0.5 * jnp.sum(r * r)
 
 
-def _augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask):
+def augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask):
+    """``phi(x)`` of the module docstring: ``f + nu h + rho/2 h^2 + 1/(2 rho) sum_i
+    (max(0, lam_i - rho g_i)^2 - lam_i^2)`` over the inequalities, ``h`` the ``eq_mask`` row."""
     gx = g(x)
     h = jnp.sum(eq_mask * gx)
     shifted = jnp.where(eq_mask > 0, 0.0, jnp.maximum(0.0, lam - rho * gx))
@@ -358,7 +361,7 @@ def step(f, g, s: SolverState, o: SolverOptions) -> SolverState:
         s: the lane's state.
         o: :class:`SolverOptions`.
     """
-    phi = partial(_augmented_lagrangian, f, g, eq_mask=s.eq_mask)  # (x, lam, nu, rho) -> ()
+    phi = partial(augmented_lagrangian, f, g, eq_mask=s.eq_mask)  # (x, lam, nu, rho) -> ()
     # A multiplier update, where the inner solve is done, then a Newton step where the
     # (updated) inner solve is not: the sequence of updates and the step count of a lane
     # are those of one kind of update per loop step, but under vmap (where both kinds are
