@@ -29,7 +29,7 @@ from .options import EvaluateOptions  # noqa: E402
 from .grasp import STANDARD_GRAVITY, Grasp  # noqa: E402
 from .gripfile import grasp_from_dict, grasp_to_dict, load, save  # noqa: E402
 from .model import KINDS  # noqa: E402
-from .status import BoundaryKind, GraspStatus, LaneStatus  # noqa: E402
+from .status import BoundaryKind, GraspStatus, LaneStatus, TuneStatus  # noqa: E402
 from .result import (  # noqa: E402
     INFEASIBLE,
     NOT_CONVERGED,
@@ -61,6 +61,7 @@ __all__ = [
     "GraspStatus",
     "LaneStatus",
     "BoundaryKind",
+    "TuneStatus",
     "load",
     "save",
     "grasp_from_dict",

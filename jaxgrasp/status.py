@@ -5,19 +5,22 @@ enums give the codes names and one-line meanings. A member *is* its integer
 (``enum.IntEnum``), so ``result.status == GraspStatus.STABLE`` works on arrays, and
 ``GraspStatus(int(code)).label`` is the name written to files and JSON.
 
-Four kinds of code, never to be mixed up (they share some names, not their numbers):
+Four kinds of integer code, never to be mixed up (they share some names, not their numbers):
 
 * :class:`LaneStatus`: how one solver lane (one program from one start) ended;
 * :class:`GraspStatus`: what an evaluation says of a grasp;
 * :class:`BoundaryKind`: which boundary of the equilibrium region (eq. 20, 21);
 * :class:`Constraint`: the rows of :func:`jaxgrasp.model.constraint_margins`.
+
+and one string status, :class:`TuneStatus`: how :func:`jaxgrasp.tune` stopped (a Python
+loop, not an array, so its members are strings).
 """
 
 from __future__ import annotations
 
 import enum
 
-__all__ = ["LaneStatus", "GraspStatus", "BoundaryKind", "Constraint", "NO_BOUNDARY"]
+__all__ = ["LaneStatus", "GraspStatus", "BoundaryKind", "Constraint", "NO_BOUNDARY", "TuneStatus"]
 
 
 class _Coded(enum.IntEnum):
@@ -78,3 +81,29 @@ class Constraint(_Coded):
     CONTACT = 0, "the fingertip keeps touching: d / dr >= 0"
     SLIP = 1, "no slip: friction carries the tangential force and torsion (eq. 9)"
     FORCE = 2, "the normal force stays below its limit (eq. 21)"
+
+
+class TuneStatus(enum.StrEnum):
+    """How :func:`jaxgrasp.tune` stopped. A member *is* its string (``== "converged"``).
+
+    ``message`` is a template with ``{ftol}``, ``{patience}`` and ``{maxiter}``.
+    """
+
+    def __new__(cls, value: str, message: str):
+        obj = str.__new__(cls, value)
+        obj._value_ = value
+        obj.message = message
+        return obj
+
+    CONVERGED = "converged", "the projected gradient vanished"
+    STALLED = "stalled", (
+        "no relative improvement above {ftol:g} in {patience} iterations "
+        "(typically a maximum on a kink, where the limiting boundary switches)"
+    )
+    MAX_ITERATIONS = "max_iterations", "stopped after maxiter={maxiter} iterations"
+    LINE_SEARCH_FAILED = "line_search_failed", "the line search found no better point (a kink of the value, or noise)"
+
+    @property
+    def converged(self) -> bool:
+        """The search ended at a (local) maximum: converged or stalled."""
+        return self in (TuneStatus.CONVERGED, TuneStatus.STALLED)

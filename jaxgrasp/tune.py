@@ -42,7 +42,7 @@ from .evaluate import EvaluateOptions, evaluate_compiled
 from .fields import FIELD, TUNABLE
 from .grasp import Grasp
 from .result import Evaluation
-from .status import GraspStatus
+from .status import GraspStatus, TuneStatus
 from .units import MJ_TO_J
 from .validation import GraspValueError, check_grasp_inputs
 
@@ -295,7 +295,8 @@ class TuneResult:
         initial_params: the same at the start.
         bounds: ``(lo, hi)`` by label as used (``"positions"``: in-face offsets, m).
         evaluation: the :class:`~jaxgrasp.Evaluation` of ``grasp``.
-        status: ``"converged"`` (projected gradient below ``tol``), ``"stalled"`` (no
+        status: a :class:`~jaxgrasp.status.TuneStatus`, equal to its string:
+            ``"converged"`` (projected gradient below ``tol``), ``"stalled"`` (no
             relative improvement above ``ftol`` in ``patience`` iterations: typically a
             maximum on a kink, where the limiting boundary switches),
             ``"max_iterations"`` or ``"line_search_failed"``.
@@ -317,7 +318,7 @@ class TuneResult:
     initial_params: dict
     bounds: dict
     evaluation: Evaluation
-    status: str
+    status: TuneStatus
     converged: bool
     iterations: int
     evaluations: int
@@ -424,7 +425,7 @@ def tune(
         status, iters, evals = _run_scipy(vg, box.u0, data, rec, **run)
     else:
         status, iters, evals = _run_jaxopt(_jaxopt_solver(specs, hard_options, method), box.u0, data, rec, **run)
-    message = _STOP_MESSAGES[status].format(ftol=ftol, patience=patience, maxiter=maxiter)
+    message = status.message.format(ftol=ftol, patience=patience, maxiter=maxiter)
     return _result(specs, grasp, box, data, rec, status, iters, evals, method, message)
 
 
@@ -519,15 +520,6 @@ class _Record:
         return v
 
 
-_STOP_MESSAGES = {
-    "converged": "the projected gradient vanished",
-    "stalled": "no relative improvement above {ftol:g} in {patience} iterations "
-    "(typically a maximum on a kink, where the limiting boundary switches)",
-    "max_iterations": "stopped after maxiter={maxiter} iterations",
-    "line_search_failed": "the line search found no better point (a kink of the value, or noise)",
-}
-
-
 def _result(specs, grasp, box: _Box, data, rec: _Record, status, iters, evals, method, message) -> TuneResult:
     """The :class:`TuneResult` of a finished search."""
     v_best, u_best, ev_best = rec.best
@@ -559,7 +551,7 @@ def _result(specs, grasp, box: _Box, data, rec: _Record, status, iters, evals, m
         bounds=bounds_used,
         evaluation=jax.tree_util.tree_map(np.asarray, ev_best),
         status=status,
-        converged=status in ("converged", "stalled"),
+        converged=status.converged,
         iterations=iters,
         evaluations=int(evals) + 1,
         not_converged_evaluations=n_nc,
@@ -573,7 +565,7 @@ def _run_jaxopt(solver, u0, data, rec: _Record, *, maxiter, tol, ftol, patience,
     box = (jnp.zeros_like(jnp.asarray(u0)), jnp.ones_like(jnp.asarray(u0)))
     u = jnp.asarray(u0)
     state = solver.init_state(u, box, data)
-    status, iters, stall = "max_iterations", 0, 0
+    status, iters, stall = TuneStatus.MAX_ITERATIONS, 0, 0
     for it in range(1, maxiter + 1):
         u_prev = u
         prev_best = rec.best[0]
@@ -584,13 +576,13 @@ def _run_jaxopt(solver, u0, data, rec: _Record, *, maxiter, tol, ftol, patience,
             callback(it, v, np.asarray(u))
         stall = stall + 1 if rec.best[0] <= prev_best * (1.0 + ftol) else 0
         if float(state.error) <= tol:
-            status = "converged"
+            status = TuneStatus.CONVERGED
             break
         if bool(getattr(state, "failed_linesearch", False)) and np.array_equal(np.asarray(u), np.asarray(u_prev)):
-            status = "line_search_failed"
+            status = TuneStatus.LINE_SEARCH_FAILED
             break
         if stall >= patience:
-            status = "stalled"
+            status = TuneStatus.STALLED
             break
     return status, iters, int(getattr(state, "num_fun_eval", iters + 1))
 
@@ -647,11 +639,11 @@ def _run_scipy(vg, u0, data, rec: _Record, *, maxiter, tol, ftol, patience, call
         options={"maxiter": maxiter, "gtol": tol, "ftol": ftol},
     )
     if out.success:
-        status = "converged" if "PROJ" in str(out.message).upper() else "stalled"
+        status = TuneStatus.CONVERGED if "PROJ" in str(out.message).upper() else TuneStatus.STALLED
     elif count["it"] >= maxiter:
-        status = "max_iterations"
+        status = TuneStatus.MAX_ITERATIONS
     else:
-        status = "line_search_failed"
+        status = TuneStatus.LINE_SEARCH_FAILED
     return status, count["it"], count["evals"]
 
 

@@ -301,6 +301,8 @@ def test_tune_cube_reaches_grid_best(cube_grid):
     dr_best, v_best = cube_grid
     res = tune(presets.cube(E_TUNE, 1.5e-3), ["initial_deformation:shared"], maxiter=50)
     assert res.converged, res.message
+    assert isinstance(res.status, jaxgrasp.TuneStatus) and res.status in ("converged", "stalled")
+    assert res.message == res.status.message.format(ftol=1e-7, patience=4, maxiter=50)  # the defaults
     assert res.value >= 0.99 * v_best, (res.value, v_best)
     # (the optimum is a kink between the slip and force-limit boundaries, so tune may
     # beat the 0.05 mm grid by a few %)
