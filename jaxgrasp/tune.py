@@ -300,7 +300,6 @@ class TuneResult:
             relative improvement above ``ftol`` in ``patience`` iterations: typically a
             maximum on a kink, where the limiting boundary switches),
             ``"max_iterations"`` or ``"line_search_failed"``.
-        converged: ``status`` is ``"converged"`` or ``"stalled"``.
         iterations: optimiser iterations run.
         evaluations: value-and-gradient evaluations.
         not_converged_evaluations: iterates whose evaluation did not converge
@@ -319,12 +318,16 @@ class TuneResult:
     bounds: dict
     evaluation: Evaluation
     status: TuneStatus
-    converged: bool
     iterations: int
     evaluations: int
     not_converged_evaluations: int
     method: str
     message: str
+
+    @property
+    def converged(self) -> bool:
+        """``status`` is ``"converged"`` or ``"stalled"`` (derived from it, never stored)."""
+        return self.status.converged
 
     @property
     def gain(self) -> float:
@@ -551,7 +554,6 @@ def _result(specs, grasp, box: _Box, data, rec: _Record, status, iters, evals, m
         bounds=bounds_used,
         evaluation=jax.tree_util.tree_map(np.asarray, ev_best),
         status=status,
-        converged=status.converged,
         iterations=iters,
         evaluations=int(evals) + 1,
         not_converged_evaluations=n_nc,
