@@ -20,9 +20,10 @@ Format (TOML; JSON is the same structure as one object with keys ``fingertip``,
     # radius / young_modulus / friction / max_force here override [fingertip]
 
 Each fingertip key must be given in ``[fingertip]`` or in every contact. Unknown keys,
-wrong types (booleans are not numbers), malformed files and physically invalid values
-all raise :class:`~jaxgrasp.validation.GraspValueError` with a one-line message
-prefixed by the file name.
+keys given twice in one table (JSON too, not only TOML), wrong types (booleans are not
+numbers), malformed files and physically invalid values all raise
+:class:`~jaxgrasp.validation.GraspValueError` with a one-line message prefixed by the
+file name. Files are UTF-8, with or without a byte-order mark.
 """
 
 from __future__ import annotations
@@ -201,14 +202,64 @@ def _format(path: Path) -> str:
     return suffix[1:]
 
 
+class _JsonObject(dict):
+    """A parsed JSON object that remembers the keys it was given more than once."""
+
+    duplicates: list
+
+
+def _json_object(pairs) -> _JsonObject:
+    """``object_pairs_hook`` of :func:`json.loads`: keep every object's duplicate keys
+    (plain ``json`` silently keeps the last value; TOML rejects a repeated key)."""
+    obj = _JsonObject()
+    obj.duplicates = []
+    for key, value in pairs:
+        if key in obj and key not in obj.duplicates:
+            obj.duplicates.append(key)
+        obj[key] = value
+    return obj
+
+
+def _first_duplicate(value: Any, where: str = "") -> str | None:
+    """``"key 'k' in fingertip"`` for the first repeated key in document order, or ``None``."""
+    if isinstance(value, _JsonObject):
+        if value.duplicates:
+            return f"key {value.duplicates[0]!r} " + (f"in {where}" if where else "at top level")
+        items = ((k, f"{where}.{k}" if where else k) for k, v in value.items())
+        children = [(value[k], w) for k, w in items]
+    elif isinstance(value, list):
+        children = [(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    else:
+        return None
+    for child, w in children:
+        found = _first_duplicate(child, w)
+        if found:
+            return found
+    return None
+
+
+def _parse_json(raw: bytes) -> Any:
+    """Parse JSON, rejecting a key given twice in one object (one-line ValueError)."""
+    data = json.loads(raw, object_pairs_hook=_json_object)
+    dup = _first_duplicate(data)
+    if dup:
+        raise ValueError(f"{dup} is given more than once; give each key once")
+    return data
+
+
 def load(path: str | os.PathLike) -> Grasp:
     """Read a grasp file (``.toml`` or ``.json``, SI units) and return a validated :class:`Grasp`.
 
+    UTF-8 text, with or without a byte-order mark. A key given twice in one table is an
+    error in both formats.
+
     Raises:
-        GraspValueError: missing/unreadable file, unknown extension, malformed TOML/JSON,
-            or invalid content; the message is one line starting with the file name.
+        GraspValueError: missing/unreadable file, a folder, unknown extension, malformed
+            TOML/JSON, or invalid content; the message is one line starting with the file name.
     """
     path = Path(path)
+    if path.is_dir():
+        raise GraspValueError(f"{path}: is a folder, not a grasp file (.toml or .json)")
     fmt = _format(path)
     try:
         raw = path.read_bytes()
@@ -218,9 +269,9 @@ def load(path: str | os.PathLike) -> Grasp:
         raise GraspValueError(f"{path}: cannot read file ({exc.strerror or exc})") from None
     try:
         if fmt == "toml":
-            data = tomllib.loads(raw.decode("utf-8"))
+            data = tomllib.loads(raw.decode("utf-8-sig"))  # a leading BOM is not TOML syntax
         else:
-            data = json.loads(raw)
+            data = _parse_json(raw)
     except UnicodeDecodeError as exc:
         raise GraspValueError(f"{path}: not valid UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except ValueError as exc:  # TOMLDecodeError, JSONDecodeError, int-too-long
