@@ -5,7 +5,7 @@
     import jaxgrasp
     grasp = jaxgrasp.presets.cube(young_modulus=6e5, initial_deformation=1.5e-3)
     res = jaxgrasp.tune(grasp, params=["initial_deformation:shared"])
-    res.initial_value, res.value        # J
+    res.start_value, res.value          # J: the grasp as given, the tuned one
     res.params["initial_deformation"]   # m, the tuned (shared) deformation
     res.grasp                           # the tuned grasp
 
@@ -235,7 +235,9 @@ def _start(spec: _Spec, grasp: Grasp) -> np.ndarray:
 
 
 def _apply(specs: tuple[_Spec, ...], u, data) -> Grasp:
-    """The grasp at the normalised parameters ``u`` (traceable)."""
+    """The grasp at the normalised parameters ``u`` (traceable); the grasp as given,
+    ``data["grasp"]``, where ``data["as_given"]`` is true (its value when the start was
+    clipped into the bounds, from the same compiled function)."""
     base: Grasp = data["grasp"]
     changes = {}
     off = 0
@@ -253,7 +255,8 @@ def _apply(specs: tuple[_Spec, ...], u, data) -> Grasp:
             changes[spec.name] = jnp.full((n,), x[0])
         else:
             changes[spec.name] = x
-    return base.replace(**changes)
+    given = data["as_given"]
+    return base.replace(**{k: jnp.where(given, getattr(base, k), v) for k, v in changes.items()})
 
 
 @lru_cache(maxsize=64)
@@ -285,8 +288,9 @@ class TuneResult:
     Attributes:
         grasp: the tuned grasp (the best iterate found).
         value: its evaluation value, J (smoothed if the options ask for it).
-        initial_value: the value at the start, J.
-        history: ``(iterations + 1,)`` value at the start and after each iteration, J.
+        initial_value: the value where the search started, J: the grasp as given, or,
+            where ``clipped`` names parameters, the grasp with them clipped into the bounds.
+        history: ``(iterations + 1,)`` value at the search's start and after each iteration, J.
         history_status: ``(iterations + 1,)`` evaluation status at those iterates
             (:data:`~jaxgrasp.STATUS_NAMES`).
         params: tuned values by parameter label (``"initial_deformation"``,
@@ -306,6 +310,11 @@ class TuneResult:
             (``history_status`` not_converged); their values are not to be trusted.
         method: the optimiser.
         message: a one-line explanation of ``status``.
+        start_value: the value of the grasp as given, J: ``initial_value`` unless the
+            start was moved (``clipped``, or a ``:shared`` parameter whose contacts
+            differed set to their mean). ``gain`` is measured from it.
+        clipped: labels of the parameters whose start lay outside the bounds and was
+            clipped into them (``()`` when none).
     """
 
     grasp: Grasp
@@ -323,6 +332,8 @@ class TuneResult:
     not_converged_evaluations: int
     method: str
     message: str
+    start_value: float
+    clipped: tuple = ()
 
     @property
     def converged(self) -> bool:
@@ -331,15 +342,34 @@ class TuneResult:
 
     @property
     def gain(self) -> float:
-        """``value / initial_value``."""
-        return self.value / self.initial_value
+        """``value / start_value``: the gain over the grasp as given (``inf`` where that
+        grasp had value 0 and the clipped start did not)."""
+        return self.value / self.start_value if self.start_value > 0.0 else math.inf
+
+    def start_note(self) -> str:
+        """``""``, or where the start was moved into the bounds, e.g.
+        ``"start of initial_deformation clipped into its bounds (value there 2.946e-04 J)"``."""
+        if not self.clipped:
+            return ""
+        return (
+            f"start of {', '.join(self.clipped)} clipped into {'its' if len(self.clipped) == 1 else 'their'} "
+            f"bounds (value there {self.initial_value:.4g} J)"
+        )
 
     def summary(self) -> str:
-        """One line: initial -> tuned value, gain, status."""
+        """One line: value of the grasp as given -> tuned value, gain, status (and a note
+        where the start was clipped into the bounds)."""
+        note = self.start_note()
         return (
-            f"tuned value: {self.initial_value:.6e} J -> {self.value:.6e} J "
-            f"(x{self.gain:.4f}) in {self.iterations} iterations, {self.status}"
+            f"tuned value: {self.start_value:.6e} J -> {self.value:.6e} J "
+            f"(x{self.gain:.4f}) in {_count(self.iterations, 'iteration')}, {self.status}"
+            + (f"; {note}" if note else "")
         )
+
+
+def _count(n: int, noun: str) -> str:
+    """``"1 iteration"``, ``"2 iterations"``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 def _labelled_params(specs, grasp: Grasp, x_by_spec) -> dict:
@@ -387,7 +417,9 @@ def tune(
         bounds: by parameter name (with or without ``:shared``): ``(lo, hi)`` in SI
             units, scalars or one per contact; for ``positions`` the half-width in m (a
             number, one per contact, or ``(N, 2)``). Only ``initial_deformation`` has a
-            default (:func:`default_bounds`). A start outside its bounds is clipped.
+            default (:func:`default_bounds`). A start outside its bounds is clipped into
+            them: :attr:`TuneResult.clipped` names it, and ``start_value`` and ``gain``
+            stay those of the grasp as given.
         maxiter: largest number of optimiser iterations.
         options: :class:`~jaxgrasp.EvaluateOptions` of every evaluation (e.g. a
             ``smooth_min_temperature`` to smooth the kinks).
@@ -419,17 +451,27 @@ def tune(
         "basis": jnp.asarray(face_basis(grasp.normals)),
         "temperature": jnp.float64(0.0 if t is None else t / MJ_TO_J),
         "value_scale": jnp.float64(1.0),
+        "as_given": jnp.asarray(False),
     }
     vg = _compiled(specs, hard_options)
     rec = _Record.start(vg, box, data)
     data["value_scale"] = jnp.float64(rec.initial_value)
+    start_value = _value_as_given(vg, box, data, rec) if box.moved else rec.initial_value
     run = dict(maxiter=maxiter, tol=tol, ftol=ftol, patience=patience, callback=callback)
     if method == "scipy_lbfgsb":
         status, iters, evals = _run_scipy(vg, box.u0, data, rec, **run)
     else:
         status, iters, evals = _run_jaxopt(_jaxopt_solver(specs, hard_options, method), box.u0, data, rec, **run)
     message = status.message.format(ftol=ftol, patience=patience, maxiter=maxiter)
-    return _result(specs, grasp, box, data, rec, status, iters, evals, method, message)
+    return _result(specs, grasp, box, data, rec, status, iters, evals, method, message, start_value)
+
+
+def _value_as_given(vg, box: "_Box", data, rec: "_Record") -> float:
+    """The value of the grasp as given, J, where the search starts elsewhere (clipped
+    into the bounds): the same compiled function at ``as_given``, one more evaluation."""
+    (_, ev), _ = vg(jnp.asarray(box.u0), {**data, "as_given": jnp.asarray(True)})
+    v = float(ev.value)
+    return v if math.isfinite(v) else 0.0
 
 
 def _checked_grasp(grasp: Grasp, method: str, maxiter) -> Grasp:
@@ -449,13 +491,16 @@ def _checked_grasp(grasp: Grasp, method: str, maxiter) -> Grasp:
 @dataclasses.dataclass(frozen=True)
 class _Box:
     """The tuned parameters' bounds and start: ``los``/``his``/``x0s`` per spec (SI),
-    ``u0`` the start mapped to ``[0, 1]``, ``clipped`` the labels whose start was clipped."""
+    ``u0`` the start mapped to ``[0, 1]``, ``clipped`` the labels whose start was clipped,
+    ``moved`` whether the start differs from the grasp as given (clipped, or a shared
+    parameter whose contacts differed set to their mean)."""
 
     los: tuple
     his: tuple
     x0s: tuple
     u0: np.ndarray
     clipped: tuple
+    moved: bool
 
     @classmethod
     def build(cls, specs, grasp: Grasp, bounds) -> "_Box":
@@ -465,16 +510,20 @@ class _Box:
         if extra:
             raise GraspValueError(f"tune: bounds given for {extra[0]!r}, which is not tuned")
         los, his, x0s, clipped = [], [], [], []
+        moved = False
         for spec in specs:
             lo, hi = _bounds_for(spec, grasp, bounds.get(spec.label, bounds.get(spec.name)))
             x0 = _start(spec, grasp)
             if np.any(x0 < lo) or np.any(x0 > hi):
                 clipped.append(spec.label)
+            if spec.shared:
+                per_contact = np.asarray(getattr(grasp, spec.name), dtype=np.float64)
+                moved = moved or bool(np.any(per_contact != per_contact.reshape(-1)[0]))
             los.append(lo)
             his.append(hi)
             x0s.append(np.clip(x0, lo, hi))
         u0 = np.concatenate([(x - lo) / (hi - lo) for x, lo, hi in zip(x0s, los, his)])
-        return cls(tuple(los), tuple(his), tuple(x0s), u0, tuple(clipped))
+        return cls(tuple(los), tuple(his), tuple(x0s), u0, tuple(clipped), moved or bool(clipped))
 
     def params(self, u) -> list[np.ndarray]:
         """Each spec's vector (SI) at the normalised parameters ``u``."""
@@ -523,7 +572,7 @@ class _Record:
         return v
 
 
-def _result(specs, grasp, box: _Box, data, rec: _Record, status, iters, evals, method, message) -> TuneResult:
+def _result(specs, grasp, box: _Box, data, rec: _Record, status, iters, evals, method, message, start_value) -> TuneResult:
     """The :class:`TuneResult` of a finished search."""
     v_best, u_best, ev_best = rec.best
     tuned = _apply(specs, jnp.asarray(u_best), data)
@@ -531,7 +580,7 @@ def _result(specs, grasp, box: _Box, data, rec: _Record, status, iters, evals, m
     hst = np.asarray(rec.statuses, dtype=np.int32)
     n_nc = int(np.sum(hst == GraspStatus.NOT_CONVERGED))
     if box.clipped:
-        message += f"; start of {', '.join(box.clipped)} clipped to its bounds"
+        message += f"; start of {', '.join(box.clipped)} clipped into the bounds"
     if n_nc:
         message += f"; {n_nc} iterate(s) had not-converged evaluations"
     n = grasp.num_contacts
@@ -559,6 +608,8 @@ def _result(specs, grasp, box: _Box, data, rec: _Record, status, iters, evals, m
         not_converged_evaluations=n_nc,
         method=method,
         message=message,
+        start_value=float(start_value),
+        clipped=box.clipped,
     )
 
 

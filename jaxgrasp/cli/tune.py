@@ -110,9 +110,13 @@ def run(args) -> int:
     tuned = "; ".join(f"{k} = {_fmt(v)}" for k, v in res.params.items() if k != "positions")
     if "positions" in res.params:
         tuned = (tuned + "; " if tuned else "") + "positions moved"
+    note = res.start_note()
+    iterations = f"{res.iterations} iteration" + ("" if res.iterations == 1 else "s")
     print(
-        f"tune {source}: value {res.initial_value:.6e} J -> {res.value:.6e} J "
-        f"(x{res.gain:.4f}, {res.iterations} iterations, {res.status}); {tuned}; wrote {out}"
+        f"tune {source}: value {res.start_value:.6e} J -> {res.value:.6e} J "
+        f"(x{res.gain:.4f}, {iterations}, {res.status}); {tuned}; "
+        + (f"{note}; " if note else "")
+        + f"wrote {out}"
         + ("" if args.no_plot else f", {out.with_suffix('.png')}")
     )
     return 0
