@@ -82,21 +82,40 @@ class Evaluation:
 
     @property
     def status_name(self) -> str:
-        """Name of ``status`` (for an unbatched, concrete result)."""
+        """Name of ``status`` (for an unbatched, concrete result): ``'stable'`` etc.
+
+        Raises:
+            ValueError: a batched result (``status`` has a shape); its names are
+                ``numpy.asarray(jaxgrasp.STATUS_NAMES)[numpy.asarray(result.status)]``.
+        """
+        shape = np.shape(self.status)
+        if shape != ():
+            raise ValueError(
+                f"status_name is one grasp's result, but status has shape {shape}: index the "
+                "batched result first, or use numpy.asarray(jaxgrasp.STATUS_NAMES)[numpy.asarray(result.status)]"
+            )
         return GraspStatus(int(self.status)).label
 
     def tolerates(self, kinetic_energy, potential_energy=None):
         """Stable-grasp condition with kinetic energy, eq. 2: ``U + K < min U + value``.
 
         Args:
-            kinetic_energy: the object's kinetic energy ``K``, J.
-            potential_energy: its current potential energy ``U``, J (default: the
+            kinetic_energy: the object's kinetic energy ``K``, J, ``>= 0`` and finite
+                (a number or an array, broadcast against the result).
+            potential_energy: its current potential energy ``U``, J, finite (default: the
                 equilibrium energy, i.e. the object passes the equilibrium pose).
 
         Returns:
             Boolean array: ``True`` where no fingertip can slip or be overloaded.
             Always ``False`` for an unstable, infeasible or not-converged grasp.
+
+        Raises:
+            ValueError: a concrete ``kinetic_energy`` that is negative or not finite, or
+                a ``potential_energy`` that is not finite (traced values are not checked).
         """
+        _check_energy("kinetic_energy", kinetic_energy, nonnegative=True)
+        if potential_energy is not None:
+            _check_energy("potential_energy", potential_energy, nonnegative=False)
         u = self.equilibrium_energy if potential_energy is None else potential_energy
         ok = (u + kinetic_energy) < (self.equilibrium_energy + self.value)
         return ok & (self.status == STABLE)
@@ -119,11 +138,24 @@ class Evaluation:
         return _explain(a, tol)
 
     def to_dict(self) -> dict:
-        """A JSON-ready summary of an unbatched result (``None`` for unreachable boundaries)."""
+        """A JSON-ready summary of an unbatched result (``None`` for unreachable boundaries).
+
+        Each entry of ``boundaries`` gives the boundary's minimum energy twice, in J:
+        ``energy``, absolute (on the scale of ``equilibrium_energy``), and
+        ``energy_above_equilibrium``, ``energy - equilibrium_energy``: the energy that
+        brings the object from its equilibrium to that boundary, ``>= 0`` (round-off
+        below 0 is reported as 0); ``value`` is the least of them (hard minimum).
+
+        Raises:
+            ValueError: a batched result.
+            RuntimeError: a boundary energy lies below the equilibrium energy by more
+                than round-off (the equilibrium solve missed a lower point: a bug).
+        """
         a = jax.tree_util.tree_map(np.asarray, self)
         if a.value.ndim != 0:
             raise ValueError("to_dict() takes one grasp's result; index a batched result first")
         n = a.boundary_energy.shape[-1]
+        above = _energies_above_equilibrium(a)
         boundaries = []
         for j in range(n):
             for kind in BoundaryKind:
@@ -133,6 +165,7 @@ class Evaluation:
                         "kind": kind.label,
                         "contact": j,
                         "energy": e if math.isfinite(e) else None,
+                        "energy_above_equilibrium": float(above[kind, j]) if math.isfinite(e) else None,
                         "status": LaneStatus(int(a.boundary_status[kind, j])).label,
                         "translation": a.boundary_translation[kind, j].tolist(),
                         "rotation": a.boundary_rotation[kind, j].tolist(),
@@ -152,8 +185,57 @@ class Evaluation:
             ),
             "boundaries": boundaries,
             "explanation": _explain(a, 1e-8),
-            "units": {"energy": "J", "translation": "m", "rotation": "rad (rotation vector)"},
+            "units": {
+                "energy": "J",
+                "energy_above_equilibrium": "J",
+                "translation": "m",
+                "rotation": "rad (rotation vector)",
+            },
         }
+
+
+def _check_energy(name: str, value, nonnegative: bool) -> None:
+    """A concrete energy argument, J, must be finite (and ``>= 0`` where asked)."""
+    if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(value)):
+        return
+    arr = np.asarray(value, dtype=np.float64)
+    bad = ~np.isfinite(arr) | ((arr < 0.0) if nonnegative else False)
+    if np.any(bad):
+        x = float(arr.reshape(-1)[int(np.flatnonzero(bad)[0])])
+        rule = "finite and >= 0 (an energy, J)" if nonnegative else "finite (an energy, J)"
+        raise ValueError(f"{name} = {x:g} J must be {rule}")
+
+
+_ROUND_OFF = 1e-8
+"""Relative tolerance (of the result's energy scale) within which a boundary energy below
+the equilibrium energy is round-off: the evaluator's default ``boundary_tol``."""
+
+
+def _energies_above_equilibrium(a) -> np.ndarray:
+    """``(2, N)`` ``boundary_energy - equilibrium_energy``, J, of a NumPy-leaved unbatched
+    result: ``>= 0``, round-off below 0 set to 0, ``nan`` where a boundary is unreachable.
+
+    The energy scale is the largest magnitude among the equilibrium energy and the
+    reachable boundary energies (a fingertip released at the equilibrium has an energy of
+    round-off size, ~1e-18 J, but its force-limit boundary does not); the tolerance is
+    :data:`_ROUND_OFF` of it, or ``1e3`` epsilons of the result's dtype where larger.
+    """
+    be = np.asarray(a.boundary_energy, dtype=np.float64)
+    u0 = float(a.equilibrium_energy)
+    finite = np.isfinite(be)
+    scale = max([abs(u0)] + [float(x) for x in np.abs(be[finite])])
+    eps = float(np.finfo(np.asarray(a.boundary_energy).dtype).eps)
+    tol = max(_ROUND_OFF, 1e3 * eps) * scale
+    above = np.where(finite, be - u0, np.nan)
+    worst = np.nanmin(above) if np.any(finite) else 0.0
+    if worst < -tol:
+        k, j = np.unravel_index(int(np.nanargmin(above)), above.shape)
+        raise RuntimeError(
+            f"internal error: the {BoundaryKind(int(k)).label} boundary of contact {j} has energy "
+            f"{be[k, j]:.6e} J, below the equilibrium energy {u0:.6e} J by more than round-off: "
+            "the equilibrium solve missed a lower point; please report this grasp"
+        )
+    return np.where(finite, np.maximum(above, 0.0), np.nan)
 
 
 # ----------------------------------------------------------------------------- explain

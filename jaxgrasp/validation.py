@@ -16,7 +16,7 @@ import numpy as np
 
 from .fields import FIELD, FIELDS, NAMES, PER_CONTACT
 
-__all__ = ["GraspValueError", "check_grasp_inputs", "format_value", "as_float_array"]
+__all__ = ["GraspValueError", "check_grasp_inputs", "format_value", "as_float_array", "inward_contacts"]
 
 NORMAL_MIN_NORM = 1e-12
 """A normal shorter than this (absolute) is treated as zero."""
@@ -240,6 +240,28 @@ def _unit_normals(nrm: np.ndarray) -> np.ndarray:
     rescale = np.abs(norms - 1.0) > _UNIT_TOLERANCE
     unit[rescale] = (nrm[rescale] / peak[rescale, None]) / (norms[rescale] / peak[rescale])[:, None]
     return unit
+
+
+def inward_contacts(positions, normals) -> list[int]:
+    """Contacts whose normal does not point away from the centre of mass: ``n_i . c_i <= 0``.
+
+    Args:
+        positions: ``(N, 3)`` contact positions ``c_i``, m, object frame (origin at the
+            centre of mass).
+        normals: ``(N, 3)`` surface normals ``n_i`` (any length).
+
+    Returns:
+        The 0-based indices, in order (``[]`` for a grasp of a convex object from outside,
+        where every outward normal points away from the centre of mass).
+
+    Such normals are valid input, not an error: on a non-convex or hollow object the
+    outward normal can point towards the centre of mass (an inside grip on the walls of a
+    cavity or ring, a pinch of a rim), and the model needs nothing else. But a normal
+    flipped by mistake reads the same way, so the command line names these contacts.
+    """
+    c = np.asarray(positions, dtype=np.float64)
+    n = np.asarray(normals, dtype=np.float64)
+    return [int(i) for i in np.flatnonzero(~(np.einsum("ij,ij->i", n, c) > 0.0))]
 
 
 def _check_distinct(pos: np.ndarray) -> None:

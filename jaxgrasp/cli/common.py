@@ -22,6 +22,7 @@ __all__ = [
     "add_grasp_source",
     "add_overrides",
     "grasp_source",
+    "grasp_notes",
     "load_grasp",
 ]
 
@@ -72,6 +73,25 @@ def add_overrides(p: argparse.ArgumentParser) -> None:
 def grasp_source(args) -> str:
     """The grasp's name in messages: the file, or ``preset cube``."""
     return args.file or f"preset {args.preset}"
+
+
+def grasp_notes(grasp) -> list[str]:
+    """Remarks on a valid grasp that may not be what its author meant (one line each):
+    normals pointing towards the centre of mass (:func:`jaxgrasp.validation.inward_contacts`)."""
+    from ..validation import inward_contacts
+
+    inward = inward_contacts(grasp.positions, grasp.normals)
+    if not inward:
+        return []
+    names = [str(i) for i in inward]
+    which = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+    one = len(inward) == 1
+    return [
+        f"the normal{'' if one else 's'} of contact{'' if one else 's'} {which} "
+        f"point{'s' if one else ''} towards the centre of mass (n . c <= 0): evaluated as an "
+        "inside grip (a fingertip pressing outward on the wall of a cavity); if the fingertip "
+        "presses from outside, flip the normal: normals point out of the object"
+    ]
 
 
 def load_grasp(args, overrides: bool = True):

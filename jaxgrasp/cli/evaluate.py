@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from .common import add_grasp_source, add_overrides, grasp_source, load_grasp
+from .common import add_grasp_source, add_overrides, grasp_notes, grasp_source, load_grasp
 
 __all__ = ["add_parser", "run", "format_summary"]
 
@@ -24,6 +24,7 @@ def run(args) -> int:
 
     grasp = load_grasp(args)
     d = evaluate(grasp).to_dict()
+    d["notes"] = grasp_notes(grasp)
     if args.json:
         print(json.dumps(d, indent=2, allow_nan=False))
     else:
@@ -37,6 +38,7 @@ def format_summary(d: dict, source: str) -> str:
     lines.append(f"status: {d['status']}")
     if d.get("explanation"):
         lines.append(f"explanation: {d['explanation']}")
+    lines += [f"note: {note}" for note in d.get("notes", [])]
     lines.append(f"value: {d['value']:.6e} J   (least energy that makes a fingertip slip or overload)")
     lim = d["limiting"]
     if lim is not None:
@@ -45,11 +47,11 @@ def format_summary(d: dict, source: str) -> str:
     t = ", ".join(f"{v:.3e}" for v in d["equilibrium_translation"])
     w = ", ".join(f"{v:.3e}" for v in d["equilibrium_rotation"])
     lines.append(f"equilibrium pose: translation ({t}) m, rotation ({w}) rad")
-    lines.append("boundaries (minimum energy above equilibrium):")
+    lines.append("boundaries (energy above equilibrium, J):")
     for b in d["boundaries"]:
         if b["energy"] is None:
             lines.append(f"  contact {b['contact']} {b['kind']:<9}: not reachable ({b['status']})")
         else:
-            de = b["energy"] - d["equilibrium_energy"]
+            de = b["energy_above_equilibrium"]
             lines.append(f"  contact {b['contact']} {b['kind']:<9}: {de:.6e} J ({b['status']})")
     return "\n".join(lines)
