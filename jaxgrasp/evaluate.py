@@ -66,13 +66,16 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
         limiting boundary, the equilibrium and every boundary problem's minimum.
 
     Raises:
-        GraspValueError: for a concrete grasp with invalid fields (checked before
-            anything is compiled).
+        GraspValueError: a grasp with batch axes (its fields' shapes are those of one
+            grasp inside ``jax.vmap``, so a batch needs ``jax.vmap(jaxgrasp.evaluate)``
+            or :func:`jaxgrasp.sweep`); or, for a concrete grasp, invalid fields (checked
+            before anything is compiled).
 
     ``evaluate`` can be wrapped in ``jax.jit`` and ``jax.vmap`` and differentiated with
     ``jax.grad``/``jax.jacfwd`` (envelope theorem; see :mod:`jaxgrasp.envelope`).
     """
-    if _is_concrete(grasp) and np.ndim(grasp.mass) == 0:
+    _check_unbatched(grasp)
+    if _is_concrete(grasp):
         from .validation import check_grasp_inputs
 
         check_grasp_inputs(**grasp.to_numpy())
@@ -83,6 +86,33 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
         options = dataclasses.replace(options, smooth_min_temperature=None)
     temperature = np.float64(0.0 if t is None else float(t) / MJ_TO_J)  # mJ; 0: hard minimum
     return evaluate_compiled(grasp, temperature, options)
+
+
+_ONE_GRASP_NDIM = {"points": 2, "directions": 2, "per_contact": 1, "scalar": 0, "vector": 1}
+"""Most dimensions of a field of one grasp, by :attr:`jaxgrasp.fields.Field.shape`."""
+
+
+def _check_unbatched(grasp) -> None:
+    """One grasp, not a batch: a one-line error that points to ``jax.vmap`` otherwise
+    (shapes are static, so this holds for traced grasps too; inside ``vmap`` they are
+    those of one grasp)."""
+    from .fields import FIELDS
+    from .validation import GraspValueError
+
+    if not isinstance(grasp, Grasp):
+        raise GraspValueError(f"evaluate needs a jaxgrasp.Grasp, got {type(grasp).__name__}")
+    batched = [
+        f"{f.name} {tuple(np.shape(getattr(grasp, f.name)))}"
+        for f in FIELDS
+        if np.ndim(getattr(grasp, f.name)) > _ONE_GRASP_NDIM[f.shape]
+    ]
+    if batched:
+        more = f" and {len(batched) - 3} more" if len(batched) > 3 else ""
+        raise GraspValueError(
+            f"evaluate takes one grasp, but this one has batch axes ({', '.join(batched[:3])}{more}; "
+            "one grasp has positions (N, 3), per-contact fields (N,), mass ()): "
+            "use jax.vmap(jaxgrasp.evaluate)(grasp) for a batch, or jaxgrasp.sweep for a grid"
+        )
 
 
 @partial(jax.jit, static_argnames="options")
