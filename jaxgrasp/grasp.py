@@ -79,8 +79,14 @@ class Grasp:
         max_force,
         mass=DEFAULT_MASS,
         gravity=DEFAULT_GRAVITY,
+        dtype=None,
     ) -> "Grasp":
         """Build a validated grasp, broadcasting per-fingertip scalars to all contacts.
+
+        Every field is validated in float64 and stored as ``dtype``: by default float64
+        whatever the inputs' dtypes (float32 where JAX's x64 mode is off), so float32
+        arrays passed in become float64; give ``dtype=jnp.float32`` for a float32 grasp
+        (screening, see the README's Precision section).
 
         Args:
             positions: ``(N, 3)`` contact positions, m.
@@ -90,9 +96,12 @@ class Grasp:
                 or ``(N,)``; units m, Pa, -, N.
             mass: kg (default 0).
             gravity: ``(3,)`` m/s^2 (default ``(0, 0, -9.81)``).
+            dtype: ``None`` (float64) or ``jnp.float32`` / ``jnp.float64`` (or their
+                names): the dtype of every field.
 
         Raises:
-            GraspValueError: a field is malformed; the message names the field and value.
+            GraspValueError: a field is malformed, or ``dtype`` is not float32 or float64
+                (float64 also needs JAX's x64 mode); the message names the field and value.
         """
         from .validation import check_grasp_inputs
 
@@ -107,8 +116,13 @@ class Grasp:
             mass=mass,
             gravity=gravity,
         )
-        dtype = jax.dtypes.canonicalize_dtype(jnp.float64)  # float32 where x64 is off
+        dtype = _field_dtype(dtype)
         return cls(**{k: jnp.asarray(v, dtype=dtype) for k, v in fields.items()})
+
+    def astype(self, dtype) -> "Grasp":
+        """The same grasp with every field cast to ``dtype`` (``jnp.float32`` or ``jnp.float64``)."""
+        dtype = _field_dtype(dtype)
+        return jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype=dtype), self)
 
     def replace(self, **changes) -> "Grasp":
         """Return a copy with some fields replaced (no validation: for traced values)."""
@@ -117,3 +131,20 @@ class Grasp:
     def to_numpy(self) -> dict[str, np.ndarray]:
         """Fields as a dict of NumPy arrays (for files and reports)."""
         return {f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+
+def _field_dtype(dtype) -> np.dtype:
+    """The dtype of a grasp's fields: float64 for ``None`` (float32 where x64 is off)."""
+    from .validation import GraspValueError
+
+    if dtype is None:
+        return jax.dtypes.canonicalize_dtype(jnp.float64)
+    try:
+        dt = np.dtype(dtype)
+    except TypeError:
+        raise GraspValueError(f"dtype must be float32 or float64, got {dtype!r}") from None
+    if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
+        raise GraspValueError(f"dtype must be float32 or float64, got {dt}")
+    if dt == np.float64 and not jax.config.jax_enable_x64:
+        raise GraspValueError("dtype float64 needs JAX's x64 mode, which JAX_ENABLE_X64=0 switched off")
+    return dt
