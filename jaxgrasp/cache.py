@@ -22,7 +22,9 @@ from __future__ import annotations
 
 import hashlib
 import os
+import tempfile
 import time
+import warnings
 from pathlib import Path
 from typing import Any, Callable, Hashable, Sequence
 
@@ -70,7 +72,10 @@ def enable_compilation_cache(path=None) -> Path | None:
     The cache lives in ``path`` (default :func:`default_dir`). Exported programs are kept
     in its subfolder ``jaxgrasp-export`` (:func:`set_export_dir`), so a repeated sweep
     neither traces in Python nor compiles in XLA. A folder that cannot be created leaves
-    every setting as it was (every run compiles).
+    every setting as it was (every run compiles). A folder that exists but cannot be
+    written is still read (a shared, pre-filled cache works) and new compilations are
+    not saved, quietly: JAX's own warning for every entry it fails to write (two lines
+    on stderr per compilation, every run) is silenced.
 
     Returns:
         The folder, or ``None`` when it could not be created.
@@ -80,11 +85,27 @@ def enable_compilation_cache(path=None) -> Path | None:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError:
         return None  # no writable cache: compile every time
+    if not _writable(folder):
+        warnings.filterwarnings("ignore", message=_JAX_WRITE_ERROR, category=UserWarning)
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     set_export_dir(folder / EXPORT_SUBDIR)
     return folder
+
+
+_JAX_WRITE_ERROR = r"Error writing persistent compilation cache entry"
+"""The start of the warning JAX gives for every cache entry it fails to write."""
+
+
+def _writable(folder: Path) -> bool:
+    """Whether a file can be created in ``folder`` (``os.access`` says yes to root even
+    where the file system refuses)."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
 
 
 # --------------------------------------------------------------------------- export store
