@@ -32,7 +32,8 @@ COMMANDS = (evaluate, sweep, tune)
 
 def build_parser() -> Parser:
     """The ``jaxgrasp`` argument parser with every sub-command."""
-    parser = Parser(prog="jaxgrasp", description=__doc__.splitlines()[0])
+    # the docstring's first line without its reStructuredText markup
+    parser = Parser(prog="jaxgrasp", description=__doc__.splitlines()[0].replace("``", ""))
     sub = parser.add_subparsers(dest="command", parser_class=Parser)
     for command in COMMANDS:
         command.add_parser(sub)

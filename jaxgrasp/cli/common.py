@@ -100,7 +100,7 @@ def load_grasp(args, overrides: bool = True):
 
     from ..grasp import Grasp
     from ..gripfile import load
-    from ..validation import check_grasp_inputs
+    from ..validation import GraspValueError, check_grasp_inputs
 
     if (args.file is None) == (args.preset is None):
         if args.file is None and getattr(args, "default_preset", None):
@@ -110,9 +110,34 @@ def load_grasp(args, overrides: bool = True):
     grasp = load(args.file) if args.file is not None else PRESETS[args.preset]()
     if not overrides:
         return grasp
+    given = {name: getattr(args, name) for name in OVERRIDES if getattr(args, name, None) is not None}
+    if not given:
+        return grasp
     fields = grasp.to_numpy()
-    for name in OVERRIDES:
-        value = getattr(args, name, None)
-        if value is not None:
-            fields[name] = np.full_like(fields[name], value)
-    return Grasp(**check_grasp_inputs(**fields))
+    for name, value in given.items():
+        _check_override(name, value)
+        fields[name] = np.full_like(fields[name], value)
+    options = ", ".join(f"{FIELD[n].option} {v:g}" for n, v in given.items())
+    dr, r = fields["initial_deformation"], fields["radius"]
+    if ("initial_deformation" in given or "radius" in given) and not np.all(dr < r):
+        i = int(np.flatnonzero(~(dr < r))[0])
+        raise UsageError(
+            f"with {options}: initial_deformation ({dr[i]:g} m) must be below the fingertip "
+            f"radius ({r[i]:g} m)"
+        )
+    try:
+        return Grasp(**check_grasp_inputs(**fields))
+    except GraspValueError as exc:  # another rule between fields, e.g. the energy scale
+        raise UsageError(f"with {options}: {exc}") from None
+
+
+def _check_override(name: str, value: float) -> None:
+    """One override's own rules, named by its option (``--friction -1: must be positive``)."""
+    import numpy as np
+
+    field = FIELD[name]
+    text = f"{field.option} {value:g}"
+    if not math.isfinite(value):
+        raise UsageError(f"{text}: {name} must be finite")
+    if not field.allows(np.float64(value)):
+        raise UsageError(f"{text}: {name} must be {field.rule}" + (f" ({field.unit})" if field.unit else ""))

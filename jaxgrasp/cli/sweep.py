@@ -234,6 +234,8 @@ def _best_text(result) -> str:
     best = result.best()
     if best is None:
         return "best: none (no converged point)"
+    if best["status"] != "stable":  # every trusted point has value 0
+        return "best: none (no stable point)"
     where = ", ".join(_fmt_param(n, best[n]) for n in result.axes)
     lim = (
         f"{best['limiting_kind']} of contact {best['limiting_contact']}"
@@ -247,7 +249,7 @@ def _summary_line(result, source: str, wall: float, out: Path, written: list[str
     c = result.counts()
     shape = " x ".join(f"{len(a)} {n}" for n, a in result.axes.items())
     return (
-        f"sweep {source}: {result.size} points ({shape}); "
+        f"sweep {source}: {result.size} point{'' if result.size == 1 else 's'} ({shape}); "
         f"stable {c['stable']}, unstable {c['unstable']}, infeasible {c['infeasible']}, "
         f"not_converged {c['not_converged']}; {_best_text(result)}; "
         f"wall {wall:.1f} s (compile {result.compile_seconds:.1f} s, run {result.run_seconds:.1f} s); "

@@ -16,13 +16,14 @@ import numpy as np
 from ..fields import TUNABLE
 from .common import UsageError, add_grasp_source, grasp_source, load_grasp, parse_number
 
-__all__ = ["add_parser", "run", "parse_bounds"]
+__all__ = ["add_parser", "run", "parse_bounds", "check_bounds"]
 
 
 def parse_bounds(items) -> dict:
     """``["initial_deformation=0.001:0.005", "positions=0.01"]`` -> bounds dict (SI units).
 
-    ``NAME=LO:HI`` gives a range (every contact), ``positions=H`` a half-width in m.
+    ``NAME=LO:HI`` gives a range (every contact), ``positions=HALF_WIDTH`` a half-width in m;
+    errors name the option and its syntax (:class:`UsageError`).
     """
     out = {}
     for item in items or []:
@@ -32,14 +33,53 @@ def parse_bounds(items) -> dict:
             raise UsageError(f"--bounds: {item!r} must be NAME=LO:HI (or positions=HALF_WIDTH)")
         if name in out:
             raise UsageError(f"--bounds: {name!r} given more than once")
-        if ":" in spec:
+        if name.partition(":")[0] == "positions":
+            if ":" in spec:
+                raise UsageError(
+                    f"--bounds {item}: give positions=HALF_WIDTH, one number: how far (m) each "
+                    "contact may move in its face"
+                )
+            h = parse_number("--bounds", spec, "half-width")
+            if not h > 0:
+                raise UsageError(f"--bounds {item}: the half-width must be > 0 m")
+            out[name] = h
+        elif ":" in spec:
             parts = spec.split(":")
             if len(parts) != 2:
                 raise UsageError(f"--bounds: {item!r} must be NAME=LO:HI")
-            out[name] = (parse_number("--bounds", parts[0], "lower bound"), parse_number("--bounds", parts[1], "upper bound"))
+            lo = parse_number("--bounds", parts[0], "lower bound")
+            hi = parse_number("--bounds", parts[1], "upper bound")
+            if not lo < hi:
+                raise UsageError(f"--bounds {item}: LO must be below HI")
+            out[name] = (lo, hi)
         else:
-            out[name] = parse_number("--bounds", spec, "half-width")
+            raise UsageError(f"--bounds {item}: give a range, {name}=LO:HI (only positions takes one number)")
     return out
+
+
+def check_bounds(params, bounds: dict) -> None:
+    """Every ``--param`` without default bounds has ``--bounds``, and every ``--bounds`` is
+    of a ``--param`` (:class:`UsageError` naming the options; library messages would show
+    Python syntax such as ``bounds={'positions': 0.01}``)."""
+    from ..fields import FIELD
+    from ..tune import parse_param
+
+    specs = [parse_param(p) for p in params]
+    tuned = {s.name for s in specs} | {s.label for s in specs}
+    for key in bounds:
+        if key not in tuned:
+            raise UsageError(
+                f"--bounds {key}=...: {key} is not tuned (add --param {key.partition(':')[0]}, "
+                f"or drop these bounds)"
+            )
+    for s in specs:
+        if s.name == "initial_deformation" or s.name in bounds or s.label in bounds:
+            continue
+        if s.name == "positions":
+            form = "positions=HALF_WIDTH (m, how far each contact may move in its face)"
+        else:
+            form = f"{s.name}=LO:HI ({FIELD[s.name].unit or 'dimensionless'})"
+        raise UsageError(f"--param {s.label} needs --bounds {form}; only initial_deformation has default bounds")
 
 
 def add_parser(sub) -> None:
@@ -101,6 +141,7 @@ def run(args) -> int:
     out = _check_options(args)
     bounds = parse_bounds(args.bounds)
     params = args.param or ["initial_deformation"]
+    check_bounds(params, bounds)
     grasp = load_grasp(args, overrides=False)
     source = grasp_source(args)
     options = EvaluateOptions(smooth_min_temperature=args.smooth_min_temperature)
