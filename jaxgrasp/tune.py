@@ -456,7 +456,7 @@ def tune(
     vg = _compiled(specs, hard_options)
     rec = _Record.start(vg, box, data)
     data["value_scale"] = jnp.float64(rec.initial_value)
-    start_value = _value_as_given(vg, box, data, rec) if box.moved else rec.initial_value
+    start_value = _value_as_given(vg, box, data) if box.moved else rec.initial_value
     run = dict(maxiter=maxiter, tol=tol, ftol=ftol, patience=patience, callback=callback)
     if method == "scipy_lbfgsb":
         status, iters, evals = _run_scipy(vg, box.u0, data, rec, **run)
@@ -466,7 +466,7 @@ def tune(
     return _result(specs, grasp, box, data, rec, status, iters, evals, method, message, start_value)
 
 
-def _value_as_given(vg, box: "_Box", data, rec: "_Record") -> float:
+def _value_as_given(vg, box: "_Box", data) -> float:
     """The value of the grasp as given, J, where the search starts elsewhere (clipped
     into the bounds): the same compiled function at ``as_given``, one more evaluation."""
     (_, ev), _ = vg(jnp.asarray(box.u0), {**data, "as_given": jnp.asarray(True)})
@@ -604,7 +604,7 @@ def _result(specs, grasp, box: _Box, data, rec: _Record, status, iters, evals, m
         evaluation=jax.tree_util.tree_map(np.asarray, ev_best),
         status=status,
         iterations=iters,
-        evaluations=int(evals) + 1,
+        evaluations=int(evals) + 1 + int(box.moved),  # the start, and the grasp as given
         not_converged_evaluations=n_nc,
         method=method,
         message=message,
