@@ -31,7 +31,7 @@ from jaxgrasp.gripfile import load
 from jaxgrasp.validation import GraspValueError
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(jaxgrasp.__file__).resolve().parent.parent  # the jaxgrasp under test, for subprocesses
 
 
 def cube_doc(**fingertip) -> dict:

@@ -24,7 +24,9 @@ def run(args) -> int:
 
     grasp = load_grasp(args)
     d = evaluate(grasp).to_dict()
-    d["notes"] = grasp_notes(grasp)
+    notes = grasp_notes(grasp)
+    if notes:  # otherwise exactly Evaluation.to_dict()
+        d["notes"] = notes
     if args.json:
         print(json.dumps(d, indent=2, allow_nan=False))
     else:
