@@ -32,7 +32,9 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import math
+import os
 import time
 from typing import Any, Callable, Mapping
 
@@ -42,7 +44,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from . import cache
+from . import cache, outputs
 from .evaluate import EvaluateOptions
 from .evaluate import evaluate as _evaluate_one
 from .fields import FIELD, SWEEPABLE, Field
@@ -225,7 +227,11 @@ class SweepResult:
 
     # ---- files
     def to_csv(self, path) -> None:
-        """Write a tidy CSV: one row per grid point (C order: last axis fastest).
+        """Write a tidy CSV to ``path``: one row per grid point (C order: last axis fastest).
+
+        ``path`` is written atomically (a temporary file renamed into place, see
+        :mod:`jaxgrasp.outputs`): a failure leaves the previous file as it was. A binary
+        file object is written to directly.
 
         Columns: each axis with its SI unit (``young_modulus_Pa``, ``initial_deformation_m``,
         ``mass_kg``, ``friction``, ``max_force_N``, ``radius_m``), then ``value_J``,
@@ -248,19 +254,28 @@ class SweepResult:
         contact = np.asarray(self.limiting_contact).ravel()
         energy = np.asarray(self.equilibrium_energy).ravel()
         fmt = lambda x: repr(float(x))
-        with open(path, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(cols)
-            for i in range(value.size):
-                row = [fmt(flat[n][i]) for n in self.axes]
-                row += [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
-                w.writerow(row)
+
+        def write(binary):
+            fh = io.TextIOWrapper(binary, encoding="utf-8", newline="")
+            try:
+                w = csv.writer(fh)
+                w.writerow(cols)
+                for i in range(value.size):
+                    row = [fmt(flat[n][i]) for n in self.axes]
+                    row += [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
+                    w.writerow(row)
+            finally:
+                fh.detach()  # flushed; the binary file stays open for its owner
+
+        _write(path, write)
 
     def to_npz(self, path) -> None:
         """Write a ``.npz``: ``axis_names``, ``axis_<name>`` (1-D, SI), the grid-shaped
         result arrays, ``status_names``, ``kind_names``, the timings and ``devices``.
 
         Read it back with :meth:`from_npz`. No pickled objects (``allow_pickle=False``).
+        ``path`` gets the suffix ``.npz`` if it has none (as ``np.savez``) and is written
+        atomically (see :meth:`to_csv`); a binary file object is written to directly.
         """
         arrays = {
             "axis_names": np.asarray(self.names, dtype=str),
@@ -274,7 +289,10 @@ class SweepResult:
             arrays[f"axis_{n}"] = np.asarray(a, dtype=np.float64)
         for f in _RESULT_FIELDS:
             arrays[f] = np.asarray(getattr(self, f))
-        np.savez(path, **arrays)
+        if not hasattr(path, "write"):
+            path = os.fspath(path)
+            path = path if path.endswith(".npz") else path + ".npz"
+        _write(path, lambda fh: np.savez(fh, **arrays))
 
     @classmethod
     def from_npz(cls, path) -> "SweepResult":
@@ -293,6 +311,14 @@ class SweepResult:
         axes = ", ".join(f"{n}[{len(a)}]" for n, a in self.axes.items())
         counts = ", ".join(f"{k} {v}" for k, v in self.counts().items() if v)
         return f"SweepResult({axes or 'no axes'}; {counts})"
+
+
+def _write(target, write) -> None:
+    """``write(fh)`` into a binary file object ``target``, or atomically into the file at path ``target``."""
+    if hasattr(target, "write"):
+        write(target)
+    else:
+        outputs.write_file(target, write)
 
 
 def _flatten(r: SweepResult):
