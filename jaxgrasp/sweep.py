@@ -54,6 +54,7 @@ from .validation import GraspValueError, as_float_array, check_grasp_inputs, for
 
 __all__ = [
     "sweep",
+    "check_inputs",
     "SweepResult",
     "PARAMETERS",
     "DEFAULT_CHUNK_SIZE",
@@ -458,6 +459,7 @@ def sweep(
     chunk_size: int | None = None,
     progress: Callable[[int, int], Any] | None = None,
     devices=None,
+    on_chunk: Callable[[int, int, Mapping[str, np.ndarray]], Any] | None = None,
     **axes,
 ) -> SweepResult:
     """Evaluate ``grasp`` at every point of the Cartesian grid of ``axes``.
@@ -472,6 +474,14 @@ def sweep(
             of devices (:func:`batch_size`); the last chunk is padded to it.
         progress: optional ``progress(done, total)`` called after each chunk with the
             numbers of grid points done and in all.
+        on_chunk: optional ``on_chunk(start, stop, results)`` called after each chunk
+            (before ``progress``): grid points ``start .. stop - 1`` (C order, last axis
+            fastest) are done, and so is every point before them; ``results`` maps each
+            result field (``value``, ``status``, ``limiting_kind``, ``limiting_contact``,
+            ``equilibrium_energy``) to a flat ``(total,)`` array whose first ``stop``
+            entries are final. The arrays are the sweep's own buffers: read them, copy
+            what you keep, never write them. For checkpoints (``jaxgrasp sweep`` writes
+            ``sweep.partial.npz`` with it, :mod:`jaxgrasp.partial`).
         devices: the devices the batch is sharded over (default: all of
             ``jax.devices()``, which after ``jax.distributed.initialize()`` spans every
             host). The batch is rounded up to a multiple of their number.
@@ -506,7 +516,7 @@ def sweep(
     # so that every grid point is exactly the grasp evaluate() would see
     raw = grasp.to_numpy()
     own = {k: np.broadcast_to(np.asarray(raw[k], dtype=np.float64), v.shape) for k, v in base.items()}
-    arrays, run_seconds = _run_chunks(fn, own, axes, chunk, sharding, progress)
+    arrays, run_seconds = _run_chunks(fn, own, axes, chunk, sharding, progress, on_chunk)
     return SweepResult(
         axes=dict(axes),
         **arrays,
@@ -514,6 +524,18 @@ def sweep(
         run_seconds=run_seconds,
         devices=len(devices),
     )
+
+
+def check_inputs(grasp: Grasp, /, *, chunk_size: int | None = None, **axes) -> None:
+    """Raise what :func:`sweep` would raise for these arguments, computing nothing.
+
+    For a caller that must reject bad input before it prepares anything else (the
+    ``jaxgrasp sweep`` command checks its output folder only after this).
+
+    Raises:
+        GraspValueError: as :func:`sweep` (one line).
+    """
+    _check_inputs(grasp, chunk_size, axes)
 
 
 def _check_inputs(grasp, chunk_size, axes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
@@ -548,7 +570,7 @@ def _chunk_fields(own: dict, axes: dict, start: int, chunk: int) -> dict[str, np
     return fields
 
 
-def _run_chunks(fn, own: dict, axes: dict, chunk: int, sharding, progress):
+def _run_chunks(fn, own: dict, axes: dict, chunk: int, sharding, progress, on_chunk=None):
     """Evaluate every grid point, ``chunk`` at a time; (grid-shaped results, run seconds)."""
     shape = tuple(a.size for a in axes.values())
     total = int(math.prod(shape))
@@ -567,6 +589,8 @@ def _run_chunks(fn, own: dict, axes: dict, chunk: int, sharding, progress):
             if f not in outs:
                 outs[f] = np.empty((total, *a.shape[1:]), dtype=a.dtype)
             outs[f][start:stop] = a[: stop - start]
+        if on_chunk is not None:  # first: a checkpoint is on disk when progress reports it
+            on_chunk(start, stop, outs)
         if progress is not None:
             progress(stop, total)
     return {f: outs[f].reshape(shape) for f in _RESULT_FIELDS}, run_seconds

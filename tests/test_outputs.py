@@ -13,6 +13,7 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp import outputs
+from jaxgrasp.partial import PartialSweep
 from jaxgrasp.sweep import SweepResult
 
 
@@ -123,7 +124,7 @@ def test_check_writable_creates_nothing_and_names_the_file(tmp_path):
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders; "
-                    "test_interrupts.py::test_out_folder_not_writable_fails_before_computing runs as nobody")
+                    "test_interrupts.py::test_out_folder_not_writable_fails_before_computing drops root's override with setpriv")
 def test_check_writable_read_only_folder(tmp_path):  # pragma: no cover - root here
     ro = tmp_path / "ro"
     ro.mkdir()
@@ -177,3 +178,29 @@ def test_folder_lock_held_by_another_process(tmp_path):
         p.wait()
     with outputs.FolderLock(tmp_path):  # the kernel released the dead holder's lock
         pass
+
+
+# ----------------------------------------------------------------------------- checkpoint
+
+
+def test_partial_round_trip(tmp_path):
+    axes = {"young_modulus": np.array([2e5, 6e5]), "mass": np.array([0.0, 0.1, 0.2])}
+    flat = {
+        "value": np.arange(6.0),
+        "status": np.zeros(6, np.int32),
+        "limiting_kind": np.ones(6, np.int32),
+        "limiting_contact": np.zeros(6, np.int32),
+        "equilibrium_energy": np.arange(6.0) + 10,
+    }
+    done = np.array([1, 1, 1, 1, 0, 0], bool)
+    p = PartialSweep.from_flat(axes, done, flat, jaxgrasp.presets.cube().to_numpy(), 2)
+    outputs.write_file(tmp_path / "p.npz", p.save)
+    q = PartialSweep.load(tmp_path / "p.npz")
+    assert q.shape == (2, 3) and q.total == 6 and q.done_count == 4 and q.chunk_size == 2
+    np.testing.assert_array_equal(q.results["value"], [[0, 1, 2], [3, np.nan, np.nan]])
+    np.testing.assert_array_equal(q.results["status"], [[0, 0, 0], [0, -1, -1]])
+    assert q.results["status"].dtype == np.int32
+    np.testing.assert_array_equal(q.grasp["radius"], jaxgrasp.presets.cube().radius)
+    _result().to_npz(tmp_path / "r.npz")
+    with pytest.raises(ValueError, match="not a jaxgrasp sweep checkpoint"):
+        PartialSweep.load(tmp_path / "r.npz")
