@@ -43,13 +43,18 @@ def build_parser() -> Parser:
 
 
 def main(argv=None) -> int:
-    """Run ``jaxgrasp`` with ``argv`` (default ``sys.argv[1:]``); the exit status.
+    """Run ``jaxgrasp`` with ``argv``; the exit status.
 
     The command runs in a worker thread while this (main) thread handles Ctrl-C and
     SIGTERM (:mod:`.interrupt`): on either, the process ends within a second with status
     130 (143), one line ``jaxgrasp: interrupted ...`` and no temporary file left.
+
+    Without ``argv`` (the installed ``jaxgrasp`` command, ``python -m jaxgrasp``) it reads
+    ``sys.argv[1:]`` and, once the command is done, ends the process with its status at
+    once (``os._exit``, after flushing stdout and stderr), so that no interrupt lands in
+    the interpreter's teardown. Pass ``argv`` to get the status returned instead.
     """
-    return run_interruptibly(lambda: _main(argv))
+    return run_interruptibly(lambda: _main(argv), end_process=argv is None)
 
 
 def _main(argv) -> int:
