@@ -9,6 +9,8 @@ the exit status, the one line, the time from signal to exit and what is left on 
 
 Cost: the sweeps share one cache folder and one grid and chunk size, so one sweep
 program is compiled for the module (~20 s on 2 cores); every other run loads it (~2.5 s).
+The check of the checkpoint against ``evaluate`` uses the session's ``evaluate_many``,
+compiled already by earlier modules in a whole run (~20 s more when this file runs alone).
 """
 
 from __future__ import annotations
@@ -269,42 +271,36 @@ def test_sigint_while_matplotlib_imports(sweep_cache, previous_set):
     assert _partial(out / PARTIAL)["done"].all()
 
 
-def test_concurrent_sweep_into_same_folder_fails_at_once(sweep_cache, previous_set):
-    """Item 4: two runs into one folder used to overwrite each other silently. Now the
-    second fails at once (before computing), naming the first one's pid."""
+# ----------------------------------------------------------------------------- item 4 (set)
+
+
+def test_sigterm_while_writing_outputs_keeps_previous_set_and_folder_locked(sweep_cache, previous_set):
+    """Item 4: an interrupt while the plot is written used to leave the new npz and
+    csv beside the previous png (SIGTERM here: it used to kill at once, exit -15); two
+    runs into one folder used to overwrite each other silently. Now the previous set
+    stays whole with no temporary file, and a second sweep started meanwhile fails at
+    once (before computing), naming the first one's pid."""
     out, before = previous_set
-    first = Run(_slow("sweep", *SWEEP_ARGS, "--out", out), _env(sweep_cache, JAXGRASP_TEST_SLOW="import"))
+    first = Run(_slow("sweep", *SWEEP_ARGS, "--out", out, "--quiet"), _env(sweep_cache, JAXGRASP_TEST_SLOW="savefig"))
+    first.wait_for(r"^test: slow savefig")  # npz and csv staged, the png half written
     try:
-        first.wait_for(r"^test: slow import")  # it holds the folder until interrupted
         second = subprocess.run(
             _jaxgrasp("sweep", *SWEEP_ARGS, "--out", out), env=_env(sweep_cache), cwd=str(ROOT),
             capture_output=True, text=True, timeout=300,
         )
     finally:
-        first.interrupt()
+        rc, dt, after, stdout = first.interrupt(signal.SIGTERM)
+    line = _assert_one_line(rc, dt, after, expect_rc=143, word="terminated")
+    assert line == f"jaxgrasp: terminated; kept 24 of 24 points in {out / PARTIAL}"
+    assert stdout == ""
+    assert _snapshot(out) == before
+    assert _listing(out) == set(SET) | {PARTIAL}  # no *.tmp, no lock file
+
     assert second.returncode == 2, second.stderr[-3000:]
     assert second.stdout == ""
     assert second.stderr.count("\n") == 1 and second.stderr.startswith("jaxgrasp: error: --out: "), second.stderr
-    assert f"pid {first.proc.pid}" in second.stderr
+    assert f"is being written by another jaxgrasp process (pid {first.proc.pid})" in second.stderr
     assert "sweeping" not in second.stderr  # nothing computed
-    assert _snapshot(out) == before
-
-
-# ----------------------------------------------------------------------------- item 4 (set)
-
-
-def test_sigterm_while_writing_outputs_keeps_previous_set(sweep_cache, previous_set):
-    """Item 4: an interrupt while the plot is written used to leave the new npz and
-    csv beside the previous png. Now the previous set stays whole and no temporary file
-    is left (SIGTERM here: exit 143)."""
-    out, before = previous_set
-    run = Run(_slow("sweep", *SWEEP_ARGS, "--out", out, "--quiet"), _env(sweep_cache, JAXGRASP_TEST_SLOW="savefig"))
-    run.wait_for(r"^test: slow savefig")
-    rc, dt, after, stdout = run.interrupt(signal.SIGTERM)
-    line = _assert_one_line(rc, dt, after, expect_rc=143, word="terminated")
-    assert line == f"jaxgrasp: terminated; kept 24 of 24 points in {out / PARTIAL}"
-    assert _snapshot(out) == before
-    assert _listing(out) == set(SET) | {PARTIAL}  # no *.tmp, no lock file
 
 
 # ----------------------------------------------------------------------------- item 3
