@@ -589,7 +589,7 @@ def _run_chunks(fn, own: dict, axes: dict, chunk: int, sharding, progress, on_ch
             if f not in outs:
                 outs[f] = np.empty((total, *a.shape[1:]), dtype=a.dtype)
             outs[f][start:stop] = a[: stop - start]
-        if on_chunk is not None:  # first: a checkpoint is on disk when progress reports it
+        if on_chunk is not None:  # first: a checkpoint it writes is on disk before progress reports the chunk
             on_chunk(start, stop, outs)
         if progress is not None:
             progress(stop, total)
