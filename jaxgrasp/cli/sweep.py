@@ -98,7 +98,10 @@ def add_parser(sub) -> None:
         help="evaluate a grasp over a grid of parameters (npz, csv, png)",
         description=(
             "Evaluate a grasp over the Cartesian grid of the given parameter axes; write "
-            "DIR/sweep.npz, DIR/sweep.csv (one row per grid point, SI units) and DIR/sweep.png."
+            "DIR/sweep.npz, DIR/sweep.csv (one row per grid point, SI units) and DIR/sweep.png "
+            "as one set, replacing a previous set at once. Until then the finished points are "
+            "kept in DIR/sweep.partial.npz (what an interrupted sweep leaves); one sweep at a "
+            "time per DIR."
         ),
         epilog=(
             "SPEC is START:STOP:COUNT (inclusive), a comma list or a number, in SI units. "
