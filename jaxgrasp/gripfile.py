@@ -37,11 +37,12 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from . import outputs
 from .fields import FIELD, FIELDS, FINGERTIP
 from .grasp import Grasp
 from .validation import GraspValueError
 
-__all__ = ["load", "save", "grasp_from_dict", "grasp_to_dict", "to_toml"]
+__all__ = ["load", "save", "to_text", "grasp_from_dict", "grasp_to_dict", "to_toml"]
 
 TOP_KEYS = ("fingertip", "object", "contacts")
 FINGERTIP_KEYS = tuple(FIELD[name].file_key for name in FINGERTIP)
@@ -378,15 +379,18 @@ def to_toml(grasp: Grasp) -> str:
     return "\n".join(lines) + "\n"
 
 
+def to_text(grasp: Grasp, path: str | os.PathLike) -> str:
+    """The text :func:`save` writes to ``path``: TOML or JSON by its extension."""
+    if _format(Path(path)) == "toml":
+        return to_toml(grasp)
+    return json.dumps(grasp_to_dict(grasp), indent=2) + "\n"
+
+
 def save(grasp: Grasp, path: str | os.PathLike) -> None:
     """Write a single grasp to ``path`` (``.toml`` or ``.json`` by extension, SI units).
 
-    Floats are written so that :func:`load` reproduces the grasp bit for bit.
+    Floats are written so that :func:`load` reproduces the grasp bit for bit. The file is
+    written atomically (a temporary file renamed into place, :mod:`jaxgrasp.outputs`): a
+    failure leaves the previous file as it was.
     """
-    path = Path(path)
-    fmt = _format(path)
-    if fmt == "toml":
-        text = to_toml(grasp)
-    else:
-        text = json.dumps(grasp_to_dict(grasp), indent=2) + "\n"
-    path.write_text(text, encoding="utf-8")
+    outputs.write_file(path, to_text(grasp, path).encode("utf-8"))

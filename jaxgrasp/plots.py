@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 
 import matplotlib
 import numpy as np
@@ -29,11 +30,12 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
+from . import outputs
 from .fields import FIELD
 from .status import BoundaryKind, GraspStatus
 from .units import MJ_TO_J
 
-__all__ = ["plot_sweep", "plot_max_over", "plot_max", "new_figure", "J_TO_MJ"]
+__all__ = ["plot_sweep", "plot_max_over", "plot_max", "new_figure", "save_figure", "J_TO_MJ"]
 
 
 J_TO_MJ = 1.0 / MJ_TO_J
@@ -65,9 +67,28 @@ def new_figure(**kwargs) -> Figure:
     return fig
 
 
+def save_figure(fig, path, format: str | None = None) -> None:
+    """Save ``fig`` (150 dpi, tight box) to ``path`` atomically, or into a binary file object.
+
+    A path is written as a temporary file renamed into place (:mod:`jaxgrasp.outputs`),
+    so a failure or an interrupt never leaves half an image. The format is ``format``,
+    else the path's suffix, else matplotlib's default (``png``; its suffix is then added,
+    as ``savefig`` does).
+    """
+    if hasattr(path, "write"):
+        fig.savefig(path, format=format or matplotlib.rcParams["savefig.format"], dpi=150, bbox_inches="tight")
+        return
+    path = os.fspath(path)
+    fmt = format or os.path.splitext(path)[1][1:].lower()
+    if not fmt:
+        fmt = matplotlib.rcParams["savefig.format"]
+        path = f"{path}.{fmt}"
+    outputs.write_file(path, lambda fh: fig.savefig(fh, format=fmt, dpi=150, bbox_inches="tight"))
+
+
 def _save(fig, path):
     if path is not None:
-        fig.savefig(path, dpi=150, bbox_inches="tight")
+        save_figure(fig, path)
     return fig
 
 

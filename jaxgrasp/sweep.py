@@ -32,7 +32,9 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import math
+import os
 import time
 from typing import Any, Callable, Mapping
 
@@ -42,7 +44,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from . import cache
+from . import cache, outputs
 from .evaluate import EvaluateOptions
 from .evaluate import evaluate as _evaluate_one
 from .fields import FIELD, SWEEPABLE, Field
@@ -52,6 +54,7 @@ from .validation import GraspValueError, as_float_array, check_grasp_inputs, for
 
 __all__ = [
     "sweep",
+    "check_inputs",
     "SweepResult",
     "PARAMETERS",
     "DEFAULT_CHUNK_SIZE",
@@ -225,7 +228,11 @@ class SweepResult:
 
     # ---- files
     def to_csv(self, path) -> None:
-        """Write a tidy CSV: one row per grid point (C order: last axis fastest).
+        """Write a tidy CSV to ``path``: one row per grid point (C order: last axis fastest).
+
+        ``path`` is written atomically (a temporary file renamed into place, see
+        :mod:`jaxgrasp.outputs`): a failure leaves the previous file as it was. A binary
+        file object is written to directly.
 
         Columns: each axis with its SI unit (``young_modulus_Pa``, ``initial_deformation_m``,
         ``mass_kg``, ``friction``, ``max_force_N``, ``radius_m``), then ``value_J``,
@@ -248,19 +255,28 @@ class SweepResult:
         contact = np.asarray(self.limiting_contact).ravel()
         energy = np.asarray(self.equilibrium_energy).ravel()
         fmt = lambda x: repr(float(x))
-        with open(path, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(cols)
-            for i in range(value.size):
-                row = [fmt(flat[n][i]) for n in self.axes]
-                row += [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
-                w.writerow(row)
+
+        def write(binary):
+            fh = io.TextIOWrapper(binary, encoding="utf-8", newline="")
+            try:
+                w = csv.writer(fh)
+                w.writerow(cols)
+                for i in range(value.size):
+                    row = [fmt(flat[n][i]) for n in self.axes]
+                    row += [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
+                    w.writerow(row)
+            finally:
+                fh.detach()  # flushed; the binary file stays open for its owner
+
+        _write(path, write)
 
     def to_npz(self, path) -> None:
         """Write a ``.npz``: ``axis_names``, ``axis_<name>`` (1-D, SI), the grid-shaped
         result arrays, ``status_names``, ``kind_names``, the timings and ``devices``.
 
         Read it back with :meth:`from_npz`. No pickled objects (``allow_pickle=False``).
+        ``path`` gets the suffix ``.npz`` if it has none (as ``np.savez``) and is written
+        atomically (see :meth:`to_csv`); a binary file object is written to directly.
         """
         arrays = {
             "axis_names": np.asarray(self.names, dtype=str),
@@ -274,7 +290,10 @@ class SweepResult:
             arrays[f"axis_{n}"] = np.asarray(a, dtype=np.float64)
         for f in _RESULT_FIELDS:
             arrays[f] = np.asarray(getattr(self, f))
-        np.savez(path, **arrays)
+        if not hasattr(path, "write"):
+            path = os.fspath(path)
+            path = path if path.endswith(".npz") else path + ".npz"
+        _write(path, lambda fh: np.savez(fh, **arrays))
 
     @classmethod
     def from_npz(cls, path) -> "SweepResult":
@@ -293,6 +312,14 @@ class SweepResult:
         axes = ", ".join(f"{n}[{len(a)}]" for n, a in self.axes.items())
         counts = ", ".join(f"{k} {v}" for k, v in self.counts().items() if v)
         return f"SweepResult({axes or 'no axes'}; {counts})"
+
+
+def _write(target, write) -> None:
+    """``write(fh)`` into a binary file object ``target``, or atomically into the file at path ``target``."""
+    if hasattr(target, "write"):
+        write(target)
+    else:
+        outputs.write_file(target, write)
 
 
 def _flatten(r: SweepResult):
@@ -432,6 +459,7 @@ def sweep(
     chunk_size: int | None = None,
     progress: Callable[[int, int], Any] | None = None,
     devices=None,
+    on_chunk: Callable[[int, int, Mapping[str, np.ndarray]], Any] | None = None,
     **axes,
 ) -> SweepResult:
     """Evaluate ``grasp`` at every point of the Cartesian grid of ``axes``.
@@ -446,6 +474,14 @@ def sweep(
             of devices (:func:`batch_size`); the last chunk is padded to it.
         progress: optional ``progress(done, total)`` called after each chunk with the
             numbers of grid points done and in all.
+        on_chunk: optional ``on_chunk(start, stop, results)`` called after each chunk
+            (before ``progress``): grid points ``start .. stop - 1`` (C order, last axis
+            fastest) are done, and so is every point before them; ``results`` maps each
+            result field (``value``, ``status``, ``limiting_kind``, ``limiting_contact``,
+            ``equilibrium_energy``) to a flat ``(total,)`` array whose first ``stop``
+            entries are final. The arrays are the sweep's own buffers: read them, copy
+            what you keep, never write them. For checkpoints (``jaxgrasp sweep`` writes
+            ``sweep.partial.npz`` with it, :mod:`jaxgrasp.partial`).
         devices: the devices the batch is sharded over (default: all of
             ``jax.devices()``, which after ``jax.distributed.initialize()`` spans every
             host). The batch is rounded up to a multiple of their number.
@@ -480,7 +516,7 @@ def sweep(
     # so that every grid point is exactly the grasp evaluate() would see
     raw = grasp.to_numpy()
     own = {k: np.broadcast_to(np.asarray(raw[k], dtype=np.float64), v.shape) for k, v in base.items()}
-    arrays, run_seconds = _run_chunks(fn, own, axes, chunk, sharding, progress)
+    arrays, run_seconds = _run_chunks(fn, own, axes, chunk, sharding, progress, on_chunk)
     return SweepResult(
         axes=dict(axes),
         **arrays,
@@ -488,6 +524,18 @@ def sweep(
         run_seconds=run_seconds,
         devices=len(devices),
     )
+
+
+def check_inputs(grasp: Grasp, /, *, chunk_size: int | None = None, **axes) -> None:
+    """Raise what :func:`sweep` would raise for these arguments, computing nothing.
+
+    For a caller that must reject bad input before it prepares anything else (the
+    ``jaxgrasp sweep`` command checks its output folder only after this).
+
+    Raises:
+        GraspValueError: as :func:`sweep` (one line).
+    """
+    _check_inputs(grasp, chunk_size, axes)
 
 
 def _check_inputs(grasp, chunk_size, axes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
@@ -522,7 +570,7 @@ def _chunk_fields(own: dict, axes: dict, start: int, chunk: int) -> dict[str, np
     return fields
 
 
-def _run_chunks(fn, own: dict, axes: dict, chunk: int, sharding, progress):
+def _run_chunks(fn, own: dict, axes: dict, chunk: int, sharding, progress, on_chunk=None):
     """Evaluate every grid point, ``chunk`` at a time; (grid-shaped results, run seconds)."""
     shape = tuple(a.size for a in axes.values())
     total = int(math.prod(shape))
@@ -541,6 +589,8 @@ def _run_chunks(fn, own: dict, axes: dict, chunk: int, sharding, progress):
             if f not in outs:
                 outs[f] = np.empty((total, *a.shape[1:]), dtype=a.dtype)
             outs[f][start:stop] = a[: stop - start]
+        if on_chunk is not None:  # first: a checkpoint it writes is on disk before progress reports the chunk
+            on_chunk(start, stop, outs)
         if progress is not None:
             progress(stop, total)
     return {f: outs[f].reshape(shape) for f in _RESULT_FIELDS}, run_seconds

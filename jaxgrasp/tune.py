@@ -728,5 +728,7 @@ def plot_history(result: TuneResult, path=None, *, title: str | None = None):
     ax.grid(True, alpha=0.3)
     ax.legend(loc="lower right", fontsize=8)
     if path is not None:
-        fig.savefig(path, dpi=150, bbox_inches="tight")
+        from .plots import save_figure  # atomic: never half an image
+
+        save_figure(fig, path)
     return fig

@@ -1,7 +1,9 @@
 """The ``jaxgrasp`` command line: ``jaxgrasp evaluate``, ``jaxgrasp sweep``, ``jaxgrasp tune``.
 
-Every error in the input (bad file, bad value, bad option) prints one line
-``jaxgrasp: error: ...`` on stderr and exits with status 2, never a traceback.
+Every error in the input (bad file, bad value, bad option, an output that cannot be
+written) prints one line ``jaxgrasp: error: ...`` on stderr and exits with status 2, never
+a traceback. Ctrl-C (or SIGTERM) at any moment ends the command within a second with one
+line ``jaxgrasp: interrupted ...`` and status 130 (143), see :mod:`.interrupt`.
 
 One module per sub-command (:mod:`.evaluate`, :mod:`.sweep`, :mod:`.tune`), each with
 ``add_parser(sub)`` and ``run(args)``; what they share is in :mod:`.common`.
@@ -14,6 +16,7 @@ import sys
 from ..cache import enable_compilation_cache
 from . import evaluate, sweep, tune
 from .common import EXIT_USAGE, Parser, UsageError, load_grasp, parse_number
+from .interrupt import run_interruptibly
 
 __all__ = [
     "main",
@@ -41,7 +44,23 @@ def build_parser() -> Parser:
 
 
 def main(argv=None) -> int:
-    """Run ``jaxgrasp`` with ``argv`` (default ``sys.argv[1:]``); the exit status."""
+    """Run ``jaxgrasp`` with ``argv``; the exit status.
+
+    The command runs in a worker thread while this (main) thread handles Ctrl-C and
+    SIGTERM (:mod:`.interrupt`): on either, the process ends within a second with status
+    130 (143), one line ``jaxgrasp: interrupted ...`` and no temporary file left.
+
+    Without ``argv`` (the installed ``jaxgrasp`` command, ``python -m jaxgrasp``) it reads
+    ``sys.argv[1:]`` and, once the command is done, ends the process with its status at
+    once (``os._exit``, after flushing stdout and stderr), so that no interrupt lands in
+    the interpreter's teardown. Pass ``argv`` to get the status returned instead.
+    """
+    return run_interruptibly(lambda: _main(argv), end_process=argv is None)
+
+
+def _main(argv) -> int:
+    """Parse ``argv`` and run its command; input errors as one line, exit status 2."""
+    from ..outputs import OutputError, clear_notes
     from ..validation import GraspValueError
 
     parser = build_parser()
@@ -51,9 +70,8 @@ def main(argv=None) -> int:
             raise UsageError("choose a command: evaluate, sweep or tune (see 'jaxgrasp --help')")
         enable_compilation_cache()  # looked up here, so that tests can replace it
         return args.func(args)
-    except (UsageError, GraspValueError) as exc:
+    except (UsageError, GraspValueError, OutputError) as exc:
         print(f"jaxgrasp: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("jaxgrasp: interrupted", file=sys.stderr)
-        return 130
+    finally:
+        clear_notes()

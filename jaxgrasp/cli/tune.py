@@ -1,7 +1,9 @@
 """``jaxgrasp tune``: maximise a grasp's value over chosen parameters; write the tuned grasp.
 
 Writes the tuned grasp to ``--out`` (``.toml`` or ``.json``) and a plot of the value over
-the iterations next to it (same name, ``.png``), and prints one summary line.
+the iterations next to it (same name, ``.png``), and prints one summary line. The folder
+of ``--out`` is checked for writability before tuning; the grasp file and its plot then
+replace the previous ones as one set (:func:`jaxgrasp.outputs.write_set`).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import outputs
 from ..fields import TUNABLE
 from .common import UsageError, add_grasp_source, grasp_source, load_grasp, parse_number
 
@@ -147,7 +150,7 @@ def run(args) -> int:
     options = EvaluateOptions(smooth_min_temperature=args.smooth_min_temperature)
     progress = _progress_printer(args.quiet)
     res = tune(grasp, params, bounds, maxiter=args.maxiter, options=options, method=args.method, callback=progress)
-    _write_outputs(res, out, None if args.no_plot else f"jaxgrasp tune: {source}")
+    replaced = _write_outputs(res, out, None if args.no_plot else f"jaxgrasp tune: {source}")
     tuned = "; ".join(f"{k} = {_fmt(v)}" for k, v in res.params.items() if k != "positions")
     if "positions" in res.params:
         tuned = (tuned + "; " if tuned else "") + "positions moved"
@@ -159,6 +162,7 @@ def run(args) -> int:
         + (f"{note}; " if note else "")
         + f"wrote {out}"
         + ("" if args.no_plot else f", {out.with_suffix('.png')}")
+        + (f" (replacing the previous {', '.join(replaced)})" if replaced else "")
     )
     return 0
 
@@ -175,6 +179,10 @@ def _check_options(args) -> Path:
     t = args.smooth_min_temperature
     if t is not None and not (math.isfinite(t) and t > 0):
         raise UsageError(f"--smooth-min-temperature must be a finite number > 0 (J), got {t}")
+    try:
+        outputs.check_writable(out.parent)  # before any computation; creates nothing
+    except outputs.OutputError as exc:
+        raise UsageError(f"--out {str(out)!r}: {exc}") from None
     return out
 
 
@@ -195,19 +203,24 @@ def _progress_printer(quiet: bool):
     return progress
 
 
-def _write_outputs(res, out: Path, title: str | None) -> None:
-    """Write the tuned grasp to ``out`` and (with a ``title``) its history plot beside it."""
-    from ..gripfile import save
-    from ..tune import plot_history
+def _write_outputs(res, out: Path, title: str | None) -> list[str]:
+    """Write the tuned grasp to ``out`` and (with a ``title``) its history plot beside it,
+    as one set; the names of the previous files they replaced."""
+    from ..gripfile import to_text
 
+    members = {out: to_text(res.grasp, out).encode("utf-8")}
+    if title is not None:
+        from ..plots import save_figure
+        from ..tune import plot_history
+
+        fig = plot_history(res, title=title)
+        members[out.with_suffix(".png")] = lambda fh: save_figure(fig, fh, format="png")
     try:
-        if out.parent and not out.parent.exists():
-            out.parent.mkdir(parents=True, exist_ok=True)
-        save(res.grasp, out)
-        if title is not None:
-            plot_history(res, out.with_suffix(".png"), title=title)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        replaced = outputs.write_set(members)
     except OSError as exc:
         raise UsageError(f"cannot write {str(out)!r}: {exc.strerror or exc}") from None
+    return [p.name for p in replaced]
 
 
 def _fmt(v) -> str:

@@ -1,0 +1,385 @@
+"""Output files that are whole or absent: checked first, written aside, renamed as one set.
+
+Every file jaxgrasp writes goes through :func:`write_set` (or :func:`write_file`, a set of
+one). Each member is first written to a temporary file in its destination folder
+(``NAME.<pid>-<token>.tmp``), flushed and ``fsync``-ed; only when every member is complete
+are they renamed over their destinations (``os.replace``), all under one process-wide lock
+(:data:`PUBLISH_LOCK`). So a reader, or a run that stops half-way, sees either the
+previous set or the new one, never a new file beside an old one; a failure while writing
+removes the temporary files and leaves the previous set as it was.
+
+The rest is for commands that may be interrupted (``jaxgrasp.cli``):
+
+* :func:`check_writable`: can files be created in a folder? Asked before any
+  computation, without creating anything.
+* :class:`FolderLock`: one writer per output folder (a lock file ``.jaxgrasp.lock`` held
+  with ``flock`` and holding the writer's pid).
+* :func:`abandon`: on an interrupt, wait for a rename phase in progress (at most a
+  moment), delete this process's temporary files and lock files, and forbid every later
+  write; it returns the notes commands left for that moment (:func:`set_note`), e.g.
+  where a sweep kept its finished points.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import threading
+from pathlib import Path
+from typing import BinaryIO, Callable, Iterable, Mapping, Union
+
+__all__ = [
+    "OutputError",
+    "FolderBusy",
+    "TEMP_SUFFIX",
+    "LOCK_NAME",
+    "PUBLISH_LOCK",
+    "check_writable",
+    "write_file",
+    "write_set",
+    "FolderLock",
+    "set_note",
+    "clear_notes",
+    "abandon",
+]
+
+TEMP_SUFFIX = ".tmp"
+"""Suffix of every temporary file (``NAME.<pid>-<token>.tmp`` beside its destination)."""
+
+LOCK_NAME = ".jaxgrasp.lock"
+"""Name of the lock file :class:`FolderLock` keeps in the folder it guards."""
+
+PUBLISH_LOCK = threading.Lock()
+"""Held while a set of files is renamed into place (and forever after :func:`abandon`)."""
+
+Content = Union[bytes, Callable[[BinaryIO], object]]
+"""What a member of a set holds: its bytes, or ``write(fh)`` writing them to a binary file."""
+
+_REGISTRY = threading.Lock()  # guards the three below
+_TEMPS: set[Path] = set()  # temporary files of this process not yet renamed or removed
+_LOCKS: set["FolderLock"] = set()  # folder locks held by this process
+_ABANDONED = False
+_NOTES: dict[str, str] = {}
+
+
+class OutputError(Exception):
+    """An output folder or file that cannot be written (one line)."""
+
+
+class FolderBusy(OutputError):
+    """Another process holds the :class:`FolderLock` of the folder; ``.pid`` is its pid
+    (``None`` when its lock file does not say)."""
+
+    def __init__(self, message: str, pid: int | None):
+        super().__init__(message)
+        self.pid = pid
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def _nearest_existing(path: Path) -> Path:
+    """``path`` or its nearest ancestor that exists (``lexists``: a path under a regular
+    file does not exist)."""
+    p = path
+    while not os.path.lexists(p) and p.parent != p:
+        p = p.parent
+    return p
+
+
+def check_writable(folder) -> Path:
+    """Check that files can be created in ``folder`` without creating anything there.
+
+    ``folder`` need not exist; then its nearest existing ancestor must be a folder in
+    which ``folder`` can be created. A probe file is created and removed in the folder
+    (or that ancestor), so read-only folders and file systems are caught, not just
+    permission bits.
+
+    Returns:
+        ``folder`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        OutputError: (one line) ``folder`` or an ancestor is a regular file, or no file
+            can be created there.
+    """
+    folder = Path(folder)
+    where = _nearest_existing(folder)
+    if not where.is_dir():
+        if where == folder:
+            raise OutputError(f"{str(folder)!r} exists and is not a folder")
+        raise OutputError(f"cannot create folder {str(folder)!r}: {str(where)!r} is a file, not a folder")
+    try:
+        fd, probe = _create_temp(where / "jaxgrasp-probe")
+    except OSError as exc:
+        what = "folder" if where == folder else f"folder {str(where)!r}, where it would be created,"
+        raise OutputError(f"cannot write to {str(folder)!r}: the {what} is not writable ({exc.strerror})") from None
+    os.close(fd)
+    _discard(probe)
+    return folder
+
+
+# --------------------------------------------------------------------------- temporary files
+
+
+def _create_temp(dest: Path) -> tuple[int, Path]:
+    """Create and register a new temporary file beside ``dest``; ``(fd, path)``.
+
+    Registration and creation happen under one lock, so :func:`abandon` removes every
+    temporary file that exists, and none is created after it.
+    """
+    with _REGISTRY:
+        if _ABANDONED:
+            raise OutputError("output writing was abandoned (interrupted)")
+        tmp = dest.with_name(f"{dest.name}.{os.getpid()}-{secrets.token_hex(4)}{TEMP_SUFFIX}")
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # the umask applies
+        _TEMPS.add(tmp)
+        return fd, tmp
+
+
+def _discard(tmp: Path) -> None:
+    """Remove a temporary file of this process (nothing if it was renamed or removed)."""
+    with _REGISTRY:
+        if tmp in _TEMPS:
+            _TEMPS.discard(tmp)
+            try:
+                os.unlink(tmp)
+            except FileNotFoundError:
+                pass
+
+
+def _stage(dest: Path, content: Content) -> Path:
+    """Write ``content`` to a new temporary file beside ``dest``, on disk (``fsync``); its path."""
+    fd, tmp = _create_temp(dest)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            if isinstance(content, (bytes, bytearray, memoryview)):
+                fh.write(content)
+            else:
+                content(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+    except BaseException:
+        _discard(tmp)
+        raise
+    return tmp
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Make the renames in ``folder`` durable (where the platform allows it)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+# --------------------------------------------------------------------------- sets
+
+
+def write_set(
+    members: Mapping[object, Content],
+    *,
+    remove: Iterable = (),
+    on_publish: Callable[[], object] | None = None,
+) -> list[Path]:
+    """Write several files as one set: all of them, or none (the previous ones stay).
+
+    Args:
+        members: destination path -> its bytes, or ``write(fh)`` that writes them to a
+            binary file object. The destination folders must exist.
+        remove: paths deleted in the same rename phase (e.g. a member of the previous
+            set that the new set no longer has); missing ones are ignored.
+        on_publish: called once the set is in place, still under :data:`PUBLISH_LOCK`
+            (so an interrupt sees the state before or after both).
+
+    Returns:
+        The destinations that replaced an existing file.
+
+    Raises:
+        OSError or whatever a ``write`` raises: nothing was replaced, and every temporary
+        file is gone.
+        OutputError: writing was abandoned (:func:`abandon`).
+    """
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for dest, content in members.items():
+            dest = Path(dest)
+            staged.append((_stage(dest, content), dest))
+        return _publish(staged, [Path(p) for p in remove], on_publish)
+    finally:
+        for tmp, _ in staged:
+            _discard(tmp)  # nothing left when they were renamed
+
+
+def _publish(staged, remove, on_publish) -> list[Path]:
+    """Rename the staged files over their destinations and delete ``remove``, under the lock."""
+    with PUBLISH_LOCK:
+        replaced = [dest for _, dest in staged if os.path.lexists(dest)]
+        for tmp, dest in staged:
+            os.replace(tmp, dest)
+            with _REGISTRY:
+                _TEMPS.discard(tmp)
+        for path in remove:
+            try:
+                os.unlink(path)
+            except FileNotFoundError:
+                pass
+        for folder in {dest.parent for _, dest in staged} | {p.parent for p in remove}:
+            _fsync_folder(folder)
+        if on_publish is not None:
+            on_publish()
+    return replaced
+
+
+def write_file(path, content: Content) -> bool:
+    """Write one file atomically (:func:`write_set` of one member).
+
+    Returns:
+        Whether it replaced an existing file.
+    """
+    return bool(write_set({path: content}))
+
+
+# --------------------------------------------------------------------------- folder lock
+
+
+class FolderLock:
+    """One writer per folder: the lock file ``folder/.jaxgrasp.lock``, held with ``flock``.
+
+    The file holds the pid of the process that holds it, for the message of a second
+    writer. The kernel releases the ``flock`` when its process ends in any way, so a lock
+    file left by a killed process (a *stale* lock) is simply taken over; its pid is
+    never trusted (pids are reused). On platforms without ``fcntl`` (Windows) the lock
+    does nothing.
+
+    Use as a context manager (or :meth:`acquire`, which does nothing where the lock is
+    already held, and :meth:`release`); :meth:`acquire` creates ``folder`` if needed.
+    """
+
+    def __init__(self, folder):
+        self.folder = Path(folder)
+        self.path = self.folder / LOCK_NAME
+        self._fd: int | None = None
+
+    def acquire(self) -> "FolderLock":
+        """Take the lock now or fail at once.
+
+        Raises:
+            FolderBusy: another process (or another lock of this one) holds it.
+            OSError: the folder or the lock file cannot be created.
+        """
+        if self._fd is not None:
+            return self
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - not POSIX
+            return self
+        self.folder.mkdir(parents=True, exist_ok=True)
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                pid = _read_pid(fd)
+                os.close(fd)
+                who = f"pid {pid}" if pid is not None else "pid unknown"
+                raise FolderBusy(
+                    f"{str(self.folder)!r} is being written by another jaxgrasp process ({who}); "
+                    "wait for it or choose another folder",
+                    pid,
+                ) from None
+            if _same_file(fd, self.path):  # not a file its last holder removed meanwhile
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self._fd = fd
+        with _REGISTRY:
+            _LOCKS.add(self)
+        return self
+
+    def release(self) -> None:
+        """Remove the lock file and release the lock (nothing if not held)."""
+        with _REGISTRY:
+            _LOCKS.discard(self)
+            self._drop()
+
+    def _drop(self) -> None:
+        # removed while still locked: a waiting process then finds it gone and retries
+        if self._fd is None:
+            return
+        try:
+            os.unlink(self.path)
+        except OSError:
+            pass
+        os.close(self._fd)
+        self._fd = None
+
+    def __enter__(self) -> "FolderLock":
+        return self.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def _read_pid(fd: int) -> int | None:
+    try:
+        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+        return int(text) if text else None
+    except (OSError, ValueError):
+        return None
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    try:
+        return os.path.samestat(os.fstat(fd), os.stat(path))
+    except FileNotFoundError:
+        return False
+
+
+# --------------------------------------------------------------------------- interrupts
+
+
+def set_note(key: str, text: str) -> None:
+    """Leave a note for an interrupt (:func:`abandon` returns them), e.g. where a sweep's
+    finished points are; replaces the note of the same ``key``."""
+    with _REGISTRY:
+        _NOTES[key] = text
+
+
+def clear_notes() -> None:
+    """Forget every note (a command's notes end with it)."""
+    with _REGISTRY:
+        _NOTES.clear()
+
+
+def abandon(timeout: float = 0.5) -> list[str]:
+    """Stop every write of this process for good, for an exit on an interrupt.
+
+    Waits at most ``timeout`` seconds for a rename phase in progress (so a set is never
+    published half), then keeps :data:`PUBLISH_LOCK` (nothing is published after this),
+    deletes every temporary file and lock file of this process and makes later writes
+    raise :class:`OutputError`. Meant to be followed by ``os._exit``.
+
+    Returns:
+        The notes left with :func:`set_note`, oldest first.
+    """
+    global _ABANDONED
+    PUBLISH_LOCK.acquire(timeout=timeout)  # never released
+    with _REGISTRY:
+        _ABANDONED = True
+        for tmp in list(_TEMPS):
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+        _TEMPS.clear()
+        for lock in list(_LOCKS):
+            lock._drop()
+        _LOCKS.clear()
+        return list(_NOTES.values())

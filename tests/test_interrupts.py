@@ -1,0 +1,362 @@
+"""Ctrl-C, SIGTERM and output files of the ``jaxgrasp`` command (issue 11, items 1-4).
+
+The interrupt tests run the command in a subprocess (``python -m jaxgrasp``, with the
+``PYTHONPATH`` of the tests) and send the signal at a chosen moment, found by watching
+its stderr: during XLA's compilation (a fresh cache folder and ``JAX_LOG_COMPILES``),
+between chunks of a sweep (its progress lines), while matplotlib is imported or while
+the plot is written (a wrapper makes those slow, so the moment is certain). Each checks
+the exit status, the one line, the time from signal to exit and what is left on disk.
+
+Cost: the sweeps share one cache folder and one grid and chunk size, so one sweep
+program is compiled for the module (~20 s on 2 cores); every other run loads it (~2.5 s).
+The check of the checkpoint against ``evaluate`` uses the session's ``evaluate_many``,
+compiled already by earlier modules in a whole run (~20 s more when this file runs alone).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import jaxgrasp
+from jaxgrasp import cli
+
+ROOT = Path(__file__).resolve().parent.parent
+EXIT_LIMIT_S = 1.0  # the issue's bound from signal to exit
+
+E_SPEC, DR_SPEC, CHUNK = "2e5:1e6:3", "1e-3:5e-3:8", "3"  # 24 points, 8 chunks of 3
+SWEEP_ARGS = ["--preset", "cube", "--young-modulus", E_SPEC, "--initial-deformation", DR_SPEC, "--chunk-size", CHUNK]
+TOTAL = 24
+SET = ("sweep.npz", "sweep.csv", "sweep.png")
+PARTIAL = "sweep.partial.npz"
+
+# Runs the command after making one step slow (JAXGRASP_TEST_SLOW): "import" (of
+# matplotlib) or "savefig" (the plot's bytes are half written). The step announces
+# itself on stderr first, so the test knows when to send the signal.
+SLOW_WRAPPER = r"""
+import os, sys, time
+slow = os.environ["JAXGRASP_TEST_SLOW"]
+
+def announce(what):
+    sys.stderr.write(f"test: slow {what}\n"); sys.stderr.flush()
+
+if slow == "import":
+    import importlib.abc
+    class SlowMatplotlib(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path=None, target=None):
+            if name == "matplotlib":
+                announce("import"); time.sleep(60)
+            return None
+    sys.meta_path.insert(0, SlowMatplotlib())
+elif slow == "savefig":
+    import matplotlib.figure
+    def savefig(self, fname, **kwargs):
+        fh = open(fname, "wb") if isinstance(fname, (str, os.PathLike)) else fname
+        fh.write(b"\x89PNG half"); fh.flush()
+        announce("savefig"); time.sleep(60)
+    matplotlib.figure.Figure.savefig = savefig
+from jaxgrasp.cli import main
+sys.exit(main())
+"""
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+@pytest.fixture(scope="module")
+def sweep_cache(tmp_path_factory):
+    """The compilation cache folder of every sweep subprocess of this module."""
+    return tmp_path_factory.mktemp("interrupt-cache")
+
+
+def _env(cache: Path, **extra) -> dict:
+    return dict(os.environ, JAXGRASP_CACHE_DIR=str(cache), **extra)
+
+
+def _jaxgrasp(*args) -> list[str]:
+    return [sys.executable, "-m", "jaxgrasp", *map(str, args)]
+
+
+def _slow(*args) -> list[str]:
+    return [sys.executable, "-c", SLOW_WRAPPER, *map(str, args)]
+
+
+class Run:
+    """A command in a subprocess whose stderr is read line by line."""
+
+    def __init__(self, cmd, env, cwd=ROOT, kill_after=300.0):
+        self.proc = subprocess.Popen(
+            cmd, env=env, cwd=str(cwd), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        self.before: list[str] = []  # stderr lines before the signal
+        self._timer = threading.Timer(kill_after, self.proc.kill)  # never hang the suite
+        self._timer.start()
+
+    def wait_for(self, pattern: str) -> str:
+        """Read stderr until a line matches ``pattern``; that line."""
+        for line in self.proc.stderr:
+            self.before.append(line)
+            if re.search(pattern, line):
+                return line
+        self.proc.wait()
+        raise AssertionError(f"no line matching {pattern!r}; rc {self.proc.returncode}; stderr:\n{''.join(self.before)[-3000:]}")
+
+    def interrupt(self, signum=signal.SIGINT, wait_s: float = 60.0):
+        """Send ``signum``; (exit status, seconds from signal to exit, stderr after it, stdout)."""
+        t0 = time.perf_counter()
+        self.proc.send_signal(signum)
+        try:
+            rc = self.proc.wait(timeout=wait_s)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            rc = self.proc.wait()
+        dt = time.perf_counter() - t0
+        self._timer.cancel()
+        return rc, dt, self.proc.stderr.read(), self.proc.stdout.read()
+
+    def finish(self):
+        """Wait for the end; (exit status, stdout, whole stderr)."""
+        out, err = self.proc.communicate(timeout=300)
+        self._timer.cancel()
+        return self.proc.returncode, out, "".join(self.before) + err
+
+
+def _assert_one_line(rc, dt, after, expect_rc=130, word="interrupted"):
+    """Exit ``expect_rc`` within the limit; after the signal only progress lines of the
+    worker (it runs until the handler does) and then exactly one line, the last."""
+    assert rc == expect_rc, f"exit {rc} after {dt:.2f} s; stderr after the signal:\n{after[-3000:]}"
+    assert dt < EXIT_LIMIT_S, f"{dt:.2f} s from signal to exit"
+    for bad in ("Traceback", "Fatal Python error", "Error", "Exception ignored"):
+        assert bad not in after, after
+    lines = [ln for ln in after.splitlines() if ln.startswith("jaxgrasp:")]
+    assert lines and lines[-1] == after.splitlines()[-1], after
+    assert lines[-1].startswith(f"jaxgrasp: {word}"), after
+    assert all(re.match(r"jaxgrasp: chunk \d+/\d+ ", ln) for ln in lines[:-1]), after
+    return lines[-1]
+
+
+def _listing(folder: Path) -> set[str]:
+    return set(os.listdir(folder))
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {n: (folder / n).read_bytes() for n in SET}
+
+
+@pytest.fixture(scope="module")
+def finished_run(sweep_cache, tmp_path_factory):
+    """A finished sweep into a folder holding an older run's files; (folder, stdout)."""
+    out = tmp_path_factory.mktemp("previous") / "out"
+    out.mkdir()
+    for n in SET:
+        (out / n).write_bytes(b"older run")
+    rc, stdout, stderr = Run(_jaxgrasp("sweep", *SWEEP_ARGS, "--out", out), _env(sweep_cache)).finish()
+    assert rc == 0, stderr[-3000:]
+    return out, stdout
+
+
+@pytest.fixture
+def previous_set(finished_run, tmp_path) -> tuple[Path, dict[str, bytes]]:
+    """A copy of a finished run's folder (the previous set of a new run); (folder, its files' bytes)."""
+    out = tmp_path / "out"
+    shutil.copytree(finished_run[0], out)
+    return out, _snapshot(out)
+
+
+def test_sequential_rerun_replaces_previous_set_and_says_so(finished_run):
+    """Item 4: a second run into a folder used to overwrite the previous files silently."""
+    out, stdout = finished_run
+    assert stdout.count("\n") == 1
+    assert stdout.rstrip().endswith(
+        f"wrote {out}/{{sweep.npz,sweep.csv,sweep.png}} (replacing the previous sweep.npz, sweep.csv, sweep.png)"
+    ), stdout
+    assert all((out / n).read_bytes() != b"older run" for n in SET)
+    assert _listing(out) == set(SET)  # the checkpoint is gone once the set is written; no lock, no *.tmp
+
+
+def _partial(path: Path) -> dict:
+    """The checkpoint's arrays (read with NumPy alone: the documented format)."""
+    with np.load(path, allow_pickle=False) as z:
+        return {k: np.array(z[k]) for k in z.files}
+
+
+# ----------------------------------------------------------------------------- item 1
+
+
+def test_sigint_during_xla_compilation_exits_130_at_once(tmp_path):
+    """Item 1: Ctrl-C while XLA compiles evaluate (fresh cache: ~17 s of compilation)
+    used to wait for XLA, then segfault (exit 139)."""
+    env = _env(tmp_path / "fresh-cache", JAX_LOG_COMPILES="1")
+    run = Run(_jaxgrasp("evaluate", "--preset", "cube"), env)
+    run.wait_for(r"Finished jaxpr to MLIR module conversion jit\(evaluate_compiled\)")
+    time.sleep(0.3)  # inside XLA's compiler now
+    rc, dt, after, stdout = run.interrupt()
+    line = _assert_one_line(rc, dt, after)
+    assert line == "jaxgrasp: interrupted"
+    assert stdout == ""
+    assert "Finished XLA compilation of jit(evaluate_compiled)" not in after  # it was compiling
+
+
+# ----------------------------------------------------------------------------- item 4 (chunks)
+
+
+def test_sigint_between_chunks_keeps_finished_points(sweep_cache, tmp_path, evaluate_many):
+    """Item 4: an interrupted sweep used to throw away its finished chunks. Now the
+    checkpoint holds them, equal to evaluate() of those points."""
+    out = tmp_path / "out"
+    run = Run(_jaxgrasp("sweep", *SWEEP_ARGS, "--out", out), _env(sweep_cache))
+    run.wait_for(r"jaxgrasp: chunk 1/8 ")
+    rc, dt, after, stdout = run.interrupt()
+    line = _assert_one_line(rc, dt, after)
+    m = re.fullmatch(r"jaxgrasp: interrupted; kept (\d+) of 24 points in (.+)", line)
+    assert m and Path(m[2]) == out / PARTIAL, line
+    kept = int(m[1])
+    assert kept >= 3 and kept % 3 == 0 or kept == TOTAL, kept
+    assert stdout == ""
+    assert _listing(out) == {PARTIAL}  # no half set, no temporary file, no lock
+
+    z = _partial(out / PARTIAL)
+    assert str(z["format"]) == "jaxgrasp-sweep-partial-1"
+    assert [str(n) for n in z["axis_names"]] == ["young_modulus", "initial_deformation"]
+    done = z["done"]
+    assert done.shape == (3, 8) and done.sum() == kept
+    assert done.ravel()[:kept].all() and not done.ravel()[kept:].any()  # C order, a prefix
+    assert np.isnan(z["value"][~done]).all() and (z["status"][~done] == -1).all()
+    np.testing.assert_array_equal(z["grasp_young_modulus"], jaxgrasp.presets.cube().young_modulus)
+
+    base = jaxgrasp.presets.cube()
+    idx = np.argwhere(done)
+    grasps = [
+        base.replace(
+            young_modulus=np.full(2, z["axis_young_modulus"][i]),
+            initial_deformation=np.full(2, z["axis_initial_deformation"][j]),
+        )
+        for i, j in idx
+    ]
+    for (i, j), r in zip(idx, evaluate_many(grasps)):
+        np.testing.assert_allclose(z["value"][i, j], r.value, rtol=1e-12, atol=1e-18)
+        np.testing.assert_allclose(z["equilibrium_energy"][i, j], r.equilibrium_energy, rtol=1e-12, atol=1e-18)
+        assert z["status"][i, j] == r.status
+        assert z["limiting_kind"][i, j] == r.limiting_kind
+        assert z["limiting_contact"][i, j] == r.limiting_contact
+
+
+# ----------------------------------------------------------------------------- item 2 (+ lock)
+
+
+def test_sigint_while_matplotlib_imports(sweep_cache, previous_set):
+    """Item 2: Ctrl-C during matplotlib's import (made slow here) used to raise inside
+    the import (ImportError and fatal errors, or exit -2 without a message, by timing),
+    after the new npz/csv had already replaced the previous ones."""
+    out, before = previous_set
+    run = Run(_slow("sweep", *SWEEP_ARGS, "--out", out), _env(sweep_cache, JAXGRASP_TEST_SLOW="import"))
+    run.wait_for(r"^test: slow import")
+    rc, dt, after, stdout = run.interrupt()
+    line = _assert_one_line(rc, dt, after)
+    assert line == f"jaxgrasp: interrupted; kept 24 of 24 points in {out / PARTIAL}"
+    assert stdout == ""
+    assert _snapshot(out) == before  # the previous set, untouched
+    assert _listing(out) == set(SET) | {PARTIAL}  # no *.tmp, no lock file
+    assert _partial(out / PARTIAL)["done"].all()
+
+
+# ----------------------------------------------------------------------------- item 4 (set)
+
+
+def test_sigterm_while_writing_outputs_keeps_previous_set_and_folder_locked(sweep_cache, previous_set):
+    """Item 4: an interrupt while the plot is written used to leave the new npz and
+    csv beside the previous png (SIGTERM here: it used to kill at once, exit -15); two
+    runs into one folder used to overwrite each other silently. Now the previous set
+    stays whole with no temporary file, and a second sweep started meanwhile fails at
+    once (before computing), naming the first one's pid."""
+    out, before = previous_set
+    first = Run(_slow("sweep", *SWEEP_ARGS, "--out", out, "--quiet"), _env(sweep_cache, JAXGRASP_TEST_SLOW="savefig"))
+    first.wait_for(r"^test: slow savefig")  # npz and csv staged, the png half written
+    try:
+        second = subprocess.run(
+            _jaxgrasp("sweep", *SWEEP_ARGS, "--out", out), env=_env(sweep_cache), cwd=str(ROOT),
+            capture_output=True, text=True, timeout=300,
+        )
+    finally:
+        rc, dt, after, stdout = first.interrupt(signal.SIGTERM)
+    line = _assert_one_line(rc, dt, after, expect_rc=143, word="terminated")
+    assert line == f"jaxgrasp: terminated; kept 24 of 24 points in {out / PARTIAL}"
+    assert stdout == ""
+    assert _snapshot(out) == before
+    assert _listing(out) == set(SET) | {PARTIAL}  # no *.tmp, no lock file
+
+    assert second.returncode == 2, second.stderr[-3000:]
+    assert second.stdout == ""
+    assert second.stderr.count("\n") == 1 and second.stderr.startswith("jaxgrasp: error: --out: "), second.stderr
+    assert f"is being written by another jaxgrasp process (pid {first.proc.pid})" in second.stderr
+    assert "sweeping" not in second.stderr  # nothing computed
+
+
+# ----------------------------------------------------------------------------- item 3
+
+
+def _without_root_override() -> list[str]:
+    """A command prefix that makes a read-only folder read-only to the command: nothing
+    for a normal user; for root, ``setpriv`` dropping CAP_DAC_OVERRIDE (root keeps its
+    uid, so it still reads its own files, but the permission bits bind it)."""
+    if os.geteuid() != 0:
+        return []
+    setpriv = shutil.which("setpriv")
+    if setpriv is None:  # pragma: no cover - util-linux missing
+        pytest.skip("running as root without setpriv: a read-only folder is writable")
+    return [setpriv, "--bounding-set", "-dac_override"]
+
+
+def test_out_folder_not_writable_fails_before_computing(sweep_cache, tmp_path):
+    """Item 3: a read-only --out used to fail only after the whole sweep (exit 1,
+    PermissionError traceback, every result lost)."""
+    out = tmp_path / "ro"
+    out.mkdir()
+    out.chmod(0o555)
+    try:
+        p = subprocess.run(
+            _without_root_override() + _jaxgrasp("sweep", *SWEEP_ARGS, "--out", out), env=_env(sweep_cache),
+            cwd=str(ROOT), capture_output=True, text=True, timeout=300,
+        )
+        assert p.returncode == 2, p.stderr[-3000:]
+        assert p.stdout == ""
+        assert p.stderr.count("\n") == 1, p.stderr
+        assert p.stderr.startswith(f"jaxgrasp: error: --out: cannot write to '{out}'"), p.stderr
+        assert "not writable" in p.stderr and "sweeping" not in p.stderr  # nothing computed
+        assert os.listdir(out) == []
+    finally:
+        out.chmod(0o755)
+
+
+@pytest.mark.parametrize("command", ["sweep", "tune"])
+def test_out_under_a_file_fails_before_computing(command, tmp_path, monkeypatch, capsys):
+    """Item 3: ``--out`` under a regular file (fails as root too) used to be found only
+    after the computation (sweep) or not at all before it (tune)."""
+    monkeypatch.setattr(cli, "enable_compilation_cache", lambda: None)
+    computed = []
+    module = importlib.import_module(f"jaxgrasp.{command}")  # the module, not the function
+    monkeypatch.setattr(module, command, lambda *a, **k: computed.append(1) or pytest.fail("computed"))
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    if command == "sweep":
+        argv = ["sweep", "--preset", "cube", "--mass", "0", "--out", str(blocker / "sub" / "out")]
+    else:
+        argv = ["tune", "--preset", "cube", "--out", str(blocker / "sub" / "tuned.toml")]
+    rc = cli.main(argv)
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert computed == []
+    assert err.count("\n") == 1 and err.startswith("jaxgrasp: error: --out"), err
+    assert "is a file, not a folder" in err and str(blocker) in err
+    assert blocker.read_text() == "not a folder"
