@@ -18,7 +18,11 @@ Quick start::
 
 import os as _os
 
-import jax as _jax
+from . import startup as _startup
+
+_startup.install_if_command_line()  # Ctrl-C while JAX loads: one line, exit 130 (the program only)
+
+import jax as _jax  # noqa: E402
 
 if "JAX_ENABLE_X64" not in _os.environ:  # an explicit choice of the user's stands
     _jax.config.update("jax_enable_x64", True)

@@ -39,6 +39,7 @@ __all__ = [
     "write_set",
     "FolderLock",
     "set_note",
+    "set_last_write",
     "clear_notes",
     "abandon",
 ]
@@ -58,6 +59,7 @@ Content = Union[bytes, Callable[[BinaryIO], object]]
 _REGISTRY = threading.Lock()  # guards the three below
 _TEMPS: set[Path] = set()  # temporary files of this process not yet renamed or removed
 _LOCKS: set["FolderLock"] = set()  # folder locks held by this process
+_LAST_WRITES: dict[str, Callable[[], object]] = {}  # run by abandon() before it stops writing
 _ABANDONED = False
 _NOTES: dict[str, str] = {}
 
@@ -352,17 +354,31 @@ def set_note(key: str, text: str) -> None:
         _NOTES[key] = text
 
 
+def set_last_write(key: str, write: Callable[[], object] | None) -> None:
+    """Leave ``write()`` for an interrupt to run first (:func:`abandon`), e.g. the
+    checkpoint of the points a sweep finished since its last one; ``None`` withdraws the
+    ``key``'s. It runs in the interrupted thread while the command's worker may still run,
+    so it must read only what the worker no longer changes."""
+    with _REGISTRY:
+        if write is None:
+            _LAST_WRITES.pop(key, None)
+        else:
+            _LAST_WRITES[key] = write
+
+
 def clear_notes() -> None:
-    """Forget every note (a command's notes end with it)."""
+    """Forget every note and last write (a command's notes end with it)."""
     with _REGISTRY:
         _NOTES.clear()
+        _LAST_WRITES.clear()
 
 
 def abandon(timeout: float = 0.5) -> list[str]:
     """Stop every write of this process for good, for an exit on an interrupt.
 
-    Waits at most ``timeout`` seconds for a rename phase in progress (so a set is never
-    published half), then keeps :data:`PUBLISH_LOCK` (nothing is published after this),
+    First runs the last writes left with :func:`set_last_write` (a failing one is
+    skipped: its previous file stays). Then waits at most ``timeout`` seconds for a
+    rename phase in progress (so a set is never published half), then keeps :data:`PUBLISH_LOCK` (nothing is published after this),
     deletes every temporary file and lock file of this process and makes later writes
     raise :class:`OutputError`. Meant to be followed by ``os._exit``.
 
@@ -370,6 +386,14 @@ def abandon(timeout: float = 0.5) -> list[str]:
         The notes left with :func:`set_note`, oldest first.
     """
     global _ABANDONED
+    with _REGISTRY:
+        last_writes = list(_LAST_WRITES.values())
+        _LAST_WRITES.clear()
+    for write in last_writes:
+        try:
+            write()
+        except Exception:  # noqa: BLE001 - an exit is under way; the previous file stays
+            pass
     PUBLISH_LOCK.acquire(timeout=timeout)  # never released
     with _REGISTRY:
         _ABANDONED = True

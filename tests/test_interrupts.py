@@ -194,6 +194,37 @@ def _partial(path: Path) -> dict:
 # ----------------------------------------------------------------------------- item 1
 
 
+@pytest.mark.parametrize("delay_s", [0.15, 0.35])
+def test_sigint_while_jax_loads_exits_130_in_one_line(delay_s):
+    """Item 1: Ctrl-C in the first ~0.5 s, while ``import jaxgrasp`` loads JAX (before the
+    command's own handling), used to print Python's KeyboardInterrupt traceback."""
+    run = Run(_jaxgrasp("evaluate", "--preset", "cube"), dict(os.environ))
+    time.sleep(delay_s)
+    rc, dt, after, stdout = run.interrupt()
+    assert _assert_one_line(rc, dt, after) == "jaxgrasp: interrupted"
+    assert stdout == ""
+
+
+@pytest.mark.parametrize(
+    "orig_argv, expected",
+    [
+        (["python", "-m", "jaxgrasp", "sweep"], True),
+        (["python", "-X", "dev", "-m", "jaxgrasp.cli", "evaluate"], True),
+        (["/venv/bin/python", "/venv/bin/jaxgrasp", "evaluate"], True),
+        (["python", "-m", "pytest", "tests"], False),
+        (["python", "-c", "import jaxgrasp", "-m", "jaxgrasp"], False),
+        (["python", "script.py", "-m", "jaxgrasp"], False),
+        (["python"], False),
+    ],
+)
+def test_startup_handler_only_in_the_program(orig_argv, expected):
+    """The early Ctrl-C handler is for the jaxgrasp program alone: a program that imports
+    jaxgrasp keeps Python's KeyboardInterrupt."""
+    from jaxgrasp.startup import is_command_line
+
+    assert is_command_line(orig_argv) is expected
+
+
 def test_sigint_during_xla_compilation_exits_130_at_once(tmp_path):
     """Item 1: Ctrl-C while XLA compiles evaluate (fresh cache: ~17 s of compilation)
     used to wait for XLA, then segfault (exit 139)."""
@@ -223,6 +254,10 @@ def test_sigint_between_chunks_keeps_finished_points(sweep_cache, tmp_path, eval
     assert m and Path(m[2]) == out / PARTIAL, line
     kept = int(m[1])
     assert kept >= 3 and kept % 3 == 0 or kept == TOTAL, kept
+    # every chunk reported done before the exit is kept, also one whose checkpoint write
+    # was skipped as too frequent (the interrupt writes it)
+    reported = [int(d) for d in re.findall(r"chunk \d+/8 \((\d+)/24 points\)", "".join(run.before) + after)]
+    assert kept >= max(reported), (kept, reported)
     assert stdout == ""
     assert _listing(out) == {PARTIAL}  # no half set, no temporary file, no lock
 

@@ -123,19 +123,44 @@ def test_check_writable_creates_nothing_and_names_the_file(tmp_path):
         outputs.check_writable(blocker)
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders; "
-                    "test_interrupts.py::test_out_folder_not_writable_fails_before_computing drops root's override with setpriv")
-def test_check_writable_read_only_folder(tmp_path):  # pragma: no cover - root here
+READ_ONLY_CHECK = """
+import sys
+from jaxgrasp import outputs
+for path in sys.argv[1:]:
+    try:
+        outputs.check_writable(path)
+        print("writable", path)
+    except outputs.OutputError as exc:
+        print("error", exc)
+"""
+
+
+def test_check_writable_read_only_folder(tmp_path):
+    """A read-only folder, and a folder to be made under it, are refused. Run in a
+    subprocess that, as root, drops root's override of permission bits (setpriv), so the
+    folder is read-only to it as to any user."""
     ro = tmp_path / "ro"
     ro.mkdir()
     ro.chmod(0o555)
+    prefix = []
+    if os.geteuid() == 0:
+        import shutil
+
+        assert shutil.which("setpriv"), "running as root: setpriv (util-linux) is needed to drop CAP_DAC_OVERRIDE"
+        prefix = [shutil.which("setpriv"), "--bounding-set", "-dac_override"]
     try:
-        with pytest.raises(outputs.OutputError, match="not writable"):
-            outputs.check_writable(ro)
-        with pytest.raises(outputs.OutputError, match="not writable"):
-            outputs.check_writable(ro / "sub")
+        p = subprocess.run(
+            prefix + [sys.executable, "-c", READ_ONLY_CHECK, str(ro), str(ro / "sub"), str(tmp_path)],
+            capture_output=True, text=True, timeout=120,
+        )
     finally:
         ro.chmod(0o755)
+    lines = p.stdout.splitlines()
+    assert p.returncode == 0 and len(lines) == 3, p.stdout + p.stderr
+    assert lines[0].startswith("error") and "not writable" in lines[0], lines
+    assert lines[1].startswith("error") and "not writable" in lines[1], lines
+    assert lines[2] == f"writable {tmp_path}", lines  # the check can also say yes
+    assert os.listdir(ro) == []
 
 
 # ----------------------------------------------------------------------------- lock
@@ -204,3 +229,39 @@ def test_partial_round_trip(tmp_path):
     _result().to_npz(tmp_path / "r.npz")
     with pytest.raises(ValueError, match="not a jaxgrasp sweep checkpoint"):
         PartialSweep.load(tmp_path / "r.npz")
+
+
+def test_interrupt_writes_the_checkpoint_a_throttled_chunk_skipped(tmp_path, monkeypatch):
+    """A chunk whose checkpoint write was skipped (writes too frequent) is still kept when
+    the sweep is interrupted: abandon() runs the skipped write first."""
+    import threading
+
+    from jaxgrasp.cli.sweep import _Checkpoint
+
+    monkeypatch.setattr(outputs, "PUBLISH_LOCK", threading.Lock())  # abandon() keeps it forever
+    monkeypatch.setattr(outputs, "_ABANDONED", False)
+    axes = {"mass": np.array([0.0, 0.1, 0.2, 0.3])}
+    flat = {
+        "value": np.arange(4.0),
+        "status": np.zeros(4, dtype=np.int32),
+        "limiting_kind": np.zeros(4, dtype=np.int32),
+        "limiting_contact": np.ones(4, dtype=np.int32),
+        "equilibrium_energy": np.arange(4.0) + 10,
+    }
+    path = tmp_path / "sweep.partial.npz"
+    cp = _Checkpoint(path, jaxgrasp.presets.cube(), axes, chunk=1)
+    try:
+        cp(0, 1, flat)  # the first chunk is always written
+        assert PartialSweep.load(path).done_count == 1
+        cp._cost = 1e9  # the last write was slow: the next ones are skipped
+        cp(1, 2, flat)
+        cp(2, 3, flat)
+        assert PartialSweep.load(path).done_count == 1
+        notes = outputs.abandon(0.1)
+    finally:
+        outputs.clear_notes()
+    kept = PartialSweep.load(path)
+    assert kept.done_count == 3
+    np.testing.assert_array_equal(kept.results["value"][:3], [0.0, 1.0, 2.0])
+    assert notes == [f"kept 3 of 4 points in {path}"]
+    assert not _tmp_files(tmp_path)

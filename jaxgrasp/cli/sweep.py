@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -256,7 +257,10 @@ class _Checkpoint:
     Each write also leaves the note an interrupt prints (``kept K of N points in PATH``).
     A write is skipped while the previous one cost more than :data:`CHECKPOINT_SHARE`
     of the time since (fast chunks: of 8 chunks of 3 cube points, ~70 ms each, 5 were
-    written), so an interrupt may lose the chunks since; the last chunk's is always written.
+    written); the skipped write is then left to an interrupt
+    (:func:`jaxgrasp.outputs.set_last_write`), so a Ctrl-C or SIGTERM keeps every
+    finished point, and only a hard kill (``kill -9``) loses those since the last write.
+    The last chunk's is always written.
     """
 
     def __init__(self, path: Path, grasp, axes: dict, chunk: int):
@@ -266,22 +270,32 @@ class _Checkpoint:
         self.chunk = chunk
         self.total = int(np.prod([a.size for a in axes.values()]))
         self.done = np.zeros(self.total, dtype=bool)
+        self._results = None  # the sweep's flat result arrays (filled chunk by chunk)
+        self._lock = threading.Lock()  # the worker's chunk updates vs an interrupt's write
         self._cost = 0.0  # seconds the last write took
         self._end = 0.0  # when it ended
 
     def __call__(self, start: int, stop: int, results) -> None:
-        self.done[start:stop] = True
+        with self._lock:
+            self.done[start:stop] = True
+            self._results = results
         now = time.perf_counter()
         if stop < self.total and self._cost > CHECKPOINT_SHARE * (now - self._end):
+            outputs.set_last_write("sweep", self.write)
             return
-        from ..partial import PartialSweep
-
-        partial = PartialSweep.from_flat(self.axes, self.done, results, self.grasp, self.chunk)
-        kept = partial.done_count
-        note = f"kept {kept} of {self.total} points in {self.path}"
-        outputs.write_set({self.path: partial.save}, on_publish=lambda: outputs.set_note("sweep", note))
+        self.write()
         self._end = time.perf_counter()
         self._cost = self._end - now
+
+    def write(self) -> None:
+        """Write the points finished so far (the worker's later chunks do not touch them)."""
+        from ..partial import PartialSweep
+
+        outputs.set_last_write("sweep", None)
+        with self._lock:
+            partial = PartialSweep.from_flat(self.axes, self.done.copy(), self._results, self.grasp, self.chunk)
+        note = f"kept {partial.done_count} of {self.total} points in {self.path}"
+        outputs.write_set({self.path: partial.save}, on_publish=lambda: outputs.set_note("sweep", note))
 
 
 def _write_outputs(result, out: Path, title: str | None) -> tuple[list[str], list[str], list[str]]:
@@ -302,11 +316,17 @@ def _write_outputs(result, out: Path, title: str | None) -> tuple[list[str], lis
         replaced = outputs.write_set(
             members,
             remove=stale + [out / PARTIAL_NAME],
-            on_publish=lambda: outputs.set_note("sweep", f"the results are in {out}"),
+            on_publish=lambda: _published(out),
         )
     except OSError as exc:
         raise UsageError(f"cannot write to --out {str(out)!r}: {exc.strerror or exc}") from None
     return [p.name for p in members], [p.name for p in replaced], [p.name for p in stale]
+
+
+def _published(out: Path) -> None:
+    """The whole set is in place: an interrupt now only says so (no checkpoint to write)."""
+    outputs.set_last_write("sweep", None)
+    outputs.set_note("sweep", f"the results are in {out}")
 
 
 def _fmt_param(name: str, x: float) -> str:
