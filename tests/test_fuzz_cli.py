@@ -376,17 +376,22 @@ def test_hostile_but_valid(run_cli, tmp_path, edit, status):
 
 
 @pytest.mark.parametrize("as_json", [True, False], ids=["json", "text"])
-def test_tiny_deformation_is_an_error_or_finite(run_cli, tmp_path, as_json):
+@pytest.mark.parametrize("dr", [1e-300, 1e-52])
+def test_tiny_deformation_is_a_one_line_error(run_cli, tmp_path, as_json, dr):
+    """E dr^3 below 1e-150 J (here 2e5 Pa x dr^3: 0 after underflow, or 2e-151 J): exit
+    status 2 and the one-line error naming the 1e-150 J threshold, never a traceback."""
     doc = base_doc()
     for c in doc["contacts"]:
-        c["initial_deformation"] = 1e-300
+        c["initial_deformation"] = dr
     p = tmp_path / "g.json"
     p.write_text(to_json(doc), encoding="utf-8")
     try:
         rc, out, err = run_cli(["evaluate", p] + (["--json"] if as_json else []))
     except Exception as exc:  # the traceback a user would see
         pytest.fail(f"main raised {type(exc).__name__}: {exc}")
-    check_outcome(rc, out, err, as_json, "initial_deformation 1e-300")
+    check_outcome(rc, out, err, as_json, f"initial_deformation {dr}")
+    assert rc == 2 and "contact 0: young_modulus * initial_deformation^3" in err, err
+    assert "below 1e-150 J, too small to evaluate" in err, err
 
 
 def _console():
