@@ -18,8 +18,8 @@ of the session's ``evaluate_many`` (one compiled ``jit(vmap(evaluate))`` per con
 count, shared with the other test modules). Environment:
 
 * ``JAXGRASP_PROPERTY_PROFILE``: ``ci`` (default, :data:`PROFILES`) or ``long`` (200
-  examples per property, for a run before a release: about N minutes on 2 cores, see
-  ``experiments/property_long.log``);
+  examples per property, for a run before a release: 4-5 minutes on 2 shared cores, see
+  ``experiments/property_long.sh`` and its logs ``experiments/property_long*.log``);
 * ``JAXGRASP_PROPERTY_EXAMPLES``: examples per property, overriding the profile;
 * ``JAXGRASP_PROPERTY_RANDOM=1``: new random examples each run (default: derandomized,
   the same examples every run);
