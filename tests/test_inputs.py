@@ -170,6 +170,30 @@ def test_validation_message_examples_exact():
         check_grasp_inputs(**base_kwargs(positions=[[0, 0, 0]], normals=[[1, 0, 0]]))
 
 
+@pytest.mark.parametrize(
+    "young_modulus, initial_deformation, contact",
+    [
+        (0.5, 1e-50, 0),  # 5e-151 J, just below the threshold
+        ([2e5, 1e4], [0.002, 1e-52], 1),  # 1e-152 J at contact 1 only
+        (2e5, 1e-300, 0),  # dr^3 underflows to 0
+        (5e-324, 0.002, 0),  # the smallest positive float64 modulus
+    ],
+)
+def test_energy_scale_below_1e_150_joule_is_rejected(young_modulus, initial_deformation, contact):
+    """``young_modulus * initial_deformation^3`` below 1e-150 J (the solver's energy scale
+    would underflow) is one line naming the contact and the threshold."""
+    with pytest.raises(GraspValueError) as info:
+        Grasp.create(**base_kwargs(young_modulus=young_modulus, initial_deformation=initial_deformation))
+    msg = one_line(info.value)
+    assert msg.startswith(f"contact {contact}: young_modulus * initial_deformation^3 = "), msg
+    assert msg.endswith("is below 1e-150 J, too small to evaluate in floating point"), msg
+
+
+def test_energy_scale_just_above_1e_150_joule_is_accepted():
+    g = Grasp.create(**base_kwargs(young_modulus=2.0, initial_deformation=1e-50))  # 2e-150 J
+    assert float(np.min(np.asarray(g.young_modulus) * np.asarray(g.initial_deformation) ** 3)) >= 1e-150
+
+
 def test_grasp_value_error_is_value_error():
     assert issubclass(GraspValueError, ValueError)
     assert str(GraspValueError("a\nb  c")) == "a b c"

@@ -72,24 +72,60 @@ def skew(v):
 
 
 # ------------------------------------------------------------------ independent NumPy model
+def contact_frame(n):
+    """``R_i``: a right-handed frame whose first axis ``e1`` is the contact normal ``n``."""
+    a = np.eye(3)[int(np.argmin(np.abs(n)))]  # the axis least aligned with n
+    t1 = np.cross(n, a)
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n, t1)
+    R = np.column_stack([n, t1, t2])
+    assert np.allclose(R.T @ R, np.eye(3), atol=1e-15) and np.linalg.det(R) > 0
+    return R
+
+
 def numpy_kinematics(x, g):
-    """Eq. 11-16 written out in NumPy with SciPy's rotation (internal units)."""
+    """Eq. 11-16 of the paper, literally, in each contact frame ``R_i`` (internal units).
+
+    Independent of ``jaxgrasp.model``'s vector shortcuts: the displacement and rotation
+    are expressed in the contact frame (eq. 11, 12), the deformations read off its axes
+    ``e1`` (normal) and ``e2, e3`` (tangential, ``D23``), and the torsion is the ``e1``
+    component of the rotation vector of ``R_i^T dR R_i`` (a matrix logarithm by SciPy, not
+    ``n . w``). ``dR`` is SciPy's; ``R_o = I`` and ``p_o = 0`` (centre-of-mass frame).
+    Returns ``d, cos(phi), dt^2, theta``, one entry per contact.
+    """
     x = np.array(x, dtype=np.float64)  # a writable copy (SciPy refuses read-only buffers)
     dp, w = x[:3], x[3:]
-    R = Rotation.from_rotvec(w).as_matrix()
+    dR = Rotation.from_rotvec(w).as_matrix()
     c = np.asarray(g.positions) * 1e3
-    n = np.asarray(g.normals)
-    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    normals = np.asarray(g.normals)
     r = np.asarray(g.radius) * 1e3
     dr = np.asarray(g.initial_deformation) * 1e3
-    u = c @ (R - np.eye(3)).T + dp  # eq. 11
-    Rn = n @ R.T
-    cphi = np.einsum("ij,ij->i", n, Rn)  # eq. 14
-    d = r - np.einsum("ij,ij->i", (r - dr)[:, None] * n - u, Rn)  # eq. 13
-    un = np.einsum("ij,ij->i", n, u)
-    dt2 = np.einsum("ij,ij->i", u, u) - un**2  # eq. 15
-    theta = n @ w  # eq. 16
-    return d, cphi, dt2, theta
+    e1 = np.array([1.0, 0.0, 0.0])
+    D23 = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    out = []
+    for i in range(c.shape[0]):
+        Ri = contact_frame(normals[i] / np.linalg.norm(normals[i]))
+        p_i = Ri.T @ ((dR - np.eye(3)) @ c[i] + dp)  # eq. 11
+        R_i = Ri.T @ dR @ Ri  # eq. 12
+        d = r[i] - ((r[i] - dr[i]) * e1 - p_i) @ (R_i @ e1)  # eq. 13
+        cphi = e1 @ (R_i @ e1)  # eq. 14 (cos phi; phi itself is never needed)
+        dt2 = float(np.sum((D23 @ p_i) ** 2))  # eq. 15, squared
+        theta = Rotation.from_matrix(R_i).as_rotvec() @ e1  # eq. 16
+        out.append((d, cphi, dt2, theta))
+    return tuple(np.array(v) for v in zip(*out))
+
+
+def numpy_energy(x, g):
+    """Eq. 3, 5, 7, 17-19 from :func:`numpy_kinematics` (mJ; gravity along ``g.gravity``)."""
+    d, cphi, dt2, theta = numpy_kinematics(x, g)
+    E = np.asarray(g.young_modulus) * 1e-6
+    r = np.asarray(g.radius) * 1e3
+    d = np.maximum(d, 0.0)  # a fingertip that has let go stores no energy
+    u_n = np.pi * E * d**3 / (3.0 * cphi**2)  # eq. 3
+    u_t = np.pi * E * d * dt2  # eq. 5
+    u_tau = np.pi * E * d**2 * (r - d / 3.0) * theta**2  # eq. 7
+    u_g = -float(g.mass) * np.asarray(g.gravity) @ np.asarray(x[:3])  # eq. 18 (g = (0, 0, -g) there)
+    return float(np.sum(u_n + u_t + u_tau) + u_g)  # eq. 17, 19
 
 
 def paper_forces(d, cphi, dt2, theta, g):
@@ -359,23 +395,24 @@ def test_contact_renumbering_invariance():
 
 # ------------------------------------------------------------------ against an independent transcription
 def test_kinematics_and_energy_match_numpy_transcription():
+    """jaxgrasp.model against eq. 11-19 computed literally in each contact frame, to 1e-12."""
     rng = np.random.default_rng(8)
-    for g in (four_finger(), random_grasp(rng), presets.cube(6e5, 2e-3, 0.2)):
+    checked = 0
+    for g in (four_finger(), random_grasp(rng), random_grasp(rng, n=3), presets.cube(6e5, 2e-3, 0.2)):
         p = model_params(g)
-        E = np.asarray(g.young_modulus) * 1e-6
-        r = np.asarray(g.radius) * 1e3
-        weight = float(g.mass) * np.asarray(g.gravity)
-        for _ in range(5):
-            x = random_pose(rng, 0.5, 0.05)
+        for t_scale, w_scale in ((0.5, 0.05), (0.05, 0.3), (1.5, 0.002)):
+            x = random_pose(rng, t_scale, w_scale)
             ref = numpy_kinematics(x, g)
             got = [np.asarray(a) for a in contact_kinematics(x, p)]
-            for a, b in zip(got, ref):
-                np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-12)
+            for what, a, b in zip(("d", "cos phi", "dt^2", "theta"), got, ref):
+                np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12, err_msg=what)
+            assert float(potential_energy(x, p)) == pytest.approx(numpy_energy(x, g), rel=1e-12)
+            checked += 1
+            # the pose moves every contact: the comparison is not one of zeros
             d, cphi, dt2, theta = ref
-            dpos = np.maximum(d, 0.0)
-            u = np.sum(np.pi * E * (dpos**3 / (3 * cphi**2) + dpos * dt2 + dpos**2 * (r - dpos / 3) * theta**2))
-            u -= weight @ np.asarray(x[:3])
-            assert float(potential_energy(x, p)) == pytest.approx(u, rel=1e-11)
+            assert (np.abs(d - np.asarray(g.initial_deformation) * 1e3) > 1e-4).all()
+            assert (dt2 > 1e-8).all() and (np.abs(theta) > 1e-6).all() and (cphi < 1.0).all()
+    assert checked == 12
 
 
 def test_friction_form_equivalent_to_paper_eq9():

@@ -1,0 +1,178 @@
+"""The multi-start search of the boundary problems is needed (issue #11, item 13).
+
+The boundary problems are non-convex and ``evaluate`` solves each from
+``EvaluateOptions().num_starts`` = 20 starts (the 12 coordinate half-axes of the scaled
+pose space, then 8 seeded random directions), keeping the lowest. The grasps below were
+found by ``experiments/start_search.py`` (log: ``experiments/start_search.log``): two
+fingertips off the centre of mass (so gravity and the stiffer tip twist the object),
+where the lowest boundary point is reached only from the random directions. With fewer
+starts the value is overstated, i.e. the grasp is reported more stable than it is:
+
+======== ================ ================ ================ ================
+grasp    Ipopt (J)        20 starts        12 half-axes     6 positive axes
+======== ================ ================ ================ ================
+offset_a 4.5315584e-04    = Ipopt          3.23 x           3.23 x
+offset_b 7.2946277e-04    1.0065 x         2.23 x           2.23 x
+offset_c 2.6200422e-04    = Ipopt          2.81 x           2.81 x
+======== ================ ================ ================ ================
+
+(``= Ipopt``: to 1e-6 relative. ``offset_b`` shows that 20 starts can miss the minimum as
+well: its default check is a strict xfail, see :data:`KNOWN_OVERSTATED`.) The 12- and
+6-start ratios hold unbatched and in batches of 3, 13 and 16 grasps
+(``start_search.py --recheck``): a lane's outcome can depend on the batch it is solved
+in, and these cases were chosen where it does not.
+
+``test_default_starts_agree_with_ipopt`` checks the default evaluation against the
+independent CasADi/Ipopt reference to 1e-6: cutting the default to 12 starts
+(``num_random_starts=0``) or to the 6 positive axes makes it fail.
+``test_fewer_starts_overstate`` shows that the cases have that power at the current
+defaults: every start lane of every boundary problem is solved once
+(``jaxgrasp.programs.solve_programs``, default options); lanes are independent, so the
+value a subset of the starts would give is the minimum over those lanes.
+
+The grasps go through the session's ``evaluate_many`` (the compiled 2-contact evaluator
+that ``test_evaluate.py`` already uses); ``solve_programs`` compiles once for 2 contacts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import jaxgrasp
+from jaxgrasp.programs import solve_programs
+from jaxgrasp.status import LaneStatus
+
+CASES = {
+    # experiments/start_search.py --offset 0.1, N = 2: generation 9 #15
+    "offset_a": jaxgrasp.Grasp.create(
+        positions=[
+            [-0.04205213653154721, -0.04235648021310565, 0.01800987357054853],
+            [0.036446745735029415, -0.06225838816660432, 0.017041348715144344],
+        ],
+        normals=[
+            [-0.9348331826969002, 0.3017538682641709, 0.18716710051820948],
+            [0.9640154702139234, -0.23645787717649655, 0.1214983354182832],
+        ],
+        initial_deformation=[0.0036676566781200593, 0.0008374697835078464],
+        radius=[0.016139433428238578, 0.028276507282585604],
+        young_modulus=[867660.7716903591, 393298.3380292545],
+        friction=[0.9224905316505057, 0.56106133383181],
+        max_force=[22.95407264339134, 17.566439727060292],
+        mass=0.000791111268307404,
+        gravity=[-9.702160648392303, 0.7089760643671655, -1.2655163740317075],
+    ),
+    # generation 6 #37 (no mass)
+    "offset_b": jaxgrasp.Grasp.create(
+        positions=[
+            [-0.029325312830456755, -0.04869183129874834, -0.02438223008577727],
+            [0.051889149974591084, -0.0474517626339462, -0.026428459682863815],
+        ],
+        normals=[
+            [-0.9892613244830336, -0.08761882911648514, 0.11698278790630397],
+            [0.9983589907111118, -0.05424627602233486, 0.018348493235127883],
+        ],
+        initial_deformation=[0.0035870021327819436, 0.0008181475141180738],
+        radius=[0.015481976843764032, 0.028766464031559708],
+        young_modulus=[771973.8046995061, 404996.0924115681],
+        friction=[0.8667718708991939, 0.6418295819715377],
+        max_force=[24.271662085451013, 18.60617989795916],
+        mass=0.0,
+        gravity=[-9.606613531089808, -0.9064092555177583, -1.7684735581269124],
+    ),
+    # generation 7 #29
+    "offset_c": jaxgrasp.Grasp.create(
+        positions=[
+            [0.05134129978392757, 0.018167300868696983, -0.029642892792721913],
+            [-0.0053543024688180035, -0.024123987009071368, -0.0709834463673663],
+        ],
+        normals=[
+            [0.5874421715803232, 0.6667958275603703, 0.45857934907393605],
+            [-0.7305733211810848, -0.40040268542917795, -0.5531187140926821],
+        ],
+        initial_deformation=[0.004332155826442552, 0.0007700559916410983],
+        radius=[0.02070983402336595, 0.02353514986868575],
+        young_modulus=[568726.6136191839, 472615.0775457163],
+        friction=[0.6208963386353712, 0.4950910377699956],
+        max_force=[29.726591774279527, 15.935063795909436],
+        mass=0.04590152465864576,
+        gravity=[8.146121396682865, 3.5088177625676917, 4.1910624070270135],
+    ),
+}
+OVERSTATED = 1e-3
+"""A subset of the starts overstates the value when it exceeds Ipopt's by this, relative
+(measured: 26 % to 950 %)."""
+
+
+@pytest.fixture(scope="module")
+def results(evaluate_many, ipopt_reference):
+    """``{case: (Evaluation, subset values)}``; Ipopt runs in its worker meanwhile."""
+    if ipopt_reference is not None:
+        ipopt_reference.submit(list(CASES.values()))
+    evals = evaluate_many(list(CASES.values()))
+    return {k: (e, subset_values(g)) for (k, g), e in zip(CASES.items(), evals)}
+
+
+@pytest.fixture(scope="module")
+def refs(results, ipopt_reference):
+    if ipopt_reference is None:
+        pytest.skip("casadi (for the Ipopt reference) is not installed")
+    return {k: ipopt_reference.get(g) for k, g in CASES.items()}
+
+
+def subset_values(grasp) -> dict:
+    """Value (J) from the first 20 (all), 12 (half-axes) and 6 (positive axes) starts.
+
+    Per boundary problem the lowest converged lane among the subset (as
+    ``jaxgrasp.evaluate.best_starts``), then the lowest problem minus ``U0``."""
+    d = jaxgrasp.EvaluateOptions().num_starts
+    progs = solve_programs(grasp)
+    status = np.where(np.asarray(progs.found), np.asarray(progs.boundary.status), int(LaneStatus.NO_START))
+    obj = np.where(status == int(LaneStatus.CONVERGED), np.asarray(progs.boundary.objective), np.inf)
+    obj = obj.reshape(-1, d)
+    u0 = float(progs.equilibrium.objective)
+    to_joule = float(progs.scale) * 1e-3  # scaled energy -> mJ -> J
+    return {k: (float(np.min(obj[:, :k])) - u0) * to_joule for k in (d, 12, 6)}
+
+
+def _ctx(case, res, ref) -> str:
+    return (
+        f"{case}: jaxgrasp {jaxgrasp.STATUS_NAMES[int(res.status)]} value={float(res.value)!r} "
+        f"limiting=({int(res.limiting_kind)},{int(res.limiting_contact)}) "
+        f"starts={jaxgrasp.EvaluateOptions().num_starts} | ipopt {ref['status']} value={float(ref['value'])!r} "
+        f"limiting={ref['limiting']}"
+    )
+
+
+KNOWN_OVERSTATED = {
+    "offset_b": "the default 20 starts overstate it too: 7.3419e-4 J vs Ipopt's 7.2946e-4 J (+0.65 %); "
+    "jaxgrasp finds 7.2946e-4 J on a rigidly rotated copy (start_search generation 5 #12)",
+}
+"""Cases where the default search itself misses Ipopt's minimum (a finding reported on
+issue #11; strict xfail, so a fix of the start search shows up here)."""
+
+
+@pytest.mark.parametrize(
+    "case",
+    [pytest.param(k, marks=pytest.mark.xfail(reason=KNOWN_OVERSTATED[k], strict=True)) if k in KNOWN_OVERSTATED else k
+     for k in CASES],
+)
+def test_default_starts_agree_with_ipopt(results, refs, case):
+    """At the default options the value equals the multi-start Ipopt reference's to 1e-6."""
+    res, ref = results[case][0], refs[case]
+    ctx = _ctx(case, res, ref)
+    assert jaxgrasp.STATUS_NAMES[int(res.status)] == ref["status"] == "stable", ctx
+    jv, iv = float(res.value), float(ref["value"])
+    assert float(res.equilibrium_energy) == pytest.approx(float(ref["equilibrium_energy"]), rel=1e-8), ctx
+    assert abs(jv - iv) <= 1e-6 * iv, ctx
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_fewer_starts_overstate(results, refs, case):
+    """The same grasps with only the 12 half-axes, or the 6 positive axes, as starts
+    overstate the value by more than 0.1 %: the random starts are what finds it."""
+    (res, v), iv = results[case], float(refs[case]["value"])
+    d = jaxgrasp.EvaluateOptions().num_starts
+    assert v[d] == pytest.approx(float(res.value), rel=1e-9), (v, float(res.value))  # same lanes as evaluate
+    assert v[12] > iv * (1 + OVERSTATED), (case, v, iv)
+    assert v[6] >= v[12], (case, v)
