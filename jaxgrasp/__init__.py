@@ -32,6 +32,7 @@ from .evaluate import evaluate  # noqa: E402
 from .options import EvaluateOptions  # noqa: E402
 from .grasp import STANDARD_GRAVITY, Grasp  # noqa: E402
 from .gripfile import grasp_from_dict, grasp_to_dict, load, save  # noqa: E402
+from .dataset import GraspSet, load_batch, save_batch  # noqa: E402
 from .model import KINDS  # noqa: E402
 from .status import BoundaryKind, GraspStatus, LaneStatus, TuneStatus  # noqa: E402
 from .result import (  # noqa: E402
@@ -70,6 +71,9 @@ __all__ = [
     "save",
     "grasp_from_dict",
     "grasp_to_dict",
+    "load_batch",
+    "save_batch",
+    "GraspSet",
     "presets",
     "sweep",
     "SweepResult",
