@@ -30,7 +30,7 @@ if "JAX_ENABLE_X64" not in _os.environ:  # an explicit choice of the user's stan
 from . import presets  # noqa: E402
 from .evaluate import evaluate  # noqa: E402
 from .options import EvaluateOptions  # noqa: E402
-from .grasp import STANDARD_GRAVITY, Grasp  # noqa: E402
+from .grasp import STANDARD_GRAVITY, Grasp, stack  # noqa: E402
 from .gripfile import grasp_from_dict, grasp_to_dict, load, save  # noqa: E402
 from .dataset import GraspSet, load_batch, save_batch  # noqa: E402
 from .model import KINDS  # noqa: E402
@@ -52,6 +52,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Grasp",
+    "stack",
     "STANDARD_GRAVITY",
     "evaluate",
     "EvaluateOptions",

@@ -258,7 +258,8 @@ def _read_jsonl(raw: bytes, path: Path) -> tuple[list, list]:
 
 
 def _as_list(grasps) -> list[Grasp]:
-    """A sequence of grasps, or one batched grasp (leading axis ``B``), as a list."""
+    """A sequence of grasps, or one batched grasp (leading axis ``B``, e.g. from
+    :func:`jaxgrasp.stack`), as a list."""
     if isinstance(grasps, Grasp):
         pos = np.asarray(grasps.positions)
         if pos.ndim == 2:
@@ -267,7 +268,8 @@ def _as_list(grasps) -> list[Grasp]:
             raise GraspValueError(f"save_batch needs grasps with positions (N, 3) or a batch (B, N, 3), got {pos.shape}")
         fields = grasps.to_numpy()
         b = pos.shape[0]
-        return [Grasp(**{k: (v[i] if np.ndim(v) > _ONE_NDIM[k] else v) for k, v in fields.items()}) for i in range(b)]
+        ndim = {**_ONE_NDIM, "active": 1}
+        return [Grasp(**{k: (v[i] if np.ndim(v) > ndim[k] else v) for k, v in fields.items()}) for i in range(b)]
     out = list(grasps)
     for i, g in enumerate(out):
         if not isinstance(g, Grasp):
@@ -280,6 +282,7 @@ def _as_list(grasps) -> list[Grasp]:
 def _npz_bytes(grasps: Sequence[Grasp]) -> bytes:
     """The ``.npz`` of ``grasps``, padded to the largest contact count (``active`` marks
     the real contacts; a pad repeats the grasp's last contact, so it holds valid numbers)."""
+    grasps = [g.compact() for g in grasps]
     n = max(g.num_contacts for g in grasps)
     arrays: dict[str, list] = {name: [] for name in _ARRAYS}
     for g in grasps:

@@ -106,6 +106,8 @@ def _check_unbatched(grasp) -> None:
         for f in FIELDS
         if np.ndim(getattr(grasp, f.name)) > _ONE_GRASP_NDIM[f.shape]
     ]
+    if grasp.active is not None and np.ndim(grasp.active) > 1:
+        batched.append(f"active {tuple(np.shape(grasp.active))}")
     if batched:
         more = f" and {len(batched) - 3} more" if len(batched) > 3 else ""
         raise GraspValueError(
@@ -177,8 +179,10 @@ def best_starts(progs: Programs, num_starts: int, boundary_tol: float) -> Bounda
         LaneStatus.CONVERGED,
         jnp.where(unreachable, LaneStatus.INFEASIBLE, LaneStatus.NOT_CONVERGED),
     )
-    # without a converged equilibrium no boundary problem was started
-    status = jnp.where(eq.status == LaneStatus.CONVERGED, status, LaneStatus.NO_START)
+    # without a converged equilibrium no boundary problem was started, nor any of an
+    # inactive contact (whose lanes were never found)
+    boundary_on = jnp.tile(progs.contact_on, 2)  # (2N,), b = kind * N + contact
+    status = jnp.where((eq.status == LaneStatus.CONVERGED) & boundary_on, status, LaneStatus.NO_START)
     # Lowest feasible point of each boundary problem among lanes that did not converge
     # (e.g. degenerate active constraints, where multipliers grow without bound): an
     # estimate of that boundary's energy, used to tell whether it could be limiting.

@@ -19,9 +19,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .fields import DEFAULT_GRAVITY, DEFAULT_MASS
+from .fields import DEFAULT_GRAVITY, DEFAULT_MASS, FIELDS
 
-__all__ = ["Grasp", "STANDARD_GRAVITY"]
+__all__ = ["Grasp", "STANDARD_GRAVITY", "stack"]
+
+_PER_CONTACT = tuple(f.name for f in FIELDS if f.per_contact)  # fields with one entry per contact
 
 STANDARD_GRAVITY = DEFAULT_GRAVITY
 """Default gravity vector, m/s^2, object frame (:data:`jaxgrasp.fields.DEFAULT_GRAVITY`)."""
@@ -47,6 +49,14 @@ class Grasp:
         max_force: ``(N,)`` upper limit of the normal contact force, N.
         mass: ``()`` object mass, kg.
         gravity: ``(3,)`` gravitational acceleration, m/s^2, object frame.
+        active: ``None`` (every contact is there) or ``(N,)`` bool: the contacts the
+            grasp has. An inactive contact has no energy, no constraint and no boundary
+            problem (its boundaries are reported ``no_start`` with energy ``+inf`` and are
+            never limiting); its other fields must still hold valid numbers. Padding a
+            grasp with inactive contacts changes none of its results, so grasps with
+            different contact counts can share one batch and one compilation
+            (:func:`stack`). With a mask, ``jax.grad`` over the whole grasp needs
+            ``allow_int=True`` (the mask is not differentiable).
 
     Any field may carry extra leading batch axes for ``jax.vmap``.
     """
@@ -60,6 +70,7 @@ class Grasp:
     max_force: Any
     mass: Any
     gravity: Any
+    active: Any = None
 
     @property
     def num_contacts(self) -> int:
@@ -80,6 +91,7 @@ class Grasp:
         mass=DEFAULT_MASS,
         gravity=DEFAULT_GRAVITY,
         dtype=None,
+        active=None,
     ) -> "Grasp":
         """Build a validated grasp, broadcasting per-fingertip scalars to all contacts.
 
@@ -98,6 +110,8 @@ class Grasp:
             gravity: ``(3,)`` m/s^2 (default ``(0, 0, -9.81)``).
             dtype: ``None`` (float64) or ``jnp.float32`` / ``jnp.float64`` (or their
                 names): the dtype of every field.
+            active: ``None`` (every contact) or ``(N,)`` bool, the contacts the grasp
+                has (at least 2); the inactive ones must hold valid values too.
 
         Raises:
             GraspValueError: a field is malformed, or ``dtype`` is not float32 or float64
@@ -115,22 +129,69 @@ class Grasp:
             max_force=max_force,
             mass=mass,
             gravity=gravity,
+            active=active,
         )
         dtype = _field_dtype(dtype)
-        return cls(**{k: jnp.asarray(v, dtype=dtype) for k, v in fields.items()})
+        mask = fields.pop("active", None)
+        grasp = cls(**{k: jnp.asarray(v, dtype=dtype) for k, v in fields.items()})
+        return grasp if mask is None else grasp.replace(active=jnp.asarray(mask, dtype=bool))
 
     def astype(self, dtype) -> "Grasp":
         """The same grasp with every field cast to ``dtype`` (``jnp.float32`` or ``jnp.float64``)."""
         dtype = _field_dtype(dtype)
-        return jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype=dtype), self)
+        cast = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype=dtype), self.replace(active=None))
+        return cast.replace(active=self.active)
 
     def replace(self, **changes) -> "Grasp":
         """Return a copy with some fields replaced (no validation: for traced values)."""
         return dataclasses.replace(self, **changes)
 
     def to_numpy(self) -> dict[str, np.ndarray]:
-        """Fields as a dict of NumPy arrays (for files and reports)."""
-        return {f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)}
+        """Fields as a dict of NumPy arrays (for files and reports); ``active`` only where
+        the grasp has a mask."""
+        fields = [f.name for f in dataclasses.fields(self)]
+        return {n: np.asarray(getattr(self, n)) for n in fields if n != "active" or self.active is not None}
+
+    def compact(self) -> "Grasp":
+        """The same grasp with only its active contacts and no mask (concrete, unbatched)."""
+        if self.active is None:
+            return self
+        keep = np.asarray(self.active, dtype=bool)
+        if keep.ndim != 1:
+            raise ValueError(f"compact() needs one grasp (active of shape (N,)), got {keep.shape}")
+        return self.replace(active=None, **{n: jnp.asarray(getattr(self, n))[keep] for n in _PER_CONTACT})
+
+
+def stack(grasps, num_contacts: int | None = None) -> Grasp:
+    """Stack grasps with any numbers of contacts into one batched :class:`Grasp`.
+
+    Each grasp is padded to the largest contact count ``N`` with inactive contacts that
+    repeat its last active contact (valid numbers, masked out), so the batch has
+    ``positions (B, N, 3)``, per-contact fields ``(B, N)``, ``mass (B,)``, ``gravity
+    (B, 3)`` and ``active (B, N)``, and ``jax.vmap(jaxgrasp.evaluate)`` of it gives every
+    grasp's own result (boundaries of padding contacts ``no_start``) with one compilation.
+
+    Args:
+        grasps: a non-empty sequence of unbatched grasps (a grasp with a mask is compacted
+            first).
+        num_contacts: pad to at least this many contacts (a fixed ``N``, so that batches
+            of different sets share one compilation); default the largest count.
+    """
+    items = [g.compact() for g in grasps]
+    if not items:
+        raise ValueError("stack needs at least one grasp")
+    n = max([g.num_contacts for g in items] + [int(num_contacts or 0)])
+    fields = [f.name for f in dataclasses.fields(Grasp) if f.name != "active"]
+    out = {name: [] for name in fields}
+    active = []
+    for g in items:
+        k = g.num_contacts
+        pad = np.concatenate([np.arange(k), np.full(n - k, k - 1)]).astype(int)
+        for name in fields:
+            a = jnp.asarray(getattr(g, name))
+            out[name].append(a[pad] if name in _PER_CONTACT else a)
+        active.append(np.arange(n) < k)
+    return Grasp(**{name: jnp.stack(v) for name, v in out.items()}, active=jnp.asarray(np.stack(active)))
 
 
 def _field_dtype(dtype) -> np.dtype:

@@ -294,9 +294,9 @@ def grasp_to_dict(grasp: Grasp) -> dict[str, Any]:
     """The file structure of a single (unbatched) grasp, as plain Python floats.
 
     Per-fingertip values equal across all contacts go into ``"fingertip"``; the others
-    are written per contact. ``grasp_from_dict(grasp_to_dict(g))`` reproduces ``g``.
+    are written per contact. Only active contacts are written (:meth:`Grasp.compact`). ``grasp_from_dict(grasp_to_dict(g))`` reproduces ``g``.
     """
-    fields = grasp.to_numpy()
+    fields = grasp.compact().to_numpy()  # a file lists the contacts the grasp has
     pos = np.asarray(fields["positions"], dtype=np.float64)
     if pos.ndim != 2 or pos.shape[-1] != 3:
         raise GraspValueError(

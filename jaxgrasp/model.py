@@ -54,12 +54,14 @@ class ModelParams:
     mu: Any  # (N,) friction coefficient
     fmax: Any  # (N,) normal force limit, N
     weight: Any  # (3,) m * g_vec, N
+    on: Any  # (N,) bool, the active contacts (Grasp.active; all where it is None)
 
 
 def model_params(grasp: Grasp) -> ModelParams:
     """Convert an SI :class:`~jaxgrasp.Grasp` to internal units, normalising normals."""
     n = jnp.asarray(grasp.normals)
     n = n / jnp.linalg.norm(n, axis=-1, keepdims=True)
+    on = jnp.ones(n.shape[:-1], bool) if grasp.active is None else jnp.asarray(grasp.active, bool)
     return ModelParams(
         c=jnp.asarray(grasp.positions) * M_TO_MM,
         n=n,
@@ -69,6 +71,7 @@ def model_params(grasp: Grasp) -> ModelParams:
         mu=jnp.asarray(grasp.friction),
         fmax=jnp.asarray(grasp.max_force),
         weight=jnp.asarray(grasp.mass)[..., None] * jnp.asarray(grasp.gravity),
+        on=on,
     )
 
 
@@ -125,18 +128,19 @@ def potential_energy(x, p: ModelParams):
     contact-keeping constraint, where the paper's formulas do not apply) the fingertip is
     taken as not touching: its deformation enters as ``max(d_i, 0)``. This leaves ``U``
     unchanged on the feasible set and bounded below outside it, which the solver needs.
+    Inactive contacts (``p.on`` false) contribute nothing.
     """
     d, cphi, dt2, theta = contact_kinematics(x, p)
     dp = jnp.maximum(d, 0.0)
     elastic = jnp.pi * p.E * (
         dp**3 / (3.0 * cphi**2) + dp * dt2 + dp**2 * (p.r - dp / 3.0) * theta**2
     )
-    return jnp.sum(elastic) - jnp.dot(p.weight, x[:3])
+    return jnp.sum(jnp.where(p.on, elastic, 0.0)) - jnp.dot(p.weight, x[:3])
 
 
 def energy_scale(p: ModelParams):
     """A constant energy scale, mJ: the elastic energy of the initial state (no gradient)."""
-    return jax.lax.stop_gradient(jnp.sum(jnp.pi * p.E * p.dr**3 / 3.0))
+    return jax.lax.stop_gradient(jnp.sum(jnp.where(p.on, jnp.pi * p.E * p.dr**3 / 3.0, 0.0)))
 
 
 def constraint_margins(x, p: ModelParams):
@@ -150,6 +154,8 @@ def constraint_margins(x, p: ModelParams):
        - (225/16) d (r - d/3)^2 theta^2 / (mu^2 (2r - d))) / (mu dr)^2``. This form is
        independent of ``E`` and has no ``1/e^2`` singularity at ``d -> 0``;
     2. normal force below its limit (eq. 21): ``(sqrt(f_max / (pi E)) cos phi - d) / dr``.
+
+    An inactive contact's margins are the constant 1 (always satisfied, no gradient).
     """
     d, cphi, dt2, theta = contact_kinematics(x, p)
     dr = jax.lax.stop_gradient(p.dr)
@@ -161,4 +167,4 @@ def constraint_margins(x, p: ModelParams):
         - (225.0 / 16.0) * d * (p.r - d / 3.0) ** 2 * theta**2 / (p.mu**2 * (2.0 * p.r - d))
     ) / mu_dr2
     force = (jnp.sqrt(p.fmax / (jnp.pi * p.E)) * cphi - d) / dr
-    return jnp.stack([contact, slip, force])
+    return jnp.where(p.on, jnp.stack([contact, slip, force]), 1.0)

@@ -67,8 +67,9 @@ class ProgramData:
 
 def program_data(p: ModelParams) -> ProgramData:
     """The scaling of ``p``'s programs: lever = largest contact distance or radius, scale =
-    initial elastic energy; both constants (``stop_gradient``)."""
-    lever = jax.lax.stop_gradient(jnp.maximum(jnp.max(jnp.linalg.norm(p.c, axis=-1)), jnp.max(p.r)))
+    initial elastic energy (active contacts only); both constants (``stop_gradient``)."""
+    reach = jnp.where(p.on, jnp.maximum(jnp.linalg.norm(p.c, axis=-1), p.r), 0.0)
+    lever = jax.lax.stop_gradient(jnp.max(reach))
     return ProgramData(params=p, lever=lever, scale=energy_scale(p))
 
 
@@ -114,6 +115,8 @@ class Programs:
             ``(3N,)`` constraint vector (``N + b``).
         lever: ``()`` mm, the length that scales rotations.
         scale: ``()`` mJ, the energy scale dividing the objective.
+        contact_on: ``(N,)`` bool, the active contacts (an inactive one's boundary
+            lanes are never started).
     """
 
     equilibrium: SolverResult
@@ -123,6 +126,7 @@ class Programs:
     constraint_index: Any
     lever: Any
     scale: Any
+    contact_on: Any
 
 
 def _ray_start(gk, z0, v, t_grid, bisection_steps):
@@ -162,7 +166,8 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     # ray_length rad, whichever is farther: torsion slip needs a rotation angle that does
     # not shrink with the lever arm (contacts far from the centre of mass).
     rot = jnp.linalg.norm(dirs[:, 3:], axis=1)
-    t_max = options.ray_length * jnp.maximum(jnp.max(data.params.r), data.lever * rot)  # (D,) mm
+    r_max = jnp.max(jnp.where(data.params.on, data.params.r, 0.0))
+    t_max = options.ray_length * jnp.maximum(r_max, data.lever * rot)  # (D,) mm
     unit_grid = 2.0 ** (-(options.ray_points - 1 - jnp.arange(options.ray_points, dtype=dtype)) / 4.0)
     lane_k = jnp.repeat(n + jnp.arange(2 * n), num_dirs)
     lane_v = jnp.tile(dirs, (2 * n, 1))
@@ -199,8 +204,9 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
         sopt,
     )
     lane_k, z0s, found, nu0s = _boundary_starts(data, eq.x, options)
-    # Without a converged equilibrium there is nothing to start from: skip every lane.
-    found = found & (eq.status == LaneStatus.CONVERGED)
+    # Without a converged equilibrium there is nothing to start from: skip every lane;
+    # an inactive contact has no boundary problems.
+    found = found & (eq.status == LaneStatus.CONVERGED) & data.params.on[(lane_k - n) % n]
     masks = jax.nn.one_hot(lane_k, 3 * n, dtype=dtype)
     # Every lane gets this grasp's data as its theta (not closed over): under a vmap
     # over grasps, solve_lanes then runs the lanes of all grasps in one work queue.
@@ -215,6 +221,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
         constraint_index=lane_k,
         lever=data.lever,
         scale=data.scale,
+        contact_on=data.params.on,
     )
 
 

@@ -47,7 +47,7 @@ from jax.sharding import PartitionSpec as P
 from . import cache, outputs
 from .evaluate import EvaluateOptions
 from .evaluate import evaluate as _evaluate_one
-from .fields import FIELD, SWEEPABLE, Field
+from .fields import FIELD, NAMES, SWEEPABLE, Field
 from .grasp import Grasp
 from .status import BoundaryKind, GraspStatus
 from .validation import GraspValueError, as_float_array, check_grasp_inputs, format_value
@@ -394,7 +394,7 @@ def _check_deformation_below_radius(base: dict[str, np.ndarray], axes: dict[str,
 
 # --------------------------------------------------------------------------- compiled batch
 
-_GRASP_FIELDS = tuple(f.name for f in dataclasses.fields(Grasp))
+_GRASP_FIELDS = NAMES  # a sweep's grasp has every contact active (no mask leaf)
 
 
 def _batched_fn(options: EvaluateOptions, sharding=None):
@@ -546,6 +546,11 @@ def _check_inputs(grasp, chunk_size, axes) -> tuple[dict[str, np.ndarray], dict[
         raise GraspValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     if not isinstance(grasp, Grasp):
         raise GraspValueError(f"sweep needs a jaxgrasp.Grasp, got {type(grasp).__name__}")
+    if grasp.active is not None:
+        raise GraspValueError(
+            "sweep needs a grasp without inactive contacts: sweep grasp.compact() (its active "
+            "contacts, renumbered from 0)"
+        )
     try:
         base = check_grasp_inputs(**grasp.to_numpy())
     except GraspValueError as exc:

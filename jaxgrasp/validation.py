@@ -117,17 +117,20 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     ``(N, 3)`` (any non-zero length); ``initial_deformation`` m in ``(0, radius)``,
     ``radius`` m, ``young_modulus`` Pa, ``friction``, ``max_force`` N, each a scalar or
     ``(N,)`` and ``> 0``; ``mass`` kg ``>= 0`` and ``gravity`` ``(3,)`` m/s^2 may be left
-    out (defaults ``0`` and ``(0, 0, -9.81)``).
+    out (defaults ``0`` and ``(0, 0, -9.81)``); ``active``, optional, ``None`` or ``(N,)``
+    bool with at least 2 true (every contact, active or not, must hold valid values).
 
     Returns:
         A dict with exactly the :class:`Grasp` field names: float64 arrays, per-fingertip
-        fields broadcast to ``(N,)``, normals of unit length.
+        fields broadcast to ``(N,)``, normals of unit length; plus ``active`` (a bool
+        array) where a mask was given.
 
     Raises:
         GraspValueError: a field is unknown, missing, not numeric, has the wrong shape, is
             not finite or breaks a physical rule; or a value is a JAX tracer (use
             ``Grasp(...)`` or ``grasp.replace(...)`` inside ``jit``).
     """
+    active = given.pop("active", None)
     unknown = sorted(set(given) - set(NAMES))
     if unknown:
         raise GraspValueError(f"unknown grasp field {unknown[0]!r}; the fields are {', '.join(NAMES)}")
@@ -144,9 +147,27 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     out = {name: np.array(np.broadcast_to(arrs[name], (n,)), dtype=np.float64) for name in PER_CONTACT}
     _check_deformation(out, arrs)
     out["normals"] = _unit_normals(arrs["normals"])
-    _check_distinct(arrs["positions"])
+    mask = _check_active(active, n)
+    _check_distinct(arrs["positions"] if mask is None else arrs["positions"][mask])
     out.update(positions=arrs["positions"], mass=arrs["mass"], gravity=arrs["gravity"])
-    return {name: out[name] for name in NAMES}
+    checked = {name: out[name] for name in NAMES}
+    return checked if mask is None else {**checked, "active": mask}
+
+
+def _check_active(active, n: int) -> np.ndarray | None:
+    """The contact mask as an ``(N,)`` bool array with at least 2 true, or ``None``."""
+    if active is None:
+        return None
+    if _is_tracer(active):
+        raise GraspValueError("active is a JAX tracer: Grasp.create needs concrete values")
+    a = np.asarray(active)
+    if a.dtype != np.bool_:
+        raise GraspValueError(f"active must be booleans (one per contact), got {_short(active)}")
+    if a.shape != (n,):
+        raise GraspValueError(f"active must have shape ({n},), one per contact, got {a.shape}")
+    if int(a.sum()) < 2:
+        raise GraspValueError(f"active must mark at least 2 contacts, got {int(a.sum())}")
+    return a.copy()
 
 
 def _reject_tracers(given: dict) -> None:

@@ -46,6 +46,9 @@ def grasp_key(grasp) -> tuple:
     for name in GRASP_FIELDS:
         a = np.asarray(getattr(grasp, name), dtype=np.float64)
         out.append((name, a.shape, a.tobytes()))
+    if grasp.active is not None:  # a contact mask makes a different grasp
+        a = np.asarray(grasp.active, dtype=bool)
+        out.append(("active", a.shape, a.tobytes()))
     return tuple(out)
 
 
