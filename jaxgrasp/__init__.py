@@ -44,6 +44,7 @@ from .result import (  # noqa: E402
     Evaluation,
 )
 from .solver import SolverOptions  # noqa: E402
+from .batch import BatchResult, evaluate_batch  # noqa: E402
 from .sweep import PARAMETERS, SweepResult, sweep  # noqa: E402
 from .tune import TuneResult, tune  # noqa: E402
 from .validation import GraspValueError  # noqa: E402
@@ -76,6 +77,8 @@ __all__ = [
     "save_batch",
     "GraspSet",
     "presets",
+    "evaluate_batch",
+    "BatchResult",
     "sweep",
     "SweepResult",
     "PARAMETERS",

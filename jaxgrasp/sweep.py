@@ -35,19 +35,27 @@ import dataclasses
 import io
 import math
 import os
-import time
 from typing import Any, Callable, Mapping
 
 import jax
-import jax.numpy as jnp
 import numpy as np
-from jax.sharding import Mesh, NamedSharding
+from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from . import cache, outputs
+from . import outputs
+from .batch import (
+    ACCELERATOR_CHUNK_SIZE,
+    DEFAULT_CHUNK_SIZE,
+    RESULT_FIELDS,
+    _mesh,
+    batch_size,
+    compiled_evaluator,
+    default_chunk_size,
+    grasp_fields,
+    run_chunks,
+)
 from .evaluate import EvaluateOptions
-from .evaluate import evaluate as _evaluate_one
-from .fields import FIELD, NAMES, SWEEPABLE, Field
+from .fields import FIELD, SWEEPABLE, Field
 from .grasp import Grasp
 from .status import BoundaryKind, GraspStatus
 from .validation import GraspValueError, as_float_array, check_grasp_inputs, format_value
@@ -65,35 +73,13 @@ __all__ = [
     "compiled_evaluator",
 ]
 
-DEFAULT_CHUNK_SIZE = 64
-"""Default grid points per compiled batch and per CPU device (see :func:`default_chunk_size`).
-
-Measured on a 2-core CPU with the cube (``experiments/sweep_100k.log``): a larger batch is
-slower per grasp (the lanes of a batch iterate until its slowest converges) and needs
-about 1.5 MiB of XLA temporaries per grid point (385 MiB at 256; 6.0 GiB at 4096, where
-the process peaked at 7.5 GiB), more contacts proportionally more."""
-
-ACCELERATOR_CHUNK_SIZE = 1024
-"""Default grid points per compiled batch and per GPU/TPU device (about 1.5 GiB of
-temporaries for the cube; not measured on a GPU here: tune ``chunk_size`` there)."""
-
-
-def default_chunk_size(devices=None) -> int:
-    """The default batch of :func:`sweep`: :data:`DEFAULT_CHUNK_SIZE` per CPU device,
-    :data:`ACCELERATOR_CHUNK_SIZE` per GPU/TPU device, times the number of ``devices``
-    (default ``jax.devices()``)."""
-    devices = tuple(jax.devices() if devices is None else devices)
-    per = DEFAULT_CHUNK_SIZE if devices[0].platform == "cpu" else ACCELERATOR_CHUNK_SIZE
-    return per * len(devices)
-
-
 PARAMETERS: dict[str, Field] = {name: FIELD[name] for name in SWEEPABLE}
 """Sweepable parameters: name -> its :class:`jaxgrasp.fields.Field` (``.unit`` SI unit,
 ``.per_contact``, ``.rule`` and ``.allows(x)`` its allowed range).
 
 A per-contact parameter is set to the same value at every contact of a grid point."""
 
-_RESULT_FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
+_RESULT_FIELDS = RESULT_FIELDS
 _RESULT_UNITS = {"value": "J", "equilibrium_energy": "J"}
 
 
@@ -394,60 +380,6 @@ def _check_deformation_below_radius(base: dict[str, np.ndarray], axes: dict[str,
 
 # --------------------------------------------------------------------------- compiled batch
 
-_GRASP_FIELDS = NAMES  # a sweep's grasp has every contact active (no mask leaf)
-
-
-def _batched_fn(options: EvaluateOptions, sharding=None):
-    # arrays in, arrays out (no Grasp pytree), so that jax.export can serialize it
-    def one(*fields):
-        r = _evaluate_one(Grasp(*fields), options)
-        return tuple(getattr(r, f) for f in _RESULT_FIELDS)
-
-    if sharding is None:
-        return jax.jit(jax.vmap(one))
-    return jax.jit(jax.vmap(one), in_shardings=sharding, out_shardings=sharding)
-
-
-def _mesh(devices) -> Mesh:
-    return Mesh(np.asarray(devices), ("batch",))
-
-
-def _batch_spec(n_contacts: int, chunk: int, sharding) -> tuple:
-    """The :class:`Grasp` fields of a batch of ``chunk`` grasps, as ``ShapeDtypeStruct``."""
-    per_field = dict(positions=(n_contacts, 3), normals=(n_contacts, 3), mass=(), gravity=(3,))
-    return tuple(
-        jax.ShapeDtypeStruct((chunk, *per_field.get(f, (n_contacts,))), jnp.float64, sharding=sharding)
-        for f in _GRASP_FIELDS
-    )
-
-
-def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None):
-    """The batched evaluator for ``chunk`` grasps of ``n_contacts``; ``(fn, compile seconds)``.
-
-    ``fn`` takes the :class:`Grasp` fields (in field order) of a batch, each sharded along
-    its first axis over ``devices`` (default ``jax.devices()``; ``chunk`` must be a
-    multiple of their number), and returns the result fields (``value``, ``status``,
-    ``limiting_kind``, ``limiting_contact``, ``equilibrium_energy``), sharded the same
-    way. It comes from :func:`jaxgrasp.cache.compiled`: memoised in the process (0
-    seconds on a hit) and exported to disk where that is turned on.
-    """
-    devices = tuple(jax.devices() if devices is None else devices)
-    if chunk % len(devices):
-        raise ValueError(f"chunk {chunk} is not a multiple of the {len(devices)} devices")
-    x64 = jax.config.jax_enable_x64
-    sharding = NamedSharding(_mesh(devices), P("batch"))
-    return cache.compiled(
-        ("sweep", options, n_contacts, chunk, x64, tuple(d.id for d in devices)),
-        lambda: _batched_fn(options, sharding),
-        _batch_spec(n_contacts, chunk, sharding),
-        name="sweep",
-        export_key=(options, n_contacts, chunk, x64, len(devices)),
-        sharding=sharding,
-        n_devices=len(devices),
-        n_outputs=len(_RESULT_FIELDS),
-    )
-
-
 # --------------------------------------------------------------------------- sweep
 
 
@@ -516,10 +448,14 @@ def sweep(
     # so that every grid point is exactly the grasp evaluate() would see
     raw = grasp.to_numpy()
     own = {k: np.broadcast_to(np.asarray(raw[k], dtype=np.float64), v.shape) for k, v in base.items()}
-    arrays, run_seconds = _run_chunks(fn, own, axes, chunk, sharding, progress, on_chunk)
+    shape = tuple(a.size for a in axes.values())
+    outs, run_seconds = run_chunks(
+        fn, lambda start: _chunk_fields(own, axes, start, chunk), grasp_fields(False), total, chunk, sharding,
+        progress, on_chunk,
+    )
     return SweepResult(
         axes=dict(axes),
-        **arrays,
+        **{f: outs[f].reshape(shape) for f in _RESULT_FIELDS},
         compile_seconds=compile_seconds,
         run_seconds=run_seconds,
         devices=len(devices),
@@ -575,52 +511,3 @@ def _chunk_fields(own: dict, axes: dict, start: int, chunk: int) -> dict[str, np
     return fields
 
 
-def _run_chunks(fn, own: dict, axes: dict, chunk: int, sharding, progress, on_chunk=None):
-    """Evaluate every grid point, ``chunk`` at a time; (grid-shaped results, run seconds)."""
-    shape = tuple(a.size for a in axes.values())
-    total = int(math.prod(shape))
-    # host-side output arrays, filled chunk by chunk: the only O(grid) memory of a sweep
-    outs: dict[str, np.ndarray] = {}
-    run_seconds = 0.0
-    for start in range(0, total, chunk):
-        stop = min(start + chunk, total)
-        fields = _chunk_fields(own, axes, start, chunk)
-        batch = [_put(fields[k], sharding) for k in _GRASP_FIELDS]
-        t0 = time.perf_counter()
-        res = [_gather(a) for a in fn(*batch)]
-        run_seconds += time.perf_counter() - t0
-        del batch  # no device buffer outlives its chunk
-        for f, a in zip(_RESULT_FIELDS, res):
-            if f not in outs:
-                outs[f] = np.empty((total, *a.shape[1:]), dtype=a.dtype)
-            outs[f][start:stop] = a[: stop - start]
-        if on_chunk is not None:  # first: a checkpoint it writes is on disk before progress reports the chunk
-            on_chunk(start, stop, outs)
-        if progress is not None:
-            progress(stop, total)
-    return {f: outs[f].reshape(shape) for f in _RESULT_FIELDS}, run_seconds
-
-
-def batch_size(chunk_size: int, total: int, n_devices: int = 1) -> int:
-    """The batch one compiled call evaluates: ``min(chunk_size, total)`` rounded up to a
-    multiple of ``n_devices`` (each device gets ``batch / n_devices`` lanes)."""
-    chunk = max(1, min(int(chunk_size), int(total)))
-    return -(-chunk // n_devices) * n_devices
-
-
-def _put(a: np.ndarray, sharding) -> jax.Array:
-    """Host array -> global array sharded along its first axis (each process supplies its
-    own devices' slices, so this works unchanged across hosts)."""
-    a = np.ascontiguousarray(a, dtype=np.float64)
-    if jax.process_count() == 1:
-        return jax.device_put(a, sharding)
-    return jax.make_array_from_callback(a.shape, sharding, lambda i: a[i])
-
-
-def _gather(x) -> np.ndarray:
-    """Global (sharded) result array -> the whole array as NumPy on this host."""
-    if getattr(x, "is_fully_addressable", True):
-        return np.asarray(jax.device_get(x))
-    from jax.experimental import multihost_utils
-
-    return np.asarray(multihost_utils.process_allgather(x, tiled=True))

@@ -1,0 +1,333 @@
+"""The batched engine: many grasps evaluated in chunks of one compiled, sharded program.
+
+::
+
+    import jaxgrasp
+    grasps = [jaxgrasp.presets.cube(), jaxgrasp.presets.prism(), jaxgrasp.load("examples/four_finger.json")]
+    res = jaxgrasp.evaluate_batch(grasps)   # any contact counts: padded (jaxgrasp.stack)
+    res.value, res.status_names              # (B,) J, names
+    res.rank()[:10]                          # indices of the best grasps
+
+:func:`evaluate_batch` and :func:`jaxgrasp.sweep` share this path: the grasps of a chunk
+are lanes of ``jax.jit(jax.vmap(evaluate))`` (from :func:`compiled_evaluator`, memoised
+and exported by :mod:`jaxgrasp.cache`), sharded along the batch over all devices; the
+last chunk is padded to the same size, so a set compiles once per chunk size, number of
+contacts and options. Memory is bounded by the chunk size.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any, Callable, Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from . import cache
+from .evaluate import EvaluateOptions
+from .evaluate import evaluate as _evaluate_one
+from .fields import FIELD, NAMES
+from .grasp import Grasp, stack
+from .status import GraspStatus
+from .validation import GraspValueError, check_grasp_inputs
+
+__all__ = [
+    "evaluate_batch",
+    "BatchResult",
+    "RESULT_FIELDS",
+    "DEFAULT_CHUNK_SIZE",
+    "ACCELERATOR_CHUNK_SIZE",
+    "default_chunk_size",
+    "batch_size",
+    "grasp_fields",
+    "compiled_evaluator",
+    "run_chunks",
+]
+
+RESULT_FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
+"""The per-grasp results a compiled batch returns (the summary fields of an Evaluation)."""
+
+DEFAULT_CHUNK_SIZE = 64
+"""Default grid points per compiled batch and per CPU device (see :func:`default_chunk_size`).
+
+Measured on a 2-core CPU with the cube (``experiments/sweep_100k.log``): a larger batch is
+slower per grasp (the lanes of a batch iterate until its slowest converges) and needs
+about 1.5 MiB of XLA temporaries per grid point (385 MiB at 256; 6.0 GiB at 4096, where
+the process peaked at 7.5 GiB), more contacts proportionally more."""
+
+ACCELERATOR_CHUNK_SIZE = 1024
+"""Default grid points per compiled batch and per GPU/TPU device (about 1.5 GiB of
+temporaries for the cube; not measured on a GPU here: tune ``chunk_size`` there)."""
+
+
+def default_chunk_size(devices=None) -> int:
+    """The default batch of :func:`evaluate_batch` and :func:`jaxgrasp.sweep`: :data:`DEFAULT_CHUNK_SIZE` per CPU device,
+    :data:`ACCELERATOR_CHUNK_SIZE` per GPU/TPU device, times the number of ``devices``
+    (default ``jax.devices()``)."""
+    devices = tuple(jax.devices() if devices is None else devices)
+    per = DEFAULT_CHUNK_SIZE if devices[0].platform == "cpu" else ACCELERATOR_CHUNK_SIZE
+    return per * len(devices)
+
+
+# --------------------------------------------------------------------------- compiled batch
+
+def grasp_fields(masked: bool) -> tuple[str, ...]:
+    """The :class:`Grasp` fields a compiled batch takes, in order: every field of
+    :data:`jaxgrasp.fields.NAMES`, then ``active`` for grasps with a contact mask."""
+    return NAMES + (("active",) if masked else ())
+
+
+def _batched_fn(options: EvaluateOptions, sharding=None, masked: bool = False):
+    # arrays in, arrays out (no Grasp pytree), so that jax.export can serialize it
+    names = grasp_fields(masked)
+
+    def one(*fields):
+        r = _evaluate_one(Grasp(**dict(zip(names, fields))), options)
+        return tuple(getattr(r, f) for f in RESULT_FIELDS)
+
+    if sharding is None:
+        return jax.jit(jax.vmap(one))
+    return jax.jit(jax.vmap(one), in_shardings=sharding, out_shardings=sharding)
+
+
+def _mesh(devices) -> Mesh:
+    return Mesh(np.asarray(devices), ("batch",))
+
+
+def _batch_spec(n_contacts: int, chunk: int, sharding, masked: bool = False) -> tuple:
+    """The :class:`Grasp` fields of a batch of ``chunk`` grasps, as ``ShapeDtypeStruct``."""
+    per_field = dict(positions=(n_contacts, 3), normals=(n_contacts, 3), mass=(), gravity=(3,))
+    return tuple(
+        jax.ShapeDtypeStruct(
+            (chunk, *per_field.get(f, (n_contacts,))), jnp.bool_ if f == "active" else jnp.float64, sharding=sharding
+        )
+        for f in grasp_fields(masked)
+    )
+
+
+def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None, masked: bool = False):
+    """The batched evaluator for ``chunk`` grasps of ``n_contacts``; ``(fn, compile seconds)``.
+
+    ``fn`` takes the :class:`Grasp` fields (:func:`grasp_fields`: with ``masked``, the
+    contact mask ``active`` last) of a batch, each sharded along
+    its first axis over ``devices`` (default ``jax.devices()``; ``chunk`` must be a
+    multiple of their number), and returns the result fields (``value``, ``status``,
+    ``limiting_kind``, ``limiting_contact``, ``equilibrium_energy``), sharded the same
+    way. It comes from :func:`jaxgrasp.cache.compiled`: memoised in the process (0
+    seconds on a hit) and exported to disk where that is turned on.
+    """
+    devices = tuple(jax.devices() if devices is None else devices)
+    if chunk % len(devices):
+        raise ValueError(f"chunk {chunk} is not a multiple of the {len(devices)} devices")
+    x64 = jax.config.jax_enable_x64
+    sharding = NamedSharding(_mesh(devices), P("batch"))
+    return cache.compiled(
+        ("sweep", options, n_contacts, chunk, x64, tuple(d.id for d in devices), masked),
+        lambda: _batched_fn(options, sharding, masked),
+        _batch_spec(n_contacts, chunk, sharding, masked),
+        name="sweep",
+        export_key=(options, n_contacts, chunk, x64, len(devices), masked),
+        sharding=sharding,
+        n_devices=len(devices),
+        n_outputs=len(RESULT_FIELDS),
+    )
+
+
+
+def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], names, total: int, chunk: int,
+               sharding, progress=None, on_chunk=None) -> tuple[dict[str, np.ndarray], float]:
+    """Evaluate ``total`` grasps ``chunk`` at a time with the compiled ``fn``; the flat
+    ``(total,)`` result arrays by name (:data:`RESULT_FIELDS`) and the run seconds.
+
+    ``chunk_fields(start)`` gives the fields (``names``) of grasps ``start .. start +
+    chunk - 1``, each with a leading axis of ``chunk`` (past ``total``: any valid grasp,
+    e.g. the last one repeated). ``on_chunk(start, stop, results)`` (first: a checkpoint
+    it writes is on disk before ``progress`` reports the chunk) and ``progress(stop,
+    total)`` are called after each chunk. No device buffer outlives its chunk.
+    """
+    outs: dict[str, np.ndarray] = {}  # host-side, filled chunk by chunk
+    run_seconds = 0.0
+    for start in range(0, total, chunk):
+        stop = min(start + chunk, total)
+        fields = chunk_fields(start)
+        batch = [_put(fields[k], sharding) for k in names]
+        t0 = time.perf_counter()
+        res = [_gather(a) for a in fn(*batch)]
+        run_seconds += time.perf_counter() - t0
+        del batch
+        for f, a in zip(RESULT_FIELDS, res):
+            if f not in outs:
+                outs[f] = np.empty((total, *a.shape[1:]), dtype=a.dtype)
+            outs[f][start:stop] = a[: stop - start]
+        if on_chunk is not None:
+            on_chunk(start, stop, outs)
+        if progress is not None:
+            progress(stop, total)
+    return outs, run_seconds
+
+
+def batch_size(chunk_size: int, total: int, n_devices: int = 1) -> int:
+    """The batch one compiled call evaluates: ``min(chunk_size, total)`` rounded up to a
+    multiple of ``n_devices`` (each device gets ``batch / n_devices`` lanes)."""
+    chunk = max(1, min(int(chunk_size), int(total)))
+    return -(-chunk // n_devices) * n_devices
+
+
+def _put(a: np.ndarray, sharding) -> jax.Array:
+    """Host array -> global array sharded along its first axis (each process supplies its
+    own devices' slices, so this works unchanged across hosts)."""
+    a = np.ascontiguousarray(a, dtype=np.bool_ if a.dtype == np.bool_ else np.float64)
+    if jax.process_count() == 1:
+        return jax.device_put(a, sharding)
+    return jax.make_array_from_callback(a.shape, sharding, lambda i: a[i])
+
+
+def _gather(x) -> np.ndarray:
+    """Global (sharded) result array -> the whole array as NumPy on this host."""
+    if getattr(x, "is_fully_addressable", True):
+        return np.asarray(jax.device_get(x))
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+
+
+# --------------------------------------------------------------------------- evaluate_batch
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class BatchResult:
+    """The evaluation of ``B`` grasps, in input order (SI units).
+
+    Attributes:
+        value: ``(B,)`` evaluation value ``Delta U_min``, J (0 where unstable or infeasible).
+        status: ``(B,)`` :class:`~jaxgrasp.status.GraspStatus` codes.
+        limiting_kind: ``(B,)`` :class:`~jaxgrasp.status.BoundaryKind` codes, -1 none.
+        limiting_contact: ``(B,)`` 0-based contact of the limiting boundary (the grasp's
+            own numbering), -1 none.
+        equilibrium_energy: ``(B,)`` ``min U`` over the equilibrium region, J.
+        num_contacts: ``(B,)`` active contacts of each grasp.
+        compile_seconds: time spent compiling (0 when a compilation was reused).
+        run_seconds: time spent evaluating the chunks.
+        devices: number of devices the batch was sharded over.
+    """
+
+    value: Any
+    status: Any
+    limiting_kind: Any
+    limiting_contact: Any
+    equilibrium_energy: Any
+    num_contacts: Any
+    compile_seconds: float = 0.0
+    run_seconds: float = 0.0
+    devices: int = 1
+
+    def __len__(self) -> int:
+        return int(np.shape(self.value)[0])
+
+    @property
+    def status_names(self) -> np.ndarray:
+        """``(B,)`` status names (``'stable'``, ...)."""
+        return np.asarray(GraspStatus.labels(), dtype=object)[np.asarray(self.status)]
+
+    def counts(self) -> dict[str, int]:
+        """Number of grasps of each status, by name."""
+        s = np.asarray(self.status)
+        return {code.label: int(np.sum(s == code)) for code in GraspStatus}
+
+    def rank(self) -> np.ndarray:
+        """Grasp indices, best first: stable grasps by value (highest first), then
+        unstable and infeasible ones (value 0), then not_converged ones (untrusted) by
+        value; ties keep input order."""
+        status = np.asarray(self.status)
+        group = np.where(status == GraspStatus.STABLE, 0, np.where(status == GraspStatus.NOT_CONVERGED, 2, 1))
+        return np.lexsort((np.arange(len(self)), -np.asarray(self.value), group))
+
+
+def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], bool]:
+    """The fields of ``grasps`` (a sequence, or one batched Grasp), each with a leading
+    ``B`` axis, and whether they carry a contact mask; every grasp validated."""
+    if isinstance(grasps, Grasp):
+        batch = grasps
+    else:
+        items = list(grasps)
+        if not items or not all(isinstance(g, Grasp) for g in items):
+            raise GraspValueError("evaluate_batch needs a non-empty sequence of jaxgrasp.Grasp or one batched Grasp")
+        counts = {g.num_contacts for g in items}
+        masked = len(counts) > 1 or any(g.active is not None for g in items)
+        batch = stack(items) if masked else jax.tree_util.tree_map(lambda *x: jnp.stack(x), *items)
+    raw = batch.to_numpy()
+    pos = raw["positions"]
+    if pos.ndim != 3:
+        raise GraspValueError(f"evaluate_batch needs grasps with a batch axis: positions (B, N, 3), got {pos.shape}")
+    b, n = pos.shape[:2]
+    one_ndim = {"points": 2, "directions": 2, "per_contact": 1, "scalar": 0, "vector": 1}
+    fields = {}
+    for name, a in raw.items():
+        nd = 1 if name == "active" else one_ndim[FIELD[name].shape]
+        fields[name] = a if a.ndim > nd else np.broadcast_to(a, (b, *a.shape))
+    for i in range(b):
+        try:
+            check_grasp_inputs(**{k: v[i] for k, v in fields.items()})
+        except GraspValueError as exc:
+            raise GraspValueError(f"grasp {i}: {exc}") from None
+    return fields, "active" in fields
+
+
+def evaluate_batch(
+    grasps,
+    /,
+    *,
+    options: EvaluateOptions = EvaluateOptions(),
+    chunk_size: int | None = None,
+    progress: Callable[[int, int], Any] | None = None,
+    on_chunk: Callable[[int, int, Mapping[str, np.ndarray]], Any] | None = None,
+    devices=None,
+) -> BatchResult:
+    """Evaluate many grasps in chunks of one compiled program; every result equals
+    :func:`jaxgrasp.evaluate` of that grasp.
+
+    Args:
+        grasps: a sequence of :class:`~jaxgrasp.Grasp` (any contact counts: they are
+            padded with inactive contacts, :func:`jaxgrasp.stack`) or one batched grasp
+            (leading axis ``B``; fields without it are shared by every grasp).
+        options: :class:`~jaxgrasp.EvaluateOptions` of every evaluation.
+        chunk_size: grasps per compiled batch (default :func:`default_chunk_size`),
+            ``min(chunk_size, B)`` rounded up to a multiple of the devices.
+        progress: ``progress(done, total)`` after each chunk.
+        on_chunk: ``on_chunk(start, stop, results)`` after each chunk (before
+            ``progress``): grasps ``start .. stop - 1`` and all before are done;
+            ``results`` maps :data:`RESULT_FIELDS` to flat ``(B,)`` arrays (read only).
+        devices: the devices the batch is sharded over (default ``jax.devices()``).
+
+    Returns:
+        A :class:`BatchResult` with ``(B,)`` arrays in input order.
+
+    Raises:
+        GraspValueError: before anything is compiled, naming the first invalid grasp.
+    """
+    if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1):
+        raise GraspValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    fields, masked = _batched_fields(grasps)
+    devices = tuple(jax.devices() if devices is None else devices)
+    total, n_contacts = fields["positions"].shape[:2]
+    chunk = batch_size(default_chunk_size(devices) if chunk_size is None else chunk_size, total, len(devices))
+    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, masked)
+    sharding = NamedSharding(_mesh(devices), P("batch"))
+
+    def chunk_fields(start: int) -> dict[str, np.ndarray]:
+        idx = np.minimum(np.arange(start, start + chunk), total - 1)  # pad with the last grasp
+        return {k: v[idx] for k, v in fields.items()}
+
+    outs, run_seconds = run_chunks(fn, chunk_fields, grasp_fields(masked), total, chunk, sharding, progress, on_chunk)
+    active = fields.get("active", np.ones((total, n_contacts), dtype=bool))
+    return BatchResult(
+        **outs,
+        num_contacts=active.sum(axis=1),
+        compile_seconds=compile_seconds,
+        run_seconds=run_seconds,
+        devices=len(devices),
+    )
