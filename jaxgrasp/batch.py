@@ -264,10 +264,9 @@ def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], bool]:
     if pos.ndim != 3:
         raise GraspValueError(f"evaluate_batch needs grasps with a batch axis: positions (B, N, 3), got {pos.shape}")
     b, n = pos.shape[:2]
-    one_ndim = {"points": 2, "directions": 2, "per_contact": 1, "scalar": 0, "vector": 1}
     fields = {}
     for name, a in raw.items():
-        nd = 1 if name == "active" else one_ndim[FIELD[name].shape]
+        nd = 1 if name == "active" else FIELD[name].ndim
         fields[name] = a if a.ndim > nd else np.broadcast_to(a, (b, *a.shape))
     for i in range(b):
         try:

@@ -62,8 +62,6 @@ SUFFIXES = (".npz", ".jsonl")
 
 _OPTIONAL = {"mass": DEFAULT_MASS, "gravity": DEFAULT_GRAVITY}
 _ARRAYS = NAMES + ("active",)
-_ONE_NDIM = {f: {"points": 2, "directions": 2, "per_contact": 1, "scalar": 0, "vector": 1}[FIELD[f].shape] for f in NAMES}
-"""Axes of each field of one grasp."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -202,7 +200,7 @@ def _npz_grasp(arrays: dict[str, np.ndarray], i: int, n: int) -> dict[str, Any]:
             row = a if a.ndim == 0 else a[i]
             kwargs[name] = row[keep] if a.ndim >= 2 else row
         else:
-            kwargs[name] = a[i] if a.ndim > _ONE_NDIM[name] else a
+            kwargs[name] = a[i] if a.ndim > field.ndim else a
     return kwargs
 
 
@@ -268,7 +266,7 @@ def _as_list(grasps) -> list[Grasp]:
             raise GraspValueError(f"save_batch needs grasps with positions (N, 3) or a batch (B, N, 3), got {pos.shape}")
         fields = grasps.to_numpy()
         b = pos.shape[0]
-        ndim = {**_ONE_NDIM, "active": 1}
+        ndim = {**{n: FIELD[n].ndim for n in NAMES}, "active": 1}
         return [Grasp(**{k: (v[i] if np.ndim(v) > ndim[k] else v) for k, v in fields.items()}) for i in range(b)]
     out = list(grasps)
     for i, g in enumerate(out):

@@ -88,10 +88,6 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
     return evaluate_compiled(grasp, temperature, options)
 
 
-_ONE_GRASP_NDIM = {"points": 2, "directions": 2, "per_contact": 1, "scalar": 0, "vector": 1}
-"""Most dimensions of a field of one grasp, by :attr:`jaxgrasp.fields.Field.shape`."""
-
-
 def _check_unbatched(grasp) -> None:
     """One grasp, not a batch: a one-line error that points to ``jax.vmap`` otherwise
     (shapes are static, so this holds for traced grasps too; inside ``vmap`` they are
@@ -104,7 +100,7 @@ def _check_unbatched(grasp) -> None:
     batched = [
         f"{f.name} {tuple(np.shape(getattr(grasp, f.name)))}"
         for f in FIELDS
-        if np.ndim(getattr(grasp, f.name)) > _ONE_GRASP_NDIM[f.shape]
+        if np.ndim(getattr(grasp, f.name)) > f.ndim
     ]
     if grasp.active is not None and np.ndim(grasp.active) > 1:
         batched.append(f"active {tuple(np.shape(grasp.active))}")

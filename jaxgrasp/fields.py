@@ -76,6 +76,12 @@ class Field:
         return self.shape in ("points", "directions", "per_contact")
 
     @property
+    def ndim(self) -> int:
+        """Axes of the field of one grasp: ``(N, 3)`` 2, ``(N,)`` 1, ``()`` 0, ``(3,)`` 1;
+        an array with more has batch axes in front."""
+        return {"points": 2, "directions": 2, "per_contact": 1, "scalar": 0, "vector": 1}[self.shape]
+
+    @property
     def option(self) -> str:
         """The command-line option that sets it: ``--young-modulus``."""
         return "--" + self.name.replace("_", "-")
