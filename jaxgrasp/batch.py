@@ -231,12 +231,11 @@ class BatchResult:
     @property
     def status_names(self) -> np.ndarray:
         """``(B,)`` status names (``'stable'``, ...)."""
-        return np.asarray(GraspStatus.labels(), dtype=object)[np.asarray(self.status)]
+        return GraspStatus.names_of(self.status)
 
     def counts(self) -> dict[str, int]:
         """Number of grasps of each status, by name."""
-        s = np.asarray(self.status)
-        return {code.label: int(np.sum(s == code)) for code in GraspStatus}
+        return GraspStatus.count(self.status)
 
     def rank(self) -> np.ndarray:
         """Grasp indices, best first: stable grasps by value (highest first), then

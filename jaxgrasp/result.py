@@ -86,13 +86,13 @@ class Evaluation:
 
         Raises:
             ValueError: a batched result (``status`` has a shape); its names are
-                ``numpy.asarray(jaxgrasp.STATUS_NAMES)[numpy.asarray(result.status)]``.
+                ``jaxgrasp.GraspStatus.names_of(result.status)``.
         """
         shape = np.shape(self.status)
         if shape != ():
             raise ValueError(
                 f"status_name is one grasp's result, but status has shape {shape}: index the "
-                "batched result first, or use numpy.asarray(jaxgrasp.STATUS_NAMES)[numpy.asarray(result.status)]"
+                "batched result first, or use jaxgrasp.GraspStatus.names_of(result.status)"
             )
         return GraspStatus(int(self.status)).label
 

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import enum
 
+import numpy as np
+
 __all__ = ["LaneStatus", "GraspStatus", "BoundaryKind", "Constraint", "NO_BOUNDARY", "TuneStatus"]
 
 
@@ -41,6 +43,17 @@ class _Coded(enum.IntEnum):
     def labels(cls) -> tuple[str, ...]:
         """Every label, indexed by code (codes are ``0, 1, 2, ...``)."""
         return tuple(m.label for m in cls)
+
+    @classmethod
+    def names_of(cls, codes) -> np.ndarray:
+        """An array of codes as an object array of labels, same shape."""
+        return np.asarray(cls.labels(), dtype=object)[np.asarray(codes)]
+
+    @classmethod
+    def count(cls, codes) -> dict[str, int]:
+        """How many entries of an array of codes carry each member, by label."""
+        c = np.asarray(codes)
+        return {m.label: int(np.sum(c == m)) for m in cls}
 
 
 class LaneStatus(_Coded):

@@ -147,7 +147,7 @@ class SweepResult:
     @property
     def status_names(self) -> np.ndarray:
         """``status`` as an array of names (``'stable'``, ...)."""
-        return np.asarray(GraspStatus.labels(), dtype=object)[np.asarray(self.status)]
+        return GraspStatus.names_of(self.status)
 
     @property
     def limiting_kind_names(self) -> np.ndarray:
@@ -162,8 +162,7 @@ class SweepResult:
 
     def counts(self) -> dict[str, int]:
         """Number of grid points of each status, by name."""
-        s = np.asarray(self.status).ravel()
-        return {code.label: int(np.sum(s == code)) for code in GraspStatus}
+        return GraspStatus.count(self.status)
 
     def best(self) -> dict | None:
         """The grid point of highest value among trusted results (not ``not_converged``).
