@@ -51,8 +51,8 @@ import numpy as np
 
 from . import outputs
 from .fields import DEFAULT_GRAVITY, DEFAULT_MASS, FIELD, NAMES
-from .grasp import Grasp
-from .gripfile import _parse_json, grasp_from_dict, grasp_to_dict
+from .grasp import Grasp, stack
+from .gripfile import _parse_json, grasp_from_dict, grasp_to_dict, read_input
 from .validation import GraspValueError
 
 __all__ = ["GraspSet", "load_batch", "save_batch", "SUFFIXES"]
@@ -123,12 +123,7 @@ def load_batch(path: str | os.PathLike) -> GraspSet:
     suffix = _suffix(path)
     if path.is_dir():
         raise GraspValueError(f"{path}: is a folder, not a dataset file (.npz or .jsonl)")
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise GraspValueError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise GraspValueError(f"{path}: cannot read file ({exc.strerror or exc})") from None
+    raw = read_input(path)
     grasps, errors = (_read_npz if suffix == ".npz" else _read_jsonl)(raw, path)
     return GraspSet(grasps=tuple(grasps), errors=tuple(errors), source=str(path))
 
@@ -278,26 +273,15 @@ def _as_list(grasps) -> list[Grasp]:
 
 
 def _npz_bytes(grasps: Sequence[Grasp]) -> bytes:
-    """The ``.npz`` of ``grasps``, padded to the largest contact count (``active`` marks
-    the real contacts; a pad repeats the grasp's last contact, so it holds valid numbers)."""
-    grasps = [g.compact() for g in grasps]
-    n = max(g.num_contacts for g in grasps)
-    arrays: dict[str, list] = {name: [] for name in _ARRAYS}
-    for g in grasps:
-        fields = {k: np.asarray(v, dtype=np.float64) for k, v in g.to_numpy().items()}
-        k = g.num_contacts
-        pad = np.concatenate([np.arange(k), np.full(n - k, k - 1)])
-        for name in NAMES:
-            a = fields[name]
-            if FIELD[name].per_contact:
-                a = np.broadcast_to(a, (k, *a.shape[1:]) if a.ndim else (k,))[pad]
-            arrays[name].append(a)
-        arrays["active"].append(np.arange(n) < k)
-    stacked = {name: np.stack(v) for name, v in arrays.items()}
-    if stacked["active"].all():
-        del stacked["active"]
+    """The ``.npz`` of ``grasps``, padded by :func:`jaxgrasp.stack` to the largest contact
+    count (``active`` marks the real contacts, written only where some are padding)."""
+    arrays = stack(grasps).to_numpy()
+    active = arrays.pop("active")
+    arrays = {name: np.asarray(a, dtype=np.float64) for name, a in arrays.items()}
+    if not active.all():
+        arrays["active"] = active
     buf = io.BytesIO()
-    np.savez(buf, **stacked)
+    np.savez(buf, **arrays)
     return buf.getvalue()
 
 

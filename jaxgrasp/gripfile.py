@@ -248,6 +248,17 @@ def _parse_json(raw: bytes) -> Any:
     return data
 
 
+def read_input(path: Path) -> bytes:
+    """The bytes of an input file; a missing or unreadable one is a one-line
+    :class:`GraspValueError` starting with the file name."""
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise GraspValueError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise GraspValueError(f"{path}: cannot read file ({exc.strerror or exc})") from None
+
+
 def load(path: str | os.PathLike) -> Grasp:
     """Read a grasp file (``.toml`` or ``.json``, SI units) and return a validated :class:`Grasp`.
 
@@ -262,12 +273,7 @@ def load(path: str | os.PathLike) -> Grasp:
     if path.is_dir():
         raise GraspValueError(f"{path}: is a folder, not a grasp file (.toml or .json)")
     fmt = _format(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise GraspValueError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise GraspValueError(f"{path}: cannot read file ({exc.strerror or exc})") from None
+    raw = read_input(path)
     try:
         if fmt == "toml":
             data = tomllib.loads(raw.decode("utf-8-sig"))  # a leading BOM is not TOML syntax
