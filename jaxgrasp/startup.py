@@ -18,9 +18,12 @@ import signal
 import sys
 import threading
 
-__all__ = ["is_command_line", "install_if_command_line"]
+__all__ = ["EXIT", "is_command_line", "install_if_command_line"]
 
-_EXIT = {signal.SIGINT: (130, "interrupted"), signal.SIGTERM: (143, "terminated")}
+EXIT = {signal.SIGINT: (130, "interrupted"), signal.SIGTERM: (143, "terminated")}
+"""The signals the ``jaxgrasp`` program handles: signal -> (exit status, 128 + the signal
+number as a shell reports it; the word of its one line). :mod:`jaxgrasp.cli.interrupt`
+uses the same table once the command runs."""
 
 _PROGRAM = "jaxgrasp"
 _MODULES = ("jaxgrasp", "jaxgrasp.cli")
@@ -44,7 +47,7 @@ def is_command_line(orig_argv: list[str]) -> bool:
 
 
 def _end_at_once(signum, _frame) -> None:
-    status, word = _EXIT[signum]
+    status, word = EXIT[signum]
     try:
         os.write(2, f"jaxgrasp: {word}\n".encode())
     except OSError:  # pragma: no cover - stderr closed: the status still tells
@@ -59,6 +62,6 @@ def install_if_command_line() -> bool:
         return False
     if threading.current_thread() is not threading.main_thread():
         return False
-    for signum in _EXIT:
+    for signum in EXIT:
         signal.signal(signum, _end_at_once)
     return True

@@ -32,13 +32,14 @@ import threading
 from typing import Callable
 
 from .. import outputs
+from ..startup import EXIT
 
 __all__ = ["run_interruptibly", "Interrupted", "EXIT_STATUS", "POLL_SECONDS", "PUBLISH_WAIT_SECONDS"]
 
-EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
+EXIT_STATUS = {signum: status for signum, (status, _) in EXIT.items()}
 """Exit status on each signal handled: 128 + the signal number, as a shell reports it."""
 
-_WORDS = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated"}
+_WORDS = {signum: word for signum, (_, word) in EXIT.items()}
 
 POLL_SECONDS = 0.05
 """The main thread's longest wait between two chances to run a signal handler, s."""
