@@ -30,7 +30,7 @@ from jax.sharding import PartitionSpec as P
 from . import cache
 from .evaluate import EvaluateOptions
 from .evaluate import evaluate as _evaluate_one
-from .fields import FIELD, NAMES
+from .fields import NAMES
 from .grasp import Grasp, stack
 from .status import GraspStatus
 from .validation import GraspValueError, check_grasp_inputs
@@ -258,16 +258,11 @@ def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], bool]:
         counts = {g.num_contacts for g in items}
         masked = len(counts) > 1 or any(g.active is not None for g in items)
         batch = stack(items) if masked else jax.tree_util.tree_map(lambda *x: jnp.stack(x), *items)
-    raw = batch.to_numpy()
-    pos = raw["positions"]
-    if pos.ndim != 3:
-        raise GraspValueError(f"evaluate_batch needs grasps with a batch axis: positions (B, N, 3), got {pos.shape}")
-    b, n = pos.shape[:2]
-    fields = {}
-    for name, a in raw.items():
-        nd = 1 if name == "active" else FIELD[name].ndim
-        fields[name] = a if a.ndim > nd else np.broadcast_to(a, (b, *a.shape))
-    for i in range(b):
+    pos = np.shape(batch.positions)
+    if len(pos) != 3:
+        raise GraspValueError(f"evaluate_batch needs grasps with a batch axis: positions (B, N, 3), got {pos}")
+    fields = batch.to_numpy_batch()
+    for i in range(pos[0]):
         try:
             check_grasp_inputs(**{k: v[i] for k, v in fields.items()})
         except GraspValueError as exc:

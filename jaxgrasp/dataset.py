@@ -259,10 +259,8 @@ def _as_list(grasps) -> list[Grasp]:
             return [grasps]
         if pos.ndim != 3:
             raise GraspValueError(f"save_batch needs grasps with positions (N, 3) or a batch (B, N, 3), got {pos.shape}")
-        fields = grasps.to_numpy()
-        b = pos.shape[0]
-        ndim = {**{n: FIELD[n].ndim for n in NAMES}, "active": 1}
-        return [Grasp(**{k: (v[i] if np.ndim(v) > ndim[k] else v) for k, v in fields.items()}) for i in range(b)]
+        fields = grasps.to_numpy_batch()
+        return [Grasp(**{k: v[i] for k, v in fields.items()}) for i in range(pos.shape[0])]
     out = list(grasps)
     for i, g in enumerate(out):
         if not isinstance(g, Grasp):

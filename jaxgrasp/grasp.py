@@ -152,6 +152,15 @@ class Grasp:
         fields = [f.name for f in dataclasses.fields(self)]
         return {n: np.asarray(getattr(self, n)) for n in fields if n != "active" or self.active is not None}
 
+    def to_numpy_batch(self) -> dict[str, np.ndarray]:
+        """The fields of a batched grasp (``positions (B, N, 3)``) as NumPy arrays, each
+        with that leading ``B`` axis: a field given once for the whole batch (no batch
+        axis, e.g. ``gravity (3,)``) is broadcast to it."""
+        raw = self.to_numpy()
+        b = raw["positions"].shape[0]
+        ndim = {**{f.name: f.ndim for f in FIELDS}, "active": 1}  # axes of one grasp's field
+        return {k: a if a.ndim > ndim[k] else np.broadcast_to(a, (b, *a.shape)) for k, a in raw.items()}
+
     def compact(self) -> "Grasp":
         """The same grasp with only its active contacts and no mask (concrete, unbatched)."""
         if self.active is None:
