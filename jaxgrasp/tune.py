@@ -44,7 +44,7 @@ from .grasp import Grasp
 from .result import Evaluation
 from .status import GraspStatus, TuneStatus
 from .units import MJ_TO_J
-from .validation import GraspValueError, check_grasp_inputs
+from .validation import GraspValueError, check_grasp_inputs, counted
 
 __all__ = ["tune", "TuneResult", "TUNABLE", "METHODS", "parse_param", "default_bounds", "plot_history"]
 
@@ -362,14 +362,9 @@ class TuneResult:
         note = self.start_note()
         return (
             f"tuned value: {self.start_value:.6e} J -> {self.value:.6e} J "
-            f"(x{self.gain:.4f}) in {_count(self.iterations, 'iteration')}, {self.status}"
+            f"(x{self.gain:.4f}) in {counted(self.iterations, 'iteration')}, {self.status}"
             + (f"; {note}" if note else "")
         )
-
-
-def _count(n: int, noun: str) -> str:
-    """``"1 iteration"``, ``"2 iterations"``."""
-    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 def _labelled_params(specs, grasp: Grasp, x_by_spec) -> dict:

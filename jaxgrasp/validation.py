@@ -16,7 +16,7 @@ import numpy as np
 
 from .fields import FIELD, FIELDS, NAMES, PER_CONTACT
 
-__all__ = ["GraspValueError", "check_grasp_inputs", "format_value", "as_float_array", "inward_contacts"]
+__all__ = ["GraspValueError", "check_grasp_inputs", "format_value", "counted", "as_float_array", "inward_contacts"]
 
 NORMAL_MIN_NORM = 1e-12
 """A normal shorter than this (absolute) is treated as zero."""
@@ -50,6 +50,11 @@ def format_value(value: Any) -> str:
             text = text[:-2]
         return text
     return "[" + ", ".join(format_value(v) for v in arr) + "]"
+
+
+def counted(n: int, noun: str) -> str:
+    """``"1 point"``, ``"2 points"``: a count with its noun, singular for one."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 def _with_unit(text: str, field: str) -> str:

@@ -26,6 +26,7 @@ import numpy as np
 from .. import outputs
 from ..fields import FIELD
 from ..status import NO_BOUNDARY
+from ..validation import counted
 from .common import OVERRIDES, UsageError, add_grasp_source, grasp_source, load_grasp, parse_number
 
 __all__ = ["add_parser", "run", "parse_axis_spec", "auto_chunk", "AXES", "PAPER_AXES"]
@@ -355,7 +356,7 @@ def _summary_line(
     c = result.counts()
     shape = " x ".join(f"{len(a)} {n}" for n, a in result.axes.items())
     return (
-        f"sweep {source}: {result.size} point{'' if result.size == 1 else 's'} ({shape}); "
+        f"sweep {source}: {counted(result.size, 'point')} ({shape}); "
         f"stable {c['stable']}, unstable {c['unstable']}, infeasible {c['infeasible']}, "
         f"not_converged {c['not_converged']}; {_best_text(result)}; "
         f"wall {wall:.1f} s (compile {result.compile_seconds:.1f} s, run {result.run_seconds:.1f} s); "

@@ -17,6 +17,7 @@ import numpy as np
 
 from .. import outputs
 from ..fields import TUNABLE
+from ..validation import counted
 from .common import UsageError, add_grasp_source, grasp_source, load_grasp, parse_number
 
 __all__ = ["add_parser", "run", "parse_bounds", "check_bounds"]
@@ -155,10 +156,9 @@ def run(args) -> int:
     if "positions" in res.params:
         tuned = (tuned + "; " if tuned else "") + "positions moved"
     note = res.start_note()
-    iterations = f"{res.iterations} iteration" + ("" if res.iterations == 1 else "s")
     print(
         f"tune {source}: value {res.start_value:.6e} J -> {res.value:.6e} J "
-        f"(x{res.gain:.4f}, {iterations}, {res.status}); {tuned}; "
+        f"(x{res.gain:.4f}, {counted(res.iterations, 'iteration')}, {res.status}); {tuned}; "
         + (f"{note}; " if note else "")
         + f"wrote {out}"
         + ("" if args.no_plot else f", {out.with_suffix('.png')}")
