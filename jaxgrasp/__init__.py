@@ -37,6 +37,7 @@ from .model import KINDS  # noqa: E402
 from .status import BoundaryKind, GraspStatus, LaneStatus, TuneStatus  # noqa: E402
 from .result import (  # noqa: E402
     INFEASIBLE,
+    INVALID,
     NOT_CONVERGED,
     STABLE,
     STATUS_NAMES,
@@ -44,7 +45,8 @@ from .result import (  # noqa: E402
     Evaluation,
 )
 from .solver import SolverOptions  # noqa: E402
-from .batch import BatchResult, evaluate_batch  # noqa: E402
+from .batch import evaluate_batch  # noqa: E402
+from .batch_result import BatchResult  # noqa: E402
 from .sweep import PARAMETERS, SweepResult, sweep  # noqa: E402
 from .tune import TuneResult, tune  # noqa: E402
 from .validation import GraspValueError  # noqa: E402
@@ -64,6 +66,7 @@ __all__ = [
     "UNSTABLE",
     "INFEASIBLE",
     "NOT_CONVERGED",
+    "INVALID",
     "KINDS",
     "GraspStatus",
     "LaneStatus",

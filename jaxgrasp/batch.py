@@ -17,7 +17,6 @@ contacts and options. Memory is bounded by the chunk size.
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from typing import Any, Callable, Mapping
 
@@ -28,10 +27,13 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from . import cache
+from .batch_result import BatchResult, invalid_fill
+from .dataset import GraspSet
 from .evaluate import EvaluateOptions
 from .evaluate import evaluate as _evaluate_one
 from .fields import NAMES
 from .grasp import Grasp, stack
+from .result import FIELDS, Evaluation
 from .status import GraspStatus
 from .validation import GraspValueError, check_grasp_inputs
 
@@ -39,6 +41,7 @@ __all__ = [
     "evaluate_batch",
     "BatchResult",
     "RESULT_FIELDS",
+    "BUCKET_BASE",
     "DEFAULT_CHUNK_SIZE",
     "ACCELERATOR_CHUNK_SIZE",
     "default_chunk_size",
@@ -48,8 +51,13 @@ __all__ = [
     "run_chunks",
 ]
 
-RESULT_FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
-"""The per-grasp results a compiled batch returns (the summary fields of an Evaluation)."""
+RESULT_FIELDS = FIELDS
+"""The per-grasp arrays a compiled batch returns: every :class:`~jaxgrasp.Evaluation`
+field, in field order."""
+
+BUCKET_BASE = 4
+"""Batch sizes come from the buckets ``devices * BUCKET_BASE**k`` (1, 4, 16, 64, ... per
+device; see :func:`batch_size`), so sets and grids of different sizes share compilations."""
 
 DEFAULT_CHUNK_SIZE = 64
 """Default grid points per compiled batch and per CPU device (see :func:`default_chunk_size`).
@@ -115,9 +123,8 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
     ``fn`` takes the :class:`Grasp` fields (:func:`grasp_fields`: with ``masked``, the
     contact mask ``active`` last) of a batch, each sharded along
     its first axis over ``devices`` (default ``jax.devices()``; ``chunk`` must be a
-    multiple of their number), and returns the result fields (``value``, ``status``,
-    ``limiting_kind``, ``limiting_contact``, ``equilibrium_energy``), sharded the same
-    way. It comes from :func:`jaxgrasp.cache.compiled`: memoised in the process (0
+    multiple of their number), and returns every :class:`~jaxgrasp.Evaluation` field
+    (:data:`RESULT_FIELDS`, leading axis ``chunk``), sharded the same way. It comes from :func:`jaxgrasp.cache.compiled`: memoised in the process (0
     seconds on a hit) and exported to disk where that is turned on.
     """
     devices = tuple(jax.devices() if devices is None else devices)
@@ -139,9 +146,10 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
 
 
 def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], names, total: int, chunk: int,
-               sharding, progress=None, on_chunk=None) -> tuple[dict[str, np.ndarray], float]:
-    """Evaluate ``total`` grasps ``chunk`` at a time with the compiled ``fn``; the flat
-    ``(total,)`` result arrays by name (:data:`RESULT_FIELDS`) and the run seconds.
+               sharding, progress=None, on_chunk=None, keep=RESULT_FIELDS) -> tuple[dict[str, np.ndarray], float]:
+    """Evaluate ``total`` grasps ``chunk`` at a time with the compiled ``fn``; the
+    ``(total, ...)`` result arrays named in ``keep`` (of :data:`RESULT_FIELDS`) and the
+    run seconds.
 
     ``chunk_fields(start)`` gives the fields (``names``) of grasps ``start .. start +
     chunk - 1``, each with a leading axis of ``chunk`` (past ``total``: any valid grasp,
@@ -156,10 +164,11 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
         fields = chunk_fields(start)
         batch = [_put(fields[k], sharding) for k in names]
         t0 = time.perf_counter()
-        res = [_gather(a) for a in fn(*batch)]
+        res = dict(zip(RESULT_FIELDS, fn(*batch)))
+        res = {f: _gather(res[f]) for f in keep}
         run_seconds += time.perf_counter() - t0
         del batch
-        for f, a in zip(RESULT_FIELDS, res):
+        for f, a in res.items():
             if f not in outs:
                 outs[f] = np.empty((total, *a.shape[1:]), dtype=a.dtype)
             outs[f][start:stop] = a[: stop - start]
@@ -171,10 +180,21 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
 
 
 def batch_size(chunk_size: int, total: int, n_devices: int = 1) -> int:
-    """The batch one compiled call evaluates: ``min(chunk_size, total)`` rounded up to a
-    multiple of ``n_devices`` (each device gets ``batch / n_devices`` lanes)."""
-    chunk = max(1, min(int(chunk_size), int(total)))
-    return -(-chunk // n_devices) * n_devices
+    """The batch one compiled call evaluates for ``total`` grasps in chunks of at most
+    ``chunk_size``: the smallest bucket ``n_devices * BUCKET_BASE**k`` (1, 4, 16, 64, ...
+    lanes per device) that holds ``min(chunk_size, total)`` grasps, but never more than
+    ``chunk_size`` rounded up to a multiple of ``n_devices``.
+
+    So sets and grids of different sizes share a few compilations (with the CPU default
+    of 64: batches of 1, 4, 16 or 64), at the price of padding lanes (a padded lane costs
+    about what a grasp does, far less than a compilation).
+    """
+    cap = -(-max(1, int(chunk_size)) // n_devices)  # lanes per device, at most
+    need = -(-max(1, min(int(chunk_size), int(total))) // n_devices)
+    bucket = 1
+    while bucket < need:
+        bucket *= BUCKET_BASE
+    return min(bucket, cap) * n_devices
 
 
 def _put(a: np.ndarray, sharding) -> jax.Array:
@@ -198,76 +218,57 @@ def _gather(x) -> np.ndarray:
 # --------------------------------------------------------------------------- evaluate_batch
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
-class BatchResult:
-    """The evaluation of ``B`` grasps, in input order (SI units).
 
-    Attributes:
-        value: ``(B,)`` evaluation value ``Delta U_min``, J (0 where unstable or infeasible).
-        status: ``(B,)`` :class:`~jaxgrasp.status.GraspStatus` codes.
-        limiting_kind: ``(B,)`` :class:`~jaxgrasp.status.BoundaryKind` codes, -1 none.
-        limiting_contact: ``(B,)`` 0-based contact of the limiting boundary (the grasp's
-            own numbering), -1 none.
-        equilibrium_energy: ``(B,)`` ``min U`` over the equilibrium region, J.
-        num_contacts: ``(B,)`` active contacts of each grasp.
-        compile_seconds: time spent compiling (0 when a compilation was reused).
-        run_seconds: time spent evaluating the chunks.
-        devices: number of devices the batch was sharded over.
-    """
-
-    value: Any
-    status: Any
-    limiting_kind: Any
-    limiting_contact: Any
-    equilibrium_energy: Any
-    num_contacts: Any
-    compile_seconds: float = 0.0
-    run_seconds: float = 0.0
-    devices: int = 1
-
-    def __len__(self) -> int:
-        return int(np.shape(self.value)[0])
-
-    @property
-    def status_names(self) -> np.ndarray:
-        """``(B,)`` status names (``'stable'``, ...)."""
-        return GraspStatus.names_of(self.status)
-
-    def counts(self) -> dict[str, int]:
-        """Number of grasps of each status, by name."""
-        return GraspStatus.count(self.status)
-
-    def rank(self) -> np.ndarray:
-        """Grasp indices, best first: stable grasps by value (highest first), then
-        unstable and infeasible ones (value 0), then not_converged ones (untrusted) by
-        value; ties keep input order."""
-        status = np.asarray(self.status)
-        group = np.where(status == GraspStatus.STABLE, 0, np.where(status == GraspStatus.NOT_CONVERGED, 2, 1))
-        return np.lexsort((np.arange(len(self)), -np.asarray(self.value), group))
-
-
-def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], bool]:
-    """The fields of ``grasps`` (a sequence, or one batched Grasp), each with a leading
-    ``B`` axis, and whether they carry a contact mask; every grasp validated."""
+def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], tuple]:
+    """The fields of ``grasps`` (a sequence of :class:`Grasp`, one batched grasp, or a
+    :class:`~jaxgrasp.GraspSet`), each with a leading ``B`` axis (padded to the largest
+    contact count, with ``active``, where counts differ or a grasp has a mask), and each
+    grasp's error (``None``: valid). Every valid grasp is validated; an invalid one (a
+    set's ``None``) is stood in for by the first valid grasp and has no active contact."""
+    errors = None
+    if isinstance(grasps, GraspSet):
+        errors = tuple(grasps.errors)
+        valid = [g for g in grasps.grasps if g is not None]
+        if not valid:
+            raise GraspValueError(f"{grasps.source}: no valid grasp to evaluate (first: {errors[0]})")
+        grasps = [valid[0] if g is None else g for g in grasps.grasps]
     if isinstance(grasps, Grasp):
         batch = grasps
     else:
         items = list(grasps)
         if not items or not all(isinstance(g, Grasp) for g in items):
-            raise GraspValueError("evaluate_batch needs a non-empty sequence of jaxgrasp.Grasp or one batched Grasp")
+            raise GraspValueError(
+                "evaluate_batch needs a non-empty sequence of jaxgrasp.Grasp, one batched Grasp or a GraspSet"
+            )
         counts = {g.num_contacts for g in items}
         masked = len(counts) > 1 or any(g.active is not None for g in items)
-        batch = stack(items) if masked else jax.tree_util.tree_map(lambda *x: jnp.stack(x), *items)
+        batch = stack(items) if masked else jax.tree_util.tree_map(lambda *x: np.stack(x), *items)
     pos = np.shape(batch.positions)
     if len(pos) != 3:
         raise GraspValueError(f"evaluate_batch needs grasps with a batch axis: positions (B, N, 3), got {pos}")
     fields = batch.to_numpy_batch()
+    errors = (None,) * pos[0] if errors is None else errors
     for i in range(pos[0]):
+        if errors[i] is not None:
+            continue
         try:
             check_grasp_inputs(**{k: v[i] for k, v in fields.items()})
         except GraspValueError as exc:
             raise GraspValueError(f"grasp {i}: {exc}") from None
-    return fields, "active" in fields
+    if "active" in fields:
+        fields["active"] = np.array(fields["active"])  # not a broadcast view: rows are set below
+    invalid = np.asarray([e is not None for e in errors])
+    if invalid.any():
+        fields.setdefault("active", np.ones(pos[:2], dtype=bool))
+        fields["active"][invalid] = False
+    return fields, errors
+
+
+def _mark_invalid(outs: dict[str, np.ndarray], rows: np.ndarray) -> None:
+    """Set the results of the invalid grasps ``rows``: status INVALID, NaN, -1 codes."""
+    for f, a in outs.items():
+        a[rows] = invalid_fill(a)
+    outs["status"][rows] = GraspStatus.INVALID
 
 
 def evaluate_batch(
@@ -285,41 +286,57 @@ def evaluate_batch(
 
     Args:
         grasps: a sequence of :class:`~jaxgrasp.Grasp` (any contact counts: they are
-            padded with inactive contacts, :func:`jaxgrasp.stack`) or one batched grasp
-            (leading axis ``B``; fields without it are shared by every grasp).
+            padded with inactive contacts, :func:`jaxgrasp.stack`), one batched grasp
+            (leading axis ``B``; fields without it are shared by every grasp), or a
+            :class:`~jaxgrasp.GraspSet` from :func:`jaxgrasp.load_batch`, whose invalid
+            grasps are not evaluated: their status is ``invalid`` and their error kept.
         options: :class:`~jaxgrasp.EvaluateOptions` of every evaluation.
-        chunk_size: grasps per compiled batch (default :func:`default_chunk_size`),
-            ``min(chunk_size, B)`` rounded up to a multiple of the devices.
+        chunk_size: grasps per compiled batch, at most (default
+            :func:`default_chunk_size`); the batch is a bucket of :func:`batch_size`, so
+            batches of different sizes share compilations.
         progress: ``progress(done, total)`` after each chunk.
         on_chunk: ``on_chunk(start, stop, results)`` after each chunk (before
             ``progress``): grasps ``start .. stop - 1`` and all before are done;
-            ``results`` maps :data:`RESULT_FIELDS` to flat ``(B,)`` arrays (read only).
+            ``results`` maps :data:`RESULT_FIELDS` to ``(B, ...)`` arrays whose first
+            ``stop`` rows are final (the engine's own buffers: read, never write).
         devices: the devices the batch is sharded over (default ``jax.devices()``).
 
     Returns:
-        A :class:`BatchResult` with ``(B,)`` arrays in input order.
+        A :class:`~jaxgrasp.BatchResult`: every :class:`~jaxgrasp.Evaluation` field with
+        a leading ``B`` axis, in input order.
 
     Raises:
-        GraspValueError: before anything is compiled, naming the first invalid grasp.
+        GraspValueError: before anything is compiled, naming the first invalid grasp of
+            a sequence or batched grasp (a :class:`~jaxgrasp.GraspSet` keeps its invalid
+            grasps as rows), or when a set has no valid grasp.
     """
     if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1):
         raise GraspValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
-    fields, masked = _batched_fields(grasps)
+    fields, errors = _batched_fields(grasps)
+    masked = "active" in fields
     devices = tuple(jax.devices() if devices is None else devices)
     total, n_contacts = fields["positions"].shape[:2]
     chunk = batch_size(default_chunk_size(devices) if chunk_size is None else chunk_size, total, len(devices))
     fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, masked)
     sharding = NamedSharding(_mesh(devices), P("batch"))
+    invalid = np.flatnonzero([e is not None for e in errors])
 
     def chunk_fields(start: int) -> dict[str, np.ndarray]:
         idx = np.minimum(np.arange(start, start + chunk), total - 1)  # pad with the last grasp
         return {k: v[idx] for k, v in fields.items()}
 
-    outs, run_seconds = run_chunks(fn, chunk_fields, grasp_fields(masked), total, chunk, sharding, progress, on_chunk)
+    def finished(start: int, stop: int, outs: dict[str, np.ndarray]) -> None:
+        _mark_invalid(outs, invalid[(invalid >= start) & (invalid < stop)])
+        if on_chunk is not None:
+            on_chunk(start, stop, outs)
+
+    outs, run_seconds = run_chunks(fn, chunk_fields, grasp_fields(masked), total, chunk, sharding, progress, finished)
     active = fields.get("active", np.ones((total, n_contacts), dtype=bool))
     return BatchResult(
-        **outs,
+        evaluation=Evaluation(**outs),
         num_contacts=active.sum(axis=1),
+        active=active,
+        errors=errors,
         compile_seconds=compile_seconds,
         run_seconds=run_seconds,
         devices=len(devices),

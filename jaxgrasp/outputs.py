@@ -26,7 +26,7 @@ import os
 import secrets
 import threading
 from pathlib import Path
-from typing import BinaryIO, Callable, Iterable, Mapping, Union
+from typing import Any, BinaryIO, Callable, Iterable, Mapping, Sequence, Union
 
 __all__ = [
     "OutputError",
@@ -36,6 +36,8 @@ __all__ = [
     "PUBLISH_LOCK",
     "check_writable",
     "write_file",
+    "write_to",
+    "csv_content",
     "write_set",
     "FolderLock",
     "set_note",
@@ -245,6 +247,32 @@ def write_file(path, content: Content) -> bool:
         Whether it replaced an existing file.
     """
     return bool(write_set({path: content}))
+
+
+def write_to(target, content: Content) -> None:
+    """Write ``content`` (bytes, or ``write(fh)``) into ``target``: a binary file object
+    directly, or the file at path ``target`` atomically (:func:`write_file`)."""
+    if hasattr(target, "write"):
+        target.write(content) if isinstance(content, bytes) else content(target)
+    else:
+        write_file(target, content)
+
+
+def csv_content(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> Callable[[BinaryIO], None]:
+    """``write(fh)`` writing a UTF-8 CSV table (``header``, then ``rows``) to a binary file."""
+    import csv
+    import io
+
+    def write(binary: BinaryIO) -> None:
+        fh = io.TextIOWrapper(binary, encoding="utf-8", newline="")
+        try:
+            w = csv.writer(fh)
+            w.writerow(header)
+            w.writerows(rows)
+        finally:
+            fh.detach()  # flushed; the binary file stays open for its owner
+
+    return write
 
 
 # --------------------------------------------------------------------------- folder lock

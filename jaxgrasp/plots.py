@@ -1,6 +1,8 @@
-"""Plots of sweep results (matplotlib, Agg backend: no display needed).
+"""Plots of sweep and batch results (matplotlib, Agg backend: no display needed).
 
-Conventions of every plot here:
+:func:`plot_ranking` draws a batch's grasps ranked by value (a log scale: values span
+decades), coloured by status, beside the count of each status. The sweep plots below
+follow these conventions:
 
 * the evaluation value is drawn in mJ (labelled), parameters in readable units (mm,
   kPa, kg, N; labelled);
@@ -25,6 +27,7 @@ import math
 import os
 
 import matplotlib
+import matplotlib.ticker
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -35,7 +38,7 @@ from .fields import FIELD
 from .status import BoundaryKind, GraspStatus
 from .units import MJ_TO_J
 
-__all__ = ["plot_sweep", "plot_max_over", "plot_max", "new_figure", "save_figure", "J_TO_MJ"]
+__all__ = ["plot_sweep", "plot_max_over", "plot_max", "plot_ranking", "new_figure", "save_figure", "J_TO_MJ"]
 
 
 J_TO_MJ = 1.0 / MJ_TO_J
@@ -342,5 +345,73 @@ def plot_max(reduced, best, path=None, *, over="initial_deformation", x=None, cu
     ax2.grid(True, alpha=0.3)
     if title:
         ax.set_title(title, fontsize=11)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+# --------------------------------------------------------------------------- batch ranking
+
+STATUS_COLORS = {
+    "stable": "tab:blue",
+    "unstable": "tab:orange",
+    "infeasible": "tab:red",
+    "not_converged": "0.55",
+    "invalid": "k",
+}
+"""The colour of each grasp status in :func:`plot_ranking`."""
+
+
+def plot_ranking(result, path=None, *, top: int = 5, title=None):
+    """The grasps of a :class:`~jaxgrasp.BatchResult` ranked by value, and their statuses.
+
+    Left: the value (mJ, log scale) of every stable grasp, best first, points with their
+    value set by a force limit marked with triangles; not_converged grasps (untrusted
+    values) as grey diamonds after them; the ``top`` best labelled with their input index.
+    Right: how many grasps have each status (unstable and infeasible grasps have value 0,
+    invalid ones none, so they are counted, not drawn on the log scale).
+
+    Returns the figure; with ``path``, also saves it (atomically).
+    """
+    names = np.asarray(result.status_names)
+    value = np.asarray(result.value, dtype=np.float64) * J_TO_MJ
+    kind = np.asarray(result.limiting_kind)
+    order = [int(i) for i in result.rank()]
+    fig = new_figure(figsize=(10.0, 4.2))
+    ax, bars = fig.subplots(1, 2, gridspec_kw={"width_ratios": [3.2, 1.0]})
+    ranked = [i for i in order if names[i] in ("stable", "not_converged") and value[i] > 0]
+    x = np.arange(1, len(ranked) + 1)
+    for label, marker in (("stable", "o"), ("not_converged", "D")):
+        m = np.asarray([names[i] == label for i in ranked], dtype=bool)
+        if m.any():
+            idx = np.asarray(ranked)[m]
+            face = STATUS_COLORS[label] if label == "stable" else "none"
+            ax.plot(x[m], value[idx], marker, ms=3.5, ls="none", mfc=face, mec=STATUS_COLORS[label])
+            force = m & np.asarray([kind[i] == BoundaryKind.MAX_FORCE for i in ranked], dtype=bool)
+            ax.plot(x[force], value[np.asarray(ranked)[force]], "^", ms=6, ls="none", mfc="none", mec="k", mew=0.8)
+    for r, i in enumerate(ranked[: max(0, top)], start=1):
+        ax.annotate(f"grasp {i}", (r, value[i]), xytext=(4, 3), textcoords="offset points", fontsize=8)
+    if ranked:
+        ax.set_yscale("log")
+    else:
+        ax.text(0.5, 0.5, "no stable grasp", transform=ax.transAxes, ha="center", va="center", color="0.4")
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+    ax.set_xlabel("rank (1 = most stable)")
+    ax.set_ylabel(VALUE_LABEL)
+    ax.grid(True, which="both", alpha=0.25)
+    handles = [
+        Line2D([], [], marker="o", ls="none", color=STATUS_COLORS["stable"], label="stable"),
+        Line2D([], [], marker="^", ls="none", mfc="none", mec="k", label="value set by force limit"),
+        Line2D([], [], marker="D", ls="none", mfc="none", mec=STATUS_COLORS["not_converged"], label="not_converged (untrusted)"),
+    ]
+    ax.legend(handles=handles, fontsize=8, loc="upper right")
+    counts = result.counts()
+    labels = [k for k in STATUS_COLORS if counts.get(k, 0) or k != "invalid"]
+    bars.barh(labels, [counts.get(k, 0) for k in labels], color=[STATUS_COLORS[k] for k in labels])
+    for y, k in enumerate(labels):
+        bars.text(counts.get(k, 0), y, f" {counts.get(k, 0)}", va="center", fontsize=9)
+    bars.invert_yaxis()
+    bars.set_xlabel("grasps")
+    bars.set_xlim(0, max(1, max(counts.values())) * 1.25)
+    fig.suptitle(title or f"{len(result)} grasps ranked by evaluation value")
     fig.tight_layout()
     return _save(fig, path)

@@ -11,12 +11,23 @@ import numpy as np
 
 from .status import NO_BOUNDARY, BoundaryKind, Constraint, GraspStatus, LaneStatus
 
-__all__ = ["Evaluation", "STATUS_NAMES", "STABLE", "UNSTABLE", "INFEASIBLE", "NOT_CONVERGED"]
+__all__ = [
+    "Evaluation",
+    "SUMMARY_FIELDS",
+    "FIELDS",
+    "STATUS_NAMES",
+    "STABLE",
+    "UNSTABLE",
+    "INFEASIBLE",
+    "NOT_CONVERGED",
+    "INVALID",
+]
 
 STABLE = GraspStatus.STABLE
 UNSTABLE = GraspStatus.UNSTABLE
 INFEASIBLE = GraspStatus.INFEASIBLE
 NOT_CONVERGED = GraspStatus.NOT_CONVERGED
+INVALID = GraspStatus.INVALID  # a dataset row that was not evaluated; evaluate() never gives it
 
 STATUS_NAMES = GraspStatus.labels()
 """Grasp status names, indexed by the :class:`~jaxgrasp.status.GraspStatus` codes."""
@@ -192,6 +203,14 @@ class Evaluation:
                 "rotation": "rad (rotation vector)",
             },
         }
+
+
+FIELDS = tuple(f.name for f in dataclasses.fields(Evaluation))
+"""Every array of an :class:`Evaluation`, in field order."""
+
+SUMMARY_FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
+"""The five numbers that summarise a grasp's evaluation (the columns of sweep and batch
+tables): value (J), status, limiting kind and contact, equilibrium energy (J)."""
 
 
 def _check_energy(name: str, value, nonnegative: bool) -> None:

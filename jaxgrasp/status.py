@@ -75,6 +75,10 @@ class GraspStatus(_Coded):
     )
     INFEASIBLE = 2, "no pose satisfies every constraint (no stable equilibrium at all): value 0"
     NOT_CONVERGED = 3, "the solver did not settle a problem the value depends on: do not trust the value"
+    INVALID = 4, (
+        "the grasp's input is invalid, so it was not evaluated (a dataset row; its error "
+        "names the field and value): value NaN"
+    )
 
 
 class BoundaryKind(_Coded):
@@ -82,6 +86,12 @@ class BoundaryKind(_Coded):
 
     SLIP = 0, "the contact's friction is at its limit (Howe-Cutkosky with torsion, eq. 20)"
     MAX_FORCE = 1, "the contact's normal force is at its limit (eq. 21)"
+
+    @classmethod
+    def names_of(cls, codes) -> np.ndarray:
+        """An array of codes as an object array of labels, same shape; ``-1``
+        (:data:`NO_BOUNDARY`) is ``'none'``."""
+        return np.asarray(cls.labels() + ("none",), dtype=object)[np.asarray(codes)]
 
 
 NO_BOUNDARY = -1

@@ -11,10 +11,13 @@
     result.value.shape          # (9, 41), J
     result.to_csv("sweep.csv")  # one row per grid point, SI units in the column names
 
-The grid points are evaluated as lanes of ``jax.jit(jax.vmap(evaluate))`` in chunks of
-``chunk_size`` points; the last chunk is padded to the same size, so one sweep compiles
-once (and a later sweep of a grasp with the same number of contacts, the same options and
-the same chunk size reuses that compilation). Memory is bounded by the chunk size, not by
+A sweep is a grid of grasps for the batched engine (:mod:`jaxgrasp.batch`, shared with
+:func:`jaxgrasp.evaluate_batch`): the grid points are evaluated as lanes of
+``jax.jit(jax.vmap(evaluate))`` in chunks whose size is a fixed bucket
+(:func:`jaxgrasp.batch.batch_size`: 1, 4, 16 or 64 points on a CPU); the last chunk is
+padded to the same size, so one sweep compiles once, and a later sweep or batch of
+grasps with the same number of contacts and options, in the same bucket, reuses that
+compilation. Memory is bounded by the chunk size, not by
 the grid size: apart from the result arrays (5 numbers per grid point) nothing grows with
 the grid, and no device buffer outlives its chunk.
 
@@ -30,9 +33,7 @@ and, with :func:`jaxgrasp.cache.set_export_dir` (the CLI sets it), kept on disk 
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import io
 import math
 import os
 from typing import Any, Callable, Mapping
@@ -46,7 +47,6 @@ from . import outputs
 from .batch import (
     ACCELERATOR_CHUNK_SIZE,
     DEFAULT_CHUNK_SIZE,
-    RESULT_FIELDS,
     _mesh,
     batch_size,
     compiled_evaluator,
@@ -57,6 +57,7 @@ from .batch import (
 from .evaluate import EvaluateOptions
 from .fields import FIELD, SWEEPABLE, Field
 from .grasp import Grasp
+from .result import SUMMARY_FIELDS
 from .status import BoundaryKind, GraspStatus
 from .validation import GraspValueError, as_float_array, check_grasp_inputs, format_value
 
@@ -79,7 +80,7 @@ PARAMETERS: dict[str, Field] = {name: FIELD[name] for name in SWEEPABLE}
 
 A per-contact parameter is set to the same value at every contact of a grid point."""
 
-_RESULT_FIELDS = RESULT_FIELDS
+_RESULT_FIELDS = SUMMARY_FIELDS
 _RESULT_UNITS = {"value": "J", "equilibrium_energy": "J"}
 
 
@@ -152,8 +153,7 @@ class SweepResult:
     @property
     def limiting_kind_names(self) -> np.ndarray:
         """``limiting_kind`` as an array of names (``'slip'``, ``'max_force'``, ``'none'``)."""
-        names = np.asarray(BoundaryKind.labels() + ("none",), dtype=object)
-        return names[np.asarray(self.limiting_kind)]  # -1 -> last entry, 'none'
+        return BoundaryKind.names_of(self.limiting_kind)
 
     def grid(self) -> dict[str, np.ndarray]:
         """Each axis' value at every grid point: dict name -> array shaped like the grid."""
@@ -225,7 +225,6 @@ class SweepResult:
         ``limiting_contact`` (-1 for none) and ``equilibrium_energy_J``. Floats are
         written with 17 significant digits (they read back exactly).
         """
-        grid = self.grid()
         cols = [column_name(n) for n in self.axes] + [
             column_name("value"),
             "status",
@@ -233,27 +232,18 @@ class SweepResult:
             "limiting_contact",
             column_name("equilibrium_energy"),
         ]
-        flat = {n: g.ravel() for n, g in grid.items()}
+        flat = [g.ravel() for g in self.grid().values()]
         value = np.asarray(self.value).ravel()
         status = self.status_names.ravel()
         kind = self.limiting_kind_names.ravel()
         contact = np.asarray(self.limiting_contact).ravel()
         energy = np.asarray(self.equilibrium_energy).ravel()
         fmt = lambda x: repr(float(x))
-
-        def write(binary):
-            fh = io.TextIOWrapper(binary, encoding="utf-8", newline="")
-            try:
-                w = csv.writer(fh)
-                w.writerow(cols)
-                for i in range(value.size):
-                    row = [fmt(flat[n][i]) for n in self.axes]
-                    row += [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
-                    w.writerow(row)
-            finally:
-                fh.detach()  # flushed; the binary file stays open for its owner
-
-        _write(path, write)
+        rows = (
+            [fmt(g[i]) for g in flat] + [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
+            for i in range(value.size)
+        )
+        outputs.write_to(path, outputs.csv_content(cols, rows))
 
     def to_npz(self, path) -> None:
         """Write a ``.npz``: ``axis_names``, ``axis_<name>`` (1-D, SI), the grid-shaped
@@ -278,7 +268,7 @@ class SweepResult:
         if not hasattr(path, "write"):
             path = os.fspath(path)
             path = path if path.endswith(".npz") else path + ".npz"
-        _write(path, lambda fh: np.savez(fh, **arrays))
+        outputs.write_to(path, lambda fh: np.savez(fh, **arrays))
 
     @classmethod
     def from_npz(cls, path) -> "SweepResult":
@@ -297,14 +287,6 @@ class SweepResult:
         axes = ", ".join(f"{n}[{len(a)}]" for n, a in self.axes.items())
         counts = ", ".join(f"{k} {v}" for k, v in self.counts().items() if v)
         return f"SweepResult({axes or 'no axes'}; {counts})"
-
-
-def _write(target, write) -> None:
-    """``write(fh)`` into a binary file object ``target``, or atomically into the file at path ``target``."""
-    if hasattr(target, "write"):
-        write(target)
-    else:
-        outputs.write_file(target, write)
 
 
 def _flatten(r: SweepResult):
@@ -399,10 +381,11 @@ def sweep(
         grasp: the base :class:`~jaxgrasp.Grasp` (SI units); parameters not swept keep
             its values.
         options: :class:`~jaxgrasp.EvaluateOptions` for every evaluation.
-        chunk_size: grid points per compiled batch (bounds memory); default
-            :func:`default_chunk_size` (64 per CPU device, 1024 per GPU). The batch size used is
-            ``min(chunk_size, number of points)`` rounded up to a multiple of the number
-            of devices (:func:`batch_size`); the last chunk is padded to it.
+        chunk_size: grid points per compiled batch, at most (bounds memory); default
+            :func:`default_chunk_size` (64 per CPU device, 1024 per GPU). The batch used is
+            the smallest bucket that holds ``min(chunk_size, number of points)``, capped
+            at ``chunk_size``, a multiple of the number of devices (:func:`batch_size`);
+            the last chunk is padded to it.
         progress: optional ``progress(done, total)`` called after each chunk with the
             numbers of grid points done and in all.
         on_chunk: optional ``on_chunk(start, stop, results)`` called after each chunk
@@ -450,7 +433,7 @@ def sweep(
     shape = tuple(a.size for a in axes.values())
     outs, run_seconds = run_chunks(
         fn, lambda start: _chunk_fields(own, axes, start, chunk), grasp_fields(False), total, chunk, sharding,
-        progress, on_chunk,
+        progress, on_chunk, keep=_RESULT_FIELDS,
     )
     return SweepResult(
         axes=dict(axes),

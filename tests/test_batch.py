@@ -1,6 +1,9 @@
-"""The batched engine ``jaxgrasp.evaluate_batch`` (issue 12, part 2, first step): grasps
-with different contact counts in one compiled program, chunked, equal to ``evaluate``
-grasp by grasp; ranking; one-line errors before anything is compiled."""
+"""The batched engine ``jaxgrasp.evaluate_batch`` (issue 12, part 2): grasps with
+different contact counts in one compiled program, chunked, equal to ``evaluate`` grasp by
+grasp in every Evaluation field; invalid rows of a dataset; buckets; ranking; files;
+one-line errors before anything is compiled.
+
+Every evaluation here goes through ONE compilation (4 contacts, masked, batch 2)."""
 
 from __future__ import annotations
 
@@ -10,8 +13,10 @@ import numpy as np
 import pytest
 
 import jaxgrasp
-from jaxgrasp import BatchResult, GraspValueError, evaluate_batch
-from jaxgrasp.status import GraspStatus
+from jaxgrasp import BatchResult, GraspSet, GraspValueError, evaluate_batch
+from jaxgrasp.batch import batch_size
+from jaxgrasp.result import FIELDS, Evaluation
+from jaxgrasp.status import GraspStatus, LaneStatus
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -59,19 +64,104 @@ def test_rank_puts_stable_grasps_first_by_value(batch_and_refs):
     assert int(order[-1]) == 3  # the infeasible grasp (value 0) is last here
 
 
-def test_rank_orders_groups_and_ties():
-    r = BatchResult(
-        value=np.array([0.0, 2.0, 5.0, 2.0, 9.0, 0.0]),
-        status=np.array([1, 0, 3, 0, 0, 2]),
-        limiting_kind=np.zeros(6, int), limiting_contact=np.zeros(6, int),
-        equilibrium_energy=np.zeros(6), num_contacts=np.full(6, 2),
+def _fake(value, status) -> BatchResult:
+    b = len(value)
+    ev = {f: np.zeros(b) for f in FIELDS} | {"value": np.asarray(value), "status": np.asarray(status)}
+    return BatchResult(
+        evaluation=Evaluation(**ev), num_contacts=np.full(b, 2), active=np.ones((b, 2), bool), errors=(None,) * b
     )
-    # stable by value (ties in input order), then unstable/infeasible, then not_converged
-    assert r.rank().tolist() == [4, 1, 3, 0, 5, 2]
+
+
+def test_rank_orders_groups_and_ties():
+    r = _fake([0.0, 2.0, 5.0, 2.0, 9.0, 0.0, np.nan], [1, 0, 3, 0, 0, 2, 4])
+    # stable by value (ties in input order), then unstable/infeasible, then not_converged, then invalid
+    assert r.rank().tolist() == [4, 1, 3, 0, 5, 2, 6]
+
+
+def test_every_evaluation_field_equals_evaluate(batch_and_refs):
+    """Padded to 4 contacts, grasp i's own contacts are the first n_i: every array of
+    res[i] equals evaluate's on them; the padding contacts are no_start, +inf, never limiting."""
+    _, res, refs, _ = batch_and_refs
+    for i, ref in enumerate(refs):
+        n, N = int(res.num_contacts[i]), res.active.shape[1]
+        got = res[i]
+        assert isinstance(got, Evaluation)
+        assert res.active[i].tolist() == [True] * n + [False] * (N - n)
+        rows = np.r_[0, 1 + np.arange(n), 1 + N + np.arange(n)]  # kkt/steps rows of the real lanes
+        pairs = {
+            "boundary_energy": (got.boundary_energy[:, :n], ref.boundary_energy),
+            "boundary_translation": (got.boundary_translation[:, :n], ref.boundary_translation),
+            "boundary_rotation": (got.boundary_rotation[:, :n], ref.boundary_rotation),
+            "equilibrium_margins": (got.equilibrium_margins[:, :n], ref.equilibrium_margins),
+            "equilibrium_translation": (got.equilibrium_translation, ref.equilibrium_translation),
+            "equilibrium_rotation": (got.equilibrium_rotation, ref.equilibrium_rotation),
+        }
+        for name, (a, b) in pairs.items():
+            np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-13, err_msg=f"grasp {i} {name}")
+        # KKT residuals of converged lanes are round-off (~1e-11, scaled units): equal to far below the tolerance
+        np.testing.assert_allclose(got.kkt[rows], ref.kkt, rtol=0, atol=1e-9, err_msg=f"grasp {i} kkt")
+        np.testing.assert_array_equal(got.boundary_status[:, :n], ref.boundary_status, err_msg=f"grasp {i}")
+        np.testing.assert_array_equal(got.steps[rows], ref.steps, err_msg=f"grasp {i}")
+        assert int(got.equilibrium_status) == int(ref.equilibrium_status)
+        assert np.all(got.boundary_status[:, n:] == LaneStatus.NO_START)
+        assert np.all(np.isposinf(got.boundary_energy[:, n:]))
+
+
+@pytest.fixture(scope="module")
+def set_result(batch_and_refs):
+    grasps, _, _, _ = batch_and_refs
+    error = "grasp 2 (line 3): friction = -1 must be positive"
+    gset = GraspSet(grasps=(grasps[0], grasps[1], None, grasps[2]), errors=(None, None, error, None), source="set.jsonl")
+    return evaluate_batch(gset, chunk_size=2), error  # same bucket and N as the fixture: no compilation
+
+
+def test_invalid_rows_of_a_set_are_marked_and_the_others_evaluated(batch_and_refs, set_result):
+    _, res, refs, _ = batch_and_refs
+    out, error = set_result
+    assert out.compile_seconds == 0.0  # the fixture's compiled program
+    assert out.status_names.tolist() == [res.status_names[0], res.status_names[1], "invalid", res.status_names[2]]
+    assert out.errors == (None, None, error, None)
+    assert out.num_contacts.tolist() == [2, 3, 0, 4]
+    assert np.isnan(out.value[2]) and np.isnan(out.boundary_energy[2]).all()
+    assert out.limiting_contact[2] == -1 and out.limiting_kind[2] == -1
+    for j, i in ((0, 0), (1, 1), (3, 2)):
+        np.testing.assert_allclose(out.value[j], refs[i].value, rtol=1e-12, atol=1e-18)
+    assert out.counts()["invalid"] == 1 and int(out.rank()[-1]) == 2
+
+
+def test_csv_and_npz_round_trip(set_result, tmp_path):
+    import csv
+
+    out, error = set_result
+    out.to_csv(tmp_path / "r.csv")
+    with open(tmp_path / "r.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == ["index", "num_contacts", "value_J", "status", "limiting_kind",
+                             "limiting_contact", "equilibrium_energy_J", "error"]
+    assert [r["index"] for r in rows] == ["0", "1", "2", "3"]
+    assert float(rows[0]["value_J"]) == float(out.value[0])  # 17 digits: exact
+    assert rows[2]["status"] == "invalid" and rows[2]["value_J"] == "" and rows[2]["error"] == error
+    assert rows[3]["num_contacts"] == "4" and rows[3]["error"] == ""
+    out.to_npz(tmp_path / "r.npz")
+    back = BatchResult.from_npz(tmp_path / "r.npz")
+    assert back.errors == out.errors
+    for f in FIELDS:
+        np.testing.assert_array_equal(getattr(back, f), getattr(out, f), err_msg=f)
+    np.testing.assert_array_equal(back.active, out.active)
+
+
+def test_batch_sizes_come_from_a_few_buckets():
+    # a grid or set of any size up to the chunk uses one of 1, 4, 16, 64 lanes per device
+    assert [batch_size(64, t) for t in (1, 2, 4, 5, 6, 12, 16, 17, 100, 128, 369)] == [1, 4, 4, 16, 16, 16, 16, 64, 64, 64, 64]
+    assert len({batch_size(64, t) for t in range(1, 1000)}) == 4
+    assert batch_size(6, 14) == 6 and batch_size(4096, 369) == 1024  # an explicit chunk caps the bucket
+    assert batch_size(64, 6, n_devices=2) == 8 and batch_size(128, 369, n_devices=2) == 128  # per device: 4, 64
 
 
 def test_errors_are_one_line_before_compiling():
     cube = jaxgrasp.presets.cube()
+    with pytest.raises(GraspValueError, match="no valid grasp to evaluate"):
+        evaluate_batch(GraspSet(grasps=(None,), errors=("grasp 0: bad",)))
     with pytest.raises(GraspValueError, match="non-empty sequence"):
         evaluate_batch([])
     with pytest.raises(GraspValueError, match=r"batch axis: positions \(B, N, 3\)"):

@@ -1,10 +1,11 @@
 """The sharded path over two processes (``jax.distributed``, issue 12, part 6).
 
 Two processes on localhost, one CPU device each, joined by ``jax.distributed.initialize``
-with gloo CPU collectives, run one sweep together (its chunks sharded over both devices,
-each process supplying its own slice, the results gathered to both). Both must get the
-same arrays, equal to ``evaluate`` of every grid point in one process. Cost: both compile
-the sweep's program at once (~25 s on 2 cores).
+with gloo CPU collectives, evaluate one set of grasps with 2 and 3 contacts together
+(``evaluate_batch``: padded to 3, its chunks sharded over both devices, each process
+supplying its own slice, the results gathered to both; sweeps run through the same
+engine). Both must get the same arrays, equal to ``evaluate`` of every grasp in one
+process. Cost: both compile the padded program at once (~25 s on 2 cores).
 """
 
 from __future__ import annotations
@@ -29,9 +30,9 @@ import jax
 jax.config.update("jax_cpu_collectives_implementation", "gloo")
 jax.distributed.initialize(f"127.0.0.1:{port}", 2, i)
 import numpy as np, jaxgrasp
-r = jaxgrasp.sweep(jaxgrasp.presets.cube(), young_modulus=%(E)r, initial_deformation=%(DR)r)
-np.savez(out, **{f: np.asarray(getattr(r, f)) for f in
-                 ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")})
+grasps = [jaxgrasp.presets.cube(young_modulus=e, initial_deformation=d) for e in %(E)r for d in %(DR)r]
+r = jaxgrasp.evaluate_batch(grasps + [jaxgrasp.presets.prism(mass=0.1)])
+np.savez(out, **{f: np.asarray(getattr(r, f)) for f in jaxgrasp.result.FIELDS})
 print("RESULT " + json.dumps({"devices": r.devices, "processes": jax.process_count(),
                              "local_devices": jax.local_device_count()}))
 """ % {"E": E, "DR": DR}
@@ -43,7 +44,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_two_processes_sweep_like_one(tmp_path, evaluate_many):
+def test_two_processes_evaluate_a_set_like_one(tmp_path, evaluate_many):
     port = _free_port()
     env = dict(os.environ, JAXGRASP_CACHE_DIR=str(tmp_path / "cache"), JAX_PLATFORMS="cpu")
     env.pop("XLA_FLAGS", None)  # one CPU device per process
@@ -68,13 +69,15 @@ def test_two_processes_sweep_like_one(tmp_path, evaluate_many):
     for f in z[0]:
         np.testing.assert_array_equal(z[0][f], z[1][f], err_msg=f)  # both processes gathered the same
 
-    base = jaxgrasp.presets.cube()
-    grasps = [base.replace(young_modulus=np.full(2, e), initial_deformation=np.full(2, d)) for e in E for d in DR]
+    grasps = [jaxgrasp.presets.cube(young_modulus=e, initial_deformation=d) for e in E for d in DR]
+    grasps.append(jaxgrasp.presets.prism(mass=0.1))
     for k, ref in enumerate(evaluate_many(grasps)):
-        i, j = divmod(k, len(DR))
-        np.testing.assert_allclose(z[0]["value"][i, j], ref.value, rtol=1e-12, atol=1e-18)
-        np.testing.assert_allclose(z[0]["equilibrium_energy"][i, j], ref.equilibrium_energy, rtol=1e-12)
-        assert z[0]["status"][i, j] == ref.status
-        assert z[0]["limiting_kind"][i, j] == ref.limiting_kind
-        assert z[0]["limiting_contact"][i, j] == ref.limiting_contact
-    assert (z[0]["value"] > 0).all()  # every point stable: the comparison is not of zeros
+        n = grasps[k].num_contacts
+        np.testing.assert_allclose(z[0]["value"][k], ref.value, rtol=1e-12, atol=1e-18)
+        np.testing.assert_allclose(z[0]["equilibrium_energy"][k], ref.equilibrium_energy, rtol=1e-12)
+        np.testing.assert_allclose(z[0]["boundary_energy"][k][:, :n], ref.boundary_energy, rtol=1e-10)
+        assert z[0]["status"][k] == ref.status
+        assert z[0]["limiting_kind"][k] == ref.limiting_kind
+        assert z[0]["limiting_contact"][k] == ref.limiting_contact
+    assert (z[0]["value"] > 0).all()  # every grasp stable: the comparison is not of zeros
+    assert np.isposinf(z[0]["boundary_energy"][:-1, :, 2]).all()  # the cubes' padding contact

@@ -118,8 +118,8 @@ def _assert_same(a: dict, b: dict, rtol: float) -> None:
 
 
 def test_batch_size_is_a_multiple_of_the_devices():
-    assert batch_size(4096, 369, 1) == 369
-    assert batch_size(4096, 369, 2) == 370
+    assert batch_size(4096, 369, 1) == 1024
+    assert batch_size(4096, 369, 2) == 512
     assert batch_size(62, 369, 2) == 62
     assert batch_size(61, 369, 4) == 64
     assert batch_size(4096, 1, 8) == 8
