@@ -1,4 +1,10 @@
-"""The grid points a sweep has finished so far: the checkpoint ``sweep.partial.npz``.
+"""What an interrupted command keeps: a sweep's finished grid points, a batch's finished chunks.
+
+Sweeps: :class:`PartialSweep`, the file ``sweep.partial.npz``. Batches:
+:class:`PartialBatch`, the folder ``results.partial`` (one file per finished chunk, so a
+checkpoint costs the same at every chunk and survives ``kill -9``).
+
+The sweep's checkpoint ``sweep.partial.npz``:
 
 ``jaxgrasp sweep --out DIR`` rewrites ``DIR/sweep.partial.npz`` (atomically, see
 :mod:`jaxgrasp.outputs`) after its chunks, and deletes it once the final
@@ -25,20 +31,21 @@ File format (``np.load(path)``; no pickled objects), ``format`` =
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 
+from . import outputs
+
+from .result import SUMMARY_FIELDS as RESULT_FIELDS
 from .status import BoundaryKind, GraspStatus
 
-__all__ = ["PartialSweep", "FORMAT", "RESULT_FIELDS"]
+__all__ = ["PartialSweep", "PartialBatch", "FORMAT", "BATCH_FORMAT", "RESULT_FIELDS"]
 
 FORMAT = "jaxgrasp-sweep-partial-1"
 """The ``format`` entry of a checkpoint file (changes when its layout does)."""
-
-RESULT_FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
-"""The per-point result arrays, as in :class:`jaxgrasp.SweepResult`."""
-
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class PartialSweep:
@@ -134,3 +141,101 @@ class PartialSweep:
                 grasp={k[len("grasp_") :]: np.array(z[k]) for k in z.files if k.startswith("grasp_")},
                 chunk_size=int(z["chunk_size"]),
             )
+
+
+# --------------------------------------------------------------------------- batches
+
+BATCH_FORMAT = "jaxgrasp-batch-partial-1"
+"""The ``format`` of a batch checkpoint's ``manifest.json`` (changes when its layout does)."""
+
+
+class PartialBatch:
+    """The finished chunks of ``jaxgrasp batch FILE --out DIR``: the folder
+    ``DIR/results.partial``, which ``--resume`` continues.
+
+    Layout (no pickled objects):
+
+    * ``manifest.json``: ``format`` (:data:`BATCH_FORMAT`), ``source`` (the input file),
+      ``source_sha256`` (its bytes' SHA-256: a resumed run must read the same file),
+      ``grasps`` (``B``) and ``num_contacts`` (``N``, the padded contact count);
+    * ``rows-<first>.npz``, one per finished chunk, each written atomically once its
+      chunk is done: ``rows`` (int64, the input indices of its grasps) and every
+      :class:`~jaxgrasp.Evaluation` field for them (leading axis ``len(rows)``, contacts
+      padded to ``N``).
+
+    A chunk file is complete or absent, so a run killed at any moment (even ``kill -9``)
+    keeps every chunk finished before it.
+    """
+
+    MANIFEST = "manifest.json"
+
+    def __init__(self, folder, source: str, source_sha256: str, grasps: int, num_contacts: int):
+        self.folder = Path(folder)
+        self.manifest = {
+            "format": BATCH_FORMAT,
+            "source": str(source),
+            "source_sha256": source_sha256,
+            "grasps": int(grasps),
+            "num_contacts": int(num_contacts),
+        }
+
+    def exists(self) -> bool:
+        """Whether the folder holds a checkpoint (its manifest)."""
+        return (self.folder / self.MANIFEST).is_file()
+
+    def start(self) -> None:
+        """Create the folder and its manifest (a fresh run)."""
+        self.folder.mkdir(exist_ok=True)
+        text = json.dumps(self.manifest, indent=1) + "\n"
+        outputs.write_file(self.folder / self.MANIFEST, text.encode())
+
+    def check(self) -> None:
+        """Raise ``ValueError`` (one line) unless the checkpoint on disk is of this run:
+        same format, input bytes, number of grasps and padded contact count."""
+        path = self.folder / self.MANIFEST
+        try:
+            have = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{path}: not a readable checkpoint ({exc})") from None
+        if not isinstance(have, dict) or have.get("format") != BATCH_FORMAT:
+            raise ValueError(f"{path}: not a jaxgrasp batch checkpoint ({BATCH_FORMAT})")
+        if have.get("source_sha256") != self.manifest["source_sha256"]:
+            raise ValueError(
+                f"{self.folder} was made from other input ({have.get('source')}, whose contents "
+                f"differ from {self.manifest['source']}): remove it to start afresh"
+            )
+        for key in ("grasps", "num_contacts"):
+            if have.get(key) != self.manifest[key]:
+                raise ValueError(f"{path}: {key} {have.get(key)} differs from this run's {self.manifest[key]}")
+
+    def chunk_files(self) -> list[Path]:
+        """The finished chunks' files, in order of their first row."""
+        return sorted(self.folder.glob("rows-*.npz"))
+
+    def load(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Every finished row: ``(rows, results)``, ``rows`` the input indices (int64) and
+        ``results`` each :class:`~jaxgrasp.Evaluation` field for them (empty when no
+        chunk is finished). A chunk file that cannot be read is skipped (recomputed)."""
+        rows, parts = [], []
+        for path in self.chunk_files():
+            try:
+                with np.load(path, allow_pickle=False) as z:
+                    part = {k: np.array(z[k]) for k in z.files}
+            except (OSError, ValueError, EOFError):
+                continue
+            rows.append(part.pop("rows"))
+            parts.append(part)
+        if not rows:
+            return np.zeros(0, dtype=np.int64), {}
+        return np.concatenate(rows), {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    def save_rows(self, rows: np.ndarray, results: Mapping[str, np.ndarray]) -> None:
+        """Keep one finished chunk: input ``rows`` and their ``results`` (by field), atomically."""
+        arrays = {"rows": np.asarray(rows, dtype=np.int64), **{k: np.asarray(v) for k, v in results.items()}}
+        outputs.write_file(self.folder / f"rows-{int(arrays['rows'][0]):09d}.npz", lambda fh: np.savez(fh, **arrays))
+
+    def files(self) -> list[Path]:
+        """Every file of the checkpoint (to remove once the final results are written),
+        with the temporary files a killed run may have left (``*.tmp``: never complete)."""
+        stale = sorted(self.folder.glob("*" + outputs.TEMP_SUFFIX))
+        return self.chunk_files() + [self.folder / self.MANIFEST] + stale

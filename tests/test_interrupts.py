@@ -395,3 +395,89 @@ def test_out_under_a_file_fails_before_computing(command, tmp_path, monkeypatch,
     assert err.count("\n") == 1 and err.startswith("jaxgrasp: error: --out"), err
     assert "is a file, not a folder" in err and str(blocker) in err
     assert blocker.read_text() == "not a folder"
+
+
+# ----------------------------------------------------------------------------- batch (issue 12, item 5)
+
+BATCH_TOTAL = 48  # with --chunk-size 3: 16 chunks of the sweeps' compiled program (2 contacts, batch 3)
+
+
+@pytest.fixture(scope="module")
+def batch_file(tmp_path_factory) -> Path:
+    """48 cube grasps (6 E x 8 dr) in a ``.jsonl`` dataset."""
+    path = tmp_path_factory.mktemp("batch") / "cubes.jsonl"
+    cube = jaxgrasp.presets.cube
+    grasps = [
+        cube(young_modulus=float(e), initial_deformation=float(d))
+        for e in np.linspace(2e5, 1e6, 6)
+        for d in np.linspace(1e-3, 4.9e-3, 8)
+    ]
+    jaxgrasp.save_batch(path, grasps)
+    return path
+
+
+def _batch(path: Path, out: Path, *extra) -> list[str]:
+    return _jaxgrasp("batch", path, "--out", out, "--chunk-size", "3", *extra)
+
+
+def _chunk_files(out: Path) -> dict[str, tuple[int, bytes]]:
+    """The checkpoint's chunk files: name -> (inode, bytes)."""
+    return {p.name: (p.stat().st_ino, p.read_bytes()) for p in sorted((out / "results.partial").glob("rows-*.npz"))}
+
+
+def _kept_rows(files: dict) -> int:
+    import io
+
+    return sum(np.load(io.BytesIO(data))["rows"].size for _, data in files.values())
+
+
+def test_batch_killed_and_resumed_equals_an_uninterrupted_run(sweep_cache, batch_file, tmp_path):
+    """Issue 12, item 5: ``kill -9`` after the first chunk, SIGTERM in the resumed run,
+    then ``--resume`` again. Every finished chunk stays on disk untouched (not recomputed)
+    and the final files equal those of a run that was never interrupted."""
+    out, env = tmp_path / "out", _env(sweep_cache)
+    killed = Run(_batch(batch_file, out), env)
+    killed.wait_for(r"^jaxgrasp: chunk 1/16 \(3/48 grasps\)")  # its chunk file is written before this line
+    killed.proc.kill()
+    killed.proc.wait()
+    killed._timer.cancel()
+    assert killed.proc.returncode == -signal.SIGKILL
+    first = _chunk_files(out)
+    kept1 = _kept_rows(first)
+    assert 3 <= kept1 < BATCH_TOTAL and kept1 % 3 == 0, kept1
+    assert not (out / "results.csv").exists()
+
+    second = Run(_batch(batch_file, out, "--resume"), env)
+    assert f"resuming: {kept1} of 48 grasps were finished" in second.wait_for(r"^jaxgrasp: resuming: ")
+    second.wait_for(rf"^jaxgrasp: evaluating {BATCH_TOTAL - kept1} grasps ")  # only those not kept
+    second.wait_for(r"^jaxgrasp: chunk 1/")
+    rc, dt, after, stdout = second.interrupt(signal.SIGTERM)
+    line = _assert_one_line(rc, dt, after, expect_rc=143, word="terminated")
+    m = re.fullmatch(
+        rf"jaxgrasp: terminated; kept (\d+) of 48 grasps in {re.escape(str(out / 'results.partial'))}; "
+        "the same command with --resume finishes the rest",
+        line,
+    )
+    assert m, line
+    kept2 = int(m[1])
+    now = _chunk_files(out)
+    assert {k: now[k] for k in first} == first  # the killed run's chunks: same files, same bytes
+    assert _kept_rows(now) == kept2 and kept1 + 3 <= kept2 < BATCH_TOTAL, (kept1, kept2)
+
+    rc, stdout, stderr = Run(_batch(batch_file, out, "--resume"), env).finish()
+    assert rc == 0, stderr[-3000:]
+    assert f"resuming: {kept2} of 48 grasps were finished" in stderr
+    assert f"; {kept2} resumed from the checkpoint)" in stdout, stdout
+    assert _listing(out) == {"results.csv", "results.npz", "results.png"}  # no checkpoint, *.tmp or lock
+
+    rc, _, stderr = Run(_batch(batch_file, tmp_path / "ref", "--quiet"), env).finish()
+    assert rc == 0, stderr[-3000:]
+    got = jaxgrasp.BatchResult.from_npz(out / "results.npz")
+    ref = jaxgrasp.BatchResult.from_npz(tmp_path / "ref" / "results.npz")
+    for f in jaxgrasp.result.FIELDS:
+        a, b = getattr(got, f), getattr(ref, f)
+        if np.issubdtype(a.dtype, np.floating):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=0, err_msg=f)
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=f)
+    assert len(set(got.status_names)) >= 2  # the set has more than one status

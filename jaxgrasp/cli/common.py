@@ -9,7 +9,11 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
+import time
+from pathlib import Path
 
+from .. import outputs
 from ..fields import FIELD, SWEEPABLE
 from ..presets import PRESETS
 
@@ -24,6 +28,11 @@ __all__ = [
     "grasp_source",
     "grasp_notes",
     "load_grasp",
+    "check_out",
+    "lock_out",
+    "replaced_text",
+    "ChunkProgress",
+    "say",
 ]
 
 EXIT_USAGE = 2
@@ -141,3 +150,80 @@ def _check_override(name: str, value: float) -> None:
         raise UsageError(f"{text}: {name} must be finite")
     if not field.allows(np.float64(value)):
         raise UsageError(f"{text}: {name} must be {field.rule}" + (f" ({field.unit})" if field.unit else ""))
+
+
+# --------------------------------------------------------------------------- output folders
+
+
+def check_out(out: Path) -> None:
+    """``--out`` must be a folder (existing or not) where files can be created."""
+    try:
+        outputs.check_writable(out)
+    except outputs.OutputError as exc:
+        raise UsageError(f"--out: {exc}") from None
+
+
+def lock_out(out: Path) -> outputs.FolderLock:
+    """The lock of ``--out`` (created if needed), held; a one-line error if another run holds it."""
+    lock = outputs.FolderLock(out)
+    try:
+        return lock.acquire()
+    except outputs.FolderBusy as exc:
+        raise UsageError(f"--out: {exc}") from None
+    except OSError as exc:
+        raise UsageError(f"cannot create --out folder {str(out)!r}: {exc.strerror or exc}") from None
+
+
+def replaced_text(replaced, removed) -> str:
+    """`` (replacing the previous sweep.npz, ...; removing the previous sweep.png)`` or ''."""
+    parts = [f"{verb} the previous {', '.join(names)}" for verb, names in (("replacing", replaced), ("removing", removed)) if names]
+    return f" ({'; '.join(parts)})" if parts else ""
+
+
+# --------------------------------------------------------------------------- progress
+
+
+def say(line: str) -> None:
+    """One progress or note line on stderr, at once."""
+    print(line, file=sys.stderr, flush=True)
+
+
+class ChunkProgress:
+    """``progress(done, total)`` of the batched engine: a line before the first chunk and
+    one per chunk on stderr (``jaxgrasp: chunk 2/8 (6/24 points), elapsed 3.1 s, about
+    4 s left``); the time left is estimated from the chunks after the first, which
+    includes the compilation. Silent unless ``show``."""
+
+    def __init__(self, verb: str, noun: str, total: int, chunk: int, n_devices: int = 1, show: bool = True):
+        self.verb, self.noun, self.total, self.chunk, self.show = verb, noun, total, chunk, show
+        self.nchunks = math.ceil(total / chunk)
+        self.n_devices = n_devices
+        self.t_start = time.perf_counter()
+        self._first: tuple[int, float] | None = None  # (done, time) after the first chunk
+
+    def start(self) -> None:
+        """The line before the first chunk (how many items, chunks and devices)."""
+        self.t_start = time.perf_counter()
+        if self.show:
+            on = f" on {self.n_devices} devices" if self.n_devices > 1 else ""
+            say(
+                f"jaxgrasp: {self.verb} {self.total} {self.noun}s in {self.nchunks} chunks of {self.chunk}{on} "
+                "(the first chunk includes compilation)"
+            )
+
+    def __call__(self, done: int, total: int) -> None:
+        now = time.perf_counter()
+        if self._first is None:
+            self._first = (done, now)
+            left = "time left known after the next chunk" if done < total else "done"
+        elif done < total:
+            rate = (done - self._first[0]) / max(now - self._first[1], 1e-9)
+            left = f"about {math.ceil((total - done) / rate)} s left"
+        else:
+            left = "done"
+        if self.show:
+            k = math.ceil(done / self.chunk)
+            say(
+                f"jaxgrasp: chunk {k}/{self.nchunks} ({done}/{total} {self.noun}s), "
+                f"elapsed {now - self.t_start:.1f} s, {left}"
+            )

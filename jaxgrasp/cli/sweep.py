@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import threading
 import time
 from pathlib import Path
@@ -27,7 +26,18 @@ from .. import outputs
 from ..fields import FIELD
 from ..status import NO_BOUNDARY
 from ..validation import counted
-from .common import OVERRIDES, UsageError, add_grasp_source, grasp_source, load_grasp, parse_number
+from .common import (
+    OVERRIDES,
+    ChunkProgress,
+    UsageError,
+    add_grasp_source,
+    check_out,
+    grasp_source,
+    load_grasp,
+    lock_out,
+    parse_number,
+    replaced_text,
+)
 
 __all__ = ["add_parser", "run", "parse_axis_spec", "auto_chunk", "AXES", "PAPER_AXES"]
 
@@ -137,10 +147,11 @@ def add_parser(sub) -> None:
 
 
 def auto_chunk(total: int, cap: int = 64) -> int:
-    """About a tenth of the grid, at least 64, at most ``cap`` (jaxgrasp.sweep.default_chunk_size)."""
-    chunk = min(cap, max(MIN_AUTO_CHUNK, math.ceil(total / AUTO_CHUNKS)))
-    nchunks = math.ceil(total / chunk)
-    return max(1, math.ceil(total / nchunks))  # same number of chunks, least padding
+    """About a tenth of the grid, at least 64, at most ``cap`` (jaxgrasp.sweep.default_chunk_size),
+    as a batch bucket (:func:`jaxgrasp.batch.batch_size`), so that sweeps share compilations."""
+    from ..batch import batch_size
+
+    return batch_size(cap, max(MIN_AUTO_CHUNK, math.ceil(total / AUTO_CHUNKS)))
 
 
 # --------------------------------------------------------------------------- the command
@@ -156,12 +167,12 @@ def run(args) -> int:
     grasp = load_grasp(args, overrides=False)
     check_inputs(grasp, chunk_size=args.chunk_size, **axes)  # bad input: nothing touched yet
     out = Path(args.out)
-    _check_out(out)
+    check_out(out)
 
     plan = _plan_chunks(int(np.prod([a.size for a in axes.values()])), args.chunk_size)
-    with _lock_out(out):
+    with lock_out(out):
         checkpoint = _Checkpoint(out / PARTIAL_NAME, grasp, axes, plan.chunk)
-        progress = _Progress(plan, show=not args.quiet and plan.nchunks > 1)
+        progress = ChunkProgress("sweeping", "point", plan.total, plan.chunk, plan.n_devices, not args.quiet and plan.nchunks > 1)
         progress.start()
         result = sweep(grasp, chunk_size=plan.chunk, progress=progress, on_chunk=checkpoint, **axes)
         wall = time.perf_counter() - progress.t_start
@@ -172,25 +183,6 @@ def run(args) -> int:
         written, replaced, removed = _write_outputs(result, out, None if args.no_plot else title)
     print(_summary_line(result, grasp_source(args), wall, out, written, replaced, removed))
     return 0
-
-
-def _check_out(out: Path) -> None:
-    """``--out`` must be a folder (existing or not) where files can be created."""
-    try:
-        outputs.check_writable(out)
-    except outputs.OutputError as exc:
-        raise UsageError(f"--out: {exc}") from None
-
-
-def _lock_out(out: Path) -> outputs.FolderLock:
-    """The lock of ``--out`` (created if needed), held; a one-line error if another run holds it."""
-    lock = outputs.FolderLock(out)
-    try:
-        return lock.acquire()
-    except outputs.FolderBusy as exc:
-        raise UsageError(f"--out: {exc}") from None
-    except OSError as exc:
-        raise UsageError(f"cannot create --out folder {str(out)!r}: {exc.strerror or exc}") from None
 
 
 def _parse_axes(args) -> tuple[dict[str, np.ndarray], bool]:
@@ -219,36 +211,6 @@ def _plan_chunks(total: int, chunk_size: int | None) -> _Plan:
     n_devices = jax.device_count()
     chunk = batch_size(chunk, total, n_devices)
     return _Plan(total, chunk, math.ceil(total / chunk), n_devices)
-
-
-class _Progress:
-    """``progress(done, total)`` of :func:`jaxgrasp.sweep.sweep`: one line per chunk on stderr."""
-
-    def __init__(self, plan: _Plan, show: bool):
-        self.plan = plan
-        self.show = show
-        self.t_start = time.perf_counter()
-
-    def start(self) -> None:
-        """The line before the first chunk (how many points, chunks and devices)."""
-        self.t_start = time.perf_counter()
-        if self.show:
-            p = self.plan
-            on = f" on {p.n_devices} devices" if p.n_devices > 1 else ""
-            self._say(
-                f"jaxgrasp: sweeping {p.total} points in {p.nchunks} chunks of {p.chunk}{on} "
-                "(the first chunk includes compilation)"
-            )
-
-    def __call__(self, done: int, total: int) -> None:
-        if self.show:
-            k = math.ceil(done / self.plan.chunk)
-            el = time.perf_counter() - self.t_start
-            self._say(f"jaxgrasp: chunk {k}/{self.plan.nchunks} ({done}/{total} points), elapsed {el:.1f} s")
-
-    @staticmethod
-    def _say(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
 
 
 class _Checkpoint:
@@ -361,11 +323,5 @@ def _summary_line(
         f"not_converged {c['not_converged']}; {_best_text(result)}; "
         f"wall {wall:.1f} s (compile {result.compile_seconds:.1f} s, run {result.run_seconds:.1f} s); "
         f"wrote {out}/{{{','.join(written)}}}"
-        + _replaced_text(replaced, removed)
+        + replaced_text(replaced, removed)
     )
-
-
-def _replaced_text(replaced, removed) -> str:
-    """`` (replacing the previous sweep.npz, ...; removing the previous sweep.png)`` or ''."""
-    parts = [f"{verb} the previous {', '.join(names)}" for verb, names in (("replacing", replaced), ("removing", removed)) if names]
-    return f" ({'; '.join(parts)})" if parts else ""
