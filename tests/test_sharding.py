@@ -2,15 +2,16 @@
 
 JAX fixes its device count when it starts, so every sweep here runs in a subprocess:
 ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` gives two CPU devices. Compiling
-costs about a minute on a 2-core machine, so the grid is tiny (2 E x 3 dr, 6 points) and
-the 1-device and 2-device processes run side by side.
+costs about a minute on a 2-core machine, so the grid is tiny (2 E x 3 dr, 6 points); the
+one-device reference is ``evaluate`` of each point in this process (the session's
+``evaluate_many``, compiled already).
 
 Checked:
 
 * with 2 devices the sweep's compiled input/output shardings span both devices and the
   result records ``devices == 2``;
-* its values, statuses and limiting boundaries equal a 1-device sweep of the same grid
-  (statuses exactly, energies to 1e-12 relative);
+* its values, statuses and limiting boundaries equal ``evaluate`` of every grid point on
+  one device (statuses exactly, energies to 1e-12 relative);
 * a later process with the same cache folders deserializes the exported program instead
   of tracing (``jax.export``) and gives bit-identical results; a corrupt file falls back
   to tracing, again with identical results.
@@ -34,6 +35,8 @@ import pytest
 from jaxgrasp.sweep import batch_size
 
 FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
+E = (2e5, 1e6)  # Pa: the worker's grid
+DR = (1e-3, 3e-3, 4.9e-3)  # m
 
 WORKER = textwrap.dedent(
     r"""
@@ -53,8 +56,8 @@ WORKER = textwrap.dedent(
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     if cfg.get("export_dir"):
         cache.set_export_dir(cfg["export_dir"])
-    E = np.array([2e5, 1e6])
-    DR = np.array([1e-3, 3e-3, 4.9e-3])
+    E = np.array(%(E)r)
+    DR = np.array(%(DR)r)
     out = {"device_count": jax.device_count(), "runs": []}
     for k, step in enumerate(cfg["steps"]):
         if step == "corrupt":
@@ -80,7 +83,7 @@ WORKER = textwrap.dedent(
         })
     print("RESULT " + json.dumps(out))
     """
-    % {"fields": FIELDS}
+    % {"fields": FIELDS, "E": E, "DR": DR}
 )
 
 
@@ -129,19 +132,14 @@ def test_batch_size_is_a_multiple_of_the_devices():
 def runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("sharding")
     cache = {"xla_cache": str(tmp / "xla"), "export_dir": str(tmp / "xla" / "jaxgrasp-export")}
-    # side by side: a plain 1-device sweep (traced, no caches) and a 2-device one that
-    # exports its program and fills the caches
-    one = _start(1, {"steps": ["sweep"], "out": str(tmp / "one")})
-    two = _start(2, {"steps": ["sweep"], "out": str(tmp / "two"), **cache})
-    r_one, r_two = _finish(one), _finish(two)
+    # a 2-device sweep that exports its program and fills the caches
+    r_two = _finish(_start(2, {"steps": ["sweep"], "out": str(tmp / "two"), **cache}))
     # a later process: loads the exported program, then falls back after corruption
     again = _finish(_start(2, {"steps": ["sweep", "corrupt", "sweep"], "out": str(tmp / "again"), **cache}))
-    return {"tmp": tmp, "one": r_one, "two": r_two, "again": again}
+    return {"tmp": tmp, "two": r_two, "again": again}
 
 
 def test_two_devices_are_used(runs):
-    assert runs["one"]["device_count"] == 1
-    assert runs["one"]["runs"][0]["devices"] == 1
     assert runs["two"]["device_count"] == 2
     run = runs["two"]["runs"][0]
     assert run["devices"] == 2
@@ -149,11 +147,14 @@ def test_two_devices_are_used(runs):
     assert run["stats"]["traced"] == 1
 
 
-def test_two_devices_equal_one_device(runs):
-    tmp = runs["tmp"]
-    _assert_same(_load(str(tmp / "two"), 0), _load(str(tmp / "one"), 0), rtol=1e-12)
-    status = _load(str(tmp / "one"), 0)["status"]
-    assert len(np.unique(status)) >= 2  # the tiny grid has more than one status
+def test_two_devices_equal_one_device(runs, evaluate_many):
+    import jaxgrasp
+
+    grasps = [jaxgrasp.presets.cube(young_modulus=e, initial_deformation=d) for e in E for d in DR]
+    refs = evaluate_many(grasps)
+    one = {f: np.reshape([np.asarray(getattr(r, f)) for r in refs], (len(E), len(DR))) for f in FIELDS}
+    _assert_same(_load(str(runs["tmp"] / "two"), 0), one, rtol=1e-12)
+    assert len(np.unique(one["status"])) >= 2  # the tiny grid has more than one status
 
 
 def test_exported_program_is_reused_bit_for_bit(runs):

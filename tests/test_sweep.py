@@ -237,7 +237,7 @@ def test_cli_sweep_writes_files(run_cli, tmp_path, cube_sweep):
     out = tmp_path / "out"
     rc, stdout, stderr = run_cli(
         "sweep", "--preset", "cube", "--young-modulus", "2e5,6e5", "--initial-deformation", "1e-3:3e-3:3",
-        "--out", str(out),
+        "--out", str(out), "--chunk-size", str(CHUNK),  # the module's compiled program
     )
     assert rc == 0, stderr
     assert stderr == ""  # one chunk: no progress lines
