@@ -22,7 +22,7 @@ import jax
 import numpy as np
 
 from . import outputs
-from .result import FIELDS, Evaluation
+from .result import FIELDS, Evaluation, SummaryNames
 from .status import BoundaryKind, GraspStatus
 
 __all__ = ["BatchResult", "CSV_COLUMNS", "invalid_fill"]
@@ -50,7 +50,7 @@ def invalid_fill(a: np.ndarray) -> np.ndarray:
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class BatchResult:
+class BatchResult(SummaryNames):
     """The evaluation of ``B`` grasps, in input order (SI units).
 
     Every :class:`~jaxgrasp.Evaluation` field is an attribute with a leading ``B`` axis
@@ -89,21 +89,7 @@ class BatchResult:
         """Grasp ``i``'s :class:`~jaxgrasp.Evaluation` (contacts numbered as in the batch)."""
         return jax.tree_util.tree_map(lambda a: a[i], self.evaluation)
 
-    # ---- names and counts
-    @property
-    def status_names(self) -> np.ndarray:
-        """``(B,)`` status names (``'stable'``, ..., ``'invalid'``)."""
-        return GraspStatus.names_of(self.status)
-
-    @property
-    def limiting_kind_names(self) -> np.ndarray:
-        """``(B,)`` limiting boundary names (``'slip'``, ``'max_force'``, ``'none'``)."""
-        return BoundaryKind.names_of(self.limiting_kind)
-
-    def counts(self) -> dict[str, int]:
-        """Number of grasps of each status, by name."""
-        return GraspStatus.count(self.status)
-
+    # ---- ranking
     def rank(self) -> np.ndarray:
         """Grasp indices, best first: stable grasps by value (highest first), then
         unstable and infeasible ones (value 0), then not_converged ones (untrusted) by

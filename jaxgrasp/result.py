@@ -13,6 +13,7 @@ from .status import NO_BOUNDARY, BoundaryKind, Constraint, GraspStatus, LaneStat
 
 __all__ = [
     "Evaluation",
+    "SummaryNames",
     "SUMMARY_FIELDS",
     "FIELDS",
     "STATUS_NAMES",
@@ -211,6 +212,25 @@ FIELDS = tuple(f.name for f in dataclasses.fields(Evaluation))
 SUMMARY_FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
 """The five numbers that summarise a grasp's evaluation (the columns of sweep and batch
 tables): value (J), status, limiting kind and contact, equilibrium energy (J)."""
+
+
+class SummaryNames:
+    """Names and counts of the codes of a result with ``status`` and ``limiting_kind``
+    arrays of any shape (:class:`jaxgrasp.SweepResult`, :class:`jaxgrasp.BatchResult`)."""
+
+    @property
+    def status_names(self) -> np.ndarray:
+        """``status`` as an array of names (``'stable'``, ..., ``'invalid'``), same shape."""
+        return GraspStatus.names_of(self.status)
+
+    @property
+    def limiting_kind_names(self) -> np.ndarray:
+        """``limiting_kind`` as an array of names (``'slip'``, ``'max_force'``, ``'none'``)."""
+        return BoundaryKind.names_of(self.limiting_kind)
+
+    def counts(self) -> dict[str, int]:
+        """Number of entries of each status, by name."""
+        return GraspStatus.count(self.status)
 
 
 def _check_energy(name: str, value, nonnegative: bool) -> None:

@@ -57,7 +57,7 @@ from .batch import (
 from .evaluate import EvaluateOptions
 from .fields import FIELD, SWEEPABLE, Field
 from .grasp import Grasp
-from .result import SUMMARY_FIELDS
+from .result import SUMMARY_FIELDS, SummaryNames
 from .status import BoundaryKind, GraspStatus
 from .validation import GraspValueError, as_float_array, check_grasp_inputs, format_value
 
@@ -94,7 +94,7 @@ def column_name(name: str) -> str:
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class SweepResult:
+class SweepResult(SummaryNames):
     """Evaluation of a grasp over a parameter grid (SI units); a JAX pytree.
 
     Every array is shaped like the grid, ``(len(ax1), len(ax2), ...)``, in the order the
@@ -145,24 +145,10 @@ class SweepResult:
         """Number of grid points."""
         return int(np.prod(self.shape, dtype=np.int64))
 
-    @property
-    def status_names(self) -> np.ndarray:
-        """``status`` as an array of names (``'stable'``, ...)."""
-        return GraspStatus.names_of(self.status)
-
-    @property
-    def limiting_kind_names(self) -> np.ndarray:
-        """``limiting_kind`` as an array of names (``'slip'``, ``'max_force'``, ``'none'``)."""
-        return BoundaryKind.names_of(self.limiting_kind)
-
     def grid(self) -> dict[str, np.ndarray]:
         """Each axis' value at every grid point: dict name -> array shaped like the grid."""
         mesh = np.meshgrid(*self.axes.values(), indexing="ij") if self.axes else []
         return dict(zip(self.axes, mesh))
-
-    def counts(self) -> dict[str, int]:
-        """Number of grid points of each status, by name."""
-        return GraspStatus.count(self.status)
 
     def best(self) -> dict | None:
         """The grid point of highest value among trusted results (not ``not_converged``).
