@@ -47,6 +47,7 @@ from .result import (  # noqa: E402
 from .solver import SolverOptions  # noqa: E402
 from .batch import evaluate_batch  # noqa: E402
 from .batch_result import BatchResult  # noqa: E402
+from .ferrari_canny import EpsilonResult, epsilon  # noqa: E402
 from .sweep import PARAMETERS, SweepResult, sweep  # noqa: E402
 from .tune import TuneResult, tune  # noqa: E402
 from .validation import GraspValueError  # noqa: E402
@@ -84,6 +85,8 @@ __all__ = [
     "BatchResult",
     "sweep",
     "SweepResult",
+    "epsilon",
+    "EpsilonResult",
     "PARAMETERS",
     "tune",
     "TuneResult",
