@@ -100,25 +100,28 @@ class BatchResult(SummaryNames):
         return np.lexsort((np.arange(len(self)), -value, group))
 
     # ---- tables and files
-    def rows(self) -> list[list]:
-        """The rows of :meth:`to_csv` (:data:`CSV_COLUMNS`), in input order; an invalid
-        grasp's numbers are empty strings."""
+    def rows(self, extra: Mapping[str, Any] | None = None) -> list[list]:
+        """The rows of :meth:`to_csv` (:data:`CSV_COLUMNS`, then the ``extra`` columns), in
+        input order; an invalid grasp's numbers are empty strings."""
         value, energy = np.asarray(self.value), np.asarray(self.equilibrium_energy)
         status, kind = self.status_names, self.limiting_kind_names
         contact, count = np.asarray(self.limiting_contact), np.asarray(self.num_contacts)
-        fmt = lambda x: "" if np.isnan(x) else repr(float(x))
+        extra = [np.asarray(a) for a in (extra or {}).values()]
+        fmt = outputs.csv_cell
         return [
             [i, int(count[i]), fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i]), self.errors[i] or ""]
+            + [fmt(a[i]) for a in extra]
             for i in range(len(self))
         ]
 
-    def to_csv(self, path) -> None:
+    def to_csv(self, path, extra: Mapping[str, Any] | None = None) -> None:
         """Write one row per grasp, in input order (:data:`CSV_COLUMNS`): ``value_J`` and
         ``equilibrium_energy_J`` with 17 significant digits (empty for an invalid grasp),
         ``status`` and ``limiting_kind`` by name, ``limiting_contact`` (-1 none) and
-        ``error`` (empty for a valid grasp). Atomic for a path; a binary file object is
+        ``error`` (empty for a valid grasp); then a column per ``extra`` entry (name ->
+        ``(B,)`` array, e.g. ``epsilon``). Atomic for a path; a binary file object is
         written to directly."""
-        outputs.write_to(path, outputs.csv_content(CSV_COLUMNS, self.rows()))
+        outputs.write_to(path, outputs.csv_content(CSV_COLUMNS + tuple(extra or ()), self.rows(extra)))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Every array of :meth:`to_npz`, by name."""
@@ -135,12 +138,13 @@ class BatchResult(SummaryNames):
         )
         return out
 
-    def to_npz(self, path) -> None:
+    def to_npz(self, path, extra: Mapping[str, Any] | None = None) -> None:
         """Write a ``.npz`` with every :class:`~jaxgrasp.Evaluation` field (leading ``B``),
         ``num_contacts``, ``active``, ``error`` (str, empty for a valid grasp),
-        ``status_names``, ``kind_names``, the timings and ``devices``; no pickled
-        objects. Atomic for a path; read it back with :meth:`from_npz`."""
-        arrays = self.arrays()
+        ``status_names``, ``kind_names``, the timings, ``devices`` and the ``extra``
+        arrays by name; no pickled objects. Atomic for a path; read it back with
+        :meth:`from_npz`."""
+        arrays = self.arrays() | {k: np.asarray(v) for k, v in (extra or {}).items()}
         outputs.write_to(path, lambda fh: np.savez(fh, **arrays))
 
     @classmethod

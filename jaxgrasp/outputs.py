@@ -28,6 +28,8 @@ import threading
 from pathlib import Path
 from typing import Any, BinaryIO, Callable, Iterable, Mapping, Sequence, Union
 
+import numpy as np
+
 __all__ = [
     "OutputError",
     "FolderBusy",
@@ -38,6 +40,7 @@ __all__ = [
     "write_file",
     "write_to",
     "csv_content",
+    "csv_cell",
     "write_set",
     "FolderLock",
     "set_note",
@@ -256,6 +259,16 @@ def write_to(target, content: Content) -> None:
         target.write(content) if isinstance(content, bytes) else content(target)
     else:
         write_file(target, content)
+
+
+def csv_cell(x) -> str:
+    """A number as a CSV cell: floats with 17 significant digits (they read back exactly;
+    NaN as an empty cell), booleans ``True``/``False``, integers as they are."""
+    if isinstance(x, (bool, np.bool_)):
+        return str(bool(x))
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    return "" if np.isnan(x) else repr(float(x))
 
 
 def csv_content(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> Callable[[BinaryIO], None]:

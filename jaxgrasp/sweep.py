@@ -64,6 +64,7 @@ from .validation import GraspValueError, as_float_array, check_grasp_inputs, for
 __all__ = [
     "sweep",
     "check_inputs",
+    "grid_grasp",
     "SweepResult",
     "PARAMETERS",
     "DEFAULT_CHUNK_SIZE",
@@ -198,7 +199,7 @@ class SweepResult(SummaryNames):
         return reduced, np.asarray(self.axes[name])[arg]
 
     # ---- files
-    def to_csv(self, path) -> None:
+    def to_csv(self, path, extra: Mapping[str, Any] | None = None) -> None:
         """Write a tidy CSV to ``path``: one row per grid point (C order: last axis fastest).
 
         ``path`` is written atomically (a temporary file renamed into place, see
@@ -208,15 +209,18 @@ class SweepResult(SummaryNames):
         Columns: each axis with its SI unit (``young_modulus_Pa``, ``initial_deformation_m``,
         ``mass_kg``, ``friction``, ``max_force_N``, ``radius_m``), then ``value_J``,
         ``status`` (name), ``limiting_kind`` (``slip``/``max_force``/``none``),
-        ``limiting_contact`` (-1 for none) and ``equilibrium_energy_J``. Floats are
-        written with 17 significant digits (they read back exactly).
+        ``limiting_contact`` (-1 for none) and ``equilibrium_energy_J``, then a column per
+        ``extra`` entry (name -> grid-shaped array, e.g. ``epsilon``). Floats are written
+        with 17 significant digits (they read back exactly).
         """
+        extra = {k: np.asarray(v).ravel() for k, v in (extra or {}).items()}
         cols = [column_name(n) for n in self.axes] + [
             column_name("value"),
             "status",
             "limiting_kind",
             "limiting_contact",
             column_name("equilibrium_energy"),
+            *extra,
         ]
         flat = [g.ravel() for g in self.grid().values()]
         value = np.asarray(self.value).ravel()
@@ -224,16 +228,19 @@ class SweepResult(SummaryNames):
         kind = self.limiting_kind_names.ravel()
         contact = np.asarray(self.limiting_contact).ravel()
         energy = np.asarray(self.equilibrium_energy).ravel()
-        fmt = lambda x: repr(float(x))
+        fmt = outputs.csv_cell
         rows = (
-            [fmt(g[i]) for g in flat] + [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
+            [fmt(g[i]) for g in flat]
+            + [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
+            + [fmt(a[i]) for a in extra.values()]
             for i in range(value.size)
         )
         outputs.write_to(path, outputs.csv_content(cols, rows))
 
-    def to_npz(self, path) -> None:
+    def to_npz(self, path, extra: Mapping[str, Any] | None = None) -> None:
         """Write a ``.npz``: ``axis_names``, ``axis_<name>`` (1-D, SI), the grid-shaped
-        result arrays, ``status_names``, ``kind_names``, the timings and ``devices``.
+        result arrays, ``status_names``, ``kind_names``, the timings, ``devices`` and the
+        ``extra`` arrays by name (e.g. ``epsilon``).
 
         Read it back with :meth:`from_npz`. No pickled objects (``allow_pickle=False``).
         ``path`` gets the suffix ``.npz`` if it has none (as ``np.savez``) and is written
@@ -251,6 +258,7 @@ class SweepResult(SummaryNames):
             arrays[f"axis_{n}"] = np.asarray(a, dtype=np.float64)
         for f in _RESULT_FIELDS:
             arrays[f] = np.asarray(getattr(self, f))
+        arrays.update({k: np.asarray(v) for k, v in (extra or {}).items()})
         if not hasattr(path, "write"):
             path = os.fspath(path)
             path = path if path.endswith(".npz") else path + ".npz"
@@ -412,10 +420,7 @@ def sweep(
     fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices)
     sharding = NamedSharding(_mesh(devices), P("batch"))
 
-    # the grasp's own values (not the validated copies, whose normals are re-normalised),
-    # so that every grid point is exactly the grasp evaluate() would see
-    raw = grasp.to_numpy()
-    own = {k: np.broadcast_to(np.asarray(raw[k], dtype=np.float64), v.shape) for k, v in base.items()}
+    own = _own_fields(grasp, base)
     shape = tuple(a.size for a in axes.values())
     outs, run_seconds = run_chunks(
         fn, lambda start: _chunk_fields(own, axes, start, chunk), grasp_fields(False), total, chunk, sharding,
@@ -428,6 +433,26 @@ def sweep(
         run_seconds=run_seconds,
         devices=len(devices),
     )
+
+
+def grid_grasp(grasp: Grasp, /, **axes) -> Grasp:
+    """Every grid point of ``sweep(grasp, **axes)`` as one batched :class:`Grasp` (leading
+    axis: the points in C order, last axis fastest), e.g. to compute another metric on the
+    same grid (``jaxgrasp.epsilon(grid_grasp(...))``).
+
+    Raises:
+        GraspValueError: as :func:`sweep` (one line).
+    """
+    base, checked = _check_inputs(grasp, None, axes)
+    total = int(math.prod(a.size for a in checked.values()))
+    return Grasp(**_chunk_fields(_own_fields(grasp, base), checked, 0, total))
+
+
+def _own_fields(grasp: Grasp, base: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The grasp's own values (not the validated copies, whose normals are re-normalised),
+    so that every grid point is exactly the grasp evaluate() would see."""
+    raw = grasp.to_numpy()
+    return {k: np.broadcast_to(np.asarray(raw[k], dtype=np.float64), v.shape) for k, v in base.items()}
 
 
 def check_inputs(grasp: Grasp, /, *, chunk_size: int | None = None, **axes) -> None:

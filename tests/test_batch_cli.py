@@ -172,3 +172,23 @@ def test_a_file_of_invalid_grasps_is_one_line(run_cli, tmp_path):
     path.write_text('{"contacts": []}\n')
     rc, _, err = run_cli(["batch", path, "--out", tmp_path / "o"])
     assert rc == 2 and err.count("\n") == 1 and "no valid grasp (1 invalid; first: grasp 0 (line 1)" in err, err
+
+
+def test_epsilon_columns(dataset, run_cli, tmp_path):
+    """``--epsilon`` appends ``epsilon`` and ``force_closure`` (issue 15): jaxgrasp.epsilon of
+    each valid grasp, empty and False for the invalid one."""
+    out = tmp_path / "o"
+    rc, _, err = run_cli(["batch", dataset, "--out", out, "--chunk-size", "2", "--epsilon", "--no-plot", "--quiet"])
+    assert rc == 0, err
+    with open(out / "results.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0])[-3:] == ["error", "epsilon", "force_closure"]
+    grasps = _grasps()
+    for row, g in zip([r for r in rows if r["status"] != "invalid"], grasps):
+        eps = jaxgrasp.epsilon(g)
+        assert float(row["epsilon"]) == float(eps.value)
+        assert row["force_closure"] == str(bool(eps.force_closure))
+    assert rows[BAD_LINE]["epsilon"] == "" and rows[BAD_LINE]["force_closure"] == "False"
+    assert rows[4]["status"] == "infeasible" and rows[4]["force_closure"] == "True"  # closure, yet no equilibrium
+    with np.load(out / "results.npz") as z:
+        assert np.isnan(z["epsilon"][BAD_LINE]) and z["force_closure"].tolist() == [r["force_closure"] == "True" for r in rows]

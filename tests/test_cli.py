@@ -30,7 +30,9 @@ def expected_cube(preset_json):
     Computed after the first CLI run, so that the CLI is what compiles the evaluator,
     with the compilation cache on: the subprocess test then finds it cached.
     """
-    return jaxgrasp.evaluate(jaxgrasp.presets.cube(6e5, 0.002)).to_dict()
+    grasp = jaxgrasp.presets.cube(6e5, 0.002)
+    eps = jaxgrasp.epsilon(grasp)  # the Ferrari-Canny metric beside the value (issue 15)
+    return jaxgrasp.evaluate(grasp).to_dict() | {"epsilon": float(eps.value), "force_closure": bool(eps.force_closure)}
 
 
 @pytest.fixture(scope="module")
@@ -67,6 +69,7 @@ def test_evaluate_preset_json(preset_json, expected_cube):
         (k, j) for k in jaxgrasp.KINDS for j in (0, 1)
     }
     assert d["status"] == "stable"
+    assert d["force_closure"] is True and d["epsilon"] > 0
     # exactly the library's numbers (JSON round-trips floats exactly)
     assert d == expected_cube
     assert d["value"] == expected_cube["value"] and d["value"] > 0

@@ -254,6 +254,28 @@ def test_cli_sweep_writes_files(run_cli, tmp_path, cube_sweep):
     np.testing.assert_allclose(res.value[0], cube_sweep[0].value[0, :3], rtol=1e-12, atol=1e-18)
 
 
+def test_cli_sweep_epsilon_column(run_cli, tmp_path, cube_sweep):
+    """``--epsilon`` (issue 15): the Ferrari-Canny value of every grid point, which does not
+    change with Young's modulus (the energy tolerance does) and, with torsion, grows with the
+    initial deformation through the eccentricity (eq. 10)."""
+    out = tmp_path / "out"
+    rc, _, stderr = run_cli(
+        "sweep", "--preset", "cube", "--young-modulus", "2e5,6e5", "--initial-deformation", "1e-3:3e-3:3",
+        "--out", str(out), "--chunk-size", str(CHUNK), "--epsilon", "--no-plot",
+    )
+    assert rc == 0, stderr
+    with np.load(out / "sweep.npz") as z:
+        eps, closure, value = z["epsilon"], z["force_closure"], z["value"]
+    assert eps.shape == (2, 3) and closure.all()
+    np.testing.assert_array_equal(eps[0], eps[1])  # independent of E
+    assert np.all(np.diff(eps[0]) > 0) and value[0, 0] != value[1, 0]
+    g = cube().replace(young_modulus=np.full(2, 6e5), initial_deformation=np.full(2, 2e-3))
+    assert eps[1, 1] == float(jaxgrasp.epsilon(g).value)
+    with open(out / "sweep.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [float(r["epsilon"]) for r in rows] == eps.ravel().tolist()
+
+
 @pytest.mark.parametrize(
     "spec",
     [

@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import outputs
 from ..validation import counted
-from .common import ChunkProgress, UsageError, check_out, lock_out, replaced_text, say
+from .common import ChunkProgress, UsageError, add_epsilon_option, check_out, epsilon_columns, lock_out, replaced_text, say
 
 __all__ = ["add_parser", "run", "OUTPUT_NAMES", "PARTIAL_NAME", "DEFAULT_TOP"]
 
@@ -64,6 +64,7 @@ def add_parser(sub) -> None:
     sp.add_argument("--strict", action="store_true", help="any invalid grasp: exit 2 before computing")
     sp.add_argument("--resume", action="store_true", help="finish an interrupted run into the same DIR")
     sp.add_argument("--no-plot", action="store_true", help="do not write results.png")
+    add_epsilon_option(sp)
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
     sp.set_defaults(func=run)
 
@@ -97,7 +98,8 @@ def run(args) -> int:
         result = _evaluate(gset, todo, n_contacts, args, keeper)
         merged = _merge(gset, done_rows, done, todo, result)
         wall = time.perf_counter() - t_start
-        written, replaced, removed = _write_outputs(merged, out, checkpoint, args)
+        extra = _epsilon(gset) if args.epsilon else None
+        written, replaced, removed = _write_outputs(merged, out, checkpoint, args, extra)
     print(_summary(merged, args.file, wall, result, len(done_rows), out, written, replaced, removed, args.top))
     return 0
 
@@ -208,10 +210,13 @@ def _merge(gset, done_rows: np.ndarray, done: dict, todo: np.ndarray, result):
     )
 
 
-def _write_outputs(result, out: Path, checkpoint, args) -> tuple[list[str], list[str], list[str]]:
+def _write_outputs(result, out: Path, checkpoint, args, extra=None) -> tuple[list[str], list[str], list[str]]:
     """Write ``results.csv``, ``results.npz`` and (unless ``--no-plot``) ``results.png``
-    as one set, removing the checkpoint in the same step."""
-    members = {out / "results.csv": result.to_csv, out / "results.npz": result.to_npz}
+    as one set, removing the checkpoint in the same step; ``extra``: more columns (``--epsilon``)."""
+    members = {
+        out / "results.csv": lambda fh: result.to_csv(fh, extra),
+        out / "results.npz": lambda fh: result.to_npz(fh, extra),
+    }
     if not args.no_plot:
         from ..plots import plot_ranking, save_figure
 
@@ -231,6 +236,18 @@ def _write_outputs(result, out: Path, checkpoint, args) -> tuple[list[str], list
     except OSError:
         pass  # something else was put there: leave it
     return [p.name for p in members], [p.name for p in replaced], [p.name for p in stale]
+
+
+def _epsilon(gset) -> dict:
+    """The ``--epsilon`` columns of every input row (NaN and False for an invalid grasp)."""
+    from ..grasp import stack
+
+    valid = gset.valid
+    cols = epsilon_columns(stack([g for g in gset.grasps if g is not None]))
+    out = {"epsilon": np.full(len(gset), np.nan), "force_closure": np.zeros(len(gset), dtype=bool)}
+    for k, v in cols.items():
+        out[k][valid] = v
+    return out
 
 
 def _summary(result, source, wall, run, resumed, out, written, replaced, removed, top) -> str:

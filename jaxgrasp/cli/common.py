@@ -33,6 +33,8 @@ __all__ = [
     "replaced_text",
     "ChunkProgress",
     "say",
+    "add_epsilon_option",
+    "epsilon_columns",
 ]
 
 EXIT_USAGE = 2
@@ -227,3 +229,25 @@ class ChunkProgress:
                 f"jaxgrasp: chunk {k}/{self.nchunks} ({done}/{total} {self.noun}s), "
                 f"elapsed {now - self.t_start:.1f} s, {left}"
             )
+
+
+# --------------------------------------------------------------------------- epsilon column
+
+
+def add_epsilon_option(p: argparse.ArgumentParser) -> None:
+    """``--epsilon``: add the Ferrari-Canny metric's columns to a command's tables."""
+    p.add_argument(
+        "--epsilon",
+        action="store_true",
+        help="add columns epsilon and force_closure (Ferrari-Canny metric, 8 cone edges, soft fingers)",
+    )
+
+
+def epsilon_columns(grasps, shape=None) -> dict:
+    """``{"epsilon": values, "force_closure": bools}`` of a batched grasp
+    (:func:`jaxgrasp.epsilon`), reshaped to ``shape`` (e.g. a sweep's grid)."""
+    from ..ferrari_canny import epsilon
+
+    eps = epsilon(grasps)
+    cols = {"epsilon": eps.value, "force_closure": eps.force_closure}
+    return {k: v.reshape(shape) if shape is not None else v for k, v in cols.items()}

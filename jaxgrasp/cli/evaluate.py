@@ -21,11 +21,15 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Evaluate the grasp of the command line and print the result; exit status 0."""
     from ..evaluate import evaluate
+    from ..ferrari_canny import epsilon
 
     grasp = load_grasp(args)
     d = evaluate(grasp).to_dict()
+    eps = epsilon(grasp)  # the Ferrari-Canny metric on the same contacts, beside the value
+    d["epsilon"] = float(eps.value)
+    d["force_closure"] = bool(eps.force_closure)
     notes = grasp_notes(grasp)
-    if notes:  # otherwise exactly Evaluation.to_dict()
+    if notes:  # otherwise Evaluation.to_dict() with epsilon and force_closure
         d["notes"] = notes
     if args.json:
         print(json.dumps(d, indent=2, allow_nan=False))
@@ -45,6 +49,10 @@ def format_summary(d: dict, source: str) -> str:
     lim = d["limiting"]
     if lim is not None:
         lines.append(f"limiting boundary: {lim['kind']} of contact {lim['contact']}")
+    closure = "force closure" if d["force_closure"] else "not force closure"
+    lines.append(
+        f"epsilon: {d['epsilon']:.6e}   (Ferrari-Canny, 8 cone edges, soft fingers; {closure})"
+    )
     lines.append(f"equilibrium energy: {d['equilibrium_energy']:.6e} J")
     t = ", ".join(f"{v:.3e}" for v in d["equilibrium_translation"])
     w = ", ".join(f"{v:.3e}" for v in d["equilibrium_rotation"])

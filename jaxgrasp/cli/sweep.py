@@ -29,6 +29,8 @@ from ..validation import counted
 from .common import (
     OVERRIDES,
     ChunkProgress,
+    add_epsilon_option,
+    epsilon_columns,
     UsageError,
     add_grasp_source,
     check_out,
@@ -142,6 +144,7 @@ def add_parser(sub) -> None:
         ),
     )
     sp.add_argument("--no-plot", action="store_true", help="do not write sweep.png")
+    add_epsilon_option(sp)
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
     sp.set_defaults(func=run, default_preset="cube")
 
@@ -159,7 +162,7 @@ def auto_chunk(total: int, cap: int = 64) -> int:
 
 def run(args) -> int:
     """Sweep the grasp of the command line; write the files and print one summary line."""
-    from ..sweep import check_inputs, sweep
+    from ..sweep import check_inputs, grid_grasp, sweep
 
     axes, paper = _parse_axes(args)
     if args.chunk_size is not None and args.chunk_size < 1:
@@ -180,7 +183,8 @@ def run(args) -> int:
         title = f"jaxgrasp sweep: {grasp_source(args)}"
         if paper and args.preset == "cube" and args.file is None:
             title = FIG6_TITLE
-        written, replaced, removed = _write_outputs(result, out, None if args.no_plot else title)
+        extra = epsilon_columns(grid_grasp(grasp, **axes), result.shape) if args.epsilon else None
+        written, replaced, removed = _write_outputs(result, out, None if args.no_plot else title, extra)
     print(_summary_line(result, grasp_source(args), wall, out, written, replaced, removed))
     return 0
 
@@ -261,14 +265,17 @@ class _Checkpoint:
         outputs.write_set({self.path: partial.save}, on_publish=lambda: outputs.set_note("sweep", note))
 
 
-def _write_outputs(result, out: Path, title: str | None) -> tuple[list[str], list[str], list[str]]:
+def _write_outputs(result, out: Path, title: str | None, extra=None) -> tuple[list[str], list[str], list[str]]:
     """Write ``sweep.npz``, ``sweep.csv`` and (with a ``title``) ``sweep.png`` as one set.
 
     The set replaces the previous one at once, removing a previous ``sweep.png`` that the
     new set lacks, and the checkpoint ``sweep.partial.npz``. Returns the names written,
     those that replaced a previous file and the previous files removed.
     """
-    members = {out / "sweep.npz": result.to_npz, out / "sweep.csv": result.to_csv}
+    members = {
+        out / "sweep.npz": lambda fh: result.to_npz(fh, extra),
+        out / "sweep.csv": lambda fh: result.to_csv(fh, extra),
+    }
     if title is not None:
         from ..plots import plot_sweep, save_figure
 
