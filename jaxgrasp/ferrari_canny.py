@@ -115,13 +115,23 @@ def wrenches(fields: dict, *, cone_edges: int = 8, torsion: bool = True) -> tupl
 
 def _hull_distance(w: np.ndarray) -> float:
     """Signed distance from the origin to the boundary of ``conv(w)``; 0 where the hull is
-    flat (does not span the space)."""
+    flat (does not span the space).
+
+    Flatness is decided by the rank of the points' differences, not by a qhull error: in
+    6-D, qhull's default (``Qx``, exact pre-merges) can fail on full-dimensional wrench
+    sets with many cone edges (QH6271 "wide merge due to dupridge", e.g. 64 edges), and
+    such a grasp is not flat. Those are retried with joggled input (``QJ``: a simplicial
+    hull of inputs perturbed by about 1e-11, so the value moves by about that much)."""
     from scipy.spatial import ConvexHull, QhullError
 
+    w = np.asarray(w, dtype=np.float64)
+    dim = w.shape[1]
+    if w.shape[0] <= dim or np.linalg.matrix_rank(w[1:] - w[0], tol=1e-12 * max(1.0, float(np.max(np.abs(w))))) < dim:
+        return 0.0
     try:
         hull = ConvexHull(w)
-    except (QhullError, ValueError):  # flat (coplanar wrenches) or too few points
-        return 0.0
+    except QhullError:
+        hull = ConvexHull(w, qhull_options="QJ")
     return float(np.min(-hull.equations[:, -1]))  # rows: unit normal . x + offset <= 0 inside
 
 
