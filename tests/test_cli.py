@@ -88,6 +88,7 @@ def test_evaluate_summary_text(run_cli, expected_cube):
     assert f"{expected_cube['value']:.6e}" in out
     lim = expected_cube["limiting"]
     assert f"{lim['kind']} of contact {lim['contact']}" in out
+    assert f"epsilon: {expected_cube['epsilon']:.6e}   (Ferrari-Canny, 8 cone edges, soft fingers; force closure)" in out
 
 
 def test_overrides_apply(run_cli):

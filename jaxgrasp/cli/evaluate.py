@@ -39,7 +39,8 @@ def run(args) -> int:
 
 
 def format_summary(d: dict, source: str) -> str:
-    """The human-readable summary of an evaluation (``Evaluation.to_dict()``) of ``source``."""
+    """The human-readable summary of an evaluation (``Evaluation.to_dict()``, with
+    ``epsilon`` and ``force_closure`` where given) of ``source``."""
     lines = [f"grasp: {source}"]
     lines.append(f"status: {d['status']}")
     if d.get("explanation"):
@@ -49,10 +50,9 @@ def format_summary(d: dict, source: str) -> str:
     lim = d["limiting"]
     if lim is not None:
         lines.append(f"limiting boundary: {lim['kind']} of contact {lim['contact']}")
-    closure = "force closure" if d["force_closure"] else "not force closure"
-    lines.append(
-        f"epsilon: {d['epsilon']:.6e}   (Ferrari-Canny, 8 cone edges, soft fingers; {closure})"
-    )
+    if "epsilon" in d:  # the command adds it; Evaluation.to_dict() alone has none
+        closure = "force closure" if d["force_closure"] else "not force closure"
+        lines.append(f"epsilon: {d['epsilon']:.6e}   (Ferrari-Canny, 8 cone edges, soft fingers; {closure})")
     lines.append(f"equilibrium energy: {d['equilibrium_energy']:.6e} J")
     t = ", ".join(f"{v:.3e}" for v in d["equilibrium_translation"])
     w = ", ".join(f"{v:.3e}" for v in d["equilibrium_rotation"])
