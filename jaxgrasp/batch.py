@@ -46,6 +46,7 @@ __all__ = [
     "ACCELERATOR_CHUNK_SIZE",
     "default_chunk_size",
     "batch_size",
+    "check_chunk_size",
     "grasp_fields",
     "compiled_evaluator",
     "run_chunks",
@@ -179,6 +180,15 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
     return outs, run_seconds
 
 
+def check_chunk_size(chunk_size) -> None:
+    """``chunk_size`` must be ``None`` (the default) or a positive integer; a one-line
+    :class:`GraspValueError` otherwise (for :func:`evaluate_batch` and :func:`jaxgrasp.sweep`)."""
+    if chunk_size is not None and (
+        isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1
+    ):
+        raise GraspValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+
+
 def batch_size(chunk_size: int, total: int, n_devices: int = 1) -> int:
     """The batch one compiled call evaluates for ``total`` grasps in chunks of at most
     ``chunk_size``: the smallest bucket ``n_devices * BUCKET_BASE**k`` (1, 4, 16, 64, ...
@@ -310,8 +320,7 @@ def evaluate_batch(
             a sequence or batched grasp (a :class:`~jaxgrasp.GraspSet` keeps its invalid
             grasps as rows), or when a set has no valid grasp.
     """
-    if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1):
-        raise GraspValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    check_chunk_size(chunk_size)
     fields, errors = _batched_fields(grasps)
     masked = "active" in fields
     devices = tuple(jax.devices() if devices is None else devices)

@@ -49,6 +49,7 @@ from .batch import (
     DEFAULT_CHUNK_SIZE,
     _mesh,
     batch_size,
+    check_chunk_size,
     compiled_evaluator,
     default_chunk_size,
     grasp_fields,
@@ -469,10 +470,7 @@ def check_inputs(grasp: Grasp, /, *, chunk_size: int | None = None, **axes) -> N
 
 def _check_inputs(grasp, chunk_size, axes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """The validated base grasp's fields and the validated axes; one-line errors."""
-    if chunk_size is not None and (
-        isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1
-    ):
-        raise GraspValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    check_chunk_size(chunk_size)
     if not isinstance(grasp, Grasp):
         raise GraspValueError(f"sweep needs a jaxgrasp.Grasp, got {type(grasp).__name__}")
     if grasp.active is not None:

@@ -22,7 +22,17 @@ import numpy as np
 
 from .. import outputs
 from ..validation import counted
-from .common import ChunkProgress, UsageError, add_epsilon_option, check_out, epsilon_columns, lock_out, replaced_text, say
+from .common import (
+    ChunkProgress,
+    UsageError,
+    add_epsilon_option,
+    check_chunk_size,
+    check_out,
+    epsilon_columns,
+    lock_out,
+    replaced_text,
+    say,
+)
 
 __all__ = ["add_parser", "run", "OUTPUT_NAMES", "PARTIAL_NAME", "DEFAULT_TOP"]
 
@@ -105,8 +115,7 @@ def run(args) -> int:
 
 
 def _check_numbers(args) -> None:
-    if args.chunk_size is not None and args.chunk_size < 1:
-        raise UsageError(f"--chunk-size must be >= 1, got {args.chunk_size}")
+    check_chunk_size(args.chunk_size)
     if args.top < 0:
         raise UsageError(f"--top must be >= 0, got {args.top}")
 

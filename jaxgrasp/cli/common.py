@@ -22,6 +22,7 @@ __all__ = [
     "UsageError",
     "Parser",
     "parse_number",
+    "check_chunk_size",
     "OVERRIDES",
     "add_grasp_source",
     "add_overrides",
@@ -66,6 +67,12 @@ def parse_number(option: str, text: str, what: str = "value") -> float:
     if not math.isfinite(x):
         raise UsageError(f"{option}: {what} {t!r} must be finite")
     return x
+
+
+def check_chunk_size(value: int | None) -> None:
+    """``--chunk-size`` must be at least 1 (``None``: the default)."""
+    if value is not None and value < 1:
+        raise UsageError(f"--chunk-size must be >= 1, got {value}")
 
 
 def add_grasp_source(p: argparse.ArgumentParser) -> None:

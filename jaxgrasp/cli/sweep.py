@@ -33,6 +33,7 @@ from .common import (
     epsilon_columns,
     UsageError,
     add_grasp_source,
+    check_chunk_size,
     check_out,
     grasp_source,
     load_grasp,
@@ -165,8 +166,7 @@ def run(args) -> int:
     from ..sweep import check_inputs, grid_grasp, sweep
 
     axes, paper = _parse_axes(args)
-    if args.chunk_size is not None and args.chunk_size < 1:
-        raise UsageError(f"--chunk-size must be >= 1, got {args.chunk_size}")
+    check_chunk_size(args.chunk_size)
     grasp = load_grasp(args, overrides=False)
     check_inputs(grasp, chunk_size=args.chunk_size, **axes)  # bad input: nothing touched yet
     out = Path(args.out)
@@ -175,7 +175,8 @@ def run(args) -> int:
     plan = _plan_chunks(int(np.prod([a.size for a in axes.values()])), args.chunk_size)
     with lock_out(out):
         checkpoint = _Checkpoint(out / PARTIAL_NAME, grasp, axes, plan.chunk)
-        progress = ChunkProgress("sweeping", "point", plan.total, plan.chunk, plan.n_devices, not args.quiet and plan.nchunks > 1)
+        show = not args.quiet and plan.nchunks > 1
+        progress = ChunkProgress("sweeping", "point", plan.total, plan.chunk, plan.n_devices, show)
         progress.start()
         result = sweep(grasp, chunk_size=plan.chunk, progress=progress, on_chunk=checkpoint, **axes)
         wall = time.perf_counter() - progress.t_start
