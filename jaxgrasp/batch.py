@@ -35,7 +35,7 @@ from .fields import NAMES
 from .grasp import Grasp, stack
 from .result import FIELDS, Evaluation
 from .status import GraspStatus
-from .validation import GraspValueError, check_grasp_inputs
+from .validation import GraspValueError, check_batch_inputs
 
 __all__ = [
     "evaluate_batch",
@@ -258,13 +258,7 @@ def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], tuple]:
         raise GraspValueError(f"evaluate_batch needs grasps with a batch axis: positions (B, N, 3), got {pos}")
     fields = batch.to_numpy_batch()
     errors = (None,) * pos[0] if errors is None else errors
-    for i in range(pos[0]):
-        if errors[i] is not None:
-            continue
-        try:
-            check_grasp_inputs(**{k: v[i] for k, v in fields.items()})
-        except GraspValueError as exc:
-            raise GraspValueError(f"grasp {i}: {exc}") from None
+    check_batch_inputs(fields, skip=[i for i, e in enumerate(errors) if e is not None])
     if "active" in fields:
         fields["active"] = np.array(fields["active"])  # not a broadcast view: rows are set below
     invalid = np.asarray([e is not None for e in errors])

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from .grasp import Grasp
-from .validation import GraspValueError, check_grasp_inputs
+from .validation import GraspValueError, check_batch_inputs, check_grasp_inputs
 
 __all__ = ["epsilon", "EpsilonResult", "wrenches", "tangent_basis", "FORCE_CLOSURE_TOL"]
 
@@ -158,15 +158,15 @@ def epsilon(grasp: Grasp, /, *, cone_edges: int = 8, torsion: bool = True) -> Ep
     ndim = np.ndim(grasp.positions)
     if ndim not in (2, 3):
         raise GraspValueError(f"epsilon needs positions (N, 3) or a batch (B, N, 3), got {np.shape(grasp.positions)}")
-    batch = grasp.to_numpy_batch() if ndim == 3 else {k: v[None] for k, v in grasp.to_numpy().items() if v is not None}
+    if ndim == 3:
+        batch = grasp.to_numpy_batch()
+        check_batch_inputs(batch)
+    else:
+        batch = {k: v[None] for k, v in grasp.to_numpy().items()}
+        check_grasp_inputs(**grasp.to_numpy())
     values, lams = [], []
     for i in range(batch["positions"].shape[0]):
-        one = {k: v[i] for k, v in batch.items()}
-        try:
-            check_grasp_inputs(**one)
-        except GraspValueError as exc:
-            raise GraspValueError(f"grasp {i}: {exc}" if ndim == 3 else str(exc)) from None
-        w, lam = wrenches(one, cone_edges=int(cone_edges), torsion=bool(torsion))
+        w, lam = wrenches({k: v[i] for k, v in batch.items()}, cone_edges=int(cone_edges), torsion=bool(torsion))
         values.append(_hull_distance(w))
         lams.append(lam)
     value = np.asarray(values) if ndim == 3 else np.asarray(values[0])

@@ -16,7 +16,15 @@ import numpy as np
 
 from .fields import FIELD, FIELDS, NAMES, PER_CONTACT
 
-__all__ = ["GraspValueError", "check_grasp_inputs", "format_value", "counted", "as_float_array", "inward_contacts"]
+__all__ = [
+    "GraspValueError",
+    "check_grasp_inputs",
+    "check_batch_inputs",
+    "format_value",
+    "counted",
+    "as_float_array",
+    "inward_contacts",
+]
 
 NORMAL_MIN_NORM = 1e-12
 """A normal shorter than this (absolute) is treated as zero."""
@@ -157,6 +165,23 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     out.update(positions=arrs["positions"], mass=arrs["mass"], gravity=arrs["gravity"])
     checked = {name: out[name] for name in NAMES}
     return checked if mask is None else {**checked, "active": mask}
+
+
+def check_batch_inputs(fields: dict[str, np.ndarray], skip=()) -> None:
+    """Validate every grasp of batched fields (each with a leading axis ``B``, e.g.
+    :meth:`Grasp.to_numpy_batch`) with :func:`check_grasp_inputs`, except rows ``skip``.
+
+    Raises:
+        GraspValueError: ``grasp i: ...`` naming the first invalid grasp (one line).
+    """
+    skip = set(int(i) for i in skip)
+    for i in range(len(fields["positions"])):
+        if i in skip:
+            continue
+        try:
+            check_grasp_inputs(**{k: v[i] for k, v in fields.items()})
+        except GraspValueError as exc:
+            raise GraspValueError(f"grasp {i}: {exc}") from None
 
 
 def _check_active(active, n: int) -> np.ndarray | None:
