@@ -27,14 +27,13 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from . import cache
-from .batch_result import BatchResult, invalid_fill
+from .batch_result import BatchResult, mark_invalid
 from .dataset import GraspSet
 from .evaluate import EvaluateOptions
 from .evaluate import evaluate as _evaluate_one
 from .fields import NAMES
 from .grasp import Grasp, stack
 from .result import FIELDS, Evaluation
-from .status import GraspStatus
 from .validation import GraspValueError, check_batch_inputs
 
 __all__ = [
@@ -268,13 +267,6 @@ def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], tuple]:
     return fields, errors
 
 
-def _mark_invalid(outs: dict[str, np.ndarray], rows: np.ndarray) -> None:
-    """Set the results of the invalid grasps ``rows``: status INVALID, NaN, -1 codes."""
-    for f, a in outs.items():
-        a[rows] = invalid_fill(a)
-    outs["status"][rows] = GraspStatus.INVALID
-
-
 def evaluate_batch(
     grasps,
     /,
@@ -329,7 +321,7 @@ def evaluate_batch(
         return {k: v[idx] for k, v in fields.items()}
 
     def finished(start: int, stop: int, outs: dict[str, np.ndarray]) -> None:
-        _mark_invalid(outs, invalid[(invalid >= start) & (invalid < stop)])
+        mark_invalid(outs, invalid[(invalid >= start) & (invalid < stop)])
         if on_chunk is not None:
             on_chunk(start, stop, outs)
 

@@ -25,7 +25,7 @@ from . import outputs
 from .result import FIELDS, Evaluation, SummaryNames
 from .status import BoundaryKind, GraspStatus
 
-__all__ = ["BatchResult", "CSV_COLUMNS", "invalid_fill"]
+__all__ = ["BatchResult", "CSV_COLUMNS", "mark_invalid"]
 
 CSV_COLUMNS = (
     "index",
@@ -42,11 +42,13 @@ CSV_COLUMNS = (
 _RANK_GROUP = {GraspStatus.STABLE: 0, GraspStatus.NOT_CONVERGED: 2, GraspStatus.INVALID: 3}  # others: 1
 
 
-def invalid_fill(a: np.ndarray) -> np.ndarray:
-    """The entry of an array of :class:`~jaxgrasp.Evaluation` field values for a grasp
-    that was not evaluated: NaN for floats, -1 for integer codes (``status`` is set to
-    :data:`~jaxgrasp.status.GraspStatus.INVALID` apart)."""
-    return np.asarray(np.nan if np.issubdtype(a.dtype, np.floating) else -1, dtype=a.dtype)
+def mark_invalid(results: dict[str, np.ndarray], rows) -> None:
+    """Set the rows ``rows`` of :class:`~jaxgrasp.Evaluation` field arrays (by name, leading
+    axis ``B``) to those of grasps that were not evaluated: NaN for floats, -1 for integer
+    codes, ``status`` :data:`~jaxgrasp.status.GraspStatus.INVALID`."""
+    for a in results.values():
+        a[rows] = np.nan if np.issubdtype(a.dtype, np.floating) else -1
+    results["status"][rows] = GraspStatus.INVALID
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

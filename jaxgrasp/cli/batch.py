@@ -185,9 +185,8 @@ class _Keeper:
 def _merge(gset, done_rows: np.ndarray, done: dict, todo: np.ndarray, result):
     """One :class:`~jaxgrasp.BatchResult` of every input row: the previous run's rows,
     this run's, and the invalid ones (status ``invalid``, NaN, -1)."""
-    from ..batch_result import BatchResult, invalid_fill
+    from ..batch_result import BatchResult, mark_invalid
     from ..result import FIELDS, Evaluation
-    from ..status import GraspStatus
 
     parts = [(done_rows, done)] if done_rows.size else []
     if result is not None:
@@ -196,18 +195,12 @@ def _merge(gset, done_rows: np.ndarray, done: dict, todo: np.ndarray, result):
     arrays = {}
     for f in FIELDS:
         like = parts[0][1][f]
-        a = np.empty((total, *like.shape[1:]), dtype=like.dtype)
-        a[...] = invalid_fill(a)
+        arrays[f] = np.empty((total, *like.shape[1:]), dtype=like.dtype)
         for rows, res in parts:
-            a[rows] = res[f]
-        arrays[f] = a
-    invalid = ~gset.valid
-    arrays["status"][invalid] = GraspStatus.INVALID
-    n = arrays["boundary_energy"].shape[-1]
-    active = np.zeros((total, n), dtype=bool)
+            arrays[f][rows] = res[f]
+    mark_invalid(arrays, ~gset.valid)  # every valid row is in one of the parts
     counts = gset.num_contacts
-    for i in range(total):
-        active[i, : counts[i]] = True  # the grasp's own contacts come first (jaxgrasp.stack)
+    active = np.arange(arrays["boundary_energy"].shape[-1]) < counts[:, None]  # own contacts first (jaxgrasp.stack)
     return BatchResult(
         evaluation=Evaluation(**arrays),
         num_contacts=counts,
