@@ -41,6 +41,7 @@ suffix, a missing or misshapen array, an unknown array) raises
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import io
 import json
 import os
@@ -74,11 +75,14 @@ class GraspSet:
         errors: ``None`` per valid grasp, the one-line reason per invalid one
             (``"grasp 3: friction = -1 must be positive"``; ``line 4`` for ``.jsonl``).
         source: the file read.
+        source_sha256: SHA-256 (hex) of the file's bytes as they were parsed, ``None``
+            for a set made in memory (``jaxgrasp batch --resume`` checks it).
     """
 
     grasps: tuple
     errors: tuple
     source: str = "<memory>"
+    source_sha256: str | None = None
 
     def __len__(self) -> int:
         return len(self.grasps)
@@ -125,7 +129,9 @@ def load_batch(path: str | os.PathLike) -> GraspSet:
         raise GraspValueError(f"{path}: is a folder, not a dataset file (.npz or .jsonl)")
     raw = read_input(path)
     grasps, errors = (_read_npz if suffix == ".npz" else _read_jsonl)(raw, path)
-    return GraspSet(grasps=tuple(grasps), errors=tuple(errors), source=str(path))
+    return GraspSet(
+        grasps=tuple(grasps), errors=tuple(errors), source=str(path), source_sha256=hashlib.sha256(raw).hexdigest()
+    )
 
 
 # ----------------------------------------------------------------------------- .npz

@@ -14,7 +14,6 @@ recomputing those chunks. At the end ``results.csv``, ``results.npz`` and
 
 from __future__ import annotations
 
-import hashlib
 import time
 from pathlib import Path
 
@@ -85,7 +84,6 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Evaluate the dataset of the command line; write the files and print a summary."""
     from ..dataset import load_batch
-    from ..gripfile import read_input
     from ..partial import PartialBatch
 
     _check_numbers(args)
@@ -96,12 +94,11 @@ def run(args) -> int:
         raise UsageError(f"{args.file}: no valid grasp ({len(gset)} invalid; first: {gset.errors[0]})")
     out = Path(args.out)
     check_out(out)
-    digest = hashlib.sha256(read_input(Path(args.file))).hexdigest()
     n_contacts = int(gset.num_contacts.max())
 
     t_start = time.perf_counter()
     with lock_out(out):
-        checkpoint = PartialBatch(out / PARTIAL_NAME, args.file, digest, len(gset), n_contacts)
+        checkpoint = PartialBatch(out / PARTIAL_NAME, args.file, gset.source_sha256, len(gset), n_contacts)
         done_rows, done = _open_checkpoint(checkpoint, args.resume, len(gset))
         todo = np.flatnonzero(gset.valid & ~np.isin(np.arange(len(gset)), done_rows))
         keeper = _Keeper(checkpoint, todo, len(done_rows), len(gset))
