@@ -375,22 +375,21 @@ def plot_ranking(result, path=None, *, top: int = 5, title=None):
     names = np.asarray(result.status_names)
     value = np.asarray(result.value, dtype=np.float64) * J_TO_MJ
     kind = np.asarray(result.limiting_kind)
-    order = [int(i) for i in result.rank()]
+    order = np.asarray(result.rank())
     fig = new_figure(figsize=(10.0, 4.2))
     ax, bars = fig.subplots(1, 2, gridspec_kw={"width_ratios": [3.2, 1.0]})
-    ranked = [i for i in order if names[i] in ("stable", "not_converged") and value[i] > 0]
-    x = np.arange(1, len(ranked) + 1)
+    ranked = order[np.isin(names[order], ("stable", "not_converged")) & (value[order] > 0)]
+    x = np.arange(1, ranked.size + 1)
     for label, marker in (("stable", "o"), ("not_converged", "D")):
-        m = np.asarray([names[i] == label for i in ranked], dtype=bool)
+        m = names[ranked] == label
         if m.any():
-            idx = np.asarray(ranked)[m]
             face = STATUS_COLORS[label] if label == "stable" else "none"
-            ax.plot(x[m], value[idx], marker, ms=3.5, ls="none", mfc=face, mec=STATUS_COLORS[label])
-            force = m & np.asarray([kind[i] == BoundaryKind.MAX_FORCE for i in ranked], dtype=bool)
-            ax.plot(x[force], value[np.asarray(ranked)[force]], "^", ms=6, ls="none", mfc="none", mec="k", mew=0.8)
+            ax.plot(x[m], value[ranked[m]], marker, ms=3.5, ls="none", mfc=face, mec=STATUS_COLORS[label])
+            force = m & (kind[ranked] == BoundaryKind.MAX_FORCE)
+            ax.plot(x[force], value[ranked[force]], "^", ms=6, ls="none", mfc="none", mec="k", mew=0.8)
     for r, i in enumerate(ranked[: max(0, top)], start=1):
         ax.annotate(f"grasp {i}", (r, value[i]), xytext=(4, 3), textcoords="offset points", fontsize=8)
-    if ranked:
+    if ranked.size:
         ax.set_yscale("log")
     else:
         ax.text(0.5, 0.5, "no stable grasp", transform=ax.transAxes, ha="center", va="center", color="0.4")
