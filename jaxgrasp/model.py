@@ -32,6 +32,7 @@ __all__ = [
     "contact_kinematics",
     "potential_energy",
     "constraint_margins",
+    "energy_and_margins",
     "energy_scale",
     "KINDS",
 ]
@@ -130,7 +131,12 @@ def potential_energy(x, p: ModelParams):
     unchanged on the feasible set and bounded below outside it, which the solver needs.
     Inactive contacts (``p.on`` false) contribute nothing.
     """
-    d, cphi, dt2, theta = contact_kinematics(x, p)
+    return _energy(x, contact_kinematics(x, p), p)
+
+
+def _energy(x, kinematics, p: ModelParams):
+    """:func:`potential_energy` from the contact kinematics at ``x``."""
+    d, cphi, dt2, theta = kinematics
     dp = jnp.maximum(d, 0.0)
     elastic = jnp.pi * p.E * (
         dp**3 / (3.0 * cphi**2) + dp * dt2 + dp**2 * (p.r - dp / 3.0) * theta**2
@@ -157,7 +163,12 @@ def constraint_margins(x, p: ModelParams):
 
     An inactive contact's margins are the constant 1 (always satisfied, no gradient).
     """
-    d, cphi, dt2, theta = contact_kinematics(x, p)
+    return _margins(contact_kinematics(x, p), p)
+
+
+def _margins(kinematics, p: ModelParams):
+    """:func:`constraint_margins` from the contact kinematics at ``x``."""
+    d, cphi, dt2, theta = kinematics
     dr = jax.lax.stop_gradient(p.dr)
     mu_dr2 = jax.lax.stop_gradient((p.mu * p.dr) ** 2)
     contact = d / dr
@@ -168,3 +179,11 @@ def constraint_margins(x, p: ModelParams):
     ) / mu_dr2
     force = (jnp.sqrt(p.fmax / (jnp.pi * p.E)) * cphi - d) / dr
     return jnp.where(p.on, jnp.stack([contact, slip, force]), 1.0)
+
+
+def energy_and_margins(x, p: ModelParams):
+    """``(potential_energy(x, p), constraint_margins(x, p))`` from one evaluation of the
+    contact kinematics (the solver's programs need both at every point; sharing the
+    kinematics also shares their derivatives)."""
+    kinematics = contact_kinematics(x, p)
+    return _energy(x, kinematics, p), _margins(kinematics, p)

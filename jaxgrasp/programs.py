@@ -31,9 +31,9 @@ import jax.numpy as jnp
 
 from .grasp import Grasp
 from .lanes import solve_lanes
-from .model import ModelParams, constraint_margins, energy_scale, model_params, potential_energy
-from .options import EvaluateOptions
-from .solver import SolverResult, solve
+from .model import ModelParams, constraint_margins, energy_and_margins, energy_scale, model_params, potential_energy
+from .options import COMPILER_OPTIONS, EvaluateOptions
+from .solver import SolverResult
 from .status import LaneStatus
 
 __all__ = [
@@ -42,6 +42,7 @@ __all__ = [
     "to_pose",
     "objective",
     "constraints",
+    "objective_and_constraints",
     "lagrangian",
     "Programs",
     "solve_programs",
@@ -87,6 +88,13 @@ def constraints(z, data: ProgramData):
     """Scaled constraint margins ``(3N,)``, rows of :func:`~jaxgrasp.model.constraint_margins`
     flattened (index ``row * N + contact``), ``>= 0`` where satisfied."""
     return constraint_margins(to_pose(z, data.lever), data.params).reshape(-1)
+
+
+def objective_and_constraints(z, data: ProgramData):
+    """``(objective(z, data), constraints(z, data))`` from one evaluation of the contact
+    kinematics: the function the solver's lanes run (:func:`~jaxgrasp.solver.solve`'s ``fg``)."""
+    energy, margins = energy_and_margins(to_pose(z, data.lever), data.params)
+    return energy / data.scale, margins.reshape(-1)
 
 
 def lagrangian(z, lam, nu, eq_mask, data: ProgramData):
@@ -189,30 +197,73 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     return lane_k, z0s, found, nu0s
 
 
+def _equilibrium_lanes(data: ProgramData, num_lanes: int):
+    """The lanes of the equilibrium problem: ``(z0, eq_mask, nu0, active)`` with leading
+    axis ``num_lanes``; lane 0 starts from the initial grasping state with no equality,
+    the others are inactive."""
+    n = data.params.c.shape[0]
+    dtype = data.params.c.dtype
+    z0 = jnp.zeros((num_lanes, 6), dtype)
+    masks = jnp.zeros((num_lanes, 3 * n), dtype)
+    nu0 = jnp.zeros(num_lanes, dtype)
+    return z0, masks, nu0, jnp.arange(num_lanes) == 0
+
+
 def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
-    """Solve every program of the grasp ``p`` (traceable; the solver sees no derivative)."""
+    """Solve every program of the grasp ``p`` (traceable; the solver sees no derivative).
+
+    Both stages run through ONE :func:`~jaxgrasp.lanes.solve_lanes` call site, inside a
+    two-iteration loop: iteration 0 solves the equilibrium problem (lane 0 of the lane
+    axis, the other lanes inactive), iteration 1 the boundary problems from starts found
+    around that equilibrium. The solver's loop is then compiled once rather than twice
+    (the equilibrium used to have a ``while_loop`` of its own), which halves the program
+    the solver contributes; each lane's result is what :func:`~jaxgrasp.solver.solve`
+    gives it. The stage is the loop counter, not batched data, so under ``vmap`` the
+    ``lax.cond`` choosing the lanes stays a branch.
+    """
     data = program_data(jax.lax.stop_gradient(p))
     n = data.params.c.shape[0]
     dtype = data.params.c.dtype
     sopt = options.solver
-    eq = solve(
-        lambda z: objective(z, data),
-        lambda z: constraints(z, data),
-        jnp.zeros(6, dtype),
-        jnp.zeros(3 * n, dtype),
-        0.0,
-        sopt,
-    )
-    lane_k, z0s, found, nu0s = _boundary_starts(data, eq.x, options)
-    # Without a converged equilibrium there is nothing to start from: skip every lane;
-    # an inactive contact has no boundary problems.
-    found = found & (eq.status == LaneStatus.CONVERGED) & data.params.on[(lane_k - n) % n]
-    masks = jax.nn.one_hot(lane_k, 3 * n, dtype=dtype)
+    num_lanes = 2 * n * options.num_starts
     # Every lane gets this grasp's data as its theta (not closed over): under a vmap
     # over grasps, solve_lanes then runs the lanes of all grasps in one work queue.
-    num_lanes = lane_k.shape[0]
     theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (num_lanes,) + jnp.shape(a)), data)
-    lanes = solve_lanes(objective, constraints, theta, z0s, masks, nu0s, found, sopt)
+
+    def boundary_lanes(eq: SolverResult):
+        lane_k, z0s, found, nu0s = _boundary_starts(data, eq.x, options)
+        # Without a converged equilibrium there is nothing to start from: skip every lane;
+        # an inactive contact has no boundary problems.
+        found = found & (eq.status == LaneStatus.CONVERGED) & data.params.on[(lane_k - n) % n]
+        return z0s, jax.nn.one_hot(lane_k, 3 * n, dtype=dtype), nu0s, found
+
+    def stage(i, carry):
+        eq, _, _ = carry
+        z0s, masks, nu0s, active = jax.lax.cond(
+            i == 0, lambda eq: _equilibrium_lanes(data, num_lanes), boundary_lanes, eq
+        )
+        res = solve_lanes(objective_and_constraints, theta, z0s, masks, nu0s, active, sopt)
+        eq = jax.lax.cond(i == 0, lambda: jax.tree_util.tree_map(lambda a: a[0], res), lambda: eq)
+        return eq, res, (z0s, active)
+
+    # the carry: one lane's result, every lane's result (zeros until solved)
+    zero = lambda shape, dt=dtype: jnp.zeros((num_lanes,) + shape, dt)
+    lanes0 = SolverResult(
+        x=zero((6,)),
+        lam=zero((3 * n,)),
+        nu=zero(()),
+        objective=zero(()),
+        status=zero((), jnp.int32),
+        stationarity=zero(()),
+        feasibility=zero(()),
+        complementarity=zero(()),
+        steps=zero((), jnp.int32),
+    )
+    eq0 = jax.tree_util.tree_map(lambda a: a[0], lanes0)
+    eq, lanes, (z0s, found) = jax.lax.fori_loop(
+        0, 2, stage, (eq0, lanes0, (jnp.zeros((num_lanes, 6), dtype), jnp.zeros(num_lanes, bool)))
+    )
+    lane_k = jnp.repeat(n + jnp.arange(2 * n), options.num_starts)
     return Programs(
         equilibrium=eq,
         boundary=lanes,
@@ -225,7 +276,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
     )
 
 
-@partial(jax.jit, static_argnames="options")
+@partial(jax.jit, static_argnames="options", compiler_options=COMPILER_OPTIONS)
 def solve_programs(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Programs:
     """Solve every program of ``grasp`` and return them lane by lane (for diagnostics and
     benchmarks; :func:`jaxgrasp.evaluate` is this plus the reduction to one value)."""
