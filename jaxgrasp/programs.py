@@ -166,7 +166,6 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     """
     n = data.params.c.shape[0]
     dtype = data.params.c.dtype
-    f = lambda z: objective(z, data)
     g = lambda z: constraints(z, data)
     dirs = jnp.asarray(options.directions(), dtype)
     num_dirs = dirs.shape[0]
@@ -188,8 +187,9 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
         z0 = jnp.where(on_boundary, z_eq, z0)
         found = found | on_boundary
         # least-squares estimate of the equality multiplier: grad f + nu grad h = 0
-        gf = jax.grad(f)(z0)
-        gh = jax.grad(gk)(z0)
+        # (both gradients from one forward-mode pass, as the solver takes them)
+        gf, jac = jax.jacfwd(objective_and_constraints)(z0, data)
+        gh = jac[k]
         nu0 = -jnp.dot(gf, gh) / jnp.maximum(jnp.dot(gh, gh), 1e-300)
         return z0, found, nu0
 
