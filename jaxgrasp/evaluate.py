@@ -40,7 +40,7 @@ import numpy as np
 from .envelope import envelope_energy, soft_minimum
 from .grasp import Grasp
 from .model import ModelParams, model_params
-from .options import COMPILER_OPTIONS, EvaluateOptions
+from .options import EvaluateOptions
 from .programs import Programs, constraints, program_data, programs_of, to_pose
 from .result import Evaluation
 from .status import NO_BOUNDARY, Constraint, GraspStatus, LaneStatus
@@ -113,7 +113,7 @@ def _check_unbatched(grasp) -> None:
         )
 
 
-@partial(jax.jit, static_argnames="options", compiler_options=COMPILER_OPTIONS)
+@partial(jax.jit, static_argnames="options")
 def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions) -> Evaluation:
     """The jitted evaluator behind :func:`evaluate` (no input validation).
 

@@ -32,7 +32,7 @@ import jax.numpy as jnp
 from .grasp import Grasp
 from .lanes import solve_lanes
 from .model import ModelParams, constraint_margins, energy_and_margins, energy_scale, model_params, potential_energy
-from .options import COMPILER_OPTIONS, EvaluateOptions
+from .options import EvaluateOptions
 from .solver import SolverResult
 from .status import LaneStatus
 
@@ -276,7 +276,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
     )
 
 
-@partial(jax.jit, static_argnames="options", compiler_options=COMPILER_OPTIONS)
+@partial(jax.jit, static_argnames="options")
 def solve_programs(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Programs:
     """Solve every program of ``grasp`` and return them lane by lane (for diagnostics and
     benchmarks; :func:`jaxgrasp.evaluate` is this plus the reduction to one value)."""
