@@ -31,9 +31,20 @@ import jax.numpy as jnp
 
 from .grasp import Grasp
 from .lanes import solve_lanes
-from .model import ModelParams, constraint_margins, energy_and_margins, energy_scale, model_params, potential_energy
+from .model import (
+    ModelParams,
+    constraint_margins,
+    elastic_energies,
+    energy_and_margins,
+    energy_scale,
+    kinematics_curvature,
+    kinematics_jacobian,
+    margins_of,
+    model_params,
+    potential_energy,
+)
 from .options import EvaluateOptions
-from .solver import SolverResult
+from .solver import FirstOrder, Problem, SolverResult
 from .status import LaneStatus
 
 __all__ = [
@@ -43,6 +54,7 @@ __all__ = [
     "objective",
     "constraints",
     "objective_and_constraints",
+    "lane_problem",
     "lagrangian",
     "Programs",
     "solve_programs",
@@ -95,6 +107,73 @@ def objective_and_constraints(z, data: ProgramData):
     kinematics: the function the solver's lanes run (:func:`~jaxgrasp.solver.solve`'s ``fg``)."""
     energy, margins = energy_and_margins(to_pose(z, data.lever), data.params)
     return energy / data.scale, margins.reshape(-1)
+
+
+def _pose_scale(data: ProgramData, dtype):
+    """``(6,)`` ``dx/dz``: 1 for the translation, ``1 / lever`` for the rotation."""
+    one = jnp.ones(3, dtype)
+    return jnp.concatenate([one, one / data.lever])
+
+
+def _per_contact_jacobian(fn, q):
+    """``(..., N, 4)`` derivatives of ``fn(q)`` with respect to each contact's own
+    kinematics ``q`` ``(N, 4)``: ``fn`` acts contact by contact (its output ``(..., N)``),
+    so four forward tangents, one per kinematic quantity set on every contact at once,
+    give every contact's derivatives."""
+    tangents = jnp.broadcast_to(jnp.eye(4, dtype=q.dtype)[:, None, :], (4,) + q.shape)
+    out = jax.vmap(lambda t: jax.jvp(fn, (q,), (t,))[1])(tangents)  # (4, ..., N)
+    return jnp.moveaxis(out, 0, -1)
+
+
+def _first_order(z, data: ProgramData) -> FirstOrder:
+    """The program at ``z`` with its gradient and constraint Jacobian, from the contact
+    kinematics' Jacobian (:func:`~jaxgrasp.model.kinematics_jacobian`, kept in ``aux``
+    for :func:`_lagrangian_hessian`)."""
+    p = data.params
+    x = to_pose(z, data.lever)
+    q, dq, geometry = kinematics_jacobian(x, p)
+    energies = lambda q: elastic_energies(tuple(q.T), p)
+    margins = lambda q: margins_of(tuple(q.T), p)
+    de = _per_contact_jacobian(energies, q)  # (N, 4)
+    dm = _per_contact_jacobian(margins, q)  # (3, N, 4)
+    scale = _pose_scale(data, z.dtype)
+    gravity = jnp.concatenate([p.weight, jnp.zeros(3, z.dtype)])
+    grad_f = (jnp.einsum("nk,nkj->j", de, dq) - gravity) * scale / data.scale
+    jac = jnp.einsum("rnk,nkj->rnj", dm, dq).reshape(-1, 6) * scale
+    fx = (jnp.sum(energies(q)) - jnp.dot(p.weight, x[:3])) / data.scale
+    return FirstOrder(fx, margins(q).reshape(-1), grad_f, jac, aux=(q, dq, geometry))
+
+
+def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProgramData):
+    """``(6, 6)`` Hessian in ``z`` of ``f + weights . g`` (``weights`` ``(3N,)`` fixed), from
+    the kinematics' derivatives in ``d.aux``: ``sum_i dq_i^T H_i dq_i + sum_ik
+    (d psi / d q_ik) d2q_ik`` with ``psi_i`` contact ``i``'s share of the function of its
+    own kinematics and ``H_i`` its ``4 x 4`` Hessian (four forward-over-reverse tangents
+    for every contact at once); the second sum is
+    :func:`~jaxgrasp.model.kinematics_curvature`."""
+    p = data.params
+    q, dq, geometry = d.aux
+    w = weights.reshape(3, -1)
+
+    def psi(q):  # (N,): each contact's f + w . g, as a function of its own kinematics
+        return elastic_energies(tuple(q.T), p) / data.scale + jnp.sum(w * margins_of(tuple(q.T), p), axis=0)
+
+    grad_psi = lambda q: jax.grad(lambda q: jnp.sum(psi(q)))(q)
+    gq = grad_psi(q)  # (N, 4)
+    hq = _per_contact_jacobian(grad_psi, q)  # (N, 4, 4): [i, j, k] = d2 psi_i / dq_ij dq_ik
+    hx = jnp.einsum("njm,njk,nkl->ml", dq, hq, dq) + kinematics_curvature(to_pose(z, data.lever), p, geometry, gq)
+    scale = _pose_scale(data, z.dtype)
+    return hx * scale[:, None] * scale[None, :]
+
+
+def lane_problem(data: ProgramData) -> Problem:
+    """The solver's view of a program of the grasp ``data``: values, first and second
+    derivatives from the contact kinematics (the equality row is the lane's ``eq_mask``)."""
+    return Problem(
+        fg=lambda z: objective_and_constraints(z, data),
+        first_order=lambda z: _first_order(z, data),
+        lagrangian_hessian=lambda d, z, w: _lagrangian_hessian(d, z, w, data),
+    )
 
 
 def lagrangian(z, lam, nu, eq_mask, data: ProgramData):
@@ -242,7 +321,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
         z0s, masks, nu0s, active = jax.lax.cond(
             i == 0, lambda eq: _equilibrium_lanes(data, num_lanes), boundary_lanes, eq
         )
-        res = solve_lanes(objective_and_constraints, theta, z0s, masks, nu0s, active, sopt)
+        res = solve_lanes(lane_problem, theta, z0s, masks, nu0s, active, sopt)
         eq = jax.lax.cond(i == 0, lambda: jax.tree_util.tree_map(lambda a: a[0], res), lambda: eq)
         return eq, res, (z0s, active)
 

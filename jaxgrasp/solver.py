@@ -40,6 +40,9 @@ import jax.numpy as jnp
 from .status import LaneStatus
 
 __all__ = [
+    "Problem",
+    "FirstOrder",
+    "as_problem",
     "SolverOptions",
     "SolverResult",
     "SolverState",
@@ -184,22 +187,66 @@ def augmented_lagrangian(fg, x, lam, nu, rho, eq_mask):
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class _FirstOrder:
-    """The problem at the lane's point: ``fx`` ``()``, ``gx`` ``(m,)``, ``grad_f`` ``(n,)``
-    and the constraint Jacobian ``jac`` ``(m, n)``, from ONE forward-mode pass over ``fg``
-    (``n`` tangents). Every gradient the step needs is then a product with ``jac``: phi's
-    before and after the multiplier update and the violation's, with no reverse pass."""
+class FirstOrder:
+    """A program at one point: ``fx`` ``()``, ``gx`` ``(m,)``, ``grad_f`` ``(n,)``, the
+    constraint Jacobian ``jac`` ``(m, n)``, and ``aux``: whatever the program's
+    :attr:`Problem.lagrangian_hessian` reuses (``None`` for the autodiff default). Every
+    gradient a step needs is a product with ``jac``: phi's before and after the multiplier
+    update and the violation's, with no reverse pass."""
 
     fx: Any
     gx: Any
     grad_f: Any
     jac: Any
+    aux: Any = None
 
 
-def _first_order(fg, x) -> _FirstOrder:
-    fx, gx = fg(x)
-    grad_f, jac = jax.jacfwd(fg)(x)
-    return _FirstOrder(fx, gx, grad_f, jac)
+@dataclasses.dataclass(frozen=True)
+class Problem:
+    """A smooth program ``min f(x) s.t. g(x) >= 0`` (one row of ``g`` may be made an
+    equality by the lane's ``eq_mask``), as the solver evaluates it.
+
+    Attributes:
+        fg: ``(n,) -> ((), (m,))``, the objective and the constraint margins from one
+            call (so that they can share their work).
+        first_order: ``(n,) -> FirstOrder`` at a point, or ``None``: one forward-mode
+            Jacobian of ``fg`` (``n`` tangents).
+        lagrangian_hessian: ``(FirstOrder, x, w) -> (n, n)``, the Hessian of
+            ``f + w . g`` at ``x`` for fixed weights ``w`` ``(m,)``, given the
+            ``first_order`` at ``x``; or ``None``: ``jax.hessian`` of ``f + w . g``. A
+            program with structure supplies both (:mod:`jaxgrasp.programs` writes them
+            from the contact kinematics' derivatives, several times cheaper).
+    """
+
+    fg: Callable
+    first_order: Callable | None = None
+    lagrangian_hessian: Callable | None = None
+
+
+def as_problem(problem) -> Problem:
+    """``problem`` itself, or a :class:`Problem` of the plain ``fg`` callable (autodiff)."""
+    return problem if isinstance(problem, Problem) else Problem(problem)
+
+
+def _first_order(problem: Problem, x) -> FirstOrder:
+    if problem.first_order is not None:
+        return problem.first_order(x)
+    fx, gx = problem.fg(x)
+    grad_f, jac = jax.jacfwd(problem.fg)(x)
+    return FirstOrder(fx, gx, grad_f, jac)
+
+
+def _lagrangian_hessian(problem: Problem, d: FirstOrder, x, weights):
+    """``(n, n)`` Hessian of ``f + weights . g`` at ``x`` (weights held fixed)."""
+    weights = jax.lax.stop_gradient(weights)
+    if problem.lagrangian_hessian is not None:
+        return problem.lagrangian_hessian(d, x, weights)
+
+    def lagrangian(x):
+        fx, gx = problem.fg(x)
+        return fx + jnp.dot(weights, gx)
+
+    return jax.hessian(lagrangian)(x)
 
 
 def init(x0, eq_mask, nu0, active, o: SolverOptions) -> SolverState:
@@ -230,22 +277,16 @@ def _tolerances(dtype, o: SolverOptions):
     return max(o.tol, 1e3 * eps), max(o.infeasible_tol, 1e4 * eps), 100.0 * eps
 
 
-def _phi_hessian(fg, s: SolverState, d: _FirstOrder):
+def _phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
     """``(n, n)`` exact Hessian of phi at ``s.x``, assembled from its two parts:
-    ``hess(f + w . g)`` with the weights ``w = d phi / d g`` held fixed (one scalar
-    Hessian of the Lagrangian-like function, forward over reverse), plus
-    ``rho J^T D J`` with ``D`` selecting the equality and the inequalities whose shifted
-    multiplier is positive (where phi's penalty is quadratic in ``g``). This equals
-    ``jax.hessian`` of phi (to rounding) at a fraction of its program size and cost."""
+    ``hess(f + w . g)`` with the weights ``w = d phi / d g`` held fixed
+    (:func:`_lagrangian_hessian`), plus ``rho J^T D J`` with ``D`` selecting the equality
+    and the inequalities whose shifted multiplier is positive (where phi's penalty is
+    quadratic in ``g``). This equals ``jax.hessian`` of phi (to rounding) at a fraction
+    of its program size and cost."""
     _, shifted, weights = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
-    weights = jax.lax.stop_gradient(weights)
-
-    def lagrangian(x):
-        fx, gx = fg(x)
-        return fx + jnp.dot(weights, gx)
-
     quadratic = ((s.eq_mask > 0) | (shifted > 0)).astype(d.jac.dtype)
-    return jax.hessian(lagrangian)(s.x) + s.rho * (d.jac.T * quadratic) @ d.jac
+    return _lagrangian_hessian(problem, d, s.x, weights) + s.rho * (d.jac.T * quadratic) @ d.jac
 
 
 def _newton_direction(hmat, gphi, o: SolverOptions):
@@ -317,19 +358,19 @@ def _line_search(merit, x, phi0, p, gphi, needs_step, o: SolverOptions):
     return jnp.where(improve, x + alphas[idx] * p, x), improve
 
 
-def _newton_step(fg, s: SolverState, d: _FirstOrder, gphi, needs_step, o: SolverOptions) -> SolverState:
+def _newton_step(problem: Problem, s: SolverState, d: FirstOrder, gphi, needs_step, o: SolverOptions) -> SolverState:
     """A damped Newton step on phi from ``s`` (``d``: the problem at ``s.x``; ``gphi``:
     ``(n,)`` gradient of phi there)."""
-    p = _newton_direction(_phi_hessian(fg, s, d), gphi, o)
+    p = _newton_direction(_phi_hessian(problem, s, d), gphi, o)
     phi0 = _phi_of(d.fx, d.gx, s.lam, s.nu, s.rho, s.eq_mask)
-    merit = lambda x: augmented_lagrangian(fg, x, s.lam, s.nu, s.rho, s.eq_mask)
+    merit = lambda x: augmented_lagrangian(problem.fg, x, s.lam, s.nu, s.rho, s.eq_mask)
     x_new, improve = _line_search(merit, s.x, phi0, p, gphi, needs_step, o)
     # A step that cannot decrease phi ends the inner loop (numerically converged).
     inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
     return dataclasses.replace(s, x=x_new, inner=inner)
 
 
-def _lane_status(s: SolverState, d: _FirstOrder, stat, viol, comp, o: SolverOptions):
+def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, o: SolverOptions):
     """``()`` :class:`~jaxgrasp.status.LaneStatus` after a multiplier update, from the KKT
     residuals ``stat``, ``viol``, ``comp`` at ``s.x`` and the violation ``s.prev_viol``
     before it: converged, infeasible, or not converged (yet)."""
@@ -353,7 +394,7 @@ def _lane_status(s: SolverState, d: _FirstOrder, stat, viol, comp, o: SolverOpti
     )
 
 
-def _multiplier_update(s: SolverState, d: _FirstOrder, gphi, o: SolverOptions) -> SolverState:
+def _multiplier_update(s: SolverState, d: FirstOrder, gphi, o: SolverOptions) -> SolverState:
     """The multiplier and penalty update ending an inner solve, with the lane's new status
     and KKT residuals (``d``: the problem at ``s.x``; ``gphi``: ``(n,)`` gradient of phi
     there)."""
@@ -381,7 +422,7 @@ def _multiplier_update(s: SolverState, d: _FirstOrder, gphi, o: SolverOptions) -
     )
 
 
-def _inner_done(s: SolverState, d: _FirstOrder, o: SolverOptions):
+def _inner_done(s: SolverState, d: FirstOrder, o: SolverOptions):
     """``(gphi, done)``: the ``(n,)`` gradient of phi at ``s.x`` (``d``: the problem there)
     and whether the inner solve is done (``()`` bool: stationary enough, or
     ``max_inner`` Newton steps taken)."""
@@ -399,7 +440,7 @@ def _select(pred, a, b):
     return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
 
 
-def step(fg, s: SolverState, o: SolverOptions) -> SolverState:
+def step(problem, s: SolverState, o: SolverOptions) -> SolverState:
     """One loop step of one lane: a multiplier update where the inner solve is done, then
     a Newton step on phi where the (updated) inner solve is not. A finished lane is
     returned unchanged.
@@ -411,8 +452,7 @@ def step(fg, s: SolverState, o: SolverOptions) -> SolverState:
     :func:`_line_search`).
 
     Args:
-        fg: objective and constraint margins, ``(n,) -> ((), (m,))``, feasible where
-            the margins are ``>= 0``.
+        problem: a :class:`Problem`, or its ``fg`` alone (:func:`as_problem`).
         s: the lane's state.
         o: :class:`SolverOptions`.
     """
@@ -420,15 +460,16 @@ def step(fg, s: SolverState, o: SolverOptions) -> SolverState:
     # (updated) inner solve is not: the sequence of updates and the step count of a lane
     # are those of one kind of update per loop step, but under vmap (where both kinds are
     # computed for every lane) a lane no longer spends a whole loop step on an update.
+    problem = as_problem(problem)
     is_running = running(s, o)
-    d = _first_order(fg, s.x)
+    d = _first_order(problem, s.x)
     gphi, inner_done = _inner_done(s, d, o)
     update = is_running & inner_done
     s_upd = _multiplier_update(s, d, gphi, o)
     s1 = _select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
     gphi1, inner_done1 = _inner_done(s1, d, o)
     newton = is_running & running(s1, o) & ~inner_done1
-    s_newton = _newton_step(fg, s1, d, gphi1, newton, o)
+    s_newton = _newton_step(problem, s1, d, gphi1, newton, o)
     return _select(newton, dataclasses.replace(s_newton, steps=s1.steps + 1), s1)
 
 
@@ -437,13 +478,13 @@ def running(s: SolverState, o: SolverOptions):
     return (s.status == LaneStatus.NOT_CONVERGED) & (s.steps < o.max_steps)
 
 
-def to_result(fg, s: SolverState) -> SolverResult:
-    """The :class:`SolverResult` of a lane's final state (``fg`` as in :func:`solve`)."""
+def to_result(problem, s: SolverState) -> SolverResult:
+    """The :class:`SolverResult` of a lane's final state (``problem`` as in :func:`solve`)."""
     return SolverResult(
         x=s.x,
         lam=s.lam,
         nu=s.nu,
-        objective=fg(s.x)[0],
+        objective=as_problem(problem).fg(s.x)[0],
         status=s.status,
         stationarity=s.stationarity,
         feasibility=s.feasibility,
@@ -453,7 +494,7 @@ def to_result(fg, s: SolverState) -> SolverResult:
 
 
 def solve(
-    fg: Callable,
+    problem,
     x0,
     eq_mask,
     nu0=0.0,
@@ -465,9 +506,9 @@ def solve(
     ``init``, then ``step`` while ``running``, then ``to_result``.
 
     Args:
-        fg: objective and constraint margins, ``(n,) -> ((), (m,))``, feasible where the
-            margins are ``>= 0``. One function, so that the two share their work (and
-            their derivatives: :func:`step` differentiates ``fg`` once per step).
+        problem: a :class:`Problem`, or just its ``fg``: objective and constraint margins,
+            ``(n,) -> ((), (m,))``, feasible where the margins are ``>= 0`` (one function,
+            so that the two share their work), differentiated by autodiff.
         x0: ``(n,)`` starting point.
         eq_mask: ``(m,)`` one-hot vector selecting the equality constraint, or zeros.
         nu0: initial equality multiplier.
@@ -475,5 +516,5 @@ def solve(
         active: ``False`` skips the lane (it ends at once with status ``LaneStatus.NO_START``).
     """
     s = init(x0, eq_mask, nu0, active, options)
-    s = jax.lax.while_loop(lambda s: running(s, options), lambda s: step(fg, s, options), s)
-    return to_result(fg, s)
+    s = jax.lax.while_loop(lambda s: running(s, options), lambda s: step(problem, s, options), s)
+    return to_result(problem, s)

@@ -265,7 +265,8 @@ def _queue_is_exercised(ref: SolverResult):
 
 
 def _queue(theta, x0, eq_mask, nu0, active):
-    return solve_lanes(_lane_functions(QUEUE_CASES), theta, x0, eq_mask, nu0, active, QUEUE_OPTIONS)
+    fg = _lane_functions(QUEUE_CASES)
+    return solve_lanes(lambda t: lambda x: fg(x, t), theta, x0, eq_mask, nu0, active, QUEUE_OPTIONS)
 
 
 def test_solve_lanes_equals_vmap_of_solve():
