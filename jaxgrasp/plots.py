@@ -513,7 +513,7 @@ def draw_scene(scene, *, title=None, view=(22.0, -58.0)):
     ]
     if len(scene.ghost_edges):
         handles.insert(1, Line2D([], [], color=COLORS["ghost"][:3], ls="--", lw=1.5,
-                                 label=f"object at the least-energy failure pose, motion x{scene.magnification:g}"))
+                                 label=f"object at the least-energy pose on that boundary (motion x{scene.magnification:g})"))
         handles.insert(2, Line2D([], [], color="0.25", lw=1.2, label="object axes at the centre of mass"))
     fig.legend(handles=handles, loc="lower center", ncol=2, fontsize=8, frameon=False)
     fig.suptitle(title or _grasp_title(scene), fontsize=10.5)
@@ -528,4 +528,4 @@ def _grasp_title(scene) -> str:
         return line + " (no limiting boundary)"
     kind = scene.limiting_kind.replace("_", " ")
     return (f"{line}, limited by {kind} of contact {scene.limiting_contact}\n"
-            f"ghost: the least-energy motion to that boundary, magnified x{scene.magnification:g}")
+            f"ghost: the object at the least-energy pose on that boundary, motion magnified x{scene.magnification:g}")
