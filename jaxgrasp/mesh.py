@@ -127,11 +127,13 @@ def _check_surface(mesh, where: str) -> None:
     if not scale > 0 or not mesh.area > 1e-12 * scale**2:
         raise GraspValueError(f"{where} has no surface area (a degenerate mesh)")
     if mesh.is_watertight:
+        with np.errstate(invalid="ignore", divide="ignore"):  # trimesh divides by a zero volume
+            volume = float(mesh.volume)
         if not mesh.is_winding_consistent:
             raise GraspValueError(f"{where}: its faces are not consistently oriented, so it has no inside")
-        if not abs(mesh.volume) > 1e-9 * scale**3:
+        if not abs(volume) > 1e-9 * scale**3:
             raise GraspValueError(f"{where} encloses no volume (a degenerate mesh)")
-        if mesh.volume < 0:
+        if volume < 0:
             mesh.invert()  # faces inward: turn them outward
 
 
