@@ -254,7 +254,7 @@ def test_show_writes_a_picture_and_a_glb(run_cli, tmp_path):
     png, glb = tmp_path / "out" / "block.png", tmp_path / "out" / "block.glb"
     rc, out, err = run_cli(["show", "examples/block.toml", "--out", png, "--glb", glb])
     assert rc == 0, err
-    assert "stable" in out and "limited by slip of contact 0" in out and "ghost motion x" in out
+    assert "stable" in out and "limited by slip of contact 1" in out and "ghost motion x" in out
     image = matplotlib.image.imread(png)
     assert image.shape[0] > 500 and image.shape[1] > 500
     assert np.mean(np.any(image[..., :3] < 0.9, axis=-1)) > 0.05  # not blank
