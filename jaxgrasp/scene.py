@@ -124,8 +124,6 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
             ten, at least 1) that moves the object's farthest point by about 15 % of its
             size.
     """
-    import trimesh
-
     from .mesh import MeshGrasp
     from .model import KINDS
 
