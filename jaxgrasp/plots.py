@@ -47,6 +47,7 @@ __all__ = [
     "plot_max",
     "plot_ranking",
     "plot_grasp",
+    "draw_scene",
     "new_figure",
     "save_figure",
     "J_TO_MJ",
