@@ -32,6 +32,7 @@ from .evaluate import evaluate  # noqa: E402
 from .options import COMPILER_OPTIONS, EvaluateOptions  # noqa: E402
 from .grasp import STANDARD_GRAVITY, Grasp, stack  # noqa: E402
 from .gripfile import grasp_from_dict, grasp_to_dict, load, save  # noqa: E402
+from .mesh import MeshGrasp, from_mesh  # noqa: E402  (trimesh is imported when a mesh is used)
 from .dataset import GraspSet, load_batch, save_batch  # noqa: E402
 from .model import KINDS  # noqa: E402
 from .status import BoundaryKind, GraspStatus, LaneStatus, TuneStatus  # noqa: E402
@@ -78,6 +79,8 @@ __all__ = [
     "save",
     "grasp_from_dict",
     "grasp_to_dict",
+    "from_mesh",
+    "MeshGrasp",
     "load_batch",
     "save_batch",
     "GraspSet",

@@ -29,7 +29,8 @@ Two formats, chosen by the file's suffix:
 ``.jsonl``
     One grasp per line, each a JSON object in the grasp-file schema
     (:mod:`jaxgrasp.gripfile`: ``fingertip``, ``object``, ``contacts``), any numbers of
-    contacts. Blank lines are skipped; UTF-8, with or without a byte-order mark.
+    contacts (an ``object.mesh`` path is relative to the dataset file). Blank lines are
+    skipped; UTF-8, with or without a byte-order mark.
 
 A grasp with an invalid value does not stop the reading: :func:`load_batch` returns
 every grasp in input order, ``None`` with a one-line error (naming the grasp, field and
@@ -243,7 +244,7 @@ def _read_jsonl(raw: bytes, path: Path) -> tuple[list, list]:
             errors.append(f"{where}: malformed JSON: nested too deeply")
             continue
         try:
-            grasps.append(grasp_from_dict(data, source=where))
+            grasps.append(grasp_from_dict(data, source=where, base=path.parent))  # a mesh path is relative to the file
             errors.append(None)
         except GraspValueError as exc:
             grasps.append(None)

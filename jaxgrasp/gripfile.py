@@ -12,12 +12,22 @@ Format (TOML; JSON is the same structure as one object with keys ``fingertip``,
     [object]                 # optional
     mass = 0.1               # kg, default 0
     gravity = [0, 0, -9.81]  # m/s^2, object frame, default (0, 0, -9.81)
+    # mesh = "part.stl"      # optional: the object's mesh, path relative to this file
+    # units = "mm"           # the mesh's length unit: m (default), cm or mm
+    # density = 1200.0       # kg/m^3: mass = density x volume (instead of mass)
+    # center_of_mass = [0, 0, 0.01]  # m, mesh frame (default: the watertight mesh's)
 
     [[contacts]]             # one table per contact, at least 2
     position = [0.05, 0, 0]      # m, object frame, origin at the centre of mass
     normal = [1, 0, 0]           # outward surface normal (any non-zero length)
     initial_deformation = 0.002  # m, in (0, radius)
     # radius / young_modulus / friction / max_force here override [fingertip]
+
+With ``mesh``, contact positions are in metres in the mesh's own frame (its origin and
+axes, after the unit conversion), each is snapped to the surface, ``normal`` may be
+omitted (the mesh's outward normal there), and the grasp is moved to the centre-of-mass
+frame (:func:`jaxgrasp.from_mesh`); ``load(path, keep_mesh=True)`` returns the
+:class:`~jaxgrasp.mesh.MeshGrasp` with the mesh and that offset.
 
 Each fingertip key must be given in ``[fingertip]`` or in every contact. Unknown keys,
 keys given twice in one table (JSON too, not only TOML), wrong types (booleans are not
@@ -40,13 +50,16 @@ import numpy as np
 from . import outputs
 from .fields import FIELD, FIELDS, FINGERTIP
 from .grasp import Grasp
+from .mesh import MeshGrasp, from_mesh
 from .validation import GraspValueError
 
 __all__ = ["load", "save", "to_text", "grasp_from_dict", "grasp_to_dict", "to_toml"]
 
 TOP_KEYS = ("fingertip", "object", "contacts")
 FINGERTIP_KEYS = tuple(FIELD[name].file_key for name in FINGERTIP)
-OBJECT_KEYS = tuple(f.file_key for f in FIELDS if f.file_section == "object")
+MESH_KEYS = ("mesh", "units", "density", "center_of_mass")
+"""``[object]`` keys of an object given by its mesh (:func:`jaxgrasp.from_mesh`)."""
+OBJECT_KEYS = tuple(f.file_key for f in FIELDS if f.file_section == "object") + MESH_KEYS
 CONTACT_REQUIRED = tuple(f.file_key for f in FIELDS if f.file_section == "contacts")
 CONTACT_KEYS = CONTACT_REQUIRED + FINGERTIP_KEYS
 _COMMENTS = {f.file_key: f.comment for f in FIELDS}
@@ -110,8 +123,9 @@ def _value(field, value: Any, path: str):
     return _number(value, path)
 
 
-def _grasp_kwargs(data: Any) -> dict[str, Any]:
-    """Turn a parsed file into keyword arguments for :meth:`Grasp.create`."""
+def _grasp_kwargs(data: Any) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """Turn a parsed file into keyword arguments for :meth:`Grasp.create`, and the mesh
+    keys of ``[object]`` (``None`` when it names no mesh)."""
     if not isinstance(data, Mapping):
         raise GraspValueError(
             f"the top level must be a table (object) with keys {', '.join(TOP_KEYS)}, "
@@ -123,12 +137,35 @@ def _grasp_kwargs(data: Any) -> dict[str, Any]:
     defaults = {k: _number(v, f"fingertip.{k}") for k, v in fingertip.items()}
     obj = _table(data.get("object", {}), "object")
     _check_keys(obj, OBJECT_KEYS, "in [object]")
+    mesh = _mesh_keys(obj)
     kwargs: dict[str, Any] = {}
     for f in FIELDS:
         if f.file_section == "object":
             kwargs[f.name] = _value(f, obj[f.file_key], f"object.{f.file_key}") if f.file_key in obj else f.default
-    kwargs.update(_contact_kwargs(_contact_tables(data), defaults))
-    return kwargs
+    if mesh is not None and "mass" not in obj:
+        kwargs["mass"] = None  # from_mesh: from the density, or the default
+    optional = ("normal",) if mesh is not None else ()
+    kwargs.update(_contact_kwargs(_contact_tables(data), defaults, optional))
+    return kwargs, mesh
+
+
+def _mesh_keys(obj: Mapping) -> dict[str, Any] | None:
+    """The mesh keys of ``[object]`` as :func:`jaxgrasp.from_mesh` arguments, or ``None``."""
+    if "mesh" not in obj:
+        extra = [k for k in MESH_KEYS if k in obj]
+        if extra:
+            raise GraspValueError(f"object.{extra[0]} is given without object.mesh (the object's mesh file)")
+        return None
+    out: dict[str, Any] = {}
+    for key in ("mesh", "units"):
+        if key in obj and not (isinstance(obj[key], str) and obj[key]):
+            raise GraspValueError(f"object.{key} = {_show(obj[key])} must be a non-empty string")
+    out["mesh"], out["units"] = obj["mesh"], obj.get("units", "m")
+    if "density" in obj:
+        out["density"] = _number(obj["density"], "object.density")
+    if "center_of_mass" in obj:
+        out["center_of_mass"] = _vector3(obj["center_of_mass"], "object.center_of_mass")
+    return out
 
 
 def _contact_tables(data: Mapping) -> list:
@@ -144,8 +181,9 @@ def _contact_tables(data: Mapping) -> list:
     return list(contacts)
 
 
-def _contact_kwargs(contacts: list, defaults: dict) -> dict[str, Any]:
-    """The per-contact fields of the contact tables, with ``[fingertip]`` ``defaults``."""
+def _contact_kwargs(contacts: list, defaults: dict, optional: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The per-contact fields of the contact tables, with ``[fingertip]`` ``defaults``;
+    a contact key in ``optional`` may be missing (its value is then ``None``)."""
     per_contact = [f for f in FIELDS if f.file_section in ("contacts", "fingertip")]
     values: dict[str, list] = {f.name: [] for f in per_contact}
     overridden = {key: False for key in FINGERTIP_KEYS}
@@ -153,7 +191,7 @@ def _contact_kwargs(contacts: list, defaults: dict) -> dict[str, Any]:
         where = f"contacts[{i}]"
         _check_keys(contact, CONTACT_KEYS, f"in {where}")
         for key in CONTACT_REQUIRED:
-            if key not in contact:
+            if key not in contact and key not in optional:
                 raise GraspValueError(f"{where} is missing key {key!r}")
         for f in per_contact:
             key = f.file_key
@@ -163,6 +201,8 @@ def _contact_kwargs(contacts: list, defaults: dict) -> dict[str, Any]:
                     overridden[key] = True
             elif key in defaults:
                 values[f.name].append(defaults[key])
+            elif key in optional:
+                values[f.name].append(None)
             else:
                 raise GraspValueError(
                     f"{where} has no {key!r} and [fingertip] does not give one; "
@@ -176,18 +216,32 @@ def _contact_kwargs(contacts: list, defaults: dict) -> dict[str, Any]:
     return values
 
 
-def grasp_from_dict(data: Mapping, source: str = "<dict>") -> Grasp:
+def grasp_from_dict(data: Mapping, source: str = "<dict>", base=None) -> Grasp:
     """Build a validated :class:`Grasp` from a parsed grasp file (TOML/JSON structure).
 
     Args:
         data: ``{"fingertip": {...}, "object": {...}, "contacts": [{...}, ...]}``, SI units.
         source: name used as the prefix of error messages (a file name).
+        base: folder a relative ``object.mesh`` path is taken from (default: the current
+            folder).
 
     Raises:
         GraspValueError: anything wrong with the data; message ``"<source>: <problem>"``.
     """
+    built = _build(data, source, base)
+    return built.grasp if isinstance(built, MeshGrasp) else built
+
+
+def _build(data: Mapping, source: str, base) -> Grasp | MeshGrasp:
+    """The grasp of parsed file data, a :class:`MeshGrasp` where it names a mesh."""
     try:
-        return Grasp.create(**_grasp_kwargs(data))
+        kwargs, mesh = _grasp_kwargs(data)
+        if mesh is None:
+            return Grasp.create(**kwargs)
+        path = Path(mesh.pop("mesh"))
+        if base is not None and not path.is_absolute():
+            path = Path(base) / path
+        return from_mesh(path, kwargs.pop("positions"), normals=kwargs.pop("normals"), **mesh, **kwargs)
     except GraspValueError as exc:
         raise GraspValueError(f"{source}: {exc}") from None
     except RecursionError:
@@ -259,11 +313,15 @@ def read_input(path: Path) -> bytes:
         raise GraspValueError(f"{path}: cannot read file ({exc.strerror or exc})") from None
 
 
-def load(path: str | os.PathLike) -> Grasp:
+def load(path: str | os.PathLike, *, keep_mesh: bool = False) -> Grasp | MeshGrasp:
     """Read a grasp file (``.toml`` or ``.json``, SI units) and return a validated :class:`Grasp`.
 
     UTF-8 text, with or without a byte-order mark. A key given twice in one table is an
-    error in both formats.
+    error in both formats. A file whose ``[object]`` names a ``mesh`` (path relative to
+    the file) gives the grasp in the centre-of-mass frame (:func:`jaxgrasp.from_mesh`);
+    with ``keep_mesh=True`` it gives its :class:`~jaxgrasp.mesh.MeshGrasp` instead (the
+    grasp, the mesh and the frame offset), for drawing. A file without a mesh gives its
+    :class:`Grasp` either way.
 
     Raises:
         GraspValueError: missing/unreadable file, a folder, unknown extension, malformed
@@ -286,7 +344,8 @@ def load(path: str | os.PathLike) -> Grasp:
         raise GraspValueError(f"{path}: malformed {kind}: {exc}") from None
     except RecursionError:
         raise GraspValueError(f"{path}: malformed {fmt.upper()}: nested too deeply") from None
-    return grasp_from_dict(data, source=str(path))
+    built = _build(data, str(path), path.parent)
+    return built.grasp if isinstance(built, MeshGrasp) and not keep_mesh else built
 
 
 # ----------------------------------------------------------------------------- writing

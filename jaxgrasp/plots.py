@@ -1,4 +1,7 @@
-"""Plots of sweep and batch results (matplotlib, Agg backend: no display needed).
+"""Plots of grasps, sweep and batch results (matplotlib, Agg backend: no display needed).
+
+:func:`plot_grasp` draws one grasp in 3-D (object, fingertips, friction cones, the
+limiting contact) with the motion that makes it fail (:mod:`jaxgrasp.scene`).
 
 :func:`plot_ranking` draws a batch's grasps ranked by value (a log scale: values span
 decades), coloured by status, beside the count of each status. The sweep plots below
@@ -38,7 +41,17 @@ from .fields import FIELD
 from .status import BoundaryKind, GraspStatus
 from .units import MJ_TO_J
 
-__all__ = ["plot_sweep", "plot_max_over", "plot_max", "plot_ranking", "new_figure", "save_figure", "J_TO_MJ"]
+__all__ = [
+    "plot_sweep",
+    "plot_max_over",
+    "plot_max",
+    "plot_ranking",
+    "plot_grasp",
+    "draw_scene",
+    "new_figure",
+    "save_figure",
+    "J_TO_MJ",
+]
 
 
 J_TO_MJ = 1.0 / MJ_TO_J
@@ -414,3 +427,106 @@ def plot_ranking(result, path=None, *, top: int = 5, title=None):
     fig.suptitle(title or f"{len(result)} grasps ranked by evaluation value")
     fig.tight_layout()
     return _save(fig, path)
+
+
+# --------------------------------------------------------------------------- one grasp in 3-D
+
+
+def plot_grasp(grasp, path=None, *, result=None, magnification=None, title=None, view=(22.0, -58.0)):
+    """A 3-D picture of a grasp and the way it fails.
+
+    The object (its mesh, or the contacts' hull when there is none), each fingertip as a
+    hemisphere pressed into its contact, its outward normal and friction cone, the
+    limiting contact's fingertip in red, and the object moved by the least-energy pose of
+    the limiting boundary as an orange ghost, the motion magnified by the factor the
+    title states (:func:`jaxgrasp.scene.grasp_scene`). Axes in mm, the mesh's frame.
+
+    Args:
+        grasp: a :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp` (one grasp).
+        path: where to save the figure (PNG, ...); ``None`` returns it open.
+        result: its :class:`~jaxgrasp.Evaluation` (default: evaluated here).
+        magnification: the ghost's motion factor (default: a round one, see
+            :func:`jaxgrasp.scene.nice_magnification`).
+        title: first title line (default: the status, value and limiting boundary).
+        view: ``(elevation, azimuth)`` of the camera, degrees.
+
+    Returns:
+        The matplotlib ``Figure``.
+    """
+    from .scene import grasp_scene
+
+    if result is None:
+        from .evaluate import evaluate
+        from .mesh import MeshGrasp
+
+        result = evaluate(grasp.grasp if isinstance(grasp, MeshGrasp) else grasp)
+    scene = grasp_scene(grasp, result, magnification=magnification)
+    return _save(draw_scene(scene, title=title, view=view), path)
+
+
+def draw_scene(scene, *, title=None, view=(22.0, -58.0)):
+    """The figure of a :class:`~jaxgrasp.scene.GraspScene` (see :func:`plot_grasp`)."""
+    from matplotlib.patches import Patch
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
+
+    from .scene import COLORS
+
+    mm = 1e3
+    fig = new_figure(figsize=(7.6, 7.4))
+    ax = fig.add_subplot(projection="3d", computed_zorder=False)
+    tris, colors = [], []
+    for p in scene.parts:
+        tris.append(np.asarray(p.mesh.triangles) * mm)
+        colors.append(np.tile(p.color, (len(p.mesh.faces), 1)))
+    ax.add_collection3d(Poly3DCollection(np.concatenate(tris), facecolors=np.concatenate(colors), linewidths=0, zorder=1))
+    ax.add_collection3d(Line3DCollection(scene.object_edges * mm, colors="0.25", linewidths=0.9, zorder=2))
+    ax.add_collection3d(Line3DCollection(scene.axes * mm, colors="0.25", linewidths=1.2, zorder=2))
+    if len(scene.ghost_edges):
+        ghost = np.concatenate([scene.ghost_edges, scene.ghost_axes]) * mm
+        ax.add_collection3d(Line3DCollection(ghost, colors=[COLORS["ghost"][:3]], linewidths=1.4, linestyles="--",
+                                             zorder=3))
+    for (start, end), name in zip(scene.axes * mm, "xyz"):
+        ax.text(*(start + 1.08 * (end - start)), name, fontsize=8, color="0.25", ha="center", va="center", zorder=6)
+    c = scene.contacts * mm
+    for i, p in enumerate(c):
+        lim = i == scene.limiting_contact
+        ax.scatter(*p, s=60 if lim else 25, color=COLORS["limiting" if lim else "fingertip"][:3], depthshade=False,
+                   edgecolors="k", linewidths=0.6, zorder=5)
+        r = scene.radius[i] * mm
+        above = p + scene.normals[i] * r + np.array([0.0, 0.0, 1.5 * r])  # over the fingertip
+        text = f"contact {i}" + (f"\nlimiting: {scene.limiting_kind.replace('_', ' ')}" if lim else "")
+        ax.text(*above, text, fontsize=8.5, color="darkred" if lim else "k", ha="center", va="bottom", zorder=6)
+    pts = np.concatenate([np.asarray(p.mesh.vertices) for p in scene.parts]) * mm
+    centre, half = (pts.max(0) + pts.min(0)) / 2, (pts.max(0) - pts.min(0)).max() / 2 * 1.02
+    for set_lim, x in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
+        set_lim(x - half, x + half)
+    ax.set_box_aspect((1, 1, 1), zoom=1.1)
+    ax.view_init(*view)
+    for name, axis in zip("xyz", (ax.set_xlabel, ax.set_ylabel, ax.set_zlabel)):
+        axis(f"{name} [mm]", fontsize=8, labelpad=-2)
+    ax.tick_params(labelsize=7, pad=0)
+    handles = [
+        Patch(color=COLORS["object"], label="object" if scene.has_mesh else "object (contacts' hull: no mesh)"),
+        Patch(color=COLORS["fingertip"], label="fingertip (pressed in by its initial deformation)"),
+        Patch(color=COLORS["limiting"], label="fingertip of the limiting boundary"),
+        Patch(color=COLORS["cone"], label="friction cone (forces on the object)"),
+        Line2D([], [], color=COLORS["normal"], lw=1.5, label="outward normal"),
+    ]
+    if len(scene.ghost_edges):
+        handles.insert(1, Line2D([], [], color=COLORS["ghost"][:3], ls="--", lw=1.5,
+                                 label=f"object at the least-energy pose on that boundary (motion x{scene.magnification:g})"))
+        handles.insert(2, Line2D([], [], color="0.25", lw=1.2, label="object axes at the centre of mass"))
+    fig.legend(handles=handles, loc="lower center", ncol=2, fontsize=8, frameon=False)
+    fig.suptitle(title or _grasp_title(scene), fontsize=10.5)
+    fig.subplots_adjust(left=0.0, right=1.0, top=0.93, bottom=0.15)
+    return fig
+
+
+def _grasp_title(scene) -> str:
+    """``stable: value 0.2638 mJ, limited by slip of contact 0`` and the ghost's factor."""
+    line = f"{scene.status}: value {scene.value * J_TO_MJ:.4g} mJ"
+    if scene.limiting_kind is None:
+        return line + " (no limiting boundary)"
+    kind = scene.limiting_kind.replace("_", " ")
+    return (f"{line}, limited by {kind} of contact {scene.limiting_contact}\n"
+            f"ghost: the object at the least-energy pose on that boundary, motion magnified x{scene.magnification:g}")

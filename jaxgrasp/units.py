@@ -11,3 +11,7 @@ PA_TO_MPA = 1.0e-6
 """Young's modulus: Pa (N/m^2) to N/mm^2."""
 MJ_TO_J = 1.0e-3
 """Energy: millijoules (N mm) to joules."""
+
+LENGTH_UNITS = {"m": 1.0, "cm": 1.0e-2, "mm": 1.0e-3}
+"""Length units a mesh's vertices may be given in, and each one's size in metres
+(:func:`jaxgrasp.from_mesh`, the ``units`` key of a grasp file's ``[object]``)."""

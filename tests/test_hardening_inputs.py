@@ -243,7 +243,7 @@ def test_cli_override_errors_name_the_option(run_cli, argv, wanted):
 def test_cli_help_has_no_markup(capsys):
     from jaxgrasp.cli import main
 
-    for argv in ([], ["evaluate"], ["sweep"], ["tune"]):
+    for argv in ([], ["evaluate"], ["sweep"], ["tune"], ["show"]):
         with pytest.raises(SystemExit):
             main([*argv, "--help"])
         text = capsys.readouterr().out

@@ -1,11 +1,12 @@
-"""The ``jaxgrasp`` command line: ``jaxgrasp evaluate``, ``sweep``, ``batch``, ``tune``.
+"""The ``jaxgrasp`` command line: ``jaxgrasp evaluate``, ``sweep``, ``batch``, ``tune``, ``show``.
 
 Every error in the input (bad file, bad value, bad option, an output that cannot be
 written) prints one line ``jaxgrasp: error: ...`` on stderr and exits with status 2, never
 a traceback. Ctrl-C (or SIGTERM) at any moment ends the command within a second with one
 line ``jaxgrasp: interrupted ...`` and status 130 (143), see :mod:`.interrupt`.
 
-One module per sub-command (:mod:`.evaluate`, :mod:`.sweep`, :mod:`.batch`, :mod:`.tune`), each with
+One module per sub-command (:mod:`.evaluate`, :mod:`.sweep`, :mod:`.batch`, :mod:`.tune`,
+:mod:`.show`), each with
 ``add_parser(sub)`` and ``run(args)``; what they share is in :mod:`.common`.
 """
 
@@ -14,7 +15,7 @@ from __future__ import annotations
 import sys
 
 from ..cache import enable_compilation_cache
-from . import batch, evaluate, sweep, tune
+from . import batch, evaluate, show, sweep, tune
 from .common import EXIT_USAGE, Parser, UsageError, load_grasp, parse_number
 from .interrupt import run_interruptibly
 
@@ -29,7 +30,7 @@ __all__ = [
     "enable_compilation_cache",
 ]
 
-COMMANDS = (evaluate, sweep, batch, tune)
+COMMANDS = (evaluate, sweep, batch, tune, show)
 """The sub-command modules, in the order of ``jaxgrasp --help``."""
 
 
@@ -67,7 +68,7 @@ def _main(argv) -> int:
     try:
         args = parser.parse_args(argv)
         if args.command is None:
-            raise UsageError("choose a command: evaluate, sweep, batch or tune (see 'jaxgrasp --help')")
+            raise UsageError("choose a command: evaluate, sweep, batch, tune or show (see 'jaxgrasp --help')")
         enable_compilation_cache()  # looked up here, so that tests can replace it
         return args.func(args)
     except (UsageError, GraspValueError, OutputError) as exc:

@@ -112,22 +112,33 @@ def grasp_notes(grasp) -> list[str]:
     ]
 
 
-def load_grasp(args, overrides: bool = True):
-    """The grasp named on the command line (file or preset), with overrides applied."""
-    import numpy as np
-
-    from ..grasp import Grasp
+def load_grasp(args, overrides: bool = True, keep_mesh: bool = False):
+    """The grasp named on the command line (file or preset), with overrides applied; with
+    ``keep_mesh``, a file naming a mesh gives its :class:`~jaxgrasp.mesh.MeshGrasp` (the
+    overrides applied to its grasp)."""
     from ..gripfile import load
-    from ..validation import GraspValueError, check_grasp_inputs
+    from ..mesh import MeshGrasp
 
     if (args.file is None) == (args.preset is None):
         if args.file is None and getattr(args, "default_preset", None):
             args.preset = args.default_preset
         else:
             raise UsageError(f"give either a grasp FILE or --preset {'|'.join(PRESETS)}")
-    grasp = load(args.file) if args.file is not None else PRESETS[args.preset]()
+    loaded = load(args.file, keep_mesh=keep_mesh) if args.file is not None else PRESETS[args.preset]()
     if not overrides:
-        return grasp
+        return loaded
+    if isinstance(loaded, MeshGrasp):
+        return loaded.replace(grasp=_overridden(loaded.grasp, args))
+    return _overridden(loaded, args)
+
+
+def _overridden(grasp, args):
+    """``grasp`` with the command line's overrides (``--young-modulus`` ...) applied."""
+    import numpy as np
+
+    from ..grasp import Grasp
+    from ..validation import GraspValueError, check_grasp_inputs
+
     given = {name: getattr(args, name) for name in OVERRIDES if getattr(args, name, None) is not None}
     if not given:
         return grasp
