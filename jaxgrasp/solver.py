@@ -20,6 +20,14 @@ flattened into one ``lax.while_loop`` whose body does a multiplier update where 
 solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
 need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
 
+Derivatives: a program is a :class:`Problem`, ``fg(x) = (f, g)`` in one call. Each step
+takes the program's first-order data once (:class:`FirstOrder`: ``f``, ``g``, ``grad f``
+and the Jacobian ``J`` of ``g``; by default one forward-mode pass); every gradient it needs
+is then ``grad f + J^T w`` for some weights ``w`` (phi's before and after the multiplier
+update, the violation's), and phi's Hessian is ``hess(f + w . g) + rho J^T D J``. A
+program with structure may supply its own first-order data and Lagrangian Hessian
+(:mod:`jaxgrasp.programs` does, from the contact kinematics); otherwise autodiff.
+
 Each lane ends with a status and its KKT residuals at ``(x, lam, nu)``:
 stationarity ``|grad f + nu grad h - sum lam grad g|_inf``, feasibility
 ``max(|h|, max(-g_i, 0))`` and complementarity ``max |lam_i g_i|``.
