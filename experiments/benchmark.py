@@ -14,7 +14,7 @@ Scenes:
 * ``cube``: the paper's grid, E = 2e5..1e6 Pa (9) x dr = 1..5 mm (41), m = 0 -> 369 grasps;
 * ``prism``: E = 2e5..1e6 Pa (5) x dr = 1..5 mm (9) x m in {0, 0.1, 0.2} kg -> 135 grasps.
 
-jaxgrasp: ``jax.jit(jax.vmap(lambda g: solve_programs(g, opts)))`` on the stacked batch;
+jaxgrasp: ``jax.jit(jax.vmap(lambda g: solve_programs(g, opts)), compiler_options=jaxgrasp.COMPILER_OPTIONS)`` on the stacked batch;
 compile (ahead of time, ``lower().compile()``) and first run timed, then the steady state is
 the median of ``--repeats`` (>= 3) calls with ``block_until_ready``. Programs solved =
 equilibrium programs + active boundary lanes; programs/s = programs / steady wall time.
@@ -136,7 +136,7 @@ def timed_call(fn, *args):
 def compile_aot(fn, *args):
     """Ahead-of-time compile; returns (compiled, seconds)."""
     t0 = time.perf_counter()
-    compiled = jax.jit(fn).lower(*args).compile()
+    compiled = jax.jit(fn, compiler_options=jaxgrasp.COMPILER_OPTIONS).lower(*args).compile()
     return compiled, time.perf_counter() - t0
 
 

@@ -29,7 +29,7 @@ if "JAX_ENABLE_X64" not in _os.environ:  # an explicit choice of the user's stan
 
 from . import presets  # noqa: E402
 from .evaluate import evaluate  # noqa: E402
-from .options import EvaluateOptions  # noqa: E402
+from .options import COMPILER_OPTIONS, EvaluateOptions  # noqa: E402
 from .grasp import STANDARD_GRAVITY, Grasp, stack  # noqa: E402
 from .gripfile import grasp_from_dict, grasp_to_dict, load, save  # noqa: E402
 from .mesh import MeshGrasp, from_mesh  # noqa: E402  (trimesh is imported when a mesh is used)
@@ -61,6 +61,7 @@ __all__ = [
     "STANDARD_GRAVITY",
     "evaluate",
     "EvaluateOptions",
+    "COMPILER_OPTIONS",
     "SolverOptions",
     "Evaluation",
     "STATUS_NAMES",

@@ -32,6 +32,7 @@ from .dataset import GraspSet
 from .evaluate import EvaluateOptions
 from .evaluate import evaluate as _evaluate_one
 from .fields import NAMES
+from .options import COMPILER_OPTIONS
 from .grasp import Grasp, stack
 from .result import FIELDS, Evaluation
 from .validation import GraspValueError, check_batch_inputs
@@ -98,8 +99,8 @@ def _batched_fn(options: EvaluateOptions, sharding=None, masked: bool = False):
         return tuple(getattr(r, f) for f in RESULT_FIELDS)
 
     if sharding is None:
-        return jax.jit(jax.vmap(one))
-    return jax.jit(jax.vmap(one), in_shardings=sharding, out_shardings=sharding)
+        return jax.jit(jax.vmap(one), compiler_options=COMPILER_OPTIONS)
+    return jax.jit(jax.vmap(one), in_shardings=sharding, out_shardings=sharding, compiler_options=COMPILER_OPTIONS)
 
 
 def _mesh(devices) -> Mesh:

@@ -31,6 +31,8 @@ from typing import Any, Callable, Hashable, Sequence
 import jax
 import numpy as np
 
+from .options import COMPILER_OPTIONS
+
 __all__ = [
     "MEMO_SIZE",
     "EXPORT_SUBDIR",
@@ -236,7 +238,8 @@ def compiled(
         else:
             _STATS["deserialized"] += 1
         # the XLA compilation of the exported program hits JAX's persistent cache, if on
-        fn = jax.jit(exp.call, in_shardings=sharding, out_shardings=sharding).lower(*spec).compile()
+        fn = jax.jit(exp.call, in_shardings=sharding, out_shardings=sharding, compiler_options=COMPILER_OPTIONS)
+        fn = fn.lower(*spec).compile()
     seconds = time.perf_counter() - t0
     if len(_MEMO) >= MEMO_SIZE:
         _MEMO.pop(next(iter(_MEMO)))

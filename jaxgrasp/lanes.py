@@ -23,8 +23,7 @@ __all__ = ["solve_lanes"]
 
 
 def solve_lanes(
-    f: Callable,
-    g: Callable,
+    problem: Callable,
     theta,
     x0,
     eq_mask,
@@ -47,12 +46,12 @@ def solve_lanes(
     folded into the lane axis (``custom_vmap``): all ``B * L`` lanes share one queue
     of ``min(ceil(slot_fraction * B * L), max_slots)`` slots, instead of ``B`` queues advancing in
     lockstep until the slowest of them is empty. Results are the same lane by lane.
-    ``f`` and ``g`` must therefore take every lane-dependent quantity through ``theta``
-    (they must not close over traced values).
+    ``problem`` must therefore take every lane-dependent quantity through ``theta``
+    (it must not close over traced values).
 
     Args:
-        f: objective ``(x, theta_lane) -> ()``.
-        g: constraint margins ``(x, theta_lane) -> (m,)``.
+        problem: ``theta_lane -> Problem`` (or ``-> fg``, see
+            :func:`~jaxgrasp.solver.as_problem`): the lane's program.
         theta: pytree of per-lane problem data, leading axis ``L`` (may be empty).
         x0: ``(L, n)`` starting points.
         eq_mask: ``(L, m)`` one-hot equality selectors (rows of zeros: no equality).
@@ -67,7 +66,7 @@ def solve_lanes(
 
     @jax.custom_batching.custom_vmap
     def run(theta, x0, eq_mask, nu0, active):
-        return _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, options)
+        return _solve_lanes(problem, theta, x0, eq_mask, nu0, active, options)
 
     @run.def_vmap
     def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active):
@@ -111,14 +110,14 @@ def _running_slots(slots, o: SolverOptions):
     return jax.vmap(lambda s: solver.running(s, o))(slots)
 
 
-def _advance(f, g, theta, order, num_active, o: SolverOptions, q: _Queue) -> _Queue:
+def _advance(problem, theta, order, num_active, o: SolverOptions, q: _Queue) -> _Queue:
     """One loop step: every slot steps and is written back; finished slots are refilled.
 
     ``order`` is the ``(L,)`` queue order of the lanes, its first ``num_active`` entries the
     active lanes.
     """
     th = _take(theta, q.idx)
-    slots = jax.vmap(lambda s, t: solver.step(lambda x: f(x, t), lambda x: g(x, t), s, o))(q.slots, th)
+    slots = jax.vmap(lambda s, t: solver.step(problem(t), s, o))(q.slots, th)
     states = jax.tree_util.tree_map(lambda a, b: a.at[q.idx].set(b), q.states, slots)
     done = ~_running_slots(slots, o)
     # the k-th finished slot takes order[ptr + k], while lanes remain
@@ -140,7 +139,7 @@ def _to_tail(q: _Queue, tail: int, o: SolverOptions) -> _Queue:
     return _Queue(q.states, _take(q.slots, keep), q.idx[keep], q.ptr)
 
 
-def _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
+def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
     """:func:`solve_lanes` on one flat batch of ``L`` lanes: the queue loop, then the tail."""
     num_lanes = x0.shape[0]
     width = _num_slots(num_lanes, o)
@@ -148,7 +147,7 @@ def _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> Sol
     # The queue: active lanes first, in order; only those are ever loaded into a slot.
     order = jnp.argsort(~jnp.asarray(active), stable=True)
     num_active = jnp.sum(jnp.asarray(active, jnp.int32))
-    advance = partial(_advance, f, g, theta, order, num_active, o)
+    advance = partial(_advance, problem, theta, order, num_active, o)
 
     # The tail: once the queue is empty and at most width // 8 slots still run (e.g. a few
     # lanes that take the whole step budget), the running slots move to a loop of
@@ -166,7 +165,7 @@ def _solve_lanes(f, g, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> Sol
     q = jax.lax.while_loop(cond, advance, _Queue(states, _take(states, idx0), idx0, ptr0))
     if tail is not None:
         q = jax.lax.while_loop(lambda q: jnp.any(_running_slots(q.slots, o)), advance, _to_tail(q, tail, o))
-    # theta taken by lane index, as the slots take it: f then compiles as in the loop (given
+    # theta taken by lane index, as the slots take it: fg then compiles as in the loop (given
     # theta itself, XLA simplifies across its broadcasts and rounds f(x) differently).
     th = _take(theta, jnp.arange(num_lanes))
-    return jax.vmap(lambda s, t: solver.to_result(lambda x: f(x, t), s))(q.states, th)
+    return jax.vmap(lambda s, t: solver.to_result(problem(t), s))(q.states, th)

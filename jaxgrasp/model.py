@@ -32,6 +32,11 @@ __all__ = [
     "contact_kinematics",
     "potential_energy",
     "constraint_margins",
+    "energy_and_margins",
+    "elastic_energies",
+    "margins_of",
+    "kinematics_jacobian",
+    "kinematics_curvature",
     "energy_scale",
     "KINDS",
 ]
@@ -130,12 +135,23 @@ def potential_energy(x, p: ModelParams):
     unchanged on the feasible set and bounded below outside it, which the solver needs.
     Inactive contacts (``p.on`` false) contribute nothing.
     """
-    d, cphi, dt2, theta = contact_kinematics(x, p)
+    return _energy(x, contact_kinematics(x, p), p)
+
+
+def _energy(x, kinematics, p: ModelParams):
+    """:func:`potential_energy` from the contact kinematics at ``x``."""
+    return jnp.sum(elastic_energies(kinematics, p)) - jnp.dot(p.weight, x[:3])
+
+
+def elastic_energies(kinematics, p: ModelParams):
+    """``(N,)`` elastic energy of each fingertip, mJ, from its kinematics ``(d, cos phi,
+    dt^2, theta)`` (:func:`contact_kinematics`); 0 for an inactive contact."""
+    d, cphi, dt2, theta = kinematics
     dp = jnp.maximum(d, 0.0)
     elastic = jnp.pi * p.E * (
         dp**3 / (3.0 * cphi**2) + dp * dt2 + dp**2 * (p.r - dp / 3.0) * theta**2
     )
-    return jnp.sum(jnp.where(p.on, elastic, 0.0)) - jnp.dot(p.weight, x[:3])
+    return jnp.where(p.on, elastic, 0.0)
 
 
 def energy_scale(p: ModelParams):
@@ -157,7 +173,13 @@ def constraint_margins(x, p: ModelParams):
 
     An inactive contact's margins are the constant 1 (always satisfied, no gradient).
     """
-    d, cphi, dt2, theta = contact_kinematics(x, p)
+    return margins_of(contact_kinematics(x, p), p)
+
+
+def margins_of(kinematics, p: ModelParams):
+    """:func:`constraint_margins` ``(3, N)`` from the contact kinematics ``(d, cos phi,
+    dt^2, theta)`` (:func:`contact_kinematics`)."""
+    d, cphi, dt2, theta = kinematics
     dr = jax.lax.stop_gradient(p.dr)
     mu_dr2 = jax.lax.stop_gradient((p.mu * p.dr) ** 2)
     contact = d / dr
@@ -168,3 +190,87 @@ def constraint_margins(x, p: ModelParams):
     ) / mu_dr2
     force = (jnp.sqrt(p.fmax / (jnp.pi * p.E)) * cphi - d) / dr
     return jnp.where(p.on, jnp.stack([contact, slip, force]), 1.0)
+
+
+def energy_and_margins(x, p: ModelParams):
+    """``(potential_energy(x, p), constraint_margins(x, p))`` from one evaluation of the
+    contact kinematics (the solver's programs need both at every point; sharing the
+    kinematics also shares their derivatives)."""
+    kinematics = contact_kinematics(x, p)
+    return _energy(x, kinematics, p), margins_of(kinematics, p)
+
+
+def kinematics_jacobian(x, p: ModelParams):
+    """The contact kinematics and their Jacobian in the pose change, written from the
+    rotation's derivatives.
+
+    Returns ``(q, dq, geometry)``: :func:`contact_kinematics` ``q = (d, cos phi, dt^2,
+    theta)`` of every contact as ``(N, 4)``, the Jacobian ``dq`` ``(N, 4, 6)`` with respect
+    to ``x = (dp [mm], w [rad])``, and the per-contact vectors
+    :func:`kinematics_curvature` reuses. Every quantity is a polynomial of degree at most
+    two in ``u = (R - I) c + dp`` and ``R n``, so its derivatives follow from
+    ``dR/dw_k`` (``3 x 3`` each, forward-mode autodiff of :func:`rotation_matrix`, once
+    per pose rather than once per contact and tangent).
+    """
+    dtype = x.dtype
+    dp, w = x[:3], x[3:]
+    rot = rotation_matrix(w)
+    d_rot = jax.jacfwd(rotation_matrix)(w)  # (3, 3, k)
+    c, n = p.c, p.n
+    num = c.shape[0]
+    u = c @ (rot - jnp.eye(3, dtype=dtype)).T + dp  # (N, 3)
+    rn = n @ rot.T  # (N, 3): R n
+    a_c = jnp.einsum("abk,nb->nka", d_rot, c)  # (N, k, 3): dR/dw_k c
+    a_n = jnp.einsum("abk,nb->nka", d_rot, n)  # dR/dw_k n
+    arm = (p.r - p.dr)[:, None]  # (N, 1)
+
+    cphi = jnp.sum(n * rn, axis=-1)
+    d = p.r - jnp.sum((arm * n - u) * rn, axis=-1)
+    un = jnp.sum(n * u, axis=-1)
+    dt2 = jnp.sum(u * u, axis=-1) - un * un
+    theta = n @ w
+
+    zeros3 = jnp.zeros((num, 3), dtype)
+    # rows of dq, (N, 6) each: [d/d dp | d/d w]
+    n_a_n = jnp.einsum("na,nka->nk", n, a_n)
+    dcphi = jnp.concatenate([zeros3, n_a_n], axis=-1)
+    dd_w = -arm * n_a_n + jnp.einsum("nka,na->nk", a_c, rn) + jnp.einsum("na,nka->nk", u, a_n)
+    dd = jnp.concatenate([rn, dd_w], axis=-1)
+    pu = u - un[:, None] * n  # (N, 3): the tangential part of u
+    ddt2 = 2.0 * jnp.concatenate([pu, jnp.einsum("nka,na->nk", a_c, pu)], axis=-1)
+    dtheta = jnp.concatenate([zeros3, n], axis=-1)
+    dq = jnp.stack([dd, dcphi, ddt2, dtheta], axis=1)  # (N, 4, 6)
+    q = jnp.stack([d, cphi, dt2, theta], axis=-1)
+    return q, dq, (u, rn, pu, a_c, a_n)
+
+
+def kinematics_curvature(x, p: ModelParams, geometry, weights):
+    """``(6, 6)`` ``sum_ik weights_ik d2 q_ik / dx^2``: the kinematics' second derivatives
+    weighted by ``weights`` ``(N, 4)`` (one per contact and quantity of ``q``), summed
+    over contacts as they are formed, so that no per-contact ``6 x 6`` Hessian is ever
+    built (``geometry`` from :func:`kinematics_jacobian` at the same ``x``).
+
+    With ``A_k = dR/dw_k`` and ``B_kl = d2R/dw_k dw_l``: ``theta`` is linear; ``cos phi =
+    n.Rn`` and the ``B`` terms of ``d`` and ``dt^2`` add up to ``sum B_kl : M`` for one
+    ``3 x 3`` matrix ``M`` (the Hessian of ``w -> R(w) : M``); the rest are products of
+    the per-contact vectors ``A_k c``, ``A_k n``.
+    """
+    dtype = x.dtype
+    u, rn, pu, a_c, a_n = geometry
+    c, n = p.c, p.n
+    arm = p.r - p.dr
+    gd, gc, gt = weights[:, 0], weights[:, 1], weights[:, 2]
+    outer = lambda s, a, b: jnp.einsum("n,na,nb->ab", s, a, b)
+    # every B_kl term: d (-arm n.Bn + Bc.Rn + u.Bn), cos phi (n.Bn), dt^2 (2 Pu.Bc)
+    m = outer(gd, rn, c) + outer(gd, u, n) + outer(gc - gd * arm, n, n) + outer(2.0 * gt, pu, c)
+    b_part = jax.hessian(lambda w: jnp.sum(rotation_matrix(w) * m))(x[3:])
+    # d: (A_k c).(A_l n) + (A_l c).(A_k n), and the dp-w cross term A_k n
+    a_cn = jnp.einsum("n,nka,nla->kl", gd, a_c, a_n)
+    ww = b_part + a_cn + a_cn.T
+    pw = jnp.einsum("n,nka->ak", gd, a_n)
+    # dt^2 = |P u|^2: 2 (du)^T P (du), du = [I | A_k c]
+    s_c = jnp.einsum("na,nka->nk", n, a_c)  # n . A_k c
+    ww = ww + 2.0 * (jnp.einsum("n,nka,nla->kl", gt, a_c, a_c) - jnp.einsum("n,nk,nl->kl", gt, s_c, s_c))
+    pw = pw + 2.0 * (jnp.einsum("n,nka->ak", gt, a_c) - jnp.einsum("n,na,nk->ak", gt, n, s_c))
+    pp = 2.0 * (jnp.sum(gt) * jnp.eye(3, dtype=dtype) - outer(gt, n, n))
+    return jnp.block([[pp, pw], [pw.T, ww]])

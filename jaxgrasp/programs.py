@@ -31,9 +31,20 @@ import jax.numpy as jnp
 
 from .grasp import Grasp
 from .lanes import solve_lanes
-from .model import ModelParams, constraint_margins, energy_scale, model_params, potential_energy
+from .model import (
+    ModelParams,
+    constraint_margins,
+    elastic_energies,
+    energy_and_margins,
+    energy_scale,
+    kinematics_curvature,
+    kinematics_jacobian,
+    margins_of,
+    model_params,
+    potential_energy,
+)
 from .options import EvaluateOptions
-from .solver import SolverResult, solve
+from .solver import FirstOrder, Problem, SolverResult
 from .status import LaneStatus
 
 __all__ = [
@@ -42,6 +53,8 @@ __all__ = [
     "to_pose",
     "objective",
     "constraints",
+    "objective_and_constraints",
+    "lane_problem",
     "lagrangian",
     "Programs",
     "solve_programs",
@@ -87,6 +100,80 @@ def constraints(z, data: ProgramData):
     """Scaled constraint margins ``(3N,)``, rows of :func:`~jaxgrasp.model.constraint_margins`
     flattened (index ``row * N + contact``), ``>= 0`` where satisfied."""
     return constraint_margins(to_pose(z, data.lever), data.params).reshape(-1)
+
+
+def objective_and_constraints(z, data: ProgramData):
+    """``(objective(z, data), constraints(z, data))`` from one evaluation of the contact
+    kinematics: the function the solver's lanes run (:func:`~jaxgrasp.solver.solve`'s ``fg``)."""
+    energy, margins = energy_and_margins(to_pose(z, data.lever), data.params)
+    return energy / data.scale, margins.reshape(-1)
+
+
+def _pose_scale(data: ProgramData, dtype):
+    """``(6,)`` ``dx/dz``: 1 for the translation, ``1 / lever`` for the rotation."""
+    one = jnp.ones(3, dtype)
+    return jnp.concatenate([one, one / data.lever])
+
+
+def _per_contact_jacobian(fn, q):
+    """``(..., N, 4)`` derivatives of ``fn(q)`` with respect to each contact's own
+    kinematics ``q`` ``(N, 4)``: ``fn`` acts contact by contact (its output ``(..., N)``),
+    so four forward tangents, one per kinematic quantity set on every contact at once,
+    give every contact's derivatives."""
+    tangents = jnp.broadcast_to(jnp.eye(4, dtype=q.dtype)[:, None, :], (4,) + q.shape)
+    out = jax.vmap(lambda t: jax.jvp(fn, (q,), (t,))[1])(tangents)  # (4, ..., N)
+    return jnp.moveaxis(out, 0, -1)
+
+
+def _first_order(z, data: ProgramData) -> FirstOrder:
+    """The program at ``z`` with its gradient and constraint Jacobian, from the contact
+    kinematics' Jacobian (:func:`~jaxgrasp.model.kinematics_jacobian`, kept in ``aux``
+    for :func:`_lagrangian_hessian`)."""
+    p = data.params
+    x = to_pose(z, data.lever)
+    q, dq, geometry = kinematics_jacobian(x, p)
+    energies = lambda q: elastic_energies(tuple(q.T), p)
+    margins = lambda q: margins_of(tuple(q.T), p)
+    de = _per_contact_jacobian(energies, q)  # (N, 4)
+    dm = _per_contact_jacobian(margins, q)  # (3, N, 4)
+    scale = _pose_scale(data, z.dtype)
+    gravity = jnp.concatenate([p.weight, jnp.zeros(3, z.dtype)])
+    grad_f = (jnp.einsum("nk,nkj->j", de, dq) - gravity) * scale / data.scale
+    jac = jnp.einsum("rnk,nkj->rnj", dm, dq).reshape(-1, 6) * scale
+    fx = (jnp.sum(energies(q)) - jnp.dot(p.weight, x[:3])) / data.scale
+    return FirstOrder(fx, margins(q).reshape(-1), grad_f, jac, aux=(q, dq, geometry))
+
+
+def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProgramData):
+    """``(6, 6)`` Hessian in ``z`` of ``f + weights . g`` (``weights`` ``(3N,)`` fixed), from
+    the kinematics' derivatives in ``d.aux``: ``sum_i dq_i^T H_i dq_i + sum_ik
+    (d psi / d q_ik) d2q_ik`` with ``psi_i`` contact ``i``'s share of the function of its
+    own kinematics and ``H_i`` its ``4 x 4`` Hessian (four forward-over-reverse tangents
+    for every contact at once); the second sum is
+    :func:`~jaxgrasp.model.kinematics_curvature`."""
+    p = data.params
+    q, dq, geometry = d.aux
+    w = weights.reshape(3, -1)
+
+    def psi(q):  # (N,): each contact's f + w . g, as a function of its own kinematics
+        return elastic_energies(tuple(q.T), p) / data.scale + jnp.sum(w * margins_of(tuple(q.T), p), axis=0)
+
+    grad_psi = lambda q: jax.grad(lambda q: jnp.sum(psi(q)))(q)
+    gq = grad_psi(q)  # (N, 4)
+    hq = _per_contact_jacobian(grad_psi, q)  # (N, 4, 4): [i, j, k] = d2 psi_i / dq_ij dq_ik
+    hx = jnp.einsum("njm,njk,nkl->ml", dq, hq, dq) + kinematics_curvature(to_pose(z, data.lever), p, geometry, gq)
+    scale = _pose_scale(data, z.dtype)
+    return hx * scale[:, None] * scale[None, :]
+
+
+def lane_problem(data: ProgramData) -> Problem:
+    """The solver's view of a program of the grasp ``data``: values, first and second
+    derivatives from the contact kinematics (the equality row is the lane's ``eq_mask``)."""
+    return Problem(
+        fg=lambda z: objective_and_constraints(z, data),
+        first_order=lambda z: _first_order(z, data),
+        lagrangian_hessian=lambda d, z, w: _lagrangian_hessian(d, z, w, data),
+    )
 
 
 def lagrangian(z, lam, nu, eq_mask, data: ProgramData):
@@ -158,7 +245,6 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     """
     n = data.params.c.shape[0]
     dtype = data.params.c.dtype
-    f = lambda z: objective(z, data)
     g = lambda z: constraints(z, data)
     dirs = jnp.asarray(options.directions(), dtype)
     num_dirs = dirs.shape[0]
@@ -180,8 +266,9 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
         z0 = jnp.where(on_boundary, z_eq, z0)
         found = found | on_boundary
         # least-squares estimate of the equality multiplier: grad f + nu grad h = 0
-        gf = jax.grad(f)(z0)
-        gh = jax.grad(gk)(z0)
+        # (both gradients from one forward-mode pass, as the solver takes them)
+        gf, jac = jax.jacfwd(objective_and_constraints)(z0, data)
+        gh = jac[k]
         nu0 = -jnp.dot(gf, gh) / jnp.maximum(jnp.dot(gh, gh), 1e-300)
         return z0, found, nu0
 
@@ -189,30 +276,73 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     return lane_k, z0s, found, nu0s
 
 
+def _equilibrium_lanes(data: ProgramData, num_lanes: int):
+    """The lanes of the equilibrium problem: ``(z0, eq_mask, nu0, active)`` with leading
+    axis ``num_lanes``; lane 0 starts from the initial grasping state with no equality,
+    the others are inactive."""
+    n = data.params.c.shape[0]
+    dtype = data.params.c.dtype
+    z0 = jnp.zeros((num_lanes, 6), dtype)
+    masks = jnp.zeros((num_lanes, 3 * n), dtype)
+    nu0 = jnp.zeros(num_lanes, dtype)
+    return z0, masks, nu0, jnp.arange(num_lanes) == 0
+
+
 def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
-    """Solve every program of the grasp ``p`` (traceable; the solver sees no derivative)."""
+    """Solve every program of the grasp ``p`` (traceable; the solver sees no derivative).
+
+    Both stages run through ONE :func:`~jaxgrasp.lanes.solve_lanes` call site, inside a
+    two-iteration loop: iteration 0 solves the equilibrium problem (lane 0 of the lane
+    axis, the other lanes inactive), iteration 1 the boundary problems from starts found
+    around that equilibrium. The solver's loop is then compiled once rather than twice
+    (the equilibrium used to have a ``while_loop`` of its own), which halves the program
+    the solver contributes; each lane's result is what :func:`~jaxgrasp.solver.solve`
+    gives it. The stage is the loop counter, not batched data, so under ``vmap`` the
+    ``lax.cond`` choosing the lanes stays a branch.
+    """
     data = program_data(jax.lax.stop_gradient(p))
     n = data.params.c.shape[0]
     dtype = data.params.c.dtype
     sopt = options.solver
-    eq = solve(
-        lambda z: objective(z, data),
-        lambda z: constraints(z, data),
-        jnp.zeros(6, dtype),
-        jnp.zeros(3 * n, dtype),
-        0.0,
-        sopt,
-    )
-    lane_k, z0s, found, nu0s = _boundary_starts(data, eq.x, options)
-    # Without a converged equilibrium there is nothing to start from: skip every lane;
-    # an inactive contact has no boundary problems.
-    found = found & (eq.status == LaneStatus.CONVERGED) & data.params.on[(lane_k - n) % n]
-    masks = jax.nn.one_hot(lane_k, 3 * n, dtype=dtype)
+    num_lanes = 2 * n * options.num_starts
     # Every lane gets this grasp's data as its theta (not closed over): under a vmap
     # over grasps, solve_lanes then runs the lanes of all grasps in one work queue.
-    num_lanes = lane_k.shape[0]
     theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (num_lanes,) + jnp.shape(a)), data)
-    lanes = solve_lanes(objective, constraints, theta, z0s, masks, nu0s, found, sopt)
+
+    def boundary_lanes(eq: SolverResult):
+        lane_k, z0s, found, nu0s = _boundary_starts(data, eq.x, options)
+        # Without a converged equilibrium there is nothing to start from: skip every lane;
+        # an inactive contact has no boundary problems.
+        found = found & (eq.status == LaneStatus.CONVERGED) & data.params.on[(lane_k - n) % n]
+        return z0s, jax.nn.one_hot(lane_k, 3 * n, dtype=dtype), nu0s, found
+
+    def stage(i, carry):
+        eq, _, _ = carry
+        z0s, masks, nu0s, active = jax.lax.cond(
+            i == 0, lambda eq: _equilibrium_lanes(data, num_lanes), boundary_lanes, eq
+        )
+        res = solve_lanes(lane_problem, theta, z0s, masks, nu0s, active, sopt)
+        eq = jax.lax.cond(i == 0, lambda: jax.tree_util.tree_map(lambda a: a[0], res), lambda: eq)
+        return eq, res, (z0s, active)
+
+    # the carry: one lane's result, every lane's result (zeros until solved)
+    zero = lambda shape, dt=dtype: jnp.zeros((num_lanes,) + shape, dt)
+    lanes0 = SolverResult(
+        x=zero((6,)),
+        lam=zero((3 * n,)),
+        nu=zero(()),
+        objective=zero(()),
+        status=zero((), jnp.int32),
+        stationarity=zero(()),
+        feasibility=zero(()),
+        complementarity=zero(()),
+        steps=zero((), jnp.int32),
+    )
+    eq0 = jax.tree_util.tree_map(lambda a: a[0], lanes0)
+    eq, lanes, (z0s, found) = jax.lax.fori_loop(
+        0, 2, stage, (eq0, lanes0, (jnp.zeros((num_lanes, 6), dtype), jnp.zeros(num_lanes, bool)))
+    )
+    lane_k = jnp.repeat(n + jnp.arange(2 * n), options.num_starts)
     return Programs(
         equilibrium=eq,
         boundary=lanes,

@@ -20,6 +20,14 @@ flattened into one ``lax.while_loop`` whose body does a multiplier update where 
 solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
 need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
 
+Derivatives: a program is a :class:`Problem`, ``fg(x) = (f, g)`` in one call. Each step
+takes the program's first-order data once (:class:`FirstOrder`: ``f``, ``g``, ``grad f``
+and the Jacobian ``J`` of ``g``; by default one forward-mode pass); every gradient it needs
+is then ``grad f + J^T w`` for some weights ``w`` (phi's before and after the multiplier
+update, the violation's), and phi's Hessian is ``hess(f + w . g) + rho J^T D J``. A
+program with structure may supply its own first-order data and Lagrangian Hessian
+(:mod:`jaxgrasp.programs` does, from the contact kinematics); otherwise autodiff.
+
 Each lane ends with a status and its KKT residuals at ``(x, lam, nu)``:
 stationarity ``|grad f + nu grad h - sum lam grad g|_inf``, feasibility
 ``max(|h|, max(-g_i, 0))`` and complementarity ``max |lam_i g_i|``.
@@ -32,7 +40,6 @@ many lanes with early exit, can drive them.
 from __future__ import annotations
 
 import dataclasses
-from functools import partial
 from typing import Any, Callable
 
 import jax
@@ -41,6 +48,9 @@ import jax.numpy as jnp
 from .status import LaneStatus
 
 __all__ = [
+    "Problem",
+    "FirstOrder",
+    "as_problem",
     "SolverOptions",
     "SolverResult",
     "SolverState",
@@ -158,20 +168,93 @@ class SolverState:
     complementarity: Any
 
 
-def _violation(g, x, eq_mask):
-    gx = g(x)
-    r = jnp.where(eq_mask > 0, gx, jnp.minimum(gx, 0.0))
-    return 0.5 * jnp.sum(r * r)
-
-
-def augmented_lagrangian(f, g, x, lam, nu, rho, eq_mask):
-    """``phi(x)`` of the module docstring: ``f + nu h + rho/2 h^2 + 1/(2 rho) sum_i
-    (max(0, lam_i - rho g_i)^2 - lam_i^2)`` over the inequalities, ``h`` the ``eq_mask`` row."""
-    gx = g(x)
+def _penalty_terms(gx, lam, nu, rho, eq_mask):
+    """``(h, shifted, weights)`` of phi at constraint values ``gx`` ``(m,)``: the equality
+    ``h``, ``shifted = max(0, lam - rho g)`` over the inequalities (0 at the equality) and
+    ``weights = d phi / d g`` ``(m,)`` (``nu + rho h`` at the equality, ``-shifted``
+    elsewhere), so that ``grad phi = grad f + J^T weights``."""
     h = jnp.sum(eq_mask * gx)
     shifted = jnp.where(eq_mask > 0, 0.0, jnp.maximum(0.0, lam - rho * gx))
-    ineq = jnp.sum(shifted**2 - lam**2) / (2.0 * rho)
-    return f(x) + nu * h + 0.5 * rho * h * h + ineq
+    weights = jnp.where(eq_mask > 0, nu + rho * h, -shifted)
+    return h, shifted, weights
+
+
+def _phi_of(fx, gx, lam, nu, rho, eq_mask):
+    """phi from the objective ``fx`` ``()`` and the constraints ``gx`` ``(m,)``."""
+    h, shifted, _ = _penalty_terms(gx, lam, nu, rho, eq_mask)
+    return fx + nu * h + 0.5 * rho * h * h + jnp.sum(shifted**2 - lam**2) / (2.0 * rho)
+
+
+def augmented_lagrangian(fg, x, lam, nu, rho, eq_mask):
+    """``phi(x)`` of the module docstring: ``f + nu h + rho/2 h^2 + 1/(2 rho) sum_i
+    (max(0, lam_i - rho g_i)^2 - lam_i^2)`` over the inequalities, ``h`` the ``eq_mask`` row
+    (``fg(x) = (f(x), g(x))``)."""
+    fx, gx = fg(x)
+    return _phi_of(fx, gx, lam, nu, rho, eq_mask)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class FirstOrder:
+    """A program at one point: ``fx`` ``()``, ``gx`` ``(m,)``, ``grad_f`` ``(n,)``, the
+    constraint Jacobian ``jac`` ``(m, n)``, and ``aux``: whatever the program's
+    :attr:`Problem.lagrangian_hessian` reuses (``None`` for the autodiff default). Every
+    gradient a step needs is a product with ``jac``: phi's before and after the multiplier
+    update and the violation's, with no reverse pass."""
+
+    fx: Any
+    gx: Any
+    grad_f: Any
+    jac: Any
+    aux: Any = None
+
+
+@dataclasses.dataclass(frozen=True)
+class Problem:
+    """A smooth program ``min f(x) s.t. g(x) >= 0`` (one row of ``g`` may be made an
+    equality by the lane's ``eq_mask``), as the solver evaluates it.
+
+    Attributes:
+        fg: ``(n,) -> ((), (m,))``, the objective and the constraint margins from one
+            call (so that they can share their work).
+        first_order: ``(n,) -> FirstOrder`` at a point, or ``None``: one forward-mode
+            Jacobian of ``fg`` (``n`` tangents).
+        lagrangian_hessian: ``(FirstOrder, x, w) -> (n, n)``, the Hessian of
+            ``f + w . g`` at ``x`` for fixed weights ``w`` ``(m,)``, given the
+            ``first_order`` at ``x``; or ``None``: ``jax.hessian`` of ``f + w . g``. A
+            program with structure supplies both (:mod:`jaxgrasp.programs` writes them
+            from the contact kinematics' derivatives, several times cheaper).
+    """
+
+    fg: Callable
+    first_order: Callable | None = None
+    lagrangian_hessian: Callable | None = None
+
+
+def as_problem(problem) -> Problem:
+    """``problem`` itself, or a :class:`Problem` of the plain ``fg`` callable (autodiff)."""
+    return problem if isinstance(problem, Problem) else Problem(problem)
+
+
+def _first_order(problem: Problem, x) -> FirstOrder:
+    if problem.first_order is not None:
+        return problem.first_order(x)
+    fx, gx = problem.fg(x)
+    grad_f, jac = jax.jacfwd(problem.fg)(x)
+    return FirstOrder(fx, gx, grad_f, jac)
+
+
+def _lagrangian_hessian(problem: Problem, d: FirstOrder, x, weights):
+    """``(n, n)`` Hessian of ``f + weights . g`` at ``x`` (weights held fixed)."""
+    weights = jax.lax.stop_gradient(weights)
+    if problem.lagrangian_hessian is not None:
+        return problem.lagrangian_hessian(d, x, weights)
+
+    def lagrangian(x):
+        fx, gx = problem.fg(x)
+        return fx + jnp.dot(weights, gx)
+
+    return jax.hessian(lagrangian)(x)
 
 
 def init(x0, eq_mask, nu0, active, o: SolverOptions) -> SolverState:
@@ -202,13 +285,25 @@ def _tolerances(dtype, o: SolverOptions):
     return max(o.tol, 1e3 * eps), max(o.infeasible_tol, 1e4 * eps), 100.0 * eps
 
 
-def _newton_direction(phi, s: SolverState, gphi, o: SolverOptions):
-    """``(n,)`` Newton direction on phi at ``s.x``, a descent direction.
+def _phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
+    """``(n, n)`` exact Hessian of phi at ``s.x``, assembled from its two parts:
+    ``hess(f + w . g)`` with the weights ``w = d phi / d g`` held fixed
+    (:func:`_lagrangian_hessian`), plus ``rho J^T D J`` with ``D`` selecting the equality
+    and the inequalities whose shifted multiplier is positive (where phi's penalty is
+    quadratic in ``g``). This equals ``jax.hessian`` of phi (to rounding) at a fraction
+    of its program size and cost."""
+    _, shifted, weights = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
+    quadratic = ((s.eq_mask > 0) | (shifted > 0)).astype(d.jac.dtype)
+    return _lagrangian_hessian(problem, d, s.x, weights) + s.rho * (d.jac.T * quadratic) @ d.jac
 
-    The exact Hessian's eigenvalues are mirrored (``|e|``) and floored at ``1e-10`` of the
+
+def _newton_direction(hmat, gphi, o: SolverOptions):
+    """``(n,)`` Newton direction for the Hessian ``hmat`` ``(n, n)`` and gradient ``gphi``,
+    a descent direction.
+
+    The Hessian's eigenvalues are mirrored (``|e|``) and floored at ``1e-10`` of the
     largest, and the step is capped at ``max_step`` (inf-norm).
     """
-    hmat = jax.hessian(phi)(s.x, s.lam, s.nu, s.rho)
     hmat = 0.5 * (hmat + hmat.T)
     evals, evecs = jnp.linalg.eigh(hmat)
     aevals = jnp.abs(evals)
@@ -218,12 +313,13 @@ def _newton_direction(phi, s: SolverState, gphi, o: SolverOptions):
     return p * jnp.minimum(1.0, o.max_step / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
 
 
-def _line_search(merit, x, p, gphi, needs_step, o: SolverOptions):
+def _line_search(merit, x, phi0, p, gphi, needs_step, o: SolverOptions):
     """Backtracking along ``p`` on the ladder of step lengths ``1, 1/2, 1/4, ...``.
 
     Args:
         merit: phi as a function of the point, ``(n,) -> ()``.
         x: ``(n,)`` current point.
+        phi0: ``()`` phi at ``x``.
         p: ``(n,)`` descent direction.
         gphi: ``(n,)`` gradient of phi at ``x``.
         needs_step: ``()`` bool; where ``False`` no step length is tried.
@@ -235,7 +331,6 @@ def _line_search(merit, x, p, gphi, needs_step, o: SolverOptions):
     """
     _, _, rounding = _tolerances(x.dtype, o)
     alphas = 0.5 ** jnp.arange(o.line_search_steps, dtype=x.dtype)
-    phi0 = merit(x)
     slope = jnp.dot(gphi, p)
     # Armijo, with slack for rounding: near a minimiser at a large penalty the decrease
     # a Newton step promises is below phi's rounding error, and a strict test would
@@ -271,16 +366,19 @@ def _line_search(merit, x, p, gphi, needs_step, o: SolverOptions):
     return jnp.where(improve, x + alphas[idx] * p, x), improve
 
 
-def _newton_step(phi, s: SolverState, gphi, needs_step, o: SolverOptions) -> SolverState:
-    """A damped Newton step on phi from ``s`` (``gphi``: ``(n,)`` gradient of phi at ``s.x``)."""
-    p = _newton_direction(phi, s, gphi, o)
-    x_new, improve = _line_search(lambda x: phi(x, s.lam, s.nu, s.rho), s.x, p, gphi, needs_step, o)
+def _newton_step(problem: Problem, s: SolverState, d: FirstOrder, gphi, needs_step, o: SolverOptions) -> SolverState:
+    """A damped Newton step on phi from ``s`` (``d``: the problem at ``s.x``; ``gphi``:
+    ``(n,)`` gradient of phi there)."""
+    p = _newton_direction(_phi_hessian(problem, s, d), gphi, o)
+    phi0 = _phi_of(d.fx, d.gx, s.lam, s.nu, s.rho, s.eq_mask)
+    merit = lambda x: augmented_lagrangian(problem.fg, x, s.lam, s.nu, s.rho, s.eq_mask)
+    x_new, improve = _line_search(merit, s.x, phi0, p, gphi, needs_step, o)
     # A step that cannot decrease phi ends the inner loop (numerically converged).
     inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
     return dataclasses.replace(s, x=x_new, inner=inner)
 
 
-def _lane_status(g, s: SolverState, stat, viol, comp, o: SolverOptions):
+def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, o: SolverOptions):
     """``()`` :class:`~jaxgrasp.status.LaneStatus` after a multiplier update, from the KKT
     residuals ``stat``, ``viol``, ``comp`` at ``s.x`` and the violation ``s.prev_viol``
     before it: converged, infeasible, or not converged (yet)."""
@@ -290,8 +388,9 @@ def _lane_status(g, s: SolverState, stat, viol, comp, o: SolverOptions):
     # Infeasible: the violation stays above infeasible_tol at a point where the
     # violation measure v = |h|^2/2 + sum min(g_i, 0)^2/2 is stationary (a local
     # minimiser of the violation, which no penalty can push further), or it stalls at
-    # the largest penalty.
-    grad_v = jax.grad(lambda x: _violation(g, x, s.eq_mask))(s.x)
+    # the largest penalty. grad v = J^T r, r the violated part of g.
+    r = jnp.where(s.eq_mask > 0, d.gx, jnp.minimum(d.gx, 0.0))
+    grad_v = d.jac.T @ r
     stationary_violation = jnp.max(jnp.abs(grad_v)) <= o.infeasible_stationarity * viol
     infeasible = (viol > infeasible_tol) & (
         stationary_violation | (at_max & (viol >= 0.5 * s.prev_viol))
@@ -303,10 +402,11 @@ def _lane_status(g, s: SolverState, stat, viol, comp, o: SolverOptions):
     )
 
 
-def _multiplier_update(g, s: SolverState, gphi, o: SolverOptions) -> SolverState:
+def _multiplier_update(s: SolverState, d: FirstOrder, gphi, o: SolverOptions) -> SolverState:
     """The multiplier and penalty update ending an inner solve, with the lane's new status
-    and KKT residuals (``gphi``: ``(n,)`` gradient of phi at ``s.x``)."""
-    gx = g(s.x)
+    and KKT residuals (``d``: the problem at ``s.x``; ``gphi``: ``(n,)`` gradient of phi
+    there)."""
+    gx = d.gx
     is_eq = s.eq_mask > 0
     h = jnp.sum(s.eq_mask * gx)
     lam = jnp.where(is_eq, 0.0, jnp.maximum(0.0, s.lam - s.rho * gx))
@@ -323,18 +423,20 @@ def _multiplier_update(g, s: SolverState, gphi, o: SolverOptions) -> SolverState
         rho=rho,
         inner=jnp.zeros_like(s.inner),
         prev_viol=viol,
-        status=_lane_status(g, s, stat, viol, comp, o).astype(jnp.int32),
+        status=_lane_status(s, d, stat, viol, comp, o).astype(jnp.int32),
         stationarity=stat,
         feasibility=viol,
         complementarity=comp,
     )
 
 
-def _inner_done(phi, s: SolverState, o: SolverOptions):
-    """``(gphi, done)``: the ``(n,)`` gradient of phi at ``s.x`` and whether the inner
-    solve is done (``()`` bool: stationary enough, or ``max_inner`` Newton steps taken)."""
+def _inner_done(s: SolverState, d: FirstOrder, o: SolverOptions):
+    """``(gphi, done)``: the ``(n,)`` gradient of phi at ``s.x`` (``d``: the problem there)
+    and whether the inner solve is done (``()`` bool: stationary enough, or
+    ``max_inner`` Newton steps taken)."""
     tol, _, _ = _tolerances(s.x.dtype, o)
-    gphi = jax.grad(phi)(s.x, s.lam, s.nu, s.rho)
+    _, _, weights = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
+    gphi = d.grad_f + d.jac.T @ weights
     # Inexact inner solves: while the violation is large, a rough minimiser of phi
     # is enough to update the multipliers; the tolerance tightens to tol as the
     # violation vanishes.
@@ -346,34 +448,36 @@ def _select(pred, a, b):
     return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
 
 
-def step(f, g, s: SolverState, o: SolverOptions) -> SolverState:
+def step(problem, s: SolverState, o: SolverOptions) -> SolverState:
     """One loop step of one lane: a multiplier update where the inner solve is done, then
     a Newton step on phi where the (updated) inner solve is not. A finished lane is
     returned unchanged.
 
-    Stages, in order: :func:`_inner_done`; :func:`_multiplier_update` (status from
-    :func:`_lane_status`); :func:`_inner_done` again; :func:`_newton_step`
-    (:func:`_newton_direction`, then :func:`_line_search`).
+    Stages, in order: :func:`_first_order` (the problem and its Jacobian at ``s.x``,
+    shared by every later stage: the update does not move ``x``); :func:`_inner_done`;
+    :func:`_multiplier_update` (status from :func:`_lane_status`); :func:`_inner_done`
+    again; :func:`_newton_step` (:func:`_phi_hessian`, :func:`_newton_direction`, then
+    :func:`_line_search`).
 
     Args:
-        f: objective, ``(n,) -> ()``.
-        g: constraint margins, ``(n,) -> (m,)``, feasible where ``>= 0``.
+        problem: a :class:`Problem`, or its ``fg`` alone (:func:`as_problem`).
         s: the lane's state.
         o: :class:`SolverOptions`.
     """
-    phi = partial(augmented_lagrangian, f, g, eq_mask=s.eq_mask)  # (x, lam, nu, rho) -> ()
     # A multiplier update, where the inner solve is done, then a Newton step where the
     # (updated) inner solve is not: the sequence of updates and the step count of a lane
     # are those of one kind of update per loop step, but under vmap (where both kinds are
     # computed for every lane) a lane no longer spends a whole loop step on an update.
+    problem = as_problem(problem)
     is_running = running(s, o)
-    gphi, inner_done = _inner_done(phi, s, o)
+    d = _first_order(problem, s.x)
+    gphi, inner_done = _inner_done(s, d, o)
     update = is_running & inner_done
-    s_upd = _multiplier_update(g, s, gphi, o)
+    s_upd = _multiplier_update(s, d, gphi, o)
     s1 = _select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
-    gphi1, inner_done1 = _inner_done(phi, s1, o)
+    gphi1, inner_done1 = _inner_done(s1, d, o)
     newton = is_running & running(s1, o) & ~inner_done1
-    s_newton = _newton_step(phi, s1, gphi1, newton, o)
+    s_newton = _newton_step(problem, s1, d, gphi1, newton, o)
     return _select(newton, dataclasses.replace(s_newton, steps=s1.steps + 1), s1)
 
 
@@ -382,13 +486,13 @@ def running(s: SolverState, o: SolverOptions):
     return (s.status == LaneStatus.NOT_CONVERGED) & (s.steps < o.max_steps)
 
 
-def to_result(f, s: SolverState) -> SolverResult:
-    """The :class:`SolverResult` of a lane's final state (``f`` as in :func:`solve`)."""
+def to_result(problem, s: SolverState) -> SolverResult:
+    """The :class:`SolverResult` of a lane's final state (``problem`` as in :func:`solve`)."""
     return SolverResult(
         x=s.x,
         lam=s.lam,
         nu=s.nu,
-        objective=f(s.x),
+        objective=as_problem(problem).fg(s.x)[0],
         status=s.status,
         stationarity=s.stationarity,
         feasibility=s.feasibility,
@@ -398,8 +502,7 @@ def to_result(f, s: SolverState) -> SolverResult:
 
 
 def solve(
-    f: Callable,
-    g: Callable,
+    problem,
     x0,
     eq_mask,
     nu0=0.0,
@@ -411,8 +514,9 @@ def solve(
     ``init``, then ``step`` while ``running``, then ``to_result``.
 
     Args:
-        f: objective, ``(n,) -> ()``.
-        g: constraint margins, ``(n,) -> (m,)``, feasible where ``>= 0``.
+        problem: a :class:`Problem`, or just its ``fg``: objective and constraint margins,
+            ``(n,) -> ((), (m,))``, feasible where the margins are ``>= 0`` (one function,
+            so that the two share their work), differentiated by autodiff.
         x0: ``(n,)`` starting point.
         eq_mask: ``(m,)`` one-hot vector selecting the equality constraint, or zeros.
         nu0: initial equality multiplier.
@@ -420,5 +524,5 @@ def solve(
         active: ``False`` skips the lane (it ends at once with status ``LaneStatus.NO_START``).
     """
     s = init(x0, eq_mask, nu0, active, options)
-    s = jax.lax.while_loop(lambda s: running(s, options), lambda s: step(f, g, s, options), s)
-    return to_result(f, s)
+    s = jax.lax.while_loop(lambda s: running(s, options), lambda s: step(problem, s, options), s)
+    return to_result(problem, s)

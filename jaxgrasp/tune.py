@@ -40,6 +40,7 @@ import numpy as np
 
 from .evaluate import EvaluateOptions, evaluate_compiled
 from .fields import FIELD, TUNABLE
+from .options import COMPILER_OPTIONS
 from .grasp import Grasp
 from .result import Evaluation
 from .status import GraspStatus, TuneStatus
@@ -275,7 +276,7 @@ def _compiled(specs: tuple[_Spec, ...], options: EvaluateOptions):
         g = jnp.where(jnp.isfinite(g), g, 0.0)
         return (f, ev), g
 
-    return jax.jit(safe_vg)
+    return jax.jit(safe_vg, compiler_options=COMPILER_OPTIONS)
 
 
 # ----------------------------------------------------------------------------- result

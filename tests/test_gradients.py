@@ -110,8 +110,8 @@ def _value(g):
     return ev.value, ev
 
 
-_VG = jax.jit(jax.vmap(jax.value_and_grad(_value, has_aux=True)))
-_JF = jax.jit(jax.vmap(jax.jacfwd(lambda g: jaxgrasp.evaluate(g, OPTS).value)))
+_VG = jax.jit(jax.vmap(jax.value_and_grad(_value, has_aux=True)), compiler_options=jaxgrasp.COMPILER_OPTIONS)
+_JF = jax.jit(jax.vmap(jax.jacfwd(lambda g: jaxgrasp.evaluate(g, OPTS).value)), compiler_options=jaxgrasp.COMPILER_OPTIONS)
 
 
 def run_batched(fn, grasps):

@@ -480,3 +480,76 @@ def test_matches_ipopt_reference_model():
             np.testing.assert_allclose(m[0], ref["contact"], rtol=1e-10, atol=1e-12)
             np.testing.assert_allclose(m[1], ref["slip"], rtol=1e-10, atol=1e-10)
             np.testing.assert_allclose(m[2], ref["max_force"], rtol=1e-10, atol=1e-12)
+
+
+# ------------------------------------------- hand-written derivatives used by the solver
+def _kinematics_stack(x, p):
+    return jnp.stack(M.contact_kinematics(x, p), axis=-1)  # (N, 4)
+
+
+_kin_jacobian = jax.jit(M.kinematics_jacobian)
+_kin_curvature = jax.jit(M.kinematics_curvature)
+_auto_jacobian = jax.jit(jax.jacfwd(_kinematics_stack))
+_auto_hessian = jax.jit(jax.hessian(_kinematics_stack))
+
+
+def _derivative_cases():
+    """(name, grasp, pose): the cube at rest and moved, generic 3-contact grasps (one
+    with a mask) at rotations from exactly zero (the rotation's series branch) to large.
+    Two contact counts only: each compiles these small functions once."""
+    rng = np.random.default_rng(7)
+    cases = [("cube_zero", presets.cube(), jnp.zeros(6))]
+    cases.append(("cube_moved", presets.cube(), jnp.asarray([0.3, -0.2, 0.1, 0.02, -0.05, 0.04])))
+    for w_scale in (0.0, 1e-4, 0.05, 0.6):
+        cases.append((f"generic_w{w_scale:g}", random_grasp(rng, n=3), random_pose(rng, w_scale=w_scale)))
+    g = random_grasp(rng, n=3).replace(active=np.array([True, False, True]))
+    cases.append(("masked", g, random_pose(rng, w_scale=0.1)))
+    return cases
+
+
+def _close(got, want, rtol=1e-12):
+    scale = max(float(jnp.max(jnp.abs(want))), 1e-300)
+    np.testing.assert_allclose(got, want, rtol=rtol, atol=rtol * scale)
+
+
+@pytest.mark.parametrize("name, grasp, x", _derivative_cases(), ids=lambda v: v if isinstance(v, str) else "")
+def test_kinematics_jacobian_and_curvature_equal_autodiff(name, grasp, x):
+    """model.kinematics_jacobian / kinematics_curvature (written from dR/dw and one 3x3
+    matrix, for the solver's Newton step) equal jax.jacfwd / jax.hessian of
+    contact_kinematics, contracted with random weights, to rounding."""
+    p = model_params(grasp)
+    q, dq, geometry = _kin_jacobian(x, p)
+    _close(q, _kinematics_stack(x, p), 1e-13)
+    _close(dq, _auto_jacobian(x, p))
+    weights = jnp.asarray(np.random.default_rng(3).normal(size=q.shape))
+    got = _kin_curvature(x, p, geometry, weights)
+    _close(got, jnp.einsum("nk,nkab->ab", weights, _auto_hessian(x, p)))
+    _close(got, got.T, 1e-13)  # a Hessian
+
+
+@jax.jit
+def _program_derivatives(data, z, weights):
+    """(fx, gx, grad f, jac, Lagrangian Hessian) from the grasp programs' Problem, and the
+    same from the solver's autodiff default for the same fg."""
+    from jaxgrasp import programs as P
+    from jaxgrasp import solver as S
+
+    def both(problem):
+        d = S._first_order(problem, z)
+        return d.fx, d.gx, d.grad_f, d.jac, S._lagrangian_hessian(problem, d, z, weights)
+
+    return both(P.lane_problem(data)), both(S.Problem(lambda z: P.objective_and_constraints(z, data)))
+
+
+@pytest.mark.parametrize("name, grasp, x", _derivative_cases()[1::2], ids=lambda v: v if isinstance(v, str) else "")
+def test_program_derivatives_equal_autodiff(name, grasp, x):
+    """The grasp programs' Problem (first order and Lagrangian Hessian written from the
+    kinematics) gives what the solver's autodiff default gives for the same fg."""
+    from jaxgrasp import programs as P
+
+    data = P.program_data(model_params(grasp))
+    z = jnp.concatenate([x[:3], x[3:] * data.lever])
+    weights = jnp.asarray(np.random.default_rng(5).normal(size=3 * grasp.num_contacts))
+    got, want = _program_derivatives(data, z, weights)
+    for g, w in zip(got, want):
+        _close(g, w)

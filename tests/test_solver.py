@@ -145,7 +145,7 @@ NAMES = tuple(CASES)
 
 
 def _lane_functions(names):
-    """``(f, g)`` of lanes whose ``theta`` picks one of the programs ``names`` (index
+    """``fg(x, theta) = (f, g)`` of lanes whose ``theta`` picks one of the programs ``names`` (index
     ``theta["kind"]``) and moves it by ``theta["shift"]`` (``(3,)``: x* moves by it)."""
     fs = [CASES[n].f for n in names]
     gs = [CASES[n].g for n in names]
@@ -156,16 +156,16 @@ def _lane_functions(names):
     def g(x, theta):
         return jax.lax.switch(theta["kind"], gs, x - theta["shift"])
 
-    return f, g
+    return lambda x, theta: (f(x, theta), g(x, theta))
 
 
 @partial(jax.jit, static_argnames=("names", "options"))
 def _solve_batch(names, theta, x0, eq_mask, nu0, active, options):
     """``vmap`` of :func:`solve` over lanes (the reference for the work queue)."""
-    f, g = _lane_functions(names)
+    fg = _lane_functions(names)
 
     def one(t, x, m, nu, a):
-        return solve(lambda z: f(z, t), lambda z: g(z, t), x, m, nu, options, a)
+        return solve(lambda z: fg(z, t), x, m, nu, options, a)
 
     return jax.vmap(one)(theta, x0, eq_mask, nu0, active)
 
@@ -265,8 +265,8 @@ def _queue_is_exercised(ref: SolverResult):
 
 
 def _queue(theta, x0, eq_mask, nu0, active):
-    f, g = _lane_functions(QUEUE_CASES)
-    return solve_lanes(f, g, theta, x0, eq_mask, nu0, active, QUEUE_OPTIONS)
+    fg = _lane_functions(QUEUE_CASES)
+    return solve_lanes(lambda t: lambda x: fg(x, t), theta, x0, eq_mask, nu0, active, QUEUE_OPTIONS)
 
 
 def test_solve_lanes_equals_vmap_of_solve():
