@@ -6,9 +6,9 @@ Three layers, each skipping more of the work of building an evaluator:
   later call with the same key (at most :data:`MEMO_SIZE` are kept);
 * the export store (:func:`set_export_dir`): the traced program, serialized with
   ``jax.export``, so that a later process skips tracing :func:`jaxgrasp.evaluate` in
-  Python (2-15 s);
+  Python (the cube: 1.5-4 s on 2 cores);
 * JAX's persistent compilation cache, so that the XLA compilation of that program is a
-  cache load (0.5-1.5 s for the cube instead of 7-25 s).
+  cache load (the cube: 0.5-1 s instead of 7-22 s; ``experiments/compile_time.py``).
 
 The programs of :func:`jaxgrasp.evaluate` on a concrete grasp
 (:func:`jaxgrasp.evaluate.compiled_program`), of :func:`jaxgrasp.evaluate_batch` and of
