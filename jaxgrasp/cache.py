@@ -101,11 +101,11 @@ def enable_compilation_cache(path=None) -> Path | None:
     the exported programs in its subfolder ``jaxgrasp-export`` (:func:`set_export_dir`):
     a repeated :func:`jaxgrasp.evaluate` of a concrete grasp, batch or sweep in a new
     process loads its program instead of tracing it in Python and compiling it in XLA.
-    Calling it again (with the same folder) changes nothing. A folder that cannot be created leaves
-    every setting as it was (every run compiles). A folder that exists but cannot be
-    written is still read (a shared, pre-filled cache works) and new compilations are
-    not saved, quietly: JAX's own warning for every entry it fails to write (two lines
-    on stderr per compilation, every run) is silenced.
+    Calling it again (with the same folder) changes nothing. A folder that cannot be
+    created leaves every setting as it was (every run compiles). A folder that exists
+    but cannot be written is still read (a shared, pre-filled cache works) and new
+    compilations are not saved, quietly: JAX's own warning for every entry it fails to
+    write (two lines on stderr per compilation, every run) is silenced.
 
     Returns:
         The folder, or ``None`` when it could not be created.

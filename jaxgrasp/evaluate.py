@@ -74,7 +74,10 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
             before anything is compiled).
 
     ``evaluate`` can be wrapped in ``jax.jit`` and ``jax.vmap`` and differentiated with
-    ``jax.grad``/``jax.jacfwd`` (envelope theorem; see :mod:`jaxgrasp.envelope`).
+    ``jax.grad``/``jax.jacfwd`` (envelope theorem; see :mod:`jaxgrasp.envelope`); a traced
+    grasp becomes part of the caller's program. A concrete grasp runs a program compiled
+    once per process for its shapes and options (:func:`compiled_program`), loaded from
+    disk instead where the caches are on (:mod:`jaxgrasp.cache`).
     """
     _check_unbatched(grasp)
     # The smoothing temperature is a traced argument: evaluations with and without
@@ -144,7 +147,7 @@ def compiled_program(grasp: Grasp, options: EvaluateOptions):
 
     masked = grasp.active is not None
     return cache.compiled(
-        ("evaluate", options, masked, avals, x64),
+        ("evaluate", options, masked, avals, x64, jax.config.jax_default_device),
         build,
         spec,
         name="evaluate",
