@@ -27,9 +27,9 @@ def parse_args(description: str) -> argparse.Namespace:
         args.out = FIGURES / "quick" if args.quick else FIGURES
     args.out.mkdir(parents=True, exist_ok=True)
     # reuse compilations across runs (same cache as the jaxgrasp command)
-    from jaxgrasp.cli import enable_compilation_cache
+    import jaxgrasp
 
-    enable_compilation_cache()
+    jaxgrasp.enable_compilation_cache()
     return args
 
 

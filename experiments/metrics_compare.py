@@ -111,9 +111,9 @@ def main() -> None:
         args.count = min(args.count, 40)
     fig_dir = ROOT / "experiments" / "figures" / ("quick" if args.quick else "")
     fig_dir.mkdir(parents=True, exist_ok=True)
-    from jaxgrasp.cli import enable_compilation_cache
+    import jaxgrasp
 
-    enable_compilation_cache()
+    jaxgrasp.enable_compilation_cache()
     from test_properties import seeded_grasps
 
     say(f"# metrics_compare: Ferrari-Canny epsilon (torsion, {EDGES} edges) vs energy tolerance J")

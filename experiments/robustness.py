@@ -123,12 +123,11 @@ def main() -> int:
     args = parse_args()
     import os
 
+    # before jaxgrasp is imported (test_properties imports it): this process and its
+    # spawned workers start warm (jaxgrasp.cache)
     os.environ.setdefault("JAXGRASP_CACHE_DIR", str(Path.home() / ".cache" / "jaxgrasp" / "xla"))
-    import jaxgrasp
-    from jaxgrasp.cli import enable_compilation_cache
     from test_properties import literal, seeded_grasps
 
-    enable_compilation_cache()
     t_start = time.perf_counter()
     grasps = seeded_grasps(args.count, seed=args.seed)
     sample = list(range(min(args.ipopt, len(grasps))))

@@ -106,13 +106,12 @@ def main() -> None:
     import jax
 
     import jaxgrasp
-    from jaxgrasp.cache import enable_compilation_cache
     from jaxgrasp.cli.sweep import auto_chunk
     from jaxgrasp.evaluate import EvaluateOptions
 
     S = sys.modules["jaxgrasp.sweep"]
     if not args.no_cache:
-        enable_compilation_cache()
+        jaxgrasp.enable_compilation_cache()
     cube = jaxgrasp.presets.cube()
     n_dev = jax.device_count()
     say(

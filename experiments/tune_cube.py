@@ -201,9 +201,7 @@ def main():
     args = p.parse_args()
     out = args.out or (HERE / "figures" / ("quick" if args.quick else ""))
     out.mkdir(parents=True, exist_ok=True)
-    from jaxgrasp.cli import enable_compilation_cache
-
-    enable_compilation_cache()
+    jaxgrasp.enable_compilation_cache()
     log = Tee(out / "tune_cube.log")
     log(f"jaxgrasp {jaxgrasp.__version__}, jax {jax.__version__}, {jax.devices()[0].platform}")
     skip = set(filter(None, args.skip.split(",")))

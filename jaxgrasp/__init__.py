@@ -8,6 +8,11 @@ breaks). Set the environment variable ``JAX_ENABLE_X64`` (to ``0`` or ``1``) bef
 importing to keep JAX's own setting: with ``JAX_ENABLE_X64=0`` jaxgrasp computes in
 float32. Every public function takes and returns SI units (m, Pa, N, kg, J, rad).
 
+Compilation takes seconds in every new process unless the caches on disk are on: call
+:func:`enable_compilation_cache` once, or set the environment variable
+``JAXGRASP_CACHE_DIR`` to a folder before importing (see :mod:`jaxgrasp.cache`). The
+``jaxgrasp`` command turns them on by itself.
+
 Quick start::
 
     import jaxgrasp
@@ -26,6 +31,10 @@ import jax as _jax  # noqa: E402
 
 if "JAX_ENABLE_X64" not in _os.environ:  # an explicit choice of the user's stands
     _jax.config.update("jax_enable_x64", True)
+
+from . import cache  # noqa: E402
+
+cache.enable_from_environment()  # $JAXGRASP_CACHE_DIR set: every process starts warm
 
 from . import presets  # noqa: E402
 from .evaluate import evaluate  # noqa: E402
@@ -52,6 +61,7 @@ from .ferrari_canny import EpsilonResult, epsilon  # noqa: E402
 from .sweep import PARAMETERS, SweepResult, sweep  # noqa: E402
 from .tune import TuneResult, tune  # noqa: E402
 from .validation import GraspValueError  # noqa: E402
+from .cache import enable_compilation_cache  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -95,4 +105,5 @@ __all__ = [
     "tune",
     "TuneResult",
     "GraspValueError",
+    "enable_compilation_cache",
 ]

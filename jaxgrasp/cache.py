@@ -1,21 +1,34 @@
 """Every cache of jaxgrasp: compiled programs in this process, traced programs on disk, XLA's.
 
-Three layers, each skipping more of the work of building a batched evaluator:
+Three layers, each skipping more of the work of building an evaluator:
 
 * the in-process memo (:func:`compiled`): a program compiled once is reused by every
   later call with the same key (at most :data:`MEMO_SIZE` are kept);
 * the export store (:func:`set_export_dir`): the traced program, serialized with
   ``jax.export``, so that a later process skips tracing :func:`jaxgrasp.evaluate` in
-  Python (5-15 s);
-* JAX's persistent compilation cache (:func:`enable_compilation_cache`), so that the XLA
-  compilation of that program is a cache load.
+  Python (the cube: 1.5-4 s on 2 cores);
+* JAX's persistent compilation cache, so that the XLA compilation of that program is a
+  cache load (the cube: 0.5-1 s instead of 7-22 s; ``experiments/compile_time.py``).
 
-The ``jaxgrasp`` command turns on the last two: ``$JAXGRASP_CACHE_DIR`` (default
-``~/.cache/jaxgrasp/xla``) for XLA, its subfolder ``jaxgrasp-export`` for the exported
-programs. A library user calls :func:`enable_compilation_cache` to get the same.
+The programs of :func:`jaxgrasp.evaluate` on a concrete grasp
+(:func:`jaxgrasp.evaluate.compiled_program`), of :func:`jaxgrasp.evaluate_batch` and of
+:func:`jaxgrasp.sweep` (:func:`jaxgrasp.batch.compiled_evaluator`) all come from
+:func:`compiled`. A traced grasp (inside the caller's ``jit``, ``vmap`` or ``grad``) is
+traced with the caller's program and uses none of these.
 
-Tests and benchmarks read what the caches did with :func:`stats` and start afresh with
-:func:`clear_compiled`.
+The two stores on disk are off by default, as JAX's own cache is. One call turns both on,
+:func:`enable_compilation_cache` (``jaxgrasp.enable_compilation_cache()``): XLA's cache in
+the folder :func:`default_dir`, the exported programs in its subfolder
+``jaxgrasp-export``. Two things call it by themselves:
+
+* the ``jaxgrasp`` command, always;
+* ``import jaxgrasp``, when the environment variable ``JAXGRASP_CACHE_DIR`` (:data:`ENV_VAR`)
+  names a folder (:func:`enable_from_environment`): so every process of a program, or of
+  a test runner, starts warm without a change to its code.
+
+``JAXGRASP_CACHE_DIR`` is also the folder the command uses (default
+``~/.cache/jaxgrasp/xla``). Tests and benchmarks read what the caches did with
+:func:`stats` and start afresh with :func:`clear_compiled`.
 """
 
 from __future__ import annotations
@@ -34,10 +47,12 @@ import numpy as np
 from .options import COMPILER_OPTIONS
 
 __all__ = [
+    "ENV_VAR",
     "MEMO_SIZE",
     "EXPORT_SUBDIR",
     "default_dir",
     "enable_compilation_cache",
+    "enable_from_environment",
     "set_export_dir",
     "export_dir",
     "source_digest",
@@ -49,8 +64,12 @@ __all__ = [
     "stats",
 ]
 
+ENV_VAR = "JAXGRASP_CACHE_DIR"
+"""The environment variable naming the cache folder; where set, ``import jaxgrasp`` turns
+the caches on (:func:`enable_from_environment`)."""
+
 MEMO_SIZE = 16
-"""Most compiled programs kept in this process (the oldest is dropped first)."""
+"""Most compiled programs kept in this process (the least recently used is dropped first)."""
 
 EXPORT_SUBDIR = "jaxgrasp-export"
 """Folder of the exported programs inside the compilation cache folder."""
@@ -65,19 +84,30 @@ _STATS = {"traced": 0, "deserialized": 0, "cache_errors": 0}
 
 def default_dir() -> Path:
     """The compilation cache folder: ``$JAXGRASP_CACHE_DIR`` or ``~/.cache/jaxgrasp/xla``."""
-    return Path(os.environ.get("JAXGRASP_CACHE_DIR") or str(Path.home() / ".cache" / "jaxgrasp" / "xla"))
+    return Path(os.environ.get(ENV_VAR) or str(Path.home() / ".cache" / "jaxgrasp" / "xla"))
+
+
+def enable_from_environment() -> Path | None:
+    """Turn the caches on (:func:`enable_compilation_cache`) if ``$JAXGRASP_CACHE_DIR``
+    names a folder (unset or empty: leave them as they are); the folder or ``None``.
+    ``import jaxgrasp`` calls it once."""
+    if not os.environ.get(ENV_VAR):
+        return None
+    return enable_compilation_cache()
 
 
 def enable_compilation_cache(path=None) -> Path | None:
-    """Use JAX's persistent compilation cache so a repeated command does not recompile.
+    """Turn on both caches on disk, so that a new process neither traces nor compiles again.
 
-    The cache lives in ``path`` (default :func:`default_dir`). Exported programs are kept
-    in its subfolder ``jaxgrasp-export`` (:func:`set_export_dir`), so a repeated sweep
-    neither traces in Python nor compiles in XLA. A folder that cannot be created leaves
-    every setting as it was (every run compiles). A folder that exists but cannot be
-    written is still read (a shared, pre-filled cache works) and new compilations are
-    not saved, quietly: JAX's own warning for every entry it fails to write (two lines
-    on stderr per compilation, every run) is silenced.
+    JAX's persistent compilation cache lives in ``path`` (default :func:`default_dir`),
+    the exported programs in its subfolder ``jaxgrasp-export`` (:func:`set_export_dir`):
+    a repeated :func:`jaxgrasp.evaluate` of a concrete grasp, batch or sweep in a new
+    process loads its program instead of tracing it in Python and compiling it in XLA.
+    Calling it again (with the same folder) changes nothing. A folder that cannot be
+    created leaves every setting as it was (every run compiles). A folder that exists
+    but cannot be written is still read (a shared, pre-filled cache works) and new
+    compilations are not saved, quietly: JAX's own warning for every entry it fails to
+    write (two lines on stderr per compilation, every run) is silenced.
 
     Returns:
         The folder, or ``None`` when it could not be created.
@@ -221,8 +251,9 @@ def compiled(
         ``fn``, the compiled program (``jax.stages.Compiled``), and the seconds spent
         building it (0 on a memo hit).
     """
-    hit = _MEMO.get(key)
+    hit = _MEMO.pop(key, None)
     if hit is not None:
+        _MEMO[key] = hit  # now the most recently used
         return hit, 0.0
     t0 = time.perf_counter()
     path = None if export_key is None else export_path(name, export_key)
@@ -238,13 +269,28 @@ def compiled(
         else:
             _STATS["deserialized"] += 1
         # the XLA compilation of the exported program hits JAX's persistent cache, if on
-        fn = jax.jit(exp.call, in_shardings=sharding, out_shardings=sharding, compiler_options=COMPILER_OPTIONS)
+        fn = jax.jit(
+            _named(exp.call, f"{name}_stored"),
+            in_shardings=sharding,
+            out_shardings=sharding,
+            compiler_options=COMPILER_OPTIONS,
+        )
         fn = fn.lower(*spec).compile()
     seconds = time.perf_counter() - t0
     if len(_MEMO) >= MEMO_SIZE:
         _MEMO.pop(next(iter(_MEMO)))
     _MEMO[key] = fn
     return fn, seconds
+
+
+def _named(fn: Callable, name: str) -> Callable:
+    """``fn`` under ``name``, the name JAX gives its program in logs (``jit(name)``)."""
+
+    def named(*args):
+        return fn(*args)
+
+    named.__name__ = named.__qualname__ = name
+    return named
 
 
 def clear_compiled() -> None:

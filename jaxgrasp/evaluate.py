@@ -37,16 +37,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import cache
 from .envelope import envelope_energy, soft_minimum
 from .grasp import Grasp
 from .model import ModelParams, model_params
-from .options import EvaluateOptions
+from .options import COMPILER_OPTIONS, EvaluateOptions
 from .programs import Programs, constraints, program_data, programs_of, to_pose
+from .result import FIELDS as RESULT_FIELDS
 from .result import Evaluation
 from .status import NO_BOUNDARY, Constraint, GraspStatus, LaneStatus
 from .units import M_TO_MM, MJ_TO_J
 
-__all__ = ["EvaluateOptions", "evaluate", "evaluate_compiled", "Boundaries", "Verdict"]
+__all__ = ["EvaluateOptions", "evaluate", "evaluate_compiled", "compiled_program", "Boundaries", "Verdict"]
 
 
 def _is_concrete(tree) -> bool:
@@ -72,20 +74,25 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
             before anything is compiled).
 
     ``evaluate`` can be wrapped in ``jax.jit`` and ``jax.vmap`` and differentiated with
-    ``jax.grad``/``jax.jacfwd`` (envelope theorem; see :mod:`jaxgrasp.envelope`).
+    ``jax.grad``/``jax.jacfwd`` (envelope theorem; see :mod:`jaxgrasp.envelope`); a traced
+    grasp becomes part of the caller's program. A concrete grasp runs a program compiled
+    once per process for its shapes and options (:func:`compiled_program`), loaded from
+    disk instead where the caches are on (:mod:`jaxgrasp.cache`).
     """
     _check_unbatched(grasp)
-    if _is_concrete(grasp):
-        from .validation import check_grasp_inputs
-
-        check_grasp_inputs(**grasp.to_numpy())
     # The smoothing temperature is a traced argument: evaluations with and without
     # smoothing, or with different temperatures, share one compilation.
     t = options.smooth_min_temperature
     if t is not None:
         options = dataclasses.replace(options, smooth_min_temperature=None)
     temperature = np.float64(0.0 if t is None else float(t) / MJ_TO_J)  # mJ; 0: hard minimum
-    return evaluate_compiled(grasp, temperature, options)
+    if not _is_concrete(grasp):  # inside the caller's jit, vmap or grad
+        return evaluate_compiled(grasp, temperature, options)
+    from .validation import check_grasp_inputs
+
+    check_grasp_inputs(**grasp.to_numpy())
+    fn, _ = compiled_program(grasp, options)
+    return Evaluation(**dict(zip(RESULT_FIELDS, fn(temperature, *jax.tree_util.tree_leaves(grasp)))))
 
 
 def _check_unbatched(grasp) -> None:
@@ -111,6 +118,47 @@ def _check_unbatched(grasp) -> None:
             "one grasp has positions (N, 3), per-contact fields (N,), mass ()): "
             "use jax.vmap(jaxgrasp.evaluate)(grasp) for a batch, or jaxgrasp.sweep for a grid"
         )
+
+
+def compiled_program(grasp: Grasp, options: EvaluateOptions):
+    """The compiled :func:`evaluate_compiled` for grasps shaped like the concrete
+    ``grasp``; ``(fn, seconds)``.
+
+    ``fn(temperature, *jax.tree_util.tree_leaves(grasp))`` takes the soft-minimum
+    temperature (mJ, ``()`` float) and the grasp's fields (with a contact mask, ``active``
+    last) and returns every :class:`~jaxgrasp.Evaluation` field (:data:`RESULT_FIELDS`).
+    It comes from :func:`jaxgrasp.cache.compiled`, as the batches' programs do: memoised
+    in the process and, where the export store is on, loaded from it instead of traced
+    (``seconds``: the time to build it, 0 on a memo hit). Its results are those of
+    :func:`evaluate_compiled` bit for bit (the same program).
+    """
+    leaves, treedef = jax.tree_util.tree_flatten(grasp)
+    avals = tuple((np.shape(x), _canonical_dtype(x).name) for x in leaves)
+    x64 = jax.config.jax_enable_x64
+    spec = [jax.ShapeDtypeStruct((), _canonical_dtype(np.float64(0.0)))]
+    spec += [jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in avals]
+
+    def build():
+        def evaluate_fields(temperature, *leaves):  # arrays in, arrays out, so that jax.export can serialize it
+            r = evaluate_compiled(jax.tree_util.tree_unflatten(treedef, leaves), temperature, options)
+            return tuple(getattr(r, f) for f in RESULT_FIELDS)
+
+        return jax.jit(evaluate_fields, compiler_options=COMPILER_OPTIONS)
+
+    masked = grasp.active is not None
+    return cache.compiled(
+        ("evaluate", options, masked, avals, x64, jax.config.jax_default_device),
+        build,
+        spec,
+        name="evaluate",
+        export_key=(options, masked, avals, x64),
+        n_outputs=len(RESULT_FIELDS),
+    )
+
+
+def _canonical_dtype(x) -> np.dtype:
+    """The dtype JAX gives ``x`` as an argument (float64 becomes float32 without x64)."""
+    return np.dtype(jax.dtypes.canonicalize_dtype(x.dtype if hasattr(x, "dtype") else np.result_type(x)))
 
 
 @partial(jax.jit, static_argnames="options")

@@ -16,7 +16,11 @@ and about a second per grasp to run, so:
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
+import json
 import multiprocessing
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -216,3 +220,56 @@ def run_cli(cache_dir, capsys, monkeypatch):
         return rc, out.out, out.err
 
     return run
+
+
+# ----------------------------------------------------------------------------- warm caches
+_FILL_CACHE = """
+import json
+import numpy as np
+import jaxgrasp
+r = jaxgrasp.evaluate(jaxgrasp.presets.cube(6e5, 0.002))
+fields = {f: np.asarray(getattr(r, f)).tolist() for f in jaxgrasp.result.FIELDS}
+print(json.dumps({"stats": jaxgrasp.cache.stats(), "fields": fields}))
+"""
+
+
+@dataclasses.dataclass(frozen=True)
+class WarmCache:
+    """A cache folder filled by a library process that only set ``JAXGRASP_CACHE_DIR``
+    and evaluated the cube (``jaxgrasp.presets.cube(6e5, 0.002)``, = examples/cube.toml).
+
+    Attributes:
+        folder: the folder (``JAXGRASP_CACHE_DIR``).
+        first: what that process printed: ``stats`` (:func:`jaxgrasp.cache.stats`) and
+            ``fields`` (every Evaluation field, as lists).
+    """
+
+    folder: Path
+    first: dict
+
+    def run(self, argv: list[str]) -> subprocess.CompletedProcess:
+        """Run ``argv`` in the repository with ``JAXGRASP_CACHE_DIR`` set to the folder."""
+        env = dict(os.environ, JAXGRASP_CACHE_DIR=str(self.folder))
+        proc = subprocess.run(argv, capture_output=True, text=True, env=env, cwd=TESTS_DIR.parent, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        return proc
+
+    def evaluate_in_new_process(self) -> dict:
+        """A new library process evaluates the cube: its ``stats`` and ``fields``."""
+        return json.loads(self.run([sys.executable, "-c", _FILL_CACHE]).stdout)
+
+    def program_files(self) -> set[str]:
+        """The stored evaluators' files: exported programs and XLA executables."""
+        from jaxgrasp.cache import EXPORT_SUBDIR
+
+        exported = {f"{EXPORT_SUBDIR}/{p.name}" for p in (self.folder / EXPORT_SUBDIR).glob("evaluate-*")}
+        return exported | {p.name for p in self.folder.glob("jit_evaluate_stored-*")}
+
+
+@pytest.fixture(scope="session")
+def warm_cache(tmp_path_factory) -> WarmCache:
+    """:class:`WarmCache`: one cold library process (traces and compiles the cube, ~10 s
+    on 2 cores) whose stores later processes load."""
+    folder = tmp_path_factory.mktemp("warm") / "cache"  # not there yet: jaxgrasp creates it
+    filler = WarmCache(folder, {})
+    return WarmCache(folder, filler.evaluate_in_new_process())

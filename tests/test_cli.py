@@ -1,15 +1,13 @@
 """Tests of the ``jaxgrasp`` command line (``jaxgrasp.cli``).
 
 Most calls run ``jaxgrasp.cli.main`` in-process (the evaluator compiles once per session);
-one test runs the installed console script in a subprocess.
+one test runs the installed console script in a subprocess, on a warm cache.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
@@ -25,11 +23,8 @@ PRESET_ARGS = ["evaluate", "--preset", "cube", "--young-modulus", "6e5", "--init
 
 @pytest.fixture(scope="module")
 def expected_cube(preset_json):
-    """What the CLI must print for the paper's cube at E = 6e5 Pa, dr = 2 mm.
-
-    Computed after the first CLI run, so that the CLI is what compiles the evaluator,
-    with the compilation cache on: the subprocess test then finds it cached.
-    """
+    """What the CLI must print for the paper's cube at E = 6e5 Pa, dr = 2 mm (computed
+    after the first CLI run, which shares its compiled evaluator)."""
     grasp = jaxgrasp.presets.cube(6e5, 0.002)
     eps = jaxgrasp.epsilon(grasp)  # the Ferrari-Canny metric beside the value (issue 15)
     return jaxgrasp.evaluate(grasp).to_dict() | {"epsilon": float(eps.value), "force_closure": bool(eps.force_closure)}
@@ -139,8 +134,11 @@ def test_bad_input_exit_2_one_line(run_cli, argv, mentions):
     assert mentions in lines[0]
 
 
-def test_console_script_subprocess(cache_dir, preset_json):
-    """The installed entry point (or ``python -m jaxgrasp.cli``) prints the same JSON."""
+def test_console_script_subprocess(warm_cache, preset_json):
+    """The installed entry point (or ``python -m jaxgrasp.cli``) prints the same JSON,
+    and starts warm (issue 13): on the program a library process stored (conftest's
+    ``warm_cache``) it neither traces (no new exported program) nor compiles (no new XLA
+    executable)."""
     script = Path(sys.executable).with_name("jaxgrasp")
     if script.exists():
         cmd = [str(script)]
@@ -148,16 +146,8 @@ def test_console_script_subprocess(cache_dir, preset_json):
         cmd = [shutil.which("jaxgrasp")]
     else:
         cmd = [sys.executable, "-m", "jaxgrasp.cli"]
-    env = dict(os.environ, JAXGRASP_CACHE_DIR=str(cache_dir))
-    proc = subprocess.run(
-        cmd + ["evaluate", str(CUBE_TOML), "--json"],
-        capture_output=True,
-        text=True,
-        env=env,
-        cwd=str(ROOT),
-        timeout=540,
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    before = warm_cache.program_files()
+    proc = warm_cache.run(cmd + ["evaluate", str(CUBE_TOML), "--json"])
     assert "Traceback" not in proc.stderr
     assert json.loads(proc.stdout) == json.loads(preset_json[1])
-    assert any(cache_dir.iterdir()), "the compilation cache folder was not used"
+    assert warm_cache.program_files() == before
