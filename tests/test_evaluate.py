@@ -365,13 +365,19 @@ def test_tolerates(results, case):
 
 def test_jit_matches_evaluate():
     """A concrete grasp runs the memoised (or stored) program of ``jaxgrasp.cache``, a
-    traced one the caller's program: the same numbers bit for bit."""
+    traced one the caller's program: the same numbers to rounding (the two programs differ
+    in XLA's view: the caller's bakes the temperature in as a constant, and may be compiled
+    with other XLA options, so XLA may fuse and round differently, ~1e-15), same codes."""
     g = cube(6e5, 2e-3)
     a = jaxgrasp.evaluate(g)
     b = jax.jit(jaxgrasp.evaluate)(g)
-    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
-        assert np.asarray(x).dtype == np.asarray(y).dtype
-        np.testing.assert_array_equal(np.asarray(y), np.asarray(x))
+    for f in dataclasses.fields(a):
+        x, y = np.asarray(getattr(a, f.name)), np.asarray(getattr(b, f.name))
+        assert x.dtype == y.dtype, f.name
+        if f.name == "kkt":  # residuals of converged lanes: round-off itself, ~1e-11
+            np.testing.assert_allclose(y, x, rtol=0, atol=1e-12)
+        else:
+            np.testing.assert_allclose(y, x, rtol=1e-13, atol=1e-20, err_msg=f.name)
     assert int(a.status) == int(b.status) == jaxgrasp.STABLE
 
 
