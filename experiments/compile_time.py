@@ -8,7 +8,7 @@ median reported, with the load average (1 min) when it started:
 
 * ``evaluate.*``: the cube (``jaxgrasp.presets.cube(6e5, 0.002)``, default options),
   caches off, in stages: ``import`` (``import jaxgrasp``), ``trace``, ``lower`` and
-  ``compile`` (``evaluate_compiled.trace(...).lower().compile()``), ``first_run`` (the
+  ``compile`` (``evaluate_compiled.trace(...).lower().compile(COMPILER_OPTIONS)``), ``first_run`` (the
   compiled program's first call); ``hlo_lines``: lines of the lowered StableHLO;
 * ``evaluate_cold.first`` / ``evaluate_warm.first``: the first ``jaxgrasp.evaluate(cube)``
   call end to end, with ``JAXGRASP_CACHE_DIR`` set to an empty folder (trace, export,
@@ -60,7 +60,7 @@ traced = evaluate_compiled.trace(grasp, temperature, options)
 t2 = time.perf_counter()
 lowered = traced.lower()
 t3 = time.perf_counter()
-compiled = lowered.compile()
+compiled = lowered.compile(jaxgrasp.COMPILER_OPTIONS)  # as jaxgrasp.evaluate compiles it
 t4 = time.perf_counter()
 jax.block_until_ready(compiled(grasp, temperature))
 t5 = time.perf_counter()
