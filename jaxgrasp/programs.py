@@ -31,9 +31,17 @@ import jax.numpy as jnp
 
 from .grasp import Grasp
 from .lanes import solve_lanes
-from .model import ModelParams, constraint_margins, energy_scale, model_params, potential_energy
+from .model import (
+    ModelParams,
+    constraint_margins,
+    contact_kinematics,
+    energy_scale,
+    model_params,
+    potential_energy,
+    rotation_matrix,
+)
 from .options import EvaluateOptions
-from .solver import SolverResult, solve
+from .solver import SolverOptions, SolverResult, solve
 from .status import LaneStatus
 
 __all__ = [
@@ -46,6 +54,8 @@ __all__ = [
     "Programs",
     "solve_programs",
     "programs_of",
+    "settle_released",
+    "RELEASED_TOL",
 ]
 
 
@@ -213,6 +223,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
     num_lanes = lane_k.shape[0]
     theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (num_lanes,) + jnp.shape(a)), data)
     lanes = solve_lanes(objective, constraints, theta, z0s, masks, nu0s, found, sopt)
+    lanes = settle_released(data, lanes, lane_k, found, options.num_starts, sopt)
     return Programs(
         equilibrium=eq,
         boundary=lanes,
@@ -223,6 +234,160 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
         scale=data.scale,
         contact_on=data.params.on,
     )
+
+
+# ------------------------------------------------------------- released-contact polish
+# A boundary lane can stall (status NOT_CONVERGED) where a fingertip j is released:
+# d_j = 0, and the slip margin (eq. 9) is then active at the apex of its friction cone,
+# where its gradient vanishes (it is quadratic in (d_j, dt_j)). No bounded multiplier
+# exists (LICQ and MFCQ fail), the augmented Lagrangian's multiplier of that row grows
+# without bound and the KKT residuals stall near 1e-5. The point itself is right; what
+# is missing is a certificate. In (d_j, t_j) (t_j: tangential displacement, 2 components)
+# contact j's three rows require d_j >= 0 and 2 |t_j| <= mu_j d_j / cos^2 phi_j (minus a
+# torsion term), inside the circular cone; the three half-spaces
+#     P_k = (mu_j d_j / (2 cos^2 phi_j) + t_j . v_k) / dr_j >= 0,   v_k at 0, 120, 240 deg,
+# bound the triangular pyramid circumscribing that cone, whose apex is the cone's and
+# whose three rows have independent gradients. Replacing contact j's rows by P_0..P_2
+# (and dropping the equality where it is j's own slip row) relaxes the program. A point
+# that is feasible for the original program and a KKT point of the relaxation (bounded
+# multipliers, residuals <= tol) is a KKT point of a program whose feasible set contains
+# the original's: whatever certifies it as a minimiser of the relaxation certifies it for
+# the original, at the same energy. The polish is a few Newton steps on the relaxation's
+# KKT equations with the active set fixed at the stalled point.
+
+_PYRAMID = jnp.array([0.0, 2.0 * jnp.pi / 3.0, 4.0 * jnp.pi / 3.0])
+RELEASED_TOL = 1e-6
+"""A stalled lane's contact ``j`` is released where its contact and slip margins are
+both within this (scaled margins), and the lane's violation too."""
+_POLISH_STEPS = 8
+
+
+def _pyramid_rows(z, data: ProgramData, j):
+    """``(3,)`` the rows ``P_k`` above for contact ``j`` at scaled pose ``z``."""
+    p = data.params
+    x = to_pose(z, data.lever)
+    d, cphi, _, _ = contact_kinematics(x, p)
+    u = (rotation_matrix(x[3:]) - jnp.eye(3, dtype=z.dtype)) @ p.c[j] + x[:3]
+    n = p.n[j]
+    # an orthonormal basis (e1, e2) of the plane normal to n, from the axis least aligned with n
+    a = jax.nn.one_hot(jnp.argmin(jnp.abs(n)), 3, dtype=z.dtype)
+    e1 = jnp.cross(n, a)
+    e1 = e1 / jnp.linalg.norm(e1)
+    e2 = jnp.cross(n, e1)
+    v = jnp.cos(_PYRAMID)[:, None] * e1 + jnp.sin(_PYRAMID)[:, None] * e2  # (3, 3)
+    dr = jax.lax.stop_gradient(p.dr[j])
+    return (p.mu[j] * d[j] / (2.0 * cphi[j] ** 2) + v @ u) / dr
+
+
+def _relaxed_constraints(z, data: ProgramData, j):
+    """``(3N,)`` :func:`constraints` with contact ``j``'s rows (contact, slip, force)
+    replaced by its pyramid rows ``P_0, P_1, P_2``."""
+    n = data.params.c.shape[0]
+    rows = jnp.arange(3) * n + j
+    return constraints(z, data).at[rows].set(_pyramid_rows(z, data, j))
+
+
+def _polish_released(data: ProgramData, z0, k, j, o: SolverOptions):
+    """Newton's method on the KKT equations of the relaxation of boundary program ``k``
+    (equality row) at released contact ``j``, from the stalled point ``z0``.
+
+    Returns ``(z, lam_rel, ok, (stat, feas, comp))``: ``lam_rel`` ``(3N,)`` multipliers
+    of the relaxation (the equality's included, free in sign); ``ok`` whether ``z``
+    is a KKT point of the relaxation within tol and feasible for the original program."""
+    n = data.params.c.shape[0]
+    dtype = z0.dtype
+    tol = max(o.tol, 1e3 * float(jnp.finfo(dtype).eps))
+    rows = jnp.arange(3 * n)
+    j_rows = (rows % n == j) & (rows < 3 * n)
+    has_eq = k != n + j  # j's own slip equality is relaxed away
+    is_eq = (rows == k) & has_eq
+    g_rel = lambda z: _relaxed_constraints(z, data, j)
+    active = j_rows | is_eq | (constraints(z0, data) <= RELEASED_TOL)
+
+    def residual(y):
+        z, lam = y[:6], y[6:]
+        grad_l = jax.grad(lambda z: objective(z, data) - jnp.dot(lam, g_rel(z)))(z)
+        return jnp.concatenate([grad_l, jnp.where(active, g_rel(z), lam)])
+
+    def newton(_, y):
+        dy = jnp.linalg.solve(jax.jacfwd(residual)(y), residual(y))
+        return y - dy
+
+    y = jax.lax.fori_loop(0, _POLISH_STEPS, newton, jnp.concatenate([z0, jnp.zeros(3 * n, dtype)]))
+    z, lam = y[:6], y[6:]
+    gz = g_rel(z)
+    stat = jnp.max(jnp.abs(residual(y)[:6]))
+    feas = jnp.max(jnp.where(is_eq, jnp.abs(gz), jnp.maximum(-gz, 0.0)))
+    comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gz)))
+    dual = jnp.all(is_eq | (lam >= -tol))  # rows held at lam = 0 end at +-1e-30
+    lam = jnp.where(is_eq, lam, jnp.maximum(lam, 0.0))
+    g_orig = constraints(z, data)
+    orig_feas = jnp.max(jnp.where(rows == k, jnp.abs(g_orig), jnp.maximum(-g_orig, 0.0)))
+    ok = (stat <= tol) & (feas <= tol) & (comp <= tol) & dual & (orig_feas <= tol) & jnp.all(jnp.isfinite(y))
+    return z, lam, ok, (stat, jnp.maximum(feas, orig_feas), comp)
+
+
+def settle_released(data: ProgramData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
+    """Certify stalled boundary lanes at a released contact (see the comment above).
+
+    For each boundary problem, the lowest-energy lane that ended ``NOT_CONVERGED`` at a
+    feasible point where some contact ``j`` is released (contact and slip margins within
+    :data:`RELEASED_TOL`; ``j``'s force row not the equality) is polished on the
+    relaxation; where that gives a KKT point of the relaxation within ``tol`` that is
+    feasible for the original program, the lane becomes ``CONVERGED`` at that point with
+    the relaxation's KKT residuals. Its multipliers are the relaxation's, mapped back:
+    ``lam`` of ``j``'s contact row carries the pyramid rows' ``d_j`` part (the
+    tangential part has no row of the original program), ``nu`` the equality's. Every
+    other lane is returned unchanged.
+
+    Args:
+        data: the grasp's :class:`ProgramData`.
+        lanes: the boundary lanes, leading axis ``2N * D``.
+        lane_k: ``(2N * D,)`` equality row of each lane.
+        found: ``(2N * D,)`` the lanes that were started.
+        num_starts: ``D``.
+        o: the :class:`~jaxgrasp.solver.SolverOptions` the lanes were solved with.
+    """
+    n = data.params.c.shape[0]
+    g = jax.vmap(lambda z: constraints(z, data))(lanes.x).reshape(-1, 3, n)  # (L, 3, N)
+    released = (g[:, 0] <= RELEASED_TOL) & (g[:, 1] <= RELEASED_TOL) & data.params.on  # (L, N)
+    released = released & (lane_k[:, None] != 2 * n + jnp.arange(n))
+    j = jnp.argmax(released, axis=1)
+    stalled = found & (lanes.status == LaneStatus.NOT_CONVERGED) & (lanes.feasibility <= RELEASED_TOL)
+    candidate = (stalled & jnp.any(released, axis=1)).reshape(-1, num_starts)  # (2N, D)
+    pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
+    pick = jnp.arange(2 * n) * num_starts + pick  # (2N,) one lane per boundary problem
+    z, lam_rel, ok, (stat, feas, comp) = jax.vmap(lambda l: _polish_released(data, lanes.x[l], lane_k[l], j[l], o))(
+        pick
+    )
+    ok = ok & jnp.any(candidate, axis=1)
+    # the relaxation's multipliers in the original rows: the equality's as nu, the pyramid
+    # rows' d_j part on j's contact row (d P_k / d d_j = mu_j / (2 cos^2 phi_j) per dr_j)
+    jp = j[pick]
+    rows = jnp.arange(3 * n)
+    is_eq = rows[None, :] == lane_k[pick][:, None]
+    j_rows = rows[None, :] % n == jp[:, None]
+    cphi = jax.vmap(lambda z: contact_kinematics(to_pose(z, data.lever), data.params)[1])(z)  # (2N, N)
+    slope = data.params.mu[jp] / (2.0 * jnp.take_along_axis(cphi, jp[:, None], axis=1)[:, 0] ** 2)
+    lam_d = slope * jnp.sum(jnp.where(j_rows, lam_rel, 0.0), axis=1)
+    lam = jnp.where(is_eq | j_rows, 0.0, lam_rel) + jax.nn.one_hot(jp, 3 * n, dtype=lam_rel.dtype) * lam_d[:, None]
+    nu = -jnp.sum(jnp.where(is_eq, lam_rel, 0.0), axis=1)
+    new = SolverResult(
+        x=z,
+        lam=lam,
+        nu=nu,
+        objective=jax.vmap(lambda z: objective(z, data))(z),
+        status=jnp.full(pick.shape, LaneStatus.CONVERGED, jnp.int32),
+        stationarity=stat,
+        feasibility=feas,
+        complementarity=comp,
+        steps=lanes.steps[pick] + _POLISH_STEPS,
+    )
+    old = jax.tree_util.tree_map(lambda a: a[pick], lanes)
+    upd = jax.tree_util.tree_map(
+        lambda a, b: jnp.where(ok.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), new, old
+    )
+    return jax.tree_util.tree_map(lambda a, u: a.at[pick].set(u.astype(a.dtype)), lanes, upd)
 
 
 @partial(jax.jit, static_argnames="options")
