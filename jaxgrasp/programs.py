@@ -54,7 +54,7 @@ __all__ = [
     "Programs",
     "solve_programs",
     "programs_of",
-    "settle_released",
+    "settle_stalled",
     "RELEASED_TOL",
 ]
 
@@ -223,7 +223,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
     num_lanes = lane_k.shape[0]
     theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (num_lanes,) + jnp.shape(a)), data)
     lanes = solve_lanes(objective, constraints, theta, z0s, masks, nu0s, found, sopt)
-    lanes = settle_released(data, lanes, lane_k, found, options.num_starts, sopt)
+    lanes = settle_stalled(data, lanes, lane_k, found, options.num_starts, sopt)
     return Programs(
         equilibrium=eq,
         boundary=lanes,
@@ -246,7 +246,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
 # contact j's three rows require d_j >= 0 and 2 |t_j| <= mu_j d_j / cos^2 phi_j (minus a
 # torsion term), inside the circular cone; the three half-spaces
 #     P_k = (mu_j d_j / (2 cos^2 phi_j) + t_j . v_k) / dr_j >= 0,   v_k at 0, 120, 240 deg,
-# bound the triangular pyramid circumscribing that cone, whose apex is the cone's and
+# bound a triangular pyramid circumscribing that cone, whose apex is the cone's and
 # whose three rows have independent gradients. Replacing contact j's rows by P_0..P_2
 # (and dropping the equality where it is j's own slip row) relaxes the program. A point
 # that is feasible for the original program and a KKT point of the relaxation (bounded
@@ -262,46 +262,66 @@ both within this (scaled margins), and the lane's violation too."""
 _POLISH_STEPS = 8
 
 
-def _pyramid_rows(z, data: ProgramData, j):
-    """``(3,)`` the rows ``P_k`` above for contact ``j`` at scaled pose ``z``."""
-    p = data.params
+def _tangential(z, data: ProgramData, j):
+    """``(3,)`` mm, the displacement of contact ``j`` at scaled pose ``z`` (eq. 11), and
+    its normal ``n_j``."""
     x = to_pose(z, data.lever)
-    d, cphi, _, _ = contact_kinematics(x, p)
-    u = (rotation_matrix(x[3:]) - jnp.eye(3, dtype=z.dtype)) @ p.c[j] + x[:3]
-    n = p.n[j]
-    # an orthonormal basis (e1, e2) of the plane normal to n, from the axis least aligned with n
-    a = jax.nn.one_hot(jnp.argmin(jnp.abs(n)), 3, dtype=z.dtype)
-    e1 = jnp.cross(n, a)
-    e1 = e1 / jnp.linalg.norm(e1)
+    u = (rotation_matrix(x[3:]) - jnp.eye(3, dtype=z.dtype)) @ data.params.c[j] + x[:3]
+    return u, data.params.n[j]
+
+
+def _pyramid_basis(z0, data: ProgramData, j):
+    """``(3, 3)`` the pyramid's face directions ``v_k`` for contact ``j``, with ``v_0``
+    against the tangential displacement at the stalled point ``z0``: the objective pushes
+    the stalled iterate out of the cone there, and a pyramid with a face across that push
+    certifies the apex exactly where the circular cone does (the tangential reaction
+    ``sum_k lam_k v_k`` may then reach the cone's bound ``2 / (mu / cos^2 phi)`` of the
+    normal one). Falls back to a fixed basis where that displacement vanishes."""
+    u, n = _tangential(z0, data, j)
+    t = u - jnp.dot(n, u) * n
+    tn = jnp.linalg.norm(t)
+    a = jax.nn.one_hot(jnp.argmin(jnp.abs(n)), 3, dtype=z0.dtype)
+    fixed = jnp.cross(n, a)
+    e1 = jnp.where(tn > 1e-14, -t / jnp.where(tn > 1e-14, tn, 1.0), fixed / jnp.linalg.norm(fixed))
     e2 = jnp.cross(n, e1)
-    v = jnp.cos(_PYRAMID)[:, None] * e1 + jnp.sin(_PYRAMID)[:, None] * e2  # (3, 3)
+    return jnp.cos(_PYRAMID)[:, None] * e1 + jnp.sin(_PYRAMID)[:, None] * e2
+
+
+def _pyramid_rows(z, data: ProgramData, j, v):
+    """``(3,)`` the rows ``P_k`` above for contact ``j`` at scaled pose ``z`` (``v``: the
+    ``(3, 3)`` face directions)."""
+    p = data.params
+    d, cphi, _, _ = contact_kinematics(to_pose(z, data.lever), p)
+    u, _ = _tangential(z, data, j)
     dr = jax.lax.stop_gradient(p.dr[j])
     return (p.mu[j] * d[j] / (2.0 * cphi[j] ** 2) + v @ u) / dr
 
 
-def _relaxed_constraints(z, data: ProgramData, j):
+def _relaxed_constraints(z, data: ProgramData, j, v):
     """``(3N,)`` :func:`constraints` with contact ``j``'s rows (contact, slip, force)
-    replaced by its pyramid rows ``P_0, P_1, P_2``."""
+    replaced by its pyramid rows ``P_0, P_1, P_2`` (face directions ``v``)."""
     n = data.params.c.shape[0]
     rows = jnp.arange(3) * n + j
-    return constraints(z, data).at[rows].set(_pyramid_rows(z, data, j))
+    return constraints(z, data).at[rows].set(_pyramid_rows(z, data, j, v))
 
 
-def _polish_released(data: ProgramData, z0, k, j, o: SolverOptions):
-    """Newton's method on the KKT equations of the relaxation of boundary program ``k``
-    (equality row) at released contact ``j``, from the stalled point ``z0``.
+def _polish(data: ProgramData, z0, k, j, released, o: SolverOptions):
+    """Newton's method on the KKT equations of boundary program ``k`` (equality row), with
+    the active set fixed at the stalled point ``z0``: on the relaxation at contact ``j``
+    where ``released``, else on the program itself.
 
     Returns ``(z, lam_rel, ok, (stat, feas, comp))``: ``lam_rel`` ``(3N,)`` multipliers
-    of the relaxation (the equality's included, free in sign); ``ok`` whether ``z``
-    is a KKT point of the relaxation within tol and feasible for the original program."""
+    of the (relaxed) program (the equality's included, free in sign); ``ok`` whether ``z``
+    is a KKT point of it within tol and feasible for the original program."""
     n = data.params.c.shape[0]
     dtype = z0.dtype
     tol = max(o.tol, 1e3 * float(jnp.finfo(dtype).eps))
     rows = jnp.arange(3 * n)
-    j_rows = (rows % n == j) & (rows < 3 * n)
-    has_eq = k != n + j  # j's own slip equality is relaxed away
+    j_rows = (rows % n == j) & released
+    has_eq = ~released | (k != n + j)  # j's own slip equality is relaxed away
     is_eq = (rows == k) & has_eq
-    g_rel = lambda z: _relaxed_constraints(z, data, j)
+    v = _pyramid_basis(z0, data, j)
+    g_rel = lambda z: jnp.where(released, _relaxed_constraints(z, data, j, v), constraints(z, data))
     active = j_rows | is_eq | (constraints(z0, data) <= RELEASED_TOL)
 
     def residual(y):
@@ -319,26 +339,38 @@ def _polish_released(data: ProgramData, z0, k, j, o: SolverOptions):
     stat = jnp.max(jnp.abs(residual(y)[:6]))
     feas = jnp.max(jnp.where(is_eq, jnp.abs(gz), jnp.maximum(-gz, 0.0)))
     comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gz)))
-    dual = jnp.all(is_eq | (lam >= -tol))  # rows held at lam = 0 end at +-1e-30
-    lam = jnp.where(is_eq, lam, jnp.maximum(lam, 0.0))
+    # With torsion (theta_j != 0) the slip margin is d_j (mu_j^2 d_j / cos^4 phi_j - K theta_j^2)
+    # - 4 dt_j^2 with K = (225/32) r_j / mu_j^2 at d_j = 0: negative for 0 < d_j < gap below,
+    # so near the apex contact j's rows hold exactly where d_j = 0 and t_j = 0, the pyramid
+    # rows' common zero: their multipliers are then free in sign.
+    p = data.params
+    _, cphi, _, theta = contact_kinematics(to_pose(z, data.lever), p)
+    gap = (225.0 / 32.0) * p.r[j] * theta[j] ** 2 * cphi[j] ** 4 / p.mu[j] ** 4
+    free = is_eq | (j_rows & (gap >= RELEASED_TOL * p.dr[j]))
+    dual = jnp.all(free | (lam >= -tol))  # rows held at lam = 0 end at +-1e-30
+    lam = jnp.where(free, lam, jnp.maximum(lam, 0.0))
     g_orig = constraints(z, data)
     orig_feas = jnp.max(jnp.where(rows == k, jnp.abs(g_orig), jnp.maximum(-g_orig, 0.0)))
     ok = (stat <= tol) & (feas <= tol) & (comp <= tol) & dual & (orig_feas <= tol) & jnp.all(jnp.isfinite(y))
     return z, lam, ok, (stat, jnp.maximum(feas, orig_feas), comp)
 
 
-def settle_released(data: ProgramData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
-    """Certify stalled boundary lanes at a released contact (see the comment above).
+def settle_stalled(data: ProgramData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
+    """Certify boundary lanes that stalled at a feasible point (a post-solve stage).
 
-    For each boundary problem, the lowest-energy lane that ended ``NOT_CONVERGED`` at a
-    feasible point where some contact ``j`` is released (contact and slip margins within
-    :data:`RELEASED_TOL`; ``j``'s force row not the equality) is polished on the
-    relaxation; where that gives a KKT point of the relaxation within ``tol`` that is
-    feasible for the original program, the lane becomes ``CONVERGED`` at that point with
-    the relaxation's KKT residuals. Its multipliers are the relaxation's, mapped back:
-    ``lam`` of ``j``'s contact row carries the pyramid rows' ``d_j`` part (the
-    tangential part has no row of the original program), ``nu`` the equality's. Every
-    other lane is returned unchanged.
+    For each boundary problem, the lowest-energy lane that ended ``NOT_CONVERGED`` with
+    its violation within :data:`RELEASED_TOL` is polished by Newton's method on the KKT
+    equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
+    fixed: on the relaxation above where some contact ``j`` is released (contact and
+    slip margins within :data:`RELEASED_TOL`; ``j``'s force row not the equality), else
+    on the program itself (bounded multipliers, but an inner solve that stalled, e.g. at
+    the largest penalty). Where that gives a KKT point within ``tol`` (inequality
+    multipliers ``>= 0``) that is feasible for the original program, the lane becomes
+    ``CONVERGED`` there, with the polish's KKT residuals. A relaxation's multipliers are
+    mapped back: ``lam`` of ``j``'s contact row carries the pyramid rows' ``d_j`` part
+    (clipped at 0; the tangential part has no row of the original program, so the
+    envelope derivative of such a boundary misses it), ``nu`` the equality's. Every other
+    lane is returned unchanged; a lane that converged is never touched.
 
     Args:
         data: the grasp's :class:`ProgramData`.
@@ -354,23 +386,26 @@ def settle_released(data: ProgramData, lanes: SolverResult, lane_k, found, num_s
     released = released & (lane_k[:, None] != 2 * n + jnp.arange(n))
     j = jnp.argmax(released, axis=1)
     stalled = found & (lanes.status == LaneStatus.NOT_CONVERGED) & (lanes.feasibility <= RELEASED_TOL)
-    candidate = (stalled & jnp.any(released, axis=1)).reshape(-1, num_starts)  # (2N, D)
+    released_any = jnp.any(released, axis=1)
+    candidate = stalled.reshape(-1, num_starts)  # (2N, D)
     pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
     pick = jnp.arange(2 * n) * num_starts + pick  # (2N,) one lane per boundary problem
-    z, lam_rel, ok, (stat, feas, comp) = jax.vmap(lambda l: _polish_released(data, lanes.x[l], lane_k[l], j[l], o))(
-        pick
-    )
+    z, lam_rel, ok, (stat, feas, comp) = jax.vmap(
+        lambda l: _polish(data, lanes.x[l], lane_k[l], j[l], released_any[l], o)
+    )(pick)
     ok = ok & jnp.any(candidate, axis=1)
     # the relaxation's multipliers in the original rows: the equality's as nu, the pyramid
     # rows' d_j part on j's contact row (d P_k / d d_j = mu_j / (2 cos^2 phi_j) per dr_j)
     jp = j[pick]
     rows = jnp.arange(3 * n)
     is_eq = rows[None, :] == lane_k[pick][:, None]
-    j_rows = rows[None, :] % n == jp[:, None]
+    j_rows = (rows[None, :] % n == jp[:, None]) & released_any[pick][:, None]
     cphi = jax.vmap(lambda z: contact_kinematics(to_pose(z, data.lever), data.params)[1])(z)  # (2N, N)
     slope = data.params.mu[jp] / (2.0 * jnp.take_along_axis(cphi, jp[:, None], axis=1)[:, 0] ** 2)
-    lam_d = slope * jnp.sum(jnp.where(j_rows, lam_rel, 0.0), axis=1)
-    lam = jnp.where(is_eq | j_rows, 0.0, lam_rel) + jax.nn.one_hot(jp, 3 * n, dtype=lam_rel.dtype) * lam_d[:, None]
+    lam_d = jnp.maximum(slope * jnp.sum(jnp.where(j_rows, lam_rel, 0.0), axis=1), 0.0)
+    lam = jnp.where(is_eq | j_rows, 0.0, lam_rel) + jnp.where(
+        released_any[pick][:, None], jax.nn.one_hot(jp, 3 * n, dtype=lam_rel.dtype) * lam_d[:, None], 0.0
+    )
     nu = -jnp.sum(jnp.where(is_eq, lam_rel, 0.0), axis=1)
     new = SolverResult(
         x=z,
