@@ -18,6 +18,11 @@ keeps the lowest converged energy): a start is found by walking from the equilib
 along a direction until the boundary's constraint is crossed, then bisecting onto it,
 along the 12 coordinate half-axes of the scaled pose space plus
 ``EvaluateOptions.num_random_starts`` seeded random directions.
+
+A lane that stalls at a feasible point (status ``NOT_CONVERGED``: typically a released
+fingertip whose slip margin is active at the apex of its friction cone, where no bounded
+multiplier exists) is then certified, or left as it is, by a Newton polish of its KKT
+equations (:func:`settle_stalled`).
 """
 
 from __future__ import annotations
@@ -358,9 +363,9 @@ def _polish(data: ProgramData, z0, k, j, released, o: SolverOptions):
 def settle_stalled(data: ProgramData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
     """Certify boundary lanes that stalled at a feasible point (a post-solve stage).
 
-    For each boundary problem, the lowest-energy lane that ended ``NOT_CONVERGED`` with
-    its violation within :data:`RELEASED_TOL` is polished by Newton's method on the KKT
-    equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
+    For each boundary problem that no start settled, the lowest-energy lane that ended
+    ``NOT_CONVERGED`` with its violation within :data:`RELEASED_TOL` is polished by
+    Newton's method on the KKT equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
     fixed: on the relaxation above where some contact ``j`` is released (contact and
     slip margins within :data:`RELEASED_TOL`; ``j``'s force row not the equality), else
     on the program itself (bounded multipliers, but an inner solve that stalled, e.g. at
@@ -387,7 +392,10 @@ def settle_stalled(data: ProgramData, lanes: SolverResult, lane_k, found, num_st
     j = jnp.argmax(released, axis=1)
     stalled = found & (lanes.status == LaneStatus.NOT_CONVERGED) & (lanes.feasibility <= RELEASED_TOL)
     released_any = jnp.any(released, axis=1)
-    candidate = stalled.reshape(-1, num_starts)  # (2N, D)
+    # Only problems that no start settled: a settled problem keeps its answer (a stalled
+    # lane of one can sit far from the converged ones, e.g. at a large rotation).
+    converged = (found & (lanes.status == LaneStatus.CONVERGED)).reshape(-1, num_starts)
+    candidate = stalled.reshape(-1, num_starts) & ~jnp.any(converged, axis=1, keepdims=True)  # (2N, D)
     pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
     pick = jnp.arange(2 * n) * num_starts + pick  # (2N,) one lane per boundary problem
     z, lam_rel, ok, (stat, feas, comp) = jax.vmap(
