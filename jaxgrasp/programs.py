@@ -28,6 +28,7 @@ equations (:func:`settle_stalled`).
 from __future__ import annotations
 
 import dataclasses
+import math
 from functools import partial
 from typing import Any
 
@@ -241,7 +242,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
     )
 
 
-# ------------------------------------------------------------- released-contact polish
+# ------------------------------------------------------------- stalled-lane polish
 # A boundary lane can stall (status NOT_CONVERGED) where a fingertip j is released:
 # d_j = 0, and the slip margin (eq. 9) is then active at the apex of its friction cone,
 # where its gradient vanishes (it is quadratic in (d_j, dt_j)). No bounded multiplier
@@ -260,7 +261,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
 # the original, at the same energy. The polish is a few Newton steps on the relaxation's
 # KKT equations with the active set fixed at the stalled point.
 
-_PYRAMID = jnp.array([0.0, 2.0 * jnp.pi / 3.0, 4.0 * jnp.pi / 3.0])
+_PYRAMID = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)  # face angles, rad
 RELEASED_TOL = 1e-6
 """A stalled lane's contact ``j`` is released where its contact and slip margins are
 both within this (scaled margins), and the lane's violation too."""
@@ -289,7 +290,8 @@ def _pyramid_basis(z0, data: ProgramData, j):
     fixed = jnp.cross(n, a)
     e1 = jnp.where(tn > 1e-14, -t / jnp.where(tn > 1e-14, tn, 1.0), fixed / jnp.linalg.norm(fixed))
     e2 = jnp.cross(n, e1)
-    return jnp.cos(_PYRAMID)[:, None] * e1 + jnp.sin(_PYRAMID)[:, None] * e2
+    angles = jnp.asarray(_PYRAMID, z0.dtype)
+    return jnp.cos(angles)[:, None] * e1 + jnp.sin(angles)[:, None] * e2
 
 
 def _pyramid_rows(z, data: ProgramData, j, v):
