@@ -345,10 +345,12 @@ def test_not_converged_a(results):
     res = results["not_converged_a"]
     assert res.status_name == "stable", res.explain()
     assert float(res.value) == pytest.approx(NOT_CONVERGED_A_IPOPT, rel=1e-6)
-    # the max_force problem of contact 1 still does not settle; it is reported, and its
-    # best feasible point is far above the value, so it cannot be the limiting one
-    assert int(res.boundary_status[1, 1]) == 2
-    assert "did not settle" in res.explain() and "does not limit" in res.explain()
+    # its max_force problem of contact 1 stalled at a released contact 0 (friction-cone apex,
+    # unbounded multiplier) until programs.settle_stalled (issue 13, part 3): now it settles,
+    # far above the value, and nothing is left unsettled to explain
+    assert int(res.boundary_status[1, 1]) == 0
+    assert float(res.boundary_energy[1, 1]) - float(res.equilibrium_energy) > 10 * float(res.value)
+    assert "did not settle" not in res.explain()
 
 
 def test_far_contacts_torsion_still_found(results):
@@ -393,7 +395,7 @@ def test_non_limiting_boundary_minimum(results, case):
 @pytest.mark.parametrize("case", list(RELEASED))
 def test_released_contact_boundary_settles(results, ipopt_reference, case):
     """Every boundary problem settles; the formerly unsettled one is a KKT point within the
-    solver's tol (of the relaxation) at Ipopt's energy."""
+    solver's tol (of the relaxation) at Ipopt's energy (to the accuracy Ipopt reaches there)."""
     g, kind, contact = RELEASED[case]
     res = results[case]
     n = g.num_contacts
@@ -406,6 +408,9 @@ def test_released_contact_boundary_settles(results, ipopt_reference, case):
         pytest.skip("casadi (for the Ipopt reference) is not installed")
     ref = ipopt_reference.get(g)
     assert res.status_name == ref["status"]
-    assert float(res.boundary_energy[kind, contact]) == pytest.approx(
-        float(ref["boundary_energy"][kind][contact]), rel=1e-8
-    )
+    # Ipopt's point violates the degenerate slip row by 5e-12 (a) and 7e-11 (b), scaled;
+    # at the cone's apex the tangential slack grows like the square root of that, and the
+    # energy with it: Ipopt is 2.7e-7 (a) and 6.3e-7 (b) lower. jaxgrasp's point is
+    # feasible to 1e-15, so it is never below Ipopt's.
+    e, e_ipopt = float(res.boundary_energy[kind, contact]), float(ref["boundary_energy"][kind][contact])
+    assert e_ipopt * (1 - 1e-9) <= e <= e_ipopt * (1 + 1e-6), (e, e_ipopt)
