@@ -18,11 +18,17 @@ keeps the lowest converged energy): a start is found by walking from the equilib
 along a direction until the boundary's constraint is crossed, then bisecting onto it,
 along the 12 coordinate half-axes of the scaled pose space plus
 ``EvaluateOptions.num_random_starts`` seeded random directions.
+
+A lane that stalls at a feasible point (status ``NOT_CONVERGED``: typically a released
+fingertip whose slip margin is active at the apex of its friction cone, where no bounded
+multiplier exists) is then certified, or left as it is, by a Newton polish of its KKT
+equations (:func:`settle_stalled`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from functools import partial
 from typing import Any
 
@@ -34,6 +40,7 @@ from .lanes import solve_lanes
 from .model import (
     ModelParams,
     constraint_margins,
+    contact_kinematics,
     elastic_energies,
     energy_and_margins,
     energy_scale,
@@ -42,9 +49,10 @@ from .model import (
     margins_of,
     model_params,
     potential_energy,
+    rotation_matrix,
 )
 from .options import EvaluateOptions
-from .solver import FirstOrder, Problem, SolverResult
+from .solver import FirstOrder, Problem, SolverOptions, SolverResult
 from .status import LaneStatus
 
 __all__ = [
@@ -59,6 +67,8 @@ __all__ = [
     "Programs",
     "solve_programs",
     "programs_of",
+    "settle_stalled",
+    "RELEASED_TOL",
 ]
 
 
@@ -343,6 +353,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
         0, 2, stage, (eq0, lanes0, (jnp.zeros((num_lanes, 6), dtype), jnp.zeros(num_lanes, bool)))
     )
     lane_k = jnp.repeat(n + jnp.arange(2 * n), options.num_starts)
+    lanes = settle_stalled(data, lanes, lane_k, found, options.num_starts, sopt)
     return Programs(
         equilibrium=eq,
         boundary=lanes,
@@ -353,6 +364,199 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
         scale=data.scale,
         contact_on=data.params.on,
     )
+
+
+# ------------------------------------------------------------- stalled-lane polish
+# A boundary lane can stall (status NOT_CONVERGED) where a fingertip j is released:
+# d_j = 0, and the slip margin (eq. 9) is then active at the apex of its friction cone,
+# where its gradient vanishes (it is quadratic in (d_j, dt_j)). No bounded multiplier
+# exists (LICQ and MFCQ fail), the augmented Lagrangian's multiplier of that row grows
+# without bound and the KKT residuals stall near 1e-5. The point itself is right; what
+# is missing is a certificate. In (d_j, t_j) (t_j: tangential displacement, 2 components)
+# contact j's three rows require d_j >= 0 and 2 |t_j| <= mu_j d_j / cos^2 phi_j (minus a
+# torsion term), inside the circular cone; the three half-spaces
+#     P_k = (mu_j d_j / (2 cos^2 phi_j) + t_j . v_k) / dr_j >= 0,   v_k at 0, 120, 240 deg,
+# bound a triangular pyramid circumscribing that cone, whose apex is the cone's and
+# whose three rows have independent gradients. Replacing contact j's rows by P_0..P_2
+# (and dropping the equality where it is j's own slip row) relaxes the program. A point
+# that is feasible for the original program and a KKT point of the relaxation (bounded
+# multipliers, residuals <= tol) is a KKT point of a program whose feasible set contains
+# the original's: whatever certifies it as a minimiser of the relaxation certifies it for
+# the original, at the same energy. The polish is a few Newton steps on the relaxation's
+# KKT equations with the active set fixed at the stalled point.
+
+_PYRAMID = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)  # face angles, rad
+RELEASED_TOL = 1e-6
+"""A stalled lane's contact ``j`` is released where its contact and slip margins are
+both within this (scaled margins), and the lane's violation too."""
+_POLISH_STEPS = 8
+
+
+def _tangential(z, data: ProgramData, j):
+    """``(3,)`` mm, the displacement of contact ``j`` at scaled pose ``z`` (eq. 11), and
+    its normal ``n_j``."""
+    x = to_pose(z, data.lever)
+    u = (rotation_matrix(x[3:]) - jnp.eye(3, dtype=z.dtype)) @ data.params.c[j] + x[:3]
+    return u, data.params.n[j]
+
+
+def _pyramid_basis(z0, data: ProgramData, j):
+    """``(3, 3)`` the pyramid's face directions ``v_k`` for contact ``j``, with ``v_0``
+    against the tangential displacement at the stalled point ``z0``: the objective pushes
+    the stalled iterate out of the cone there, and a pyramid with a face across that push
+    certifies the apex exactly where the circular cone does (the tangential reaction
+    ``sum_k lam_k v_k`` may then reach the cone's bound ``2 / (mu / cos^2 phi)`` of the
+    normal one). Falls back to a fixed basis where that displacement vanishes."""
+    u, n = _tangential(z0, data, j)
+    t = u - jnp.dot(n, u) * n
+    tn = jnp.linalg.norm(t)
+    a = jax.nn.one_hot(jnp.argmin(jnp.abs(n)), 3, dtype=z0.dtype)
+    fixed = jnp.cross(n, a)
+    e1 = jnp.where(tn > 1e-14, -t / jnp.where(tn > 1e-14, tn, 1.0), fixed / jnp.linalg.norm(fixed))
+    e2 = jnp.cross(n, e1)
+    angles = jnp.asarray(_PYRAMID, z0.dtype)
+    return jnp.cos(angles)[:, None] * e1 + jnp.sin(angles)[:, None] * e2
+
+
+def _pyramid_rows(z, data: ProgramData, j, v):
+    """``(3,)`` the rows ``P_k`` above for contact ``j`` at scaled pose ``z`` (``v``: the
+    ``(3, 3)`` face directions)."""
+    p = data.params
+    d, cphi, _, _ = contact_kinematics(to_pose(z, data.lever), p)
+    u, _ = _tangential(z, data, j)
+    dr = jax.lax.stop_gradient(p.dr[j])
+    return (p.mu[j] * d[j] / (2.0 * cphi[j] ** 2) + v @ u) / dr
+
+
+def _relaxed_constraints(z, data: ProgramData, j, v):
+    """``(3N,)`` :func:`constraints` with contact ``j``'s rows (contact, slip, force)
+    replaced by its pyramid rows ``P_0, P_1, P_2`` (face directions ``v``)."""
+    n = data.params.c.shape[0]
+    rows = jnp.arange(3) * n + j
+    return constraints(z, data).at[rows].set(_pyramid_rows(z, data, j, v))
+
+
+def _polish(data: ProgramData, z0, k, j, released, o: SolverOptions):
+    """Newton's method on the KKT equations of boundary program ``k`` (equality row), with
+    the active set fixed at the stalled point ``z0``: on the relaxation at contact ``j``
+    where ``released``, else on the program itself.
+
+    Returns ``(z, lam_rel, ok, (stat, feas, comp))``: ``lam_rel`` ``(3N,)`` multipliers
+    of the (relaxed) program (the equality's included, free in sign); ``ok`` whether ``z``
+    is a KKT point of it within tol and feasible for the original program."""
+    n = data.params.c.shape[0]
+    dtype = z0.dtype
+    tol = max(o.tol, 1e3 * float(jnp.finfo(dtype).eps))
+    rows = jnp.arange(3 * n)
+    j_rows = (rows % n == j) & released
+    has_eq = ~released | (k != n + j)  # j's own slip equality is relaxed away
+    is_eq = (rows == k) & has_eq
+    v = _pyramid_basis(z0, data, j)
+    g_rel = lambda z: jnp.where(released, _relaxed_constraints(z, data, j, v), constraints(z, data))
+    active = j_rows | is_eq | (constraints(z0, data) <= RELEASED_TOL)
+
+    def residual(y):
+        z, lam = y[:6], y[6:]
+        grad_l = jax.grad(lambda z: objective(z, data) - jnp.dot(lam, g_rel(z)))(z)
+        return jnp.concatenate([grad_l, jnp.where(active, g_rel(z), lam)])
+
+    def newton(_, y):
+        dy = jnp.linalg.solve(jax.jacfwd(residual)(y), residual(y))
+        return y - dy
+
+    y = jax.lax.fori_loop(0, _POLISH_STEPS, newton, jnp.concatenate([z0, jnp.zeros(3 * n, dtype)]))
+    z, lam = y[:6], y[6:]
+    gz = g_rel(z)
+    stat = jnp.max(jnp.abs(residual(y)[:6]))
+    feas = jnp.max(jnp.where(is_eq, jnp.abs(gz), jnp.maximum(-gz, 0.0)))
+    comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gz)))
+    # With torsion (theta_j != 0) the slip margin is d_j (mu_j^2 d_j / cos^4 phi_j - K theta_j^2)
+    # - 4 dt_j^2 with K = (225/32) r_j / mu_j^2 at d_j = 0: negative for 0 < d_j < gap below,
+    # so near the apex contact j's rows hold exactly where d_j = 0 and t_j = 0, the pyramid
+    # rows' common zero: their multipliers are then free in sign.
+    p = data.params
+    _, cphi, _, theta = contact_kinematics(to_pose(z, data.lever), p)
+    gap = (225.0 / 32.0) * p.r[j] * theta[j] ** 2 * cphi[j] ** 4 / p.mu[j] ** 4
+    free = is_eq | (j_rows & (gap >= RELEASED_TOL * p.dr[j]))
+    dual = jnp.all(free | (lam >= -tol))  # rows held at lam = 0 end at +-1e-30
+    lam = jnp.where(free, lam, jnp.maximum(lam, 0.0))
+    g_orig = constraints(z, data)
+    orig_feas = jnp.max(jnp.where(rows == k, jnp.abs(g_orig), jnp.maximum(-g_orig, 0.0)))
+    ok = (stat <= tol) & (feas <= tol) & (comp <= tol) & dual & (orig_feas <= tol) & jnp.all(jnp.isfinite(y))
+    return z, lam, ok, (stat, jnp.maximum(feas, orig_feas), comp)
+
+
+def settle_stalled(data: ProgramData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
+    """Certify boundary lanes that stalled at a feasible point (a post-solve stage).
+
+    For each boundary problem that no start settled, the lowest-energy lane that ended
+    ``NOT_CONVERGED`` with its violation within :data:`RELEASED_TOL` is polished by
+    Newton's method on the KKT equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
+    fixed: on the relaxation above where some contact ``j`` is released (contact and
+    slip margins within :data:`RELEASED_TOL`; ``j``'s force row not the equality), else
+    on the program itself (bounded multipliers, but an inner solve that stalled, e.g. at
+    the largest penalty). Where that gives a KKT point within ``tol`` (inequality
+    multipliers ``>= 0``) that is feasible for the original program, the lane becomes
+    ``CONVERGED`` there, with the polish's KKT residuals. A relaxation's multipliers are
+    mapped back: ``lam`` of ``j``'s contact row carries the pyramid rows' ``d_j`` part
+    (clipped at 0; the tangential part has no row of the original program, so the
+    envelope derivative of such a boundary misses it), ``nu`` the equality's. Every other
+    lane is returned unchanged; a lane that converged is never touched.
+
+    Args:
+        data: the grasp's :class:`ProgramData`.
+        lanes: the boundary lanes, leading axis ``2N * D``.
+        lane_k: ``(2N * D,)`` equality row of each lane.
+        found: ``(2N * D,)`` the lanes that were started.
+        num_starts: ``D``.
+        o: the :class:`~jaxgrasp.solver.SolverOptions` the lanes were solved with.
+    """
+    n = data.params.c.shape[0]
+    g = jax.vmap(lambda z: constraints(z, data))(lanes.x).reshape(-1, 3, n)  # (L, 3, N)
+    released = (g[:, 0] <= RELEASED_TOL) & (g[:, 1] <= RELEASED_TOL) & data.params.on  # (L, N)
+    released = released & (lane_k[:, None] != 2 * n + jnp.arange(n))
+    j = jnp.argmax(released, axis=1)
+    stalled = found & (lanes.status == LaneStatus.NOT_CONVERGED) & (lanes.feasibility <= RELEASED_TOL)
+    released_any = jnp.any(released, axis=1)
+    # Only problems that no start settled: a settled problem keeps its answer (a stalled
+    # lane of one can sit far from the converged ones, e.g. at a large rotation).
+    converged = (found & (lanes.status == LaneStatus.CONVERGED)).reshape(-1, num_starts)
+    candidate = stalled.reshape(-1, num_starts) & ~jnp.any(converged, axis=1, keepdims=True)  # (2N, D)
+    pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
+    pick = jnp.arange(2 * n) * num_starts + pick  # (2N,) one lane per boundary problem
+    z, lam_rel, ok, (stat, feas, comp) = jax.vmap(
+        lambda l: _polish(data, lanes.x[l], lane_k[l], j[l], released_any[l], o)
+    )(pick)
+    ok = ok & jnp.any(candidate, axis=1)
+    # the relaxation's multipliers in the original rows: the equality's as nu, the pyramid
+    # rows' d_j part on j's contact row (d P_k / d d_j = mu_j / (2 cos^2 phi_j) per dr_j)
+    jp = j[pick]
+    rows = jnp.arange(3 * n)
+    is_eq = rows[None, :] == lane_k[pick][:, None]
+    j_rows = (rows[None, :] % n == jp[:, None]) & released_any[pick][:, None]
+    cphi = jax.vmap(lambda z: contact_kinematics(to_pose(z, data.lever), data.params)[1])(z)  # (2N, N)
+    slope = data.params.mu[jp] / (2.0 * jnp.take_along_axis(cphi, jp[:, None], axis=1)[:, 0] ** 2)
+    lam_d = jnp.maximum(slope * jnp.sum(jnp.where(j_rows, lam_rel, 0.0), axis=1), 0.0)
+    lam = jnp.where(is_eq | j_rows, 0.0, lam_rel) + jnp.where(
+        released_any[pick][:, None], jax.nn.one_hot(jp, 3 * n, dtype=lam_rel.dtype) * lam_d[:, None], 0.0
+    )
+    nu = -jnp.sum(jnp.where(is_eq, lam_rel, 0.0), axis=1)
+    new = SolverResult(
+        x=z,
+        lam=lam,
+        nu=nu,
+        objective=jax.vmap(lambda z: objective(z, data))(z),
+        status=jnp.full(pick.shape, LaneStatus.CONVERGED, jnp.int32),
+        stationarity=stat,
+        feasibility=feas,
+        complementarity=comp,
+        steps=lanes.steps[pick] + _POLISH_STEPS,
+    )
+    old = jax.tree_util.tree_map(lambda a: a[pick], lanes)
+    upd = jax.tree_util.tree_map(
+        lambda a, b: jnp.where(ok.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), new, old
+    )
+    return jax.tree_util.tree_map(lambda a, u: a.at[pick].set(u.astype(a.dtype)), lanes, upd)
 
 
 @partial(jax.jit, static_argnames="options")
