@@ -418,22 +418,22 @@ def _pyramid_basis(z0, data: ProgramData, j):
     return jnp.cos(angles)[:, None] * e1 + jnp.sin(angles)[:, None] * e2
 
 
-def _pyramid_rows(z, data: ProgramData, j, v):
-    """``(3,)`` the rows ``P_k`` above for contact ``j`` at scaled pose ``z`` (``v``: the
-    ``(3, 3)`` face directions)."""
+def _relaxed_program(z, data: ProgramData, j, v, relaxed_rows):
+    """``(f, g)`` of the program at scaled pose ``z`` with contact ``j``'s rows replaced,
+    where ``relaxed_rows`` ``(3N,)``, by its pyramid rows ``P_k = (mu_j d_j / (2 cos^2
+    phi_j) + v_k . u_j) / dr_j`` (``v``: the ``(3, 3)`` face directions; row ``k * N + j``
+    holds ``P_k``). One evaluation of the contact kinematics serves every row, so that
+    the polish's derivatives are taken once."""
     p = data.params
-    d, cphi, _, _ = contact_kinematics(to_pose(z, data.lever), p)
-    u, _ = _tangential(z, data, j)
-    dr = jax.lax.stop_gradient(p.dr[j])
-    return (p.mu[j] * d[j] / (2.0 * cphi[j] ** 2) + v @ u) / dr
-
-
-def _relaxed_constraints(z, data: ProgramData, j, v):
-    """``(3N,)`` :func:`constraints` with contact ``j``'s rows (contact, slip, force)
-    replaced by its pyramid rows ``P_0, P_1, P_2`` (face directions ``v``)."""
-    n = data.params.c.shape[0]
-    rows = jnp.arange(3) * n + j
-    return constraints(z, data).at[rows].set(_pyramid_rows(z, data, j, v))
+    n = p.c.shape[0]
+    x = to_pose(z, data.lever)
+    kinematics = contact_kinematics(x, p)
+    f = (jnp.sum(elastic_energies(kinematics, p)) - jnp.dot(p.weight, x[:3])) / data.scale
+    g = margins_of(kinematics, p).reshape(-1)
+    d, cphi = kinematics[0][j], kinematics[1][j]
+    u = (rotation_matrix(x[3:]) - jnp.eye(3, dtype=z.dtype)) @ p.c[j] + x[:3]
+    pyramid = (p.mu[j] * d / (2.0 * cphi**2) + v @ u) / jax.lax.stop_gradient(p.dr[j])
+    return f, jnp.where(relaxed_rows, pyramid[jnp.arange(3 * n) // n], g)
 
 
 def _polish(data: ProgramData, z0, k, j, released, o: SolverOptions):
@@ -452,22 +452,29 @@ def _polish(data: ProgramData, z0, k, j, released, o: SolverOptions):
     has_eq = ~released | (k != n + j)  # j's own slip equality is relaxed away
     is_eq = (rows == k) & has_eq
     v = _pyramid_basis(z0, data, j)
-    g_rel = lambda z: jnp.where(released, _relaxed_constraints(z, data, j, v), constraints(z, data))
+    fg = lambda z: _relaxed_program(z, data, j, v, j_rows)
     active = j_rows | is_eq | (constraints(z0, data) <= RELEASED_TOL)
 
-    def residual(y):
+    def residual(y):  # the KKT equations, and the constraints for the statistics
         z, lam = y[:6], y[6:]
-        grad_l = jax.grad(lambda z: objective(z, data) - jnp.dot(lam, g_rel(z)))(z)
-        return jnp.concatenate([grad_l, jnp.where(active, g_rel(z), lam)])
+        grad_l = jax.grad(lambda z: (lambda a: a[0] - jnp.dot(lam, a[1]))(fg(z)))(z)
+        gz = fg(z)[1]
+        r = jnp.concatenate([grad_l, jnp.where(active, gz, lam)])
+        return r, (r, gz)
 
-    def newton(_, y):
-        dy = jnp.linalg.solve(jax.jacfwd(residual)(y), residual(y))
-        return y - dy
+    def newton(i, carry):
+        # _POLISH_STEPS Newton steps, then one more pass for the residual at the last point
+        y, _, _ = carry
+        jac, (r, gz) = jax.jacfwd(residual, has_aux=True)(y)
+        step = jnp.where(i < _POLISH_STEPS, jnp.linalg.solve(jac, r), 0.0)
+        return y - step, r, gz
 
-    y = jax.lax.fori_loop(0, _POLISH_STEPS, newton, jnp.concatenate([z0, jnp.zeros(3 * n, dtype)]))
+    y0 = jnp.concatenate([z0, jnp.zeros(3 * n, dtype)])
+    y, r, gz = jax.lax.fori_loop(
+        0, _POLISH_STEPS + 1, newton, (y0, jnp.zeros(6 + 3 * n, dtype), jnp.zeros(3 * n, dtype))
+    )
     z, lam = y[:6], y[6:]
-    gz = g_rel(z)
-    stat = jnp.max(jnp.abs(residual(y)[:6]))
+    stat = jnp.max(jnp.abs(r[:6]))
     feas = jnp.max(jnp.where(is_eq, jnp.abs(gz), jnp.maximum(-gz, 0.0)))
     comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gz)))
     # With torsion (theta_j != 0) the slip margin is d_j (mu_j^2 d_j / cos^4 phi_j - K theta_j^2)
