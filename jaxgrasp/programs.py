@@ -69,6 +69,7 @@ __all__ = [
     "programs_of",
     "settle_stalled",
     "RELEASED_TOL",
+    "MAX_POLISHED",
 ]
 
 
@@ -390,6 +391,8 @@ RELEASED_TOL = 1e-6
 """A stalled lane's contact ``j`` is released where its contact and slip margins are
 both within this (scaled margins), and the lane's violation too."""
 _POLISH_STEPS = 8
+MAX_POLISHED = 2
+"""Most boundary problems of one grasp that :func:`settle_stalled` polishes."""
 
 
 def _tangential(z, data: ProgramData, j):
@@ -496,7 +499,7 @@ def _polish(data: ProgramData, z0, k, j, released, o: SolverOptions):
 def settle_stalled(data: ProgramData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
     """Certify boundary lanes that stalled at a feasible point (a post-solve stage).
 
-    For each boundary problem that no start settled, the lowest-energy lane that ended
+    For each boundary problem that no start settled (at most :data:`MAX_POLISHED` per grasp), the lowest-energy lane that ended
     ``NOT_CONVERGED`` with its violation within :data:`RELEASED_TOL` is polished by
     Newton's method on the KKT equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
     fixed: on the relaxation above where some contact ``j`` is released (contact and
@@ -531,10 +534,17 @@ def settle_stalled(data: ProgramData, lanes: SolverResult, lane_k, found, num_st
     candidate = stalled.reshape(-1, num_starts) & ~jnp.any(converged, axis=1, keepdims=True)  # (2N, D)
     pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
     pick = jnp.arange(2 * n) * num_starts + pick  # (2N,) one lane per boundary problem
+    # Polish at most MAX_POLISHED problems per grasp, those with a candidate first: the
+    # polish runs for every grasp of a batch (under vmap it cannot be skipped), and
+    # stalls are rare (42 of 8000 programs in the robustness set), so polishing all 2N
+    # would cost every grasp ~15% more for nothing.
+    has_candidate = jnp.any(candidate, axis=1)
+    chosen = jnp.argsort(~has_candidate, stable=True)[: min(MAX_POLISHED, 2 * n)]
+    pick = pick[chosen]
     z, lam_rel, ok, (stat, feas, comp) = jax.vmap(
         lambda l: _polish(data, lanes.x[l], lane_k[l], j[l], released_any[l], o)
     )(pick)
-    ok = ok & jnp.any(candidate, axis=1)
+    ok = ok & has_candidate[chosen]
     # the relaxation's multipliers in the original rows: the equality's as nu, the pyramid
     # rows' d_j part on j's contact row (d P_k / d d_j = mu_j / (2 cos^2 phi_j) per dr_j)
     jp = j[pick]
