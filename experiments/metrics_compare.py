@@ -85,7 +85,7 @@ def describe(g: jaxgrasp.Grasp, label: str) -> dict:
     say("      mu      " + " ".join(f"{x:7.3f}" for x in mu))
     say("      f0 [N]  " + " ".join(f"{x:7.3f}" for x in f0) + "   (initial normal force pi E dr^2)")
     say("      fmax [N]" + " ".join(f"{x:7.3f}" for x in fmax) + f"   (max f0/fmax = {np.max(f0 / fmax):.3f})")
-    pos, nrm = np.asarray(f["positions"], float), np.asarray(f["normals"], float)
+    nrm = np.asarray(f["normals"], float)
     nrm = nrm / np.linalg.norm(nrm, axis=-1, keepdims=True)
     net = np.sum(-f0[:, None] * nrm, axis=0)
     say(f"      net force of the initial squeeze |sum -f0_i n_i| = {np.linalg.norm(net):.3f} N "
@@ -225,7 +225,6 @@ def main() -> None:
         out[name] = (e, v, s, res)
         say(f"### {name}: {v.size} points; status {res.counts() if hasattr(res, 'counts') else ''}")
         # axes: 0 = E, 1 = dr, (2 = mass)
-        other = tuple(a for a in range(e.ndim) if a != 1)
         spread_E = np.max(np.ptp(e, axis=0))
         say(f"  epsilon: max spread over E at fixed dr (and mass) = {spread_E:.1e}")
         if e.ndim == 3:
