@@ -34,6 +34,7 @@ __all__ = [
     "constraint_margins",
     "energy_and_margins",
     "elastic_energies",
+    "energy_of",
     "margins_of",
     "kinematics_jacobian",
     "kinematics_curvature",
@@ -135,11 +136,12 @@ def potential_energy(x, p: ModelParams):
     unchanged on the feasible set and bounded below outside it, which the solver needs.
     Inactive contacts (``p.on`` false) contribute nothing.
     """
-    return _energy(x, contact_kinematics(x, p), p)
+    return energy_of(x, contact_kinematics(x, p), p)
 
 
-def _energy(x, kinematics, p: ModelParams):
-    """:func:`potential_energy` from the contact kinematics at ``x``."""
+def energy_of(x, kinematics, p: ModelParams):
+    """:func:`potential_energy` ``()`` mJ at ``x`` from the contact kinematics there
+    ``(d, cos phi, dt^2, theta)`` (:func:`contact_kinematics`)."""
     return jnp.sum(elastic_energies(kinematics, p)) - jnp.dot(p.weight, x[:3])
 
 
@@ -197,7 +199,7 @@ def energy_and_margins(x, p: ModelParams):
     contact kinematics (the solver's programs need both at every point; sharing the
     kinematics also shares their derivatives)."""
     kinematics = contact_kinematics(x, p)
-    return _energy(x, kinematics, p), margins_of(kinematics, p)
+    return energy_of(x, kinematics, p), margins_of(kinematics, p)
 
 
 def kinematics_jacobian(x, p: ModelParams):

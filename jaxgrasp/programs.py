@@ -43,6 +43,7 @@ from .model import (
     contact_kinematics,
     elastic_energies,
     energy_and_margins,
+    energy_of,
     energy_scale,
     kinematics_curvature,
     kinematics_jacobian,
@@ -151,7 +152,7 @@ def _first_order(z, data: ProgramData) -> FirstOrder:
     gravity = jnp.concatenate([p.weight, jnp.zeros(3, z.dtype)])
     grad_f = (jnp.einsum("nk,nkj->j", de, dq) - gravity) * scale / data.scale
     jac = jnp.einsum("rnk,nkj->rnj", dm, dq).reshape(-1, 6) * scale
-    fx = (jnp.sum(energies(q)) - jnp.dot(p.weight, x[:3])) / data.scale
+    fx = energy_of(x, tuple(q.T), p) / data.scale
     return FirstOrder(fx, margins(q).reshape(-1), grad_f, jac, aux=(q, dq, geometry))
 
 
@@ -246,6 +247,13 @@ def _ray_start(gk, z0, v, t_grid, bisection_steps):
     return z0 + hi * v, found
 
 
+def _lane_equalities(n: int, num_starts: int):
+    """``(2N * D,)`` the equality row of each boundary lane in the ``(3N,)`` constraints:
+    lane ``b * D + s`` (start ``s`` of boundary ``b``) has row ``N + b`` (slip rows, then
+    force rows)."""
+    return jnp.repeat(n + jnp.arange(2 * n), num_starts)
+
+
 def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     """Start of every boundary lane: ``(k, z0, found, nu0)``, each with leading axis ``2N * D``.
 
@@ -266,7 +274,7 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     r_max = jnp.max(jnp.where(data.params.on, data.params.r, 0.0))
     t_max = options.ray_length * jnp.maximum(r_max, data.lever * rot)  # (D,) mm
     unit_grid = 2.0 ** (-(options.ray_points - 1 - jnp.arange(options.ray_points, dtype=dtype)) / 4.0)
-    lane_k = jnp.repeat(n + jnp.arange(2 * n), num_dirs)
+    lane_k = _lane_equalities(n, num_dirs)
     lane_v = jnp.tile(dirs, (2 * n, 1))
     lane_t = jnp.tile(t_max[:, None] * unit_grid, (2 * n, 1))
 
@@ -353,7 +361,7 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
     eq, lanes, (z0s, found) = jax.lax.fori_loop(
         0, 2, stage, (eq0, lanes0, (jnp.zeros((num_lanes, 6), dtype), jnp.zeros(num_lanes, bool)))
     )
-    lane_k = jnp.repeat(n + jnp.arange(2 * n), options.num_starts)
+    lane_k = _lane_equalities(n, options.num_starts)
     lanes = settle_stalled(data, lanes, lane_k, found, options.num_starts, sopt)
     return Programs(
         equilibrium=eq,
@@ -431,10 +439,10 @@ def _relaxed_program(z, data: ProgramData, j, v, relaxed_rows):
     n = p.c.shape[0]
     x = to_pose(z, data.lever)
     kinematics = contact_kinematics(x, p)
-    f = (jnp.sum(elastic_energies(kinematics, p)) - jnp.dot(p.weight, x[:3])) / data.scale
+    f = energy_of(x, kinematics, p) / data.scale
     g = margins_of(kinematics, p).reshape(-1)
     d, cphi = kinematics[0][j], kinematics[1][j]
-    u = (rotation_matrix(x[3:]) - jnp.eye(3, dtype=z.dtype)) @ p.c[j] + x[:3]
+    u, _ = _tangential(z, data, j)
     pyramid = (p.mu[j] * d / (2.0 * cphi**2) + v @ u) / jax.lax.stop_gradient(p.dr[j])
     return f, jnp.where(relaxed_rows, pyramid[jnp.arange(3 * n) // n], g)
 
