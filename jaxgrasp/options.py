@@ -36,7 +36,8 @@ class EvaluateOptions:
             ``ray_length`` fingertip radii, rotations up to ``ray_length`` rad or that
             many radii of arc at the grasp's lever arm, whichever is larger.
         ray_points: points of the geometric grid on which the crossing is looked for.
-        bisection_steps: bisection steps onto the boundary.
+        crossing_steps: steps of safeguarded regula falsi (Illinois) from the bracketing
+            ray points onto the boundary.
         boundary_tol: a slip or force-limit margin (scaled) at most this at the
             equilibrium, or a boundary energy at most this (relative to the energy
             scale) above ``U0``, means the equilibrium is on a boundary: status unstable.
@@ -65,7 +66,7 @@ class EvaluateOptions:
     seed: int = 0
     ray_length: float = 1.0
     ray_points: int = 48
-    bisection_steps: int = 60
+    crossing_steps: int = 12
     boundary_tol: float = 1e-8
     smooth_min_temperature: float | None = None
 

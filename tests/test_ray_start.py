@@ -1,0 +1,43 @@
+"""The start search's crossing onto a boundary (``programs._ray_start``): bracket on the
+ray's grid, then safeguarded regula falsi (Illinois). Closed forms: the crossing of a
+smooth margin along a ray is known exactly."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxgrasp  # noqa: F401  (float64)
+from jaxgrasp.programs import _ray_start
+
+GRID = 2.0 ** (-(47 - jnp.arange(48.0)) / 4.0)  # the default ray grid, t_max = 1
+
+
+@pytest.mark.parametrize(
+    "margin, t_star",
+    [
+        (lambda z: 0.3 - z[0], 0.3),  # linear: the secant is exact
+        (lambda z: 1.0 - jnp.dot(z, z) / 0.04, 0.2 / np.sqrt(2.0)),  # a sphere of radius 0.2
+        (lambda z: jnp.cos(5.0 * z[0]) - 0.5, np.pi / 15.0),  # cos(5t) = 1/2
+        (lambda z: jnp.expm1(30.0 * (0.9 - z[0])), 0.9),  # steep: slow for plain regula falsi
+    ],
+)
+def test_crossing_is_found_to_rounding(margin, t_star):
+    v = jnp.asarray([1.0, 1.0, 0.0, 0.0, 0.0, 0.0]) if "dot" in margin.__code__.co_names else jnp.eye(6)[0]
+    z, found = jax.jit(lambda: _ray_start(margin, jnp.zeros(6), v, GRID, 12))()
+    assert bool(found)
+    t = float(z[0])
+    assert t == pytest.approx(t_star, rel=1e-12, abs=0)
+    assert abs(float(margin(z))) <= 1e-12  # on the boundary, to rounding
+
+
+def test_no_crossing_and_nan_values():
+    """No crossing on the ray: not found. A NaN region (an invalid pose) before the
+    crossing is never taken for it, and a NaN inside the bracket makes the step bisect."""
+    z, found = _ray_start(lambda z: 1.0 + z[0], jnp.zeros(6), jnp.eye(6)[0], GRID, 12)
+    assert not bool(found)
+    nan_inside = lambda z: jnp.where((z[0] > 0.25) & (z[0] < 0.29), jnp.nan, 0.3 - z[0])
+    z, found = _ray_start(nan_inside, jnp.zeros(6), jnp.eye(6)[0], GRID, 40)
+    assert bool(found) and float(z[0]) == pytest.approx(0.3, rel=1e-12)
