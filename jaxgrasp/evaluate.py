@@ -48,7 +48,12 @@ from .result import Evaluation
 from .status import NO_BOUNDARY, Constraint, GraspStatus, LaneStatus
 from .units import M_TO_MM, MJ_TO_J
 
-__all__ = ["EvaluateOptions", "evaluate", "evaluate_compiled", "compiled_program", "Boundaries", "Verdict"]
+__all__ = ["EvaluateOptions", "evaluate", "evaluate_compiled", "compiled_program", "Boundaries", "Verdict", "TIE_TOL"]
+
+TIE_TOL = 1e-8
+"""Boundary energies within this fraction of the value of the least one are a tie (the
+solver settles each to ``tol = 1e-10`` of the scaled energy, some ``1e-9`` of a typical
+value); the limiting boundary is then the first of them in (kind, contact) order."""
 
 
 def _is_concrete(tree) -> bool:
@@ -254,7 +259,8 @@ class Verdict:
 
     Attributes:
         status: ``()`` :class:`~jaxgrasp.status.GraspStatus` code.
-        limit: ``()`` index ``b`` of the lowest reached boundary problem (0 if none).
+        limit: ``()`` index ``b`` of the lowest reached boundary problem (0 if none); of
+            boundaries tied within :data:`TIE_TOL` of the value, the first.
         any_reached: ``()`` some boundary problem was reached.
         keep_value: ``()`` the value is reported (stable or not converged).
         margins: ``(3, N)`` scaled constraint margins at the equilibrium.
@@ -283,7 +289,13 @@ def grasp_status(p: ModelParams, progs: Programs, best: Boundaries, boundary_tol
         & jnp.any((load_margins <= boundary_tol) & (eq.lam.reshape(3, n)[Constraint.SLIP :] > 0.0))
     )
     any_reached = jnp.any(best.reached)
-    limit = jnp.argmin(jnp.where(best.reached, best.objective, jnp.inf))
+    reached = jnp.where(best.reached, best.objective, jnp.inf)
+    least = jnp.min(reached)
+    # Boundaries within the solver's accuracy of the least (TIE_TOL of the value) are a
+    # tie, which goes to the first in (kind, contact) order: symmetric contacts then give
+    # the same limiting boundary whatever the rounding (padding, batching, platform).
+    tie = TIE_TOL * jnp.abs(least - eq.objective) + 1e-14 * jnp.abs(least)
+    limit = jnp.argmax(reached <= least + tie)
     hard_scaled = best.objective[limit] - eq.objective  # value / energy scale
     # a boundary reached within the solver's accuracy of U0: the equilibrium is on it
     zero_value = any_reached & (hard_scaled <= boundary_tol)
