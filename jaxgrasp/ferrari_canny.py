@@ -40,7 +40,7 @@ import numpy as np
 from .grasp import Grasp
 from .validation import GraspValueError, check_batch_inputs, check_grasp_inputs
 
-__all__ = ["epsilon", "EpsilonResult", "wrenches", "tangent_basis", "FORCE_CLOSURE_TOL"]
+__all__ = ["epsilon", "EpsilonResult", "wrenches", "tangent_basis", "FORCE_CLOSURE_TOL", "prefetch_qhull"]
 
 FORCE_CLOSURE_TOL = 1e-12
 """A value above this (dimensionless wrench units) is force closure; qhull's facet
@@ -111,6 +111,25 @@ def wrenches(fields: dict, *, cone_edges: int = 8, torsion: bool = True) -> tupl
         for sign in (1.0, -1.0):
             rows.append(np.concatenate([-n, (base + sign * (mu * e)[:, None] * n) / lam], axis=-1))
     return np.concatenate(rows, axis=0), lam
+
+
+def prefetch_qhull() -> None:
+    """Start importing SciPy's qhull in a background thread (returns at once).
+
+    ``scipy.spatial`` takes some 0.3 s to import; a caller that will need
+    :func:`epsilon` after a long native call (a compile, or loading a cached executable,
+    which release the GIL) gets the import for free by calling this first. A later
+    ``import`` simply waits for the thread's (Python's per-module import locks)."""
+    import importlib
+    import threading
+
+    def load():
+        try:
+            importlib.import_module("scipy.spatial")
+        except Exception:  # noqa: BLE001 - the caller's own import reports it
+            pass
+
+    threading.Thread(target=load, name="jaxgrasp-prefetch-qhull", daemon=True).start()
 
 
 def _hull_distance(w: np.ndarray) -> float:

@@ -21,7 +21,9 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Evaluate the grasp of the command line and print the result; exit status 0."""
     from ..evaluate import evaluate
-    from ..ferrari_canny import epsilon
+    from ..ferrari_canny import epsilon, prefetch_qhull
+
+    prefetch_qhull()  # SciPy's import overlaps the evaluation's compile or cache load
 
     grasp = load_grasp(args)
     d = evaluate(grasp).to_dict()
