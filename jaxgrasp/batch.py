@@ -30,9 +30,10 @@ from . import cache
 from .batch_result import BatchResult, mark_invalid
 from .dataset import GraspSet
 from .evaluate import EvaluateOptions
-from .evaluate import evaluate as _evaluate_one
+from .evaluate import evaluate_traced as _evaluate_one
 from .fields import NAMES
 from .options import COMPILER_OPTIONS
+from .programs import needs_settling
 from .grasp import Grasp, stack
 from .result import FIELDS, Evaluation
 from .validation import GraspValueError, check_batch_inputs
@@ -90,12 +91,12 @@ def grasp_fields(masked: bool) -> tuple[str, ...]:
     return NAMES + (("active",) if masked else ())
 
 
-def _batched_fn(options: EvaluateOptions, sharding=None, masked: bool = False):
+def _batched_fn(options: EvaluateOptions, sharding=None, masked: bool = False, settle: bool = True):
     # arrays in, arrays out (no Grasp pytree), so that jax.export can serialize it
     names = grasp_fields(masked)
 
     def one(*fields):
-        r = _evaluate_one(Grasp(**dict(zip(names, fields))), options)
+        r = _evaluate_one(Grasp(**dict(zip(names, fields))), options, settle)
         return tuple(getattr(r, f) for f in RESULT_FIELDS)
 
     if sharding is None:
@@ -118,8 +119,11 @@ def _batch_spec(n_contacts: int, chunk: int, sharding, masked: bool = False) -> 
     )
 
 
-def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None, masked: bool = False):
+def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None, masked: bool = False,
+                       settle: bool = True):
     """The batched evaluator for ``chunk`` grasps of ``n_contacts``; ``(fn, compile seconds)``.
+    With ``settle`` false, the program without the settling stage
+    (:func:`~jaxgrasp.programs.programs_of`), which :func:`run_chunks` completes.
 
     ``fn`` takes the :class:`Grasp` fields (:func:`grasp_fields`: with ``masked``, the
     contact mask ``active`` last) of a batch, each sharded along
@@ -134,11 +138,11 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
     x64 = jax.config.jax_enable_x64
     sharding = NamedSharding(_mesh(devices), P("batch"))
     return cache.compiled(
-        ("sweep", options, n_contacts, chunk, x64, tuple(d.id for d in devices), masked),
-        lambda: _batched_fn(options, sharding, masked),
+        ("sweep", options, n_contacts, chunk, x64, tuple(d.id for d in devices), masked, settle),
+        lambda: _batched_fn(options, sharding, masked, settle),
         _batch_spec(n_contacts, chunk, sharding, masked),
-        name="sweep",
-        export_key=(options, n_contacts, chunk, x64, len(devices), masked),
+        name="sweep_settled" if settle else "sweep",
+        export_key=(options, n_contacts, chunk, x64, len(devices), masked, settle),
         sharding=sharding,
         n_devices=len(devices),
         n_outputs=len(RESULT_FIELDS),
@@ -147,7 +151,8 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
 
 
 def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], names, total: int, chunk: int,
-               sharding, progress=None, on_chunk=None, keep=RESULT_FIELDS) -> tuple[dict[str, np.ndarray], float]:
+               sharding, progress=None, on_chunk=None, keep=RESULT_FIELDS,
+               settling: Callable[[], Callable] | None = None) -> tuple[dict[str, np.ndarray], float]:
     """Evaluate ``total`` grasps ``chunk`` at a time with the compiled ``fn``; the
     ``(total, ...)`` result arrays named in ``keep`` (of :data:`RESULT_FIELDS`) and the
     run seconds.
@@ -157,6 +162,13 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
     e.g. the last one repeated). ``on_chunk(start, stop, results)`` (first: a checkpoint
     it writes is on disk before ``progress`` reports the chunk) and ``progress(stop,
     total)`` are called after each chunk. No device buffer outlives its chunk.
+
+    ``settling()``, where given, returns the same evaluator with the settling stage
+    (``fn`` being the one without, :func:`compiled_evaluator`); it is called (and
+    compiled, the seconds counted as run time) only once a chunk has a grasp that
+    :func:`~jaxgrasp.programs.needs_settling`, and that chunk is run again with it. Only
+    the rows that need it take its results, so every grasp's result is the same whatever
+    chunk it is in.
     """
     outs: dict[str, np.ndarray] = {}  # host-side, filled chunk by chunk
     run_seconds = 0.0
@@ -166,10 +178,19 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
         batch = [_put(fields[k], sharding) for k in names]
         t0 = time.perf_counter()
         res = dict(zip(RESULT_FIELDS, fn(*batch)))
-        res = {f: _gather(res[f]) for f in keep}
+        res = {f: _gather(res[f]) for f in dict.fromkeys((*keep, "boundary_status"))}
+        rows = needs_settling(res["boundary_status"])
+        rows[stop - start :] = False
+        if settling is not None and rows.any():
+            settled = dict(zip(RESULT_FIELDS, settling()(*batch)))
+            for f in res:
+                merged = np.array(res[f])  # a writable copy
+                merged[rows] = _gather(settled[f])[rows]
+                res[f] = merged
         run_seconds += time.perf_counter() - t0
         del batch
-        for f, a in res.items():
+        for f in keep:
+            a = res[f]
             if f not in outs:
                 outs[f] = np.empty((total, *a.shape[1:]), dtype=a.dtype)
             outs[f][start:stop] = a[: stop - start]
@@ -313,7 +334,8 @@ def evaluate_batch(
     devices = tuple(jax.devices() if devices is None else devices)
     total, n_contacts = fields["positions"].shape[:2]
     chunk = batch_size(default_chunk_size(devices) if chunk_size is None else chunk_size, total, len(devices))
-    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, masked)
+    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, masked, settle=False)
+    settling = lambda: compiled_evaluator(options, n_contacts, chunk, devices, masked)[0]  # noqa: E731
     sharding = NamedSharding(_mesh(devices), P("batch"))
     invalid = np.flatnonzero([e is not None for e in errors])
 
@@ -326,7 +348,9 @@ def evaluate_batch(
         if on_chunk is not None:
             on_chunk(start, stop, outs)
 
-    outs, run_seconds = run_chunks(fn, chunk_fields, grasp_fields(masked), total, chunk, sharding, progress, finished)
+    outs, run_seconds = run_chunks(
+        fn, chunk_fields, grasp_fields(masked), total, chunk, sharding, progress, finished, settling=settling
+    )
     active = fields.get("active", np.ones((total, n_contacts), dtype=bool))
     return BatchResult(
         evaluation=Evaluation(**outs),

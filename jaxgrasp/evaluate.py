@@ -42,13 +42,13 @@ from .envelope import envelope_energy, soft_minimum
 from .grasp import Grasp
 from .model import ModelParams, model_params
 from .options import COMPILER_OPTIONS, EvaluateOptions
-from .programs import Programs, constraints, program_data, programs_of, to_pose
+from .programs import Programs, constraints, needs_settling, program_data, programs_of, to_pose
 from .result import FIELDS as RESULT_FIELDS
 from .result import Evaluation
 from .status import NO_BOUNDARY, Constraint, GraspStatus, LaneStatus
 from .units import M_TO_MM, MJ_TO_J
 
-__all__ = ["EvaluateOptions", "evaluate", "evaluate_compiled", "compiled_program", "Boundaries", "Verdict", "TIE_TOL"]
+__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_compiled", "compiled_program", "Boundaries", "Verdict", "TIE_TOL"]
 
 TIE_TOL = 1e-8
 """Boundary energies within this fraction of the value of the least one are a tie (the
@@ -82,22 +82,44 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
     ``jax.grad``/``jax.jacfwd`` (envelope theorem; see :mod:`jaxgrasp.envelope`); a traced
     grasp becomes part of the caller's program. A concrete grasp runs a program compiled
     once per process for its shapes and options (:func:`compiled_program`), loaded from
-    disk instead where the caches are on (:mod:`jaxgrasp.cache`).
+    disk instead where the caches are on (:mod:`jaxgrasp.cache`): first the one without
+    the settling stage, then, only if a boundary problem did not settle, the one with it
+    (:func:`~jaxgrasp.programs.programs_of`); the result is the traced path's.
     """
     _check_unbatched(grasp)
-    # The smoothing temperature is a traced argument: evaluations with and without
-    # smoothing, or with different temperatures, share one compilation.
-    t = options.smooth_min_temperature
-    if t is not None:
-        options = dataclasses.replace(options, smooth_min_temperature=None)
-    temperature = np.float64(0.0 if t is None else float(t) / MJ_TO_J)  # mJ; 0: hard minimum
+    options, temperature = _split_temperature(options)
     if not _is_concrete(grasp):  # inside the caller's jit, vmap or grad
         return evaluate_compiled(grasp, temperature, options)
     from .validation import check_grasp_inputs
 
     check_grasp_inputs(**grasp.to_numpy())
-    fn, _ = compiled_program(grasp, options)
-    return Evaluation(**dict(zip(RESULT_FIELDS, fn(temperature, *jax.tree_util.tree_leaves(grasp)))))
+    leaves = jax.tree_util.tree_leaves(grasp)
+    # the program without the settling stage first; the one with it only where a
+    # boundary problem did not settle (equal results elsewhere, see programs_of)
+    fn, _ = compiled_program(grasp, options, settle=False)
+    out = fn(temperature, *leaves)
+    if needs_settling(out[RESULT_FIELDS.index("boundary_status")]):
+        fn, _ = compiled_program(grasp, options, settle=True)
+        out = fn(temperature, *leaves)
+    return Evaluation(**dict(zip(RESULT_FIELDS, out)))
+
+
+def _split_temperature(options: EvaluateOptions):
+    """``(options, temperature)``: the smoothing temperature as a traced argument (mJ,
+    ``0``: the hard minimum), so that evaluations with and without smoothing, or with
+    different temperatures, share one compilation."""
+    t = options.smooth_min_temperature
+    if t is not None:
+        options = dataclasses.replace(options, smooth_min_temperature=None)
+    return options, np.float64(0.0 if t is None else float(t) / MJ_TO_J)
+
+
+def evaluate_traced(grasp: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:
+    """:func:`evaluate` of a grasp inside the caller's trace (``jit``, ``vmap``), with or
+    without the settling stage (``settle``, see :func:`~jaxgrasp.programs.programs_of`):
+    what the batch engine compiles."""
+    options, temperature = _split_temperature(options)
+    return evaluate_compiled(grasp, temperature, options, settle)
 
 
 def _check_unbatched(grasp) -> None:
@@ -125,9 +147,9 @@ def _check_unbatched(grasp) -> None:
         )
 
 
-def compiled_program(grasp: Grasp, options: EvaluateOptions):
-    """The compiled :func:`evaluate_compiled` for grasps shaped like the concrete
-    ``grasp``; ``(fn, seconds)``.
+def compiled_program(grasp: Grasp, options: EvaluateOptions, settle: bool = True):
+    """The compiled :func:`evaluate_compiled` (with ``settle``) for grasps shaped like the
+    concrete ``grasp``; ``(fn, seconds)``.
 
     ``fn(temperature, *jax.tree_util.tree_leaves(grasp))`` takes the soft-minimum
     temperature (mJ, ``()`` float) and the grasp's fields (with a contact mask, ``active``
@@ -145,18 +167,18 @@ def compiled_program(grasp: Grasp, options: EvaluateOptions):
 
     def build():
         def evaluate_fields(temperature, *leaves):  # arrays in, arrays out, so that jax.export can serialize it
-            r = evaluate_compiled(jax.tree_util.tree_unflatten(treedef, leaves), temperature, options)
+            r = evaluate_compiled(jax.tree_util.tree_unflatten(treedef, leaves), temperature, options, settle)
             return tuple(getattr(r, f) for f in RESULT_FIELDS)
 
         return jax.jit(evaluate_fields, compiler_options=COMPILER_OPTIONS)
 
     masked = grasp.active is not None
     return cache.compiled(
-        ("evaluate", options, masked, avals, x64, jax.config.jax_default_device),
+        ("evaluate", options, settle, masked, avals, x64, jax.config.jax_default_device),
         build,
         spec,
-        name="evaluate",
-        export_key=(options, masked, avals, x64),
+        name="evaluate_settled" if settle else "evaluate",
+        export_key=(options, settle, masked, avals, x64),
         n_outputs=len(RESULT_FIELDS),
     )
 
@@ -166,9 +188,10 @@ def _canonical_dtype(x) -> np.dtype:
     return np.dtype(jax.dtypes.canonicalize_dtype(x.dtype if hasattr(x, "dtype") else np.result_type(x)))
 
 
-@partial(jax.jit, static_argnames="options")
-def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions) -> Evaluation:
-    """The jitted evaluator behind :func:`evaluate` (no input validation).
+@partial(jax.jit, static_argnames=("options", "settle"))
+def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions, settle: bool = True) -> Evaluation:
+    """The jitted evaluator behind :func:`evaluate` (no input validation); ``settle`` as
+    in :func:`~jaxgrasp.programs.programs_of`.
 
     ``temperature`` is the soft-minimum temperature in mJ (``0``: the hard minimum) as a
     traced argument, so tuning at any temperature shares one compilation;
@@ -176,7 +199,7 @@ def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions) -> Ev
     """
     p = model_params(grasp)
     temperature = jnp.asarray(temperature, p.c.dtype)  # float32 grasps stay float32
-    progs = programs_of(p, options)
+    progs = programs_of(p, options, settle)
     best = best_starts(progs, options.num_starts, options.boundary_tol)
     verdict = grasp_status(p, progs, best, options.boundary_tol)
     u_eq, u_b, v_eq, v_b = energies(p, progs.equilibrium, best, verdict.keep_value)

@@ -34,6 +34,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .grasp import Grasp
 from .lanes import solve_lanes
@@ -69,6 +70,7 @@ __all__ = [
     "solve_programs",
     "programs_of",
     "settle_stalled",
+    "needs_settling",
     "RELEASED_TOL",
     "MAX_POLISHED",
 ]
@@ -333,7 +335,7 @@ def _equilibrium_lanes(data: ProgramData, num_lanes: int):
     return z0, masks, nu0, jnp.arange(num_lanes) == 0
 
 
-def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
+def programs_of(p: ModelParams, options: EvaluateOptions, settle: bool = True) -> Programs:
     """Solve every program of the grasp ``p`` (traceable; the solver sees no derivative).
 
     Both stages run through ONE :func:`~jaxgrasp.lanes.solve_lanes` call site, inside a
@@ -344,6 +346,12 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
     the solver contributes; each lane's result is what :func:`~jaxgrasp.solver.solve`
     gives it. The stage is the loop counter, not batched data, so under ``vmap`` the
     ``lax.cond`` choosing the lanes stays a branch.
+
+    With ``settle`` (static), :func:`settle_stalled` then certifies stalled boundary
+    lanes. Without it the program is smaller and faster, and equal wherever no boundary
+    problem ends unsettled (:func:`needs_settling`): the host-level drivers
+    (:func:`jaxgrasp.evaluate` of a concrete grasp, the batch engine) run that program
+    first and the settling one only on the grasps that need it.
     """
     data = program_data(jax.lax.stop_gradient(p))
     n = data.params.c.shape[0]
@@ -388,7 +396,8 @@ def programs_of(p: ModelParams, options: EvaluateOptions) -> Programs:
         0, 2, stage, (eq0, lanes0, (jnp.zeros((num_lanes, 6), dtype), jnp.zeros(num_lanes, bool)))
     )
     lane_k = _lane_equalities(n, options.num_starts)
-    lanes = settle_stalled(data, lanes, lane_k, found, options.num_starts, sopt)
+    if settle:
+        lanes = settle_stalled(data, lanes, lane_k, found, options.num_starts, sopt)
     return Programs(
         equilibrium=eq,
         boundary=lanes,
@@ -610,8 +619,16 @@ def settle_stalled(data: ProgramData, lanes: SolverResult, lane_k, found, num_st
     return jax.tree_util.tree_map(lambda a, u: a.at[pick].set(u.astype(a.dtype)), lanes, upd)
 
 
-@partial(jax.jit, static_argnames="options")
-def solve_programs(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Programs:
+@partial(jax.jit, static_argnames=("options", "settle"))
+def solve_programs(grasp: Grasp, options: EvaluateOptions = EvaluateOptions(), settle: bool = True) -> Programs:
     """Solve every program of ``grasp`` and return them lane by lane (for diagnostics and
-    benchmarks; :func:`jaxgrasp.evaluate` is this plus the reduction to one value)."""
-    return programs_of(model_params(grasp), options)
+    benchmarks; :func:`jaxgrasp.evaluate` is this plus the reduction to one value);
+    ``settle`` as in :func:`programs_of`."""
+    return programs_of(model_params(grasp), options, settle)
+
+
+def needs_settling(boundary_status) -> np.ndarray:
+    """``(...)`` bool: whether an evaluation with this ``boundary_status`` ``(..., 2, N)``
+    (an :class:`~jaxgrasp.Evaluation` field, host-side) has a boundary problem that no
+    start settled, the only case in which :func:`settle_stalled` can change anything."""
+    return np.any(np.asarray(boundary_status) == LaneStatus.NOT_CONVERGED, axis=(-2, -1))

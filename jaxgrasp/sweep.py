@@ -418,14 +418,15 @@ def sweep(
     if chunk_size is None:
         chunk_size = default_chunk_size(devices)
     chunk = batch_size(chunk_size, total, len(devices))
-    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices)
+    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, settle=False)
+    settling = lambda: compiled_evaluator(options, n_contacts, chunk, devices)[0]  # noqa: E731
     sharding = NamedSharding(_mesh(devices), P("batch"))
 
     own = _own_fields(grasp, base)
     shape = tuple(a.size for a in axes.values())
     outs, run_seconds = run_chunks(
         fn, lambda start: _chunk_fields(own, axes, start, chunk), grasp_fields(False), total, chunk, sharding,
-        progress, on_chunk, keep=_RESULT_FIELDS,
+        progress, on_chunk, keep=_RESULT_FIELDS, settling=settling,
     )
     return SweepResult(
         axes=dict(axes),

@@ -414,3 +414,36 @@ def test_released_contact_boundary_settles(results, ipopt_reference, case):
     # feasible to 1e-15, so it is never below Ipopt's.
     e, e_ipopt = float(res.boundary_energy[kind, contact]), float(ref["boundary_energy"][kind][contact])
     assert e_ipopt * (1 - 1e-9) <= e <= e_ipopt * (1 + 1e-6), (e, e_ipopt)
+
+
+def test_host_drivers_settle_only_where_needed(results, monkeypatch):
+    """``evaluate`` of a concrete grasp and ``evaluate_batch`` run the program without the
+    settling stage first and the one with it only on grasps with an unsettled boundary
+    problem: the released cases need it and get the inline path's results (the
+    ``results`` fixture: ``jit(vmap(evaluate))``, the stage inline); a grasp that needs
+    none never builds the second program."""
+    import importlib
+
+    evaluate_module = importlib.import_module("jaxgrasp.evaluate")  # jaxgrasp.evaluate is the function
+    calls = []
+    program = evaluate_module.compiled_program
+    monkeypatch.setattr(
+        evaluate_module, "compiled_program", lambda g, o, settle=True: calls.append(settle) or program(g, o, settle)
+    )
+    assert jaxgrasp.evaluate(presets.cube(mass=0.05)).status_name == "stable"
+    assert calls == [False]  # every boundary settled without the stage
+    grasps = [RELEASED[case][0] for case in RELEASED]
+    singles = []
+    for g in grasps:
+        calls.clear()
+        singles.append(jaxgrasp.evaluate(g))
+        assert calls == [False, True]  # unsettled without the stage, so run again with it
+    batch = jaxgrasp.evaluate_batch(grasps + [presets.cube()], chunk_size=4)
+    for i, case in enumerate(RELEASED):
+        ref = results[case]
+        for got in (singles[i], batch[i]):
+            assert got.status_name == ref.status_name
+            np.testing.assert_array_equal(np.asarray(got.boundary_status), np.asarray(ref.boundary_status))
+            # separately compiled programs: equal to the solver's tolerance (1e-10, scaled)
+            np.testing.assert_allclose(np.asarray(got.boundary_energy), np.asarray(ref.boundary_energy), rtol=1e-9)
+            assert float(got.value) == pytest.approx(float(ref.value), rel=1e-9)

@@ -70,7 +70,7 @@ WORKER = textwrap.dedent(
         before = cache.stats()
         r = jaxgrasp.sweep(jaxgrasp.presets.cube(), young_modulus=E, initial_deformation=DR)
         chunk = S.batch_size(S.default_chunk_size(), r.size, jax.device_count())
-        fn, _ = S.compiled_evaluator(EvaluateOptions(), 2, chunk)  # the one the sweep used (memoised)
+        fn, _ = S.compiled_evaluator(EvaluateOptions(), 2, chunk, settle=False)  # the one the sweep used (memoised)
         shardings = jax.tree_util.tree_leaves(fn.input_shardings) + jax.tree_util.tree_leaves(
             fn.output_shardings
         )
