@@ -9,8 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import jaxgrasp  # noqa: F401  (float64)
-from jaxgrasp.programs import _ray_start
+from jaxgrasp.programs import _ray_start  # importing jaxgrasp turns on float64
 
 GRID = 2.0 ** (-(47 - jnp.arange(48.0)) / 4.0)  # the default ray grid, t_max = 1
 
