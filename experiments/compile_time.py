@@ -8,7 +8,8 @@ median reported, with the load average (1 min) when it started:
 
 * ``evaluate.*``: the cube (``jaxgrasp.presets.cube(6e5, 0.002)``, default options),
   caches off, in stages: ``import`` (``import jaxgrasp``), ``trace``, ``lower`` and
-  ``compile`` (``evaluate_compiled.trace(...).lower().compile(COMPILER_OPTIONS)``), ``first_run`` (the
+  ``compile`` (``evaluate_compiled.trace(..., settle=False).lower().compile(COMPILER_OPTIONS)``,
+  the program a concrete ``evaluate`` runs first), ``first_run`` (the
   compiled program's first call); ``hlo_lines``: lines of the lowered StableHLO;
 * ``evaluate_cold.first`` / ``evaluate_warm.first``: the first ``jaxgrasp.evaluate(cube)``
   call end to end, with ``JAXGRASP_CACHE_DIR`` set to an empty folder (trace, export,
@@ -56,7 +57,7 @@ import jaxgrasp
 from jaxgrasp.evaluate import evaluate_compiled
 t1 = time.perf_counter()
 grasp, options, temperature = jaxgrasp.presets.cube(6e5, 0.002), jaxgrasp.EvaluateOptions(), np.float64(0.0)
-traced = evaluate_compiled.trace(grasp, temperature, options)
+traced = evaluate_compiled.trace(grasp, temperature, options, False)  # settle=False: what evaluate runs first
 t2 = time.perf_counter()
 lowered = traced.lower()
 t3 = time.perf_counter()
