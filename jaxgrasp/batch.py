@@ -50,6 +50,7 @@ __all__ = [
     "check_chunk_size",
     "grasp_fields",
     "compiled_evaluator",
+    "settling_evaluator",
     "run_chunks",
 ]
 
@@ -150,9 +151,18 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
 
 
 
+def settling_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None, masked: bool = False):
+    """``(get, size)`` for :func:`run_chunks`'s ``settling``: the evaluator with the
+    settling stage for batches of ``size = min(chunk, BUCKET_BASE * devices)`` grasps,
+    compiled (or loaded) when ``get()`` is first called."""
+    devices = tuple(jax.devices() if devices is None else devices)
+    size = min(chunk, BUCKET_BASE * len(devices))
+    return (lambda: compiled_evaluator(options, n_contacts, size, devices, masked)[0]), size
+
+
 def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], names, total: int, chunk: int,
                sharding, progress=None, on_chunk=None, keep=RESULT_FIELDS,
-               settling: Callable[[], Callable] | None = None) -> tuple[dict[str, np.ndarray], float]:
+               settling: tuple[Callable[[], Callable], int] | None = None) -> tuple[dict[str, np.ndarray], float]:
     """Evaluate ``total`` grasps ``chunk`` at a time with the compiled ``fn``; the
     ``(total, ...)`` result arrays named in ``keep`` (of :data:`RESULT_FIELDS`) and the
     run seconds.
@@ -163,12 +173,13 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
     it writes is on disk before ``progress`` reports the chunk) and ``progress(stop,
     total)`` are called after each chunk. No device buffer outlives its chunk.
 
-    ``settling()``, where given, returns the same evaluator with the settling stage
-    (``fn`` being the one without, :func:`compiled_evaluator`); it is called (and
-    compiled, the seconds counted as run time) only once a chunk has a grasp that
-    :func:`~jaxgrasp.programs.needs_settling`, and that chunk is run again with it. Only
-    the rows that need it take its results, so every grasp's result is the same whatever
-    chunk it is in.
+    ``settling = (get, size)``, where given: ``get()`` returns the evaluator with the
+    settling stage for batches of ``size`` grasps (``fn`` being the one without,
+    :func:`compiled_evaluator`). It is called (and compiled, the seconds counted as run
+    time) only once a chunk has grasps that :func:`~jaxgrasp.programs.needs_settling`;
+    those grasps alone are evaluated again with it, ``size`` at a time (a few in a
+    dataset: a small batch, not the chunk, runs again), and take its results. Every
+    grasp's result is thus the same whatever chunk it is in.
     """
     outs: dict[str, np.ndarray] = {}  # host-side, filled chunk by chunk
     run_seconds = 0.0
@@ -179,14 +190,17 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
         t0 = time.perf_counter()
         res = dict(zip(RESULT_FIELDS, fn(*batch)))
         res = {f: _gather(res[f]) for f in dict.fromkeys((*keep, "boundary_status"))}
-        rows = needs_settling(res["boundary_status"])
-        rows[stop - start :] = False
-        if settling is not None and rows.any():
-            settled = dict(zip(RESULT_FIELDS, settling()(*batch)))
-            for f in res:
-                merged = np.array(res[f])  # a writable copy
-                merged[rows] = _gather(settled[f])[rows]
-                res[f] = merged
+        rows = np.flatnonzero(needs_settling(res["boundary_status"])[: stop - start])
+        if settling is not None and rows.size:
+            get, size = settling
+            settle = get()
+            res = {f: np.array(a) for f, a in res.items()}  # writable copies
+            for first in range(0, rows.size, size):
+                sel = rows[first : first + size]
+                sub = [_put(fields[k][np.resize(sel, size)], sharding) for k in names]  # padded by repeats
+                settled = dict(zip(RESULT_FIELDS, settle(*sub)))
+                for f in res:
+                    res[f][sel] = _gather(settled[f])[: sel.size]
         run_seconds += time.perf_counter() - t0
         del batch
         for f in keep:
@@ -335,7 +349,7 @@ def evaluate_batch(
     total, n_contacts = fields["positions"].shape[:2]
     chunk = batch_size(default_chunk_size(devices) if chunk_size is None else chunk_size, total, len(devices))
     fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, masked, settle=False)
-    settling = lambda: compiled_evaluator(options, n_contacts, chunk, devices, masked)[0]  # noqa: E731
+    settling = settling_evaluator(options, n_contacts, chunk, devices, masked)
     sharding = NamedSharding(_mesh(devices), P("batch"))
     invalid = np.flatnonzero([e is not None for e in errors])
 

@@ -54,6 +54,7 @@ from .batch import (
     default_chunk_size,
     grasp_fields,
     run_chunks,
+    settling_evaluator,
 )
 from .evaluate import EvaluateOptions
 from .fields import FIELD, SWEEPABLE, Field
@@ -419,7 +420,7 @@ def sweep(
         chunk_size = default_chunk_size(devices)
     chunk = batch_size(chunk_size, total, len(devices))
     fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, settle=False)
-    settling = lambda: compiled_evaluator(options, n_contacts, chunk, devices)[0]  # noqa: E731
+    settling = settling_evaluator(options, n_contacts, chunk, devices)
     sharding = NamedSharding(_mesh(devices), P("batch"))
 
     own = _own_fields(grasp, base)
