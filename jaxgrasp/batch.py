@@ -153,10 +153,11 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
 
 def settling_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, devices=None, masked: bool = False):
     """``(get, size)`` for :func:`run_chunks`'s ``settling``: the evaluator with the
-    settling stage for batches of ``size = min(chunk, BUCKET_BASE * devices)`` grasps,
-    compiled (or loaded) when ``get()`` is first called."""
+    settling stage for one grasp per device (``size`` = the device count: the grasps
+    that need it are few, and a larger batch would be padded with repeats that cost as
+    much as they do), compiled (or loaded) when ``get()`` is first called."""
     devices = tuple(jax.devices() if devices is None else devices)
-    size = min(chunk, BUCKET_BASE * len(devices))
+    size = len(devices)
     return (lambda: compiled_evaluator(options, n_contacts, size, devices, masked)[0]), size
 
 
@@ -178,7 +179,7 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
     :func:`compiled_evaluator`). It is called (and compiled, the seconds counted as run
     time) only once a chunk has grasps that :func:`~jaxgrasp.programs.needs_settling`;
     those grasps alone are evaluated again with it, ``size`` at a time (a few in a
-    dataset: a small batch, not the chunk, runs again), and take its results. Every
+    dataset: not the chunk, only they run again), and take its results. Every
     grasp's result is thus the same whatever chunk it is in.
     """
     outs: dict[str, np.ndarray] = {}  # host-side, filled chunk by chunk
