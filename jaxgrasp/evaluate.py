@@ -48,7 +48,7 @@ from .result import Evaluation
 from .status import NO_BOUNDARY, Constraint, GraspStatus, LaneStatus
 from .units import M_TO_MM, MJ_TO_J
 
-__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_compiled", "compiled_program", "Boundaries", "Verdict", "TIE_TOL"]
+__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_compiled", "limiting_index", "compiled_program", "Boundaries", "Verdict", "TIE_TOL"]
 
 TIE_TOL = 1e-8
 """Boundary energies within this fraction of the value of the least one are a tie (the
@@ -296,6 +296,20 @@ class Verdict:
     margins: Any
 
 
+def limiting_index(objective, reached, equilibrium):
+    """``()`` index of the limiting boundary problem: the least ``objective`` ``(B,)``
+    among the ``reached`` ones (scaled energies; ``equilibrium``: the equilibrium's).
+
+    Boundaries within the solver's accuracy of the least (:data:`TIE_TOL` of the value,
+    ``least - equilibrium``) are a tie, which goes to the first in (kind, contact) order:
+    symmetric contacts then give the same limiting boundary whatever the rounding
+    (padding, batching, platform). 0 where none is reached."""
+    energies = jnp.where(reached, objective, jnp.inf)
+    least = jnp.min(energies)
+    tie = TIE_TOL * jnp.abs(least - equilibrium) + 1e-14 * jnp.abs(least)
+    return jnp.argmax(energies <= least + tie)
+
+
 def grasp_status(p: ModelParams, progs: Programs, best: Boundaries, boundary_tol: float) -> Verdict:
     """Decide the grasp's status from the solver's outputs only (no derivative)."""
     eq = progs.equilibrium
@@ -312,13 +326,7 @@ def grasp_status(p: ModelParams, progs: Programs, best: Boundaries, boundary_tol
         & jnp.any((load_margins <= boundary_tol) & (eq.lam.reshape(3, n)[Constraint.SLIP :] > 0.0))
     )
     any_reached = jnp.any(best.reached)
-    reached = jnp.where(best.reached, best.objective, jnp.inf)
-    least = jnp.min(reached)
-    # Boundaries within the solver's accuracy of the least (TIE_TOL of the value) are a
-    # tie, which goes to the first in (kind, contact) order: symmetric contacts then give
-    # the same limiting boundary whatever the rounding (padding, batching, platform).
-    tie = TIE_TOL * jnp.abs(least - eq.objective) + 1e-14 * jnp.abs(least)
-    limit = jnp.argmax(reached <= least + tie)
+    limit = limiting_index(best.objective, best.reached, eq.objective)
     hard_scaled = best.objective[limit] - eq.objective  # value / energy scale
     # a boundary reached within the solver's accuracy of U0: the equilibrium is on it
     zero_value = any_reached & (hard_scaled <= boundary_tol)

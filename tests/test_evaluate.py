@@ -426,3 +426,22 @@ def test_boundary_poses_lie_on_their_boundary(results, case):
         k, j = int(res.limiting_kind), int(res.limiting_contact)
         m = _margins(g, res.boundary_translation[k, j], res.boundary_rotation[k, j])
         assert abs(m[1 + k, j]) <= 1e-8
+
+
+@pytest.mark.parametrize(
+    "objective, reached, expected",
+    [
+        ([1.0 + 1e-12, 1.0, 2.0], [True, True, True], 0),  # a tie (1e-12 of the value 0.5): the first
+        ([1.0 + 1e-6, 1.0, 2.0], [True, True, True], 1),  # 2e-6 of the value apart: the least
+        ([0.9, 1.0 + 1e-12, 1.0], [False, True, True], 1),  # unreached boundaries never limit
+        ([3.0, 2.0], [False, False], 0),  # none reached
+    ],
+)
+def test_limiting_index_breaks_ties_by_order(objective, reached, expected):
+    """The limiting boundary is the least reached one; boundaries within TIE_TOL of the
+    value of each other go to the first, so that rounding does not pick among symmetric
+    contacts (with a plain argmin the first case gives 1)."""
+    from jaxgrasp.evaluate import limiting_index
+
+    got = limiting_index(jnp.asarray(objective), jnp.asarray(reached), jnp.asarray(0.5))
+    assert int(got) == expected
