@@ -32,9 +32,9 @@ from .dataset import GraspSet
 from .evaluate import EvaluateOptions
 from .evaluate import evaluate_traced as _evaluate_one
 from .fields import NAMES
+from .grasp import Grasp, stack
 from .options import COMPILER_OPTIONS
 from .programs import needs_settling
-from .grasp import Grasp, stack
 from .result import FIELDS, Evaluation
 from .validation import GraspValueError, check_batch_inputs
 
