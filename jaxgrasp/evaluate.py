@@ -87,9 +87,9 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
     (:func:`~jaxgrasp.programs.programs_of`); the result is the traced path's.
     """
     _check_unbatched(grasp)
-    options, temperature = _split_temperature(options)
     if not _is_concrete(grasp):  # inside the caller's jit, vmap or grad
-        return evaluate_compiled(grasp, temperature, options)
+        return evaluate_traced(grasp, options)
+    options, temperature = _split_temperature(options)
     from .validation import check_grasp_inputs
 
     check_grasp_inputs(**grasp.to_numpy())
