@@ -4,8 +4,10 @@
 advances only a few slots per loop step instead of every lane in lockstep; under
 ``jax.vmap`` it folds the batch axis into its lanes (``custom_vmap``), so the lanes of
 every grasp of a batch share one queue. It drives the solver through its pieces
-:func:`~jaxgrasp.solver.init`, :func:`~jaxgrasp.solver.step`,
-:func:`~jaxgrasp.solver.running` and :func:`~jaxgrasp.solver.to_result`.
+:func:`~jaxgrasp.solver.init`, the parts of :func:`~jaxgrasp.solver.step`
+(:func:`~jaxgrasp.solver.propose`, one :func:`~jaxgrasp.solver.line_search` over every
+slot, :func:`~jaxgrasp.solver.accept`), :func:`~jaxgrasp.solver.running` and
+:func:`~jaxgrasp.solver.to_result`.
 """
 
 from __future__ import annotations
@@ -117,7 +119,12 @@ def _advance(problem, theta, order, num_active, o: SolverOptions, q: _Queue) -> 
     active lanes.
     """
     th = _take(theta, q.idx)
-    slots = jax.vmap(lambda s, t: solver.step(problem(t), s, o))(q.slots, th)
+    # solver.step of every slot, with one line search over all of them (only the slots
+    # that need more than the full step walk the rest of the ladder)
+    trials = jax.vmap(lambda s, t: solver.propose(problem(t), s, o))(q.slots, th)
+    merit_of = lambda x, k: solver.merit(problem(_take(th, k)), _take(trials.state, k), x)
+    x_new, improve = solver.line_search(merit_of, trials, o)
+    slots = jax.vmap(lambda t, x, i: solver.accept(t, x, i, o))(trials, x_new, improve)
     states = jax.tree_util.tree_map(lambda a, b: a.at[q.idx].set(b), q.states, slots)
     done = ~_running_slots(slots, o)
     # the k-th finished slot takes order[ptr + k], while lanes remain

@@ -45,6 +45,8 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
+from .direction import newton_direction
+from .line_search import line_search as ladder_search
 from .status import LaneStatus
 
 __all__ = [
@@ -57,6 +59,11 @@ __all__ = [
     "solve",
     "init",
     "step",
+    "Trial",
+    "propose",
+    "merit",
+    "line_search",
+    "accept",
     "running",
     "to_result",
     "augmented_lagrangian",
@@ -297,85 +304,50 @@ def _phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
     return _lagrangian_hessian(problem, d, s.x, weights) + s.rho * (d.jac.T * quadratic) @ d.jac
 
 
-def _newton_direction(hmat, gphi, o: SolverOptions):
+def _newton_direction(hmat, gphi, needed, o: SolverOptions):
     """``(n,)`` Newton direction for the Hessian ``hmat`` ``(n, n)`` and gradient ``gphi``,
-    a descent direction.
-
-    The Hessian's eigenvalues are mirrored (``|e|``) and floored at ``1e-10`` of the
-    largest, and the step is capped at ``max_step`` (inf-norm).
-    """
-    hmat = 0.5 * (hmat + hmat.T)
-    evals, evecs = jnp.linalg.eigh(hmat)
-    aevals = jnp.abs(evals)
-    floor = 1e-10 * jnp.maximum(jnp.max(aevals), 1e-30)
-    aevals = jnp.maximum(aevals, floor)
-    p = -evecs @ ((evecs.T @ gphi) / aevals)
+    a descent direction (:func:`jaxgrasp.direction.newton_direction`: eigenvalues mirrored
+    and floored at ``1e-10`` of the largest), capped at ``max_step`` (inf-norm). ``needed``
+    ``()`` bool: whether the lane takes this step (under ``vmap`` the lanes that do not
+    cost no eigendecomposition)."""
+    p = newton_direction(0.5 * (hmat + hmat.T), gphi, needed)
     return p * jnp.minimum(1.0, o.max_step / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
 
 
-def _line_search(merit, x, phi0, p, gphi, needs_step, o: SolverOptions):
-    """Backtracking along ``p`` on the ladder of step lengths ``1, 1/2, 1/4, ...``.
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Trial:
+    """A lane's loop step up to its line search (:func:`propose`; leading batch axes
+    under ``vmap``).
 
-    Args:
-        merit: phi as a function of the point, ``(n,) -> ()``.
-        x: ``(n,)`` current point.
-        phi0: ``()`` phi at ``x``.
-        p: ``(n,)`` descent direction.
-        gphi: ``(n,)`` gradient of phi at ``x``.
-        needs_step: ``()`` bool; where ``False`` no step length is tried.
-
-    Returns:
-        ``(x_new, improve)``: ``x_new`` ``(n,)`` is ``x + alpha p`` for the first ``alpha``
-        that passes Armijo, else for the one with the lowest phi; ``x`` itself where no
-        ``alpha`` lowers phi (``improve``, ``()`` bool, is then ``False``).
+    Attributes:
+        state: the lane's state after the multiplier update, where there was one.
+        newton: ``()`` bool, whether the lane takes a Newton step now.
+        p: ``(n,)`` the Newton direction (capped at ``max_step``).
+        phi0: ``()`` phi at ``state.x``.
+        slope: ``()`` phi's directional derivative along ``p``.
     """
-    _, _, rounding = _tolerances(x.dtype, o)
-    alphas = 0.5 ** jnp.arange(o.line_search_steps, dtype=x.dtype)
-    slope = jnp.dot(gphi, p)
-    # Armijo, with slack for rounding: near a minimiser at a large penalty the decrease
-    # a Newton step promises is below phi's rounding error, and a strict test would
-    # reject the very steps that converge.
-    slack = rounding * (jnp.abs(phi0) + 1.0)
 
-    # The ladder is walked lazily (a while loop that stops once every lane has its step),
-    # which gives the same step as evaluating the whole ladder: almost every Newton step
-    # takes the first or second length. Lanes that do not take a Newton step this loop
-    # step start as done.
-    def cond(c):
-        k, found = c[0], c[1]
-        return (k < o.line_search_steps) & ~found
-
-    def body(c):
-        k, found, first, best, best_val = c
-        a = alphas[k]
-        t = merit(x + a * p)
-        t = jnp.where(jnp.isfinite(t), t, jnp.inf)
-        ok = t <= phi0 + 1e-4 * a * slope + slack
-        first = jnp.where(ok, k, first)
-        better = t < best_val
-        best = jnp.where(better, k, best)
-        best_val = jnp.where(better, t, best_val)
-        return k + 1, found | ok, first, best, best_val
-
-    zero = jnp.asarray(0, jnp.int32)
-    _, armijo, first, best, best_val = jax.lax.while_loop(
-        cond, body, (zero, ~needs_step, zero, zero, jnp.asarray(jnp.inf, x.dtype))
-    )
-    idx = jnp.where(armijo, first, best)
-    improve = armijo | (best_val < phi0)
-    return jnp.where(improve, x + alphas[idx] * p, x), improve
+    state: SolverState
+    newton: Any
+    p: Any
+    phi0: Any
+    slope: Any
 
 
-def _newton_step(problem: Problem, s: SolverState, d: FirstOrder, gphi, needs_step, o: SolverOptions) -> SolverState:
-    """A damped Newton step on phi from ``s`` (``d``: the problem at ``s.x``; ``gphi``:
-    ``(n,)`` gradient of phi there)."""
-    p = _newton_direction(_phi_hessian(problem, s, d), gphi, o)
-    phi0 = _phi_of(d.fx, d.gx, s.lam, s.nu, s.rho, s.eq_mask)
-    merit = lambda x: augmented_lagrangian(problem.fg, x, s.lam, s.nu, s.rho, s.eq_mask)
-    x_new, improve = _line_search(merit, s.x, phi0, p, gphi, needs_step, o)
-    # A step that cannot decrease phi ends the inner loop (numerically converged).
-    inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
-    return dataclasses.replace(s, x=x_new, inner=inner)
+def merit(problem, s: SolverState, x):
+    """``()`` phi of the lane ``s`` (its multipliers and penalty) at the point ``x`` ``(n,)``:
+    the merit its line search lowers."""
+    return augmented_lagrangian(as_problem(problem).fg, x, s.lam, s.nu, s.rho, s.eq_mask)
+
+
+def line_search(merit_of, trials: Trial, o: SolverOptions):
+    """``(x_new, improve)`` ``(B, n)``, ``(B,)``: the backtracking line search
+    (:func:`jaxgrasp.line_search.line_search`) of a batch of ``B`` lanes' trials (leading
+    axis ``B``); ``merit_of(x, lane)`` is lane ``lane``'s :func:`merit` at ``x``."""
+    _, _, rounding = _tolerances(trials.p.dtype, o)
+    return ladder_search(merit_of, trials.state.x, trials.p, trials.phi0, trials.slope, trials.newton,
+                         o.line_search_steps, rounding)
 
 
 def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, o: SolverOptions):
@@ -448,21 +420,14 @@ def _select(pred, a, b):
     return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
 
 
-def step(problem, s: SolverState, o: SolverOptions) -> SolverState:
-    """One loop step of one lane: a multiplier update where the inner solve is done, then
-    a Newton step on phi where the (updated) inner solve is not. A finished lane is
-    returned unchanged.
+def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
+    """A lane's loop step up to its line search: a multiplier update where the inner solve
+    is done, then, where the (updated) inner solve is not, the Newton direction on phi.
 
     Stages, in order: :func:`_first_order` (the problem and its Jacobian at ``s.x``,
     shared by every later stage: the update does not move ``x``); :func:`_inner_done`;
     :func:`_multiplier_update` (status from :func:`_lane_status`); :func:`_inner_done`
-    again; :func:`_newton_step` (:func:`_phi_hessian`, :func:`_newton_direction`, then
-    :func:`_line_search`).
-
-    Args:
-        problem: a :class:`Problem`, or its ``fg`` alone (:func:`as_problem`).
-        s: the lane's state.
-        o: :class:`SolverOptions`.
+    again; :func:`_phi_hessian` and :func:`_newton_direction`.
     """
     # A multiplier update, where the inner solve is done, then a Newton step where the
     # (updated) inner solve is not: the sequence of updates and the step count of a lane
@@ -477,8 +442,35 @@ def step(problem, s: SolverState, o: SolverOptions) -> SolverState:
     s1 = _select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
     gphi1, inner_done1 = _inner_done(s1, d, o)
     newton = is_running & running(s1, o) & ~inner_done1
-    s_newton = _newton_step(problem, s1, d, gphi1, newton, o)
-    return _select(newton, dataclasses.replace(s_newton, steps=s1.steps + 1), s1)
+    p = _newton_direction(_phi_hessian(problem, s1, d), gphi1, newton, o)
+    phi0 = _phi_of(d.fx, d.gx, s1.lam, s1.nu, s1.rho, s1.eq_mask)
+    return Trial(state=s1, newton=newton, p=p, phi0=phi0, slope=jnp.dot(gphi1, p))
+
+
+def accept(t: Trial, x_new, improve, o: SolverOptions) -> SolverState:
+    """The lane's state after its loop step: ``t.state`` moved to ``x_new`` ``(n,)`` (the
+    line search's point) where it took a Newton step. A step that cannot decrease phi
+    (``improve`` false) ends the inner loop (numerically converged)."""
+    s = t.state
+    inner = jnp.where(improve, s.inner + 1, o.max_inner).astype(jnp.int32)
+    return _select(t.newton, dataclasses.replace(s, x=x_new, inner=inner, steps=s.steps + 1), s)
+
+
+def step(problem, s: SolverState, o: SolverOptions) -> SolverState:
+    """One loop step of one lane: :func:`propose`, the line search, :func:`accept`. A
+    finished lane is returned unchanged. (:func:`jaxgrasp.lanes.solve_lanes` runs the same
+    three for many lanes, with one line search over all of them.)
+
+    Args:
+        problem: a :class:`Problem`, or its ``fg`` alone (:func:`as_problem`).
+        s: the lane's state.
+        o: :class:`SolverOptions`.
+    """
+    problem = as_problem(problem)
+    t = propose(problem, s, o)
+    one = jax.tree_util.tree_map(lambda a: a[None], t)
+    x_new, improve = line_search(lambda x, _: merit(problem, t.state, x), one, o)
+    return accept(t, x_new[0], improve[0], o)
 
 
 def running(s: SolverState, o: SolverOptions):

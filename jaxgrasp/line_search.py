@@ -1,0 +1,96 @@
+"""Backtracking on a fixed ladder of step lengths, for a batch of lanes at once.
+
+Each lane tries ``alpha = 1, 1/2, 1/4, ...`` (``line_search_steps`` lengths) along its
+direction and takes the first that passes Armijo's test, or, where none does, the one
+with the lowest merit; where no length lowers the merit at all it stays put.
+
+Almost every Newton step takes the full length, but in a batch of a hundred lanes some
+lane nearly always walks the whole ladder (a converged lane whose merit cannot fall
+below its rounding), and a batched loop over the ladder runs as long as its slowest lane.
+So the full length is tried for every lane, and only the lanes that fail it walk the rest,
+gathered in blocks of :data:`LADDER_BLOCK` lanes whose remaining lengths are all
+evaluated at once: the cost follows the number of such lanes (none: no block at all),
+and each lane's step is what a walk of its own ladder would give.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["line_search", "LADDER_BLOCK"]
+
+#: lanes per gathered block of the rest of the ladder
+LADDER_BLOCK = 8
+
+
+def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: float):
+    """Backtracking line search of a batch of ``B`` lanes with ``n`` variables.
+
+    Args:
+        merit: ``(x, lane) -> ()``, the merit of lane ``lane`` (an int32 index into the
+            batch) at the point ``x`` ``(n,)``.
+        x: ``(B, n)`` current points.
+        p: ``(B, n)`` descent directions.
+        phi0: ``(B,)`` merit at ``x``.
+        slope: ``(B,)`` directional derivative of the merit along ``p`` (negative).
+        needs_step: ``(B,)`` bool; lanes where it is false try no length past the first
+            (their result is not used).
+        steps: number of lengths on the ladder ``1, 1/2, ..., 2^(1 - steps)``.
+        rounding: relative slack of Armijo's test (``slack = rounding (|phi0| + 1)``):
+            near a minimiser at a large penalty the decrease a Newton step promises is
+            below phi's rounding error, and a strict test would reject the very steps
+            that converge.
+
+    Returns:
+        ``(x_new, improve)``: ``x_new`` ``(B, n)`` is ``x + alpha p`` for the first
+        ``alpha`` that passes Armijo (``merit <= phi0 + 1e-4 alpha slope + slack``), else
+        for the one with the lowest merit; ``x`` itself where no ``alpha`` lowers the
+        merit (``improve`` ``(B,)`` bool is then false).
+    """
+    size = x.shape[0]
+    alphas = 0.5 ** jnp.arange(steps, dtype=x.dtype)
+    slack = rounding * (jnp.abs(phi0) + 1.0)
+
+    def values(xs, lanes):
+        t = jax.vmap(merit)(xs, lanes)
+        return jnp.where(jnp.isfinite(t), t, jnp.inf)
+
+    t0 = values(x + p, jnp.arange(size, dtype=jnp.int32))
+    ok0 = t0 <= phi0 + 1e-4 * slope + slack
+    idx = jnp.zeros(size, jnp.int32)
+    improve = ok0 | (t0 < phi0)
+    if steps > 1:
+        idx, improve = _rest_of_ladder(values, x, p, phi0, slope, slack, t0, needs_step & ~ok0, alphas, idx, improve)
+    return jnp.where(improve[:, None], x + alphas[idx][:, None] * p, x), improve
+
+
+def _rest_of_ladder(values, x, p, phi0, slope, slack, t0, rest, alphas, idx, improve):
+    """``(idx, improve)`` ``(B,)`` with the lanes where ``rest`` is true decided on the
+    whole ladder: every length past the first, evaluated in gathered blocks of
+    :data:`LADDER_BLOCK` lanes (as many blocks as there are such lanes)."""
+    size = x.shape[0]
+    block = min(LADDER_BLOCK, size)
+    num_blocks = -(-size // block)
+    order = jnp.argsort(~rest, stable=True)  # the lanes to decide first
+    order = jnp.concatenate([order, jnp.broadcast_to(order[-1:], (num_blocks * block - size,))])
+    count = jnp.sum(rest.astype(jnp.int32))
+    more = alphas[1:]  # (steps - 1,)
+
+    def body(c):
+        i, idx, improve = c
+        rows = jax.lax.dynamic_slice(order, (i * block,), (block,))
+        xs = x[rows][:, None, :] + more[:, None] * p[rows][:, None, :]  # (block, steps - 1, n)
+        lanes = jnp.broadcast_to(rows[:, None], xs.shape[:2])
+        ts = values(xs.reshape(-1, xs.shape[-1]), lanes.reshape(-1)).reshape(xs.shape[:2])
+        ok = ts <= phi0[rows][:, None] + 1e-4 * more * slope[rows][:, None] + slack[rows][:, None]
+        every = jnp.concatenate([t0[rows][:, None], ts], axis=1)  # (block, steps)
+        armijo = jnp.any(ok, axis=1)
+        k = jnp.where(armijo, jnp.argmax(ok, axis=1) + 1, jnp.argmin(every, axis=1))
+        better = armijo | (jnp.min(every, axis=1) < phi0[rows])
+        valid = i * block + jnp.arange(block) < count
+        put = jnp.where(valid, rows, size)  # out of range: dropped
+        return i + 1, idx.at[put].set(k.astype(idx.dtype), mode="drop"), improve.at[put].set(better, mode="drop")
+
+    _, idx, improve = jax.lax.while_loop(lambda c: c[0] * block < count, body, (jnp.asarray(0, jnp.int32), idx, improve))
+    return idx, improve
