@@ -32,9 +32,13 @@ Each lane ends with a status and its KKT residuals at ``(x, lam, nu)``:
 stationarity ``|grad f + nu grad h - sum lam grad g|_inf``, feasibility
 ``max(|h|, max(-g_i, 0))`` and complementarity ``max |lam_i g_i|``.
 
-:func:`solve` runs one lane; its pieces :func:`init`, :func:`step`, :func:`running` and
+:func:`solve` runs one lane; its pieces :func:`init`, :func:`step` (itself
+:func:`propose`, :func:`line_search` and :func:`accept`), :func:`running` and
 :func:`to_result` are public so that the work queue of :mod:`jaxgrasp.lanes`, which runs
-many lanes with early exit, can drive them.
+many lanes with early exit, can drive them: it runs one line search over all its slots.
+The direction is :func:`jaxgrasp.direction.newton_direction` and the ladder
+:func:`jaxgrasp.line_search.line_search`; under ``vmap`` each pays for ``eigh`` and for
+step lengths past the first only on the lanes that need them.
 """
 
 from __future__ import annotations

@@ -16,8 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import jaxgrasp  # noqa: F401  (float64)
-from jaxgrasp.direction import CONDITION_BOUND, EIGH_BLOCK, eigen_direction, ldl_direction, newton_direction
+from jaxgrasp.direction import CONDITION_BOUND, EIGH_BLOCK, eigen_direction, ldl_direction, newton_direction  # importing jaxgrasp turns on float64
 
 
 def closed_form(h, g):

@@ -9,8 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import jaxgrasp  # noqa: F401  (float64)
-from jaxgrasp.line_search import LADDER_BLOCK, line_search
+from jaxgrasp.line_search import LADDER_BLOCK, line_search  # importing jaxgrasp turns on float64
 
 STEPS = 16
 ROUNDING = 1e-13
