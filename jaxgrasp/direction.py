@@ -14,9 +14,11 @@ the plain Newton step ``-H^-1 g``, which an ``LDL^T`` factorisation without pivo
 at a fraction of ``eigh``'s cost (written out entry by entry, so that under ``vmap`` every
 operation is one vector operation over the lanes). Under ``vmap`` (:func:`newton_direction`
 is a ``custom_vmap``) every lane takes the factorisation, and ``eigh`` runs only on the
-lanes that fail the test, gathered in blocks of :data:`EIGH_BLOCK`: on the grasp programs
-about a quarter of the lanes of a loop step are indefinite or near-singular, and lanes that
-take no Newton step this loop step (``needed`` false) take neither.
+lanes that fail the test, gathered in blocks of :data:`EIGH_BLOCK`: on the grasp grids
+20-44 % of the Newton lanes of a loop step are indefinite, and lanes that take no Newton
+step this loop step (``needed`` false) take no ``eigh``. A batch of at most one block (a
+single grasp's few slots) takes ``eigh`` on every lane: a smaller program, nothing to
+gather.
 """
 
 from __future__ import annotations
@@ -108,6 +110,8 @@ def _newton_direction_batched(axis_size, in_batched, hmat, g, needed):
     lead = hmat.shape[:-2]  # (axis_size,) or, under an outer vmap, more: flatten all
     n = hmat.shape[-1]
     hmat, g, needed = hmat.reshape(-1, n, n), g.reshape(-1, n), needed.reshape(-1)
+    if hmat.shape[0] <= EIGH_BLOCK:  # one block: nothing to gather, eigh for every lane
+        return jax.vmap(eigen_direction)(hmat, g).reshape(lead + (n,)), True
     p, ok = jax.vmap(ldl_direction)(hmat, g)
     p = _eigh_where(hmat, g, needed & ~ok, p)
     return p.reshape(lead + (n,)), True

@@ -10,10 +10,14 @@ below its rounding), and a batched loop over the ladder runs as long as its slow
 So the full length is tried for every lane, and only the lanes that fail it walk the rest,
 gathered in blocks of :data:`LADDER_BLOCK` lanes whose remaining lengths are all
 evaluated at once: the cost follows the number of such lanes (none: no block at all),
-and each lane's step is what a walk of its own ladder would give.
+and each lane's step is what a walk of its own ladder would give. A batch of at most
+one block (a single grasp's few slots, one lane of :func:`jaxgrasp.solver.solve`) walks
+each lane's ladder lazily instead: a smaller program, and the same steps.
 """
 
 from __future__ import annotations
+
+from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -51,6 +55,8 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
     size = x.shape[0]
     alphas = 0.5 ** jnp.arange(steps, dtype=x.dtype)
     slack = rounding * (jnp.abs(phi0) + 1.0)
+    if size <= LADDER_BLOCK:  # one block: each lane walks its own ladder (a smaller program)
+        return jax.vmap(partial(_walk, merit, alphas))(x, p, phi0, slope, slack, needs_step, jnp.arange(size, dtype=jnp.int32))
 
     def values(xs, lanes):
         t = jax.vmap(merit)(xs, lanes)
@@ -63,6 +69,35 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
     if steps > 1:
         idx, improve = _rest_of_ladder(values, x, p, phi0, slope, slack, t0, needs_step & ~ok0, alphas, idx, improve)
     return jnp.where(improve[:, None], x + alphas[idx][:, None] * p, x), improve
+
+
+def _walk(merit, alphas, x, p, phi0, slope, slack, needs_step, lane):
+    """One lane's ladder walked lazily (a while loop that stops at the first length passing
+    Armijo's test): ``(x_new, improve)`` as :func:`line_search` gives them."""
+
+    def cond(c):
+        k, found = c[0], c[1]
+        return (k < alphas.shape[0]) & ~found
+
+    def body(c):
+        k, found, first, best, best_val = c
+        a = alphas[k]
+        t = merit(x + a * p, lane)
+        t = jnp.where(jnp.isfinite(t), t, jnp.inf)
+        ok = t <= phi0 + 1e-4 * a * slope + slack
+        first = jnp.where(ok, k, first)
+        better = t < best_val
+        best = jnp.where(better, k, best)
+        best_val = jnp.where(better, t, best_val)
+        return k + 1, found | ok, first, best, best_val
+
+    zero = jnp.asarray(0, jnp.int32)
+    _, armijo, first, best, best_val = jax.lax.while_loop(
+        cond, body, (zero, ~needs_step, zero, zero, jnp.asarray(jnp.inf, x.dtype))
+    )
+    idx = jnp.where(armijo, first, best)
+    improve = armijo | (best_val < phi0)
+    return jnp.where(improve, x + alphas[idx] * p, x), improve
 
 
 def _rest_of_ladder(values, x, p, phi0, slope, slack, t0, rest, alphas, idx, improve):
