@@ -28,7 +28,8 @@ import jax.numpy as jnp  # noqa: E402
 import jaxgrasp  # noqa: E402
 from jaxgrasp import solver as S  # noqa: E402
 from jaxgrasp import EvaluateOptions
-from jaxgrasp.programs import constraints, objective, program_data, solve_programs  # noqa: E402
+from jaxgrasp.direction import ldl_direction  # noqa: E402
+from jaxgrasp.programs import objective_and_constraints, program_data, solve_programs  # noqa: E402
 from jaxgrasp.model import model_params  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
 
@@ -105,11 +106,10 @@ def parts(scene, ne, ndr, lanes=4096, repeats=5):
     z = jnp.tile(progs.start, (reps, 1))[:lanes]
     masks = jnp.tile(jax.nn.one_hot(progs.constraint_index, 3 * p.c.shape[0]), (reps, 1))[:lanes]
     lam = jnp.full(masks.shape, 0.1)
-    f = lambda z: objective(z, data)
-    g = lambda z: constraints(z, data)
+    fg = lambda z: objective_and_constraints(z, data)
 
     def phi(x, m):
-        return S.augmented_lagrangian(f, g, x, lam[0], 0.3, 100.0, m)
+        return S.augmented_lagrangian(fg, x, lam[0], 0.3, 100.0, m)
 
     fns = {
         "f + g (value of phi)": jax.jit(jax.vmap(phi)),
@@ -117,6 +117,7 @@ def parts(scene, ne, ndr, lanes=4096, repeats=5):
         "hessian phi (jax.hessian)": jax.jit(jax.vmap(jax.hessian(phi))),
         "eigh 6x6": jax.jit(jax.vmap(lambda x, m: jnp.linalg.eigh(jnp.outer(x, x) + jnp.eye(6))[0])),
         "cholesky 6x6": jax.jit(jax.vmap(lambda x, m: jnp.linalg.cholesky(jnp.outer(x, x) + jnp.eye(6)))),
+        "LDL^T direction 6x6 (direction.py)": jax.jit(jax.vmap(lambda x, m: ldl_direction(jnp.outer(x, x) + jnp.eye(6), x)[0])),
         "16 phi values (line search)": jax.jit(jax.vmap(lambda x, m: jax.vmap(lambda a: phi(x + a, m))(
             0.5 ** jnp.arange(16.0)))),
     }
