@@ -26,6 +26,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from .gathered import over_rows, put_rows
+
 __all__ = ["newton_direction", "eigen_direction", "ldl_direction", "EIGH_BLOCK", "CONDITION_BOUND"]
 
 #: lanes per block of the gathered ``eigh`` under ``vmap``
@@ -119,21 +121,10 @@ def _newton_direction_batched(axis_size, in_batched, hmat, g, needed):
 
 def _eigh_where(hmat, g, use, p):
     """``p`` ``(B, n)`` with the rows where ``use`` ``(B,)`` replaced by
-    :func:`eigen_direction`, computed in gathered blocks of :data:`EIGH_BLOCK` rows (as
-    many blocks as those rows need: none where there are none)."""
-    size = hmat.shape[0]
-    block = min(EIGH_BLOCK, size)
-    num_blocks = -(-size // block)
-    order = jnp.argsort(~use, stable=True)  # rows needing eigh first
-    order = jnp.concatenate([order, jnp.broadcast_to(order[-1:], (num_blocks * block - size,))])
-    count = jnp.sum(use.astype(jnp.int32))
+    :func:`eigen_direction`, computed in gathered blocks of :data:`EIGH_BLOCK` rows
+    (:func:`jaxgrasp.gathered.over_rows`: none where there are none)."""
 
-    def body(c):
-        i, p = c
-        rows = jax.lax.dynamic_slice(order, (i * block,), (block,))
-        valid = i * block + jnp.arange(block) < count
-        q = jax.vmap(eigen_direction)(hmat[rows], g[rows])
-        return i + 1, p.at[jnp.where(valid, rows, size)].set(q, mode="drop")
+    def update(rows, valid, p):
+        return put_rows(p, rows, valid, jax.vmap(eigen_direction)(hmat[rows], g[rows]))
 
-    _, p = jax.lax.while_loop(lambda c: c[0] * block < count, body, (jnp.asarray(0, jnp.int32), p))
-    return p
+    return over_rows(use, EIGH_BLOCK, update, p)

@@ -22,6 +22,8 @@ from functools import partial
 import jax
 import jax.numpy as jnp
 
+from .gathered import over_rows, put_rows
+
 __all__ = ["line_search", "LADDER_BLOCK"]
 
 #: lanes per gathered block of the rest of the ladder
@@ -103,18 +105,11 @@ def _walk(merit, alphas, x, p, phi0, slope, slack, needs_step, lane):
 def _rest_of_ladder(values, x, p, phi0, slope, slack, t0, rest, alphas, idx, improve):
     """``(idx, improve)`` ``(B,)`` with the lanes where ``rest`` is true decided on the
     whole ladder: every length past the first, evaluated in gathered blocks of
-    :data:`LADDER_BLOCK` lanes (as many blocks as there are such lanes)."""
-    size = x.shape[0]
-    block = min(LADDER_BLOCK, size)
-    num_blocks = -(-size // block)
-    order = jnp.argsort(~rest, stable=True)  # the lanes to decide first
-    order = jnp.concatenate([order, jnp.broadcast_to(order[-1:], (num_blocks * block - size,))])
-    count = jnp.sum(rest.astype(jnp.int32))
+    :data:`LADDER_BLOCK` lanes (:func:`jaxgrasp.gathered.over_rows`)."""
     more = alphas[1:]  # (steps - 1,)
 
-    def body(c):
-        i, idx, improve = c
-        rows = jax.lax.dynamic_slice(order, (i * block,), (block,))
+    def update(rows, valid, c):
+        idx, improve = c
         xs = x[rows][:, None, :] + more[:, None] * p[rows][:, None, :]  # (block, steps - 1, n)
         lanes = jnp.broadcast_to(rows[:, None], xs.shape[:2])
         ts = values(xs.reshape(-1, xs.shape[-1]), lanes.reshape(-1)).reshape(xs.shape[:2])
@@ -123,9 +118,6 @@ def _rest_of_ladder(values, x, p, phi0, slope, slack, t0, rest, alphas, idx, imp
         armijo = jnp.any(ok, axis=1)
         k = jnp.where(armijo, jnp.argmax(ok, axis=1) + 1, jnp.argmin(every, axis=1))
         better = armijo | (jnp.min(every, axis=1) < phi0[rows])
-        valid = i * block + jnp.arange(block) < count
-        put = jnp.where(valid, rows, size)  # out of range: dropped
-        return i + 1, idx.at[put].set(k.astype(idx.dtype), mode="drop"), improve.at[put].set(better, mode="drop")
+        return put_rows(idx, rows, valid, k.astype(idx.dtype)), put_rows(improve, rows, valid, better)
 
-    _, idx, improve = jax.lax.while_loop(lambda c: c[0] * block < count, body, (jnp.asarray(0, jnp.int32), idx, improve))
-    return idx, improve
+    return over_rows(rest, LADDER_BLOCK, update, (idx, improve))
