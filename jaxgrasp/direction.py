@@ -53,7 +53,7 @@ def ldl_direction(hmat, g):
     ``tr(H) tr(H^-1) <= CONDITION_BOUND``: then ``hmat`` is positive definite with
     ``e_min >= FLOOR e_max`` (``e_max <= tr H``, ``1 / e_min <= tr H^-1``), so ``p`` is
     :func:`eigen_direction`'s direction (to rounding). Where ``ok`` is false ``p`` is
-    finite but meaningless.
+    meaningless (a pivot near zero can overflow it).
 
     Written entry by entry (``n`` is small and static): under ``vmap`` each line is one
     vector operation over the lanes, which XLA fuses, instead of a LAPACK call per lane.
@@ -97,8 +97,8 @@ def ldl_direction(hmat, g):
 def newton_direction(hmat, g, needed):
     """``(n,)`` Newton direction of the module docstring for the symmetric Hessian ``hmat``
     ``(n, n)`` and the gradient ``g`` ``(n,)``; ``needed`` ``()`` bool: where false the
-    direction is not used and may be anything finite (under ``vmap`` such lanes cost no
-    ``eigh``). One lane: :func:`eigen_direction`."""
+    direction is not used and may be anything, even not finite (under ``vmap`` such lanes
+    cost no ``eigh``). One lane: :func:`eigen_direction`."""
     del needed
     return eigen_direction(hmat, g)
 
