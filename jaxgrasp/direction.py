@@ -80,8 +80,8 @@ def ldl_direction(hmat, g):
     p = [None] * n
     for i in reversed(range(n)):
         p[i] = y[i] * inv_piv[i] - sum((low[k][i] * p[k] for k in range(i + 1, n)), 0.0 * one)
-    # tr(H^-1) = sum_k (1/d_k) |row k of L^-1|^2 ... as sum over columns of M = L^-1:
-    # H^-1 = M^T D^-1 M, tr = sum_k inv_piv[k] sum_i M[k][i]^2
+    # H^-1 = M^T D^-1 M with M = L^-1 (unit lower triangular), so
+    # tr(H^-1) = sum_k (1 / d_k) |row k of M|^2
     m = [[None] * n for _ in range(n)]
     for j in range(n):
         m[j][j] = one

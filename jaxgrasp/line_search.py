@@ -30,6 +30,16 @@ __all__ = ["line_search", "LADDER_BLOCK"]
 LADDER_BLOCK = 8
 
 
+def _finite(t):
+    """A merit that is not a number (an invalid pose) counts as ``+inf``."""
+    return jnp.where(jnp.isfinite(t), t, jnp.inf)
+
+
+def _armijo(t, alpha, phi0, slope, slack):
+    """Armijo's test with rounding slack: ``t <= phi0 + 1e-4 alpha slope + slack``."""
+    return t <= phi0 + 1e-4 * alpha * slope + slack
+
+
 def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: float):
     """Backtracking line search of a batch of ``B`` lanes with ``n`` variables.
 
@@ -60,12 +70,9 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
     if size <= LADDER_BLOCK:  # one block: each lane walks its own ladder (a smaller program)
         return jax.vmap(partial(_walk, merit, alphas))(x, p, phi0, slope, slack, needs_step, jnp.arange(size, dtype=jnp.int32))
 
-    def values(xs, lanes):
-        t = jax.vmap(merit)(xs, lanes)
-        return jnp.where(jnp.isfinite(t), t, jnp.inf)
-
+    values = lambda xs, lanes: _finite(jax.vmap(merit)(xs, lanes))
     t0 = values(x + p, jnp.arange(size, dtype=jnp.int32))
-    ok0 = t0 <= phi0 + 1e-4 * slope + slack
+    ok0 = _armijo(t0, alphas[0], phi0, slope, slack)
     idx = jnp.zeros(size, jnp.int32)
     improve = ok0 | (t0 < phi0)
     if steps > 1:
@@ -84,9 +91,8 @@ def _walk(merit, alphas, x, p, phi0, slope, slack, needs_step, lane):
     def body(c):
         k, found, first, best, best_val = c
         a = alphas[k]
-        t = merit(x + a * p, lane)
-        t = jnp.where(jnp.isfinite(t), t, jnp.inf)
-        ok = t <= phi0 + 1e-4 * a * slope + slack
+        t = _finite(merit(x + a * p, lane))
+        ok = _armijo(t, a, phi0, slope, slack)
         first = jnp.where(ok, k, first)
         better = t < best_val
         best = jnp.where(better, k, best)
@@ -113,7 +119,7 @@ def _rest_of_ladder(values, x, p, phi0, slope, slack, t0, rest, alphas, idx, imp
         xs = x[rows][:, None, :] + more[:, None] * p[rows][:, None, :]  # (block, steps - 1, n)
         lanes = jnp.broadcast_to(rows[:, None], xs.shape[:2])
         ts = values(xs.reshape(-1, xs.shape[-1]), lanes.reshape(-1)).reshape(xs.shape[:2])
-        ok = ts <= phi0[rows][:, None] + 1e-4 * more * slope[rows][:, None] + slack[rows][:, None]
+        ok = _armijo(ts, more, phi0[rows][:, None], slope[rows][:, None], slack[rows][:, None])
         every = jnp.concatenate([t0[rows][:, None], ts], axis=1)  # (block, steps)
         armijo = jnp.any(ok, axis=1)
         k = jnp.where(armijo, jnp.argmax(ok, axis=1) + 1, jnp.argmin(every, axis=1))
