@@ -14,8 +14,12 @@ Scenes:
 * ``cube``: the paper's grid, E = 2e5..1e6 Pa (9) x dr = 1..5 mm (41), m = 0 -> 369 grasps;
 * ``prism``: E = 2e5..1e6 Pa (5) x dr = 1..5 mm (9) x m in {0, 0.1, 0.2} kg -> 135 grasps.
 
-jaxgrasp: ``jax.jit(jax.vmap(lambda g: solve_programs(g, opts, settle=False)),
-compiler_options=jaxgrasp.COMPILER_OPTIONS)`` on the stacked batch: the program that
+jaxgrasp: ``solve_programs(g, opts, settle=False)`` batched as ``evaluate_batch`` and
+``sweep`` batch it (:func:`jaxgrasp.batch.over_devices`: ``jit(shard_map(vmap(...)))``,
+the batch split over every JAX device, one work queue per device; ``import jaxgrasp``
+creates one CPU device per core, see :mod:`jaxgrasp.cores`; ``JAXGRASP_CPU_DEVICES=1``
+measures one) on the stacked batch, padded to a multiple of the device count by
+repeating its last grasp (the padding's programs are not counted). This is the program that
 ``evaluate`` and ``evaluate_batch`` run first (the settling stage runs only on grasps with
 an unsettled boundary problem; their count is recorded and is 0 on both grids);
 compile (ahead of time, ``lower().compile()``) and first run timed, then the steady state is
@@ -45,7 +49,7 @@ Agreement (on the Ipopt sample):
   equilibrium energy; unstable where an equilibrium slip/force margin is <= 1e-8, as in
   jaxgrasp), as a relative difference, where both call the grasp stable.
 
-Also recorded: the first-call compile time of ``jax.jit(jax.vmap(evaluate_traced(.., settle=False)))`` on
+Also recorded: the first-call compile time of ``evaluate_traced(.., settle=False)``, batched the same way, on
 the cube's sweep grid (369 grasps).
 
     python experiments/benchmark.py [--quick] [--ipopt-sample K] [--repeats R] [--json PATH]
@@ -78,6 +82,9 @@ import jaxgrasp  # noqa: E402
 from jaxgrasp import result as R  # noqa: E402
 from jaxgrasp.status import LaneStatus  # noqa: E402
 from jaxgrasp import EvaluateOptions
+from jax.sharding import Mesh, NamedSharding  # noqa: E402
+from jax.sharding import PartitionSpec as P  # noqa: E402
+from jaxgrasp.batch import over_devices  # noqa: E402
 from jaxgrasp.evaluate import evaluate_traced  # noqa: E402
 from jaxgrasp.programs import needs_settling, solve_programs  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
@@ -131,21 +138,32 @@ def spread_sample(n: int, k: int, seed: int) -> np.ndarray:
 # --------------------------------------------------------------------------- jaxgrasp
 
 
-def timed_call(fn, *args):
+def timed_call(fn):
     t0, c0 = time.perf_counter(), time.process_time()
-    out = jax.block_until_ready(fn(*args))
+    out = jax.block_until_ready(fn())
     return out, time.perf_counter() - t0, time.process_time() - c0
 
 
-def compile_aot(fn, *args):
-    """Ahead-of-time compile; returns (compiled, seconds)."""
+def compile_aot(fn, batch):
+    """``fn`` of one grasp, batched as jaxgrasp's engine batches it
+    (:func:`jaxgrasp.batch.over_devices`: the batch split over every device, each running
+    its own work queue), compiled ahead of time for ``batch``, which is padded by
+    repeating its last grasp to a multiple of the device count and placed on the devices
+    once, as the engine places a chunk before it runs it. Returns ``(call, seconds)``:
+    ``call()`` runs it on that batch (results padded: see :func:`to_numpy`)."""
+    devices = jax.devices()
+    pad = -len(jax.tree_util.tree_leaves(batch)[0]) % len(devices)
+    sharding = NamedSharding(Mesh(np.asarray(devices), ("batch",)), P("batch"))
+    padded = jax.tree_util.tree_map(lambda a: jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]), batch)
+    padded = jax.device_put(padded, sharding)
     t0 = time.perf_counter()
-    compiled = jax.jit(fn, compiler_options=jaxgrasp.COMPILER_OPTIONS).lower(*args).compile()
-    return compiled, time.perf_counter() - t0
+    compiled = over_devices(fn, sharding).lower(padded).compile()
+    return (lambda: compiled(padded)), time.perf_counter() - t0
 
 
-def to_numpy(tree):
-    return jax.tree_util.tree_map(np.asarray, tree)
+def to_numpy(tree, size: int):
+    """The first ``size`` rows (the batch's own grasps, not the padding) as NumPy."""
+    return jax.tree_util.tree_map(lambda a: np.asarray(a)[:size], tree)
 
 
 # --------------------------------------------------------------------------- Ipopt
@@ -348,11 +366,11 @@ def run_scene(name, params, grasps, opts, args):
     # --- jaxgrasp solve_programs: compile + first run. The program without the settling
     # stage: what evaluate and evaluate_batch run first; the settling program runs only on
     # grasps with an unsettled boundary problem (counted below: none on these grids).
-    fn = jax.vmap(lambda g: solve_programs(g, opts, settle=False))
+    fn = lambda g: solve_programs(g, opts, settle=False)  # noqa: E731
     la = load()
     compiled, t_compile = compile_aot(fn, batch)
-    progs, t_first, _ = timed_call(compiled, batch)
-    progs = to_numpy(progs)
+    progs, t_first, _ = timed_call(compiled)
+    progs = to_numpy(progs, len(grasps))
     num_active = int(progs.found.sum())
     programs = len(grasps) + num_active
     out["jaxgrasp"] = {"programs": programs, "equilibrium_programs": len(grasps), "active_boundary_lanes": num_active,
@@ -364,14 +382,14 @@ def run_scene(name, params, grasps, opts, args):
     log(f"{name}: jaxgrasp compile {t_compile:.1f} s, first run {t_first:.2f} s, {programs} programs")
 
     # --- jaxgrasp.evaluate batch (values for the comparison; compile time recorded)
-    efn = jax.vmap(lambda g: evaluate_traced(g, opts, settle=False))
+    efn = lambda g: evaluate_traced(g, opts, settle=False)  # noqa: E731
     ecompiled, te_compile = compile_aot(efn, batch)
-    evals, te_first, _ = timed_call(ecompiled, batch)
-    evals = to_numpy(evals)
+    evals, te_first, _ = timed_call(ecompiled)
+    evals = to_numpy(evals, len(grasps))
     # the grasps evaluate and evaluate_batch would run again with the settling stage
     out["jaxgrasp"]["grasps_needing_settling"] = int(np.sum(needs_settling(evals.boundary_status)))
     log(f"{name}: {out['jaxgrasp']['grasps_needing_settling']} grasps needing the settling stage")
-    _, te_second, _ = timed_call(ecompiled, batch)
+    _, te_second, _ = timed_call(ecompiled)
     out["evaluate"] = {"compile_s": te_compile, "first_run_s": te_first, "first_call_s": te_compile + te_first,
                        "second_call_s": te_second,
                        "status_counts": {R.STATUS_NAMES[s]: int(c) for s, c in enumerate(np.bincount(evals.status, minlength=4))}}
@@ -392,12 +410,12 @@ def run_scene(name, params, grasps, opts, args):
     recs = [None] * len(sample)
     for r in range(repeats):
         loads.append(load())
-        res, w, c = timed_call(compiled, batch)
+        res, w, c = timed_call(compiled)
         j_wall.append(w)
         j_cpu.append(c)
         if r == 0:
             same = all(np.array_equal(np.asarray(a), b, equal_nan=True) for a, b in
-                       zip(jax.tree_util.tree_leaves(res), jax.tree_util.tree_leaves(progs)))
+                       zip(jax.tree_util.tree_leaves(to_numpy(res, len(grasps))), jax.tree_util.tree_leaves(progs)))
         t0, c0 = time.perf_counter(), time.process_time()
         for s in chunks[r]:
             recs[s] = ipopt_grasp(models[s], progs, int(sample[s]), n)
@@ -530,11 +548,13 @@ def markdown_tables(results: dict) -> str:
                      f"solve the ratio would be {i['median_solve_ms'] / amort:.1f}.")
     ev = results.get("evaluate_compile_cube_grid")
     if ev:
-        notes.append(f"`jax.jit(jax.vmap(evaluate_traced(g, settle=False)))` on the cube sweep grid ({ev['grasps']} grasps): "
+        notes.append(f"`evaluate_traced(g, settle=False)` batched over the devices on the cube sweep grid ({ev['grasps']} grasps): "
                      f"compile {ev['compile_s']:.1f} s, first call {ev['first_call_s']:.1f} s "
                      f"(compile + first run), second call {ev['second_call_s']:.2f} s.")
     notes.append(f"Load average (1, 5, 15 min): {results['load_start']} at start, {results['load_end']} at end, "
-                 f"on {results['machine']['cpu_count']} cores ({results['machine']['jax_backend']}).")
+                 f"on {results['machine']['cpu_count']} cores ({results['machine']['jax_backend']}, "
+                 f"{results['machine'].get('jax_devices', 1)} JAX devices: jaxgrasp's batch is split over them, "
+                 f"one work queue each; Ipopt runs on one core).")
     lines += [""] + [f"- {n}" for n in notes]
     return "\n".join(lines)
 
@@ -586,7 +606,8 @@ def main() -> None:
         "options": {"num_random_starts": opts.num_random_starts, "directions": int(opts.directions().shape[0]),
                     "solver_tol": opts.solver.tol, "ipopt_tol": 1e-12, "ipopt_max_iter": 200},
         "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
-                    "jax": jax.__version__, "jax_backend": jax.default_backend(), "casadi": ca.__version__},
+                    "jax": jax.__version__, "jax_backend": jax.default_backend(), "jax_devices": jax.device_count(),
+                    "casadi": ca.__version__},
         "code": code_state(),
         "load_start": load(),
         "started": time.strftime("%Y-%m-%d %H:%M:%S"),

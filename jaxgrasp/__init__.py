@@ -6,7 +6,9 @@ user's own ``jit``/``vmap``/``grad`` trace :func:`evaluate` (JAX fixes dtypes wh
 traces, in the caller's mode: ``experiments/x64_scope.py`` measures what a narrower scope
 breaks). Set the environment variable ``JAX_ENABLE_X64`` (to ``0`` or ``1``) before
 importing to keep JAX's own setting: with ``JAX_ENABLE_X64=0`` jaxgrasp computes in
-float32. Every public function takes and returns SI units (m, Pa, N, kg, J, rad).
+float32. It also asks JAX for one CPU device per core, so that batches and sweeps run on
+every core (``JAXGRASP_CPU_DEVICES=1`` keeps JAX's single device; see
+:mod:`jaxgrasp.cores`). Every public function takes and returns SI units (m, Pa, N, kg, J, rad).
 
 Compilation takes seconds in every new process unless the caches on disk are on: call
 :func:`enable_compilation_cache` once, or set the environment variable
@@ -31,6 +33,10 @@ import jax as _jax  # noqa: E402
 
 if "JAX_ENABLE_X64" not in _os.environ:  # an explicit choice of the user's stands
     _jax.config.update("jax_enable_x64", True)
+
+from . import cores as _cores  # noqa: E402
+
+_cores.configure_cpu_devices()  # one CPU device per core: batches run on every core
 
 from . import cache  # noqa: E402
 

@@ -52,6 +52,7 @@ __all__ = [
     "compiled_evaluator",
     "settling_evaluator",
     "run_chunks",
+    "over_devices",
 ]
 
 RESULT_FIELDS = FIELDS
@@ -100,9 +101,24 @@ def _batched_fn(options: EvaluateOptions, sharding=None, masked: bool = False, s
         r = _evaluate_one(Grasp(**dict(zip(names, fields))), options, settle)
         return tuple(getattr(r, f) for f in RESULT_FIELDS)
 
+    return over_devices(one, sharding)
+
+
+def over_devices(fn: Callable, sharding=None) -> Callable:
+    """``jax.jit(jax.vmap(fn))`` with its batch split over the devices of ``sharding`` (a
+    :class:`NamedSharding` along axis ``"batch"``; ``None``: no sharding).
+
+    Each device evaluates its own slice of the batch (``jax.shard_map``), so each runs
+    its own work queue (:func:`jaxgrasp.lanes.solve_lanes`) on its own core: the lanes
+    are independent, nothing is exchanged. (Without ``shard_map`` XLA would partition
+    the one queue that ``vmap`` folds the batch into, and gather it on every device.)
+    """
+    batched = jax.vmap(fn)
     if sharding is None:
-        return jax.jit(jax.vmap(one), compiler_options=COMPILER_OPTIONS)
-    return jax.jit(jax.vmap(one), in_shardings=sharding, out_shardings=sharding, compiler_options=COMPILER_OPTIONS)
+        return jax.jit(batched, compiler_options=COMPILER_OPTIONS)
+    # check_vma=False: the solver's loops carry values that are not per-device typed
+    split = jax.shard_map(batched, mesh=sharding.mesh, in_specs=P("batch"), out_specs=P("batch"), check_vma=False)
+    return jax.jit(split, in_shardings=sharding, out_shardings=sharding, compiler_options=COMPILER_OPTIONS)
 
 
 def _mesh(devices) -> Mesh:

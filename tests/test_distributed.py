@@ -47,8 +47,9 @@ def _free_port() -> int:
 
 def test_two_processes_evaluate_a_set_like_one(tmp_path, evaluate_many):
     port = _free_port()
-    env = dict(os.environ, JAXGRASP_CACHE_DIR=str(tmp_path / "cache"), JAX_PLATFORMS="cpu")
-    env.pop("XLA_FLAGS", None)  # one CPU device per process
+    # one CPU device per process (import jaxgrasp would otherwise make one per core)
+    env = dict(os.environ, JAXGRASP_CACHE_DIR=str(tmp_path / "cache"), JAX_PLATFORMS="cpu", JAXGRASP_CPU_DEVICES="1")
+    env.pop("XLA_FLAGS", None)
     procs = [
         subprocess.Popen(
             [sys.executable, "-c", WORKER, str(i), str(port), str(tmp_path / f"out{i}.npz")],

@@ -8,8 +8,10 @@ one-device reference is ``evaluate`` of each point in this process (the session'
 
 Checked:
 
-* with 2 devices the sweep's compiled input/output shardings span both devices and the
-  result records ``devices == 2``;
+* with 2 devices the sweep's compiled input/output shardings span both devices, the
+  result records ``devices == 2``, and the compiled program has no cross-device
+  operation (each device runs its own work queue on its half of the batch: with plain
+  ``jit(vmap)`` XLA would gather the one queue that ``vmap`` folds the batch into);
 * its values, statuses and limiting boundaries equal ``evaluate`` of every grid point on
   one device (statuses exactly, energies to 1e-12 relative);
 * a later process with the same cache folders deserializes the exported program instead
@@ -34,6 +36,9 @@ import pytest
 
 from jaxgrasp.sweep import batch_size
 
+COLLECTIVES = ("all-gather", "all-reduce", "all-to-all", "collective-permute", "reduce-scatter")
+"""XLA's cross-device operations: the compiled sweep must contain none (each device runs
+its own work queue on its slice of the batch)."""
 FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
 E = (2e5, 1e6)  # Pa: the worker's grid
 DR = (1e-3, 3e-3, 4.9e-3)  # m
@@ -78,12 +83,13 @@ WORKER = textwrap.dedent(
         out["runs"].append({
             "devices": r.devices,
             "sharding_devices": sorted({len(s.device_set) for s in shardings}),
+            "collectives": sorted({op for op in %(collectives)r if op in fn.as_text()}),
             "compile_seconds": r.compile_seconds,
             "stats": {n: v - before[n] for n, v in cache.stats().items()},
         })
     print("RESULT " + json.dumps(out))
     """
-    % {"fields": FIELDS, "E": E, "DR": DR}
+    % {"fields": FIELDS, "E": E, "DR": DR, "collectives": COLLECTIVES}
 )
 
 
@@ -144,6 +150,7 @@ def test_two_devices_are_used(runs):
     run = runs["two"]["runs"][0]
     assert run["devices"] == 2
     assert run["sharding_devices"] == [2]  # every input and output spans both devices
+    assert run["collectives"] == []  # one queue per device: nothing crosses devices
     assert run["stats"]["traced"] == 1
 
 
