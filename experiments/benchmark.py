@@ -78,7 +78,7 @@ import casadi as ca  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
-import jaxgrasp  # noqa: E402
+import jaxgrasp  # noqa: E402  (first: float64, and one JAX CPU device per core)
 from jaxgrasp import result as R  # noqa: E402
 from jaxgrasp.status import LaneStatus  # noqa: E402
 from jaxgrasp import EvaluateOptions
@@ -606,7 +606,7 @@ def main() -> None:
         "options": {"num_random_starts": opts.num_random_starts, "directions": int(opts.directions().shape[0]),
                     "solver_tol": opts.solver.tol, "ipopt_tol": 1e-12, "ipopt_max_iter": 200},
         "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
-                    "jax": jax.__version__, "jax_backend": jax.default_backend(), "jax_devices": jax.device_count(),
+                    "jax": jax.__version__, "jaxgrasp": jaxgrasp.__version__, "jax_backend": jax.default_backend(), "jax_devices": jax.device_count(),
                     "casadi": ca.__version__},
         "code": code_state(),
         "load_start": load(),
