@@ -10,7 +10,9 @@
 
 :func:`evaluate_batch` and :func:`jaxgrasp.sweep` share this path: the grasps of a chunk
 are lanes of ``jax.jit(jax.vmap(evaluate))`` (from :func:`compiled_evaluator`, memoised
-and exported by :mod:`jaxgrasp.cache`), sharded along the batch over all devices; the
+and exported by :mod:`jaxgrasp.cache`), split along the batch over all devices, each
+device running its own work queue on its slice (:func:`over_devices`; on a CPU
+``import jaxgrasp`` makes one device per core, :mod:`jaxgrasp.cores`); the
 last chunk is padded to the same size, so a set compiles once per chunk size, number of
 contacts and options. Memory is bounded by the chunk size.
 """
