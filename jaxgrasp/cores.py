@@ -7,9 +7,9 @@ work queue (:func:`jaxgrasp.batch.over_devices`), so on the CPU they use as many
 as JAX has CPU devices, and JAX creates one unless told otherwise.
 
 So ``import jaxgrasp`` asks JAX for one CPU device per core this process may run on
-(``jax_num_cpu_devices``), as it turns on 64-bit mode. Measured on a 2-core machine:
-the cube sweep grid 1.35x faster with two devices than with one, the prism grid 1.37x
-(``experiments/benchmark.py`` reports it). A single :func:`jaxgrasp.evaluate` and the
+(``jax_num_cpu_devices``), as it turns on 64-bit mode. Measured on a 2-core machine
+(``evaluate_batch`` of the benchmark grids, ``experiments/BENCHMARK.md``): the cube grid
+1.60x faster with two devices than with one, the prism grid 1.28x. A single :func:`jaxgrasp.evaluate` and the
 user's own ``jit`` run on the first device as before.
 
 It is left alone where the choice is the user's or can no longer be made:
