@@ -392,9 +392,16 @@ def programs_of(p: ModelParams, options: EvaluateOptions, settle: bool = True) -
         steps=zero((), jnp.int32),
     )
     eq0 = jax.tree_util.tree_map(lambda a: a[0], lanes0)
-    eq, lanes, (z0s, found) = jax.lax.fori_loop(
-        0, 2, stage, (eq0, lanes0, (jnp.zeros((num_lanes, 6), dtype), jnp.zeros(num_lanes, bool)))
-    )
+    carry0 = (eq0, lanes0, (jnp.zeros((num_lanes, 6), dtype), jnp.zeros(num_lanes, bool)))
+    # The carry's zeros, made to depend on the grasp (jnp.where of a flag computed from
+    # every field of its data; the values are the same zeros): under a vmap over grasps,
+    # whichever fields it maps, the carry is then batched from the start. Zeros that are
+    # not would be batched only after the first stage, and JAX's loop batching would trace
+    # the body (the whole solver) once more to find that out: a batch's program traced in
+    # 2.7 s instead of 4.6 s, and lowered in half the time, with the same results.
+    per_grasp = jnp.isnan(sum(jnp.sum(jnp.asarray(a, dtype)) for a in jax.tree_util.tree_leaves(data)))
+    carry0 = jax.tree_util.tree_map(lambda a: jnp.where(per_grasp, a, a), carry0)
+    eq, lanes, (z0s, found) = jax.lax.fori_loop(0, 2, stage, carry0)
     lane_k = _lane_equalities(n, options.num_starts)
     if settle:
         lanes = settle_stalled(data, lanes, lane_k, found, options.num_starts, sopt)
