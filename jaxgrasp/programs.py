@@ -397,8 +397,8 @@ def programs_of(p: ModelParams, options: EvaluateOptions, settle: bool = True) -
     # every field of its data; the values are the same zeros): under a vmap over grasps,
     # whichever fields it maps, the carry is then batched from the start. Zeros that are
     # not would be batched only after the first stage, and JAX's loop batching would trace
-    # the body (the whole solver) once more to find that out: a batch's program traced in
-    # 2.7 s instead of 4.6 s, and lowered in half the time, with the same results.
+    # the body (the whole solver) once more to find that out: 128 grasps over 2 devices
+    # traced in 2.6 s instead of 4.0-4.5 s, with the same results (experiments/BENCHMARK.md).
     per_grasp = jnp.isnan(sum(jnp.sum(jnp.asarray(a, dtype)) for a in jax.tree_util.tree_leaves(data)))
     carry0 = jax.tree_util.tree_map(lambda a: jnp.where(per_grasp, a, a), carry0)
     eq, lanes, (z0s, found) = jax.lax.fori_loop(0, 2, stage, carry0)
