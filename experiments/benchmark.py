@@ -82,9 +82,7 @@ import jaxgrasp  # noqa: E402  (first: float64, and one JAX CPU device per core)
 from jaxgrasp import result as R  # noqa: E402
 from jaxgrasp.status import LaneStatus  # noqa: E402
 from jaxgrasp import EvaluateOptions
-from jax.sharding import Mesh, NamedSharding  # noqa: E402
-from jax.sharding import PartitionSpec as P  # noqa: E402
-from jaxgrasp.batch import over_devices  # noqa: E402
+from jaxgrasp.batch import batch_sharding, over_devices  # noqa: E402
 from jaxgrasp.evaluate import evaluate_traced  # noqa: E402
 from jaxgrasp.programs import needs_settling, solve_programs  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
@@ -151,9 +149,8 @@ def compile_aot(fn, batch):
     repeating its last grasp to a multiple of the device count and placed on the devices
     once, as the engine places a chunk before it runs it. Returns ``(call, seconds)``:
     ``call()`` runs it on that batch (results padded: see :func:`to_numpy`)."""
-    devices = jax.devices()
-    pad = -len(jax.tree_util.tree_leaves(batch)[0]) % len(devices)
-    sharding = NamedSharding(Mesh(np.asarray(devices), ("batch",)), P("batch"))
+    sharding = batch_sharding()
+    pad = -len(jax.tree_util.tree_leaves(batch)[0]) % len(sharding.device_set)
     padded = jax.tree_util.tree_map(lambda a: jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]), batch)
     padded = jax.device_put(padded, sharding)
     t0 = time.perf_counter()

@@ -55,6 +55,7 @@ __all__ = [
     "settling_evaluator",
     "run_chunks",
     "over_devices",
+    "batch_sharding",
 ]
 
 RESULT_FIELDS = FIELDS
@@ -95,7 +96,7 @@ def grasp_fields(masked: bool) -> tuple[str, ...]:
     return NAMES + (("active",) if masked else ())
 
 
-def _batched_fn(options: EvaluateOptions, sharding=None, masked: bool = False, settle: bool = True):
+def _batched_fn(options: EvaluateOptions, sharding, masked: bool = False, settle: bool = True):
     # arrays in, arrays out (no Grasp pytree), so that jax.export can serialize it
     names = grasp_fields(masked)
 
@@ -106,25 +107,26 @@ def _batched_fn(options: EvaluateOptions, sharding=None, masked: bool = False, s
     return over_devices(one, sharding)
 
 
-def over_devices(fn: Callable, sharding=None) -> Callable:
-    """``jax.jit(jax.vmap(fn))`` with its batch split over the devices of ``sharding`` (a
-    :class:`NamedSharding` along axis ``"batch"``; ``None``: no sharding).
+def batch_sharding(devices=None) -> NamedSharding:
+    """The sharding of every batch: along its first axis (named ``"batch"``) over
+    ``devices`` (default ``jax.devices()``), one slice per device."""
+    devices = tuple(jax.devices() if devices is None else devices)
+    return NamedSharding(Mesh(np.asarray(devices), ("batch",)), P("batch"))
+
+
+def over_devices(fn: Callable, sharding: NamedSharding) -> Callable:
+    """``jax.jit(jax.vmap(fn))`` with its batch split over the devices of ``sharding``
+    (:func:`batch_sharding`).
 
     Each device evaluates its own slice of the batch (``jax.shard_map``), so each runs
     its own work queue (:func:`jaxgrasp.lanes.solve_lanes`) on its own core: the lanes
     are independent, nothing is exchanged. (Without ``shard_map`` XLA would partition
     the one queue that ``vmap`` folds the batch into, and gather it on every device.)
     """
-    batched = jax.vmap(fn)
-    if sharding is None:
-        return jax.jit(batched, compiler_options=COMPILER_OPTIONS)
     # check_vma=False: the solver's loops carry values that are not per-device typed
-    split = jax.shard_map(batched, mesh=sharding.mesh, in_specs=P("batch"), out_specs=P("batch"), check_vma=False)
+    split = jax.shard_map(jax.vmap(fn), mesh=sharding.mesh, in_specs=P("batch"), out_specs=P("batch"),
+                          check_vma=False)
     return jax.jit(split, in_shardings=sharding, out_shardings=sharding, compiler_options=COMPILER_OPTIONS)
-
-
-def _mesh(devices) -> Mesh:
-    return Mesh(np.asarray(devices), ("batch",))
 
 
 def _batch_spec(n_contacts: int, chunk: int, sharding, masked: bool = False) -> tuple:
@@ -155,7 +157,7 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
     if chunk % len(devices):
         raise ValueError(f"chunk {chunk} is not a multiple of the {len(devices)} devices")
     x64 = jax.config.jax_enable_x64
-    sharding = NamedSharding(_mesh(devices), P("batch"))
+    sharding = batch_sharding(devices)
     return cache.compiled(
         ("sweep", options, n_contacts, chunk, x64, tuple(d.id for d in devices), masked, settle),
         lambda: _batched_fn(options, sharding, masked, settle),
@@ -369,7 +371,7 @@ def evaluate_batch(
     chunk = batch_size(default_chunk_size(devices) if chunk_size is None else chunk_size, total, len(devices))
     fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, masked, settle=False)
     settling = settling_evaluator(options, n_contacts, chunk, devices, masked)
-    sharding = NamedSharding(_mesh(devices), P("batch"))
+    sharding = batch_sharding(devices)
     invalid = np.flatnonzero([e is not None for e in errors])
 
     def chunk_fields(start: int) -> dict[str, np.ndarray]:

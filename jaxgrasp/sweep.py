@@ -40,14 +40,12 @@ from typing import Any, Callable, Mapping
 
 import jax
 import numpy as np
-from jax.sharding import NamedSharding
-from jax.sharding import PartitionSpec as P
 
 from . import outputs
 from .batch import (
     ACCELERATOR_CHUNK_SIZE,
     DEFAULT_CHUNK_SIZE,
-    _mesh,
+    batch_sharding,
     batch_size,
     check_chunk_size,
     compiled_evaluator,
@@ -421,7 +419,7 @@ def sweep(
     chunk = batch_size(chunk_size, total, len(devices))
     fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, settle=False)
     settling = settling_evaluator(options, n_contacts, chunk, devices)
-    sharding = NamedSharding(_mesh(devices), P("batch"))
+    sharding = batch_sharding(devices)
 
     own = _own_fields(grasp, base)
     shape = tuple(a.size for a in axes.values())
