@@ -10,7 +10,7 @@
 
 :func:`evaluate_batch` and :func:`jaxgrasp.sweep` share this path: the grasps of a chunk
 are lanes of ``jax.jit(jax.vmap(evaluate))`` (from :func:`compiled_evaluator`, memoised
-and exported by :mod:`jaxgrasp.cache`), split along the batch over all devices, each
+and stored by :mod:`jaxgrasp.cache`), split along the batch over all devices, each
 device running its own work queue on its slice (:func:`over_devices`; on a CPU
 ``import jaxgrasp`` makes one device per core, :mod:`jaxgrasp.cores`); the
 last chunk is padded to the same size, so a set compiles once per chunk size, number of
@@ -97,7 +97,7 @@ def grasp_fields(masked: bool) -> tuple[str, ...]:
 
 
 def _batched_fn(options: EvaluateOptions, sharding, masked: bool = False, settle: bool = True):
-    # arrays in, arrays out (no Grasp pytree), so that jax.export can serialize it
+    # arrays in, arrays out (no Grasp pytree): the program store keeps flat programs
     names = grasp_fields(masked)
 
     def one(*fields):
@@ -151,7 +151,7 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
     its first axis over ``devices`` (default ``jax.devices()``; ``chunk`` must be a
     multiple of their number), and returns every :class:`~jaxgrasp.Evaluation` field
     (:data:`RESULT_FIELDS`, leading axis ``chunk``), sharded the same way. It comes from :func:`jaxgrasp.cache.compiled`: memoised in the process (0
-    seconds on a hit) and exported to disk where that is turned on.
+    seconds on a hit) and stored on disk where that is turned on (:mod:`jaxgrasp.cache`).
     """
     devices = tuple(jax.devices() if devices is None else devices)
     if chunk % len(devices):
@@ -163,9 +163,8 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
         lambda: _batched_fn(options, sharding, masked, settle),
         _batch_spec(n_contacts, chunk, sharding, masked),
         name="sweep_settled" if settle else "sweep",
-        export_key=(options, n_contacts, chunk, x64, len(devices), masked, settle),
-        sharding=sharding,
-        n_devices=len(devices),
+        store_key=(options, n_contacts, chunk, x64, masked, settle),
+        devices=list(sharding.mesh.devices.flat),
         n_outputs=len(RESULT_FIELDS),
     )
 

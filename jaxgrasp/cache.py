@@ -1,14 +1,16 @@
-"""Every cache of jaxgrasp: compiled programs in this process, traced programs on disk, XLA's.
+"""Every cache of jaxgrasp: compiled programs in this process, on disk, and XLA's.
 
 Three layers, each skipping more of the work of building an evaluator:
 
 * the in-process memo (:func:`compiled`): a program compiled once is reused by every
   later call with the same key (at most :data:`MEMO_SIZE` are kept);
-* the export store (:func:`set_export_dir`): the traced program, serialized with
-  ``jax.export``, so that a later process skips tracing :func:`jaxgrasp.evaluate` in
-  Python (the cube: 1.5-4 s on 2 cores);
-* JAX's persistent compilation cache, so that the XLA compilation of that program is a
-  cache load (the cube: 0.5-1 s instead of 7-22 s; ``experiments/compile_time.py``).
+* the program store (:func:`set_program_dir`): the compiled program itself, serialized
+  (``jax.experimental.serialize_executable``), so that a later process neither traces
+  :func:`jaxgrasp.evaluate` in Python nor lowers nor compiles it: it loads the machine
+  code (the cube: ~0.3 s instead of 3-5 s on 2 cores; ``experiments/compile_time.py``);
+* JAX's persistent compilation cache, so that a program the store cannot serve (another
+  processor, a stale or corrupt file) is traced again but its XLA compilation is a cache
+  load, and the user's own ``jit`` programs start warm too.
 
 The programs of :func:`jaxgrasp.evaluate` on a concrete grasp
 (:func:`jaxgrasp.evaluate.compiled_program`), of :func:`jaxgrasp.evaluate_batch` and of
@@ -18,8 +20,8 @@ traced with the caller's program and uses none of these.
 
 The two stores on disk are off by default, as JAX's own cache is. One call turns both on,
 :func:`enable_compilation_cache` (``jaxgrasp.enable_compilation_cache()``): XLA's cache in
-the folder :func:`default_dir`, the exported programs in its subfolder
-``jaxgrasp-export``. Two things call it by themselves:
+the folder :func:`default_dir`, the programs in its subfolder ``jaxgrasp-programs``. Two
+things call it by themselves:
 
 * the ``jaxgrasp`` command, always;
 * ``import jaxgrasp``, when the environment variable ``JAXGRASP_CACHE_DIR`` (:data:`ENV_VAR`)
@@ -27,15 +29,19 @@ the folder :func:`default_dir`, the exported programs in its subfolder
   a test runner, starts warm without a change to its code.
 
 ``JAXGRASP_CACHE_DIR`` is also the folder the command uses (default
-``~/.cache/jaxgrasp/xla``). Tests and benchmarks read what the caches did with
-:func:`stats` and start afresh with :func:`clear_compiled`.
+``~/.cache/jaxgrasp/xla``). Like XLA's cache, the folder holds machine code that is loaded
+and run: keep it where only you can write. Tests and benchmarks read what the caches did
+with :func:`stats` and start afresh with :func:`clear_compiled`.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import pickle
+import platform
 import tempfile
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -44,21 +50,20 @@ from typing import Any, Callable, Hashable, Sequence
 import jax
 import numpy as np
 
-from .options import COMPILER_OPTIONS
 
 __all__ = [
     "ENV_VAR",
     "MEMO_SIZE",
-    "EXPORT_SUBDIR",
+    "PROGRAM_SUBDIR",
     "default_dir",
     "enable_compilation_cache",
     "enable_from_environment",
-    "set_export_dir",
-    "export_dir",
+    "set_program_dir",
+    "program_dir",
     "source_digest",
-    "export_path",
-    "load_exported",
-    "save_exported",
+    "program_path",
+    "load_program",
+    "save_program",
     "compiled",
     "clear_compiled",
     "stats",
@@ -71,11 +76,11 @@ the caches on (:func:`enable_from_environment`)."""
 MEMO_SIZE = 16
 """Most compiled programs kept in this process (the least recently used is dropped first)."""
 
-EXPORT_SUBDIR = "jaxgrasp-export"
-"""Folder of the exported programs inside the compilation cache folder."""
+PROGRAM_SUBDIR = "jaxgrasp-programs"
+"""Folder of the stored compiled programs inside the compilation cache folder."""
 
 _MEMO: dict[Hashable, Any] = {}
-_EXPORT_DIR: Path | None = None
+_PROGRAM_DIR: Path | None = None
 _STATS = {"traced": 0, "deserialized": 0, "cache_errors": 0}
 
 
@@ -100,9 +105,9 @@ def enable_compilation_cache(path=None) -> Path | None:
     """Turn on both caches on disk, so that a new process neither traces nor compiles again.
 
     JAX's persistent compilation cache lives in ``path`` (default :func:`default_dir`),
-    the exported programs in its subfolder ``jaxgrasp-export`` (:func:`set_export_dir`):
+    the compiled programs in its subfolder ``jaxgrasp-programs`` (:func:`set_program_dir`):
     a repeated :func:`jaxgrasp.evaluate` of a concrete grasp, batch or sweep in a new
-    process loads its program instead of tracing it in Python and compiling it in XLA.
+    process loads its compiled program instead of tracing, lowering and compiling it.
     Calling it again (with the same folder) changes nothing. A folder that cannot be
     created leaves every setting as it was (every run compiles). A folder that exists
     but cannot be written is still read (a shared, pre-filled cache works) and new
@@ -122,7 +127,7 @@ def enable_compilation_cache(path=None) -> Path | None:
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    set_export_dir(folder / EXPORT_SUBDIR)
+    set_program_dir(folder / PROGRAM_SUBDIR)
     return folder
 
 
@@ -140,24 +145,24 @@ def _writable(folder: Path) -> bool:
         return False
 
 
-# --------------------------------------------------------------------------- export store
+# --------------------------------------------------------------------------- program store
 
 
-def set_export_dir(path) -> None:
-    """Keep traced programs (``jax.export``) in folder ``path``; ``None``: don't.
+def set_program_dir(path) -> None:
+    """Keep compiled programs in folder ``path``; ``None``: don't.
 
-    A later process building the same program (same jaxgrasp source, JAX version, key,
-    devices and precision) deserializes it instead of tracing it in Python again. A
-    missing, stale or corrupt file is ignored (the program is traced and the file
-    rewritten).
+    A later process building the same program (same jaxgrasp source, JAX and jaxlib
+    versions, key, device count, precision, backend and processor) loads it instead of
+    tracing and compiling it. A missing, stale or corrupt file is ignored (the program is
+    built and the file rewritten).
     """
-    global _EXPORT_DIR
-    _EXPORT_DIR = None if path is None else Path(path)
+    global _PROGRAM_DIR
+    _PROGRAM_DIR = None if path is None else Path(path)
 
 
-def export_dir() -> Path | None:
-    """The folder of exported programs, ``None`` when they are not kept."""
-    return _EXPORT_DIR
+def program_dir() -> Path | None:
+    """The folder of stored programs, ``None`` when they are not kept."""
+    return _PROGRAM_DIR
 
 
 def source_digest() -> str:
@@ -171,44 +176,124 @@ def source_digest() -> str:
     return h.hexdigest()
 
 
-def export_path(name: str, key: Hashable) -> Path | None:
-    """File of the exported program ``name`` (``"sweep"``) for ``key``; ``None`` when
-    exported programs are not kept. ``key`` must be the same in every process that
-    builds the same program (device counts, not device ids)."""
-    if _EXPORT_DIR is None:
+def _machine() -> str:
+    """What compiled code depends on beyond JAX's version: the backend (platform, version,
+    device kind) and, on the CPU, the processor's instruction-set flags, so that a cache
+    folder shared by machines with different processors never loads code built for
+    another (it builds its own)."""
+    dev = jax.devices()[0]
+    parts = [dev.platform, dev.client.platform_version, dev.device_kind, platform.machine()]
+    if dev.platform == "cpu":
+        try:
+            with open("/proc/cpuinfo") as f:
+                parts.append(next((ln for ln in f if ln.startswith(("flags", "Features"))), ""))
+        except OSError:
+            parts.append(platform.processor())
+    return repr(parts)
+
+
+def program_path(name: str, key: Hashable) -> Path | None:
+    """File of the stored program ``name`` (``"sweep"``) for ``key``; ``None`` when
+    programs are not kept. ``key`` must be the same in every process that builds the same
+    program (device counts, not device ids)."""
+    if _PROGRAM_DIR is None:
         return None
     import jaxlib
 
-    text = repr((key, source_digest(), jax.__version__, jaxlib.__version__, jax.default_backend()))
-    return _EXPORT_DIR / f"{name}-{hashlib.sha256(text.encode()).hexdigest()[:32]}.jaxexport"
+    text = repr((key, source_digest(), jax.__version__, jaxlib.__version__, _machine()))
+    return _PROGRAM_DIR / f"{name}-{hashlib.sha256(text.encode()).hexdigest()[:32]}.xla"
 
 
-def load_exported(path: Path, spec: Sequence, n_devices: int, n_outputs: int | None = None):
-    """The exported program at ``path`` if it takes ``spec`` (``jax.ShapeDtypeStruct``
-    leaves), runs on ``n_devices`` of this platform and returns ``n_outputs`` arrays;
-    ``None`` otherwise (missing, stale, corrupt or from an incompatible JAX)."""
+_XLA_CACHE_HITS = [0]
+"""Programs JAX's persistent cache has served in this process (counted from its events)."""
+
+
+def _count_xla_cache_hits(event: str, **_) -> None:
+    if event == "/jax/compilation_cache/cache_hits":
+        _XLA_CACHE_HITS[0] += 1
+
+
+jax.monitoring.register_event_listener(_count_xla_cache_hits)
+
+_FORMAT = "jaxgrasp-program-1"
+"""Tag of a stored program's file (a file without it is stale)."""
+
+
+def _register_handlers() -> None:
+    """Register the CPU's LAPACK handlers (``eigh``, ``solve``), which a loaded program
+    calls. JAX registers them while it lowers such a program; a program loaded without
+    lowering would call unregistered handlers and crash the process. JAX's own loader of
+    exported programs does the same (``jax._src.export``); where that private entry point
+    is gone, lowering a 2 x 2 ``eigh`` registers them through public API."""
     try:
-        exp = jax.export.deserialize(bytearray(path.read_bytes()))
-        want = [(tuple(s.shape), np.dtype(s.dtype)) for s in jax.tree_util.tree_leaves(spec)]
-        have = [(tuple(a.shape), np.dtype(a.dtype)) for a in exp.in_avals]
-        stale_outputs = n_outputs is not None and len(exp.out_avals) != n_outputs
-        if have != want or exp.nr_devices != n_devices or stale_outputs:
-            raise ValueError("stale exported program")
-        if jax.default_backend() not in exp.platforms:
-            raise ValueError("exported for another platform")
-        return exp
+        from jax._src.lib import lapack
+
+        lapack._lapack.initialize()
+    except Exception:
+        import jax.numpy as jnp
+
+        jax.jit(jnp.linalg.eigh).lower(jax.ShapeDtypeStruct((2, 2), np.float32))
+
+
+def _registering(devices: Sequence):
+    """A started thread that runs :func:`_register_handlers` for a CPU program (it imports
+    SciPy's LAPACK, ~0.15 s, while the program's machine code loads; join it before the
+    program runs), or ``None`` where there is nothing to register."""
+    if devices[0].platform != "cpu":
+        return None
+    thread = threading.Thread(target=_register_handlers, name="jaxgrasp-lapack", daemon=True)
+    thread.start()
+    return thread
+
+
+def load_program(path: Path, spec: Sequence, devices: Sequence, n_outputs: int | None = None):
+    """The compiled program stored at ``path``, loaded onto ``devices``, if it takes
+    ``spec`` (``jax.ShapeDtypeStruct`` leaves) and returns ``n_outputs`` arrays; ``None``
+    otherwise (missing, stale, corrupt, or built for other devices)."""
+    from jax.experimental import serialize_executable
+
+    try:
+        data = path.read_bytes()
     except FileNotFoundError:
         return None
-    except Exception:  # corrupt, stale, or from an incompatible JAX: trace again
+    except OSError:
+        _STATS["cache_errors"] += 1
+        return None
+    try:
+        tag, payload, in_tree, out_tree = pickle.loads(data)
+        if tag != _FORMAT:
+            raise ValueError("stale stored program")
+        want = [(tuple(s.shape), np.dtype(s.dtype)) for s in jax.tree_util.tree_leaves(spec)]
+        if in_tree != jax.tree_util.tree_structure(((0,) * len(want), {})):  # flat arguments
+            raise ValueError("stale stored program")
+        if n_outputs is not None and out_tree.num_leaves != n_outputs:
+            raise ValueError("stale stored program")
+        registering = _registering(devices)
+        try:
+            fn = serialize_executable.deserialize_and_load(
+                payload, in_tree, out_tree, backend=devices[0].client, execution_devices=list(devices)
+            )
+        finally:
+            if registering is not None:
+                registering.join()
+        have = [(tuple(a.shape), np.dtype(a.dtype)) for a in jax.tree_util.tree_leaves(fn.args_info)]
+        if have != want:
+            raise ValueError("stale stored program")
+        return fn
+    except Exception:  # corrupt, stale, or from an incompatible JAX: build it again
         _STATS["cache_errors"] += 1
         return None
 
 
-def save_exported(path: Path, exp) -> None:
-    """Write the exported program ``exp`` to ``path`` atomically; never raises."""
+def save_program(path: Path, fn) -> None:
+    """Write the compiled program ``fn`` (``jax.stages.Compiled``) to ``path`` atomically;
+    never raises (a program that cannot be serialized is built again next time)."""
+    from jax.experimental import serialize_executable
+
     try:
-        data = exp.serialize()  # needs the 'flatbuffers' package
-    except Exception:  # e.g. ImportError: keep working, trace every time
+        payload, in_tree, out_tree = serialize_executable.serialize(fn)
+        data = pickle.dumps((_FORMAT, payload, in_tree, out_tree), protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception:
         _STATS["cache_errors"] += 1
         return
     try:
@@ -217,7 +302,7 @@ def save_exported(path: Path, exp) -> None:
         tmp.write_bytes(data)
         os.replace(tmp, path)  # atomic: a concurrent reader sees the old file or the new one
     except OSError:
-        pass  # no writable cache: trace every time
+        pass  # no writable cache: build every time
 
 
 # --------------------------------------------------------------------------- compiled programs
@@ -229,53 +314,49 @@ def compiled(
     spec: Sequence,
     *,
     name: str = "program",
-    export_key: Hashable | None = None,
-    sharding=None,
-    n_devices: int = 1,
+    store_key: Hashable | None = None,
+    devices: Sequence | None = None,
     n_outputs: int | None = None,
 ):
-    """A compiled program, from the memo, the export store or built now; ``(fn, seconds)``.
+    """A compiled program, from the memo, the program store or built now; ``(fn, seconds)``.
 
     Args:
         key: what makes the program unique in this process (the memo's key).
-        build: ``build()`` returns the jitted function (``jax.jit(...)``, arrays in,
-            arrays out), called only when the program is not in the memo.
+        build: ``build()`` returns the jitted function (``jax.jit(...)`` with its
+            shardings and compiler options; arrays in, arrays out), called only when the
+            program is neither in the memo nor in the store.
         spec: its arguments as ``jax.ShapeDtypeStruct`` (with their shardings).
-        name: prefix of its exported file.
-        export_key: what makes it unique across processes; ``None``: never exported.
-        sharding: in and out shardings of the deserialized program (those of ``build()``).
-        n_devices: the number of devices it runs on (an exported one must match).
-        n_outputs: the number of arrays it returns (an exported one must match).
+        name: prefix of its stored file.
+        store_key: what makes it unique across processes (device counts, not ids);
+            ``None``: never stored.
+        devices: the devices it runs on, in its order (default: JAX's default device).
+        n_outputs: the number of arrays it returns (a stored one must match).
 
     Returns:
         ``fn``, the compiled program (``jax.stages.Compiled``), and the seconds spent
-        building it (0 on a memo hit).
+        building or loading it (0 on a memo hit).
     """
     hit = _MEMO.pop(key, None)
     if hit is not None:
         _MEMO[key] = hit  # now the most recently used
         return hit, 0.0
     t0 = time.perf_counter()
-    path = None if export_key is None else export_path(name, export_key)
-    if path is None:
+    path = None if store_key is None else program_path(name, (store_key, len(devices or ())))
+    fn = None
+    if path is not None:
+        fn = load_program(path, spec, _devices(devices), n_outputs)
+    if fn is None:
+        hits = _XLA_CACHE_HITS[0]
         fn = build().lower(*spec).compile()
         _STATS["traced"] += 1
+        # An executable that XLA's cache served cannot be serialized again (XLA on the CPU
+        # then writes a program whose kernels are missing when it is loaded): store only
+        # one that was compiled here. (Where the store's file went stale but XLA's cache
+        # still holds the program, later processes trace it and load XLA's copy.)
+        if path is not None and _XLA_CACHE_HITS[0] == hits:
+            save_program(path, fn)
     else:
-        exp = load_exported(path, spec, n_devices, n_outputs)
-        if exp is None:
-            exp = jax.export.export(build())(*spec)
-            save_exported(path, exp)
-            _STATS["traced"] += 1
-        else:
-            _STATS["deserialized"] += 1
-        # the XLA compilation of the exported program hits JAX's persistent cache, if on
-        fn = jax.jit(
-            _named(exp.call, f"{name}_stored"),
-            in_shardings=sharding,
-            out_shardings=sharding,
-            compiler_options=COMPILER_OPTIONS,
-        )
-        fn = fn.lower(*spec).compile()
+        _STATS["deserialized"] += 1
     seconds = time.perf_counter() - t0
     if len(_MEMO) >= MEMO_SIZE:
         _MEMO.pop(next(iter(_MEMO)))
@@ -283,14 +364,14 @@ def compiled(
     return fn, seconds
 
 
-def _named(fn: Callable, name: str) -> Callable:
-    """``fn`` under ``name``, the name JAX gives its program in logs (``jit(name)``)."""
-
-    def named(*args):
-        return fn(*args)
-
-    named.__name__ = named.__qualname__ = name
-    return named
+def _devices(devices: Sequence | None) -> list:
+    """``devices``, or ``[JAX's default device]`` (``jax_default_device``, else the first)."""
+    if devices:
+        return list(devices)
+    default = jax.config.jax_default_device
+    if default is None:
+        return [jax.devices()[0]]
+    return [jax.devices(default)[0]] if isinstance(default, str) else [default]
 
 
 def clear_compiled() -> None:
@@ -301,8 +382,8 @@ def clear_compiled() -> None:
 def stats() -> dict[str, int]:
     """What the caches did in this process, counted since it started (a copy):
 
-    * ``traced``: programs traced in Python (and exported, where the store is on);
-    * ``deserialized``: programs loaded from the export store instead;
-    * ``cache_errors``: exported files that could not be used or written.
+    * ``traced``: programs traced and compiled (and stored, where the store is on);
+    * ``deserialized``: compiled programs loaded from the program store instead;
+    * ``cache_errors``: stored files that could not be used or written.
     """
     return dict(_STATS)

@@ -155,7 +155,7 @@ def compiled_program(grasp: Grasp, options: EvaluateOptions, settle: bool = True
     temperature (mJ, ``()`` float) and the grasp's fields (with a contact mask, ``active``
     last) and returns every :class:`~jaxgrasp.Evaluation` field (:data:`RESULT_FIELDS`).
     It comes from :func:`jaxgrasp.cache.compiled`, as the batches' programs do: memoised
-    in the process and, where the export store is on, loaded from it instead of traced
+    in the process and, where the program store is on, loaded from it instead of built
     (``seconds``: the time to build it, 0 on a memo hit). Its results are those of
     :func:`evaluate_compiled` bit for bit (the same program).
     """
@@ -166,7 +166,7 @@ def compiled_program(grasp: Grasp, options: EvaluateOptions, settle: bool = True
     spec += [jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in avals]
 
     def build():
-        def evaluate_fields(temperature, *leaves):  # arrays in, arrays out, so that jax.export can serialize it
+        def evaluate_fields(temperature, *leaves):  # arrays in, arrays out: the program store keeps flat programs
             r = evaluate_compiled(jax.tree_util.tree_unflatten(treedef, leaves), temperature, options, settle)
             return tuple(getattr(r, f) for f in RESULT_FIELDS)
 
@@ -178,7 +178,7 @@ def compiled_program(grasp: Grasp, options: EvaluateOptions, settle: bool = True
         build,
         spec,
         name="evaluate_settled" if settle else "evaluate",
-        export_key=(options, settle, masked, avals, x64),
+        store_key=(options, settle, masked, avals, x64),
         n_outputs=len(RESULT_FIELDS),
     )
 

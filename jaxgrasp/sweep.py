@@ -27,8 +27,8 @@ device count), so one call uses every GPU of a machine, or every device of sever
 after ``jax.distributed.initialize()``. Results are gathered to the host.
 
 The compiled batched evaluator comes from :mod:`jaxgrasp.cache`: memoised in the process
-and, with :func:`jaxgrasp.cache.set_export_dir` (the CLI sets it), kept on disk with
-``jax.export``, so that a later process skips tracing :func:`jaxgrasp.evaluate`.
+and, with :func:`jaxgrasp.cache.set_program_dir` (the CLI sets it), kept on disk compiled,
+so that a later process neither traces nor compiles :func:`jaxgrasp.evaluate`.
 """
 
 from __future__ import annotations

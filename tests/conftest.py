@@ -192,18 +192,18 @@ _CACHE_OPTIONS = (
 def cache_dir(tmp_path_factory):
     """A compilation-cache folder for ``jaxgrasp.cli.main`` (and its subprocesses).
 
-    ``main`` turns on JAX's persistent compilation cache and the sweeps' exported-program
-    folder (process-wide settings); both are restored after the module so the rest of the
+    ``main`` turns on JAX's persistent compilation cache and jaxgrasp's program store
+    (process-wide settings); both are restored after the module so the rest of the
     session is unaffected.
     """
     from jaxgrasp import cache
 
     saved = {k: getattr(jax.config, k) for k in _CACHE_OPTIONS}
-    saved_export = cache.export_dir()
+    saved_programs = cache.program_dir()
     yield tmp_path_factory.mktemp("jaxgrasp-xla-cache")
     for k, v in saved.items():
         jax.config.update(k, v)
-    cache.set_export_dir(saved_export)
+    cache.set_program_dir(saved_programs)
 
 
 @pytest.fixture
@@ -259,11 +259,11 @@ class WarmCache:
         return json.loads(self.run([sys.executable, "-c", _FILL_CACHE]).stdout)
 
     def program_files(self) -> set[str]:
-        """The stored evaluators' files: exported programs and XLA executables."""
-        from jaxgrasp.cache import EXPORT_SUBDIR
+        """The stored evaluators' files: jaxgrasp's compiled programs and XLA's cache entries."""
+        from jaxgrasp.cache import PROGRAM_SUBDIR
 
-        exported = {f"{EXPORT_SUBDIR}/{p.name}" for p in (self.folder / EXPORT_SUBDIR).glob("evaluate-*")}
-        return exported | {p.name for p in self.folder.glob("jit_evaluate_stored-*")}
+        stored = {f"{PROGRAM_SUBDIR}/{p.name}" for p in (self.folder / PROGRAM_SUBDIR).glob("evaluate-*")}
+        return stored | {p.name for p in self.folder.glob("jit_evaluate_fields-*")}
 
 
 @pytest.fixture(scope="session")

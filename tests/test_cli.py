@@ -137,8 +137,8 @@ def test_bad_input_exit_2_one_line(run_cli, argv, mentions):
 def test_console_script_subprocess(warm_cache, preset_json):
     """The installed entry point (or ``python -m jaxgrasp.cli``) prints the same JSON,
     and starts warm (issue 13): on the program a library process stored (conftest's
-    ``warm_cache``) it neither traces (no new exported program) nor compiles (no new XLA
-    executable)."""
+    ``warm_cache``) it neither traces nor compiles (no new stored program, no new XLA
+    cache entry)."""
     script = Path(sys.executable).with_name("jaxgrasp")
     if script.exists():
         cmd = [str(script)]

@@ -1,4 +1,4 @@
-"""Sharding a sweep over several devices, and the sweep's on-disk exported program.
+"""Sharding a sweep over several devices, and the sweep's stored compiled program.
 
 JAX fixes its device count when it starts, so every sweep here runs in a subprocess:
 ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` gives two CPU devices. Compiling
@@ -14,9 +14,9 @@ Checked:
   ``jit(vmap)`` XLA would gather the one queue that ``vmap`` folds the batch into);
 * its values, statuses and limiting boundaries equal ``evaluate`` of every grid point on
   one device (statuses exactly, energies to 1e-12 relative);
-* a later process with the same cache folders deserializes the exported program instead
-  of tracing (``jax.export``) and gives bit-identical results; a corrupt file falls back
-  to tracing, again with identical results.
+* a later process with the same cache folders loads the stored compiled program instead
+  of tracing and compiling (:mod:`jaxgrasp.cache`) and gives bit-identical results; a
+  corrupt file falls back to tracing, again with identical results.
 
 Multi-host (``jax.distributed``) is not tested here: it needs several processes with a
 coordinator; the code path (``make_array_from_callback``, ``process_allgather``) is only
@@ -59,16 +59,16 @@ WORKER = textwrap.dedent(
         jax.config.update("jax_compilation_cache_dir", cfg["xla_cache"])
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    if cfg.get("export_dir"):
-        cache.set_export_dir(cfg["export_dir"])
+    if cfg.get("program_dir"):
+        cache.set_program_dir(cfg["program_dir"])
     E = np.array(%(E)r)
     DR = np.array(%(DR)r)
     out = {"device_count": jax.device_count(), "runs": []}
     for k, step in enumerate(cfg["steps"]):
         if step == "corrupt":
-            files = sorted(Path(cfg["export_dir"]).glob("*.jaxexport"))
+            files = sorted(Path(cfg["program_dir"]).glob("*.xla"))
             for f in files:
-                f.write_bytes(f.read_bytes()[:100] + b"not a flatbuffer")
+                f.write_bytes(f.read_bytes()[:100] + b"not a program")
             cache.clear_compiled()
             out["corrupted"] = len(files)
             continue
@@ -137,10 +137,10 @@ def test_batch_size_is_a_multiple_of_the_devices():
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("sharding")
-    cache = {"xla_cache": str(tmp / "xla"), "export_dir": str(tmp / "xla" / "jaxgrasp-export")}
-    # a 2-device sweep that exports its program and fills the caches
+    cache = {"xla_cache": str(tmp / "xla"), "program_dir": str(tmp / "xla" / "jaxgrasp-programs")}
+    # a 2-device sweep that stores its program and fills the caches
     r_two = _finish(_start(2, {"steps": ["sweep"], "out": str(tmp / "two"), **cache}))
-    # a later process: loads the exported program, then falls back after corruption
+    # a later process: loads the stored program, then falls back after corruption
     again = _finish(_start(2, {"steps": ["sweep", "corrupt", "sweep"], "out": str(tmp / "again"), **cache}))
     return {"tmp": tmp, "two": r_two, "again": again}
 
@@ -164,7 +164,7 @@ def test_two_devices_equal_one_device(runs, evaluate_many):
     assert len(np.unique(one["status"])) >= 2  # the tiny grid has more than one status
 
 
-def test_exported_program_is_reused_bit_for_bit(runs):
+def test_stored_program_is_reused_bit_for_bit(runs):
     tmp = runs["tmp"]
     first = runs["again"]["runs"][0]
     assert first["stats"] == {"traced": 0, "deserialized": 1, "cache_errors": 0}
@@ -173,7 +173,7 @@ def test_exported_program_is_reused_bit_for_bit(runs):
     _assert_same(_load(str(tmp / "again"), 0), _load(str(tmp / "two"), 0), rtol=0)
 
 
-def test_corrupt_exported_program_falls_back_to_tracing(runs):
+def test_corrupt_stored_program_falls_back_to_tracing(runs):
     tmp = runs["tmp"]
     assert runs["again"]["corrupted"] == 1
     # step 1 was the corruption; step 2 the sweep after it
