@@ -29,6 +29,8 @@ __all__ = [
     "ModelParams",
     "model_params",
     "rotation_matrix",
+    "rotation_jacobian",
+    "rotation_hessian_along",
     "contact_kinematics",
     "potential_energy",
     "constraint_margins",
@@ -103,6 +105,76 @@ def rotation_matrix(w):
         dtype=w.dtype,
     )
     return jnp.eye(3, dtype=w.dtype) + a * k + b * (k @ k)
+
+
+_LEVI_CIVITA = tuple(
+    tuple(tuple(float((i - j) * (j - k) * (k - i) / 2) for k in range(3)) for j in range(3)) for i in range(3)
+)
+"""``eps[i][j][k]``, the Levi-Civita symbol: ``skew(w)_ij = -eps_ijk w_k``."""
+
+
+def _rotation_coefficients(t2):
+    """``(a, b, a1, b1, a2, b2)`` of ``R = I + a K + b K^2`` at ``t2 = |w|^2``: ``a = sin t /
+    t``, ``b = (1 - cos t) / t^2`` and their first and second derivatives in ``t2``, from
+    the series below ``t2 < 1e-6`` (double-``where``, as :func:`rotation_matrix`) and
+    closed forms above: ``a1 = (cos t - a) / (2 t2)``, ``b1 = (a / 2 - b) / t2``,
+    ``a2 = -(a / 2 + 3 a1) / (2 t2)``, ``b2 = (a1 / 2 - 2 b1) / t2``."""
+    small = t2 < 1e-6
+    s = jnp.where(small, 1.0, t2)
+    t = jnp.sqrt(s)
+    a_big, c_big = jnp.sin(t) / t, jnp.cos(t)
+    b_big = (1.0 - c_big) / s
+    a1_big = (c_big - a_big) / (2.0 * s)
+    b1_big = (0.5 * a_big - b_big) / s
+    a2_big = -(0.5 * a_big + 3.0 * a1_big) / (2.0 * s)
+    b2_big = (0.5 * a1_big - 2.0 * b1_big) / s
+    pick = lambda series, closed: jnp.where(small, series, closed)  # noqa: E731
+    return (
+        pick(1.0 - t2 / 6.0 + t2 * t2 / 120.0, a_big),
+        pick(0.5 - t2 / 24.0 + t2 * t2 / 720.0, b_big),
+        pick(-1.0 / 6.0 + t2 / 60.0 - t2 * t2 / 1680.0, a1_big),
+        pick(-1.0 / 24.0 + t2 / 360.0 - t2 * t2 / 13440.0, b1_big),
+        pick(1.0 / 60.0 - t2 / 840.0, a2_big),
+        pick(1.0 / 360.0 - t2 / 6720.0, b2_big),
+    )
+
+
+def rotation_jacobian(w):
+    """``(3, 3, 3)`` ``dR / dw_k`` (last axis ``k``) of :func:`rotation_matrix` at ``w`` (3,),
+    written out: ``dR/dw_k = 2 w_k (a1 K + b1 K^2) + a dK/dw_k + b (e_k w^T + w e_k^T -
+    2 w_k I)`` (``K = skew(w)``; coefficients from :func:`_rotation_coefficients`): a few
+    dozen operations where forward-mode autodiff of the matrix takes hundreds."""
+    eps = jnp.asarray(_LEVI_CIVITA, w.dtype)
+    eye = jnp.eye(3, dtype=w.dtype)
+    a, b, a1, b1, _, _ = _rotation_coefficients(jnp.dot(w, w))
+    k = -eps @ w
+    inner = a1 * k + b1 * (k @ k)
+    sym = eye[:, None, :] * w[None, :, None] + w[:, None, None] * eye[None, :, :] - 2.0 * eye[:, :, None] * w
+    return 2.0 * inner[:, :, None] * w - a * eps + b * sym
+
+
+def rotation_hessian_along(w, m):
+    """``(3, 3)`` Hessian in ``w`` of ``s(w) = sum_ij R(w)_ij m_ij`` (:func:`rotation_matrix`;
+    ``m`` ``(3, 3)`` fixed), written out. With ``p = K : m = w . mu`` (``mu_k = dK/dw_k : m``),
+    ``q = K^2 : m = w^T m w - t2 tr m``, ``g = grad q = (m + m^T) w - 2 tr(m) w`` and
+    ``v = a1 mu + b1 g``: ``H = 2 (a1 p + b1 q) I + 4 (a2 p + b2 q) w w^T + 2 (w v^T + v w^T)
+    + b (m + m^T - 2 tr(m) I)``."""
+    eps = jnp.asarray(_LEVI_CIVITA, w.dtype)
+    eye = jnp.eye(3, dtype=w.dtype)
+    t2 = jnp.dot(w, w)
+    _, b, a1, b1, a2, b2 = _rotation_coefficients(t2)
+    mu = -jnp.einsum("ijk,ij->k", eps, m)
+    sym = m + m.T
+    tr = jnp.trace(m)
+    p = jnp.dot(w, mu)
+    q = w @ m @ w - t2 * tr
+    v = a1 * mu + b1 * (sym @ w - 2.0 * tr * w)
+    return (
+        2.0 * (a1 * p + b1 * q) * eye
+        + 4.0 * (a2 * p + b2 * q) * jnp.outer(w, w)
+        + 2.0 * (jnp.outer(w, v) + jnp.outer(v, w))
+        + b * (sym - 2.0 * tr * eye)
+    )
 
 
 def contact_kinematics(x, p: ModelParams):
@@ -211,13 +283,13 @@ def kinematics_jacobian(x, p: ModelParams):
     to ``x = (dp [mm], w [rad])``, and the per-contact vectors
     :func:`kinematics_curvature` reuses. Every quantity is a polynomial of degree at most
     two in ``u = (R - I) c + dp`` and ``R n``, so its derivatives follow from
-    ``dR/dw_k`` (``3 x 3`` each, forward-mode autodiff of :func:`rotation_matrix`, once
-    per pose rather than once per contact and tangent).
+    ``dR/dw_k`` (``3 x 3`` each, :func:`rotation_jacobian`, once per pose rather than once
+    per contact and tangent).
     """
     dtype = x.dtype
     dp, w = x[:3], x[3:]
     rot = rotation_matrix(w)
-    d_rot = jax.jacfwd(rotation_matrix)(w)  # (3, 3, k)
+    d_rot = rotation_jacobian(w)  # (3, 3, k)
     c, n = p.c, p.n
     num = c.shape[0]
     u = c @ (rot - jnp.eye(3, dtype=dtype)).T + dp  # (N, 3)
@@ -254,7 +326,7 @@ def kinematics_curvature(x, p: ModelParams, geometry, weights):
 
     With ``A_k = dR/dw_k`` and ``B_kl = d2R/dw_k dw_l``: ``theta`` is linear; ``cos phi =
     n.Rn`` and the ``B`` terms of ``d`` and ``dt^2`` add up to ``sum B_kl : M`` for one
-    ``3 x 3`` matrix ``M`` (the Hessian of ``w -> R(w) : M``); the rest are products of
+    ``3 x 3`` matrix ``M`` (the Hessian of ``w -> R(w) : M``, :func:`rotation_hessian_along`); the rest are products of
     the per-contact vectors ``A_k c``, ``A_k n``.
     """
     dtype = x.dtype
@@ -265,7 +337,7 @@ def kinematics_curvature(x, p: ModelParams, geometry, weights):
     outer = lambda s, a, b: jnp.einsum("n,na,nb->ab", s, a, b)
     # every B_kl term: d (-arm n.Bn + Bc.Rn + u.Bn), cos phi (n.Bn), dt^2 (2 Pu.Bc)
     m = outer(gd, rn, c) + outer(gd, u, n) + outer(gc - gd * arm, n, n) + outer(2.0 * gt, pu, c)
-    b_part = jax.hessian(lambda w: jnp.sum(rotation_matrix(w) * m))(x[3:])
+    b_part = rotation_hessian_along(x[3:], m)
     # d: (A_k c).(A_l n) + (A_l c).(A_k n), and the dp-w cross term A_k n
     a_cn = jnp.einsum("n,nka,nla->kl", gd, a_c, a_n)
     ww = b_part + a_cn + a_cn.T

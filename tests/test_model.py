@@ -303,6 +303,28 @@ def test_rotation_matrix_derivatives_at_zero():
         np.testing.assert_allclose(Jr, J, atol=1e-8)
 
 
+_rotation_jacobian = jax.jit(M.rotation_jacobian)
+_rotation_hessian_along = jax.jit(M.rotation_hessian_along)
+_auto_rotation_jacobian = jax.jit(jax.jacfwd(M.rotation_matrix))
+_auto_rotation_hessian_along = jax.jit(jax.hessian(lambda w, m: jnp.sum(M.rotation_matrix(w) * m)))
+
+
+@pytest.mark.parametrize("w", _rotvecs() + [np.zeros(3)], ids=lambda w: f"|w|={np.linalg.norm(w):.3g}")
+def test_rotation_derivatives_written_out_equal_autodiff(w):
+    """The solver's dR/dw and Hessian of R(w) : m, written from the coefficients of
+    Rodrigues' formula, equal forward-mode and forward-over-reverse autodiff of
+    rotation_matrix, on both sides of the series' switch (|w| = 1e-3) and at 0. The
+    tolerance is autodiff's own: both differentiate sin t / t near small t with
+    cancellation (relative error ~eps / t^2 in the Hessian's w w^T part)."""
+    w = jnp.asarray(w)
+    m = jnp.asarray(np.random.default_rng(11).normal(size=(3, 3)))
+    J = _rotation_jacobian(w)
+    np.testing.assert_allclose(J, _auto_rotation_jacobian(w), rtol=0, atol=1e-13)
+    H = _rotation_hessian_along(w, m)
+    np.testing.assert_allclose(H, _auto_rotation_hessian_along(w, m), rtol=0, atol=1e-10)
+    np.testing.assert_allclose(H, H.T, rtol=0, atol=1e-15 * float(jnp.max(jnp.abs(H))))  # symmetric to rounding
+
+
 # ------------------------------------------------------------------ derivatives of U
 @pytest.mark.parametrize("mass", [0.0, 0.3])
 def test_energy_gradient_hessian_at_zero_cube(mass):
