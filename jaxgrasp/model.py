@@ -38,6 +38,8 @@ __all__ = [
     "elastic_energies",
     "energy_of",
     "margins_of",
+    "contact_gradients",
+    "contact_hessians",
     "kinematics_jacobian",
     "kinematics_curvature",
     "energy_scale",
@@ -264,6 +266,98 @@ def margins_of(kinematics, p: ModelParams):
     ) / mu_dr2
     force = (jnp.sqrt(p.fmax / (jnp.pi * p.E)) * cphi - d) / dr
     return jnp.where(p.on, jnp.stack([contact, slip, force]), 1.0)
+
+
+def _contact_terms(kinematics, p: ModelParams):
+    """Shared pieces of :func:`contact_gradients` and :func:`contact_hessians`."""
+    d, cphi, dt2, theta = kinematics
+    dp = jnp.maximum(d, 0.0)
+    ddp = jnp.where(d > 0, 1.0, jnp.where(d < 0, 0.0, 0.5))  # d max(d, 0) / dd, as autodiff takes it
+    dr = jax.lax.stop_gradient(p.dr)
+    mu_dr2 = jax.lax.stop_gradient((p.mu * p.dr) ** 2)
+    u = p.r - d / 3.0
+    v = 2.0 * p.r - d
+    k = (225.0 / 16.0) / p.mu**2
+    f = d * u**2 / v  # the slip margin's torsion term is -k f theta^2
+    f1 = u**2 / v - (2.0 / 3.0) * d * u / v + d * u**2 / v**2
+    return d, cphi, dt2, theta, dp, ddp, dr, mu_dr2, k, f, f1, u, v
+
+
+def contact_gradients(kinematics, p: ModelParams):
+    """Derivatives of each contact's :func:`elastic_energies` and :func:`margins_of` with
+    respect to its own kinematics ``q = (d, cos phi, dt^2, theta)``, written out: ``(de,
+    dm)``, ``de`` ``(N, 4)`` mJ per unit of ``q``, ``dm`` ``(3, N, 4)`` (rows as
+    :func:`margins_of`); zero for an inactive contact. ``d max(d, 0) / dd`` at ``d = 0`` is
+    1/2, as JAX's autodiff takes it."""
+    d, c, s, th, dp, ddp, dr, mu_dr2, k, f, f1, _, _ = _contact_terms(kinematics, p)
+    a = jnp.pi * p.E
+    zero = jnp.zeros_like(d)
+    de = a[:, None] * jnp.stack(
+        [
+            (dp**2 / c**2 + s + (2.0 * dp * p.r - dp**2) * th**2) * ddp,
+            -2.0 * dp**3 / (3.0 * c**3),
+            dp,
+            2.0 * dp**2 * (p.r - dp / 3.0) * th,
+        ],
+        axis=-1,
+    )
+    mu2 = p.mu**2
+    slip = jnp.stack([2.0 * mu2 * d / c**4 - k * f1 * th**2, -4.0 * mu2 * d**2 / c**5, -4.0 + zero, -2.0 * k * f * th], -1)
+    force_c = jnp.sqrt(p.fmax / (jnp.pi * p.E))
+    dm = jnp.stack(
+        [
+            jnp.stack([1.0 / dr, zero, zero, zero], -1),
+            slip / mu_dr2[:, None],
+            jnp.stack([-1.0 / dr, force_c / dr, zero, zero], -1),
+        ]
+    )
+    on = p.on[:, None]
+    return jnp.where(on, de, 0.0), jnp.where(on, dm, 0.0)
+
+
+def contact_hessians(kinematics, p: ModelParams):
+    """Second derivatives of each contact's :func:`elastic_energies` and :func:`margins_of`
+    with respect to its own kinematics ``q``, written out: ``(he, hm)``, ``he`` ``(N, 4,
+    4)``, ``hm`` ``(3, N, 4, 4)`` (contact and force rows are linear in ``q``: zero);
+    zero for an inactive contact."""
+    d, c, s, th, dp, ddp, dr, mu_dr2, k, f, f1, u, v = _contact_terms(kinematics, p)
+    a = jnp.pi * p.E
+    zero = jnp.zeros_like(d)
+    e_dd = (2.0 * dp / c**2 + (2.0 * p.r - 2.0 * dp) * th**2) * ddp**2
+    e_dc = -2.0 * dp**2 / c**3 * ddp
+    e_ds = ddp
+    e_dt = 2.0 * (2.0 * dp * p.r - dp**2) * th * ddp
+    e_cc = 2.0 * dp**3 / c**4
+    e_tt = 2.0 * dp**2 * (p.r - dp / 3.0)
+    he = a[:, None, None] * jnp.stack(
+        [
+            jnp.stack([e_dd, e_dc, e_ds, e_dt], -1),
+            jnp.stack([e_dc, e_cc, zero, zero], -1),
+            jnp.stack([e_ds, zero, zero, zero], -1),
+            jnp.stack([e_dt, zero, zero, e_tt], -1),
+        ],
+        axis=-2,
+    )
+    mu2 = p.mu**2
+    f2 = -4.0 * u / (3.0 * v) + 2.0 * u**2 / v**2 + 2.0 * d / (9.0 * v) - (4.0 / 3.0) * d * u / v**2 + 2.0 * d * u**2 / v**3
+    s_dd = 2.0 * mu2 / c**4 - k * f2 * th**2
+    s_dc = -8.0 * mu2 * d / c**5
+    s_dt = -2.0 * k * f1 * th
+    s_cc = 20.0 * mu2 * d**2 / c**6
+    s_tt = -2.0 * k * f
+    slip = jnp.stack(
+        [
+            jnp.stack([s_dd, s_dc, zero, s_dt], -1),
+            jnp.stack([s_dc, s_cc, zero, zero], -1),
+            jnp.stack([zero, zero, zero, zero], -1),
+            jnp.stack([s_dt, zero, zero, s_tt], -1),
+        ],
+        axis=-2,
+    ) / mu_dr2[:, None, None]
+    linear = jnp.zeros_like(slip)
+    hm = jnp.stack([linear, slip, linear])
+    on = p.on[:, None, None]
+    return jnp.where(on, he, 0.0), jnp.where(on, hm, 0.0)
 
 
 def energy_and_margins(x, p: ModelParams):

@@ -41,8 +41,9 @@ from .lanes import solve_lanes
 from .model import (
     ModelParams,
     constraint_margins,
+    contact_gradients,
+    contact_hessians,
     contact_kinematics,
-    elastic_energies,
     energy_and_margins,
     energy_of,
     energy_scale,
@@ -129,52 +130,35 @@ def _pose_scale(data: ProgramData, dtype):
     return jnp.concatenate([one, one / data.lever])
 
 
-def _per_contact_jacobian(fn, q):
-    """``(..., N, 4)`` derivatives of ``fn(q)`` with respect to each contact's own
-    kinematics ``q`` ``(N, 4)``: ``fn`` acts contact by contact (its output ``(..., N)``),
-    so four forward tangents, one per kinematic quantity set on every contact at once,
-    give every contact's derivatives."""
-    tangents = jnp.broadcast_to(jnp.eye(4, dtype=q.dtype)[:, None, :], (4,) + q.shape)
-    out = jax.vmap(lambda t: jax.jvp(fn, (q,), (t,))[1])(tangents)  # (4, ..., N)
-    return jnp.moveaxis(out, 0, -1)
-
-
 def _first_order(z, data: ProgramData) -> FirstOrder:
     """The program at ``z`` with its gradient and constraint Jacobian, from the contact
-    kinematics' Jacobian (:func:`~jaxgrasp.model.kinematics_jacobian`, kept in ``aux``
-    for :func:`_lagrangian_hessian`)."""
+    kinematics' Jacobian (:func:`~jaxgrasp.model.kinematics_jacobian`) and each contact's
+    derivatives in its own kinematics (:func:`~jaxgrasp.model.contact_gradients`), both
+    kept in ``aux`` for :func:`_lagrangian_hessian`."""
     p = data.params
     x = to_pose(z, data.lever)
     q, dq, geometry = kinematics_jacobian(x, p)
-    energies = lambda q: elastic_energies(tuple(q.T), p)
-    margins = lambda q: margins_of(tuple(q.T), p)
-    de = _per_contact_jacobian(energies, q)  # (N, 4)
-    dm = _per_contact_jacobian(margins, q)  # (3, N, 4)
+    de, dm = contact_gradients(tuple(q.T), p)  # (N, 4), (3, N, 4)
     scale = _pose_scale(data, z.dtype)
     gravity = jnp.concatenate([p.weight, jnp.zeros(3, z.dtype)])
     grad_f = (jnp.einsum("nk,nkj->j", de, dq) - gravity) * scale / data.scale
     jac = jnp.einsum("rnk,nkj->rnj", dm, dq).reshape(-1, 6) * scale
     fx = energy_of(x, tuple(q.T), p) / data.scale
-    return FirstOrder(fx, margins(q).reshape(-1), grad_f, jac, aux=(q, dq, geometry))
+    return FirstOrder(fx, margins_of(tuple(q.T), p).reshape(-1), grad_f, jac, aux=(q, dq, geometry, de, dm))
 
 
 def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProgramData):
     """``(6, 6)`` Hessian in ``z`` of ``f + weights . g`` (``weights`` ``(3N,)`` fixed), from
     the kinematics' derivatives in ``d.aux``: ``sum_i dq_i^T H_i dq_i + sum_ik
     (d psi / d q_ik) d2q_ik`` with ``psi_i`` contact ``i``'s share of the function of its
-    own kinematics and ``H_i`` its ``4 x 4`` Hessian (four forward-over-reverse tangents
-    for every contact at once); the second sum is
-    :func:`~jaxgrasp.model.kinematics_curvature`."""
+    own kinematics, ``H_i`` its ``4 x 4`` Hessian (:func:`~jaxgrasp.model.contact_hessians`,
+    written out) and the second sum :func:`~jaxgrasp.model.kinematics_curvature`."""
     p = data.params
-    q, dq, geometry = d.aux
+    q, dq, geometry, de, dm = d.aux
     w = weights.reshape(3, -1)
-
-    def psi(q):  # (N,): each contact's f + w . g, as a function of its own kinematics
-        return elastic_energies(tuple(q.T), p) / data.scale + jnp.sum(w * margins_of(tuple(q.T), p), axis=0)
-
-    grad_psi = lambda q: jax.grad(lambda q: jnp.sum(psi(q)))(q)
-    gq = grad_psi(q)  # (N, 4)
-    hq = _per_contact_jacobian(grad_psi, q)  # (N, 4, 4): [i, j, k] = d2 psi_i / dq_ij dq_ik
+    he, hm = contact_hessians(tuple(q.T), p)
+    gq = de / data.scale + jnp.einsum("rn,rnk->nk", w, dm)  # (N, 4): d psi_i / dq_i
+    hq = he / data.scale + jnp.einsum("rn,rnkl->nkl", w, hm)  # (N, 4, 4)
     hx = jnp.einsum("njm,njk,nkl->ml", dq, hq, dq) + kinematics_curvature(to_pose(z, data.lever), p, geometry, gq)
     scale = _pose_scale(data, z.dtype)
     return hx * scale[:, None] * scale[None, :]

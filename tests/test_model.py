@@ -549,6 +549,35 @@ def test_kinematics_jacobian_and_curvature_equal_autodiff(name, grasp, x):
     _close(got, got.T, 1e-13)  # a Hessian
 
 
+def _autodiff_per_contact(fn, q):
+    """``(..., N, 4)``: ``fn`` (contact by contact, ``(N, 4) -> (..., N)``) differentiated by
+    ``jax.jacfwd`` in all of ``q`` and reduced to each contact's own block."""
+    full = jax.jacfwd(fn)(q)  # (..., N, N, 4)
+    return jnp.einsum("...iik->...ik", full)
+
+
+@pytest.mark.parametrize("name, grasp, x", _derivative_cases()[::3], ids=lambda v: v if isinstance(v, str) else "")
+def test_contact_derivatives_written_out_equal_autodiff(name, grasp, x):
+    """model.contact_gradients / contact_hessians (each contact's energy and margins in its
+    own kinematics q = (d, cos phi, dt^2, theta), written out for the solver) equal
+    autodiff of elastic_energies and margins_of: at the grasp's own kinematics and with d
+    moved to a released contact (d < 0), to exactly 0 (where d max(d, 0)/dd is 1/2, as
+    autodiff takes it) and deep into the fingertip, torsion and tangential terms on."""
+    p = model_params(grasp)
+    q0 = jnp.stack(M.contact_kinematics(x, p), axis=-1)
+    energies = lambda q: M.elastic_energies(tuple(q.T), p)  # noqa: E731
+    margins = lambda q: M.margins_of(tuple(q.T), p)  # noqa: E731
+    for d in (None, -0.3, 0.0, 2.5):
+        q = q0 if d is None else q0.at[:, 0].set(d).at[:, 2].add(0.05).at[:, 3].add(0.02)
+        de, dm = M.contact_gradients(tuple(q.T), p)
+        he, hm = M.contact_hessians(tuple(q.T), p)
+        _close(de, _autodiff_per_contact(energies, q))
+        _close(dm, _autodiff_per_contact(margins, q))
+        hess = lambda fn: jnp.einsum("...iikil->...ikl", jax.jacfwd(jax.jacfwd(fn))(q))  # noqa: E731
+        _close(he, hess(energies))
+        _close(hm, hess(margins))
+
+
 @jax.jit
 def _program_derivatives(data, z, weights):
     """(fx, gx, grad f, jac, Lagrangian Hessian) from the grasp programs' Problem, and the
