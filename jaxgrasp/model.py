@@ -85,6 +85,12 @@ def model_params(grasp: Grasp) -> ModelParams:
     )
 
 
+_LEVI_CIVITA = tuple(
+    tuple(tuple(float((i - j) * (j - k) * (k - i) / 2) for k in range(3)) for j in range(3)) for i in range(3)
+)
+"""``eps[i][j][k]``, the Levi-Civita symbol: ``skew(w)_ij = -eps_ijk w_k``."""
+
+
 def rotation_matrix(w):
     """Rodrigues' formula ``R = I + A K + B K^2`` for a rotation vector ``w`` (3,), rad.
 
@@ -98,21 +104,8 @@ def rotation_matrix(w):
     t = jnp.sqrt(t2_safe)
     a = jnp.where(small, 1.0 - t2 / 6.0 + t2 * t2 / 120.0, jnp.sin(t) / t)
     b = jnp.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - jnp.cos(t)) / t2_safe)
-    k = jnp.array(
-        [
-            [0.0, -w[2], w[1]],
-            [w[2], 0.0, -w[0]],
-            [-w[1], w[0], 0.0],
-        ],
-        dtype=w.dtype,
-    )
+    k = -jnp.asarray(_LEVI_CIVITA, w.dtype) @ w  # skew(w), exactly: one product per entry
     return jnp.eye(3, dtype=w.dtype) + a * k + b * (k @ k)
-
-
-_LEVI_CIVITA = tuple(
-    tuple(tuple(float((i - j) * (j - k) * (k - i) / 2) for k in range(3)) for j in range(3)) for i in range(3)
-)
-"""``eps[i][j][k]``, the Levi-Civita symbol: ``skew(w)_ij = -eps_ijk w_k``."""
 
 
 def _rotation_coefficients(t2):
