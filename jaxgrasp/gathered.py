@@ -17,13 +17,15 @@ __all__ = ["over_rows", "put_rows"]
 
 def over_rows(use, block: int, update, carry):
     """Fold ``update(rows, valid, carry) -> carry`` over the rows where ``use`` ``(B,)``
-    is true, ``block`` at a time (static; at most ``B``): ``rows`` ``(block,)`` int32 are
+    is true, ``block`` at a time (static; at most ``B``): ``rows`` ``(block,)`` uint32 are
     row indices, ``valid`` ``(block,)`` bool is false on the padding rows of the last
     block (which repeat a real row: write with :func:`put_rows`)."""
     size = use.shape[0]
     block = min(block, size)
     num_blocks = -(-size // block)
-    order = jnp.argsort(~use, stable=True).astype(jnp.int32)  # the rows in use first
+    # the rows in use first; unsigned, so that indexing with them adds no wrap-around of
+    # negative indices
+    order = jnp.argsort(~use, stable=True).astype(jnp.uint32)
     order = jnp.concatenate([order, jnp.broadcast_to(order[-1:], (num_blocks * block - size,))])
     count = jnp.sum(use.astype(jnp.int32))
 
@@ -37,4 +39,4 @@ def over_rows(use, block: int, update, carry):
 
 def put_rows(a, rows, valid, values):
     """``a`` with ``a[rows] = values`` where ``valid`` (the other writes are dropped)."""
-    return a.at[jnp.where(valid, rows, a.shape[0])].set(values, mode="drop")
+    return a.at[jnp.where(valid, rows, jnp.asarray(a.shape[0], rows.dtype))].set(values, mode="drop")

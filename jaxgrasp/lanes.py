@@ -99,6 +99,9 @@ class _Queue(NamedTuple):
 
 
 def _take(tree, idx):
+    """``tree``'s rows ``idx`` (every index in range). Unsigned, so that JAX adds no
+    wrap-around of negative indices (six ops per leaf, in every loop step)."""
+    idx = jnp.asarray(idx).astype(jnp.uint32)
     return jax.tree_util.tree_map(lambda a: a[idx], tree)
 
 
@@ -125,7 +128,8 @@ def _advance(problem, theta, order, num_active, o: SolverOptions, q: _Queue) -> 
     merit_of = lambda x, k: solver.merit(problem(_take(th, k)), _take(trials.state, k), x)
     x_new, improve = solver.line_search(merit_of, trials, o)
     slots = jax.vmap(lambda t, x, i: solver.accept(t, x, i, o))(trials, x_new, improve)
-    states = jax.tree_util.tree_map(lambda a, b: a.at[q.idx].set(b), q.states, slots)
+    at = q.idx.astype(jnp.uint32)  # in range: no wrap-around of negative indices
+    states = jax.tree_util.tree_map(lambda a, b: a.at[at].set(b), q.states, slots)
     done = ~_running_slots(slots, o)
     # the k-th finished slot takes order[ptr + k], while lanes remain
     rank = jnp.cumsum(done) - 1

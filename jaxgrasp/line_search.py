@@ -44,7 +44,7 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
     """Backtracking line search of a batch of ``B`` lanes with ``n`` variables.
 
     Args:
-        merit: ``(x, lane) -> ()``, the merit of lane ``lane`` (an int32 index into the
+        merit: ``(x, lane) -> ()``, the merit of lane ``lane`` (a uint32 index into the
             batch) at the point ``x`` ``(n,)``.
         x: ``(B, n)`` current points.
         p: ``(B, n)`` descent directions.
@@ -68,10 +68,10 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
     alphas = 0.5 ** jnp.arange(steps, dtype=x.dtype)
     slack = rounding * (jnp.abs(phi0) + 1.0)
     if size <= LADDER_BLOCK:  # one block: each lane walks its own ladder (a smaller program)
-        return jax.vmap(partial(_walk, merit, alphas))(x, p, phi0, slope, slack, needs_step, jnp.arange(size, dtype=jnp.int32))
+        return jax.vmap(partial(_walk, merit, alphas))(x, p, phi0, slope, slack, needs_step, jnp.arange(size, dtype=jnp.uint32))
 
     values = lambda xs, lanes: _finite(jax.vmap(merit)(xs, lanes))
-    t0 = values(x + p, jnp.arange(size, dtype=jnp.int32))
+    t0 = values(x + p, jnp.arange(size, dtype=jnp.uint32))
     ok0 = _armijo(t0, alphas[0], phi0, slope, slack)
     idx = jnp.zeros(size, jnp.int32)
     improve = ok0 | (t0 < phi0)
