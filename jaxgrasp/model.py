@@ -98,35 +98,40 @@ def rotation_matrix(w):
     ``t^2 < 1e-6`` with the double-``where`` trick, so that value, gradient and Hessian
     are finite and exact at ``w = 0``.
     """
-    t2 = jnp.dot(w, w)
-    small = t2 < 1e-6
-    t2_safe = jnp.where(small, 1.0, t2)
-    t = jnp.sqrt(t2_safe)
-    a = jnp.where(small, 1.0 - t2 / 6.0 + t2 * t2 / 120.0, jnp.sin(t) / t)
-    b = jnp.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - jnp.cos(t)) / t2_safe)
-    k = -jnp.asarray(_LEVI_CIVITA, w.dtype) @ w  # skew(w), exactly: one product per entry
+    a, b = _rotation_coefficients(jnp.dot(w, w), derivatives=False)
+    k = _skew(w)
     return jnp.eye(3, dtype=w.dtype) + a * k + b * (k @ k)
 
 
-def _rotation_coefficients(t2):
+def _skew(w):
+    """``(3, 3)`` ``skew(w)`` (``skew(w) v = w x v``), exactly: one product per entry."""
+    return -jnp.asarray(_LEVI_CIVITA, w.dtype) @ w
+
+
+def _rotation_coefficients(t2, derivatives: bool = True):
     """``(a, b, a1, b1, a2, b2)`` of ``R = I + a K + b K^2`` at ``t2 = |w|^2``: ``a = sin t /
-    t``, ``b = (1 - cos t) / t^2`` and their first and second derivatives in ``t2``, from
-    the series below ``t2 < 1e-6`` (double-``where``, as :func:`rotation_matrix`) and
-    closed forms above: ``a1 = (cos t - a) / (2 t2)``, ``b1 = (a / 2 - b) / t2``,
-    ``a2 = -(a / 2 + 3 a1) / (2 t2)``, ``b2 = (a1 / 2 - 2 b1) / t2``."""
+    t``, ``b = (1 - cos t) / t^2`` and their first and second derivatives in ``t2``
+    (without ``derivatives``: ``(a, b)`` alone), from the series below ``t2 < 1e-6`` with
+    the double-``where`` trick, so that value, gradient and Hessian are finite and exact at
+    ``w = 0``, and closed forms above: ``a1 = (cos t - a) / (2 t2)``, ``b1 = (a / 2 - b) /
+    t2``, ``a2 = -(a / 2 + 3 a1) / (2 t2)``, ``b2 = (a1 / 2 - 2 b1) / t2``."""
     small = t2 < 1e-6
     s = jnp.where(small, 1.0, t2)
     t = jnp.sqrt(s)
     a_big, c_big = jnp.sin(t) / t, jnp.cos(t)
     b_big = (1.0 - c_big) / s
+    pick = lambda series, closed: jnp.where(small, series, closed)  # noqa: E731
+    a = pick(1.0 - t2 / 6.0 + t2 * t2 / 120.0, a_big)
+    b = pick(0.5 - t2 / 24.0 + t2 * t2 / 720.0, b_big)
+    if not derivatives:
+        return a, b
     a1_big = (c_big - a_big) / (2.0 * s)
     b1_big = (0.5 * a_big - b_big) / s
     a2_big = -(0.5 * a_big + 3.0 * a1_big) / (2.0 * s)
     b2_big = (0.5 * a1_big - 2.0 * b1_big) / s
-    pick = lambda series, closed: jnp.where(small, series, closed)  # noqa: E731
     return (
-        pick(1.0 - t2 / 6.0 + t2 * t2 / 120.0, a_big),
-        pick(0.5 - t2 / 24.0 + t2 * t2 / 720.0, b_big),
+        a,
+        b,
         pick(-1.0 / 6.0 + t2 / 60.0 - t2 * t2 / 1680.0, a1_big),
         pick(-1.0 / 24.0 + t2 / 360.0 - t2 * t2 / 13440.0, b1_big),
         pick(1.0 / 60.0 - t2 / 840.0, a2_big),
@@ -142,7 +147,7 @@ def rotation_jacobian(w):
     eps = jnp.asarray(_LEVI_CIVITA, w.dtype)
     eye = jnp.eye(3, dtype=w.dtype)
     a, b, a1, b1, _, _ = _rotation_coefficients(jnp.dot(w, w))
-    k = -eps @ w
+    k = _skew(w)
     inner = a1 * k + b1 * (k @ k)
     sym = eye[:, None, :] * w[None, :, None] + w[:, None, None] * eye[None, :, :] - 2.0 * eye[:, :, None] * w
     return 2.0 * inner[:, :, None] * w - a * eps + b * sym
