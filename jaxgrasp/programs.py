@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .dense import solve as dense_solve
 from .grasp import Grasp
 from .lanes import solve_lanes
 from .model import (
@@ -503,7 +504,7 @@ def _polish(data: ProgramData, z0, k, j, released, o: SolverOptions):
         # _POLISH_STEPS Newton steps, then one more pass for the residual at the last point
         y, _, _ = carry
         jac, (r, gz) = jax.jacfwd(residual, has_aux=True)(y)
-        step = jnp.where(i < _POLISH_STEPS, jnp.linalg.solve(jac, r), 0.0)
+        step = jnp.where(i < _POLISH_STEPS, dense_solve(jac, r), 0.0)  # no LAPACK: see jaxgrasp.dense
         return y - step, r, gz
 
     y0 = jnp.concatenate([z0, jnp.zeros(3 * n, dtype)])
