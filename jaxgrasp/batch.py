@@ -368,8 +368,13 @@ def evaluate_batch(
     devices = tuple(jax.devices() if devices is None else devices)
     total, n_contacts = fields["positions"].shape[:2]
     chunk = batch_size(default_chunk_size(devices) if chunk_size is None else chunk_size, total, len(devices))
-    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, masked, settle=False)
-    settling = settling_evaluator(options, n_contacts, chunk, devices, masked)
+    # One program, the settling stage inline for every grasp: in a dataset of random
+    # grasps some 5% need it, so nearly every chunk would build and run the second
+    # program on its unsettled grasps, one per device. Inline it costs less than those
+    # reruns (512 random grasps of 2-7 contacts: 39.6-40.9 against 37.5 grasps/s, the
+    # same results to 1e-16) and the set compiles once (experiments/BENCHMARK.md).
+    # Sweeps keep the two-stage path: their grids rarely need the stage.
+    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, masked, settle=True)
     sharding = batch_sharding(devices)
     invalid = np.flatnonzero([e is not None for e in errors])
 
@@ -383,7 +388,7 @@ def evaluate_batch(
             on_chunk(start, stop, outs)
 
     outs, run_seconds = run_chunks(
-        fn, chunk_fields, grasp_fields(masked), total, chunk, sharding, progress, finished, settling=settling
+        fn, chunk_fields, grasp_fields(masked), total, chunk, sharding, progress, finished
     )
     active = fields.get("active", np.ones((total, n_contacts), dtype=bool))
     return BatchResult(

@@ -417,11 +417,12 @@ def test_released_contact_boundary_settles(results, ipopt_reference, case):
 
 
 def test_host_drivers_settle_only_where_needed(results, monkeypatch):
-    """``evaluate`` of a concrete grasp and ``evaluate_batch`` run the program without the
-    settling stage first and the one with it only on grasps with an unsettled boundary
-    problem: the released cases need it and get the inline path's results (the
-    ``results`` fixture: ``jit(vmap(evaluate))``, the stage inline); a grasp that needs
-    none never builds the second program."""
+    """``evaluate`` of a concrete grasp runs the program without the settling stage first
+    and the one with it only on grasps with an unsettled boundary problem: the released
+    cases need it and get the inline path's results (the ``results`` fixture:
+    ``jit(vmap(evaluate))``, the stage inline); a grasp that needs none never builds the
+    second program. ``evaluate_batch`` has the stage inline (one program per set) and
+    gives the same results."""
     import importlib
 
     evaluate_module = importlib.import_module("jaxgrasp.evaluate")  # jaxgrasp.evaluate is the function
