@@ -288,3 +288,28 @@ def test_solve_lanes_under_outer_vmap():
         want = _solve_batch(QUEUE_CASES, t, x, eq_mask, nu, a, QUEUE_OPTIONS)
         _queue_is_exercised(want)
         _assert_same_lanes(jax.tree_util.tree_map(lambda a: a[b], got), want)
+
+
+@pytest.mark.parametrize(
+    "viol, stationarity, inner, grows",
+    [
+        (9e-4, 0.5, 15, True),  # inner solve reached its tolerance
+        (9e-4, 10.0, 15, False),  # cut short at max_inner near feasibility: keep the penalty
+        (9e-4, 10.0, 16, True),  # ended because no step lowered phi (numerically converged)
+        (0.5, 10.0, 15, True),  # cut short, but far from feasible (above FAR_VIOLATION)
+    ],
+)
+def test_penalty_growth_after_a_stalled_violation(viol, stationarity, inner, grows):
+    """The violation stalled (not 4x below the last update's) in every case; whether the
+    penalty grows depends on how the inner solve ended and on how far from feasible the
+    lane is (``solver._multiplier_update``). The multipliers are updated either way."""
+    from jaxgrasp.solver import FAR_VIOLATION, FirstOrder, _inner_tol, _multiplier_update, init
+
+    o = SolverOptions()
+    assert o.max_inner == 15 and (viol > FAR_VIOLATION) == (viol == 0.5)
+    s = init(jnp.zeros(3), jnp.array([0.0, 1.0, 0.0]), 0.5, True, o)
+    s = dataclasses.replace(s, prev_viol=jnp.asarray(viol), inner=jnp.asarray(inner, jnp.int32))
+    d = FirstOrder(fx=jnp.asarray(0.0), gx=jnp.array([1.0, viol, 1.0]), grad_f=jnp.zeros(3), jac=jnp.eye(3))
+    new = _multiplier_update(s, d, jnp.full(3, stationarity * float(_inner_tol(s, o))), o)
+    assert float(new.rho) == (o.rho0 * o.rho_growth if grows else o.rho0)
+    assert float(new.nu) == pytest.approx(0.5 + o.rho0 * viol)
