@@ -15,9 +15,9 @@ Method (Powell-Hestenes-Rockafellar augmented Lagrangian, Nocedal & Wright Sec. 
 is minimised by Newton's method with the exact Hessian (eigenvalues mirrored and floored,
 so every step is a descent direction) and a backtracking line search evaluated on a fixed
 ladder of step lengths; then ``lam <- max(0, lam - rho g)``, ``nu <- nu + rho h``, and
-``rho`` grows when the violation does not fall fast enough after an inner solve that
-finished (reached its tolerance, or no step could lower phi), or while the violation is
-still large (above :data:`FAR_VIOLATION`). The inner and outer loops are
+``rho`` grows when the violation does not fall fast enough (on a lane with an equality:
+after an inner solve that finished, i.e. reached its tolerance or no step could lower
+phi, or while the violation is still above :data:`FAR_VIOLATION`). The inner and outer loops are
 flattened into one ``lax.while_loop`` whose body does a multiplier update where the inner
 solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
 need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
@@ -293,9 +293,9 @@ def init(x0, eq_mask, nu0, active, o: SolverOptions) -> SolverState:
 
 
 FAR_VIOLATION = 1e-2
-"""A violation (scaled constraint units) above which the penalty grows whenever the
-violation stalls, even after an inner solve cut short at ``max_inner`` Newton steps
-(:func:`_multiplier_update`)."""
+"""A violation (scaled constraint units) above which the penalty of a lane with an
+equality grows whenever the violation stalls, even after an inner solve cut short at
+``max_inner`` Newton steps (:func:`_multiplier_update`)."""
 
 
 def _tolerances(dtype, o: SolverOptions):
@@ -399,16 +399,19 @@ def _multiplier_update(s: SolverState, d: FirstOrder, gphi, o: SolverOptions) ->
     viol = jnp.maximum(jnp.abs(h), jnp.max(jnp.where(is_eq, 0.0, jnp.maximum(-gx, 0.0))))
     comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gx)))
     stat = jnp.max(jnp.abs(gphi))
-    # The penalty grows where the violation did not fall 4x, but not after an inner solve
-    # cut short at max_inner Newton steps while the violation is already small: on a
-    # strongly curved equality each Newton step on phi leaves the constraint and the next
-    # comes back, the inner solve runs out of steps, and a penalty raised at every update
-    # only worsens phi's conditioning until the lane crawls into its step budget with
-    # garbage multipliers (a 2-finger slip boundary: 17 of 20 starts at 300 steps, 0.65 %
-    # above Ipopt's minimum; without the growth its start converges to Ipopt's minimiser in
-    # 65 steps). Far from feasibility, or on an infeasible program, the penalty must grow
-    # either way (only a large one shows a violation that cannot fall).
-    finished = (stat <= _inner_tol(s, o)) | (s.inner > o.max_inner)
+    # The penalty grows where the violation did not fall 4x, but on a lane with an
+    # equality not after an inner solve cut short at max_inner Newton steps while the
+    # violation is already small: on a strongly curved equality each Newton step on phi
+    # leaves the constraint and the next comes back, the inner solve runs out of steps,
+    # and a penalty raised at every update only worsens phi's conditioning until the lane
+    # crawls into its step budget with garbage multipliers (a 2-finger slip boundary: 17
+    # of 20 starts at 300 steps, 0.65 % above Ipopt's minimum; without the growth its
+    # start converges to Ipopt's minimiser in 65 steps). Far from feasibility, or on an
+    # infeasible program, the penalty must grow either way (only a large one shows a
+    # violation that cannot fall); and without an equality (the equilibrium) the rule
+    # buys nothing and a degenerate equilibrium (three contacts at their force limits)
+    # ended infeasible under it, so the penalty grows as before.
+    finished = (stat <= _inner_tol(s, o)) | (s.inner > o.max_inner) | ~jnp.any(is_eq)
     stalled = (viol > 0.25 * s.prev_viol) & (finished | (viol > FAR_VIOLATION))
     rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
     return dataclasses.replace(

@@ -301,8 +301,9 @@ def test_solve_lanes_under_outer_vmap():
 )
 def test_penalty_growth_after_a_stalled_violation(viol, stationarity, inner, grows):
     """The violation stalled (not 4x below the last update's) in every case; whether the
-    penalty grows depends on how the inner solve ended and on how far from feasible the
-    lane is (``solver._multiplier_update``). The multipliers are updated either way."""
+    penalty of a lane with an equality grows depends on how the inner solve ended and on
+    how far from feasible the lane is (``solver._multiplier_update``). The multipliers are
+    updated either way."""
     from jaxgrasp.solver import FAR_VIOLATION, FirstOrder, _inner_tol, _multiplier_update, init
 
     o = SolverOptions()
@@ -313,3 +314,9 @@ def test_penalty_growth_after_a_stalled_violation(viol, stationarity, inner, gro
     new = _multiplier_update(s, d, jnp.full(3, stationarity * float(_inner_tol(s, o))), o)
     assert float(new.rho) == (o.rho0 * o.rho_growth if grows else o.rho0)
     assert float(new.nu) == pytest.approx(0.5 + o.rho0 * viol)
+    # without an equality (the equilibrium problem) the penalty grows as before: a stalled
+    # violation of row 1 (g < 0) raises it whatever the inner solve did
+    s_ineq = dataclasses.replace(s, eq_mask=jnp.zeros(3))
+    d_ineq = dataclasses.replace(d, gx=jnp.array([1.0, -viol, 1.0]))
+    new = _multiplier_update(s_ineq, d_ineq, jnp.full(3, stationarity * float(_inner_tol(s, o))), o)
+    assert float(new.rho) == o.rho0 * o.rho_growth
