@@ -144,14 +144,15 @@ def _advance(problem, theta, order, num_active, o: SolverOptions, q: _Queue) -> 
     return _Queue(states, slots, new_idx, q.ptr + jnp.sum(refill))
 
 
-def _to_tail(q: _Queue, tail: int, o: SolverOptions) -> _Queue:
-    """The queue with only ``tail`` slots, the running ones first (the others idle)."""
-    keep = jnp.argsort(~_running_slots(q.slots, o), stable=True)[:tail]  # running slots first
-    return _Queue(q.states, _take(q.slots, keep), q.idx[keep], q.ptr)
-
-
 def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
-    """:func:`solve_lanes` on one flat batch of ``L`` lanes: the queue loop, then the tail."""
+    """:func:`solve_lanes` on one flat batch of ``L`` lanes: the queue loop.
+
+    One loop of ``W`` slots to the end. (A second, ``W // 8``-slot loop for the last long
+    lanes once the queue was empty used to follow: it duplicated the whole solver step in
+    the program, 2.5 s of the batched program's 5.5 s XLA compile, and after the penalty
+    rule cut the lanes that run the whole step budget it saved 2-3 % of a random set's run
+    (512 grasps: 43.2-43.8 against 41.8-43.0 grasps/s) and nothing on the grids, with
+    identical results: experiments/BENCHMARK.md.)"""
     num_lanes = x0.shape[0]
     width = _num_slots(num_lanes, o)
     states = jax.vmap(lambda x, m, nu, a: solver.init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
@@ -160,22 +161,12 @@ def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> 
     num_active = jnp.sum(jnp.asarray(active, jnp.int32))
     advance = partial(_advance, problem, theta, order, num_active, o)
 
-    # The tail: once the queue is empty and at most width // 8 slots still run (e.g. a few
-    # lanes that take the whole step budget), the running slots move to a loop of
-    # width // 8 slots, so that they no longer drag the idle slots through every step.
-    tail = width // 8 if width // 8 >= 4 else None
-
     def cond(q: _Queue):
-        r = _running_slots(q.slots, o)
-        if tail is None:
-            return jnp.any(r)
-        return jnp.any(r) & ((q.ptr < num_active) | (jnp.sum(r.astype(jnp.int32)) > tail))
+        return jnp.any(_running_slots(q.slots, o))
 
     idx0 = order[:width]
     ptr0 = jnp.minimum(jnp.asarray(width), num_active)
     q = jax.lax.while_loop(cond, advance, _Queue(states, _take(states, idx0), idx0, ptr0))
-    if tail is not None:
-        q = jax.lax.while_loop(lambda q: jnp.any(_running_slots(q.slots, o)), advance, _to_tail(q, tail, o))
     # theta taken by lane index, as the slots take it: fg then compiles as in the loop (given
     # theta itself, XLA simplifies across its broadcasts and rounds f(x) differently).
     th = _take(theta, jnp.arange(num_lanes))

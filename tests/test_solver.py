@@ -213,9 +213,8 @@ def test_inactive_lane_is_not_run(known):
 
 # --- the work queue: solve_lanes must give every lane what solve gives it
 
-# 32 slots for 96 lanes (for 288 under an outer vmap): finished lanes hand their slot on,
-# and the last lanes run in the tail loop of 32 // 8 = 4 slots. A small step budget makes
-# some lanes run to it while others finish in a few steps.
+# 32 slots for 96 lanes (for 288 under an outer vmap): finished lanes hand their slot on.
+# A small step budget makes some lanes run to it while others finish in a few steps.
 QUEUE_OPTIONS = SolverOptions(max_steps=40, slot_fraction=1.0 / 3.0, max_slots=32)
 NUM_LANES = 96
 # Fewer programs than above (each is a branch every lane computes): a quick one, one with
@@ -254,7 +253,7 @@ def _assert_same_lanes(got: SolverResult, want: SolverResult):
 
 def _queue_is_exercised(ref: SolverResult):
     """The batch makes the queue work: more active lanes than slots (refills), step
-    counts from a few to the budget (the tail), and every status."""
+    counts from a few to the budget, and every status."""
     steps, status = np.asarray(ref.steps), np.asarray(ref.status)
     ran = status != LaneStatus.NO_START
     assert np.sum(ran) > QUEUE_OPTIONS.max_slots
