@@ -58,6 +58,7 @@ __all__ = [
     "default_dir",
     "enable_compilation_cache",
     "enable_from_environment",
+    "default_device",
     "set_program_dir",
     "program_dir",
     "source_digest",
@@ -364,14 +365,19 @@ def compiled(
     return fn, seconds
 
 
-def _devices(devices: Sequence | None) -> list:
-    """``devices``, or ``[JAX's default device]`` (``jax_default_device``, else the first)."""
-    if devices:
-        return list(devices)
+def default_device():
+    """The device a program without ``devices`` runs on: JAX's default device
+    (``jax_default_device``: a device, or a platform name for its first device), else
+    the first device."""
     default = jax.config.jax_default_device
     if default is None:
-        return [jax.devices()[0]]
-    return [jax.devices(default)[0]] if isinstance(default, str) else [default]
+        return jax.devices()[0]
+    return jax.devices(default)[0] if isinstance(default, str) else default
+
+
+def _devices(devices: Sequence | None) -> list:
+    """``devices``, or ``[default_device()]``."""
+    return list(devices) if devices else [default_device()]
 
 
 def clear_compiled() -> None:

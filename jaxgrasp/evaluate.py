@@ -41,7 +41,7 @@ from . import cache
 from .envelope import envelope_energy, soft_minimum
 from .grasp import Grasp
 from .model import ModelParams, model_params
-from .options import COMPILER_OPTIONS, EvaluateOptions
+from .options import COMPILER_OPTIONS, ONE_GRASP_CPU_OPTIONS, EvaluateOptions
 from .programs import Programs, constraints, needs_settling, program_data, programs_of, to_pose
 from .result import FIELDS as RESULT_FIELDS
 from .result import Evaluation
@@ -170,7 +170,8 @@ def compiled_program(grasp: Grasp, options: EvaluateOptions, settle: bool = True
             r = evaluate_compiled(jax.tree_util.tree_unflatten(treedef, leaves), temperature, options, settle)
             return tuple(getattr(r, f) for f in RESULT_FIELDS)
 
-        return jax.jit(evaluate_fields, compiler_options=COMPILER_OPTIONS)
+        cpu = cache.default_device().platform == "cpu"
+        return jax.jit(evaluate_fields, compiler_options=ONE_GRASP_CPU_OPTIONS if cpu else COMPILER_OPTIONS)
 
     masked = grasp.active is not None
     return cache.compiled(

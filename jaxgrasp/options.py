@@ -8,7 +8,7 @@ import numpy as np
 
 from .solver import SolverOptions
 
-__all__ = ["EvaluateOptions", "COMPILER_OPTIONS"]
+__all__ = ["EvaluateOptions", "COMPILER_OPTIONS", "ONE_GRASP_CPU_OPTIONS"]
 
 COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 """XLA options every jaxgrasp program is compiled with (``jax.jit(..., compiler_options=...)``).
@@ -21,6 +21,17 @@ options only on the outermost ``jax.jit``: jaxgrasp passes them where it compile
 program itself (batches, sweeps, tuning, :func:`jaxgrasp.evaluate` of a concrete grasp);
 pass them to your own outermost ``jax.jit`` around :func:`jaxgrasp.evaluate` to get the
 same."""
+
+ONE_GRASP_CPU_OPTIONS = {**COMPILER_OPTIONS, "xla_backend_optimization_level": 0}
+"""XLA options of the CPU program :func:`jaxgrasp.evaluate` compiles for one concrete grasp.
+
+That program serves one grasp per call, so the time to its first result matters more
+than the time per call: without LLVM's optimisation passes the cube's program compiles
+in about half the time (1.1-1.25 s against 2.2-2.3 s on 2 cores) and a call takes 16-17
+ms instead of 9-10 ms; the value agrees to 2 ulp (``experiments/compile_time.py``). The
+programs that serve many grasps (:func:`jaxgrasp.evaluate_batch`, sweeps, tuning) keep
+:data:`COMPILER_OPTIONS`: level 1 there already costs 10 % of a random set's rate. Other
+backends compile the one-grasp program with :data:`COMPILER_OPTIONS` too."""
 
 
 @dataclasses.dataclass(frozen=True)
