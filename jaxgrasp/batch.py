@@ -209,9 +209,9 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
         batch = [_put(fields[k], sharding) for k in names]
         t0 = time.perf_counter()
         res = dict(zip(RESULT_FIELDS, fn(*batch)))
-        res = {f: _gather(res[f]) for f in dict.fromkeys((*keep, "boundary_status"))}
-        rows = np.flatnonzero(needs_settling(res["boundary_status"])[: stop - start])
-        if settling is not None and rows.size:
+        res = {f: _gather(res[f]) for f in dict.fromkeys((*keep, "boundary_status") if settling else keep)}
+        rows = np.flatnonzero(needs_settling(res["boundary_status"])[: stop - start]) if settling else ()
+        if len(rows):
             get, size = settling
             settle = get()
             res = {f: np.array(a) for f, a in res.items()}  # writable copies
