@@ -41,7 +41,9 @@ class EvaluateOptions:
     Attributes:
         solver: settings of the augmented-Lagrangian solver.
         num_random_starts: random start directions per boundary problem, on top of the 12
-            coordinate half-axes.
+            half-axes of the start frame (:func:`jaxgrasp.programs.start_frame`: the
+            eigenvectors of the energy's Hessian at the equilibrium, so that the starts
+            do not depend on the world frame the grasp is written in).
         seed: seed of those random directions (fixed, so results are reproducible).
         ray_length: how far a start search walks from the equilibrium: translations up to
             ``ray_length`` fingertip radii, rotations up to ``ray_length`` rad or that
@@ -94,7 +96,9 @@ class EvaluateOptions:
                 )
 
     def directions(self) -> np.ndarray:
-        """``(12 + num_random_starts, 6)`` unit start directions in the scaled pose space."""
+        """``(12 + num_random_starts, 6)`` unit start directions: coefficients in the start
+        frame (:func:`jaxgrasp.programs.start_frame`) of the scaled pose space, its 12
+        half-axes first, then the seeded random ones."""
         axes = np.concatenate([np.eye(6), -np.eye(6)])
         rng = np.random.default_rng(self.seed)
         rand = rng.standard_normal((self.num_random_starts, 6))

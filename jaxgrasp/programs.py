@@ -16,8 +16,10 @@ one :func:`jaxgrasp.lanes.solve_lanes` call.
 Boundary problems are non-convex, so each is solved from several starts (the caller
 keeps the lowest converged energy): a start is found by walking from the equilibrium
 along a direction until the boundary's constraint is crossed, then bisecting onto it,
-along the 12 coordinate half-axes of the scaled pose space plus
-``EvaluateOptions.num_random_starts`` seeded random directions.
+along the 12 half-axes of the equilibrium's eigenframe plus
+``EvaluateOptions.num_random_starts`` seeded random directions in that frame
+(:func:`start_frame`): the starts turn with the grasp, so a grasp written in a rotated or
+mirrored world frame gets the same starts and the same minima.
 
 A lane that stalls at a feasible point (status ``NOT_CONVERGED``: typically a released
 fingertip whose slip margin is active at the apex of its friction cone, where no bounded
@@ -71,6 +73,9 @@ __all__ = [
     "Programs",
     "solve_programs",
     "programs_of",
+    "start_frame",
+    "FRAME_TIE",
+    "FRAME_BITS",
     "settle_stalled",
     "needs_settling",
     "RELEASED_TOL",
@@ -267,18 +272,93 @@ def _lane_equalities(n: int, num_starts: int):
     return jnp.repeat(n + jnp.arange(2 * n), num_starts)
 
 
+FRAME_TIE = 1e-6
+"""Eigenvalues of the equilibrium's Hessian closer than this (relative to the largest) are
+taken as one eigenspace by :func:`start_frame`."""
+_FRAME_SPAN = 0.3  # a reference vector joins an eigenspace's basis if its residual is longer
+FRAME_BITS = 20
+""":func:`start_frame`'s entries are multiples of ``2^-FRAME_BITS`` (about 1e-6)."""
+
+
+def start_frame(data: ProgramData, z_eq):
+    """``(6, 6)`` orthonormal columns: the frame of the start directions at the equilibrium
+    ``z_eq`` (scaled pose, ``(6,)``).
+
+    The columns are eigenvectors of the energy's Hessian ``H`` at ``z_eq`` (the object's
+    modes of motion in the grasp, softest first). Their signs, and the basis of an
+    eigenspace of equal eigenvalues (within :data:`FRAME_TIE`, as in every symmetric
+    grasp), come from reference vectors projected onto the eigenspace and
+    orthonormalised in order: first the sums over the active contacts of the contact,
+    slip and force margins' gradients (unit length; kept where their residual is longer
+    than :data:`FRAME_TIE`, and left out where a sum cancels to within :data:`FRAME_TIE`
+    of the gradients' lengths, as by symmetry), then the coordinate axes, kept where
+    their residual is longer than 0.3 (which completes every basis: six unit vectors
+    whose residuals were all at most 0.3 cannot leave an eigenspace dimension uncovered).
+
+    Rotating or mirroring the world frame maps the pose space by an orthogonal ``T``
+    (``dp -> R dp``, ``w -> det(R) R w``), ``H`` to ``T H T^T`` and the margin gradients
+    to ``T`` times them; renumbering the contacts changes neither. So the frame turns
+    with the grasp, and start directions written in it (:meth:`EvaluateOptions.directions`)
+    are the same physical motions in any world frame and numbering (up to rounding),
+    wherever the margin gradients fix the signs and the eigenspaces are single.
+    Coordinate axes were not: a mirror image of a 5-finger grasp missed its slip
+    boundary's lowest point from every one of the 20 starts (``tests/test_degenerate.py``,
+    ``sphere_5_mirrored``). A tie in the Hessian or a sign the gradients leave open is
+    settled by the coordinate axes, away from any threshold, so that rounding (e.g. a
+    grasp padded with inactive contacts) does not turn the frame.
+    """
+    n = data.params.c.shape[0]
+    dtype = z_eq.dtype
+    d = _first_order(z_eq, data)
+    hmat = _lagrangian_hessian(d, z_eq, jnp.zeros(3 * n, dtype), data)
+    evals, vecs = jnp.linalg.eigh(hmat)
+    rows = jnp.where(data.params.on[None, :, None], d.jac.reshape(3, n, 6), 0.0)
+    sums = jnp.sum(rows, axis=1)  # (3, 6)
+    norms = jnp.linalg.norm(sums, axis=1, keepdims=True)
+    # a sum that cancels (a symmetric grasp) is rounding noise: no reference
+    kept = norms > FRAME_TIE * jnp.sum(jnp.linalg.norm(rows, axis=2), axis=1, keepdims=True)
+    refs = jnp.concatenate([jnp.where(kept, sums / jnp.where(kept, norms, 1.0), 0.0), jnp.eye(6, dtype=dtype)])
+    # eigenspaces: runs of eigenvalues (ascending) with gaps within FRAME_TIE
+    tie = jnp.diff(evals) <= FRAME_TIE * jnp.max(jnp.abs(evals))
+    label = jnp.cumsum(jnp.concatenate([jnp.zeros(1, jnp.int32), (~tie).astype(jnp.int32)]))
+    same = label[:, None] == label[None, :]  # (6, 6): column j in column i's eigenspace
+    rank = jnp.sum(same & (jnp.arange(6)[None, :] < jnp.arange(6)[:, None]), axis=1)  # i's place in it
+    proj = jnp.einsum("ak,ik,bk->iab", vecs, same.astype(dtype), vecs)  # (6, 6, 6) projectors
+
+    # a margin-gradient sum counts wherever it is not rounding; an axis where it is long
+    spans = jnp.asarray([FRAME_TIE] * 3 + [_FRAME_SPAN] * 6, dtype)
+
+    def orthonormalise(carry, ref_span):  # Gram-Schmidt in every column's eigenspace at once
+        basis, count = carry  # (6, 6, 6): [column, slot, :]; (6,) slots filled
+        ref, span = ref_span
+        r = proj @ ref
+        r = r - jnp.einsum("isa,is->ia", basis, jnp.einsum("isa,ia->is", basis, r))
+        length = jnp.linalg.norm(r, axis=1)
+        keep = length > span
+        unit = r / jnp.where(keep, length, 1.0)[:, None]
+        basis = basis + (jax.nn.one_hot(count, 6, dtype=dtype) * keep[:, None])[:, :, None] * unit[:, None, :]
+        return (basis, count + keep), None
+
+    init = (jnp.zeros((6, 6, 6), dtype), jnp.zeros(6, jnp.int32))
+    (basis, _), _ = jax.lax.scan(orthonormalise, init, (refs, spans))
+    # snapped to a grid of 2^-FRAME_BITS: a rounding-level change of H (the same grasp
+    # padded with inactive contacts, or in another batch) then leaves the starts bit-identical
+    return jnp.round(basis[jnp.arange(6), rank].T * 2.0**FRAME_BITS) / 2.0**FRAME_BITS
+
+
 def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     """Start of every boundary lane: ``(k, z0, found, nu0)``, each with leading axis ``2N * D``.
 
     ``k`` is the lane's equality row in the ``(3N,)`` constraints (slip rows, then force
-    rows), ``z0`` the crossing of that constraint along the lane's direction from ``z_eq``
+    rows), ``z0`` the crossing of that constraint along the lane's direction
+    (:meth:`EvaluateOptions.directions` in the :func:`start_frame`) from ``z_eq``
     (``z_eq`` itself where the equilibrium is already on it), ``nu0`` the least-squares
     equality multiplier there.
     """
     n = data.params.c.shape[0]
     dtype = data.params.c.dtype
     g = lambda z: constraints(z, data)
-    dirs = jnp.asarray(options.directions(), dtype)
+    dirs = jnp.asarray(options.directions(), dtype) @ start_frame(data, z_eq).T
     num_dirs = dirs.shape[0]
     # A ray walks until its translation reaches ray_length radii or its rotation reaches
     # ray_length rad, whichever is farther: torsion slip needs a rotation angle that does

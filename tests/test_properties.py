@@ -29,10 +29,14 @@ count, shared with the other test modules). Environment:
 ``experiments/robustness.py`` reuses :func:`build_grasp` on 1000 seeded grasps;
 :func:`test_seeded_grasps_converge` is its 16-grasp version.
 
-The value is a minimum over a multi-start search, so a transformed grasp could in
-principle land on a different (lower or higher) local minimum than the original: such a
-case would be a real finding about the start heuristic, not noise. The tolerances are
-therefore tight (relative ``1e-6`` on values) and are not to be loosened to hide one.
+The value is a minimum over a multi-start search. The start directions live in the
+grasp's own frame (:func:`jaxgrasp.programs.start_frame`), so a rotated, mirrored or
+renumbered grasp is searched from the same physical starts and reaches the same local
+minima, up to rounding (and ``eigh``'s choice of basis where the Hessian at the
+equilibrium has equal eigenvalues). A transformed grasp landing on a different (lower or
+higher) local minimum would be a real finding about the start heuristic, not noise: the
+tolerances are tight (relative ``1e-6`` on values and on every boundary energy) and are
+not to be loosened to hide one.
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
 """Boundary starts on grasps that once needed the random ones (issue #11, item 13).
 
 The boundary problems are non-convex and ``evaluate`` solves each from
-``EvaluateOptions().num_starts`` = 20 starts (the 12 coordinate half-axes of the scaled
-pose space, then 8 seeded random directions), keeping the lowest. The grasps below were
-found by ``experiments/start_search.py`` (log: ``experiments/start_search.log``): two
+``EvaluateOptions().num_starts`` = 20 starts (the 12 half-axes of the start frame, then 8
+seeded random directions in it; :func:`jaxgrasp.programs.start_frame`), keeping the
+lowest. The start frame was the world's coordinate axes until issue 13, when the grasps
+below were found by ``experiments/start_search.py`` (log: ``experiments/start_search.log``): two
 fingertips off the centre of mass (so gravity and the stiffer tip twist the object),
 where the lowest boundary point was reached only from the random directions. With fewer
 starts the value is overstated, i.e. the grasp is reported more stable than it is
