@@ -42,8 +42,8 @@ class EvaluateOptions:
         solver: settings of the augmented-Lagrangian solver.
         num_random_starts: random start directions per boundary problem, on top of the 12
             half-axes of the start frame (:func:`jaxgrasp.programs.start_frame`: the
-            eigenvectors of the energy's Hessian at the equilibrium, so that the starts
-            do not depend on the world frame the grasp is written in).
+            grasp's modes of motion, so that the starts do not depend on the world
+            frame or the contact numbering the grasp is written in).
         seed: seed of those random directions (fixed, so results are reproducible).
         ray_length: how far a start search walks from the equilibrium: translations up to
             ``ray_length`` fingertip radii, rotations up to ``ray_length`` rad or that

@@ -280,43 +280,61 @@ FRAME_BITS = 20
 """:func:`start_frame`'s entries are multiples of ``2^-FRAME_BITS`` (about 1e-6)."""
 
 
-def start_frame(data: ProgramData, z_eq):
-    """``(6, 6)`` orthonormal columns: the frame of the start directions at the equilibrium
-    ``z_eq`` (scaled pose, ``(6,)``).
+def start_frame(data: ProgramData):
+    """``(6, 6)`` orthonormal columns: the frame of the start directions in the scaled pose
+    space ``z`` of the grasp ``data``.
 
-    The columns are eigenvectors of the energy's Hessian ``H`` at ``z_eq`` (the object's
-    modes of motion in the grasp, softest first). Their signs, and the basis of an
-    eigenspace of equal eigenvalues (within :data:`FRAME_TIE`, as in every symmetric
-    grasp), come from reference vectors projected onto the eigenspace and
-    orthonormalised in order: first the sums over the active contacts of the contact,
-    slip and force margins' gradients (unit length; kept where their residual is longer
-    than :data:`FRAME_TIE`, and left out where a sum cancels to within :data:`FRAME_TIE`
-    of the gradients' lengths, as by symmetry), then the coordinate axes, kept where
-    their residual is longer than 0.3 (which completes every basis: six unit vectors
-    whose residuals were all at most 0.3 cannot leave an eigenspace dimension uncovered).
+    The columns are the eigenvectors of the grasp's stiffness in its initial state, each
+    fingertip a spring at its contact point: ``sum_i k_i (A_i^T A_i + a_i b_i b_i^T)`` with
+    ``k_i = E_i dr_i`` (the elastic energy's second derivative in the normal and in the
+    tangential displacement are both ``2 pi E d``), ``A_i`` the ``(3, 6)`` map from ``z`` to
+    the displacement ``dp + w x c_i`` of contact ``i``, ``b_i`` the twist ``n_i . w``
+    about its normal and ``a_i = dr_i (r_i - dr_i / 3)`` the torsion's share; inactive
+    contacts have none. These are the object's modes of motion in the grasp, softest
+    first, from the grasp's fields alone: no derivative of the model is traced (the
+    energy's own Hessian at the equilibrium served as well and made the one-grasp program
+    21 % longer). Their signs, and the basis of an eigenspace of equal eigenvalues (within
+    :data:`FRAME_TIE`, as in every symmetric grasp), come from reference vectors projected
+    onto the eigenspace and orthonormalised in order: first the weight ``(m g, 0)``, the
+    sum of the fingertips' normal wrenches ``k_i (n_i, c_i x n_i)`` and of their
+    positions ``k_i (c_i, 0)`` (unit length; kept where their residual is longer than
+    :data:`FRAME_TIE`, and left out where a sum cancels to within :data:`FRAME_TIE` of its
+    terms' lengths, as by symmetry), then the coordinate axes, kept where their residual
+    is longer than 0.3 (which completes every basis: six unit vectors whose residuals
+    were all at most 0.3 cannot leave an eigenspace dimension uncovered).
 
     Rotating or mirroring the world frame maps the pose space by an orthogonal ``T``
-    (``dp -> R dp``, ``w -> det(R) R w``), ``H`` to ``T H T^T`` and the margin gradients
-    to ``T`` times them; renumbering the contacts changes neither. So the frame turns
-    with the grasp, and start directions written in it (:meth:`EvaluateOptions.directions`)
-    are the same physical motions in any world frame and numbering (up to rounding),
-    wherever the margin gradients fix the signs and the eigenspaces are single.
-    Coordinate axes were not: a mirror image of a 5-finger grasp missed its slip
-    boundary's lowest point from every one of the 20 starts (``tests/test_degenerate.py``,
-    ``sphere_5_mirrored``). A tie in the Hessian or a sign the gradients leave open is
-    settled by the coordinate axes, away from any threshold, so that rounding (e.g. a
-    grasp padded with inactive contacts) does not turn the frame.
+    (``dp -> R dp``, ``w -> det(R) R w``), the stiffness to ``T K T^T`` and each reference
+    vector to ``T`` times it (``c x n`` and ``w`` are both axial); renumbering the
+    contacts changes none of them. So the frame turns with the grasp, and start
+    directions written in it (:meth:`EvaluateOptions.directions`) are the same physical
+    motions in any world frame and numbering, wherever the references fix the signs and
+    the eigenspaces are single. Coordinate axes were not: a mirror image of a 5-finger
+    grasp missed its slip boundary's lowest point from every one of the 20 starts
+    (``tests/test_degenerate.py``, ``sphere_5_mirrored``). A tie or a sign the references
+    leave open is settled by the coordinate axes, away from any threshold, so that
+    rounding (e.g. a grasp padded with inactive contacts) does not turn the frame.
     """
-    n = data.params.c.shape[0]
-    dtype = z_eq.dtype
-    d = _first_order(z_eq, data)
-    hmat = _lagrangian_hessian(d, z_eq, jnp.zeros(3 * n, dtype), data)
-    evals, vecs = jnp.linalg.eigh(hmat)
-    rows = jnp.where(data.params.on[None, :, None], d.jac.reshape(3, n, 6), 0.0)
-    sums = jnp.sum(rows, axis=1)  # (3, 6)
+    p = data.params
+    dtype = p.c.dtype
+    lever = data.lever
+    k = jnp.where(p.on, p.E * p.dr, 0.0)  # (N,) stiffness of each fingertip (normal = tangential), / 2 pi
+    eye = jnp.broadcast_to(jnp.eye(3, dtype=dtype), p.c.shape + (3,))
+    cross = jnp.cross(p.c[:, None, :], eye)  # (N, 3, 3): cross @ v = v x c
+    a = jnp.concatenate([eye, cross / lever], axis=2)  # (N, 3, 6): z -> displacement w x c + dp of the contact
+    b = jnp.concatenate([jnp.zeros_like(p.n), p.n / lever], axis=1)  # (N, 6): z -> twist n . w about the normal
+    arm = p.dr * (p.r - p.dr / 3.0)  # mm^2: torsion stiffness / k
+    hmat = jnp.einsum("n,nia,nib->ab", k, a, a) + jnp.einsum("n,na,nb->ab", k * arm, b, b)
+    evals, vecs = jnp.linalg.eigh(hmat / jnp.max(jnp.abs(hmat)))
+    wrench = jnp.concatenate([p.n, jnp.cross(p.c, p.n) / lever], axis=1)  # (N, 6)
+    place = jnp.concatenate([p.c / lever, jnp.zeros_like(p.c)], axis=1)  # (N, 6)
+    rows = jnp.stack([k[:, None] * wrench, k[:, None] * place])  # (2, N, 6); inactive: k = 0
+    weight = jnp.concatenate([p.weight, jnp.zeros(3, dtype)])
+    sums = jnp.concatenate([weight[None], jnp.sum(rows, axis=1)])  # (3, 6)
     norms = jnp.linalg.norm(sums, axis=1, keepdims=True)
+    lengths = jnp.concatenate([jnp.linalg.norm(weight)[None], jnp.sum(jnp.linalg.norm(rows, axis=2), axis=1)])
     # a sum that cancels (a symmetric grasp) is rounding noise: no reference
-    kept = norms > FRAME_TIE * jnp.sum(jnp.linalg.norm(rows, axis=2), axis=1, keepdims=True)
+    kept = norms > FRAME_TIE * lengths[:, None]
     refs = jnp.concatenate([jnp.where(kept, sums / jnp.where(kept, norms, 1.0), 0.0), jnp.eye(6, dtype=dtype)])
     # eigenspaces: runs of eigenvalues (ascending) with gaps within FRAME_TIE
     tie = jnp.diff(evals) <= FRAME_TIE * jnp.max(jnp.abs(evals))
@@ -325,7 +343,7 @@ def start_frame(data: ProgramData, z_eq):
     rank = jnp.sum(same & (jnp.arange(6)[None, :] < jnp.arange(6)[:, None]), axis=1)  # i's place in it
     proj = jnp.einsum("ak,ik,bk->iab", vecs, same.astype(dtype), vecs)  # (6, 6, 6) projectors
 
-    # a margin-gradient sum counts wherever it is not rounding; an axis where it is long
+    # a reference sum counts wherever it is not rounding; an axis where it is long
     spans = jnp.asarray([FRAME_TIE] * 3 + [_FRAME_SPAN] * 6, dtype)
 
     def orthonormalise(carry, ref_span):  # Gram-Schmidt in every column's eigenspace at once
@@ -341,8 +359,8 @@ def start_frame(data: ProgramData, z_eq):
 
     init = (jnp.zeros((6, 6, 6), dtype), jnp.zeros(6, jnp.int32))
     (basis, _), _ = jax.lax.scan(orthonormalise, init, (refs, spans))
-    # snapped to a grid of 2^-FRAME_BITS: a rounding-level change of H (the same grasp
-    # padded with inactive contacts, or in another batch) then leaves the starts bit-identical
+    # snapped to a grid of 2^-FRAME_BITS: a rounding-level change of the stiffness (the same
+    # grasp padded with inactive contacts) then leaves the starts bit-identical
     return jnp.round(basis[jnp.arange(6), rank].T * 2.0**FRAME_BITS) / 2.0**FRAME_BITS
 
 
@@ -358,7 +376,7 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     n = data.params.c.shape[0]
     dtype = data.params.c.dtype
     g = lambda z: constraints(z, data)
-    dirs = jnp.asarray(options.directions(), dtype) @ start_frame(data, z_eq).T
+    dirs = jnp.asarray(options.directions(), dtype) @ start_frame(data).T
     num_dirs = dirs.shape[0]
     # A ray walks until its translation reaches ray_length radii or its rotation reaches
     # ray_length rad, whichever is farther: torsion slip needs a rotation angle that does

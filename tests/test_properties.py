@@ -32,8 +32,8 @@ count, shared with the other test modules). Environment:
 The value is a minimum over a multi-start search. The start directions live in the
 grasp's own frame (:func:`jaxgrasp.programs.start_frame`), so a rotated, mirrored or
 renumbered grasp is searched from the same physical starts and reaches the same local
-minima, up to rounding (and ``eigh``'s choice of basis where the Hessian at the
-equilibrium has equal eigenvalues). A transformed grasp landing on a different (lower or
+minima, up to rounding (the frame's ties and open signs are settled by the world's
+coordinate axes, e.g. in symmetric grasps). A transformed grasp landing on a different (lower or
 higher) local minimum would be a real finding about the start heuristic, not noise: the
 tolerances are tight (relative ``1e-6`` on values and on every boundary energy) and are
 not to be loosened to hide one.
