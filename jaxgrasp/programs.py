@@ -16,10 +16,10 @@ one :func:`jaxgrasp.lanes.solve_lanes` call.
 Boundary problems are non-convex, so each is solved from several starts (the caller
 keeps the lowest converged energy): a start is found by walking from the equilibrium
 along a direction until the boundary's constraint is crossed, then bisecting onto it,
-along the 12 half-axes of the equilibrium's eigenframe plus
-``EvaluateOptions.num_random_starts`` seeded random directions in that frame
-(:func:`start_frame`): the starts turn with the grasp, so a grasp written in a rotated or
-mirrored world frame gets the same starts and the same minima.
+along the 12 half-axes of the grasp's own frame (its modes of motion, :func:`start_frame`)
+plus ``EvaluateOptions.num_random_starts`` seeded random directions in that frame: the
+starts turn with the grasp, so a grasp written in a rotated or mirrored world frame, or
+with its contacts renumbered, gets the same starts and the same minima.
 
 A lane that stalls at a feasible point (status ``NOT_CONVERGED``: typically a released
 fingertip whose slip margin is active at the apex of its friction cone, where no bounded
@@ -273,8 +273,9 @@ def _lane_equalities(n: int, num_starts: int):
 
 
 FRAME_TIE = 1e-6
-"""Eigenvalues of the equilibrium's Hessian closer than this (relative to the largest) are
-taken as one eigenspace by :func:`start_frame`."""
+""":func:`start_frame` takes eigenvalues of the grasp's stiffness closer than this (relative
+to the largest) as one eigenspace, and a reference sum that cancels to within this of its
+terms' lengths as none."""
 _FRAME_SPAN = 0.3  # a reference vector joins an eigenspace's basis if its residual is longer
 FRAME_BITS = 20
 """:func:`start_frame`'s entries are multiples of ``2^-FRAME_BITS`` (about 1e-6)."""
