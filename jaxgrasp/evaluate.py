@@ -48,7 +48,7 @@ from .result import Evaluation
 from .status import NO_BOUNDARY, Constraint, GraspStatus, LaneStatus
 from .units import M_TO_MM, MJ_TO_J
 
-__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_compiled", "limiting_index", "compiled_program", "Boundaries", "Verdict", "TIE_TOL"]
+__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_compiled", "limiting_index", "compiled_program", "Boundaries", "Verdict", "TIE_TOL", "SAME_MINIMUM"]
 
 TIE_TOL = 1e-8
 """Boundary energies within this fraction of the value of the least one are a tie (the
@@ -237,15 +237,31 @@ class Boundaries:
     estimate: Any
 
 
+SAME_MINIMUM = 3e-10
+"""Converged lanes of one boundary problem whose energies above ``U0`` lie within this
+(relative) of the lowest one's reached the same minimum: lanes that do so end 6e-12 to
+1.1e-10 apart (the solver stops at KKT residuals of 1e-10). :func:`best_starts` reports
+the first of them by start, so the reported lane (its energy, pose and steps) does not
+depend on the rounding of the program it ran in (a single grasp, a batch, a grasp padded
+with inactive contacts); the energy is at most this much above the lowest lane's."""
+
+
 def best_starts(progs: Programs, num_starts: int, boundary_tol: float) -> Boundaries:
     """Keep the lowest converged start of each boundary problem (a missed lower point
-    would overstate stability), and classify the problems that no start settled."""
+    would overstate stability; of lanes at the same minimum, within
+    :data:`SAME_MINIMUM`, the first by start), and classify the problems that no start
+    settled."""
     eq, lanes = progs.equilibrium, progs.boundary
     shape = (-1, num_starts)  # (2N, D)
     lane_status = jnp.where(progs.found, lanes.status, LaneStatus.NO_START).reshape(shape)
     lane_energy = jnp.where(lane_status == LaneStatus.CONVERGED, lanes.objective.reshape(shape), jnp.inf)
-    best = jnp.argmin(lane_energy, axis=1)
-    reached = jnp.isfinite(jnp.min(lane_energy, axis=1))
+    low = jnp.min(lane_energy, axis=1, keepdims=True)
+    # the first lane (by start) of those that reached the lowest minimum: which of them
+    # ends lowest is rounding, and would differ between a single, a batched and a padded
+    # program (SAME_MINIMUM)
+    same = lane_energy <= low + SAME_MINIMUM * jnp.maximum(low - eq.objective, 1e-300)
+    best = jnp.argmax(same, axis=1)
+    reached = jnp.isfinite(low[:, 0])
     unreachable = jnp.all((lane_status == LaneStatus.INFEASIBLE) | (lane_status == LaneStatus.NO_START), axis=1)
     status = jnp.where(
         reached,

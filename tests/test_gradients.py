@@ -199,7 +199,13 @@ def test_grad_matches_central_differences(fd, field):
         if not smooth_here(ev, plus, minus, slope):
             continue
         central = (float(plus.value) - float(minus.value)) / (2 * H)
-        err = abs(slope - central) / max(abs(central), 1e-3 * float(value))
+        # Slopes below 1e-2 of the value (per unit of the direction) are compared at that
+        # scale: the value is known to the solver's accuracy (KKT residuals 1e-10, and the
+        # reported lane is the first within evaluate.SAME_MINIMUM = 3e-10 of the lowest), so
+        # it moves by up to ~6e-10 of itself between nearby grasps, 3e-7 of it in a central
+        # difference over 2H. (With 1e-3, a grasp whose exact slope is 0, its force limits
+        # inactive, failed on that noise alone: relative error 1.5e-4 to 2.8e-4.)
+        err = abs(slope - central) / max(abs(central), 1e-2 * float(value))
         errors.append(err)
     errors = np.asarray(errors)
     print(f"{field}: {len(errors)} grasps, max rel err {errors.max():.2e}, median {np.median(errors):.2e}")

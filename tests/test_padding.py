@@ -84,16 +84,8 @@ def padded_results(evaluate_many):
     return cases, res, refs, stacked
 
 
-def _close(a, b, scale, rtol=1e-12):
-    np.testing.assert_allclose(a, b, rtol=rtol, atol=rtol * scale)
-
-
-# A boundary problem's minimum is known to the solver's accuracy, not to rounding: its
-# lanes stop at KKT residuals <= tol = 1e-10 (scaled), and lanes that reach the same
-# minimum end up to ~1e-11 apart in energy; a padded program's different rounding can make
-# a slow lane end elsewhere within that. Measured on 160 seeded random grasps padded to 7
-# contacts: values within 1.0e-14, boundary energies within 3.5e-11 (3 above 1e-12).
-BOUNDARY_RTOL = 1e-10
+def _close(a, b, scale):
+    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * scale)
 
 
 def test_padding_changes_nothing(padded_results):
@@ -115,7 +107,7 @@ def test_padding_changes_nothing(padded_results):
         np.testing.assert_array_equal(got.boundary_status[:, slots], ref.boundary_status, err_msg=where)
         finite = np.isfinite(ref.boundary_energy)
         np.testing.assert_array_equal(np.isfinite(got.boundary_energy[:, slots]), finite, err_msg=where)
-        _close(got.boundary_energy[:, slots][finite], ref.boundary_energy[finite], scale, BOUNDARY_RTOL)
+        _close(got.boundary_energy[:, slots][finite], ref.boundary_energy[finite], scale)
         pad = np.setdiff1d(np.arange(N_PAD), slots)
         assert (got.boundary_status[:, pad] == LaneStatus.NO_START).all(), where
         assert np.isposinf(got.boundary_energy[:, pad]).all(), where
