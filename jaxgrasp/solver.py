@@ -17,7 +17,8 @@ so every step is a descent direction) and a backtracking line search evaluated o
 ladder of step lengths; then ``lam <- max(0, lam - rho g)``, ``nu <- nu + rho h``, and
 ``rho`` grows when the violation does not fall fast enough (on a lane with an equality:
 after an inner solve that finished, i.e. reached its tolerance or no step could lower
-phi, or while the violation is still above :data:`FAR_VIOLATION`). The inner and outer loops are
+phi, or while the violation is still above :data:`FAR_VIOLATION`, or once the lane has
+taken ``patience`` steps). The inner and outer loops are
 flattened into one ``lax.while_loop`` whose body does a multiplier update where the inner
 solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
 need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
@@ -101,6 +102,12 @@ class SolverOptions:
         max_slots: upper bound on those slots. A loop step over a few hundred lanes keeps
             its working set in the CPU caches; over thousands it runs at memory speed and
             costs much more per lane.
+        patience: loop steps after which a lane with an equality grows its penalty
+            whenever its violation stalls, as a lane without one does (before, not after
+            an inner solve cut short at ``max_inner`` while the violation is below
+            :data:`FAR_VIOLATION`; see :func:`_multiplier_update`). A lane still running
+            then is crawling: with the growth it ends converged, or infeasible at
+            ``rho_max``, instead of unsettled at ``max_steps``.
     """
 
     tol: float = 1e-10
@@ -116,6 +123,7 @@ class SolverOptions:
     line_search_steps: int = 16
     slot_fraction: float = 0.0625
     max_slots: int = 128
+    patience: int = 150
 
 
 @jax.tree_util.register_dataclass
@@ -410,8 +418,12 @@ def _multiplier_update(s: SolverState, d: FirstOrder, gphi, o: SolverOptions) ->
     # infeasible program, the penalty must grow either way (only a large one shows a
     # violation that cannot fall); and without an equality (the equilibrium) the rule
     # buys nothing and a degenerate equilibrium (three contacts at their force limits)
-    # ended infeasible under it, so the penalty grows as before.
-    finished = (stat <= _inner_tol(s, o)) | (s.inner > o.max_inner) | ~jnp.any(is_eq)
+    # ended infeasible under it, so the penalty grows as before. Past `patience` steps the
+    # rule ends: a lane of an infeasible boundary problem whose violation swings around
+    # 1e-3 at penalty 1e4, its inner solves cut short, would otherwise stall into the step
+    # budget (robustness set, grasp 312); with the growth it ends infeasible at rho_max,
+    # as the problem's other lanes do. On the 1000 robustness grasps nothing else changed.
+    finished = (stat <= _inner_tol(s, o)) | (s.inner > o.max_inner) | ~jnp.any(is_eq) | (s.steps >= o.patience)
     stalled = (viol > 0.25 * s.prev_viol) & (finished | (viol > FAR_VIOLATION))
     rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
     return dataclasses.replace(

@@ -233,6 +233,26 @@ RELEASED_B = jaxgrasp.Grasp.create(
 )
 RELEASED = {"released_a": (RELEASED_A, 1, 1), "released_b": (RELEASED_B, 1, 0)}
 
+# A boundary problem whose feasible set vanishes (robustness set, seed 0, grasp 312: the
+# equilibrium is on contact 1's slip boundary, so the grasp is unstable). The max-force
+# boundary of contact 0 has no feasible point: Ipopt finds none from any start, and
+# jaxgrasp's lanes creep towards one pose with violations falling to ~1e-7 at the largest
+# penalty, where they end infeasible. Four lanes used to stall at violations ~1e-3 for 200
+# steps at penalty 1e4 (inner solves cut short, so the penalty did not grow) and ended at
+# the step budget: the one unsettled program of the robustness run. Past
+# SolverOptions.patience steps the penalty grows as on a lane without an equality.
+VANISHING_BOUNDARY = jaxgrasp.Grasp.create(
+    positions=[[-0.016773394919399245, -0.03683812070586898, -0.05566400532441733], [-0.003704093678306986, -0.009186129372006404, 0.06810851723684894]],
+    normals=[[-0.3249062836334138, -0.5542187060440739, -0.7663403504490391], [-0.12224105384697419, 0.01539374887211463, 0.9923810544594468]],
+    initial_deformation=[0.0025019083603327113, 0.0019353741248525473],
+    radius=[0.01562704652909288, 0.022498960798288878],
+    young_modulus=[118756.46197775446, 804722.805250135],
+    friction=[0.9018291366623812, 0.3997160819139322],
+    max_force=[12.9798891107532, 17.557640321024277],
+    mass=0.05861332547631046,
+    gravity=[2.4975071329899534, -4.120269997692948, -8.545287196272321],
+)
+
 KNOWN = {
     "stable_zero_a": STABLE_ZERO_A,
     "stable_zero_b": STABLE_ZERO_B,
@@ -246,6 +266,7 @@ KNOWN = {
     "sphere_5_mirrored": SPHERE_5_MIRRORED,
     "released_a": RELEASED_A,
     "released_b": RELEASED_B,
+    "vanishing_boundary": VANISHING_BOUNDARY,
 }
 
 
@@ -253,7 +274,9 @@ KNOWN = {
 def results(evaluate_many, ipopt_reference):
     grasps = {k: v[0] for k, v in CASES.items()} | KNOWN
     if ipopt_reference is not None:
-        ipopt_reference.submit([CASES[k][0] for k in IPOPT_CASES] + [g for g, _, _ in RELEASED.values()])
+        ipopt_reference.submit(
+            [CASES[k][0] for k in IPOPT_CASES] + [g for g, _, _ in RELEASED.values()] + [VANISHING_BOUNDARY]
+        )
     return dict(zip(grasps, evaluate_many(list(grasps.values()))))
 
 
@@ -433,6 +456,22 @@ def test_released_contact_boundary_settles(results, ipopt_reference, case):
     # feasible to 1e-15, so it is never below Ipopt's.
     e, e_ipopt = float(res.boundary_energy[kind, contact]), float(ref["boundary_energy"][kind][contact])
     assert e_ipopt * (1 - 1e-9) <= e <= e_ipopt * (1 + 1e-6), (e, e_ipopt)
+
+
+def test_vanishing_boundary_settles_infeasible(results, ipopt_reference):
+    """Every boundary problem settles; the one without a feasible point is infeasible, as
+    Ipopt finds (no feasible point from any start), and the grasp is unstable."""
+    res = results["vanishing_boundary"]
+    status = np.asarray(res.boundary_status)
+    assert not np.any(status == LaneStatus.NOT_CONVERGED), status
+    assert status[1, 0] == LaneStatus.INFEASIBLE, status
+    assert not np.isfinite(res.boundary_energy[1, 0])
+    assert res.status_name == "unstable"
+    if ipopt_reference is None:
+        pytest.skip("casadi (for the Ipopt reference) is not installed")
+    ref = ipopt_reference.get(VANISHING_BOUNDARY)
+    assert ref["status"] == "unstable"
+    assert np.array_equal(np.isfinite(ref["boundary_energy"]), np.isfinite(res.boundary_energy)), ref["boundary_energy"]
 
 
 def test_host_drivers_settle_only_where_needed(results, monkeypatch):
