@@ -57,7 +57,8 @@ def solve_lanes(
         theta: pytree of per-lane problem data, leading axis ``L`` (may be empty).
         x0: ``(L, n)`` starting points.
         eq_mask: ``(L, m)`` one-hot equality selectors (rows of zeros: no equality).
-        nu0: ``(L,)`` initial equality multipliers.
+        nu0: ``(L,)`` initial equality multipliers (``NaN``: the least-squares estimate
+            at ``x0``, see :func:`~jaxgrasp.solver.init`).
         active: ``(L,)`` bool; inactive lanes end at once with status
             ``LaneStatus.NO_START``.
         options: :class:`~jaxgrasp.solver.SolverOptions`.

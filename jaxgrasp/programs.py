@@ -221,7 +221,8 @@ class Programs:
 
 
 def _ray_start(gk, z0, v, t_grid, crossing_steps):
-    """First crossing of ``gk >= 0`` -> ``< 0`` along ``z0 + t v``; returns (z, found).
+    """First crossing of ``gk >= 0`` -> ``< 0`` along ``z0 + t v``; returns
+    ``(z, found, g0)`` with ``g0 = gk(z0)``, the margin at the ray's origin.
 
     The crossing is bracketed on ``t_grid``, then narrowed by ``crossing_steps`` steps of
     regula falsi with the Illinois modification (the value at an end kept twice in a row
@@ -230,39 +231,55 @@ def _ray_start(gk, z0, v, t_grid, crossing_steps):
     strictly inside the bracket (e.g. a ``NaN`` value at an invalid pose) bisects instead.
     The bracket stays a bracket, ``gk(lo) >= 0`` (or not a number) and ``gk(hi) < 0``,
     and the start is whichever end has the smaller ``|gk|``.
-    """
-    vals = jax.vmap(lambda t: gk(z0 + t * v))(t_grid)
-    crossed = vals < 0.0  # NaN (invalid pose) never counts as a crossing
-    found = jnp.any(crossed)
-    j = jnp.argmax(crossed)
-    lo = jnp.where(j == 0, 0.0, t_grid[jnp.maximum(j - 1, 0)])
-    g_lo = jnp.where(j == 0, gk(z0), vals[jnp.maximum(j - 1, 0)])
-    hi, g_hi = t_grid[j], vals[j]
 
-    def narrow(_, c):
-        lo, hi, g_lo, g_hi, side = c
+    Every value comes from ONE call site of ``gk``, in one loop: the origin, then the grid
+    point by point, then the narrowing steps (``1 + len(t_grid) + crossing_steps``
+    iterations). ``gk`` is the grasp model, and each call site of it is a copy of the
+    model in the compiled program: five sites (the origin, the grid, the bracket's lower
+    end, the narrowing, a Jacobian) made the start search a fifth of a sweep's program
+    and about 1.4 s of its 6-7 s cold start (trace, lowering and XLA; experiments/BENCHMARK.md).
+    """
+    num_grid = t_grid.shape[0]
+    ts = jnp.concatenate([jnp.zeros(1, t_grid.dtype), t_grid])  # the origin, then the grid
+    zero = jnp.zeros((), t_grid.dtype)
+
+    def body(i, c):
+        lo, hi, g_lo, g_hi, side, crossed, g0, g1 = c
+        scanning = i <= num_grid
         secant = hi - g_hi * (hi - lo) / (g_hi - g_lo)
         inside = jnp.isfinite(secant) & (secant > lo) & (secant < hi)
-        t = jnp.where(inside, secant, 0.5 * (lo + hi))
+        t = jnp.where(scanning, ts[jnp.minimum(i, num_grid)], jnp.where(inside, secant, 0.5 * (lo + hi)))
         g_t = gk(z0 + t * v)
-        neg = g_t < 0.0
-        # Illinois: the end that stays for the second time in a row has its value halved
-        g_lo = jnp.where(neg, jnp.where(side < 0, 0.5 * g_lo, g_lo), g_t)
-        g_hi = jnp.where(neg, g_t, jnp.where(side > 0, 0.5 * g_hi, g_hi))
-        return (
-            jnp.where(neg, lo, t),
-            jnp.where(neg, t, hi),
-            g_lo,
-            g_hi,
-            jnp.where(neg, -1, 1),
-        )
+        neg = g_t < 0.0  # NaN (invalid pose) never counts as a crossing
+        # scanning: the bracket's lower end follows the grid up to the first crossing
+        # (the origin's value included), its upper end is that crossing
+        first = scanning & (i > 0) & ~crossed & neg
+        scan_lo = scanning & ~crossed & ~first
+        # narrowing, Illinois: the end that stays for the second time in a row has its
+        # value halved
+        narrowing = ~scanning
+        n_lo = jnp.where(neg, jnp.where(side < 0, 0.5 * g_lo, g_lo), g_t)
+        n_hi = jnp.where(neg, g_t, jnp.where(side > 0, 0.5 * g_hi, g_hi))
+        lo = jnp.where(scan_lo | (narrowing & ~neg), t, lo)
+        g_lo = jnp.where(scan_lo, g_t, jnp.where(narrowing, n_lo, g_lo))
+        hi = jnp.where(first | (narrowing & neg), t, hi)
+        g_hi = jnp.where(first, g_t, jnp.where(narrowing, n_hi, g_hi))
+        side = jnp.where(narrowing, jnp.where(neg, -1, 1), side)
+        g0 = jnp.where(i == 0, g_t, g0)
+        g1 = jnp.where(i == 1, g_t, g1)
+        # no crossing on the grid: the first grid interval, as a bracket that is none
+        last = ~crossed & ~first & (i == num_grid)
+        lo, g_lo = jnp.where(last, 0.0, lo), jnp.where(last, g0, g_lo)
+        hi, g_hi = jnp.where(last, t_grid[0], hi), jnp.where(last, g1, g_hi)
+        return lo, hi, g_lo, g_hi, side, crossed | first, g0, g1
 
-    lo, hi, g_lo, g_hi, _ = jax.lax.fori_loop(0, crossing_steps, narrow, (lo, hi, g_lo, g_hi, jnp.asarray(0)))
+    init = (zero, t_grid[0], zero, zero, jnp.asarray(0), jnp.asarray(False), zero, zero)
+    lo, hi, g_lo, g_hi, _, found, g0, _ = jax.lax.fori_loop(0, 1 + num_grid + crossing_steps, body, init)
     # a secant step can land on the crossing itself (to rounding, on the feasible side):
     # the bracket's other end then closes only by bisection, so the end nearer the
     # boundary is the start
     t = jnp.where(jnp.abs(g_lo) < jnp.abs(g_hi), lo, hi)  # NaN compares false: hi
-    return z0 + t * v, found
+    return z0 + t * v, found, g0
 
 
 def _lane_equalities(n: int, num_starts: int):
@@ -371,8 +388,9 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     ``k`` is the lane's equality row in the ``(3N,)`` constraints (slip rows, then force
     rows), ``z0`` the crossing of that constraint along the lane's direction
     (:meth:`EvaluateOptions.directions` in the :func:`start_frame`) from ``z_eq``
-    (``z_eq`` itself where the equilibrium is already on it), ``nu0`` the least-squares
-    equality multiplier there.
+    (``z_eq`` itself where the equilibrium is already on it), ``nu0`` ``NaN``: the
+    solver starts the equality multiplier at its least-squares estimate there
+    (:func:`~jaxgrasp.solver.init`).
     """
     n = data.params.c.shape[0]
     dtype = data.params.c.dtype
@@ -391,17 +409,12 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     lane_t = jnp.tile(t_max[:, None] * unit_grid, (2 * n, 1))
 
     def start(k, v, t_grid):
-        gk = lambda z: g(z)[k]
-        on_boundary = gk(z_eq) <= 0.0
-        z0, found = _ray_start(gk, z_eq, v, t_grid, options.crossing_steps)
+        z0, found, g_eq = _ray_start(lambda z: g(z)[k], z_eq, v, t_grid, options.crossing_steps)
+        on_boundary = g_eq <= 0.0
         z0 = jnp.where(on_boundary, z_eq, z0)
-        found = found | on_boundary
-        # least-squares estimate of the equality multiplier: grad f + nu grad h = 0
-        # (both gradients from one forward-mode pass, as the solver takes them)
-        gf, jac = jax.jacfwd(objective_and_constraints)(z0, data)
-        gh = jac[k]
-        nu0 = -jnp.dot(gf, gh) / jnp.maximum(jnp.dot(gh, gh), 1e-300)
-        return z0, found, nu0
+        # the equality multiplier: NaN, the solver's least-squares estimate at the start
+        # (from its first step's derivatives, so that no other copy of them is compiled)
+        return z0, found | on_boundary, jnp.asarray(jnp.nan, dtype)
 
     z0s, found, nu0s = jax.vmap(start)(lane_k, lane_v, lane_t)
     return lane_k, z0s, found, nu0s

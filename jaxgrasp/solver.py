@@ -18,7 +18,7 @@ ladder of step lengths; then ``lam <- max(0, lam - rho g)``, ``nu <- nu + rho h`
 ``rho`` grows when the violation does not fall fast enough (on a lane with an equality:
 after an inner solve that finished, i.e. reached its tolerance or no step could lower
 phi, or while the violation is still above :data:`FAR_VIOLATION`, or once the lane has
-taken ``patience`` steps). The inner and outer loops are
+taken ``grow_penalty_after`` steps). The inner and outer loops are
 flattened into one ``lax.while_loop`` whose body does a multiplier update where the inner
 solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
 need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
@@ -102,8 +102,8 @@ class SolverOptions:
         max_slots: upper bound on those slots. A loop step over a few hundred lanes keeps
             its working set in the CPU caches; over thousands it runs at memory speed and
             costs much more per lane.
-        patience: loop steps after which a lane with an equality grows its penalty
-            whenever its violation stalls, as a lane without one does (before, not after
+        grow_penalty_after: loop steps after which a lane with an equality grows its
+            penalty whenever its violation stalls, as a lane without one does (before, not after
             an inner solve cut short at ``max_inner`` while the violation is below
             :data:`FAR_VIOLATION`; see :func:`_multiplier_update`). A lane still running
             then is crawling: with the growth it ends converged, or infeasible at
@@ -123,7 +123,7 @@ class SolverOptions:
     line_search_steps: int = 16
     slot_fraction: float = 0.0625
     max_slots: int = 128
-    patience: int = 150
+    grow_penalty_after: int = 100
 
 
 @jax.tree_util.register_dataclass
@@ -287,7 +287,7 @@ def init(x0, eq_mask, nu0, active, o: SolverOptions) -> SolverState:
     return SolverState(
         x=x0,
         lam=jnp.zeros(eq_mask.shape, dtype),
-        nu=jnp.asarray(nu0, dtype),
+        nu=jnp.where(active, jnp.asarray(nu0, dtype), 0.0),  # NaN: estimated at the first step
         rho=jnp.asarray(o.rho0, dtype),
         eq_mask=eq_mask,
         inner=jnp.asarray(0, jnp.int32),
@@ -418,12 +418,14 @@ def _multiplier_update(s: SolverState, d: FirstOrder, gphi, o: SolverOptions) ->
     # infeasible program, the penalty must grow either way (only a large one shows a
     # violation that cannot fall); and without an equality (the equilibrium) the rule
     # buys nothing and a degenerate equilibrium (three contacts at their force limits)
-    # ended infeasible under it, so the penalty grows as before. Past `patience` steps the
-    # rule ends: a lane of an infeasible boundary problem whose violation swings around
-    # 1e-3 at penalty 1e4, its inner solves cut short, would otherwise stall into the step
-    # budget (robustness set, grasp 312); with the growth it ends infeasible at rho_max,
-    # as the problem's other lanes do. On the 1000 robustness grasps nothing else changed.
-    finished = (stat <= _inner_tol(s, o)) | (s.inner > o.max_inner) | ~jnp.any(is_eq) | (s.steps >= o.patience)
+    # ended infeasible under it, so the penalty grows as before. Past grow_penalty_after
+    # steps the rule ends: a lane of an infeasible boundary problem whose violation swings
+    # around 1e-3 at penalty 1e4, its inner solves cut short, would otherwise stall into
+    # the step budget (robustness set, grasp 312); with the growth it ends infeasible at
+    # rho_max, as the problem's other lanes do, some 100-150 steps later (so not 150: a
+    # lane then still ran out). On the 1000 robustness grasps nothing else changed.
+    late = s.steps >= o.grow_penalty_after
+    finished = (stat <= _inner_tol(s, o)) | (s.inner > o.max_inner) | ~jnp.any(is_eq) | late
     stalled = (viol > 0.25 * s.prev_viol) & (finished | (viol > FAR_VIOLATION))
     rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
     return dataclasses.replace(
@@ -458,6 +460,15 @@ def _inner_tol(s: SolverState, o: SolverOptions):
     return jnp.maximum(tol, o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
 
 
+def _initial_multiplier(s: SolverState, d: FirstOrder) -> SolverState:
+    """``s`` with a ``NaN`` equality multiplier before the first step (``nu0`` NaN in
+    :func:`init`) replaced by its least-squares estimate at ``s.x``: the ``nu`` that best
+    solves ``grad f + nu grad h = 0`` (``d``: the problem there; 0 without an equality)."""
+    grad_h = s.eq_mask @ d.jac
+    estimate = -jnp.dot(d.grad_f, grad_h) / jnp.maximum(jnp.dot(grad_h, grad_h), 1e-300)
+    return dataclasses.replace(s, nu=jnp.where(jnp.isnan(s.nu) & (s.steps == 0), estimate, s.nu))
+
+
 def _select(pred, a, b):
     return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
 
@@ -467,7 +478,8 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
     is done, then, where the (updated) inner solve is not, the Newton direction on phi.
 
     Stages, in order: :func:`_first_order` (the problem and its Jacobian at ``s.x``,
-    shared by every later stage: the update does not move ``x``); :func:`_inner_done`;
+    shared by every later stage: the update does not move ``x``);
+    :func:`_initial_multiplier` (at the first step); :func:`_inner_done`;
     :func:`_multiplier_update` (status from :func:`_lane_status`); :func:`_inner_done`
     again; :func:`_phi_hessian` and :func:`_newton_direction`.
     """
@@ -478,6 +490,7 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
     problem = as_problem(problem)
     is_running = running(s, o)
     d = _first_order(problem, s.x)
+    s = _initial_multiplier(s, d)
     gphi, inner_done = _inner_done(s, d, o)
     update = is_running & inner_done
     s_upd = _multiplier_update(s, d, gphi, o)
@@ -554,7 +567,9 @@ def solve(
             so that the two share their work), differentiated by autodiff.
         x0: ``(n,)`` starting point.
         eq_mask: ``(m,)`` one-hot vector selecting the equality constraint, or zeros.
-        nu0: initial equality multiplier.
+        nu0: initial equality multiplier, or ``NaN``: its least-squares estimate at
+            ``x0`` (``grad f + nu0 grad h = 0`` in the least-squares sense), computed at
+            the lane's first step from the derivatives that step takes anyway.
         options: :class:`SolverOptions`.
         active: ``False`` skips the lane (it ends at once with status ``LaneStatus.NO_START``).
     """

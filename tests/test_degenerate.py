@@ -240,7 +240,7 @@ RELEASED = {"released_a": (RELEASED_A, 1, 1), "released_b": (RELEASED_B, 1, 0)}
 # penalty, where they end infeasible. Four lanes used to stall at violations ~1e-3 for 200
 # steps at penalty 1e4 (inner solves cut short, so the penalty did not grow) and ended at
 # the step budget: the one unsettled program of the robustness run. Past
-# SolverOptions.patience steps the penalty grows as on a lane without an equality.
+# SolverOptions.grow_penalty_after steps the penalty grows as on a lane without an equality.
 VANISHING_BOUNDARY = jaxgrasp.Grasp.create(
     positions=[[-0.016773394919399245, -0.03683812070586898, -0.05566400532441733], [-0.003704093678306986, -0.009186129372006404, 0.06810851723684894]],
     normals=[[-0.3249062836334138, -0.5542187060440739, -0.7663403504490391], [-0.12224105384697419, 0.01539374887211463, 0.9923810544594468]],

@@ -25,7 +25,8 @@ GRID = 2.0 ** (-(47 - jnp.arange(48.0)) / 4.0)  # the default ray grid, t_max = 
 )
 def test_crossing_is_found_to_rounding(margin, t_star):
     v = jnp.asarray([1.0, 1.0, 0.0, 0.0, 0.0, 0.0]) if "dot" in margin.__code__.co_names else jnp.eye(6)[0]
-    z, found = jax.jit(lambda: _ray_start(margin, jnp.zeros(6), v, GRID, 12))()
+    z, found, g0 = jax.jit(lambda: _ray_start(margin, jnp.zeros(6), v, GRID, 12))()
+    assert float(g0) == pytest.approx(float(margin(jnp.zeros(6))), rel=1e-15)  # the origin's margin
     assert bool(found)
     t = float(z[0])
     assert t == pytest.approx(t_star, rel=1e-12, abs=0)
@@ -35,8 +36,8 @@ def test_crossing_is_found_to_rounding(margin, t_star):
 def test_no_crossing_and_nan_values():
     """No crossing on the ray: not found. A NaN region (an invalid pose) before the
     crossing is never taken for it, and a NaN inside the bracket makes the step bisect."""
-    z, found = _ray_start(lambda z: 1.0 + z[0], jnp.zeros(6), jnp.eye(6)[0], GRID, 12)
+    z, found, _ = _ray_start(lambda z: 1.0 + z[0], jnp.zeros(6), jnp.eye(6)[0], GRID, 12)
     assert not bool(found)
     nan_inside = lambda z: jnp.where((z[0] > 0.25) & (z[0] < 0.29), jnp.nan, 0.3 - z[0])
-    z, found = _ray_start(nan_inside, jnp.zeros(6), jnp.eye(6)[0], GRID, 40)
+    z, found, _ = _ray_start(nan_inside, jnp.zeros(6), jnp.eye(6)[0], GRID, 40)
     assert bool(found) and float(z[0]) == pytest.approx(0.3, rel=1e-12)

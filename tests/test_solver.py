@@ -319,3 +319,40 @@ def test_penalty_growth_after_a_stalled_violation(viol, stationarity, inner, gro
     d_ineq = dataclasses.replace(d, gx=jnp.array([1.0, -viol, 1.0]))
     new = _multiplier_update(s_ineq, d_ineq, jnp.full(3, stationarity * float(_inner_tol(s, o))), o)
     assert float(new.rho) == o.rho0 * o.rho_growth
+
+
+def test_penalty_grows_after_grow_penalty_after_steps():
+    """A lane with an equality whose inner solve was cut short near feasibility keeps its
+    penalty, until it has taken ``grow_penalty_after`` steps: from then on a stalled
+    violation raises it (a crawling lane ends converged or infeasible, not at the budget)."""
+    from jaxgrasp.solver import FirstOrder, _inner_tol, _multiplier_update, init
+
+    o = SolverOptions()
+    s = init(jnp.zeros(3), jnp.array([0.0, 1.0, 0.0]), 0.5, True, o)
+    s = dataclasses.replace(s, prev_viol=jnp.asarray(9e-4), inner=jnp.asarray(o.max_inner, jnp.int32))
+    d = FirstOrder(fx=jnp.asarray(0.0), gx=jnp.array([1.0, 9e-4, 1.0]), grad_f=jnp.zeros(3), jac=jnp.eye(3))
+    gphi = jnp.full(3, 10.0 * float(_inner_tol(s, o)))
+    for steps, grows in [(0, False), (o.grow_penalty_after - 1, False), (o.grow_penalty_after, True)]:
+        new = _multiplier_update(dataclasses.replace(s, steps=jnp.asarray(steps, jnp.int32)), d, gphi, o)
+        assert float(new.rho) == (o.rho0 * o.rho_growth if grows else o.rho0), steps
+
+
+def test_nan_nu0_is_the_least_squares_multiplier():
+    """``nu0 = NaN``: the equality multiplier starts at its least-squares estimate at x0
+    (``grad f + nu grad h = 0``; here ``f = |x - a|^2 / 2``, ``h = b . x - 1``, x0 = 0, so
+    ``nu = a . b / |b|^2``), and the lane is the one started there by hand. An inactive
+    lane's multiplier is 0, not NaN."""
+    from jaxgrasp.solver import init, propose
+
+    a, b = jnp.array([1.0, -2.0, 0.5]), jnp.array([0.3, 1.0, -0.7])
+    fg = lambda x: (0.5 * _sq(x - a), jnp.stack([x[0] + 4.0, jnp.dot(b, x) - 1.0, 4.0 - x[2]]))
+    mask = jnp.array([0.0, 1.0, 0.0])
+    o = SolverOptions()
+    nu_ls = float(jnp.dot(a, b) / _sq(b))
+    t = propose(fg, init(jnp.zeros(3), mask, jnp.nan, True, o), o)
+    assert float(t.state.nu) == pytest.approx(nu_ls, rel=1e-14)
+    got, want = solve(fg, jnp.zeros(3), mask, jnp.nan), solve(fg, jnp.zeros(3), mask, nu_ls)
+    assert int(got.status) == LaneStatus.CONVERGED
+    _assert_same_lanes(got, want)
+    off = solve(fg, jnp.zeros(3), mask, jnp.nan, active=False)
+    assert float(off.nu) == 0.0
