@@ -14,8 +14,9 @@ Scenes:
 * ``cube``: the paper's grid, E = 2e5..1e6 Pa (9) x dr = 1..5 mm (41), m = 0 -> 369 grasps;
 * ``prism``: E = 2e5..1e6 Pa (5) x dr = 1..5 mm (9) x m in {0, 0.1, 0.2} kg -> 135 grasps.
 
-jaxgrasp: ``solve_programs(g, opts, settle=False)`` batched as ``evaluate_batch`` and
-``sweep`` batch it (:func:`jaxgrasp.batch.over_devices`: ``jit(shard_map(vmap(...)))``,
+jaxgrasp: ``programs_of_batch(p, opts, settle=False)`` (what ``solve_programs`` solves
+for one grasp) batched as ``evaluate_batch`` and ``sweep`` batch it
+(:func:`jaxgrasp.batch.over_devices`: ``jit(shard_map(...))``,
 the batch split over every JAX device, one work queue per device; ``import jaxgrasp``
 creates one CPU device per core, see :mod:`jaxgrasp.cores`; ``JAXGRASP_CPU_DEVICES=1``
 measures one) on the stacked batch, padded to a multiple of the device count by
@@ -49,7 +50,7 @@ Agreement (on the Ipopt sample):
   equilibrium energy; unstable where an equilibrium slip/force margin is <= 1e-8, as in
   jaxgrasp), as a relative difference, where both call the grasp stable.
 
-Also recorded: the first-call compile time of ``evaluate_traced(.., settle=False)``, batched the same way, on
+Also recorded: the first-call compile time of the engine's ``evaluate_batch_traced(.., settle=False)``, batched the same way, on
 the cube's sweep grid (369 grasps).
 
     python experiments/benchmark.py [--quick] [--ipopt-sample K] [--repeats R] [--json PATH]
@@ -83,8 +84,9 @@ from jaxgrasp import result as R  # noqa: E402
 from jaxgrasp.status import LaneStatus  # noqa: E402
 from jaxgrasp import EvaluateOptions
 from jaxgrasp.batch import batch_sharding, over_devices  # noqa: E402
-from jaxgrasp.evaluate import evaluate_traced  # noqa: E402
-from jaxgrasp.programs import needs_settling, solve_programs  # noqa: E402
+from jaxgrasp.evaluate import evaluate_batch_traced  # noqa: E402
+from jaxgrasp.model import model_params  # noqa: E402
+from jaxgrasp.programs import needs_settling, programs_of_batch  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
 from tests.ipopt_reference import FEAS_TOL, _Model  # noqa: E402
 
@@ -143,7 +145,7 @@ def timed_call(fn):
 
 
 def compile_aot(fn, batch):
-    """``fn`` of one grasp, batched as jaxgrasp's engine batches it
+    """``fn`` of a batch of grasps, run as jaxgrasp's engine runs it
     (:func:`jaxgrasp.batch.over_devices`: the batch split over every device, each running
     its own work queue), compiled ahead of time for ``batch``, which is padded by
     repeating its last grasp to a multiple of the device count and placed on the devices
@@ -363,7 +365,7 @@ def run_scene(name, params, grasps, opts, args):
     # --- jaxgrasp solve_programs: compile + first run. The program without the settling
     # stage: what evaluate and evaluate_batch run first; the settling program runs only on
     # grasps with an unsettled boundary problem (counted below: none on these grids).
-    fn = lambda g: solve_programs(g, opts, settle=False)  # noqa: E731
+    fn = lambda gs: programs_of_batch(jax.vmap(model_params)(gs), opts, settle=False)  # noqa: E731
     la = load()
     compiled, t_compile = compile_aot(fn, batch)
     progs, t_first, _ = timed_call(compiled)
@@ -379,7 +381,7 @@ def run_scene(name, params, grasps, opts, args):
     log(f"{name}: jaxgrasp compile {t_compile:.1f} s, first run {t_first:.2f} s, {programs} programs")
 
     # --- jaxgrasp.evaluate batch (values for the comparison; compile time recorded)
-    efn = lambda g: evaluate_traced(g, opts, settle=False)  # noqa: E731
+    efn = lambda gs: evaluate_batch_traced(gs, opts, settle=False)  # noqa: E731
     ecompiled, te_compile = compile_aot(efn, batch)
     evals, te_first, _ = timed_call(ecompiled)
     evals = to_numpy(evals, len(grasps))
@@ -545,7 +547,7 @@ def markdown_tables(results: dict) -> str:
                      f"solve the ratio would be {i['median_solve_ms'] / amort:.1f}.")
     ev = results.get("evaluate_compile_cube_grid")
     if ev:
-        notes.append(f"`evaluate_traced(g, settle=False)` batched over the devices on the cube sweep grid ({ev['grasps']} grasps): "
+        notes.append(f"`evaluate_batch_traced(g, settle=False)` over the devices on the cube sweep grid ({ev['grasps']} grasps): "
                      f"compile {ev['compile_s']:.1f} s, first call {ev['first_call_s']:.1f} s "
                      f"(compile + first run), second call {ev['second_call_s']:.2f} s.")
     notes.append(f"Load average (1, 5, 15 min): {results['load_start']} at start, {results['load_end']} at end, "

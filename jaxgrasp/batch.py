@@ -9,8 +9,9 @@
     res.rank()[:10]                          # indices of the best grasps
 
 :func:`evaluate_batch` and :func:`jaxgrasp.sweep` share this path: the grasps of a chunk
-are lanes of ``jax.jit(jax.vmap(evaluate))`` (from :func:`compiled_evaluator`, memoised
-and stored by :mod:`jaxgrasp.cache`), split along the batch over all devices, each
+are evaluated by one program, :func:`jaxgrasp.evaluate.evaluate_batch_traced` (equal
+to ``jax.vmap(evaluate)`` lane by lane; from :func:`compiled_evaluator`, memoised and
+stored by :mod:`jaxgrasp.cache`), split along the batch over all devices, each
 device running its own work queue on its slice (:func:`over_devices`; on a CPU
 ``import jaxgrasp`` makes one device per core, :mod:`jaxgrasp.cores`); the
 last chunk is padded to the same size, so a set compiles once per chunk size, number of
@@ -32,7 +33,7 @@ from . import cache
 from .batch_result import BatchResult, mark_invalid
 from .dataset import GraspSet
 from .evaluate import EvaluateOptions
-from .evaluate import evaluate_traced as _evaluate_one
+from .evaluate import evaluate_batch_traced
 from .fields import NAMES
 from .grasp import Grasp, stack
 from .options import COMPILER_OPTIONS
@@ -100,11 +101,11 @@ def _batched_fn(options: EvaluateOptions, sharding, masked: bool = False, settle
     # arrays in, arrays out (no Grasp pytree): the program store keeps flat programs
     names = grasp_fields(masked)
 
-    def one(*fields):
-        r = _evaluate_one(Grasp(**dict(zip(names, fields))), options, settle)
+    def many(*fields):
+        r = evaluate_batch_traced(Grasp(**dict(zip(names, fields))), options, settle)
         return tuple(getattr(r, f) for f in RESULT_FIELDS)
 
-    return over_devices(one, sharding)
+    return over_devices(many, sharding)
 
 
 def batch_sharding(devices=None) -> NamedSharding:
@@ -115,16 +116,17 @@ def batch_sharding(devices=None) -> NamedSharding:
 
 
 def over_devices(fn: Callable, sharding: NamedSharding) -> Callable:
-    """``jax.jit(jax.vmap(fn))`` with its batch split over the devices of ``sharding``
+    """``jax.jit(fn)`` of a function of a batch (leading axis on every argument and
+    result), with the batch split over the devices of ``sharding``
     (:func:`batch_sharding`).
 
     Each device evaluates its own slice of the batch (``jax.shard_map``), so each runs
     its own work queue (:func:`jaxgrasp.lanes.solve_lanes`) on its own core: the lanes
     are independent, nothing is exchanged. (Without ``shard_map`` XLA would partition
-    the one queue that ``vmap`` folds the batch into, and gather it on every device.)
+    the one queue that the batch is folded into, and gather it on every device.)
     """
     # check_vma=False: the solver's loops carry values that are not per-device typed
-    split = jax.shard_map(jax.vmap(fn), mesh=sharding.mesh, in_specs=P("batch"), out_specs=P("batch"),
+    split = jax.shard_map(fn, mesh=sharding.mesh, in_specs=P("batch"), out_specs=P("batch"),
                           check_vma=False)
     return jax.jit(split, in_shardings=sharding, out_shardings=sharding, compiler_options=COMPILER_OPTIONS)
 

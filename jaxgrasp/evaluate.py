@@ -42,13 +42,13 @@ from .envelope import envelope_energy, soft_minimum
 from .grasp import Grasp
 from .model import ModelParams, model_params
 from .options import COMPILER_OPTIONS, ONE_GRASP_CPU_OPTIONS, EvaluateOptions
-from .programs import Programs, constraints, needs_settling, program_data, programs_of, to_pose
+from .programs import Programs, constraints, needs_settling, program_data, programs_of, programs_of_batch, to_pose
 from .result import FIELDS as RESULT_FIELDS
 from .result import Evaluation
 from .status import NO_BOUNDARY, Constraint, GraspStatus, LaneStatus
 from .units import M_TO_MM, MJ_TO_J
 
-__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_compiled", "limiting_index", "compiled_program", "Boundaries", "Verdict", "TIE_TOL", "SAME_MINIMUM"]
+__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_batch_traced", "evaluate_compiled", "evaluation_of", "limiting_index", "compiled_program", "Boundaries", "Verdict", "TIE_TOL", "SAME_MINIMUM"]
 
 TIE_TOL = 1e-8
 """Boundary energies within this fraction of the value of the least one are a tie (the
@@ -199,8 +199,24 @@ def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions, settl
     ``options.smooth_min_temperature`` is ignored.
     """
     p = model_params(grasp)
+    return evaluation_of(p, programs_of(p, options, settle), temperature, options)
+
+
+def evaluate_batch_traced(grasps: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:
+    """:func:`evaluate_traced` of a batch of grasps (leading axis ``B`` on every field,
+    ``active`` included where given), the result with a leading ``B``: what the batch
+    engine compiles. Equal to ``jax.vmap`` of :func:`evaluate_traced`, lane by lane, but
+    the solver's work queue is traced once (:func:`~jaxgrasp.programs.programs_of_batch`)."""
+    options, temperature = _split_temperature(options)
+    p = jax.vmap(model_params)(grasps)
+    progs = programs_of_batch(p, options, settle)
+    return jax.vmap(lambda p, progs: evaluation_of(p, progs, temperature, options))(p, progs)
+
+
+def evaluation_of(p: ModelParams, progs: Programs, temperature, options: EvaluateOptions) -> Evaluation:
+    """Steps 2-6 of :func:`evaluate` for one grasp ``p`` whose programs ``progs`` are
+    solved (``temperature``: mJ, ``0`` for the hard minimum)."""
     temperature = jnp.asarray(temperature, p.c.dtype)  # float32 grasps stay float32
-    progs = programs_of(p, options, settle)
     best = best_starts(progs, options.num_starts, options.boundary_tol)
     verdict = grasp_status(p, progs, best, options.boundary_tol)
     u_eq, u_b, v_eq, v_b = energies(p, progs.equilibrium, best, verdict.keep_value)

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 from . import solver
 from .solver import SolverOptions, SolverResult
 
-__all__ = ["solve_lanes"]
+__all__ = ["solve_lanes", "solve_lane_batches"]
 
 
 def solve_lanes(
@@ -73,21 +73,42 @@ def solve_lanes(
 
     @run.def_vmap
     def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active):
-        num_lanes = x0.shape[1] if in_batched[1] else x0.shape[0]
-
-        def flat(a, batched):
+        def batched(a, is_batched):
             a = jnp.asarray(a)
-            if not batched:
-                a = jnp.broadcast_to(a, (axis_size,) + a.shape)
-            return a.reshape((axis_size * num_lanes,) + a.shape[2:])
+            return a if is_batched else jnp.broadcast_to(a, (axis_size,) + a.shape)
 
-        args = (theta, x0, eq_mask, nu0, active)
-        flat_args = jax.tree_util.tree_map(flat, args, tuple(in_batched))
-        out = run(*flat_args)  # a nested vmap folds into this call in turn
-        out = jax.tree_util.tree_map(lambda a: a.reshape((axis_size, num_lanes) + a.shape[1:]), out)
+        args = jax.tree_util.tree_map(batched, (theta, x0, eq_mask, nu0, active), tuple(in_batched))
+        out = solve_lane_batches(problem, *args, options)  # a nested vmap folds into it in turn
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active))
+
+
+def solve_lane_batches(
+    problem: Callable,
+    theta,
+    x0,
+    eq_mask,
+    nu0,
+    active,
+    options: SolverOptions = SolverOptions(),
+) -> SolverResult:
+    """:func:`solve_lanes` of ``B`` batches of ``L`` lanes (every argument with leading
+    axes ``(B, L)``), all ``B * L`` lanes in one queue; the result has leading axes
+    ``(B, L)``.
+
+    This is what :func:`solve_lanes` does under ``jax.vmap`` (its batching rule calls it),
+    called directly: a caller that holds a batch, such as
+    :func:`jaxgrasp.programs.programs_of_batch`, gets the same lanes while the queue is
+    traced once, where ``vmap`` traces it once for one batch (``custom_vmap`` builds a
+    jaxpr of the function it wraps) and again folded.
+    """
+    x0 = jnp.asarray(x0)
+    b, num_lanes = x0.shape[:2]
+    flat = lambda a: jnp.asarray(a).reshape((b * num_lanes,) + jnp.shape(a)[2:])
+    out = solve_lanes(problem, jax.tree_util.tree_map(flat, theta), flat(x0), flat(eq_mask), flat(nu0),
+                      flat(active), options)
+    return jax.tree_util.tree_map(lambda a: a.reshape((b, num_lanes) + a.shape[1:]), out)
 
 
 class _Queue(NamedTuple):

@@ -40,7 +40,7 @@ import numpy as np
 
 from .dense import solve as dense_solve
 from .grasp import Grasp
-from .lanes import solve_lanes
+from .lanes import solve_lane_batches
 from .model import (
     ModelParams,
     constraint_margins,
@@ -73,6 +73,7 @@ __all__ = [
     "Programs",
     "solve_programs",
     "programs_of",
+    "programs_of_batch",
     "start_frame",
     "FRAME_TIE",
     "FRAME_BITS",
@@ -433,16 +434,30 @@ def _equilibrium_lanes(data: ProgramData, num_lanes: int):
 
 
 def programs_of(p: ModelParams, options: EvaluateOptions, settle: bool = True) -> Programs:
-    """Solve every program of the grasp ``p`` (traceable; the solver sees no derivative).
+    """Solve every program of the grasp ``p`` (traceable; the solver sees no derivative):
+    :func:`programs_of_batch` of a batch of one."""
+    one = jax.tree_util.tree_map(lambda a: jnp.asarray(a)[None], p)
+    return jax.tree_util.tree_map(lambda a: a[0], programs_of_batch(one, options, settle))
 
-    Both stages run through ONE :func:`~jaxgrasp.lanes.solve_lanes` call site, inside a
-    two-iteration loop: iteration 0 solves the equilibrium problem (lane 0 of the lane
-    axis, the other lanes inactive), iteration 1 the boundary problems from starts found
-    around that equilibrium. The solver's loop is then compiled once rather than twice
-    (the equilibrium used to have a ``while_loop`` of its own), which halves the program
-    the solver contributes; each lane's result is what :func:`~jaxgrasp.solver.solve`
-    gives it. The stage is the loop counter, not batched data, so under ``vmap`` the
-    ``lax.cond`` choosing the lanes stays a branch.
+
+def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = True) -> Programs:
+    """Solve every program of a batch of grasps ``p`` (leading axis ``B`` on every field;
+    traceable; the solver sees no derivative). Returns :class:`Programs` with a leading
+    ``B``.
+
+    Both stages run through ONE :func:`~jaxgrasp.lanes.solve_lane_batches` call site,
+    inside a two-iteration loop: iteration 0 solves the equilibrium problem (lane 0 of each
+    grasp's lane axis, the other lanes inactive), iteration 1 the boundary problems from
+    starts found around that equilibrium. The solver's loop is then compiled once rather
+    than twice (the equilibrium used to have a ``while_loop`` of its own), which halves
+    the program the solver contributes; the lanes of every grasp share one work queue,
+    and each lane's result is what :func:`~jaxgrasp.solver.solve` gives it. Everything
+    else (starts, the settling stage) is ``jax.vmap`` of the one-grasp functions. Taking
+    the batch itself, rather than being vmapped over grasps, traces the queue once: under
+    ``vmap`` it is traced for one grasp and again folded (``custom_vmap``), 0.3-0.4 s of
+    a sweep's cold start (experiments/BENCHMARK.md). The stage is the loop counter, not
+    batched data, so under a caller's ``vmap`` the ``lax.cond`` choosing the lanes stays a
+    branch.
 
     With ``settle`` (static), :func:`settle_stalled` then certifies stalled boundary
     lanes. Without it the program is smaller and faster, and equal wherever no boundary
@@ -450,16 +465,16 @@ def programs_of(p: ModelParams, options: EvaluateOptions, settle: bool = True) -
     (:func:`jaxgrasp.evaluate` of a concrete grasp, the batch engine) run that program
     first and the settling one only on the grasps that need it.
     """
-    data = program_data(jax.lax.stop_gradient(p))
-    n = data.params.c.shape[0]
+    data = jax.vmap(program_data)(jax.lax.stop_gradient(p))
+    b, n = data.params.c.shape[:2]
     dtype = data.params.c.dtype
     sopt = options.solver
     num_lanes = 2 * n * options.num_starts
-    # Every lane gets this grasp's data as its theta (not closed over): under a vmap
-    # over grasps, solve_lanes then runs the lanes of all grasps in one work queue.
-    theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (num_lanes,) + jnp.shape(a)), data)
+    # Every lane gets its grasp's data as its theta (not closed over): the queue then runs
+    # the lanes of all grasps (and, under a caller's vmap, of all batches) together.
+    theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a[:, None], (b, num_lanes) + a.shape[1:]), data)
 
-    def boundary_lanes(eq: SolverResult):
+    def boundary_lanes(data: ProgramData, eq: SolverResult):
         lane_k, z0s, found, nu0s = _boundary_starts(data, eq.x, options)
         # Without a converged equilibrium there is nothing to start from: skip every lane;
         # an inactive contact has no boundary problems.
@@ -469,14 +484,17 @@ def programs_of(p: ModelParams, options: EvaluateOptions, settle: bool = True) -
     def stage(i, carry):
         eq, _, _ = carry
         z0s, masks, nu0s, active = jax.lax.cond(
-            i == 0, lambda eq: _equilibrium_lanes(data, num_lanes), boundary_lanes, eq
+            i == 0,
+            lambda eq: jax.vmap(lambda d: _equilibrium_lanes(d, num_lanes))(data),
+            lambda eq: jax.vmap(boundary_lanes)(data, eq),
+            eq,
         )
-        res = solve_lanes(lane_problem, theta, z0s, masks, nu0s, active, sopt)
-        eq = jax.lax.cond(i == 0, lambda: jax.tree_util.tree_map(lambda a: a[0], res), lambda: eq)
+        res = solve_lane_batches(lane_problem, theta, z0s, masks, nu0s, active, sopt)
+        eq = jax.lax.cond(i == 0, lambda: jax.tree_util.tree_map(lambda a: a[:, 0], res), lambda: eq)
         return eq, res, (z0s, active)
 
-    # the carry: one lane's result, every lane's result (zeros until solved)
-    zero = lambda shape, dt=dtype: jnp.zeros((num_lanes,) + shape, dt)
+    # the carry: each grasp's equilibrium lane, every lane's result (zeros until solved)
+    zero = lambda shape, dt=dtype: jnp.zeros((b, num_lanes) + shape, dt)
     lanes0 = SolverResult(
         x=zero((6,)),
         lam=zero((3 * n,)),
@@ -488,26 +506,27 @@ def programs_of(p: ModelParams, options: EvaluateOptions, settle: bool = True) -
         complementarity=zero(()),
         steps=zero((), jnp.int32),
     )
-    eq0 = jax.tree_util.tree_map(lambda a: a[0], lanes0)
-    carry0 = (eq0, lanes0, (jnp.zeros((num_lanes, 6), dtype), jnp.zeros(num_lanes, bool)))
-    # The carry's zeros, made to depend on the grasp (jnp.where of a flag computed from
-    # every field of its data; the values are the same zeros): under a vmap over grasps,
-    # whichever fields it maps, the carry is then batched from the start. Zeros that are
-    # not would be batched only after the first stage, and JAX's loop batching would trace
-    # the body (the whole solver) once more to find that out: 128 grasps over 2 devices
-    # traced in 2.6 s instead of 4.0-4.5 s, with the same results (experiments/BENCHMARK.md).
+    eq0 = jax.tree_util.tree_map(lambda a: a[:, 0], lanes0)
+    carry0 = (eq0, lanes0, (jnp.zeros((b, num_lanes, 6), dtype), jnp.zeros((b, num_lanes), bool)))
+    # The carry's zeros, made to depend on the grasps (jnp.where of a flag computed from
+    # every field of their data; the values are the same zeros): under a caller's vmap over
+    # grasps, whichever fields it maps, the carry is then batched from the start. Zeros
+    # that are not would be batched only after the first stage, and JAX's loop batching
+    # would trace the body (the whole solver) once more to find that out: 128 grasps over
+    # 2 devices traced in 2.6 s instead of 4.0-4.5 s, with the same results
+    # (experiments/BENCHMARK.md).
     per_grasp = jnp.isnan(sum(jnp.sum(jnp.asarray(a, dtype)) for a in jax.tree_util.tree_leaves(data)))
     carry0 = jax.tree_util.tree_map(lambda a: jnp.where(per_grasp, a, a), carry0)
     eq, lanes, (z0s, found) = jax.lax.fori_loop(0, 2, stage, carry0)
     lane_k = _lane_equalities(n, options.num_starts)
     if settle:
-        lanes = settle_stalled(data, lanes, lane_k, found, options.num_starts, sopt)
+        lanes = jax.vmap(lambda d, l, f: settle_stalled(d, l, lane_k, f, options.num_starts, sopt))(data, lanes, found)
     return Programs(
         equilibrium=eq,
         boundary=lanes,
         start=z0s,
         found=found,
-        constraint_index=lane_k,
+        constraint_index=jnp.broadcast_to(lane_k, (b, num_lanes)),
         lever=data.lever,
         scale=data.scale,
         contact_on=data.params.on,

@@ -13,7 +13,7 @@
 
 A sweep is a grid of grasps for the batched engine (:mod:`jaxgrasp.batch`, shared with
 :func:`jaxgrasp.evaluate_batch`): the grid points are evaluated as lanes of
-``jax.jit(jax.vmap(evaluate))`` in chunks whose size is a fixed bucket
+one program (:func:`jaxgrasp.evaluate.evaluate_batch_traced`) in chunks whose size is a fixed bucket
 (:func:`jaxgrasp.batch.batch_size`: 1, 4, 16 or 64 points on a CPU); the last chunk is
 padded to the same size, so one sweep compiles once, and a later sweep or batch of
 grasps with the same number of contacts and options, in the same bucket, reuses that
