@@ -384,14 +384,14 @@ def start_frame(data: ProgramData):
 
 
 def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
-    """Start of every boundary lane: ``(k, z0, found, nu0)``, each with leading axis ``2N * D``.
+    """Start of every boundary lane: ``(k, z0, found, nu0, g_eq)``, each with leading axis ``2N * D``.
 
     ``k`` is the lane's equality row in the ``(3N,)`` constraints (slip rows, then force
     rows), ``z0`` the crossing of that constraint along the lane's direction
     (:meth:`EvaluateOptions.directions` in the :func:`start_frame`) from ``z_eq``
     (``z_eq`` itself where the equilibrium is already on it), ``nu0`` ``NaN``: the
     solver starts the equality multiplier at its least-squares estimate there
-    (:func:`~jaxgrasp.solver.init`).
+    (:func:`~jaxgrasp.solver.init`); ``g_eq`` the constraint ``k``'s margin at ``z_eq``.
     """
     n = data.params.c.shape[0]
     dtype = data.params.c.dtype
@@ -415,10 +415,10 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
         z0 = jnp.where(on_boundary, z_eq, z0)
         # the equality multiplier: NaN, the solver's least-squares estimate at the start
         # (from its first step's derivatives, so that no other copy of them is compiled)
-        return z0, found | on_boundary, jnp.asarray(jnp.nan, dtype)
+        return z0, found | on_boundary, jnp.asarray(jnp.nan, dtype), g_eq
 
-    z0s, found, nu0s = jax.vmap(start)(lane_k, lane_v, lane_t)
-    return lane_k, z0s, found, nu0s
+    z0s, found, nu0s, g_eq = jax.vmap(start)(lane_k, lane_v, lane_t)
+    return lane_k, z0s, found, nu0s, g_eq
 
 
 def _equilibrium_lanes(data: ProgramData, num_lanes: int):
@@ -469,29 +469,36 @@ def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = T
     b, n = data.params.c.shape[:2]
     dtype = data.params.c.dtype
     sopt = options.solver
+    tol = max(sopt.tol, 1e3 * float(jnp.finfo(dtype).eps))  # the solver's KKT tolerance
     num_lanes = 2 * n * options.num_starts
     # Every lane gets its grasp's data as its theta (not closed over): the queue then runs
     # the lanes of all grasps (and, under a caller's vmap, of all batches) together.
     theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a[:, None], (b, num_lanes) + a.shape[1:]), data)
 
     def boundary_lanes(data: ProgramData, eq: SolverResult):
-        lane_k, z0s, found, nu0s = _boundary_starts(data, eq.x, options)
+        lane_k, z0s, found, nu0s, g_eq = _boundary_starts(data, eq.x, options)
         # Without a converged equilibrium there is nothing to start from: skip every lane;
         # an inactive contact has no boundary problems.
         found = found & (eq.status == LaneStatus.CONVERGED) & data.params.on[(lane_k - n) % n]
-        return z0s, jax.nn.one_hot(lane_k, 3 * n, dtype=dtype), nu0s, found
+        # an equilibrium on the boundary (to the solver's tolerance) is that problem's
+        # minimiser: its lanes are not solved (_at_equilibrium)
+        at_eq = found & (jnp.abs(g_eq) <= tol)
+        return z0s, jax.nn.one_hot(lane_k, 3 * n, dtype=dtype), nu0s, found & ~at_eq, (at_eq, g_eq)
+
+    def equilibrium_lanes(data: ProgramData):
+        return _equilibrium_lanes(data, num_lanes) + ((jnp.zeros(num_lanes, bool), jnp.zeros(num_lanes, dtype)),)
 
     def stage(i, carry):
         eq, _, _ = carry
-        z0s, masks, nu0s, active = jax.lax.cond(
+        z0s, masks, nu0s, active, at_eq = jax.lax.cond(
             i == 0,
-            lambda eq: jax.vmap(lambda d: _equilibrium_lanes(d, num_lanes))(data),
+            lambda eq: jax.vmap(equilibrium_lanes)(data),
             lambda eq: jax.vmap(boundary_lanes)(data, eq),
             eq,
         )
         res = solve_lane_batches(lane_problem, theta, z0s, masks, nu0s, active, sopt)
         eq = jax.lax.cond(i == 0, lambda: jax.tree_util.tree_map(lambda a: a[:, 0], res), lambda: eq)
-        return eq, res, (z0s, active)
+        return eq, res, (z0s, active, at_eq)
 
     # the carry: each grasp's equilibrium lane, every lane's result (zeros until solved)
     zero = lambda shape, dt=dtype: jnp.zeros((b, num_lanes) + shape, dt)
@@ -507,7 +514,8 @@ def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = T
         steps=zero((), jnp.int32),
     )
     eq0 = jax.tree_util.tree_map(lambda a: a[:, 0], lanes0)
-    carry0 = (eq0, lanes0, (jnp.zeros((b, num_lanes, 6), dtype), jnp.zeros((b, num_lanes), bool)))
+    no_lanes = jnp.zeros((b, num_lanes), bool)
+    carry0 = (eq0, lanes0, (jnp.zeros((b, num_lanes, 6), dtype), no_lanes, (no_lanes, jnp.zeros((b, num_lanes), dtype))))
     # The carry's zeros, made to depend on the grasps (jnp.where of a flag computed from
     # every field of their data; the values are the same zeros): under a caller's vmap over
     # grasps, whichever fields it maps, the carry is then batched from the start. Zeros
@@ -517,8 +525,10 @@ def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = T
     # (experiments/BENCHMARK.md).
     per_grasp = jnp.isnan(sum(jnp.sum(jnp.asarray(a, dtype)) for a in jax.tree_util.tree_leaves(data)))
     carry0 = jax.tree_util.tree_map(lambda a: jnp.where(per_grasp, a, a), carry0)
-    eq, lanes, (z0s, found) = jax.lax.fori_loop(0, 2, stage, carry0)
+    eq, lanes, (z0s, solved, (at_eq, g_eq)) = jax.lax.fori_loop(0, 2, stage, carry0)
     lane_k = _lane_equalities(n, options.num_starts)
+    lanes = jax.vmap(lambda *a: _at_equilibrium(*a, lane_k))(eq, lanes, at_eq, g_eq)
+    found = solved | at_eq
     if settle:
         lanes = jax.vmap(lambda d, l, f: settle_stalled(d, l, lane_k, f, options.num_starts, sopt))(data, lanes, found)
     return Programs(
@@ -530,6 +540,35 @@ def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = T
         lever=data.lever,
         scale=data.scale,
         contact_on=data.params.on,
+    )
+
+
+def _at_equilibrium(eq: SolverResult, lanes: SolverResult, at_eq, g_eq, lane_k) -> SolverResult:
+    """The boundary lanes ``at_eq`` ``(L,)`` (leading axis ``L`` of ``lanes``; ``lane_k``
+    their equality rows, ``g_eq`` that row's margin at the equilibrium) given the
+    equilibrium's solution ``eq``: an equilibrium whose
+    margin of row ``k`` is within the solver's tolerance of 0 is a KKT point of boundary
+    problem ``k`` too, with the same residuals (the equality's multiplier
+    ``nu = -lam_k``, row ``k``'s ``lam`` 0), and its minimiser, as no point of the
+    boundary lies below the minimum of the region that holds it. Such lanes all start at
+    the equilibrium (where a degenerate one, several constraints active at once, could
+    stall: a grasp of the long property profile settled such a boundary in one
+    orientation and not in another), so they are not solved but given this solution."""
+    rows = jnp.arange(lanes.lam.shape[-1])
+    is_k = rows[None, :] == lane_k[:, None]  # (L, 3N)
+    given = SolverResult(
+        x=jnp.broadcast_to(eq.x, lanes.x.shape),
+        lam=jnp.where(is_k, 0.0, eq.lam[None, :]),
+        nu=-jnp.sum(jnp.where(is_k, eq.lam[None, :], 0.0), axis=1),
+        objective=jnp.broadcast_to(eq.objective, lanes.objective.shape),
+        status=jnp.full(lanes.status.shape, LaneStatus.CONVERGED, lanes.status.dtype),
+        stationarity=jnp.broadcast_to(eq.stationarity, lanes.stationarity.shape),
+        feasibility=jnp.maximum(eq.feasibility, jnp.abs(g_eq)),
+        complementarity=jnp.broadcast_to(eq.complementarity, lanes.complementarity.shape),
+        steps=jnp.zeros(lanes.steps.shape, lanes.steps.dtype),
+    )
+    return jax.tree_util.tree_map(
+        lambda a, b: jnp.where(at_eq.reshape((-1,) + (1,) * (a.ndim - 1)), a.astype(b.dtype), b), given, lanes
     )
 
 

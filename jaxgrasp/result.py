@@ -73,7 +73,8 @@ class Evaluation:
         kkt: ``(1 + 2N, 3)`` KKT residuals (stationarity, feasibility, complementarity,
             in the solver's scaled units) of the equilibrium problem (row 0) and of the
             kept start of each boundary problem (rows ``1 + kind * N + contact``).
-        steps: ``(1 + 2N,)`` solver steps of those same lanes.
+        steps: ``(1 + 2N,)`` solver steps of those same lanes (0 for a boundary the
+            equilibrium lies on: its minimiser is the equilibrium, not solved again).
     """
 
     value: Any

@@ -253,6 +253,27 @@ VANISHING_BOUNDARY = jaxgrasp.Grasp.create(
     gravity=[2.4975071329899534, -4.120269997692948, -8.545287196272321],
 )
 
+# An unstable 3-contact grasp whose equilibrium lies on five boundaries at once (every slip
+# margin and two force limits within 1e-12; long property profile, seed 1, example 138):
+# every start of those boundary problems is the equilibrium itself, a degenerate point
+# where lanes converged in one orientation of the grasp and stalled (not converged) in a
+# rotated copy. Such a boundary's minimiser is the equilibrium (programs._at_equilibrium).
+ON_BOUNDARIES = jaxgrasp.Grasp.create(
+    positions=[[-0.0027759682637051924, 0.02, -0.009278916464030515], [0.041482887925854625, -0.014435471659934557, 0.01910237923692918], [-0.020374308377913056, -0.02, -0.0027232299832244495]],
+    normals=[[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]],
+    initial_deformation=[0.0008, 0.0008, 0.0008],
+    radius=[0.01603545377728058, 0.01603545377728058, 0.01603545377728058],
+    young_modulus=[100000.0, 100000.0, 100000.0],
+    friction=[0.3, 0.3, 0.3],
+    max_force=[0.18095573684677208, 0.18095573684677208, 0.18095573684677208],
+    mass=0.0,
+    gravity=[5.442346472357425, -8.151770292872197, 0.4069471305526339],
+)
+_Q138 = np.array([[0.03217831903272739, 0.10598071922575117, 0.9938473941891788], [-0.6004813871546161, 0.7969481549286772, -0.06554191053551373], [-0.7989910258977233, -0.5946778333754922, 0.0892839012741613]])
+ON_BOUNDARIES_ROTATED = ON_BOUNDARIES.replace(
+    positions=ON_BOUNDARIES.positions @ _Q138.T, normals=ON_BOUNDARIES.normals @ _Q138.T, gravity=ON_BOUNDARIES.gravity @ _Q138.T
+)
+
 KNOWN = {
     "stable_zero_a": STABLE_ZERO_A,
     "stable_zero_b": STABLE_ZERO_B,
@@ -267,6 +288,8 @@ KNOWN = {
     "released_a": RELEASED_A,
     "released_b": RELEASED_B,
     "vanishing_boundary": VANISHING_BOUNDARY,
+    "on_boundaries": ON_BOUNDARIES,
+    "on_boundaries_rotated": ON_BOUNDARIES_ROTATED,
 }
 
 
@@ -472,6 +495,26 @@ def test_vanishing_boundary_settles_infeasible(results, ipopt_reference):
     ref = ipopt_reference.get(VANISHING_BOUNDARY)
     assert ref["status"] == "unstable"
     assert np.array_equal(np.isfinite(ref["boundary_energy"]), np.isfinite(res.boundary_energy)), ref["boundary_energy"]
+
+
+def test_boundaries_through_the_equilibrium(results):
+    """Boundaries the equilibrium lies on (margin within the solver's tol) have the
+    equilibrium as their minimiser, in any orientation: energy U0 exactly, no step taken,
+    every boundary problem settled; the rotated copy agrees boundary by boundary."""
+    tol = jaxgrasp.EvaluateOptions().solver.tol
+    energies = []
+    for case in ("on_boundaries", "on_boundaries_rotated"):
+        res = results[case]
+        assert res.status_name == "unstable"
+        assert int(res.equilibrium_status) == LaneStatus.CONVERGED
+        status = np.asarray(res.boundary_status)
+        assert np.all(status == LaneStatus.CONVERGED), status
+        on = np.abs(np.asarray(res.equilibrium_margins)[1:]) <= tol  # (2, N): slip, force rows
+        assert np.sum(on) == 5, res.equilibrium_margins
+        assert np.all(np.asarray(res.boundary_energy)[on] == float(res.equilibrium_energy))
+        assert np.all(np.asarray(res.steps)[1:][on.reshape(-1)] == 0)
+        energies.append(np.asarray(res.boundary_energy))
+    np.testing.assert_allclose(energies[1], energies[0], rtol=1e-9)
 
 
 def test_host_drivers_settle_only_where_needed(results, monkeypatch):
