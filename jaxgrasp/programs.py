@@ -58,7 +58,7 @@ from .model import (
     rotation_matrix,
 )
 from .options import EvaluateOptions
-from .solver import FirstOrder, Problem, SolverOptions, SolverResult
+from .solver import FirstOrder, Problem, SolverOptions, SolverResult, kkt_tol
 from .status import LaneStatus
 
 __all__ = [
@@ -469,7 +469,7 @@ def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = T
     b, n = data.params.c.shape[:2]
     dtype = data.params.c.dtype
     sopt = options.solver
-    tol = max(sopt.tol, 1e3 * float(jnp.finfo(dtype).eps))  # the solver's KKT tolerance
+    tol = kkt_tol(dtype, sopt)
     num_lanes = 2 * n * options.num_starts
     # Every lane gets its grasp's data as its theta (not closed over): the queue then runs
     # the lanes of all grasps (and, under a caller's vmap, of all batches) together.
@@ -654,7 +654,7 @@ def _polish(data: ProgramData, z0, k, j, released, o: SolverOptions):
     is a KKT point of it within tol and feasible for the original program."""
     n = data.params.c.shape[0]
     dtype = z0.dtype
-    tol = max(o.tol, 1e3 * float(jnp.finfo(dtype).eps))
+    tol = kkt_tol(dtype, o)
     rows = jnp.arange(3 * n)
     j_rows = (rows % n == j) & released
     has_eq = ~released | (k != n + j)  # j's own slip equality is relaxed away

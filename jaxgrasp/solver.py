@@ -74,6 +74,7 @@ __all__ = [
     "running",
     "to_result",
     "augmented_lagrangian",
+    "kkt_tol",
 ]
 
 
@@ -306,11 +307,17 @@ equality grows whenever the violation stalls, even after an inner solve cut shor
 ``max_inner`` Newton steps (:func:`_multiplier_update`)."""
 
 
+def kkt_tol(dtype, o: SolverOptions) -> float:
+    """The KKT tolerance a lane of ``dtype`` converges to: ``o.tol``, raised to ``1e3 *
+    eps`` of the dtype (float32: ~1.2e-4)."""
+    return max(o.tol, 1e3 * float(jnp.finfo(dtype).eps))
+
+
 def _tolerances(dtype, o: SolverOptions):
     """``(tol, infeasible_tol, rounding)`` for ``dtype``: the options' values, raised to
     what the precision can reach (float32: tol ~1.2e-4, infeasible_tol ~1.2e-3)."""
     eps = float(jnp.finfo(dtype).eps)
-    return max(o.tol, 1e3 * eps), max(o.infeasible_tol, 1e4 * eps), 100.0 * eps
+    return kkt_tol(dtype, o), max(o.infeasible_tol, 1e4 * eps), 100.0 * eps
 
 
 def _phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
