@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .dense import solve as dense_solve
+from .gathered import over_rows, put_rows
 from .grasp import Grasp
 from .lanes import solve_lane_batches
 from .model import (
@@ -530,7 +531,7 @@ def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = T
     lanes = jax.vmap(lambda *a: _at_equilibrium(*a, lane_k))(eq, lanes, at_eq, g_eq)
     found = solved | at_eq
     if settle:
-        lanes = jax.vmap(lambda d, l, f: settle_stalled(d, l, lane_k, f, options.num_starts, sopt))(data, lanes, found)
+        lanes = _settle_where_stalled(data, lanes, lane_k, found, options.num_starts, sopt)
     return Programs(
         equilibrium=eq,
         boundary=lanes,
@@ -598,6 +599,8 @@ both within this (scaled margins), and the lane's violation too."""
 _POLISH_STEPS = 8
 MAX_POLISHED = 2
 """Most boundary problems of one grasp that :func:`settle_stalled` polishes."""
+SETTLE_BLOCK = 4
+"""Grasps per block of the settling stage in a batch (:func:`_settle_where_stalled`)."""
 
 
 def _tangential(z, data: ProgramData, j):
@@ -701,6 +704,37 @@ def _polish(data: ProgramData, z0, k, j, released, o: SolverOptions):
     return z, lam, ok, (stat, jnp.maximum(feas, orig_feas), comp)
 
 
+def _polish_candidates(lanes: SolverResult, found, num_starts: int):
+    """``(2N, D)`` bool: the lanes :func:`settle_stalled` may polish, those that stalled
+    (``NOT_CONVERGED``) at a point feasible within :data:`RELEASED_TOL`, of problems
+    that no start settled (a settled problem keeps its answer: a stalled lane of one can
+    sit far from the converged ones, e.g. at a large rotation)."""
+    stalled = found & (lanes.status == LaneStatus.NOT_CONVERGED) & (lanes.feasibility <= RELEASED_TOL)
+    converged = (found & (lanes.status == LaneStatus.CONVERGED)).reshape(-1, num_starts)
+    return stalled.reshape(-1, num_starts) & ~jnp.any(converged, axis=1, keepdims=True)
+
+
+def _settle_where_stalled(data: ProgramData, lanes: SolverResult, lane_k, found, num_starts: int,
+                          o: SolverOptions) -> SolverResult:
+    """:func:`settle_stalled` of each grasp of a batch (leading axis ``B`` on ``data``,
+    ``lanes`` and ``found``) that has a lane to polish, in gathered blocks of
+    :data:`SETTLE_BLOCK` grasps (:func:`jaxgrasp.gathered.over_rows`); every other
+    grasp's lanes are returned as they are, which is what :func:`settle_stalled` returns
+    for them. Under ``vmap`` the stage would cost every grasp its polish; stalls are rare
+    (some 5 % of random grasps have one, and grids hardly any), so a batch pays for the
+    few that need it (experiments/BENCHMARK.md)."""
+    need = jax.vmap(lambda l, f: jnp.any(_polish_candidates(l, f, num_starts)))(lanes, found)
+
+    def update(rows, valid, lanes):
+        pick = lambda t: jax.tree_util.tree_map(lambda a: a[rows], t)
+        settled = jax.vmap(lambda d, l, f: settle_stalled(d, l, lane_k, f, num_starts, o))(
+            pick(data), pick(lanes), found[rows]
+        )
+        return jax.tree_util.tree_map(lambda a, s: put_rows(a, rows, valid, s), lanes, settled)
+
+    return over_rows(need, SETTLE_BLOCK, update, lanes)
+
+
 def settle_stalled(data: ProgramData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
     """Certify boundary lanes that stalled at a feasible point (a post-solve stage).
 
@@ -731,18 +765,14 @@ def settle_stalled(data: ProgramData, lanes: SolverResult, lane_k, found, num_st
     released = (g[:, 0] <= RELEASED_TOL) & (g[:, 1] <= RELEASED_TOL) & data.params.on  # (L, N)
     released = released & (lane_k[:, None] != 2 * n + jnp.arange(n))
     j = jnp.argmax(released, axis=1)
-    stalled = found & (lanes.status == LaneStatus.NOT_CONVERGED) & (lanes.feasibility <= RELEASED_TOL)
     released_any = jnp.any(released, axis=1)
-    # Only problems that no start settled: a settled problem keeps its answer (a stalled
-    # lane of one can sit far from the converged ones, e.g. at a large rotation).
-    converged = (found & (lanes.status == LaneStatus.CONVERGED)).reshape(-1, num_starts)
-    candidate = stalled.reshape(-1, num_starts) & ~jnp.any(converged, axis=1, keepdims=True)  # (2N, D)
+    candidate = _polish_candidates(lanes, found, num_starts)  # (2N, D)
     pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
     pick = jnp.arange(2 * n) * num_starts + pick  # (2N,) one lane per boundary problem
-    # Polish at most MAX_POLISHED problems per grasp, those with a candidate first: the
-    # polish runs for every grasp of a batch (under vmap it cannot be skipped), and
-    # stalls are rare (42 of 8000 programs in the robustness set), so polishing all 2N
-    # would cost every grasp ~15% more for nothing.
+    # Polish at most MAX_POLISHED problems per grasp, those with a candidate first: under
+    # vmap every grasp polishes as many as the one that needs most, and stalls are rare
+    # (42 of 8000 programs in the robustness set), so polishing all 2N would cost every
+    # grasp ~15% more for nothing.
     has_candidate = jnp.any(candidate, axis=1)
     chosen = jnp.argsort(~has_candidate, stable=True)[: min(MAX_POLISHED, 2 * n)]
     pick = pick[chosen]
