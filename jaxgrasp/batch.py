@@ -309,7 +309,8 @@ def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], tuple]:
             )
         counts = {g.num_contacts for g in items}
         masked = len(counts) > 1 or any(g.active is not None for g in items)
-        batch = stack(items) if masked else jax.tree_util.tree_map(lambda *x: np.stack(x), *items)
+        batch = stack(items)  # per-contact fields given as scalars broadcast: any mix stacks
+        batch = batch if masked else batch.replace(active=None)
     pos = np.shape(batch.positions)
     if len(pos) != 3:
         raise GraspValueError(f"evaluate_batch needs grasps with a batch axis: positions (B, N, 3), got {pos}")

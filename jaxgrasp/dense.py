@@ -1,14 +1,23 @@
-"""Small dense linear solves in plain XLA operations, with no LAPACK call.
+"""Small dense linear algebra that never lets LAPACK split a batch over XLA's threads.
 
-On the CPU, ``jnp.linalg.solve`` of a batch of matrices calls jaxlib's LAPACK LU kernel,
-which splits a large enough batch over XLA's intra-op thread pool and waits for the
-pieces. The batch engine runs one program per device on that same pool (one device per
-core, :mod:`jaxgrasp.cores`): when every device is inside such a kernel at once, every
-pool thread waits for pieces that no thread is left to run, and the process hangs
-(seen with 2 devices on 2 cores: the settling stage's batched polish, each device in
-``lapack_dgetrf_ffi`` -> ``ParallelBatchMap`` -> ``BlockingCounter::Wait``, no CPU used).
-The systems solved here are tiny (at most ``6 + 3N`` unknowns), so Gaussian elimination
-written out in XLA costs nothing noticeable and never leaves the device's own thread.
+On the CPU, ``jnp.linalg.solve`` or ``jnp.linalg.eigh`` of a batch of matrices calls one
+of jaxlib's LAPACK kernels, which splits a large enough batch over XLA's intra-op thread
+pool and waits for the pieces. The batch engine runs one program per device on that same
+pool (one device per core, :mod:`jaxgrasp.cores`): when every device is inside such a
+kernel at once, every pool thread waits for pieces that no thread is left to run, and
+the process hangs, using no CPU. Seen twice with 2 devices on 2 cores: the settling
+stage's batched polish (each device in ``lapack_dgetrf_ffi`` -> ``ParallelBatchMap`` ->
+``BlockingCounter::Wait``), and ``evaluate_batch(..., chunk_size=512)`` (256 grasps per
+device), each device in ``lapack_dsyevd_ffi`` for the start frames of its grasps.
+
+* :func:`solve`: the systems solved here are tiny (at most ``6 + 3N`` unknowns), so
+  Gaussian elimination written out in XLA costs nothing noticeable and never leaves the
+  device's own thread.
+* :func:`eigh`: ``jnp.linalg.eigh`` that, under ``vmap``, calls LAPACK on one matrix at a
+  time (``lax.map``): a batch of one is never split. For a few matrices per grasp, where
+  their count grows with the batch. (The solver's own ``eigh``, on every loop step, runs
+  on gathered blocks of :data:`jaxgrasp.direction.EIGH_BLOCK` lanes, a batch far below
+  any that was seen to split.)
 """
 
 from __future__ import annotations
@@ -16,7 +25,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-__all__ = ["solve"]
+__all__ = ["solve", "eigh"]
 
 
 def solve(a, b):
@@ -44,3 +53,23 @@ def solve(a, b):
         return x.at[i].set((b[i] - jnp.dot(a[i], x)) / a[i, i])  # x[i:] beyond i already set, x[i] still 0
 
     return jax.lax.fori_loop(0, m, substitute, jnp.zeros_like(b))
+
+
+@jax.custom_batching.custom_vmap
+def eigh(a):
+    """``(w, v)``: ``jnp.linalg.eigh`` of the symmetric ``a`` ``(m, m)``, eigenvalues ``w``
+    ``(m,)`` ascending and eigenvectors the columns of ``v`` ``(m, m)``; under ``vmap``
+    one LAPACK call per matrix (the module docstring), with the same digits."""
+    w, v = jnp.linalg.eigh(a)
+    return w, v
+
+
+@eigh.def_vmap
+def _eigh_one_at_a_time(axis_size, in_batched, a):
+    (batched,) = in_batched
+    if not batched:
+        a = jnp.broadcast_to(a, (axis_size,) + a.shape)
+    m = a.shape[-1]
+    lead = a.shape[:-2]  # (axis_size,) or, under an outer vmap, more: flatten all
+    w, v = jax.lax.map(lambda x: tuple(jnp.linalg.eigh(x)), a.reshape(-1, m, m))
+    return (w.reshape(lead + (m,)), v.reshape(lead + (m, m))), (True, True)

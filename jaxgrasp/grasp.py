@@ -168,7 +168,8 @@ class Grasp:
         keep = np.asarray(self.active, dtype=bool)
         if keep.ndim != 1:
             raise ValueError(f"compact() needs one grasp (active of shape (N,)), got {keep.shape}")
-        return self.replace(active=None, **{n: jnp.asarray(getattr(self, n))[keep] for n in _PER_CONTACT})
+        per_contact = {n: jnp.asarray(getattr(self, n)) for n in _PER_CONTACT}
+        return self.replace(active=None, **{n: a if a.ndim == 0 else a[keep] for n, a in per_contact.items()})
 
 
 def stack(grasps, num_contacts: int | None = None) -> Grasp:
@@ -198,7 +199,10 @@ def stack(grasps, num_contacts: int | None = None) -> Grasp:
         pad = np.concatenate([np.arange(k), np.full(n - k, k - 1)]).astype(int)
         for name in fields:
             a = jnp.asarray(getattr(g, name))
-            out[name].append(a[pad] if name in _PER_CONTACT else a)
+            if name in _PER_CONTACT:  # a scalar stands for every contact
+                a = jnp.broadcast_to(a, (k,)) if a.ndim == 0 else a
+                a = a[pad]
+            out[name].append(a)
         active.append(np.arange(n) < k)
     return Grasp(**{name: jnp.stack(v) for name, v in out.items()}, active=jnp.asarray(np.stack(active)))
 

@@ -72,14 +72,16 @@ def model_params(grasp: Grasp) -> ModelParams:
     n = jnp.asarray(grasp.normals)
     n = n / jnp.linalg.norm(n, axis=-1, keepdims=True)
     on = jnp.ones(n.shape[:-1], bool) if grasp.active is None else jnp.asarray(grasp.active, bool)
+    # a per-contact field given as a scalar (e.g. by Grasp.replace) stands for every contact
+    each = lambda a: jnp.broadcast_to(a, on.shape) if jnp.ndim(a) == 0 else jnp.asarray(a)
     return ModelParams(
         c=jnp.asarray(grasp.positions) * M_TO_MM,
         n=n,
-        dr=jnp.asarray(grasp.initial_deformation) * M_TO_MM,
-        r=jnp.asarray(grasp.radius) * M_TO_MM,
-        E=jnp.asarray(grasp.young_modulus) * PA_TO_MPA,
-        mu=jnp.asarray(grasp.friction),
-        fmax=jnp.asarray(grasp.max_force),
+        dr=each(grasp.initial_deformation) * M_TO_MM,
+        r=each(grasp.radius) * M_TO_MM,
+        E=each(grasp.young_modulus) * PA_TO_MPA,
+        mu=each(grasp.friction),
+        fmax=each(grasp.max_force),
         weight=jnp.asarray(grasp.mass)[..., None] * jnp.asarray(grasp.gravity),
         on=on,
     )

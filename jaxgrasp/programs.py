@@ -38,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .dense import eigh as serial_eigh
 from .dense import solve as dense_solve
 from .gathered import over_rows, put_rows
 from .grasp import Grasp
@@ -345,7 +346,7 @@ def start_frame(data: ProgramData):
     b = jnp.concatenate([jnp.zeros_like(p.n), p.n / lever], axis=1)  # (N, 6): z -> twist n . w about the normal
     arm = p.dr * (p.r - p.dr / 3.0)  # mm^2: torsion stiffness / k
     hmat = jnp.einsum("n,nia,nib->ab", k, a, a) + jnp.einsum("n,na,nb->ab", k * arm, b, b)
-    evals, vecs = jnp.linalg.eigh(hmat / jnp.max(jnp.abs(hmat)))
+    evals, vecs = serial_eigh(hmat / jnp.max(jnp.abs(hmat)))  # one LAPACK call per grasp: jaxgrasp.dense
     wrench = jnp.concatenate([p.n, jnp.cross(p.c, p.n) / lever], axis=1)  # (N, 6)
     place = jnp.concatenate([p.c / lever, jnp.zeros_like(p.c)], axis=1)  # (N, 6)
     rows = jnp.stack([k[:, None] * wrench, k[:, None] * place])  # (2, N, 6); inactive: k = 0

@@ -1,18 +1,23 @@
-"""``jaxgrasp.dense.solve``, and the batch engine's program free of batched LAPACK solves.
+"""``jaxgrasp.dense``, and the batch engine's program free of batched LAPACK calls that
+could split over the thread pool.
 
 jaxlib's LAPACK kernels split a large batch over XLA's thread pool and wait for the
 pieces; with one device per core (the batch engine) every device can be waiting at once
 and the process hangs (:mod:`jaxgrasp.dense`). The settling stage's polish used
 ``jnp.linalg.solve`` (``lapack_dgetrf_ffi``) on every grasp of a chunk and hung
-``evaluate_batch`` on 2 devices; its systems are now solved by ``dense.solve``. The only
-LAPACK call left is the Newton direction's ``eigh``, on gathered blocks of
-``EIGH_BLOCK`` (16) lanes: a 2-device shard_map of 6 x 6 ``eigh`` hung at 2048 matrices
-per device and ran at 1024.
+``evaluate_batch`` on 2 devices; its systems are now solved by ``dense.solve``. The start
+frame's ``eigh``, one per grasp, hung ``evaluate_batch(..., chunk_size=512)`` (256 grasps
+per device) on 2 devices; it is now ``dense.eigh``, one LAPACK call per matrix. The only
+batched LAPACK call left is the Newton direction's ``eigh``, on gathered blocks of
+``EIGH_BLOCK`` (16) lanes.
 """
 
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
+import textwrap
 
 import jax
 import jax.numpy as jnp
@@ -20,7 +25,7 @@ import numpy as np
 import pytest
 
 from jaxgrasp import batch
-from jaxgrasp.dense import solve
+from jaxgrasp.dense import eigh, solve
 from jaxgrasp.direction import EIGH_BLOCK
 from jaxgrasp.options import EvaluateOptions
 
@@ -47,13 +52,61 @@ def test_singular_system_gives_non_finite():
     assert not np.all(np.isfinite(np.asarray(solve(jnp.zeros((3, 3)), jnp.ones(3)))))
 
 
-def test_batched_program_calls_no_lapack_but_eigh():
-    """The batch engine's programs, with and without the settling stage: every LAPACK
-    custom call is the symmetric eigensolver (``syevd``), gathered in small blocks."""
+def _lapack_calls(text: str) -> list[tuple[str, str]]:
+    """``(target, operand type)`` of every LAPACK custom call in lowered StableHLO."""
+    return re.findall(r"custom_call @(\w*lapack\w*)\([^)]*\)[^\n]*?: \((tensor<[^>]*>)", text)
+
+
+def test_eigh_under_vmap_is_one_lapack_call_per_matrix():
+    """``dense.eigh`` under ``vmap`` gives ``jnp.linalg.eigh``'s digits, and its program
+    calls LAPACK on one 6 x 6 matrix at a time, however large the batch."""
+    rng = np.random.default_rng(3)
+    a = rng.standard_normal((300, 6, 6))
+    a = a + np.swapaxes(a, 1, 2)
+    w, v = jax.jit(jax.vmap(eigh))(a)
+    w_ref, v_ref = jax.jit(jax.vmap(jnp.linalg.eigh))(a)
+    assert np.array_equal(np.asarray(w), np.asarray(w_ref)) and np.array_equal(np.asarray(v), np.asarray(v_ref))
+    assert np.allclose(np.asarray(w), np.linalg.eigvalsh(a), rtol=0, atol=1e-12)
+    calls = _lapack_calls(jax.jit(jax.vmap(eigh)).lower(a).as_text())
+    assert calls == [("lapack_dsyevd_ffi", "tensor<6x6xf64>")], calls
+    w_one, _ = eigh(a[7])  # unbatched: plain eigh
+    assert np.array_equal(np.asarray(w_one), np.asarray(w_ref[7]))
+
+
+def test_batched_program_calls_no_lapack_but_small_eigh():
+    """The batch engine's programs, with and without the settling stage, for 128 grasps
+    per device: every LAPACK custom call is the symmetric eigensolver (``syevd``) on at
+    most ``EIGH_BLOCK`` matrices, never on one per grasp of the chunk."""
     sharding = batch.batch_sharding()
     assert EIGH_BLOCK <= 64
     for settle in (False, True):
         fn = batch._batched_fn(EvaluateOptions(), sharding, masked=True, settle=settle)
-        text = fn.lower(*batch._batch_spec(3, 2 * len(jax.devices()), sharding, masked=True)).as_text()
-        targets = set(re.findall(r"custom_call @(\w+)", text))
-        assert targets and all("syevd" in t for t in targets if "lapack" in t), (settle, targets)
+        text = fn.lower(*batch._batch_spec(3, 128 * len(jax.devices()), sharding, masked=True)).as_text()
+        calls = _lapack_calls(text)
+        assert calls and all("syevd" in target for target, _ in calls), (settle, calls)
+        for _, operand in calls:
+            dims = [int(d) for d in operand[len("tensor<"):].split("x")[:-1]]
+            assert dims[-2:] == [6, 6] and int(np.prod(dims[:-2])) <= EIGH_BLOCK, (settle, operand)
+
+
+def test_large_chunk_does_not_hang():
+    """``evaluate_batch`` of 300 cube grasps in one chunk of 512 (256 grasps per device on
+    2 devices): it hung, every device waiting in the start frames' batched ``eigh``
+    (checked on the code before ``dense.eigh``). Run in a subprocess with a time limit;
+    the values are :func:`jaxgrasp.evaluate`'s."""
+    code = textwrap.dedent(
+        """
+        import numpy as np, jaxgrasp
+        g = jaxgrasp.presets.cube()
+        grasps = [g.replace(young_modulus=np.full(2, e)) for e in np.linspace(2e5, 1e6, 300)]
+        v = np.asarray(jaxgrasp.evaluate_batch(grasps, chunk_size=512).evaluation.value)
+        ref = [float(jaxgrasp.evaluate(grasps[i]).value) for i in (0, 299)]
+        assert np.all(np.isfinite(v)) and np.allclose(v[[0, 299]], ref, rtol=1e-12, atol=0), (v, ref)
+        print("ok")
+        """
+    )
+    try:
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=240)
+    except subprocess.TimeoutExpired:
+        pytest.fail("evaluate_batch with chunk_size=512 did not finish in 240 s (hung?)")
+    assert out.returncode == 0 and "ok" in out.stdout, out.stderr[-2000:]

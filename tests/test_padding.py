@@ -157,3 +157,21 @@ def test_compact_files_and_sweep_see_the_active_contacts(tmp_path):
     assert got.num_contacts.tolist() == [2, 3]
     with pytest.raises(GraspValueError, match=r"sweep grasp.compact\(\)"):
         jaxgrasp.sweep(padded, mass=[0.0, 0.1])
+
+
+def test_scalar_per_contact_fields_stand_for_every_contact():
+    """A per-contact field set to a scalar by ``Grasp.replace`` (``Grasp.create`` broadcasts
+    it itself) means that value at every contact: ``evaluate``, ``stack`` and
+    ``evaluate_batch`` (which stacks grasps with different field shapes) give what the
+    ``(N,)`` field gives. They raised IndexError / numpy's 'all input arrays must have the
+    same shape' before."""
+    cube = _bases()["cube"]
+    scalar, full = cube.replace(young_modulus=8e5), cube.replace(young_modulus=np.full(2, 8e5))
+    assert float(jaxgrasp.evaluate(scalar).value) == float(jaxgrasp.evaluate(full).value)
+    stacked = stack([scalar, jaxgrasp.presets.prism()])
+    np.testing.assert_array_equal(np.asarray(stacked.young_modulus)[0], [8e5, 8e5, 8e5])
+    masked = _pad(cube, [0, 2], "stranger").replace(friction=0.4)
+    np.testing.assert_array_equal(np.asarray(masked.compact().friction), 0.4)
+    got = jaxgrasp.evaluate_batch([cube, scalar, full]).evaluation
+    assert got.value[1] == got.value[2] == float(jaxgrasp.evaluate(full).value)
+    assert got.value[0] != got.value[1]
