@@ -382,8 +382,11 @@ def evaluate_batch(
     invalid = np.flatnonzero([e is not None for e in errors])
 
     def chunk_fields(start: int) -> dict[str, np.ndarray]:
-        idx = np.minimum(np.arange(start, start + chunk), total - 1)  # pad with the last grasp
-        return {k: v[idx] for k, v in fields.items()}
+        idx = np.arange(start, start + chunk)
+        out = {k: v[np.minimum(idx, total - 1)] for k, v in fields.items()}  # pad with the last grasp
+        if masked:  # ... with no active contact, so that the padding solves nothing
+            out["active"] = out["active"] & (idx < total)[:, None]
+        return out
 
     def finished(start: int, stop: int, outs: dict[str, np.ndarray]) -> None:
         mark_invalid(outs, invalid[(invalid >= start) & (invalid < stop)])

@@ -32,6 +32,7 @@ def solve_lanes(
     nu0,
     active,
     options: SolverOptions = SolverOptions(),
+    rank=None,
 ) -> SolverResult:
     """Solve a batch of lanes with early exit of finished lanes (leading axis ``L``).
 
@@ -62,26 +63,33 @@ def solve_lanes(
         active: ``(L,)`` bool; inactive lanes end at once with status
             ``LaneStatus.NO_START``.
         options: :class:`~jaxgrasp.solver.SolverOptions`.
+        rank: ``(L,)`` int or ``None`` (all 0): the queue loads lanes in increasing rank,
+            in lane order within a rank. Results do not depend on it (each lane's
+            computation is its own); the time does: lanes expected to take many steps
+            ranked first finish while others still fill the slots, instead of running
+            alone at the end of the queue with the other slots idle.
 
     Returns:
         :class:`~jaxgrasp.solver.SolverResult` with leading axis ``L``.
     """
+    rank = jnp.zeros(jnp.shape(active), jnp.int32) if rank is None else jnp.asarray(rank, jnp.int32)
 
     @jax.custom_batching.custom_vmap
-    def run(theta, x0, eq_mask, nu0, active):
-        return _solve_lanes(problem, theta, x0, eq_mask, nu0, active, options)
+    def run(theta, x0, eq_mask, nu0, active, rank):
+        return _solve_lanes(problem, theta, x0, eq_mask, nu0, active, rank, options)
 
     @run.def_vmap
-    def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active):
+    def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active, rank):
         def batched(a, is_batched):
             a = jnp.asarray(a)
             return a if is_batched else jnp.broadcast_to(a, (axis_size,) + a.shape)
 
-        args = jax.tree_util.tree_map(batched, (theta, x0, eq_mask, nu0, active), tuple(in_batched))
-        out = solve_lane_batches(problem, *args, options)  # a nested vmap folds into it in turn
+        args = jax.tree_util.tree_map(batched, (theta, x0, eq_mask, nu0, active, rank), tuple(in_batched))
+        *args, rank = args
+        out = solve_lane_batches(problem, *args, options, rank=rank)  # a nested vmap folds into it in turn
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
-    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active))
+    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active), rank)
 
 
 def solve_lane_batches(
@@ -92,6 +100,7 @@ def solve_lane_batches(
     nu0,
     active,
     options: SolverOptions = SolverOptions(),
+    rank=None,
 ) -> SolverResult:
     """:func:`solve_lanes` of ``B`` batches of ``L`` lanes (every argument with leading
     axes ``(B, L)``), all ``B * L`` lanes in one queue; the result has leading axes
@@ -106,8 +115,9 @@ def solve_lane_batches(
     x0 = jnp.asarray(x0)
     b, num_lanes = x0.shape[:2]
     flat = lambda a: jnp.asarray(a).reshape((b * num_lanes,) + jnp.shape(a)[2:])
+    rank = None if rank is None else flat(jnp.broadcast_to(jnp.asarray(rank), x0.shape[:2]))
     out = solve_lanes(problem, jax.tree_util.tree_map(flat, theta), flat(x0), flat(eq_mask), flat(nu0),
-                      flat(active), options)
+                      flat(active), options, rank=rank)
     return jax.tree_util.tree_map(lambda a: a.reshape((b, num_lanes) + a.shape[1:]), out)
 
 
@@ -125,6 +135,13 @@ def _take(tree, idx):
     wrap-around of negative indices (six ops per leaf, in every loop step)."""
     idx = jnp.asarray(idx).astype(jnp.uint32)
     return jax.tree_util.tree_map(lambda a: a[idx], tree)
+
+
+def _queue_order(active, rank):
+    """``(L,)`` the order in which the queue loads lanes: the active ones first, by rank,
+    in lane order within a rank (only the first ``sum(active)`` are ever loaded)."""
+    key = jnp.where(jnp.asarray(active), jnp.asarray(rank, jnp.int32), jnp.iinfo(jnp.int32).max)
+    return jnp.argsort(key, stable=True)
 
 
 def _num_slots(num_lanes: int, o: SolverOptions) -> int:
@@ -166,7 +183,7 @@ def _advance(problem, theta, order, num_active, o: SolverOptions, q: _Queue) -> 
     return _Queue(states, slots, new_idx, q.ptr + jnp.sum(refill))
 
 
-def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> SolverResult:
+def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, rank, o: SolverOptions) -> SolverResult:
     """:func:`solve_lanes` on one flat batch of ``L`` lanes: the queue loop.
 
     One loop of ``W`` slots to the end. (A second, ``W // 8``-slot loop for the last long
@@ -178,8 +195,7 @@ def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, o: SolverOptions) -> 
     num_lanes = x0.shape[0]
     width = _num_slots(num_lanes, o)
     states = jax.vmap(lambda x, m, nu, a: solver.init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
-    # The queue: active lanes first, in order; only those are ever loaded into a slot.
-    order = jnp.argsort(~jnp.asarray(active), stable=True)
+    order = _queue_order(active, rank)
     num_active = jnp.sum(jnp.asarray(active, jnp.int32))
     advance = partial(_advance, problem, theta, order, num_active, o)
 

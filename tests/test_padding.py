@@ -175,3 +175,16 @@ def test_scalar_per_contact_fields_stand_for_every_contact():
     got = jaxgrasp.evaluate_batch([cube, scalar, full]).evaluation
     assert got.value[1] == got.value[2] == float(jaxgrasp.evaluate(full).value)
     assert got.value[0] != got.value[1]
+
+
+def test_grasp_without_active_contacts_solves_nothing():
+    """The batch engine stands in for an invalid grasp, and pads its last chunk, with a
+    grasp that has no active contact. Its energy would be the weight's alone, unbounded
+    below: its equilibrium lane ran the whole step budget (300 steps, checked) while the
+    rest of the chunk waited. It now has no lane at all."""
+    from jaxgrasp.programs import solve_programs
+
+    g = jaxgrasp.presets.cube(mass=0.05).replace(active=jnp.array([False, False]))
+    p = solve_programs(g, settle=False)
+    assert int(p.equilibrium.status) == LaneStatus.NO_START and int(p.equilibrium.steps) == 0
+    assert not np.any(np.asarray(p.found)) and int(np.sum(np.asarray(p.boundary.steps))) == 0
