@@ -13,8 +13,9 @@ device), each device in ``lapack_dsyevd_ffi`` for the start frames of its grasps
 * :func:`solve`: the systems solved here are tiny (at most ``6 + 3N`` unknowns), so
   Gaussian elimination written out in XLA costs nothing noticeable and never leaves the
   device's own thread.
-* :func:`eigh`: ``jnp.linalg.eigh`` that, under ``vmap``, calls LAPACK on one matrix at a
-  time (``lax.map``): a batch of one is never split. For a few matrices per grasp, where
+* :func:`eigh`: ``jnp.linalg.eigh`` that, under ``vmap`` on the CPU, calls LAPACK on one
+  matrix at a time (``lax.map``): a batch of one is never split (other backends get the
+  batched solver). For a few matrices per grasp, where
   their count grows with the batch. (The solver's own ``eigh``, on every loop step, runs
   on gathered blocks of :data:`jaxgrasp.direction.EIGH_BLOCK` lanes, a batch far below
   any that was seen to split.)
@@ -58,8 +59,8 @@ def solve(a, b):
 @jax.custom_batching.custom_vmap
 def eigh(a):
     """``(w, v)``: ``jnp.linalg.eigh`` of the symmetric ``a`` ``(m, m)``, eigenvalues ``w``
-    ``(m,)`` ascending and eigenvectors the columns of ``v`` ``(m, m)``; under ``vmap``
-    one LAPACK call per matrix (the module docstring), with the same digits."""
+    ``(m,)`` ascending and eigenvectors the columns of ``v`` ``(m, m)``; under ``vmap`` on
+    the CPU one LAPACK call per matrix (the module docstring), with the same digits."""
     w, v = jnp.linalg.eigh(a)
     return w, v
 
@@ -71,5 +72,9 @@ def _eigh_one_at_a_time(axis_size, in_batched, a):
         a = jnp.broadcast_to(a, (axis_size,) + a.shape)
     m = a.shape[-1]
     lead = a.shape[:-2]  # (axis_size,) or, under an outer vmap, more: flatten all
-    w, v = jax.lax.map(lambda x: tuple(jnp.linalg.eigh(x)), a.reshape(-1, m, m))
+    one = lambda x: tuple(jnp.linalg.eigh(x))
+    # the CPU's LAPACK one matrix at a time; other backends' solvers have no such pool
+    w, v = jax.lax.platform_dependent(
+        a.reshape(-1, m, m), cpu=lambda x: jax.lax.map(one, x), default=lambda x: jax.vmap(one)(x)
+    )
     return (w.reshape(lead + (m,)), v.reshape(lead + (m, m))), (True, True)
