@@ -15,8 +15,8 @@ device), each device in ``lapack_dsyevd_ffi`` for the start frames of its grasps
   device's own thread.
 * :func:`eigh`: ``jnp.linalg.eigh`` that, under ``vmap`` on the CPU, calls LAPACK on one
   matrix at a time (``lax.map``): a batch of one is never split (other backends get the
-  batched solver). For a few matrices per grasp, where
-  their count grows with the batch. (The solver's own ``eigh``, on every loop step, runs
+  batched solver). Meant for a few matrices per grasp, whose count grows with the batch.
+  (The solver's own ``eigh``, on every loop step, runs
   on gathered blocks of :data:`jaxgrasp.direction.EIGH_BLOCK` lanes, a batch far below
   any that was seen to split.)
 """

@@ -194,17 +194,17 @@ def stack(grasps, num_contacts: int | None = None) -> Grasp:
     fields = [f.name for f in dataclasses.fields(Grasp) if f.name != "active"]
     out = {name: [] for name in fields}
     active = []
-    for g in items:
+    for g in items:  # on the host, in NumPy: thousands of grasps, a few fields each
         k = g.num_contacts
         pad = np.concatenate([np.arange(k), np.full(n - k, k - 1)]).astype(int)
         for name in fields:
-            a = jnp.asarray(getattr(g, name))
+            a = np.asarray(getattr(g, name))
             if name in _PER_CONTACT:  # a scalar stands for every contact
-                a = jnp.broadcast_to(a, (k,)) if a.ndim == 0 else a
+                a = np.broadcast_to(a, (k,)) if a.ndim == 0 else a
                 a = a[pad]
             out[name].append(a)
         active.append(np.arange(n) < k)
-    return Grasp(**{name: jnp.stack(v) for name, v in out.items()}, active=jnp.asarray(np.stack(active)))
+    return Grasp(**{name: jnp.asarray(np.stack(v)) for name, v in out.items()}, active=jnp.asarray(np.stack(active)))
 
 
 def _field_dtype(dtype) -> np.dtype:
