@@ -493,11 +493,12 @@ def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = T
     def equilibrium_lanes(data: ProgramData):
         return _equilibrium_lanes(data, num_lanes) + ((jnp.zeros(num_lanes, bool), jnp.zeros(num_lanes, dtype)),)
 
+    lane_k = _lane_equalities(n, options.num_starts)
     # The queue starts the force-limit lanes first: on random grasps they take 46 steps on
     # average against 27 for the slip lanes (two thirds of them prove their boundary
     # infeasible), so started last they would run on with the other slots idle
     # (experiments/BENCHMARK.md). The equilibrium stage has one lane per grasp.
-    rank = jnp.where(_lane_equalities(n, options.num_starts) >= 2 * n, 0, 1)
+    rank = jnp.where(lane_k >= 2 * n, 0, 1)
 
     def stage(i, carry):
         eq, _, _ = carry
@@ -537,7 +538,6 @@ def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = T
     per_grasp = jnp.isnan(sum(jnp.sum(jnp.asarray(a, dtype)) for a in jax.tree_util.tree_leaves(data)))
     carry0 = jax.tree_util.tree_map(lambda a: jnp.where(per_grasp, a, a), carry0)
     eq, lanes, (z0s, solved, (at_eq, g_eq)) = jax.lax.fori_loop(0, 2, stage, carry0)
-    lane_k = _lane_equalities(n, options.num_starts)
     lanes = jax.vmap(lambda *a: _at_equilibrium(*a, lane_k))(eq, lanes, at_eq, g_eq)
     found = solved | at_eq
     if settle:
