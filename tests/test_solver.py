@@ -328,14 +328,14 @@ def test_penalty_growth_after_a_stalled_violation(viol, stationarity, inner, gro
     s = init(jnp.zeros(3), jnp.array([0.0, 1.0, 0.0]), 0.5, True, o)
     s = dataclasses.replace(s, prev_viol=jnp.asarray(viol), inner=jnp.asarray(inner, jnp.int32))
     d = FirstOrder(fx=jnp.asarray(0.0), gx=jnp.array([1.0, viol, 1.0]), grad_f=jnp.zeros(3), jac=jnp.eye(3))
-    new = _multiplier_update(s, d, jnp.full(3, stationarity * float(_inner_tol(s, o))), o)
+    new = _multiplier_update(s, d, jnp.full(3, stationarity * float(_inner_tol(s, d, o))), o)
     assert float(new.rho) == (o.rho0 * o.rho_growth if grows else o.rho0)
     assert float(new.nu) == pytest.approx(0.5 + o.rho0 * viol)
     # without an equality (the equilibrium problem) the penalty grows as before: a stalled
     # violation of row 1 (g < 0) raises it whatever the inner solve did
     s_ineq = dataclasses.replace(s, eq_mask=jnp.zeros(3))
     d_ineq = dataclasses.replace(d, gx=jnp.array([1.0, -viol, 1.0]))
-    new = _multiplier_update(s_ineq, d_ineq, jnp.full(3, stationarity * float(_inner_tol(s, o))), o)
+    new = _multiplier_update(s_ineq, d_ineq, jnp.full(3, stationarity * float(_inner_tol(s, d, o))), o)
     assert float(new.rho) == o.rho0 * o.rho_growth
 
 
@@ -349,7 +349,7 @@ def test_penalty_grows_after_grow_penalty_after_steps():
     s = init(jnp.zeros(3), jnp.array([0.0, 1.0, 0.0]), 0.5, True, o)
     s = dataclasses.replace(s, prev_viol=jnp.asarray(9e-4), inner=jnp.asarray(o.max_inner, jnp.int32))
     d = FirstOrder(fx=jnp.asarray(0.0), gx=jnp.array([1.0, 9e-4, 1.0]), grad_f=jnp.zeros(3), jac=jnp.eye(3))
-    gphi = jnp.full(3, 10.0 * float(_inner_tol(s, o)))
+    gphi = jnp.full(3, 10.0 * float(_inner_tol(s, d, o)))
     for steps, grows in [(0, False), (o.grow_penalty_after - 1, False), (o.grow_penalty_after, True)]:
         new = _multiplier_update(dataclasses.replace(s, steps=jnp.asarray(steps, jnp.int32)), d, gphi, o)
         assert float(new.rho) == (o.rho0 * o.rho_growth if grows else o.rho0), steps
@@ -374,3 +374,42 @@ def test_nan_nu0_is_the_least_squares_multiplier():
     _assert_same_lanes(got, want)
     off = solve(fg, jnp.zeros(3), mask, jnp.nan, active=False)
     assert float(off.nu) == 0.0
+
+
+def test_stationarity_tolerance_is_the_gradient_rounding_floor_capped():
+    """Where phi's penalty Hessian ``rho J^T D J`` is so stiff that moving ``x`` by a few
+    ulps moves phi's gradient by more than tol, a lane counts as stationary at that floor
+    (``ROUNDING_ULPS * eps * rho * max(|J|^T D |J| |x|)``), at most
+    ``MAX_STATIONARITY_TOL * tol``; elsewhere at tol. Rows where phi is not quadratic (an
+    inactive inequality) do not count."""
+    from jaxgrasp.solver import (
+        MAX_STATIONARITY_TOL,
+        ROUNDING_ULPS,
+        FirstOrder,
+        _lane_status,
+        _stationarity_tol,
+        init,
+    )
+
+    o = SolverOptions()
+    eps = float(jnp.finfo(jnp.float64).eps)
+    x = jnp.array([0.1, -0.2, 0.05])
+    jac = jnp.array([[17.0, 3.0, 0.0], [0.0, 0.0, 50.0], [1.0, 1.0, 1.0]])
+    # row 0 active (lam > 0, g = 0: quadratic), row 1 inactive (lam = 0, g > 0), row 2
+    # the equality
+    d = FirstOrder(fx=jnp.asarray(0.0), gx=jnp.array([0.0, 1.0, 0.0]), grad_f=jnp.zeros(3), jac=jac)
+    s = init(x, jnp.array([0.0, 0.0, 1.0]), 0.3, True, o)
+    s = dataclasses.replace(s, lam=jnp.array([2.0, 0.0, 0.0]))
+    a = np.abs(np.asarray(jac))[[0, 2]]
+    floor_per_rho = ROUNDING_ULPS * eps * np.max(a.T @ (a @ np.abs(np.asarray(x))))
+    for rho in (10.0, 1e4, 1e5, 1e12):
+        sr = dataclasses.replace(s, rho=jnp.asarray(rho))
+        expected = min(max(o.tol, rho * floor_per_rho), MAX_STATIONARITY_TOL * o.tol)
+        assert float(_stationarity_tol(sr, d, o)) == pytest.approx(expected, rel=1e-12), rho
+    assert float(_stationarity_tol(dataclasses.replace(s, rho=jnp.asarray(10.0)), d, o)) == o.tol
+    assert 1e4 * floor_per_rho > o.tol and 1e5 * floor_per_rho > MAX_STATIONARITY_TOL * o.tol  # both regimes hit
+    # the status follows it: stationarity 3 tol converges at penalty 1e5, not at 10
+    for rho, status in [(10.0, LaneStatus.NOT_CONVERGED), (1e5, LaneStatus.CONVERGED)]:
+        sr = dataclasses.replace(s, rho=jnp.asarray(rho), prev_viol=jnp.asarray(1.0))
+        got = _lane_status(sr, d, 3.0 * o.tol, 0.0, 0.0, o)
+        assert int(got) == status, rho
