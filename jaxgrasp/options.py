@@ -10,13 +10,30 @@ from .solver import SolverOptions
 
 __all__ = ["EvaluateOptions", "COMPILER_OPTIONS", "ONE_GRASP_CPU_OPTIONS"]
 
-COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+def _jaxlib_version() -> tuple[int, ...]:
+    from jaxlib.version import __version__  # no backend is started by this import
+
+    return tuple(int(part) for part in __version__.split(".")[:3] if part.isdigit())
+
+
+_YNN_FUSION_JAXLIB = (0, 8, 1)  # the first jaxlib whose XLA has the option below
+
+COMPILER_OPTIONS = {
+    "xla_cpu_use_fusion_emitters": False,
+    **({"xla_cpu_experimental_ynn_fusion_type": ""} if _jaxlib_version() >= _YNN_FUSION_JAXLIB else {}),
+}
 """XLA options every jaxgrasp program is compiled with (``jax.jit(..., compiler_options=...)``).
 
 On the CPU, XLA's newer fusion emitters take twice as long to compile jaxgrasp's solver
 loop and run it no faster; without them the cube's evaluator compiles in about half the
 CPU time and runs ~15% faster, with the same results to the last digit
-(``experiments/compile_time.py``). Other backends ignore the option. JAX takes compiler
+(``experiments/compile_time.py``). From jaxlib 0.8.1 on, XLA also hands small products
+and reductions to YNNPACK kernels; on the solver's arrays (a few hundred lanes of 6 x 6
+and 21 x 6 pieces) XLA's own loops are faster: with the option empty (no YNNPACK
+fusion), a random set's batch program runs ~8 % faster and the solver's Jacobian and
+Hessian products ~17 % (``experiments/BENCHMARK.md``); results change by rounding only.
+Older jaxlib does not know the option, so it is set only where it exists. Other backends
+ignore both options. JAX takes compiler
 options only on the outermost ``jax.jit``: jaxgrasp passes them where it compiles a
 program itself (batches, sweeps, tuning, :func:`jaxgrasp.evaluate` of a concrete grasp);
 pass them to your own outermost ``jax.jit`` around :func:`jaxgrasp.evaluate` to get the
