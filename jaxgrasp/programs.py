@@ -151,7 +151,12 @@ def _first_order(z, data: ProgramData) -> FirstOrder:
     scale = _pose_scale(data, z.dtype)
     gravity = jnp.concatenate([p.weight, jnp.zeros(3, z.dtype)])
     grad_f = (jnp.einsum("nk,nkj->j", de, dq) - gravity) * scale / data.scale
-    jac = jnp.einsum("rnk,nkj->rnj", dm, dq).reshape(-1, 6) * scale
+    # (3, N, 6) products over the 4 kinematic coordinates, written as a product and a sum
+    # that XLA fuses into one loop: as an einsum each is a dot of 4-long rows per contact,
+    # which XLA's CPU runtime runs one small matrix at a time: this one and the Hessian's
+    # H_i dq_i took 9 % of the solver loop's profiled time, and written this way a random
+    # batch runs 15 % faster (experiments/BENCHMARK.md)
+    jac = jnp.sum(dm[:, :, :, None] * dq[None], axis=2).reshape(-1, 6) * scale
     fx = energy_of(x, tuple(q.T), p) / data.scale
     return FirstOrder(fx, margins_of(tuple(q.T), p).reshape(-1), grad_f, jac, aux=(q, dq, geometry, de, dm))
 
@@ -168,7 +173,8 @@ def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProgramData):
     he, hm = contact_hessians(tuple(q.T), p)
     gq = de / data.scale + jnp.einsum("rn,rnk->nk", w, dm)  # (N, 4): d psi_i / dq_i
     hq = he / data.scale + jnp.einsum("rn,rnkl->nkl", w, hm)  # (N, 4, 4)
-    hx = jnp.einsum("njm,njk,nkl->ml", dq, hq, dq) + kinematics_curvature(to_pose(z, data.lever), p, geometry, gq)
+    hd = jnp.sum(hq[:, :, :, None] * dq[:, None, :, :], axis=2)  # (N, 4, 6): H_i dq_i, fused (see _first_order)
+    hx = jnp.einsum("njm,njl->ml", dq, hd) + kinematics_curvature(to_pose(z, data.lever), p, geometry, gq)
     scale = _pose_scale(data, z.dtype)
     return hx * scale[:, None] * scale[None, :]
 
