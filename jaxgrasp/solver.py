@@ -378,13 +378,14 @@ def line_search(merit_of, trials: Trial, o: SolverOptions):
                          o.line_search_steps, rounding)
 
 
-def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, o: SolverOptions):
+def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, floor, o: SolverOptions):
     """``()`` :class:`~jaxgrasp.status.LaneStatus` after a multiplier update, from the KKT
     residuals ``stat``, ``viol``, ``comp`` at ``s.x`` and the violation ``s.prev_viol``
-    before it: converged (stationarity within :func:`_stationarity_tol`, feasibility and
-    complementarity within tol), infeasible, or not converged (yet)."""
+    before it: converged (stationarity within :func:`_stationarity_tol` of the rounding
+    ``floor``, feasibility and complementarity within tol), infeasible, or not converged
+    (yet)."""
     tol, infeasible_tol, _ = _tolerances(s.x.dtype, o)
-    converged = (stat <= _stationarity_tol(s, d, o)) & (viol <= tol) & (comp <= tol)
+    converged = (stat <= _stationarity_tol(s, floor, o)) & (viol <= tol) & (comp <= tol)
     at_max = s.rho >= o.rho_max
     # Infeasible: the violation stays above infeasible_tol at a point where the
     # violation measure v = |h|^2/2 + sum min(g_i, 0)^2/2 is stationary (a local
@@ -403,10 +404,10 @@ def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, o: SolverOptio
     )
 
 
-def _multiplier_update(s: SolverState, d: FirstOrder, gphi, o: SolverOptions) -> SolverState:
+def _multiplier_update(s: SolverState, d: FirstOrder, gphi, floor, o: SolverOptions) -> SolverState:
     """The multiplier and penalty update ending an inner solve, with the lane's new status
     and KKT residuals (``d``: the problem at ``s.x``; ``gphi``: ``(n,)`` gradient of phi
-    there)."""
+    there; ``floor``: :func:`_rounding_floor` there)."""
     gx = d.gx
     is_eq = s.eq_mask > 0
     h = jnp.sum(s.eq_mask * gx)
@@ -433,7 +434,7 @@ def _multiplier_update(s: SolverState, d: FirstOrder, gphi, o: SolverOptions) ->
     # rho_max, as the problem's other lanes do, some 100-150 steps later (so not 150: a
     # lane then still ran out). On the 1000 robustness grasps nothing else changed.
     late = s.steps >= o.grow_penalty_after
-    finished = (stat <= _inner_tol(s, d, o)) | (s.inner > o.max_inner) | ~jnp.any(is_eq) | late
+    finished = (stat <= _inner_tol(s, floor, o)) | (s.inner > o.max_inner) | ~jnp.any(is_eq) | late
     stalled = (viol > 0.25 * s.prev_viol) & (finished | (viol > FAR_VIOLATION))
     rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
     return dataclasses.replace(
@@ -443,35 +444,35 @@ def _multiplier_update(s: SolverState, d: FirstOrder, gphi, o: SolverOptions) ->
         rho=rho,
         inner=jnp.zeros_like(s.inner),
         prev_viol=viol,
-        status=_lane_status(s, d, stat, viol, comp, o).astype(jnp.int32),
+        status=_lane_status(s, d, stat, viol, comp, floor, o).astype(jnp.int32),
         stationarity=stat,
         feasibility=viol,
         complementarity=comp,
     )
 
 
-def _inner_done(s: SolverState, d: FirstOrder, o: SolverOptions):
-    """``(gphi, done)``: the ``(n,)`` gradient of phi at ``s.x`` (``d``: the problem there)
-    and whether the inner solve is done (``()`` bool: stationary enough, or
-    ``max_inner`` Newton steps taken)."""
+def _inner_done(s: SolverState, d: FirstOrder, floor, o: SolverOptions):
+    """``(gphi, done)``: the ``(n,)`` gradient of phi at ``s.x`` (``d``: the problem there;
+    ``floor``: :func:`_rounding_floor`) and whether the inner solve is done (``()`` bool:
+    stationary enough, or ``max_inner`` Newton steps taken)."""
     _, _, weights = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
     gphi = d.grad_f + d.jac.T @ weights
-    return gphi, (jnp.max(jnp.abs(gphi)) <= _inner_tol(s, d, o)) | (s.inner >= o.max_inner)
+    return gphi, (jnp.max(jnp.abs(gphi)) <= _inner_tol(s, floor, o)) | (s.inner >= o.max_inner)
 
 
-def _inner_tol(s: SolverState, d: FirstOrder, o: SolverOptions):
+def _inner_tol(s: SolverState, floor, o: SolverOptions):
     """``()`` the stationarity ``|grad phi|_inf`` at which the inner solve of ``s`` is done
-    (``d``: the problem at ``s.x``).
+    (``floor``: :func:`_rounding_floor` at ``s.x``).
 
     Inexact inner solves: while the violation is large, a rough minimiser of phi is enough
     to update the multipliers; the tolerance tightens to :func:`_stationarity_tol` as the
     violation vanishes."""
-    return jnp.maximum(_stationarity_tol(s, d, o), o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
+    return jnp.maximum(_stationarity_tol(s, floor, o), o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
 
 
 ROUNDING_ULPS = 10.0
 """How many units in the last place of ``x`` the stationarity floor of
-:func:`_stationarity_tol` allows for (a Newton step lands within a few of phi's minimiser,
+:func:`_rounding_floor` allows for (a Newton step lands within a few of phi's minimiser,
 and ``g`` itself carries rounding)."""
 
 MAX_STATIONARITY_TOL = 10.0
@@ -481,27 +482,33 @@ precision (its energy error is of order stationarity squared over curvature), an
 that needs more is crawling, not at rounding."""
 
 
-def _stationarity_tol(s: SolverState, d: FirstOrder, o: SolverOptions):
-    """``()`` the stationarity ``|grad phi|_inf`` that counts as converged at ``s.x``
-    (``d``: the problem there): tol, or, where phi is so stiff that its gradient at the
-    nearest floating-point point to its minimiser cannot reach tol, that gradient's
-    rounding floor (at most :data:`MAX_STATIONARITY_TOL` tol).
+def _rounding_floor(s: SolverState, d: FirstOrder):
+    """``()`` per unit penalty, how far phi's gradient at ``s.x`` moves when ``x`` moves by
+    ``u = ROUNDING_ULPS * eps |x|`` (componentwise; ``d``: the problem at ``s.x``).
 
     phi's penalty term has the Hessian ``rho J^T D J`` (``D``: the equality and the
-    inequalities where phi is quadratic); moving ``x`` by ``u = ROUNDING_ULPS * eps |x|``
-    (componentwise) moves its gradient by up to ``rho |J|^T D |J| u``. At a penalty of
-    1e4 on a degenerate equilibrium (five constraints active in six unknowns, rows of
-    norm 17) that floor is 1-1.4e-10, and the gradient swings between 2e-10 and 1e-9 from
-    one Newton step of 1e-14 to the next: with tol 1e-10 the lane converged only by luck
-    in some batch layouts and ran its whole budget in others
-    (``tests/test_degenerate.py::test_boundaries_through_the_equilibrium``)."""
-    tol, _, _ = _tolerances(s.x.dtype, o)
+    inequalities where phi is quadratic), so its gradient moves by up to
+    ``rho max(|J|^T D |J| u)``. At a penalty of 1e4 on a degenerate equilibrium (five
+    constraints active in six unknowns, rows of norm 17) that is 1-1.4e-10, and the
+    gradient swung between 2e-10 and 1e-9 from one Newton step of 1e-14 to the next: with
+    tol 1e-10 the lane converged only by luck in some batch layouts and ran its whole
+    budget in others (``tests/test_degenerate.py::test_boundaries_through_the_equilibrium``).
+    Computed once per loop step, from the multipliers before its update (the rows where
+    phi is quadratic barely change in an update)."""
     _, shifted, _ = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
     quadratic = (s.eq_mask > 0) | (shifted > 0)
     a = jnp.abs(d.jac)
     u = ROUNDING_ULPS * float(jnp.finfo(s.x.dtype).eps) * jnp.abs(s.x)
-    floor = s.rho * jnp.max(a.T @ jnp.where(quadratic, a @ u, 0.0))
-    return jnp.clip(floor, tol, MAX_STATIONARITY_TOL * tol)
+    return jnp.max(a.T @ jnp.where(quadratic, a @ u, 0.0))
+
+
+def _stationarity_tol(s: SolverState, floor, o: SolverOptions):
+    """``()`` the stationarity ``|grad phi|_inf`` that counts as converged for ``s``: tol,
+    or, where phi is so stiff that its gradient at the floating-point point nearest its
+    minimiser cannot reach tol, that gradient's rounding floor ``s.rho * floor``
+    (:func:`_rounding_floor`), at most :data:`MAX_STATIONARITY_TOL` tol."""
+    tol, _, _ = _tolerances(s.x.dtype, o)
+    return jnp.clip(s.rho * floor, tol, MAX_STATIONARITY_TOL * tol)
 
 
 def _initial_multiplier(s: SolverState, d: FirstOrder) -> SolverState:
@@ -523,7 +530,7 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
 
     Stages, in order: :func:`_first_order` (the problem and its Jacobian at ``s.x``,
     shared by every later stage: the update does not move ``x``);
-    :func:`_initial_multiplier` (at the first step); :func:`_inner_done`;
+    :func:`_initial_multiplier` (at the first step); :func:`_rounding_floor`; :func:`_inner_done`;
     :func:`_multiplier_update` (status from :func:`_lane_status`); :func:`_inner_done`
     again; :func:`_phi_hessian` and :func:`_newton_direction`.
     """
@@ -535,11 +542,12 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
     is_running = running(s, o)
     d = _first_order(problem, s.x)
     s = _initial_multiplier(s, d)
-    gphi, inner_done = _inner_done(s, d, o)
+    floor = _rounding_floor(s, d)
+    gphi, inner_done = _inner_done(s, d, floor, o)
     update = is_running & inner_done
-    s_upd = _multiplier_update(s, d, gphi, o)
+    s_upd = _multiplier_update(s, d, gphi, floor, o)
     s1 = _select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
-    gphi1, inner_done1 = _inner_done(s1, d, o)
+    gphi1, inner_done1 = _inner_done(s1, d, floor, o)
     newton = is_running & running(s1, o) & ~inner_done1
     p = _newton_direction(_phi_hessian(problem, s1, d), gphi1, newton, o)
     phi0 = _phi_of(d.fx, d.gx, s1.lam, s1.nu, s1.rho, s1.eq_mask)

@@ -321,21 +321,22 @@ def test_penalty_growth_after_a_stalled_violation(viol, stationarity, inner, gro
     penalty of a lane with an equality grows depends on how the inner solve ended and on
     how far from feasible the lane is (``solver._multiplier_update``). The multipliers are
     updated either way."""
-    from jaxgrasp.solver import FAR_VIOLATION, FirstOrder, _inner_tol, _multiplier_update, init
+    from jaxgrasp.solver import FAR_VIOLATION, FirstOrder, _inner_tol, _multiplier_update, _rounding_floor, init
 
     o = SolverOptions()
     assert o.max_inner == 15 and (viol > FAR_VIOLATION) == (viol == 0.5)
     s = init(jnp.zeros(3), jnp.array([0.0, 1.0, 0.0]), 0.5, True, o)
     s = dataclasses.replace(s, prev_viol=jnp.asarray(viol), inner=jnp.asarray(inner, jnp.int32))
     d = FirstOrder(fx=jnp.asarray(0.0), gx=jnp.array([1.0, viol, 1.0]), grad_f=jnp.zeros(3), jac=jnp.eye(3))
-    new = _multiplier_update(s, d, jnp.full(3, stationarity * float(_inner_tol(s, d, o))), o)
+    floor = _rounding_floor(s, d)
+    new = _multiplier_update(s, d, jnp.full(3, stationarity * float(_inner_tol(s, floor, o))), floor, o)
     assert float(new.rho) == (o.rho0 * o.rho_growth if grows else o.rho0)
     assert float(new.nu) == pytest.approx(0.5 + o.rho0 * viol)
     # without an equality (the equilibrium problem) the penalty grows as before: a stalled
     # violation of row 1 (g < 0) raises it whatever the inner solve did
     s_ineq = dataclasses.replace(s, eq_mask=jnp.zeros(3))
     d_ineq = dataclasses.replace(d, gx=jnp.array([1.0, -viol, 1.0]))
-    new = _multiplier_update(s_ineq, d_ineq, jnp.full(3, stationarity * float(_inner_tol(s, d, o))), o)
+    new = _multiplier_update(s_ineq, d_ineq, jnp.full(3, stationarity * float(_inner_tol(s, floor, o))), floor, o)
     assert float(new.rho) == o.rho0 * o.rho_growth
 
 
@@ -343,15 +344,16 @@ def test_penalty_grows_after_grow_penalty_after_steps():
     """A lane with an equality whose inner solve was cut short near feasibility keeps its
     penalty, until it has taken ``grow_penalty_after`` steps: from then on a stalled
     violation raises it (a crawling lane ends converged or infeasible, not at the budget)."""
-    from jaxgrasp.solver import FirstOrder, _inner_tol, _multiplier_update, init
+    from jaxgrasp.solver import FirstOrder, _inner_tol, _multiplier_update, _rounding_floor, init
 
     o = SolverOptions()
     s = init(jnp.zeros(3), jnp.array([0.0, 1.0, 0.0]), 0.5, True, o)
     s = dataclasses.replace(s, prev_viol=jnp.asarray(9e-4), inner=jnp.asarray(o.max_inner, jnp.int32))
     d = FirstOrder(fx=jnp.asarray(0.0), gx=jnp.array([1.0, 9e-4, 1.0]), grad_f=jnp.zeros(3), jac=jnp.eye(3))
-    gphi = jnp.full(3, 10.0 * float(_inner_tol(s, d, o)))
+    floor = _rounding_floor(s, d)
+    gphi = jnp.full(3, 10.0 * float(_inner_tol(s, floor, o)))
     for steps, grows in [(0, False), (o.grow_penalty_after - 1, False), (o.grow_penalty_after, True)]:
-        new = _multiplier_update(dataclasses.replace(s, steps=jnp.asarray(steps, jnp.int32)), d, gphi, o)
+        new = _multiplier_update(dataclasses.replace(s, steps=jnp.asarray(steps, jnp.int32)), d, gphi, floor, o)
         assert float(new.rho) == (o.rho0 * o.rho_growth if grows else o.rho0), steps
 
 
@@ -387,6 +389,7 @@ def test_stationarity_tolerance_is_the_gradient_rounding_floor_capped():
         ROUNDING_ULPS,
         FirstOrder,
         _lane_status,
+        _rounding_floor,
         _stationarity_tol,
         init,
     )
@@ -402,14 +405,16 @@ def test_stationarity_tolerance_is_the_gradient_rounding_floor_capped():
     s = dataclasses.replace(s, lam=jnp.array([2.0, 0.0, 0.0]))
     a = np.abs(np.asarray(jac))[[0, 2]]
     floor_per_rho = ROUNDING_ULPS * eps * np.max(a.T @ (a @ np.abs(np.asarray(x))))
+    floor = _rounding_floor(s, d)
+    assert float(floor) == pytest.approx(floor_per_rho, rel=1e-12)
     for rho in (10.0, 1e4, 1e5, 1e12):
         sr = dataclasses.replace(s, rho=jnp.asarray(rho))
         expected = min(max(o.tol, rho * floor_per_rho), MAX_STATIONARITY_TOL * o.tol)
-        assert float(_stationarity_tol(sr, d, o)) == pytest.approx(expected, rel=1e-12), rho
-    assert float(_stationarity_tol(dataclasses.replace(s, rho=jnp.asarray(10.0)), d, o)) == o.tol
+        assert float(_stationarity_tol(sr, floor, o)) == pytest.approx(expected, rel=1e-12), rho
+    assert float(_stationarity_tol(dataclasses.replace(s, rho=jnp.asarray(10.0)), floor, o)) == o.tol
     assert 1e4 * floor_per_rho > o.tol and 1e5 * floor_per_rho > MAX_STATIONARITY_TOL * o.tol  # both regimes hit
     # the status follows it: stationarity 3 tol converges at penalty 1e5, not at 10
     for rho, status in [(10.0, LaneStatus.NOT_CONVERGED), (1e5, LaneStatus.CONVERGED)]:
         sr = dataclasses.replace(s, rho=jnp.asarray(rho), prev_viol=jnp.asarray(1.0))
-        got = _lane_status(sr, d, 3.0 * o.tol, 0.0, 0.0, o)
+        got = _lane_status(sr, d, 3.0 * o.tol, 0.0, 0.0, _rounding_floor(sr, d), o)
         assert int(got) == status, rho
