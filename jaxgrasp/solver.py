@@ -84,7 +84,10 @@ class SolverOptions:
 
     Attributes:
         tol: KKT tolerance on stationarity, feasibility and complementarity (float64;
-            in lower precision it is raised to ``1e3 * eps`` of the dtype).
+            in lower precision it is raised to ``1e3 * eps`` of the dtype). Where phi is
+            so stiff that one ulp of ``x`` moves its gradient by more, stationarity is
+            held to that rounding floor instead, at most :data:`MAX_STATIONARITY_TOL`
+            times tol (:func:`_stationarity_tol`).
         max_steps: budget of loop steps (Newton steps plus multiplier updates) per lane.
         max_inner: Newton steps before a multiplier update is forced.
         inner_tol_factor: inner solves stop at stationarity
