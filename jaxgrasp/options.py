@@ -30,8 +30,9 @@ CPU time and runs ~15% faster, with the same results to the last digit
 (``experiments/compile_time.py``). From jaxlib 0.8.1 on, XLA also hands small products
 and reductions to YNNPACK kernels; on the solver's arrays (a few hundred lanes of 6 x 6
 and 21 x 6 pieces) XLA's own loops are faster: with the option empty (no YNNPACK
-fusion), a random set's batch program runs ~8 % faster and the solver's Jacobian and
-Hessian products ~17 % (``experiments/BENCHMARK.md``); results change by rounding only.
+fusion) a random batch runs ~8 % faster, and ~18 % faster once the Jacobian's and the
+Hessian's small products are fused (:func:`jaxgrasp.programs._first_order`;
+``experiments/BENCHMARK.md``); results change by rounding only.
 Older jaxlib does not know the option, so it is set only where it exists. Other backends
 ignore both options. JAX takes compiler
 options only on the outermost ``jax.jit``: jaxgrasp passes them where it compiles a
