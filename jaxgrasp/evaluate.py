@@ -256,7 +256,9 @@ class Boundaries:
 SAME_MINIMUM = 3e-10
 """Converged lanes of one boundary problem whose energies above ``U0`` lie within this
 (relative) of the lowest one's reached the same minimum: lanes that do so end 6e-12 to
-1.1e-10 apart (the solver stops at KKT residuals of 1e-10). :func:`best_starts` reports
+1.1e-10 apart (the solver stops at feasibility and complementarity of 1e-10, and at
+stationarity of 1e-10, or up to 1e-9 where phi is too stiff to reach it, which moves the
+energy only at second order). :func:`best_starts` reports
 the first of them by start, so the reported lane (its energy, pose and steps) does not
 depend on the rounding of the program it ran in (a single grasp, a batch, a grasp padded
 with inactive contacts); the energy is at most this much above the lowest lane's."""
