@@ -8,9 +8,11 @@ Three layers, each skipping more of the work of building an evaluator:
   (``jax.experimental.serialize_executable``), so that a later process neither traces
   :func:`jaxgrasp.evaluate` in Python nor lowers nor compiles it: it loads the machine
   code (the cube: ~0.3 s instead of 3-5 s on 2 cores; ``experiments/compile_time.py``);
-* JAX's persistent compilation cache, so that a program the store cannot serve (another
-  processor, a stale or corrupt file) is traced again but its XLA compilation is a cache
-  load, and the user's own ``jit`` programs start warm too.
+* JAX's persistent compilation cache, for the user's own ``jit`` programs and
+  jaxgrasp's programs that are not stored. A program the store keeps is not written
+  there as well: a second copy of the same machine code, whose writing cost 0.16 s of a
+  cold default sweep (``experiments/compile_time.py``); a program whose stored file is
+  missing, stale or corrupt is traced and compiled again, and stored again.
 
 The programs of :func:`jaxgrasp.evaluate` on a concrete grasp
 (:func:`jaxgrasp.evaluate.compiled_program`), of :func:`jaxgrasp.evaluate_batch` and of
@@ -36,6 +38,7 @@ with :func:`stats` and start afresh with :func:`clear_compiled`.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import pickle
@@ -348,12 +351,14 @@ def compiled(
         fn = load_program(path, spec, _devices(devices), n_outputs)
     if fn is None:
         hits = _XLA_CACHE_HITS[0]
-        fn = build().lower(*spec).compile()
+        with _no_xla_cache_write() if path is not None else contextlib.nullcontext():
+            fn = build().lower(*spec).compile()
         _STATS["traced"] += 1
         # An executable that XLA's cache served cannot be serialized again (XLA on the CPU
         # then writes a program whose kernels are missing when it is loaded): store only
-        # one that was compiled here. (Where the store's file went stale but XLA's cache
-        # still holds the program, later processes trace it and load XLA's copy.)
+        # one that was compiled here. (XLA's cache holds no stored program's executable,
+        # but may hold one written by another program of the same HLO or an older
+        # jaxgrasp; later processes then trace it and load XLA's copy.)
         if path is not None and _XLA_CACHE_HITS[0] == hits:
             save_program(path, fn)
     else:
@@ -363,6 +368,19 @@ def compiled(
         _MEMO.pop(next(iter(_MEMO)))
     _MEMO[key] = fn
     return fn, seconds
+
+
+def _no_xla_cache_write():
+    """Context in which JAX's persistent cache writes no entry from this thread (its
+    minimum compile time for an entry raised to infinity, thread-locally): for programs
+    that the program store keeps. Where this JAX has no such setting, a context that
+    changes nothing."""
+    try:
+        from jax._src import config as jax_config
+
+        return jax_config.persistent_cache_min_compile_time_secs(float("inf"))
+    except (ImportError, AttributeError, TypeError):
+        return contextlib.nullcontext()
 
 
 def default_device():
