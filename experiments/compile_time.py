@@ -8,7 +8,7 @@ median reported, with the load average (1 min) when it started:
 
 * ``evaluate.*``: the cube (``jaxgrasp.presets.cube(6e5, 0.002)``, default options),
   caches off, in stages: ``import`` (``import jaxgrasp``), ``trace``, ``lower`` and
-  ``compile`` (``evaluate_compiled.trace(..., settle=False).lower().compile(ONE_GRASP_CPU_OPTIONS)``,
+  ``compile`` (``evaluate_compiled.trace(..., settle=False).lower().compile(LATENCY_CPU_OPTIONS)``,
   the program a concrete ``evaluate`` runs first), ``first_run`` (the
   compiled program's first call); ``hlo_lines``: lines of the lowered StableHLO;
 * ``evaluate_cold.first`` / ``evaluate_warm.first``: the first ``jaxgrasp.evaluate(cube)``
@@ -61,7 +61,7 @@ traced = evaluate_compiled.trace(grasp, temperature, options, False)  # settle=F
 t2 = time.perf_counter()
 lowered = traced.lower()
 t3 = time.perf_counter()
-compiled = lowered.compile(jaxgrasp.options.ONE_GRASP_CPU_OPTIONS)  # as jaxgrasp.evaluate compiles it on a CPU
+compiled = lowered.compile(jaxgrasp.options.LATENCY_CPU_OPTIONS)  # as jaxgrasp.evaluate compiles it on a CPU
 t4 = time.perf_counter()
 jax.block_until_ready(compiled(grasp, temperature))
 t5 = time.perf_counter()

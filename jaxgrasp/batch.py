@@ -9,9 +9,10 @@
     res.rank()[:10]                          # indices of the best grasps
 
 :func:`evaluate_batch` and :func:`jaxgrasp.sweep` share this path: the grasps of a chunk
-are evaluated by one program, :func:`jaxgrasp.evaluate.evaluate_batch_traced` (equal
-to ``jax.vmap(evaluate)`` lane by lane; from :func:`compiled_evaluator`, memoised and
-stored by :mod:`jaxgrasp.cache`), split along the batch over all devices, each
+are evaluated by one compiled evaluator, :func:`jaxgrasp.evaluate.evaluate_batch_traced`
+in its two stages, the solver and the evaluation (equal to ``jax.vmap(evaluate)`` lane
+by lane; from :func:`compiled_evaluator`, memoised and stored by :mod:`jaxgrasp.cache`),
+split along the batch over all devices, each
 device running its own work queue on its slice (:func:`over_devices`; on a CPU
 ``import jaxgrasp`` makes one device per core, :mod:`jaxgrasp.cores`); the
 last chunk is padded to the same size, so a set compiles once per chunk size, number of
@@ -33,11 +34,11 @@ from . import cache
 from .batch_result import BatchResult, mark_invalid
 from .dataset import GraspSet
 from .evaluate import EvaluateOptions
-from .evaluate import evaluate_batch_traced
+from .evaluate import evaluations_of, programs_of_grasps
 from .fields import NAMES
 from .grasp import Grasp, stack
-from .options import COMPILER_OPTIONS
-from .programs import needs_settling
+from .options import COMPILER_OPTIONS, LATENCY_CPU_OPTIONS
+from .programs import needs_settling, programs_treedef
 from .result import FIELDS, Evaluation
 from .validation import GraspValueError, check_batch_inputs
 
@@ -98,14 +99,35 @@ def grasp_fields(masked: bool) -> tuple[str, ...]:
 
 
 def _batched_fn(options: EvaluateOptions, sharding, masked: bool = False, settle: bool = True):
-    # arrays in, arrays out (no Grasp pytree): the program store keeps flat programs
-    names = grasp_fields(masked)
+    """The batched evaluator as its two stages, each ``jax.jit`` over the devices of
+    ``sharding`` (:func:`over_devices`), arrays in and arrays out (no pytrees: the
+    program store keeps flat programs):
 
-    def many(*fields):
-        r = evaluate_batch_traced(Grasp(**dict(zip(names, fields))), options, settle)
+    1. the solver: the :class:`Grasp` fields (:func:`grasp_fields`) -> the leaves of their
+       :class:`~jaxgrasp.programs.Programs` (:func:`~jaxgrasp.evaluate.programs_of_grasps`);
+    2. the evaluation: the fields, then those leaves -> every :class:`~jaxgrasp.Evaluation`
+       field (:data:`RESULT_FIELDS`; :func:`~jaxgrasp.evaluate.evaluations_of`),
+       compiled with :data:`~jaxgrasp.options.LATENCY_CPU_OPTIONS` on a CPU: it runs once
+       per chunk.
+
+    Two programs rather than one, so that XLA compiles the solver's (3-4 s on 2 cores)
+    while the evaluation's is traced and compiled (:func:`jaxgrasp.cache.compiled`): a
+    cold default sweep 0.3-0.4 s sooner (``experiments/BENCHMARK.md``)."""
+    names = grasp_fields(masked)
+    tree = programs_treedef()
+
+    def solve(*fields):
+        return tuple(jax.tree_util.tree_leaves(programs_of_grasps(Grasp(**dict(zip(names, fields))), options, settle)))
+
+    def evaluate(*args):
+        fields, leaves = args[: len(names)], args[len(names) :]
+        progs = jax.tree_util.tree_unflatten(tree, leaves)
+        r = evaluations_of(Grasp(**dict(zip(names, fields))), progs, options)
         return tuple(getattr(r, f) for f in RESULT_FIELDS)
 
-    return over_devices(many, sharding)
+    cpu = sharding.mesh.devices.flat[0].platform == "cpu"
+    return (over_devices(solve, sharding),
+            over_devices(evaluate, sharding, LATENCY_CPU_OPTIONS if cpu else COMPILER_OPTIONS))
 
 
 def batch_sharding(devices=None) -> NamedSharding:
@@ -115,10 +137,10 @@ def batch_sharding(devices=None) -> NamedSharding:
     return NamedSharding(Mesh(np.asarray(devices), ("batch",)), P("batch"))
 
 
-def over_devices(fn: Callable, sharding: NamedSharding) -> Callable:
+def over_devices(fn: Callable, sharding: NamedSharding, compiler_options=COMPILER_OPTIONS) -> Callable:
     """``jax.jit(fn)`` of a function of a batch (leading axis on every argument and
     result), with the batch split over the devices of ``sharding``
-    (:func:`batch_sharding`).
+    (:func:`batch_sharding`), compiled with ``compiler_options``.
 
     Each device evaluates its own slice of the batch (``jax.shard_map``), so each runs
     its own work queue (:func:`jaxgrasp.lanes.solve_lanes`) on its own core: the lanes
@@ -128,7 +150,7 @@ def over_devices(fn: Callable, sharding: NamedSharding) -> Callable:
     # check_vma=False: the solver's loops carry values that are not per-device typed
     split = jax.shard_map(fn, mesh=sharding.mesh, in_specs=P("batch"), out_specs=P("batch"),
                           check_vma=False)
-    return jax.jit(split, in_shardings=sharding, out_shardings=sharding, compiler_options=COMPILER_OPTIONS)
+    return jax.jit(split, in_shardings=sharding, out_shardings=sharding, compiler_options=compiler_options)
 
 
 def _batch_spec(n_contacts: int, chunk: int, sharding, masked: bool = False) -> tuple:
@@ -148,7 +170,8 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
     With ``settle`` false, the program without the settling stage
     (:func:`~jaxgrasp.programs.programs_of`), which :func:`run_chunks` completes.
 
-    ``fn`` takes the :class:`Grasp` fields (:func:`grasp_fields`: with ``masked``, the
+    ``fn`` (a :class:`jaxgrasp.cache.Staged` of the two stages of :func:`_batched_fn`)
+    takes the :class:`Grasp` fields (:func:`grasp_fields`: with ``masked``, the
     contact mask ``active`` last) of a batch, each sharded along
     its first axis over ``devices`` (default ``jax.devices()``; ``chunk`` must be a
     multiple of their number), and returns every :class:`~jaxgrasp.Evaluation` field

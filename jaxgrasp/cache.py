@@ -69,6 +69,7 @@ __all__ = [
     "load_program",
     "save_program",
     "compiled",
+    "Staged",
     "clear_compiled",
     "stats",
 ]
@@ -219,7 +220,7 @@ def _count_xla_cache_hits(event: str, **_) -> None:
 
 jax.monitoring.register_event_listener(_count_xla_cache_hits)
 
-_FORMAT = "jaxgrasp-program-1"
+_FORMAT = "jaxgrasp-program-2"
 """Tag of a stored program's file (a file without it is stale)."""
 
 
@@ -251,8 +252,9 @@ def _registering(devices: Sequence):
 
 
 def load_program(path: Path, spec: Sequence, devices: Sequence, n_outputs: int | None = None):
-    """The compiled program stored at ``path``, loaded onto ``devices``, if it takes
-    ``spec`` (``jax.ShapeDtypeStruct`` leaves) and returns ``n_outputs`` arrays; ``None``
+    """The compiled program stored at ``path`` (a ``jax.stages.Compiled``, or a
+    :class:`Staged` of several), loaded onto ``devices``, if it takes ``spec``
+    (``jax.ShapeDtypeStruct`` leaves) and returns ``n_outputs`` arrays; ``None``
     otherwise (missing, stale, corrupt, or built for other devices)."""
     from jax.experimental import serialize_executable
 
@@ -264,39 +266,45 @@ def load_program(path: Path, spec: Sequence, devices: Sequence, n_outputs: int |
         _STATS["cache_errors"] += 1
         return None
     try:
-        tag, payload, in_tree, out_tree = pickle.loads(data)
-        if tag != _FORMAT:
+        tag, stages = pickle.loads(data)
+        if tag != _FORMAT or not stages:
             raise ValueError("stale stored program")
         want = [(tuple(s.shape), np.dtype(s.dtype)) for s in jax.tree_util.tree_leaves(spec)]
-        if in_tree != jax.tree_util.tree_structure(((0,) * len(want), {})):  # flat arguments
-            raise ValueError("stale stored program")
-        if n_outputs is not None and out_tree.num_leaves != n_outputs:
+        if n_outputs is not None and stages[-1][2].num_leaves != n_outputs:
             raise ValueError("stale stored program")
         registering = _registering(devices)
+        loaded, previous = [], []
         try:
-            fn = serialize_executable.deserialize_and_load(
-                payload, in_tree, out_tree, backend=devices[0].client, execution_devices=list(devices)
-            )
+            for payload, in_tree, out_tree in stages:
+                # flat arguments: the program's, then the previous stage's results
+                if in_tree != jax.tree_util.tree_structure(((0,) * (len(want) + len(previous)), {})):
+                    raise ValueError("stale stored program")
+                fn = serialize_executable.deserialize_and_load(
+                    payload, in_tree, out_tree, backend=devices[0].client, execution_devices=list(devices)
+                )
+                have = [(tuple(a.shape), np.dtype(a.dtype)) for a in jax.tree_util.tree_leaves(fn.args_info)]
+                if have != want + previous:
+                    raise ValueError("stale stored program")
+                previous = [(tuple(a.shape), np.dtype(a.dtype)) for a in jax.tree_util.tree_leaves(fn.out_info)]
+                loaded.append(fn)
         finally:
             if registering is not None:
                 registering.join()
-        have = [(tuple(a.shape), np.dtype(a.dtype)) for a in jax.tree_util.tree_leaves(fn.args_info)]
-        if have != want:
-            raise ValueError("stale stored program")
-        return fn
+        return loaded[0] if len(loaded) == 1 else Staged(loaded)
     except Exception:  # corrupt, stale, or from an incompatible JAX: build it again
         _STATS["cache_errors"] += 1
         return None
 
 
 def save_program(path: Path, fn) -> None:
-    """Write the compiled program ``fn`` (``jax.stages.Compiled``) to ``path`` atomically;
-    never raises (a program that cannot be serialized is built again next time)."""
+    """Write the compiled program ``fn`` (``jax.stages.Compiled`` or :class:`Staged`) to
+    ``path`` atomically; never raises (a program that cannot be serialized is built again
+    next time)."""
     from jax.experimental import serialize_executable
 
     try:
-        payload, in_tree, out_tree = serialize_executable.serialize(fn)
-        data = pickle.dumps((_FORMAT, payload, in_tree, out_tree), protocol=pickle.HIGHEST_PROTOCOL)
+        stages = [serialize_executable.serialize(f) for f in (fn.stages if isinstance(fn, Staged) else (fn,))]
+        data = pickle.dumps((_FORMAT, stages), protocol=pickle.HIGHEST_PROTOCOL)
     except Exception:
         _STATS["cache_errors"] += 1
         return
@@ -307,6 +315,85 @@ def save_program(path: Path, fn) -> None:
         os.replace(tmp, path)  # atomic: a concurrent reader sees the old file or the new one
     except OSError:
         pass  # no writable cache: build every time
+
+
+class Staged:
+    """A program compiled in stages, each its own XLA executable (``jax.stages.Compiled``,
+    in :attr:`stages`): the first takes the program's arguments, each later one those
+    arguments followed by the previous stage's results, and the program returns the last
+    stage's results. The intermediate results stay on the devices.
+
+    A program built in stages (``build`` of :func:`compiled` returning several jitted
+    functions) compiles faster than the same work as one: XLA compiles each stage in a
+    thread of its own while the next is traced and lowered here (Python), and a stage
+    that runs once can be compiled for latency (the batch engine's evaluation,
+    :func:`jaxgrasp.batch.compiled_evaluator`)."""
+
+    def __init__(self, stages):
+        self.stages = tuple(stages)
+
+    def __call__(self, *args):
+        out = self.stages[0](*args)
+        for stage in self.stages[1:]:
+            out = stage(*args, *out)
+        return out
+
+
+def _compile(built, spec, quiet_xla: bool):
+    """Trace, lower and compile ``built`` (a jitted function, or a tuple of them: the
+    stages of a :class:`Staged`) for the arguments ``spec``. Each stage but the last is
+    compiled in a thread of its own (XLA's compiler releases the GIL) while the next is
+    traced and lowered here; the wait for those threads is not cut short by an interrupt
+    (it is raised once they are done: XLA still compiling in a thread while the
+    interpreter unwinds can crash the process). ``quiet_xla``: JAX's persistent cache
+    writes no entry for them (:func:`_no_xla_cache_write`)."""
+
+    def compile_one(lowered):
+        with _no_xla_cache_write() if quiet_xla else contextlib.nullcontext():
+            return lowered.compile()
+
+    if not isinstance(built, tuple):
+        return compile_one(built.lower(*spec))
+    results: list = [None] * len(built)
+    threads, args = [], tuple(spec)
+    for i, stage in enumerate(built):
+        lowered = stage.lower(*args)
+        if i == len(built) - 1:
+            results[i] = _outcome(compile_one, lowered)
+            break
+        thread = threading.Thread(target=lambda i=i, lowered=lowered: results.__setitem__(i, _outcome(compile_one, lowered)),
+                                  name="jaxgrasp-compile", daemon=True)
+        thread.start()
+        threads.append(thread)
+        args = tuple(spec) + tuple(
+            jax.ShapeDtypeStruct(o.shape, o.dtype, sharding=o.sharding) for o in jax.tree_util.tree_leaves(lowered.out_info)
+        )
+    _join_uninterrupted(threads)
+    for ok, value in results:
+        if not ok:
+            raise value
+    return Staged([value for _, value in results])
+
+
+def _outcome(f, *args):
+    """``(True, f(*args))``, or ``(False, exception)``."""
+    try:
+        return True, f(*args)
+    except BaseException as exc:  # raised again in the calling thread
+        return False, exc
+
+
+def _join_uninterrupted(threads) -> None:
+    """Wait for every thread; a ``KeyboardInterrupt`` meanwhile is raised after the wait."""
+    interrupted = None
+    for thread in threads:
+        while thread.is_alive():
+            try:
+                thread.join()
+            except KeyboardInterrupt as exc:
+                interrupted = exc
+    if interrupted is not None:
+        raise interrupted
 
 
 # --------------------------------------------------------------------------- compiled programs
@@ -327,8 +414,9 @@ def compiled(
     Args:
         key: what makes the program unique in this process (the memo's key).
         build: ``build()`` returns the jitted function (``jax.jit(...)`` with its
-            shardings and compiler options; arrays in, arrays out), called only when the
-            program is neither in the memo nor in the store.
+            shardings and compiler options; arrays in, arrays out), or a tuple of them,
+            the stages of a :class:`Staged` program; called only when the program is
+            neither in the memo nor in the store.
         spec: its arguments as ``jax.ShapeDtypeStruct`` (with their shardings).
         name: prefix of its stored file.
         store_key: what makes it unique across processes (device counts, not ids);
@@ -337,8 +425,8 @@ def compiled(
         n_outputs: the number of arrays it returns (a stored one must match).
 
     Returns:
-        ``fn``, the compiled program (``jax.stages.Compiled``), and the seconds spent
-        building or loading it (0 on a memo hit).
+        ``fn``, the compiled program (``jax.stages.Compiled``, or a :class:`Staged`),
+        and the seconds spent building or loading it (0 on a memo hit).
     """
     hit = _MEMO.pop(key, None)
     if hit is not None:
@@ -351,8 +439,7 @@ def compiled(
         fn = load_program(path, spec, _devices(devices), n_outputs)
     if fn is None:
         hits = _XLA_CACHE_HITS[0]
-        with _no_xla_cache_write() if path is not None else contextlib.nullcontext():
-            fn = build().lower(*spec).compile()
+        fn = _compile(build(), spec, quiet_xla=path is not None)
         _STATS["traced"] += 1
         # An executable that XLA's cache served cannot be serialized again (XLA on the CPU
         # then writes a program whose kernels are missing when it is loaded): store only

@@ -41,14 +41,14 @@ from . import cache
 from .envelope import envelope_energy, soft_minimum
 from .grasp import Grasp
 from .model import ModelParams, model_params
-from .options import COMPILER_OPTIONS, ONE_GRASP_CPU_OPTIONS, EvaluateOptions
+from .options import COMPILER_OPTIONS, LATENCY_CPU_OPTIONS, EvaluateOptions
 from .programs import Programs, constraints, needs_settling, program_data, programs_of, programs_of_batch, to_pose
 from .result import FIELDS as RESULT_FIELDS
 from .result import Evaluation
 from .status import NO_BOUNDARY, Constraint, GraspStatus, LaneStatus
 from .units import M_TO_MM, MJ_TO_J
 
-__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_batch_traced", "evaluate_compiled", "evaluation_of", "limiting_index", "compiled_program", "Boundaries", "Verdict", "TIE_TOL", "SAME_MINIMUM"]
+__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_batch_traced", "programs_of_grasps", "evaluations_of", "evaluate_compiled", "evaluation_of", "limiting_index", "compiled_program", "Boundaries", "Verdict", "TIE_TOL", "SAME_MINIMUM"]
 
 TIE_TOL = 1e-8
 """Boundary energies within this fraction of the value of the least one are a tie (the
@@ -171,7 +171,7 @@ def compiled_program(grasp: Grasp, options: EvaluateOptions, settle: bool = True
             return tuple(getattr(r, f) for f in RESULT_FIELDS)
 
         cpu = cache.default_device().platform == "cpu"
-        return jax.jit(evaluate_fields, compiler_options=ONE_GRASP_CPU_OPTIONS if cpu else COMPILER_OPTIONS)
+        return jax.jit(evaluate_fields, compiler_options=LATENCY_CPU_OPTIONS if cpu else COMPILER_OPTIONS)
 
     masked = grasp.active is not None
     return cache.compiled(
@@ -205,11 +205,25 @@ def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions, settl
 def evaluate_batch_traced(grasps: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:
     """:func:`evaluate_traced` of a batch of grasps (leading axis ``B`` on every field,
     ``active`` included where given), the result with a leading ``B``: what the batch
-    engine compiles. Equal to ``jax.vmap`` of :func:`evaluate_traced`, lane by lane, but
-    the solver's work queue is traced once (:func:`~jaxgrasp.programs.programs_of_batch`)."""
+    engine computes, in its two stages :func:`programs_of_grasps` and
+    :func:`evaluations_of`. Equal to ``jax.vmap`` of :func:`evaluate_traced`, lane by
+    lane, but the solver's work queue is traced once
+    (:func:`~jaxgrasp.programs.programs_of_batch`)."""
+    return evaluations_of(grasps, programs_of_grasps(grasps, options, settle), options)
+
+
+def programs_of_grasps(grasps: Grasp, options: EvaluateOptions, settle: bool = True) -> Programs:
+    """Step 1 of :func:`evaluate_batch_traced`: every program of a batch of grasps solved
+    (:func:`~jaxgrasp.programs.programs_of_batch`; leading axis ``B``)."""
+    options, _ = _split_temperature(options)
+    return programs_of_batch(jax.vmap(model_params)(grasps), options, settle)
+
+
+def evaluations_of(grasps: Grasp, progs: Programs, options: EvaluateOptions) -> Evaluation:
+    """Steps 2-6 of :func:`evaluate_batch_traced`: the evaluations of a batch of grasps
+    from their solved programs ``progs`` (:func:`programs_of_grasps`; leading axis ``B``)."""
     options, temperature = _split_temperature(options)
     p = jax.vmap(model_params)(grasps)
-    progs = programs_of_batch(p, options, settle)
     return jax.vmap(lambda p, progs: evaluation_of(p, progs, temperature, options))(p, progs)
 
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from .solver import SolverOptions
 
-__all__ = ["EvaluateOptions", "COMPILER_OPTIONS", "ONE_GRASP_CPU_OPTIONS"]
+__all__ = ["EvaluateOptions", "COMPILER_OPTIONS", "LATENCY_CPU_OPTIONS"]
 
 def _jaxlib_version() -> tuple[int, ...]:
     from jaxlib.version import __version__  # no backend is started by this import
@@ -40,16 +40,18 @@ program itself (batches, sweeps, tuning, :func:`jaxgrasp.evaluate` of a concrete
 pass them to your own outermost ``jax.jit`` around :func:`jaxgrasp.evaluate` to get the
 same."""
 
-ONE_GRASP_CPU_OPTIONS = {**COMPILER_OPTIONS, "xla_backend_optimization_level": 0}
-"""XLA options of the CPU program :func:`jaxgrasp.evaluate` compiles for one concrete grasp.
+LATENCY_CPU_OPTIONS = {**COMPILER_OPTIONS, "xla_backend_optimization_level": 0}
+"""XLA options of the CPU programs whose first result matters more than their time per
+call: the program :func:`jaxgrasp.evaluate` compiles for one concrete grasp, and the
+batch engine's evaluation stage (:func:`jaxgrasp.batch.compiled_evaluator`), which runs
+once per chunk after the solver.
 
-That program serves one grasp per call, so the time to its first result matters more
-than the time per call: without LLVM's optimisation passes the cube's program compiles
-in about half the time (1.1-1.25 s against 2.2-2.3 s on 2 cores) and a call takes 16-17
-ms instead of 9-10 ms; the value agrees to 2 ulp (``experiments/compile_time.py``). The
-programs that serve many grasps (:func:`jaxgrasp.evaluate_batch`, sweeps, tuning) keep
+Without LLVM's optimisation passes the cube's one-grasp program compiles in about half
+the time (1.1-1.25 s against 2.2-2.3 s on 2 cores) and a call takes 16-17 ms instead of
+9-10 ms; the value agrees to 2 ulp (``experiments/compile_time.py``). The programs that
+run the solver over many grasps (the batch engine's first stage, tuning) keep
 :data:`COMPILER_OPTIONS`: level 1 there already costs 10 % of a random set's rate. Other
-backends compile the one-grasp program with :data:`COMPILER_OPTIONS` too."""
+backends use :data:`COMPILER_OPTIONS` for both."""
 
 
 @dataclasses.dataclass(frozen=True)

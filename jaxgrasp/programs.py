@@ -73,6 +73,7 @@ __all__ = [
     "lane_problem",
     "lagrangian",
     "Programs",
+    "programs_treedef",
     "solve_programs",
     "programs_of",
     "programs_of_batch",
@@ -227,6 +228,15 @@ class Programs:
     lever: Any
     scale: Any
     contact_on: Any
+
+
+def programs_treedef():
+    """The pytree structure of :class:`Programs` (it depends on no shape), to rebuild one
+    from its leaves, in ``jax.tree_util`` order."""
+    lanes = SolverResult(*(0,) * len(dataclasses.fields(SolverResult)))
+    return jax.tree_util.tree_structure(
+        Programs(lanes, lanes, *(0,) * (len(dataclasses.fields(Programs)) - 2))
+    )
 
 
 def _ray_start(gk, z0, v, t_grid, crossing_steps):

@@ -74,14 +74,17 @@ def test_eigh_under_vmap_is_one_lapack_call_per_matrix():
 
 
 def test_batched_program_calls_no_lapack_but_small_eigh():
-    """The batch engine's programs, with and without the settling stage, for 128 grasps
-    per device: every LAPACK custom call is the symmetric eigensolver (``syevd``) on at
+    """The batch engine's programs (both stages), with and without the settling stage,
+    for 128 grasps per device: every LAPACK custom call is the symmetric eigensolver (``syevd``) on at
     most ``EIGH_BLOCK`` matrices, never on one per grasp of the chunk."""
     sharding = batch.batch_sharding()
     assert EIGH_BLOCK <= 64
     for settle in (False, True):
-        fn = batch._batched_fn(EvaluateOptions(), sharding, masked=True, settle=settle)
-        text = fn.lower(*batch._batch_spec(3, 128 * len(jax.devices()), sharding, masked=True)).as_text()
+        solve, evaluate = batch._batched_fn(EvaluateOptions(), sharding, masked=True, settle=settle)
+        spec = batch._batch_spec(3, 128 * len(jax.devices()), sharding, masked=True)
+        lowered = solve.lower(*spec)
+        out = [jax.ShapeDtypeStruct(o.shape, o.dtype, sharding=o.sharding) for o in jax.tree_util.tree_leaves(lowered.out_info)]
+        text = lowered.as_text() + evaluate.lower(*spec, *out).as_text()
         calls = _lapack_calls(text)
         assert calls and all("syevd" in target for target, _ in calls), (settle, calls)
         for _, operand in calls:
