@@ -78,3 +78,39 @@ def test_program_from_xla_cache_is_not_stored(tmp_path):
         assert both["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 0}
         assert not programs.exists() or not any(programs.iterdir())
         _assert_same_fields(both, here)
+
+
+def test_staged_program_chains_its_stages_and_is_stored(tmp_path):
+    """A program built in stages (the batch engine's evaluator is one) runs each stage on
+    the program's arguments and the previous stage's results, and is stored and loaded
+    whole: the loaded program gives the same numbers bit for bit."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxgrasp import cache
+
+    solve = jax.jit(lambda x: (jnp.sin(x) * 2.0, x + 1.0))
+    evaluate = jax.jit(lambda x, a, b: (a * b - x, jnp.sum(a)))
+    spec = (jax.ShapeDtypeStruct((5,), jnp.float64),)
+    x = jnp.linspace(0.0, 1.0, 5)
+    want = evaluate(x, *solve(x))
+    saved = cache.program_dir()
+    cache.set_program_dir(tmp_path)
+    try:
+        key = ("test-staged", str(tmp_path))
+        before = cache.stats()
+        built, _ = cache.compiled(key, lambda: (solve, evaluate), spec, name="staged", store_key=key, n_outputs=2)
+        assert isinstance(built, cache.Staged) and len(built.stages) == 2
+        assert len(list(tmp_path.glob("staged-*.xla"))) == 1
+        cache.clear_compiled()
+        loaded, _ = cache.compiled(key, lambda: (solve, evaluate), spec, name="staged", store_key=key, n_outputs=2)
+        after = cache.stats()
+        assert after["traced"] - before["traced"] == 1 and after["deserialized"] - before["deserialized"] == 1
+        assert isinstance(loaded, cache.Staged)
+        for fn in (built, loaded):
+            got = fn(x)
+            for g, w in zip(got, want):
+                np.testing.assert_array_equal(np.asarray(g), np.asarray(w))
+    finally:
+        cache.set_program_dir(saved)
+        cache.clear_compiled()
