@@ -114,22 +114,12 @@ def wrenches(fields: dict, *, cone_edges: int = 8, torsion: bool = True) -> tupl
 
 
 def prefetch_qhull() -> None:
-    """Start importing SciPy's qhull in a background thread (returns at once).
+    """Start importing SciPy's qhull in a background thread (returns at once;
+    :func:`jaxgrasp.prefetch.prefetch`): a caller that will need :func:`epsilon` after a
+    compile or a cached program's load gets ``scipy.spatial``'s ~0.3 s import for free."""
+    from .prefetch import prefetch
 
-    ``scipy.spatial`` takes some 0.3 s to import; a caller that will need
-    :func:`epsilon` after a long native call (a compile, or loading a cached executable,
-    which release the GIL) gets the import for free by calling this first. A later
-    ``import`` simply waits for the thread's (Python's per-module import locks)."""
-    import importlib
-    import threading
-
-    def load():
-        try:
-            importlib.import_module("scipy.spatial")
-        except Exception:  # noqa: BLE001 - the caller's own import reports it
-            pass
-
-    threading.Thread(target=load, name="jaxgrasp-prefetch-qhull", daemon=True).start()
+    prefetch("scipy.spatial")
 
 
 def _hull_distance(w: np.ndarray) -> float:

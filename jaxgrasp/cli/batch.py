@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import outputs
+from ..prefetch import prefetch
 from ..validation import counted
 from .common import (
     ChunkProgress,
@@ -95,6 +96,8 @@ def run(args) -> int:
     out = Path(args.out)
     check_out(out)
     n_contacts = int(gset.num_contacts.max())
+    if not args.no_plot:
+        prefetch("jaxgrasp.plots")  # matplotlib's import overlaps the compile
 
     t_start = time.perf_counter()
     with lock_out(out):

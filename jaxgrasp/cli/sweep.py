@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import outputs
+from ..prefetch import prefetch
 from ..fields import FIELD
 from ..status import NO_BOUNDARY
 from ..validation import counted
@@ -173,6 +174,8 @@ def run(args) -> int:
     check_out(out)
 
     plan = _plan_chunks(int(np.prod([a.size for a in axes.values()])), args.chunk_size)
+    if not args.no_plot:
+        prefetch("jaxgrasp.plots")  # matplotlib's import overlaps the compile
     with lock_out(out):
         checkpoint = _Checkpoint(out / PARTIAL_NAME, grasp, axes, plan.chunk)
         show = not args.quiet and plan.nchunks > 1
