@@ -111,8 +111,8 @@ def _batched_fn(options: EvaluateOptions, sharding, masked: bool = False, settle
        per chunk.
 
     Two programs rather than one, so that XLA compiles the solver's (3-4 s on 2 cores)
-    while the evaluation's is traced and compiled (:func:`jaxgrasp.cache.compiled`): a
-    cold default sweep 0.3-0.4 s sooner (``experiments/BENCHMARK.md``)."""
+    while the evaluation's is traced and compiled (:func:`jaxgrasp.cache.compiled`): the
+    default sweep's evaluator is built about 0.6 s sooner (``experiments/BENCHMARK.md``)."""
     names = grasp_fields(masked)
     tree = programs_treedef()
 

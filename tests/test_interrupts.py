@@ -295,10 +295,13 @@ def test_sigint_between_chunks_keeps_finished_points(sweep_cache, tmp_path, eval
 def test_sigint_while_matplotlib_imports(sweep_cache, previous_set):
     """Item 2: Ctrl-C during matplotlib's import (made slow here) used to raise inside
     the import (ImportError and fatal errors, or exit -2 without a message, by timing),
-    after the new npz/csv had already replaced the previous ones."""
+    after the new npz/csv had already replaced the previous ones. The command starts
+    that import in a thread while it compiles (jaxgrasp.prefetch); the signal comes once
+    every point is done, while the command waits for the import to write its figure."""
     out, before = previous_set
     run = Run(_slow("sweep", *SWEEP_ARGS, "--out", out), _env(sweep_cache, JAXGRASP_TEST_SLOW="import"))
     run.wait_for(r"^test: slow import")
+    run.wait_for(rf"^jaxgrasp: chunk {TOTAL // int(CHUNK)}/{TOTAL // int(CHUNK)} ")  # every point kept
     rc, dt, after, stdout = run.interrupt()
     line = _assert_one_line(rc, dt, after)
     assert line == f"jaxgrasp: interrupted; kept 24 of 24 points in {out / PARTIAL}"
