@@ -68,6 +68,7 @@ __all__ = [
     "program_path",
     "load_program",
     "save_program",
+    "wait_for_saves",
     "compiled",
     "Staged",
     "clear_compiled",
@@ -447,7 +448,7 @@ def compiled(
         # but may hold one written by another program of the same HLO or an older
         # jaxgrasp; later processes then trace it and load XLA's copy.)
         if path is not None and _XLA_CACHE_HITS[0] == hits:
-            save_program(path, fn)
+            _save_in_background(path, fn)
     else:
         _STATS["deserialized"] += 1
     seconds = time.perf_counter() - t0
@@ -455,6 +456,32 @@ def compiled(
         _MEMO.pop(next(iter(_MEMO)))
     _MEMO[key] = fn
     return fn, seconds
+
+
+_SAVES: list[threading.Thread] = []
+"""Threads writing a compiled program to the store (:func:`_save_in_background`)."""
+
+
+def _save_in_background(path: Path, fn) -> None:
+    """:func:`save_program` in a thread, so that serializing the program (~0.1 s for a
+    batch evaluator) overlaps its first run instead of delaying it. The thread is not a
+    daemon (the interpreter waits for it at exit); a process that ends with ``os._exit``
+    (the ``jaxgrasp`` command) calls :func:`wait_for_saves` first."""
+    thread = threading.Thread(target=save_program, args=(path, fn), name="jaxgrasp-save")
+    _SAVES.append(thread)
+    thread.start()
+
+
+def wait_for_saves(timeout: float | None = None) -> None:
+    """Wait until the programs being written to the store are on disk (each write is
+    atomic), at most ``timeout`` seconds in all (``None``: as long as they take)."""
+    end = None if timeout is None else time.monotonic() + timeout
+    while _SAVES:
+        thread = _SAVES[0]
+        thread.join(None if end is None else max(0.0, end - time.monotonic()))
+        if thread.is_alive():
+            return  # timed out
+        _SAVES.remove(thread)
 
 
 def _no_xla_cache_write():
@@ -486,7 +513,9 @@ def _devices(devices: Sequence | None) -> list:
 
 
 def clear_compiled() -> None:
-    """Forget every compiled program of this process (the next build traces or loads)."""
+    """Forget every compiled program of this process (the next build traces or loads),
+    once the programs being stored are on disk."""
+    wait_for_saves()
     _MEMO.clear()
 
 

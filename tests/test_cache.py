@@ -101,6 +101,7 @@ def test_staged_program_chains_its_stages_and_is_stored(tmp_path):
         before = cache.stats()
         built, _ = cache.compiled(key, lambda: (solve, evaluate), spec, name="staged", store_key=key, n_outputs=2)
         assert isinstance(built, cache.Staged) and len(built.stages) == 2
+        cache.wait_for_saves()  # written in a thread
         assert len(list(tmp_path.glob("staged-*.xla"))) == 1
         cache.clear_compiled()
         loaded, _ = cache.compiled(key, lambda: (solve, evaluate), spec, name="staged", store_key=key, n_outputs=2)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import sys
 
+from .. import cache
 from ..cache import enable_compilation_cache
 from . import batch, evaluate, show, sweep, tune
 from .common import EXIT_USAGE, Parser, UsageError, load_grasp, parse_number
@@ -76,3 +77,4 @@ def _main(argv) -> int:
         return EXIT_USAGE
     finally:
         clear_notes()
+        cache.wait_for_saves()  # the process may end with os._exit next

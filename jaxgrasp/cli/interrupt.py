@@ -12,7 +12,8 @@ the main thread only. On SIGINT or SIGTERM the main thread:
 1. ignores further signals (a second Ctrl-C cannot cut the clean-up short);
 2. calls :func:`jaxgrasp.outputs.abandon`: waits at most :data:`PUBLISH_WAIT_SECONDS`
    for a set of output files being renamed into place, removes this run's temporary
-   files and lock files, and forbids later writes;
+   files and lock files, and forbids later writes; then waits as long again at most
+   for a compiled program being written to the store (:func:`jaxgrasp.cache.wait_for_saves`);
 3. flushes stdout and stderr and prints one line ``jaxgrasp: interrupted``
    (``terminated`` for SIGTERM) with the notes commands left, e.g. ``; kept 128 of 369
    points in out/sweep.partial.npz``, as the process's last output;
@@ -31,7 +32,7 @@ import sys
 import threading
 from typing import Callable
 
-from .. import outputs
+from .. import cache, outputs
 from ..startup import EXIT
 
 __all__ = ["run_interruptibly", "Interrupted", "EXIT_STATUS", "POLL_SECONDS", "PUBLISH_WAIT_SECONDS"]
@@ -135,6 +136,7 @@ def _exit_interrupted(signum: int) -> int:
     for s in EXIT_STATUS:
         signal.signal(s, signal.SIG_IGN)
     notes = outputs.abandon(PUBLISH_WAIT_SECONDS)
+    cache.wait_for_saves(PUBLISH_WAIT_SECONDS)  # a stored program being written: no temporary file left
     _say_last(f"jaxgrasp: {_WORDS.get(signum, 'interrupted')}" + "".join(f"; {n}" for n in notes))
     status = EXIT_STATUS.get(signum, 130)
     _exit(status)
