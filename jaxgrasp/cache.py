@@ -476,12 +476,14 @@ def wait_for_saves(timeout: float | None = None) -> None:
     """Wait until the programs being written to the store are on disk (each write is
     atomic), at most ``timeout`` seconds in all (``None``: as long as they take)."""
     end = None if timeout is None else time.monotonic() + timeout
-    while _SAVES:
-        thread = _SAVES[0]
+    for thread in list(_SAVES):
         thread.join(None if end is None else max(0.0, end - time.monotonic()))
         if thread.is_alive():
             return  # timed out
-        _SAVES.remove(thread)
+        try:
+            _SAVES.remove(thread)
+        except ValueError:  # another thread waited for it too (the command and an interrupt)
+            pass
 
 
 def _no_xla_cache_write():

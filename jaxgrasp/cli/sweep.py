@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import outputs
-from ..prefetch import prefetch
 from ..fields import FIELD
+from ..prefetch import prefetch
 from ..status import NO_BOUNDARY
 from ..validation import counted
 from .common import (
