@@ -254,9 +254,12 @@ class WarmCache:
         assert proc.returncode == 0, proc.stderr[-2000:]
         return proc
 
-    def evaluate_in_new_process(self) -> dict:
-        """A new library process evaluates the cube: its ``stats`` and ``fields``."""
-        return json.loads(self.run([sys.executable, "-c", _FILL_CACHE]).stdout)
+    def evaluate_in_new_process(self, store: bool = True) -> dict:
+        """A new library process evaluates the cube: its ``stats`` and ``fields``. With
+        ``store`` false its program store is off (XLA's cache alone is on)."""
+        script = _FILL_CACHE if store else _FILL_CACHE.replace(
+            "import jaxgrasp\n", "import jaxgrasp\njaxgrasp.cache.set_program_dir(None)\n", 1)
+        return json.loads(self.run([sys.executable, "-c", script]).stdout)
 
     def program_files(self) -> set[str]:
         """The stored evaluators' files: jaxgrasp's compiled programs and XLA's cache entries."""

@@ -9,9 +9,6 @@ runs ``jaxgrasp evaluate examples/cube.toml`` on it (neither tracing nor compili
 
 from __future__ import annotations
 
-import json
-import sys
-
 import numpy as np
 
 import jaxgrasp
@@ -47,17 +44,6 @@ def test_second_process_loads_the_same_program(warm_cache):
         _assert_same_fields(other, here)
 
 
-_FILL = """
-import json
-import numpy as np
-import jaxgrasp
-jaxgrasp.cache.set_program_dir({programs})
-r = jaxgrasp.evaluate(jaxgrasp.presets.cube(6e5, 0.002))
-fields = {{f: np.asarray(getattr(r, f)).tolist() for f in jaxgrasp.result.FIELDS}}
-print(json.dumps({{"stats": jaxgrasp.cache.stats(), "fields": fields}}))
-"""
-
-
 def test_program_from_xla_cache_is_not_stored(tmp_path):
     """A process whose program store is off (XLA's cache on) leaves XLA's cache entry of
     the cube's program. A later process with both on finds no stored program, traces,
@@ -67,14 +53,13 @@ def test_program_from_xla_cache_is_not_stored(tmp_path):
     folder = tmp_path / "cache"
     programs = folder / PROGRAM_SUBDIR
     cache = WarmCache(folder, {})
-    run = lambda store: json.loads(cache.run([sys.executable, "-c", _FILL.format(programs=store)]).stdout)
-    xla_only = run("None")
+    xla_only = cache.evaluate_in_new_process(store=False)
     assert xla_only["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 0}
     assert any(p.name.startswith("jit_evaluate_fields-") for p in folder.iterdir())
     assert not programs.exists() or not any(programs.iterdir())
     here = jaxgrasp.evaluate(jaxgrasp.presets.cube(6e5, 0.002))
     for _ in range(2):
-        both = run(repr(str(programs)))
+        both = cache.evaluate_in_new_process()
         assert both["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 0}
         assert not programs.exists() or not any(programs.iterdir())
         _assert_same_fields(both, here)
