@@ -10,7 +10,7 @@
 
 :func:`evaluate_batch` and :func:`jaxgrasp.sweep` share this path: the grasps of a chunk
 are evaluated by one compiled evaluator, :func:`jaxgrasp.evaluate.evaluate_batch_traced`
-in its two stages, the solver and the evaluation (equal to ``jax.vmap(evaluate)`` lane
+in the stages of :mod:`jaxgrasp.batch_stages` (equal to ``jax.vmap(evaluate)`` lane
 by lane; from :func:`compiled_evaluator`, memoised and stored by :mod:`jaxgrasp.cache`),
 split along the batch over all devices, each
 device running its own work queue on its slice (:func:`over_devices`; on a CPU
@@ -30,15 +30,14 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from . import cache
+from . import batch_stages, cache
 from .batch_result import BatchResult, mark_invalid
 from .dataset import GraspSet
 from .evaluate import EvaluateOptions
-from .evaluate import evaluations_of, programs_of_grasps
 from .fields import NAMES
 from .grasp import Grasp, stack
 from .options import COMPILER_OPTIONS, LATENCY_CPU_OPTIONS
-from .programs import needs_settling, programs_treedef
+from .programs import needs_settling
 from .result import FIELDS, Evaluation
 from .validation import GraspValueError, check_batch_inputs
 
@@ -98,36 +97,21 @@ def grasp_fields(masked: bool) -> tuple[str, ...]:
     return NAMES + (("active",) if masked else ())
 
 
-def _batched_fn(options: EvaluateOptions, sharding, masked: bool = False, settle: bool = True):
-    """The batched evaluator as its two stages, each ``jax.jit`` over the devices of
-    ``sharding`` (:func:`over_devices`), arrays in and arrays out (no pytrees: the
-    program store keeps flat programs):
-
-    1. the solver: the :class:`Grasp` fields (:func:`grasp_fields`) -> the leaves of their
-       :class:`~jaxgrasp.programs.Programs` (:func:`~jaxgrasp.evaluate.programs_of_grasps`);
-    2. the evaluation: the fields, then those leaves -> every :class:`~jaxgrasp.Evaluation`
-       field (:data:`RESULT_FIELDS`; :func:`~jaxgrasp.evaluate.evaluations_of`),
-       compiled with :data:`~jaxgrasp.options.LATENCY_CPU_OPTIONS` on a CPU: it runs once
-       per chunk.
-
-    Two programs rather than one, so that XLA compiles the solver's (3-4 s on 2 cores)
-    while the evaluation's is traced and compiled (:func:`jaxgrasp.cache.compiled`): the
-    default sweep's evaluator is built about 0.6 s sooner (``experiments/BENCHMARK.md``)."""
-    names = grasp_fields(masked)
-    tree = programs_treedef()
-
-    def solve(*fields):
-        return tuple(jax.tree_util.tree_leaves(programs_of_grasps(Grasp(**dict(zip(names, fields))), options, settle)))
-
-    def evaluate(*args):
-        fields, leaves = args[: len(names)], args[len(names) :]
-        progs = jax.tree_util.tree_unflatten(tree, leaves)
-        r = evaluations_of(Grasp(**dict(zip(names, fields))), progs, options)
-        return tuple(getattr(r, f) for f in RESULT_FIELDS)
-
+def _batched_fn(options: EvaluateOptions, sharding, masked: bool = False, settle: bool = True) -> cache.Pipeline:
+    """The batched evaluator as a :class:`jaxgrasp.cache.Pipeline` of the five stages of
+    :mod:`jaxgrasp.batch_stages` (the solver's lanes, the starts around them, ...), each
+    ``jax.jit`` over the devices of ``sharding`` (:func:`over_devices`): the
+    :class:`Grasp` fields (:func:`grasp_fields`) in, every :class:`~jaxgrasp.Evaluation`
+    field (:data:`RESULT_FIELDS`) out. The last stage, the evaluation, runs once per chunk
+    and briefly: on a CPU it is compiled with :data:`~jaxgrasp.options.LATENCY_CPU_OPTIONS`."""
+    functions = batch_stages.stage_functions(options, grasp_fields(masked), settle)
     cpu = sharding.mesh.devices.flat[0].platform == "cpu"
-    return (over_devices(solve, sharding),
-            over_devices(evaluate, sharding, LATENCY_CPU_OPTIONS if cpu else COMPILER_OPTIONS))
+    latency = LATENCY_CPU_OPTIONS if cpu else COMPILER_OPTIONS
+    return cache.Pipeline(
+        stages={name: over_devices(f, sharding, latency if name == "evaluation" else COMPILER_OPTIONS)
+                for name, f in functions.items()},
+        drive=batch_stages.drive,
+    )
 
 
 def batch_sharding(devices=None) -> NamedSharding:
@@ -170,7 +154,7 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
     With ``settle`` false, the program without the settling stage
     (:func:`~jaxgrasp.programs.programs_of`), which :func:`run_chunks` completes.
 
-    ``fn`` (a :class:`jaxgrasp.cache.Staged` of the two stages of :func:`_batched_fn`)
+    ``fn`` (a :class:`jaxgrasp.cache.Staged`, the stages of :func:`_batched_fn`)
     takes the :class:`Grasp` fields (:func:`grasp_fields`: with ``masked``, the
     contact mask ``active`` last) of a batch, each sharded along
     its first axis over ``devices`` (default ``jax.devices()``; ``chunk`` must be a

@@ -39,6 +39,7 @@ with :func:`stats` and start afresh with :func:`clear_compiled`.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import os
 import pickle
@@ -48,7 +49,7 @@ import threading
 import time
 import warnings
 from pathlib import Path
-from typing import Any, Callable, Hashable, Sequence
+from typing import Any, Callable, Hashable, Mapping, Sequence
 
 import jax
 import numpy as np
@@ -70,7 +71,9 @@ __all__ = [
     "save_program",
     "wait_for_saves",
     "compiled",
+    "Pipeline",
     "Staged",
+    "lower_stages",
     "clear_compiled",
     "stats",
 ]
@@ -221,7 +224,7 @@ def _count_xla_cache_hits(event: str, **_) -> None:
 
 jax.monitoring.register_event_listener(_count_xla_cache_hits)
 
-_FORMAT = "jaxgrasp-program-2"
+_FORMAT = "jaxgrasp-program-3"
 """Tag of a stored program's file (a file without it is stale)."""
 
 
@@ -252,11 +255,22 @@ def _registering(devices: Sequence):
     return thread
 
 
-def load_program(path: Path, spec: Sequence, devices: Sequence, n_outputs: int | None = None):
+def _spec_of(x) -> jax.ShapeDtypeStruct:
+    """``x``'s shape, dtype and sharding (where it has one)."""
+    return jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=getattr(x, "sharding", None))
+
+
+def _shapes(xs) -> list:
+    return [(tuple(x.shape), np.dtype(x.dtype)) for x in jax.tree_util.tree_leaves(xs)]
+
+
+def load_program(path: Path, spec: Sequence, devices: Sequence, n_outputs: int | None = None,
+                 drive: Callable | None = None):
     """The compiled program stored at ``path`` (a ``jax.stages.Compiled``, or a
-    :class:`Staged` of several), loaded onto ``devices``, if it takes ``spec``
-    (``jax.ShapeDtypeStruct`` leaves) and returns ``n_outputs`` arrays; ``None``
-    otherwise (missing, stale, corrupt, or built for other devices)."""
+    :class:`Staged` of several, called by ``drive``: :class:`Pipeline`), loaded onto
+    ``devices``, if it takes ``spec`` (``jax.ShapeDtypeStruct`` leaves) and returns
+    ``n_outputs`` arrays; ``None`` otherwise (missing, stale, corrupt, or built for
+    other devices)."""
     from jax.experimental import serialize_executable
 
     try:
@@ -268,30 +282,31 @@ def load_program(path: Path, spec: Sequence, devices: Sequence, n_outputs: int |
         return None
     try:
         tag, stages = pickle.loads(data)
-        if tag != _FORMAT or not stages:
-            raise ValueError("stale stored program")
-        want = [(tuple(s.shape), np.dtype(s.dtype)) for s in jax.tree_util.tree_leaves(spec)]
-        if n_outputs is not None and stages[-1][2].num_leaves != n_outputs:
+        if tag != _FORMAT or not stages or (drive is None) != (len(stages) == 1 and stages[0][0] is None):
             raise ValueError("stale stored program")
         registering = _registering(devices)
-        loaded, previous = [], []
+        loaded = {}
         try:
-            for payload, in_tree, out_tree in stages:
-                # flat arguments: the program's, then the previous stage's results
-                if in_tree != jax.tree_util.tree_structure(((0,) * (len(want) + len(previous)), {})):
+            for name, payload, in_tree, out_tree in stages:
+                if in_tree != jax.tree_util.tree_structure(((0,) * in_tree.num_leaves, {})):  # flat arrays
                     raise ValueError("stale stored program")
-                fn = serialize_executable.deserialize_and_load(
+                loaded[name] = serialize_executable.deserialize_and_load(
                     payload, in_tree, out_tree, backend=devices[0].client, execution_devices=list(devices)
                 )
-                have = [(tuple(a.shape), np.dtype(a.dtype)) for a in jax.tree_util.tree_leaves(fn.args_info)]
-                if have != want + previous:
-                    raise ValueError("stale stored program")
-                previous = [(tuple(a.shape), np.dtype(a.dtype)) for a in jax.tree_util.tree_leaves(fn.out_info)]
-                loaded.append(fn)
         finally:
             if registering is not None:
                 registering.join()
-        return loaded[0] if len(loaded) == 1 else Staged(loaded)
+
+        def call(name, *args):  # each stage must take what the driver gives it
+            fn = loaded[name]
+            if _shapes(fn.args_info) != _shapes(args):
+                raise ValueError("stale stored program")
+            return tuple(jax.ShapeDtypeStruct(o.shape, o.dtype) for o in jax.tree_util.tree_leaves(fn.out_info))
+
+        out = call(None, *spec) if drive is None else drive(call, *spec)
+        if n_outputs is not None and len(out) != n_outputs:
+            raise ValueError("stale stored program")
+        return loaded[None] if drive is None else Staged(loaded, drive)
     except Exception:  # corrupt, stale, or from an incompatible JAX: build it again
         _STATS["cache_errors"] += 1
         return None
@@ -304,7 +319,8 @@ def save_program(path: Path, fn) -> None:
     from jax.experimental import serialize_executable
 
     try:
-        stages = [serialize_executable.serialize(f) for f in (fn.stages if isinstance(fn, Staged) else (fn,))]
+        named = fn.stages.items() if isinstance(fn, Staged) else [(None, fn)]
+        stages = [(name, *serialize_executable.serialize(f)) for name, f in named]
         data = pickle.dumps((_FORMAT, stages), protocol=pickle.HIGHEST_PROTOCOL)
     except Exception:
         _STATS["cache_errors"] += 1
@@ -318,62 +334,98 @@ def save_program(path: Path, fn) -> None:
         pass  # no writable cache: build every time
 
 
+@dataclasses.dataclass(frozen=True)
+class Pipeline:
+    """A program as several jitted stages and the Python function that calls them: what
+    ``build`` of :func:`compiled` returns for a program compiled in stages.
+
+    Attributes:
+        stages: stage name -> jitted function (``jax.jit(...)`` with its shardings and
+            compiler options; arrays in, a tuple of arrays out).
+        drive: ``drive(call, *args)`` -> a tuple of arrays, the program: it runs stage
+            ``name`` on arrays ``xs`` by ``call(name, *xs)`` (a tuple of arrays back),
+            in any order and as often as it likes, a stage always on arrays of the same
+            shapes. It must do nothing else with the arrays but pass them on: it also
+            runs on their shapes alone, to compile the stages and to check stored ones.
+
+    A program in stages compiles faster than the same work as one: each stage is
+    compiled by XLA in a thread of its own (XLA's compiler releases the GIL) while the
+    next is traced and lowered, a stage called twice is compiled once, and each stage
+    has its own compiler options (one that runs briefly can be compiled for latency).
+    """
+
+    stages: Mapping[str, Callable]
+    drive: Callable
+
+
 class Staged:
-    """A program compiled in stages, each its own XLA executable (``jax.stages.Compiled``,
-    in :attr:`stages`): the first takes the program's arguments, each later one those
-    arguments followed by the previous stage's results, and the program returns the last
-    stage's results. The intermediate results stay on the devices.
+    """A compiled :class:`Pipeline`: ``Staged(stages, drive)(*args)`` runs ``drive``
+    with each stage's compiled program (``jax.stages.Compiled``, in :attr:`stages`,
+    by name, in the order the driver first calls them). Results between stages stay
+    on the devices."""
 
-    A program built in stages (``build`` of :func:`compiled` returning several jitted
-    functions) compiles faster than the same work as one: XLA compiles each stage in a
-    thread of its own while the next is traced and lowered here (Python), and a stage
-    that runs once can be compiled for latency (the batch engine's evaluation,
-    :func:`jaxgrasp.batch.compiled_evaluator`)."""
-
-    def __init__(self, stages):
-        self.stages = tuple(stages)
+    def __init__(self, stages: Mapping[str, Any], drive: Callable):
+        self.stages = dict(stages)
+        self.drive = drive
 
     def __call__(self, *args):
-        out = self.stages[0](*args)
-        for stage in self.stages[1:]:
-            out = stage(*args, *out)
-        return out
+        return self.drive(lambda name, *xs: self.stages[name](*xs), *args)
+
+
+def lower_stages(pipeline: Pipeline, spec: Sequence, on_lowered: Callable | None = None) -> dict:
+    """Run ``pipeline``'s driver on the shapes ``spec`` (``jax.ShapeDtypeStruct``
+    leaves, with their shardings), lowering each stage when it is first called; returns
+    stage name -> ``jax.stages.Lowered``, in that order. ``on_lowered(name, lowered)``
+    is called at once for each (:func:`_compile` starts its XLA compilation there). A
+    stage called again on other shapes is a ``ValueError``."""
+    lowered: dict[str, tuple] = {}  # name -> (argument specs, jax.stages.Lowered)
+
+    def call(name, *args):
+        args = tuple(_spec_of(a) for a in args)
+        if name not in lowered:
+            lowered[name] = (args, pipeline.stages[name].lower(*args))
+            if on_lowered is not None:
+                on_lowered(name, lowered[name][1])
+        elif lowered[name][0] != args:
+            raise ValueError(f"stage {name!r} called on arrays of other shapes: {lowered[name][0]} and {args}")
+        return tuple(_spec_of(o) for o in jax.tree_util.tree_leaves(lowered[name][1].out_info))
+
+    pipeline.drive(call, *spec)
+    return {name: low for name, (_, low) in lowered.items()}
 
 
 def _compile(built, spec, quiet_xla: bool):
-    """Trace, lower and compile ``built`` (a jitted function, or a tuple of them: the
-    stages of a :class:`Staged`) for the arguments ``spec``. Each stage but the last is
-    compiled in a thread of its own (XLA's compiler releases the GIL) while the next is
-    traced and lowered here; the wait for those threads is not cut short by an interrupt
-    (it is raised once they are done: XLA still compiling in a thread while the
-    interpreter unwinds can crash the process). ``quiet_xla``: JAX's persistent cache
-    writes no entry for them (:func:`_no_xla_cache_write`)."""
+    """Trace, lower and compile ``built`` (a jitted function, or a :class:`Pipeline`) for
+    the arguments ``spec``. A pipeline's stages are lowered as its driver first calls
+    them (:func:`lower_stages`), each compiled in a thread of its own (XLA's compiler
+    releases the GIL) while the driver goes on; the wait for those threads is not cut
+    short by an interrupt (it is raised once they are done: XLA still compiling in a
+    thread while the interpreter unwinds can crash the process). ``quiet_xla``: JAX's
+    persistent cache writes no entry for them (:func:`_no_xla_cache_write`)."""
 
     def compile_one(lowered):
         with _no_xla_cache_write() if quiet_xla else contextlib.nullcontext():
             return lowered.compile()
 
-    if not isinstance(built, tuple):
+    if not isinstance(built, Pipeline):
         return compile_one(built.lower(*spec))
-    results: list = [None] * len(built)
-    threads, args = [], tuple(spec)
-    for i, stage in enumerate(built):
-        lowered = stage.lower(*args)
-        if i == len(built) - 1:
-            results[i] = _outcome(compile_one, lowered)
-            break
-        thread = threading.Thread(target=lambda i=i, lowered=lowered: results.__setitem__(i, _outcome(compile_one, lowered)),
-                                  name="jaxgrasp-compile", daemon=True)
+    results: dict[str, tuple] = {}
+    threads = []
+
+    def start(name, lowered):
+        thread = threading.Thread(target=lambda: results.__setitem__(name, _outcome(compile_one, lowered)),
+                                  name=f"jaxgrasp-compile-{name}", daemon=True)
         thread.start()
         threads.append(thread)
-        args = tuple(spec) + tuple(
-            jax.ShapeDtypeStruct(o.shape, o.dtype, sharding=o.sharding) for o in jax.tree_util.tree_leaves(lowered.out_info)
-        )
-    _join_uninterrupted(threads)
-    for ok, value in results:
+
+    try:
+        names = list(lower_stages(built, spec, start))
+    finally:
+        _join_uninterrupted(threads)
+    for ok, value in results.values():
         if not ok:
             raise value
-    return Staged([value for _, value in results])
+    return Staged({name: results[name][1] for name in names}, built.drive)
 
 
 def _outcome(f, *args):
@@ -415,9 +467,9 @@ def compiled(
     Args:
         key: what makes the program unique in this process (the memo's key).
         build: ``build()`` returns the jitted function (``jax.jit(...)`` with its
-            shardings and compiler options; arrays in, arrays out), or a tuple of them,
-            the stages of a :class:`Staged` program; called only when the program is
-            neither in the memo nor in the store.
+            shardings and compiler options; arrays in, arrays out), or a
+            :class:`Pipeline` of them; called when the program is not in the memo
+            (it must be cheap: nothing is traced before the program is compiled).
         spec: its arguments as ``jax.ShapeDtypeStruct`` (with their shardings).
         name: prefix of its stored file.
         store_key: what makes it unique across processes (device counts, not ids);
@@ -435,12 +487,13 @@ def compiled(
         return hit, 0.0
     t0 = time.perf_counter()
     path = None if store_key is None else program_path(name, (store_key, len(devices or ())))
+    built = build()
     fn = None
     if path is not None:
-        fn = load_program(path, spec, _devices(devices), n_outputs)
+        fn = load_program(path, spec, _devices(devices), n_outputs, built.drive if isinstance(built, Pipeline) else None)
     if fn is None:
         hits = _XLA_CACHE_HITS[0]
-        fn = _compile(build(), spec, quiet_xla=path is not None)
+        fn = _compile(built, spec, quiet_xla=path is not None)
         _STATS["traced"] += 1
         # An executable that XLA's cache served cannot be serialized again (XLA on the CPU
         # then writes a program whose kernels are missing when it is loaded): store only

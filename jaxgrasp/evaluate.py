@@ -205,10 +205,9 @@ def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions, settl
 def evaluate_batch_traced(grasps: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:
     """:func:`evaluate_traced` of a batch of grasps (leading axis ``B`` on every field,
     ``active`` included where given), the result with a leading ``B``: what the batch
-    engine computes, in its two stages :func:`programs_of_grasps` and
-    :func:`evaluations_of`. Equal to ``jax.vmap`` of :func:`evaluate_traced`, lane by
-    lane, but the solver's work queue is traced once
-    (:func:`~jaxgrasp.programs.programs_of_batch`)."""
+    engine computes, as the stages of :mod:`jaxgrasp.batch_stages`. Equal to
+    ``jax.vmap`` of :func:`evaluate_traced`, lane by lane, but the solver's work queue
+    is traced once (:func:`~jaxgrasp.programs.programs_of_batch`)."""
     return evaluations_of(grasps, programs_of_grasps(grasps, options, settle), options)
 
 

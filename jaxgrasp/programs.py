@@ -77,6 +77,13 @@ __all__ = [
     "solve_programs",
     "programs_of",
     "programs_of_batch",
+    "LaneStarts",
+    "batch_data",
+    "equilibrium_starts",
+    "equilibrium_of",
+    "boundary_starts",
+    "solve_stage",
+    "finish_programs",
     "start_frame",
     "FRAME_TIE",
     "FRAME_BITS",
@@ -461,24 +468,141 @@ def programs_of(p: ModelParams, options: EvaluateOptions, settle: bool = True) -
     return jax.tree_util.tree_map(lambda a: a[0], programs_of_batch(one, options, settle))
 
 
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class LaneStarts:
+    """What the solver's lanes of one stage start from (leading axes ``(B, L)``: grasps,
+    then each grasp's ``L = 2N * D`` lanes).
+
+    Attributes:
+        x0: ``(B, L, 6)`` starting points (scaled pose ``z``).
+        eq_mask: ``(B, L, 3N)`` one-hot equality row of each lane (zeros: no equality).
+        nu0: ``(B, L)`` initial equality multipliers (``NaN``: the solver's estimate).
+        active: ``(B, L)`` bool, the lanes to solve.
+        at_eq: ``(B, L)`` bool, boundary lanes whose problem the equilibrium already
+            solves (:func:`_at_equilibrium`; not ``active``).
+        g_eq: ``(B, L)`` each lane's equality margin at the equilibrium.
+    """
+
+    x0: Any
+    eq_mask: Any
+    nu0: Any
+    active: Any
+    at_eq: Any
+    g_eq: Any
+
+
+def batch_data(p: ModelParams) -> ProgramData:
+    """:func:`program_data` of a batch of grasps ``p`` (leading axis ``B``), with no
+    gradient: the solver sees none."""
+    return jax.vmap(program_data)(jax.lax.stop_gradient(p))
+
+
+def _num_lanes(data: ProgramData, options: EvaluateOptions) -> int:
+    return 2 * data.params.c.shape[-2] * options.num_starts
+
+
+def equilibrium_starts(data: ProgramData, options: EvaluateOptions) -> LaneStarts:
+    """Stage 1 of :func:`programs_of_batch`: the lanes of the equilibrium problem of a
+    batch ``data`` (:func:`_equilibrium_lanes`: lane 0 of each grasp from its initial
+    grasping state, the others inactive)."""
+    num_lanes = _num_lanes(data, options)
+    z0, masks, nu0, active = jax.vmap(lambda d: _equilibrium_lanes(d, num_lanes))(data)
+    no = jnp.zeros(active.shape, bool)
+    return LaneStarts(z0, masks, nu0, active, no, jnp.zeros(active.shape, z0.dtype))
+
+
+def equilibrium_of(lanes: SolverResult) -> SolverResult:
+    """Each grasp's equilibrium (leading axis ``B``) from the lanes of the equilibrium
+    stage (leading axes ``(B, L)``): lane 0."""
+    return jax.tree_util.tree_map(lambda a: a[:, 0], lanes)
+
+
+def boundary_starts(data: ProgramData, eq: SolverResult, options: EvaluateOptions) -> LaneStarts:
+    """Stage 3 of :func:`programs_of_batch`: the lanes of every boundary problem of a
+    batch ``data`` from its equilibria ``eq`` (leading axis ``B``;
+    :func:`_boundary_starts`). Without a converged equilibrium there is nothing to start
+    from: every lane is skipped; an inactive contact has no boundary problems; an
+    equilibrium on a boundary (to the solver's tolerance) is that problem's minimiser:
+    its lanes are ``at_eq``, not solved."""
+    n = data.params.c.shape[-2]
+    dtype = data.params.c.dtype
+    tol = kkt_tol(dtype, options.solver)
+
+    def one(data: ProgramData, eq: SolverResult):
+        lane_k, z0s, found, nu0s, g_eq = _boundary_starts(data, eq.x, options)
+        found = found & (eq.status == LaneStatus.CONVERGED) & data.params.on[(lane_k - n) % n]
+        at_eq = found & (jnp.abs(g_eq) <= tol)
+        return LaneStarts(z0s, jax.nn.one_hot(lane_k, 3 * n, dtype=dtype), nu0s, found & ~at_eq, at_eq, g_eq)
+
+    return jax.vmap(one)(data, eq)
+
+
+def solve_stage(data: ProgramData, starts: LaneStarts, options: EvaluateOptions) -> SolverResult:
+    """Stages 2 and 4 of :func:`programs_of_batch`: the lanes ``starts`` of a batch
+    ``data`` solved, every grasp's lanes in one work queue
+    (:func:`~jaxgrasp.lanes.solve_lane_batches`); leading axes ``(B, L)``.
+
+    Each lane gets its grasp's data as its theta (not closed over): the queue then runs
+    the lanes of all grasps (and, under a caller's vmap, of all batches) together. The
+    queue starts the force-limit lanes first: on random grasps they take 46 steps on
+    average against 27 for the slip lanes (two thirds of them prove their boundary
+    infeasible), so started last they would run on with the other slots idle
+    (experiments/BENCHMARK.md). The equilibrium stage has one lane per grasp."""
+    b, n = data.params.c.shape[:2]
+    num_lanes = _num_lanes(data, options)
+    theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a[:, None], (b, num_lanes) + a.shape[1:]), data)
+    rank = jnp.where(_lane_equalities(n, options.num_starts) >= 2 * n, 0, 1)
+    return solve_lane_batches(lane_problem, theta, starts.x0, starts.eq_mask, starts.nu0, starts.active,
+                              options.solver, rank=rank)
+
+
+def finish_programs(data: ProgramData, eq: SolverResult, lanes: SolverResult, starts: LaneStarts,
+                    options: EvaluateOptions, settle: bool = True) -> Programs:
+    """Stage 5 of :func:`programs_of_batch`: the :class:`Programs` of a batch ``data``
+    from its equilibria ``eq`` (leading axis ``B``), its boundary lanes ``lanes`` as
+    solved from ``starts`` (leading axes ``(B, L)``): lanes ``at_eq`` get the
+    equilibrium's solution (:func:`_at_equilibrium`), and with ``settle`` (static)
+    :func:`settle_stalled` certifies stalled ones."""
+    b, n = data.params.c.shape[:2]
+    num_lanes = _num_lanes(data, options)
+    lane_k = _lane_equalities(n, options.num_starts)
+    lanes = jax.vmap(lambda *a: _at_equilibrium(*a, lane_k))(eq, lanes, starts.at_eq, starts.g_eq)
+    found = starts.active | starts.at_eq
+    if settle:
+        lanes = _settle_where_stalled(data, lanes, lane_k, found, options.num_starts, options.solver)
+    return Programs(
+        equilibrium=eq,
+        boundary=lanes,
+        start=starts.x0,
+        found=found,
+        constraint_index=jnp.broadcast_to(lane_k, (b, num_lanes)),
+        lever=data.lever,
+        scale=data.scale,
+        contact_on=data.params.on,
+    )
+
+
 def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = True) -> Programs:
     """Solve every program of a batch of grasps ``p`` (leading axis ``B`` on every field;
     traceable; the solver sees no derivative). Returns :class:`Programs` with a leading
     ``B``.
 
-    Both stages run through ONE :func:`~jaxgrasp.lanes.solve_lane_batches` call site,
-    inside a two-iteration loop: iteration 0 solves the equilibrium problem (lane 0 of each
-    grasp's lane axis, the other lanes inactive), iteration 1 the boundary problems from
-    starts found around that equilibrium. The solver's loop is then compiled once rather
-    than twice (the equilibrium used to have a ``while_loop`` of its own), which halves
-    the program the solver contributes; the lanes of every grasp share one work queue,
-    and each lane's result is what :func:`~jaxgrasp.solver.solve` gives it. Everything
-    else (starts, the settling stage) is ``jax.vmap`` of the one-grasp functions. Taking
-    the batch itself, rather than being vmapped over grasps, traces the queue once: under
-    ``vmap`` it is traced for one grasp and again folded (``custom_vmap``), 0.3-0.4 s of
-    a sweep's cold start (experiments/BENCHMARK.md). The stage is the loop counter, not
-    batched data, so under a caller's ``vmap`` the ``lax.cond`` choosing the lanes stays a
-    branch.
+    Its stages, each a function of the batch: the equilibrium's lanes
+    (:func:`equilibrium_starts`), solved (:func:`solve_stage`); the boundary problems'
+    lanes from starts around that equilibrium (:func:`boundary_starts`), solved; the
+    :class:`Programs` (:func:`finish_programs`). The batch engine runs them as separate
+    compiled programs (:mod:`jaxgrasp.batch_stages`); here they are one program.
+
+    Both solves run through ONE :func:`solve_stage` call site, inside a two-iteration
+    loop: iteration 0 solves the equilibrium problem, iteration 1 the boundary problems.
+    The solver's loop is then compiled once rather than twice, which halves the program
+    the solver contributes; each lane's result is what :func:`~jaxgrasp.solver.solve`
+    gives it. Taking the batch itself, rather than being vmapped over grasps, traces the
+    queue once: under ``vmap`` it is traced for one grasp and again folded
+    (``custom_vmap``), 0.3-0.4 s of a sweep's cold start (experiments/BENCHMARK.md). The
+    stage is the loop counter, not batched data, so under a caller's ``vmap`` the
+    ``lax.cond`` choosing the lanes stays a branch.
 
     With ``settle`` (static), :func:`settle_stalled` then certifies stalled boundary
     lanes. Without it the program is smaller and faster, and equal wherever no boundary
@@ -486,64 +610,37 @@ def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = T
     (:func:`jaxgrasp.evaluate` of a concrete grasp, the batch engine) run that program
     first and the settling one only on the grasps that need it.
     """
-    data = jax.vmap(program_data)(jax.lax.stop_gradient(p))
-    b, n = data.params.c.shape[:2]
-    dtype = data.params.c.dtype
-    sopt = options.solver
-    tol = kkt_tol(dtype, sopt)
-    num_lanes = 2 * n * options.num_starts
-    # Every lane gets its grasp's data as its theta (not closed over): the queue then runs
-    # the lanes of all grasps (and, under a caller's vmap, of all batches) together.
-    theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a[:, None], (b, num_lanes) + a.shape[1:]), data)
-
-    def boundary_lanes(data: ProgramData, eq: SolverResult):
-        lane_k, z0s, found, nu0s, g_eq = _boundary_starts(data, eq.x, options)
-        # Without a converged equilibrium there is nothing to start from: skip every lane;
-        # an inactive contact has no boundary problems.
-        found = found & (eq.status == LaneStatus.CONVERGED) & data.params.on[(lane_k - n) % n]
-        # an equilibrium on the boundary (to the solver's tolerance) is that problem's
-        # minimiser: its lanes are not solved (_at_equilibrium)
-        at_eq = found & (jnp.abs(g_eq) <= tol)
-        return z0s, jax.nn.one_hot(lane_k, 3 * n, dtype=dtype), nu0s, found & ~at_eq, (at_eq, g_eq)
-
-    def equilibrium_lanes(data: ProgramData):
-        return _equilibrium_lanes(data, num_lanes) + ((jnp.zeros(num_lanes, bool), jnp.zeros(num_lanes, dtype)),)
-
-    lane_k = _lane_equalities(n, options.num_starts)
-    # The queue starts the force-limit lanes first: on random grasps they take 46 steps on
-    # average against 27 for the slip lanes (two thirds of them prove their boundary
-    # infeasible), so started last they would run on with the other slots idle
-    # (experiments/BENCHMARK.md). The equilibrium stage has one lane per grasp.
-    rank = jnp.where(lane_k >= 2 * n, 0, 1)
+    data = batch_data(p)
 
     def stage(i, carry):
         eq, _, _ = carry
-        z0s, masks, nu0s, active, at_eq = jax.lax.cond(
+        starts = jax.lax.cond(
             i == 0,
-            lambda eq: jax.vmap(equilibrium_lanes)(data),
-            lambda eq: jax.vmap(boundary_lanes)(data, eq),
+            lambda eq: equilibrium_starts(data, options),
+            lambda eq: boundary_starts(data, eq, options),
             eq,
         )
-        res = solve_lane_batches(lane_problem, theta, z0s, masks, nu0s, active, sopt, rank=rank)
-        eq = jax.lax.cond(i == 0, lambda: jax.tree_util.tree_map(lambda a: a[:, 0], res), lambda: eq)
-        return eq, res, (z0s, active, at_eq)
+        res = solve_stage(data, starts, options)
+        eq = jax.lax.cond(i == 0, lambda: equilibrium_of(res), lambda: eq)
+        return eq, res, starts
 
     # the carry: each grasp's equilibrium lane, every lane's result (zeros until solved)
-    zero = lambda shape, dt=dtype: jnp.zeros((b, num_lanes) + shape, dt)
+    # and the lanes' starts
+    starts0 = equilibrium_starts(data, options)
+    zero = lambda a, dt=None: jnp.zeros(a.shape, a.dtype if dt is None else dt)
+    x0 = starts0.x0
     lanes0 = SolverResult(
-        x=zero((6,)),
-        lam=zero((3 * n,)),
-        nu=zero(()),
-        objective=zero(()),
-        status=zero((), jnp.int32),
-        stationarity=zero(()),
-        feasibility=zero(()),
-        complementarity=zero(()),
-        steps=zero((), jnp.int32),
+        x=zero(x0),
+        lam=zero(starts0.eq_mask),
+        nu=zero(starts0.nu0),
+        objective=zero(starts0.nu0),
+        status=zero(starts0.nu0, jnp.int32),
+        stationarity=zero(starts0.nu0),
+        feasibility=zero(starts0.nu0),
+        complementarity=zero(starts0.nu0),
+        steps=zero(starts0.nu0, jnp.int32),
     )
-    eq0 = jax.tree_util.tree_map(lambda a: a[:, 0], lanes0)
-    no_lanes = jnp.zeros((b, num_lanes), bool)
-    carry0 = (eq0, lanes0, (jnp.zeros((b, num_lanes, 6), dtype), no_lanes, (no_lanes, jnp.zeros((b, num_lanes), dtype))))
+    carry0 = (equilibrium_of(lanes0), lanes0, jax.tree_util.tree_map(zero, starts0))
     # The carry's zeros, made to depend on the grasps (jnp.where of a flag computed from
     # every field of their data; the values are the same zeros): under a caller's vmap over
     # grasps, whichever fields it maps, the carry is then batched from the start. Zeros
@@ -551,23 +648,11 @@ def programs_of_batch(p: ModelParams, options: EvaluateOptions, settle: bool = T
     # would trace the body (the whole solver) once more to find that out: 128 grasps over
     # 2 devices traced in 2.6 s instead of 4.0-4.5 s, with the same results
     # (experiments/BENCHMARK.md).
+    dtype = data.params.c.dtype
     per_grasp = jnp.isnan(sum(jnp.sum(jnp.asarray(a, dtype)) for a in jax.tree_util.tree_leaves(data)))
     carry0 = jax.tree_util.tree_map(lambda a: jnp.where(per_grasp, a, a), carry0)
-    eq, lanes, (z0s, solved, (at_eq, g_eq)) = jax.lax.fori_loop(0, 2, stage, carry0)
-    lanes = jax.vmap(lambda *a: _at_equilibrium(*a, lane_k))(eq, lanes, at_eq, g_eq)
-    found = solved | at_eq
-    if settle:
-        lanes = _settle_where_stalled(data, lanes, lane_k, found, options.num_starts, sopt)
-    return Programs(
-        equilibrium=eq,
-        boundary=lanes,
-        start=z0s,
-        found=found,
-        constraint_index=jnp.broadcast_to(lane_k, (b, num_lanes)),
-        lever=data.lever,
-        scale=data.scale,
-        contact_on=data.params.on,
-    )
+    eq, lanes, starts = jax.lax.fori_loop(0, 2, stage, carry0)
+    return finish_programs(data, eq, lanes, starts, options, settle)
 
 
 def _at_equilibrium(eq: SolverResult, lanes: SolverResult, at_eq, g_eq, lane_k) -> SolverResult:

@@ -171,3 +171,15 @@ def test_errors_are_one_line_before_compiling():
     bad = cube.replace(friction=np.array([0.5, -0.5]))
     with pytest.raises(GraspValueError, match=r"^grasp 1: friction"):
         evaluate_batch([cube, bad])
+
+
+def test_smooth_minimum_is_applied_in_a_batch():
+    """``EvaluateOptions(smooth_min_temperature=T)``: each batch value is
+    :func:`jaxgrasp.evaluate`'s soft minimum with the same options, below the hard one."""
+    grasps = [jaxgrasp.presets.cube(young_modulus=e, initial_deformation=0.002) for e in (4e5, 6e5)]
+    hard = [float(jaxgrasp.evaluate(g).value) for g in grasps]
+    options = jaxgrasp.EvaluateOptions(smooth_min_temperature=0.1 * min(hard))
+    soft = [float(jaxgrasp.evaluate(g, options).value) for g in grasps]
+    got = np.asarray(evaluate_batch(grasps, options=options).evaluation.value)
+    np.testing.assert_allclose(got, soft, rtol=1e-10, atol=0)
+    assert np.all(got < np.asarray(hard) * (1 - 1e-3)), (got, hard)

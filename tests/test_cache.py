@@ -10,6 +10,7 @@ runs ``jaxgrasp evaluate examples/cube.toml`` on it (neither tracing nor compili
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import jaxgrasp
 from jaxgrasp.cache import PROGRAM_SUBDIR
@@ -65,31 +66,42 @@ def test_program_from_xla_cache_is_not_stored(tmp_path):
         _assert_same_fields(both, here)
 
 
-def test_staged_program_chains_its_stages_and_is_stored(tmp_path):
-    """A program built in stages (the batch engine's evaluator is one) runs each stage on
-    the program's arguments and the previous stage's results, and is stored and loaded
-    whole: the loaded program gives the same numbers bit for bit."""
+def test_pipeline_runs_its_driver_and_is_stored(tmp_path):
+    """A program built in stages (the batch engine's evaluator is one) runs its driver,
+    which may call a stage twice (compiled once), and is stored and loaded whole: the
+    loaded program gives the same numbers bit for bit. A stage called on other shapes
+    the second time, or a stored program whose stages do not fit the driver, is refused."""
     import jax
     import jax.numpy as jnp
 
     from jaxgrasp import cache
 
-    solve = jax.jit(lambda x: (jnp.sin(x) * 2.0, x + 1.0))
-    evaluate = jax.jit(lambda x, a, b: (a * b - x, jnp.sum(a)))
+    stages = {
+        "step": jax.jit(lambda x, y: (jnp.sin(x) * 2.0 + y, x + 1.0)),
+        "total": jax.jit(lambda x, a, b: (a * b - x, jnp.sum(a))),
+    }
+
+    def drive(call, x):
+        a, b = call("step", x, x)
+        a, b = call("step", a, b)  # the same stage again
+        return call("total", x, a, b)
+
+    pipeline = cache.Pipeline(stages, drive)
     spec = (jax.ShapeDtypeStruct((5,), jnp.float64),)
     x = jnp.linspace(0.0, 1.0, 5)
-    want = evaluate(x, *solve(x))
+    want = drive(lambda name, *xs: stages[name](*xs), x)
     saved = cache.program_dir()
     cache.set_program_dir(tmp_path)
     try:
         key = ("test-staged", str(tmp_path))
         before = cache.stats()
-        built, _ = cache.compiled(key, lambda: (solve, evaluate), spec, name="staged", store_key=key, n_outputs=2)
-        assert isinstance(built, cache.Staged) and len(built.stages) == 2
+        built, _ = cache.compiled(key, lambda: pipeline, spec, name="staged", store_key=key, n_outputs=2)
+        assert isinstance(built, cache.Staged) and list(built.stages) == ["step", "total"]
         cache.wait_for_saves()  # written in a thread
-        assert len(list(tmp_path.glob("staged-*.xla"))) == 1
+        stored = list(tmp_path.glob("staged-*.xla"))
+        assert len(stored) == 1
         cache.clear_compiled()
-        loaded, _ = cache.compiled(key, lambda: (solve, evaluate), spec, name="staged", store_key=key, n_outputs=2)
+        loaded, _ = cache.compiled(key, lambda: pipeline, spec, name="staged", store_key=key, n_outputs=2)
         after = cache.stats()
         assert after["traced"] - before["traced"] == 1 and after["deserialized"] - before["deserialized"] == 1
         assert isinstance(loaded, cache.Staged)
@@ -97,6 +109,14 @@ def test_staged_program_chains_its_stages_and_is_stored(tmp_path):
             got = fn(x)
             for g, w in zip(got, want):
                 np.testing.assert_array_equal(np.asarray(g), np.asarray(w))
+        # a driver that calls "step" again on the scalar "total" returns: refused when
+        # lowered; the stored stages (for (5,) arrays) are refused for (3,) arrays
+        again = lambda call, x: call("step", *call("total", x, *call("step", x, x))[1:] * 2)
+        with pytest.raises(ValueError, match="other shapes"):
+            cache.lower_stages(cache.Pipeline(stages, again), spec)
+        small = (jax.ShapeDtypeStruct((3,), jnp.float64),)
+        assert cache.load_program(stored[0], small, [cache.default_device()], 2, drive) is None
+        assert cache.stats()["cache_errors"] == after["cache_errors"] + 1
     finally:
         cache.set_program_dir(saved)
         cache.clear_compiled()

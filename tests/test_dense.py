@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrasp import batch
+from jaxgrasp import batch, cache
 from jaxgrasp.dense import eigh, solve
 from jaxgrasp.direction import EIGH_BLOCK
 from jaxgrasp.options import EvaluateOptions
@@ -74,17 +74,15 @@ def test_eigh_under_vmap_is_one_lapack_call_per_matrix():
 
 
 def test_batched_program_calls_no_lapack_but_small_eigh():
-    """The batch engine's programs (both stages), with and without the settling stage,
+    """The batch engine's programs (every stage), with and without the settling stage,
     for 128 grasps per device: every LAPACK custom call is the symmetric eigensolver (``syevd``) on at
     most ``EIGH_BLOCK`` matrices, never on one per grasp of the chunk."""
     sharding = batch.batch_sharding()
     assert EIGH_BLOCK <= 64
     for settle in (False, True):
-        solve, evaluate = batch._batched_fn(EvaluateOptions(), sharding, masked=True, settle=settle)
+        pipeline = batch._batched_fn(EvaluateOptions(), sharding, masked=True, settle=settle)
         spec = batch._batch_spec(3, 128 * len(jax.devices()), sharding, masked=True)
-        lowered = solve.lower(*spec)
-        out = [jax.ShapeDtypeStruct(o.shape, o.dtype, sharding=o.sharding) for o in jax.tree_util.tree_leaves(lowered.out_info)]
-        text = lowered.as_text() + evaluate.lower(*spec, *out).as_text()
+        text = "".join(lowered.as_text() for lowered in cache.lower_stages(pipeline, spec).values())
         calls = _lapack_calls(text)
         assert calls and all("syevd" in target for target, _ in calls), (settle, calls)
         for _, operand in calls:

@@ -76,13 +76,13 @@ WORKER = textwrap.dedent(
         r = jaxgrasp.sweep(jaxgrasp.presets.cube(), young_modulus=E, initial_deformation=DR)
         chunk = S.batch_size(S.default_chunk_size(), r.size, jax.device_count())
         fn, _ = S.compiled_evaluator(EvaluateOptions(), 2, chunk, settle=False)  # the one the sweep used (memoised)
-        shardings = [s for stage in fn.stages for s in jax.tree_util.tree_leaves(stage.input_shardings)
+        shardings = [s for stage in fn.stages.values() for s in jax.tree_util.tree_leaves(stage.input_shardings)
                      + jax.tree_util.tree_leaves(stage.output_shardings)]
         np.savez(cfg["out"] + f"_{k}.npz", **{f: np.asarray(getattr(r, f)) for f in %(fields)r})
         out["runs"].append({
             "devices": r.devices,
             "sharding_devices": sorted({len(s.device_set) for s in shardings}),
-            "collectives": sorted({op for op in %(collectives)r for stage in fn.stages if op in stage.as_text()}),
+            "collectives": sorted({op for op in %(collectives)r for stage in fn.stages.values() if op in stage.as_text()}),
             "compile_seconds": r.compile_seconds,
             "stats": {n: v - before[n] for n, v in cache.stats().items()},
         })
