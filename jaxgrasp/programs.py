@@ -408,19 +408,14 @@ def start_frame(data: ProgramData):
     return jnp.round(basis[jnp.arange(6), rank].T * 2.0**FRAME_BITS) / 2.0**FRAME_BITS
 
 
-def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
-    """Start of every boundary lane: ``(k, z0, found, nu0, g_eq)``, each with leading axis ``2N * D``.
-
-    ``k`` is the lane's equality row in the ``(3N,)`` constraints (slip rows, then force
-    rows), ``z0`` the crossing of that constraint along the lane's direction
-    (:meth:`EvaluateOptions.directions` in the :func:`start_frame`) from ``z_eq``
-    (``z_eq`` itself where the equilibrium is already on it), ``nu0`` ``NaN``: the
-    solver starts the equality multiplier at its least-squares estimate there
-    (:func:`~jaxgrasp.solver.init`); ``g_eq`` the constraint ``k``'s margin at ``z_eq``.
-    """
+def _lane_rays(data: ProgramData, options: EvaluateOptions):
+    """The ray of every boundary lane of the grasp ``data``: ``(k, v, t_grid)``, leading
+    axis ``2N * D``: ``k`` the lane's equality row in the ``(3N,)`` constraints (slip rows,
+    then force rows), ``v`` ``(6,)`` its direction (:meth:`EvaluateOptions.directions`
+    in the :func:`start_frame`), ``t_grid`` ``(ray_points,)`` mm, the points the ray
+    brackets its crossing on."""
     n = data.params.c.shape[0]
     dtype = data.params.c.dtype
-    g = lambda z: constraints(z, data)
     dirs = jnp.asarray(options.directions(), dtype) @ start_frame(data).T
     num_dirs = dirs.shape[0]
     # A ray walks until its translation reaches ray_length radii or its rotation reaches
@@ -430,20 +425,21 @@ def _boundary_starts(data: ProgramData, z_eq, options: EvaluateOptions):
     r_max = jnp.max(jnp.where(data.params.on, data.params.r, 0.0))
     t_max = options.ray_length * jnp.maximum(r_max, data.lever * rot)  # (D,) mm
     unit_grid = 2.0 ** (-(options.ray_points - 1 - jnp.arange(options.ray_points, dtype=dtype)) / 4.0)
-    lane_k = _lane_equalities(n, num_dirs)
-    lane_v = jnp.tile(dirs, (2 * n, 1))
-    lane_t = jnp.tile(t_max[:, None] * unit_grid, (2 * n, 1))
+    return _lane_equalities(n, num_dirs), jnp.tile(dirs, (2 * n, 1)), jnp.tile(t_max[:, None] * unit_grid, (2 * n, 1))
 
-    def start(k, v, t_grid):
-        z0, found, g_eq = _ray_start(lambda z: g(z)[k], z_eq, v, t_grid, options.crossing_steps)
-        on_boundary = g_eq <= 0.0
-        z0 = jnp.where(on_boundary, z_eq, z0)
-        # the equality multiplier: NaN, the solver's least-squares estimate at the start
-        # (from its first step's derivatives, so that no other copy of them is compiled)
-        return z0, found | on_boundary, jnp.asarray(jnp.nan, dtype), g_eq
 
-    z0s, found, nu0s, g_eq = jax.vmap(start)(lane_k, lane_v, lane_t)
-    return lane_k, z0s, found, nu0s, g_eq
+def _ray_lane(data: ProgramData, z_eq, k, v, t_grid, options: EvaluateOptions):
+    """Start of one boundary lane (its grasp ``data``, ray ``k, v, t_grid`` from
+    :func:`_lane_rays`): ``(z0, found, nu0, g_eq)``: ``z0`` the crossing of constraint
+    ``k`` along ``v`` from ``z_eq`` (``z_eq`` itself where the equilibrium is already on
+    it), ``nu0`` ``NaN``: the solver starts the equality multiplier at its least-squares
+    estimate there (:func:`~jaxgrasp.solver.init`, from its first step's derivatives, so
+    that no other copy of them is compiled); ``g_eq`` constraint ``k``'s margin at
+    ``z_eq``."""
+    z0, found, g_eq = _ray_start(lambda z: constraints(z, data)[k], z_eq, v, t_grid, options.crossing_steps)
+    on_boundary = g_eq <= 0.0
+    z0 = jnp.where(on_boundary, z_eq, z0)
+    return z0, found | on_boundary, jnp.asarray(jnp.nan, z_eq.dtype), g_eq
 
 
 def _equilibrium_lanes(data: ProgramData, num_lanes: int):
@@ -520,22 +516,30 @@ def equilibrium_of(lanes: SolverResult) -> SolverResult:
 
 def boundary_starts(data: ProgramData, eq: SolverResult, options: EvaluateOptions) -> LaneStarts:
     """Stage 3 of :func:`programs_of_batch`: the lanes of every boundary problem of a
-    batch ``data`` from its equilibria ``eq`` (leading axis ``B``;
-    :func:`_boundary_starts`). Without a converged equilibrium there is nothing to start
+    batch ``data`` from its equilibria ``eq`` (leading axis ``B``): each lane's ray
+    (:func:`_lane_rays`) walked to its crossing (:func:`_ray_lane`). Without a converged equilibrium there is nothing to start
     from: every lane is skipped; an inactive contact has no boundary problems; an
     equilibrium on a boundary (to the solver's tolerance) is that problem's minimiser:
     its lanes are ``at_eq``, not solved."""
     n = data.params.c.shape[-2]
     dtype = data.params.c.dtype
     tol = kkt_tol(dtype, options.solver)
-
-    def one(data: ProgramData, eq: SolverResult):
-        lane_k, z0s, found, nu0s, g_eq = _boundary_starts(data, eq.x, options)
-        found = found & (eq.status == LaneStatus.CONVERGED) & data.params.on[(lane_k - n) % n]
-        at_eq = found & (jnp.abs(g_eq) <= tol)
-        return LaneStarts(z0s, jax.nn.one_hot(lane_k, 3 * n, dtype=dtype), nu0s, found & ~at_eq, at_eq, g_eq)
-
-    return jax.vmap(one)(data, eq)
+    lane_k, lane_v, lane_t = jax.vmap(lambda d: _lane_rays(d, options))(data)  # (B, L, ...)
+    b, num_lanes = lane_k.shape
+    # one vmap over every lane of every grasp, each with its grasp's data: the ray's loop
+    # is then batched once, not for the lanes and again for the grasps
+    per_lane = lambda a: jnp.broadcast_to(a[:, None], (b, num_lanes) + a.shape[1:]).reshape((-1,) + a.shape[1:])
+    flat = lambda a: a.reshape((-1,) + a.shape[2:])
+    z0s, found, nu0s, g_eq = jax.tree_util.tree_map(
+        lambda a: a.reshape((b, num_lanes) + a.shape[1:]),
+        jax.vmap(lambda d, z, k, v, t: _ray_lane(d, z, k, v, t, options))(
+            jax.tree_util.tree_map(per_lane, data), per_lane(eq.x), flat(lane_k), flat(lane_v), flat(lane_t)
+        ),
+    )
+    contact_on = jnp.take_along_axis(data.params.on, (lane_k - n) % n, axis=1)
+    found = found & (eq.status == LaneStatus.CONVERGED)[:, None] & contact_on
+    at_eq = found & (jnp.abs(g_eq) <= tol)
+    return LaneStarts(z0s, jax.nn.one_hot(lane_k, 3 * n, dtype=dtype), nu0s, found & ~at_eq, at_eq, g_eq)
 
 
 def solve_stage(data: ProgramData, starts: LaneStarts, options: EvaluateOptions) -> SolverResult:
