@@ -428,6 +428,18 @@ def _lane_rays(data: ProgramData, options: EvaluateOptions):
     return _lane_equalities(n, num_dirs), jnp.tile(dirs, (2 * n, 1)), jnp.tile(t_max[:, None] * unit_grid, (2 * n, 1))
 
 
+def _contact_data(data: ProgramData, j) -> ProgramData:
+    """``data`` with contact ``j`` (a traced index) its only contact: every per-contact
+    field of its parameters sliced to ``j``, keeping that axis (length 1). The
+    constraints of contact ``j`` are each a function of that contact's kinematics
+    alone, so ``constraints(z, _contact_data(data, j))`` is rows ``j, N + j, 2N + j`` of
+    ``constraints(z, data)``."""
+    p = data.params
+    keep = lambda a: jax.lax.dynamic_slice_in_dim(a, j, 1, axis=0)
+    per_contact = {f.name: keep(getattr(p, f.name)) for f in dataclasses.fields(p) if f.name != "weight"}
+    return dataclasses.replace(data, params=dataclasses.replace(p, **per_contact))
+
+
 def _ray_lane(data: ProgramData, z_eq, k, v, t_grid, options: EvaluateOptions):
     """Start of one boundary lane (its grasp ``data``, ray ``k, v, t_grid`` from
     :func:`_lane_rays`): ``(z0, found, nu0, g_eq)``: ``z0`` the crossing of constraint
@@ -435,8 +447,14 @@ def _ray_lane(data: ProgramData, z_eq, k, v, t_grid, options: EvaluateOptions):
     it), ``nu0`` ``NaN``: the solver starts the equality multiplier at its least-squares
     estimate there (:func:`~jaxgrasp.solver.init`, from its first step's derivatives, so
     that no other copy of them is compiled); ``g_eq`` constraint ``k``'s margin at
-    ``z_eq``."""
-    z0, found, g_eq = _ray_start(lambda z: constraints(z, data)[k], z_eq, v, t_grid, options.crossing_steps)
+    ``z_eq``.
+
+    Row ``k = row * N + j`` of the constraints is contact ``j``'s alone, so the ray
+    evaluates that contact's kinematics only (:func:`_contact_data`): of a 7-contact
+    grasp, one seventh of the model in each of its steps."""
+    n = data.params.c.shape[0]
+    one = _contact_data(data, k % n)
+    z0, found, g_eq = _ray_start(lambda z: constraints(z, one)[k // n], z_eq, v, t_grid, options.crossing_steps)
     on_boundary = g_eq <= 0.0
     z0 = jnp.where(on_boundary, z_eq, z0)
     return z0, found | on_boundary, jnp.asarray(jnp.nan, z_eq.dtype), g_eq
