@@ -433,7 +433,7 @@ def _contact_data(data: ProgramData, j) -> ProgramData:
     field of its parameters sliced to ``j``, keeping that axis (length 1). The
     constraints of contact ``j`` are each a function of that contact's kinematics
     alone, so ``constraints(z, _contact_data(data, j))`` is rows ``j, N + j, 2N + j`` of
-    ``constraints(z, data)``."""
+    ``constraints(z, data)``, to rounding (tested)."""
     p = data.params
     keep = lambda a: jax.lax.dynamic_slice_in_dim(a, j, 1, axis=0)
     per_contact = {f.name: keep(getattr(p, f.name)) for f in dataclasses.fields(p) if f.name != "weight"}
@@ -535,10 +535,10 @@ def equilibrium_of(lanes: SolverResult) -> SolverResult:
 def boundary_starts(data: ProgramData, eq: SolverResult, options: EvaluateOptions) -> LaneStarts:
     """Stage 3 of :func:`programs_of_batch`: the lanes of every boundary problem of a
     batch ``data`` from its equilibria ``eq`` (leading axis ``B``): each lane's ray
-    (:func:`_lane_rays`) walked to its crossing (:func:`_ray_lane`). Without a converged equilibrium there is nothing to start
-    from: every lane is skipped; an inactive contact has no boundary problems; an
-    equilibrium on a boundary (to the solver's tolerance) is that problem's minimiser:
-    its lanes are ``at_eq``, not solved."""
+    (:func:`_lane_rays`) walked to its crossing (:func:`_ray_lane`). Without a converged
+    equilibrium there is nothing to start from: every lane is skipped; an inactive
+    contact has no boundary problems; an equilibrium on a boundary (to the solver's
+    tolerance) is that problem's minimiser: its lanes are ``at_eq``, not solved."""
     n = data.params.c.shape[-2]
     dtype = data.params.c.dtype
     tol = kkt_tol(dtype, options.solver)

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrasp import batch, cache
+from jaxgrasp import batch, batch_stages, cache
 from jaxgrasp.dense import eigh, solve
 from jaxgrasp.direction import EIGH_BLOCK
 from jaxgrasp.options import EvaluateOptions
@@ -82,7 +82,9 @@ def test_batched_program_calls_no_lapack_but_small_eigh():
     for settle in (False, True):
         pipeline = batch._batched_fn(EvaluateOptions(), sharding, masked=True, settle=settle)
         spec = batch._batch_spec(3, 128 * len(jax.devices()), sharding, masked=True)
-        text = "".join(lowered.as_text() for lowered in cache.lower_stages(pipeline, spec).values())
+        lowered = cache.lower_stages(pipeline, spec)
+        assert tuple(lowered) == batch_stages.STAGES  # every stage lowered, each once
+        text = "".join(low.as_text() for low in lowered.values())
         calls = _lapack_calls(text)
         assert calls and all("syevd" in target for target, _ in calls), (settle, calls)
         for _, operand in calls:

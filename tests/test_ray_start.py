@@ -41,3 +41,26 @@ def test_no_crossing_and_nan_values():
     nan_inside = lambda z: jnp.where((z[0] > 0.25) & (z[0] < 0.29), jnp.nan, 0.3 - z[0])
     z, found, _ = _ray_start(nan_inside, jnp.zeros(6), jnp.eye(6)[0], GRID, 40)
     assert bool(found) and float(z[0]) == pytest.approx(0.3, rel=1e-12)
+
+
+def test_one_contact_data_gives_that_contacts_constraint_rows():
+    """The start search evaluates a ray's own contact only (``programs._contact_data``):
+    for every contact ``j`` of random 5-contact grasps (one with an inactive contact) at
+    random poses, its three margins equal rows ``j, N + j, 2N + j`` of the whole grasp's."""
+    import jaxgrasp
+    from jaxgrasp.model import model_params
+    from jaxgrasp.programs import _contact_data, constraints, program_data
+    from test_properties import NumpyDraw, build_grasp
+
+    rng = np.random.default_rng(7)
+    for case in range(4):
+        g = build_grasp(NumpyDraw(rng), 5)
+        if case == 3:
+            g = g.replace(active=np.array([True, True, False, True, True]))
+        data = program_data(model_params(g))
+        for _ in range(3):
+            z = rng.normal(scale=0.5, size=6)
+            whole = np.asarray(constraints(z, data)).reshape(3, 5)
+            for j in range(5):
+                one = np.asarray(constraints(z, _contact_data(data, jnp.asarray(j))))
+                np.testing.assert_allclose(one, whole[:, j], rtol=1e-13, atol=1e-15, err_msg=f"case {case} contact {j}")
