@@ -48,7 +48,7 @@ from .result import Evaluation
 from .status import NO_BOUNDARY, Constraint, GraspStatus, LaneStatus
 from .units import M_TO_MM, MJ_TO_J
 
-__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_batch_traced", "programs_of_grasps", "evaluations_of", "evaluate_compiled", "evaluation_of", "limiting_index", "compiled_program", "Boundaries", "Verdict", "TIE_TOL", "SAME_MINIMUM"]
+__all__ = ["EvaluateOptions", "evaluate", "evaluate_traced", "evaluate_batch_traced", "evaluations_of", "evaluate_compiled", "evaluation_of", "limiting_index", "compiled_program", "Boundaries", "Verdict", "TIE_TOL", "SAME_MINIMUM"]
 
 TIE_TOL = 1e-8
 """Boundary energies within this fraction of the value of the least one are a tie (the
@@ -208,19 +208,13 @@ def evaluate_batch_traced(grasps: Grasp, options: EvaluateOptions, settle: bool 
     engine computes, as the stages of :mod:`jaxgrasp.batch_stages`. Equal to
     ``jax.vmap`` of :func:`evaluate_traced`, lane by lane, but the solver's work queue
     is traced once (:func:`~jaxgrasp.programs.programs_of_batch`)."""
-    return evaluations_of(grasps, programs_of_grasps(grasps, options, settle), options)
-
-
-def programs_of_grasps(grasps: Grasp, options: EvaluateOptions, settle: bool = True) -> Programs:
-    """Step 1 of :func:`evaluate_batch_traced`: every program of a batch of grasps solved
-    (:func:`~jaxgrasp.programs.programs_of_batch`; leading axis ``B``)."""
-    options, _ = _split_temperature(options)
-    return programs_of_batch(jax.vmap(model_params)(grasps), options, settle)
+    return evaluations_of(grasps, programs_of_batch(jax.vmap(model_params)(grasps), options, settle), options)
 
 
 def evaluations_of(grasps: Grasp, progs: Programs, options: EvaluateOptions) -> Evaluation:
     """Steps 2-6 of :func:`evaluate_batch_traced`: the evaluations of a batch of grasps
-    from their solved programs ``progs`` (:func:`programs_of_grasps`; leading axis ``B``)."""
+    from their solved programs ``progs`` (:func:`~jaxgrasp.programs.programs_of_batch`;
+    leading axis ``B``)."""
     options, temperature = _split_temperature(options)
     p = jax.vmap(model_params)(grasps)
     return jax.vmap(lambda p, progs: evaluation_of(p, progs, temperature, options))(p, progs)
