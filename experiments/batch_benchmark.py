@@ -7,18 +7,18 @@ Measured in one run of this script, each phase in its own subprocess of it (``--
 NAME``), so that each phase's compile time starts from a cold process (no JAX tracing
 caches left by another phase) and its peak RSS (``ru_maxrss``) is its own:
 
-* ``padded``: ``jaxgrasp.evaluate_batch(all grasps)`` after ``cache.clear_compiled()``:
+* ``padded``: ``jaxgrasp.evaluate_batch(all grasps)`` after ``_compile.clear_compiled()``:
   the grasps are padded with inactive contacts to 7, so ONE compilation serves the set.
   Compile seconds (``BatchResult.compile_seconds``), first-run seconds, then the steady
   rate: grasps/s = B / ``run_seconds`` of a memoised call (median of ``--repeats``);
 * ``per-count``: for each contact count, ``evaluate_batch(that count's grasps)`` unpadded
-  after ``cache.clear_compiled()``: one compilation per count. Compile seconds summed,
+  after ``_compile.clear_compiled()``: one compilation per count. Compile seconds summed,
   steady grasps/s = B / (sum over counts of the median steady ``run_seconds``);
 * ``ipopt``: a sample of ``--ipopt`` grasps (default 30), stratified over contact counts
   and seeded, solved with CasADi + Ipopt by ``experiments/benchmark.py``'s functions
   (``ipopt_setup``, ``ipopt_grasp``, ``ipopt_value``): the equilibrium from x = 0 and every
   boundary lane from jaxgrasp's own start. The starts come from one padded
-  ``jax.vmap(solve_programs)`` call (padded to the set's largest count, like the padded
+  ``jax.vmap(solve_problems)`` call (padded to the set's largest count, like the padded
   evaluation), their constraint indices mapped back to each grasp's own ``3n``
   constraints; Ipopt's NLP is built on the unpadded grasp. Ipopt seconds per grasp =
   solver calls only; NLP construction reported apart as setup.
@@ -32,7 +32,7 @@ The parent process then compares:
   difference where both say stable, and how many jaxgrasp values are above Ipopt's by
   more than ``1e-6`` relative (stability overstated; should be 0);
 
-and prints a table: compilations (``jaxgrasp.cache.stats()``: programs traced or
+and prints a table: compilations (``jaxgrasp.engine._store.stats()``: programs traced or
 deserialized), compile s, steady grasps/s, peak MiB per mode; the ratios; the target
 check (one compilation for the set and >= 50 grasps/s steady); the status counts; load
 average at start and end. Times are wall seconds, memory MiB (``ru_maxrss`` / 1024).
@@ -109,8 +109,8 @@ def ipopt_sample(counts: list[int], k: int, seed: int) -> list[int]:
 
 
 def compilations() -> int:
-    """Programs traced or loaded by :mod:`jaxgrasp.cache` in this process so far."""
-    from jaxgrasp import cache
+    """Problems traced or loaded by :mod:`jaxgrasp.engine._store` in this process so far."""
+    from jaxgrasp.engine import _store as cache
 
     s = cache.stats()
     return s["traced"] + s["deserialized"]
@@ -138,9 +138,9 @@ def timed_batch(grasps):
 
 def phase_padded(grasps, repeats: int) -> dict:
     """One padded compilation for the whole set; compile, first run, steady run seconds."""
-    from jaxgrasp import cache
+    from jaxgrasp.engine import _compile
 
-    cache.clear_compiled()
+    _compile.clear_compiled()
     c0 = compilations()
     first, wall = timed_batch(grasps)
     out = {"compilations": compilations() - c0, "compile_s": first.compile_seconds,
@@ -163,7 +163,7 @@ def phase_padded(grasps, repeats: int) -> dict:
 
 def phase_per_count(grasps, repeats: int) -> dict:
     """One unpadded compilation per contact count; per-count and summed seconds."""
-    from jaxgrasp import cache
+    from jaxgrasp.engine import _compile
 
     by_n = collections.defaultdict(list)
     for i, g in enumerate(grasps):
@@ -173,7 +173,7 @@ def phase_per_count(grasps, repeats: int) -> dict:
     c0 = compilations()
     for n, idx in sorted(by_n.items()):
         group = [grasps[i] for i in idx]
-        cache.clear_compiled()
+        _compile.clear_compiled()
         c1 = compilations()
         first, wall = timed_batch(group)
         runs = [timed_batch(group)[0].run_seconds for _ in range(repeats)]
@@ -191,7 +191,7 @@ def phase_per_count(grasps, repeats: int) -> dict:
 
 
 def own_programs(progs, s: int, npad: int, n: int):
-    """Grasp ``s`` of padded numpy ``Programs`` as a one-grasp batch for
+    """Grasp ``s`` of padded numpy ``Problems`` as a one-grasp batch for
     ``benchmark.ipopt_grasp``: constraint indices of the padded ``(3, npad)`` margins
     mapped to the grasp's own ``(3, n)`` (padding contacts' lanes are never found)."""
     from types import SimpleNamespace
@@ -208,13 +208,13 @@ def phase_ipopt(grasps, sample: list[int]) -> dict:
 
     import jaxgrasp
     from experiments import benchmark as bm
-    from jaxgrasp.programs import solve_programs
+    from jaxgrasp.tolerance._stages import solve_problems
 
     npad = max(g.num_contacts for g in grasps)
     batch = jaxgrasp.stack([grasps[i] for i in sample], num_contacts=npad)
     opts = jaxgrasp.EvaluateOptions()
     t0 = time.perf_counter()
-    progs = jax.block_until_ready(jax.jit(jax.vmap(lambda g: solve_programs(g, opts)))(batch))
+    progs = jax.block_until_ready(jax.jit(jax.vmap(lambda g: solve_problems(g, opts)))(batch))
     programs_s = time.perf_counter() - t0
     progs = jax.tree_util.tree_map(np.asarray, progs)
     log(f"ipopt: jaxgrasp programs and starts of {len(sample)} grasps in {programs_s:.1f} s (compile included)")
@@ -376,7 +376,7 @@ def report(res: dict) -> str:
          f"{a['value_worst']['per_count_J']!r} J per count",
          f"Ipopt (same starts): per grasp {s['ipopt_s_per_grasp']:.3f} s solver, "
          f"{s['ipopt_setup_s_per_grasp']:.3f} s NLP setup (apart); jaxgrasp {s['jaxgrasp_s_per_grasp'] * 1e3:.1f} ms "
-         f"per grasp (steady padded); starts from one padded solve_programs call, {i['programs_s']:.1f} s",
+         f"per grasp (steady padded); starts from one padded solve_problems call, {i['programs_s']:.1f} s",
          f"Ipopt agreement: status {ia['status_agree']}/{ia['grasps']}, value max rel diff "
          f"{'-' if ia['value_max_rel_diff'] is None else format(ia['value_max_rel_diff'], '.1e')} "
          f"({ia['both_stable']} both stable), jaxgrasp above Ipopt by > {OVER_REL:g} rel: {len(ia['overstated'])}"

@@ -1,10 +1,10 @@
 """Benchmark: jaxgrasp's batched solver vs CasADi + Ipopt on the same programs (issue #5).
 
 For every grasp of a grid, jaxgrasp solves ``1 + 2N*D`` programs (:func:`jaxgrasp.evaluate.
-solve_programs`): the equilibrium from the initial state and, for each boundary (slip or
+solve_problems`): the equilibrium from the initial state and, for each boundary (slip or
 force limit of each contact) and each of ``D`` start directions, one boundary program from
 a start found by a ray search + bisection. Only the lanes whose start search succeeded
-(``Programs.found``) are solved. This script solves *the same programs from the same
+(``Problems.found``) are solved. This script solves *the same programs from the same
 starting points* with CasADi + Ipopt (exact Hessians, MUMPS, the NLP of
 ``tests/ipopt_reference.py``: same model, same constraint and objective scaling) and
 compares speed and results.
@@ -14,17 +14,17 @@ Scenes:
 * ``cube``: the paper's grid, E = 2e5..1e6 Pa (9) x dr = 1..5 mm (41), m = 0 -> 369 grasps;
 * ``prism``: E = 2e5..1e6 Pa (5) x dr = 1..5 mm (9) x m in {0, 0.1, 0.2} kg -> 135 grasps.
 
-jaxgrasp: ``programs_of_batch(p, opts, settle=False)`` (what ``solve_programs`` solves
+jaxgrasp: ``problems_of_batch(p, opts, settle=False)`` (what ``solve_problems`` solves
 for one grasp) batched as ``evaluate_batch`` and ``sweep`` batch it
-(:func:`jaxgrasp.batch.over_devices`: ``jit(shard_map(...))``,
+(:func:`jaxgrasp.engine._batch.over_devices`: ``jit(shard_map(...))``,
 the batch split over every JAX device, one work queue per device; ``import jaxgrasp``
-creates one CPU device per core, see :mod:`jaxgrasp.cores`; ``JAXGRASP_CPU_DEVICES=1``
+creates one CPU device per core, see :mod:`jaxgrasp.engine._devices`; ``JAXGRASP_CPU_DEVICES=1``
 measures one) on the stacked batch, padded to a multiple of the device count by
 repeating its last grasp (the padding's programs are not counted). This is the program that
 ``evaluate`` and ``evaluate_batch`` run first (the settling stage runs only on grasps with
 an unsettled boundary problem; their count is recorded and is 0 on both grids);
 compile (ahead of time, ``lower().compile()``) and first run timed, then the steady state is
-the median of ``--repeats`` (>= 3) calls with ``block_until_ready``. Programs solved =
+the median of ``--repeats`` (>= 3) calls with ``block_until_ready``. Problems solved =
 equilibrium programs + active boundary lanes; programs/s = programs / steady wall time.
 
 Ipopt: serially, for each grasp of a seeded sample spread over the grid (``--ipopt-sample
@@ -80,13 +80,14 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import jaxgrasp  # noqa: E402  (first: float64, and one JAX CPU device per core)
-from jaxgrasp import result as R  # noqa: E402
-from jaxgrasp.status import LaneStatus  # noqa: E402
+from jaxgrasp.tolerance import _result as R  # noqa: E402
+from jaxgrasp.solver._status import LaneStatus  # noqa: E402
 from jaxgrasp import EvaluateOptions
-from jaxgrasp.batch import batch_sharding, over_devices  # noqa: E402
-from jaxgrasp.evaluate import evaluate_batch_traced  # noqa: E402
-from jaxgrasp.model import model_params  # noqa: E402
-from jaxgrasp.programs import needs_settling, programs_of_batch  # noqa: E402
+from jaxgrasp.engine._batch import batch_sharding, over_devices  # noqa: E402
+from jaxgrasp.engine._evaluate import evaluate_batch_traced  # noqa: E402
+from jaxgrasp.model._potential import model_params  # noqa: E402
+from jaxgrasp.tolerance._settle import needs_settling
+from jaxgrasp.tolerance._stages import problems_of_batch  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
 from tests.ipopt_reference import FEAS_TOL, _Model  # noqa: E402
 
@@ -146,7 +147,7 @@ def timed_call(fn):
 
 def compile_aot(fn, batch):
     """``fn`` of a batch of grasps, run as jaxgrasp's engine runs it
-    (:func:`jaxgrasp.batch.over_devices`: the batch split over every device, each running
+    (:func:`jaxgrasp.engine._batch.over_devices`: the batch split over every device, each running
     its own work queue), compiled ahead of time for ``batch``, which is padded by
     repeating its last grasp to a multiple of the device count and placed on the devices
     once, as the engine places a chunk before it runs it. Returns ``(call, seconds)``:
@@ -214,7 +215,7 @@ def ipopt_solve(model, x0, k: int | None):
 
 
 def ipopt_grasp(model, progs, i: int, n: int):
-    """Every program of grasp ``i`` of the batch ``progs`` (numpy Programs), serially."""
+    """Every program of grasp ``i`` of the batch ``progs`` (numpy Problems), serially."""
     lever = float(progs.lever[i])
     eq = ipopt_solve(model, np.zeros(6), None)
     lanes = []
@@ -362,10 +363,10 @@ def run_scene(name, params, grasps, opts, args):
     out = {"scene": name, "grasps": len(grasps), "contacts": n,
            "lanes_per_grasp": 2 * n * opts.directions().shape[0]}
 
-    # --- jaxgrasp solve_programs: compile + first run. The program without the settling
+    # --- jaxgrasp solve_problems: compile + first run. The program without the settling
     # stage: what evaluate and evaluate_batch run first; the settling program runs only on
     # grasps with an unsettled boundary problem (counted below: none on these grids).
-    fn = lambda gs: programs_of_batch(jax.vmap(model_params)(gs), opts, settle=False)  # noqa: E731
+    fn = lambda gs: problems_of_batch(jax.vmap(model_params)(gs), opts, settle=False)  # noqa: E731
     la = load()
     compiled, t_compile = compile_aot(fn, batch)
     progs, t_first, _ = timed_call(compiled)
@@ -464,7 +465,7 @@ def run_scene(name, params, grasps, opts, args):
     out["ratio_programs_per_cpu_s_jax_over_ipopt"] = (programs / statistics.median(j_cpu)) / (ip_programs / ip_solver_cpu)
     out["load_per_round"] = loads
     out["agreement"] = compare(params, progs, evals, sample, recs, args.same_tol, args.energy_tol)
-    # jaxgrasp.evaluate's value vs the reduction of solve_programs (same lanes): sanity
+    # jaxgrasp.evaluate's value vs the reduction of solve_problems (same lanes): sanity
     out["agreement"]["evaluate_matches_programs"] = check_reduction(progs, evals)
     log(f"{name}: jaxgrasp {j_rate:.0f} programs/s, Ipopt {i_rate:.0f} programs/s, ratio {j_rate / i_rate:.1f}")
     return out
@@ -472,7 +473,7 @@ def run_scene(name, params, grasps, opts, args):
 
 def check_reduction(progs, evals) -> float:
     """Max relative difference between evaluate's value and min(converged lane energy) -
-    equilibrium energy from solve_programs, over grasps evaluate calls stable."""
+    equilibrium energy from solve_problems, over grasps evaluate calls stable."""
     worst = 0.0
     conv = progs.found & (progs.boundary.status == LaneStatus.CONVERGED)
     for i in np.flatnonzero(evals.status == R.STABLE):

@@ -54,14 +54,14 @@ import json, time
 t0 = time.perf_counter()
 import jax, numpy as np
 import jaxgrasp
-from jaxgrasp.evaluate import evaluate_compiled
+from jaxgrasp.engine._evaluate import evaluate_compiled
 t1 = time.perf_counter()
 grasp, options, temperature = jaxgrasp.presets.cube(6e5, 0.002), jaxgrasp.EvaluateOptions(), np.float64(0.0)
 traced = evaluate_compiled.trace(grasp, temperature, options, False)  # settle=False: what evaluate runs first
 t2 = time.perf_counter()
 lowered = traced.lower()
 t3 = time.perf_counter()
-compiled = lowered.compile(jaxgrasp.options.LATENCY_CPU_OPTIONS)  # as jaxgrasp.evaluate compiles it on a CPU
+compiled = lowered.compile(jaxgrasp.engine._xla_options.LATENCY_CPU_OPTIONS)  # as jaxgrasp.evaluate compiles it on a CPU
 t4 = time.perf_counter()
 jax.block_until_ready(compiled(grasp, temperature))
 t5 = time.perf_counter()
@@ -92,7 +92,7 @@ stages = {name: covered(spans.get(event, [])) for name, event in
           [("trace", "jaxpr_trace_duration"), ("lower", "jaxpr_to_mlir_module_duration"),
            ("xla", "backend_compile_duration")]}
 stages["rest"] = (t2 - t1) - covered([iv for event in spans.values() for iv in event])
-print("RESULT " + json.dumps({"import": t1 - t0, "first": t2 - t1, **stages, "stats": jaxgrasp.cache.stats()}))
+print("RESULT " + json.dumps({"import": t1 - t0, "first": t2 - t1, **stages, "stats": jaxgrasp.engine._store.stats()}))
 """
 FIRST_EVALUATE_KEYS = ("first", "import", "trace", "lower", "xla", "rest")
 

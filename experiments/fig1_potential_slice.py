@@ -7,7 +7,7 @@ the limiting boundary minimum lies (for the cube: the rotation about the contact
 i.e. torsional slip) and the coordinate that reaches the other boundary kind (translation
 along x, which overloads one fingertip). The other four coordinates stay at the equilibrium.
 The region boundary is the contour where the smallest scaled constraint margin
-(jaxgrasp.model.constraint_margins: contact kept, no slip, force below limit) is 0.
+(jaxgrasp.model._potential.constraint_margins: contact kept, no slip, force below limit) is 0.
 
 Writes figures/fig1_potential_slice.{png,csv} (the CSV holds every second grid line of
 the plotted 241 x 241 grid) and prints the check: the lowest U along the
@@ -29,11 +29,11 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 import jaxgrasp
-from jaxgrasp.evaluate import evaluate
-from jaxgrasp.model import constraint_margins, model_params, potential_energy
-from jaxgrasp.plots import new_figure
+from jaxgrasp.engine._evaluate import evaluate
+from jaxgrasp.model._potential import constraint_margins, model_params, potential_energy
+from jaxgrasp.plots._plots import new_figure
 from jaxgrasp.presets import cube
-from jaxgrasp.units import M_TO_MM, MJ_TO_J
+from jaxgrasp.model._units import M_TO_MM, MJ_TO_J
 
 COORDS = [
     ("translation along x", "Δp_x", "mm"),

@@ -18,10 +18,10 @@ import numpy as np
 from _common import Progress, finding, force_limit_deformation, parse_args, timings
 
 import jaxgrasp
-from jaxgrasp.plots import plot_sweep
+from jaxgrasp.plots._plots import plot_sweep
 from jaxgrasp.presets import MAX_FORCE, cube
-from jaxgrasp.result import INFEASIBLE, STABLE
-from jaxgrasp.sweep import sweep
+from jaxgrasp.tolerance._result import INFEASIBLE, STABLE
+from jaxgrasp.analysis._sweep import sweep
 
 SLIP, FORCE = jaxgrasp.KINDS.index("slip"), jaxgrasp.KINDS.index("max_force")
 

@@ -22,10 +22,10 @@ import numpy as np
 from _common import Progress, finding, force_limit_deformation, parse_args, refine_interval, timings, write_rows
 
 import jaxgrasp
-from jaxgrasp.plots import plot_max
+from jaxgrasp.plots._plots import plot_max
 from jaxgrasp.presets import MAX_FORCE, cube
-from jaxgrasp.result import STATUS_NAMES
-from jaxgrasp.sweep import SweepResult, sweep
+from jaxgrasp.tolerance._result import STATUS_NAMES
+from jaxgrasp.analysis._sweep import SweepResult, sweep
 
 KIND_NAMES = tuple(jaxgrasp.KINDS) + ("none",)
 

@@ -4,7 +4,7 @@ The issue asked for jaxopt as the inner solver unless something clearly better w
 measured. This script solves the same boundary programs (cube grasps, the evaluator's own
 starts and multiplier estimates) with the same PHR outer loop and two inner solvers:
 
-* ``newton``: jaxgrasp.solver (exact 6x6 Hessian, mirrored eigenvalues, line search);
+* ``newton``: jaxgrasp.solver._solver (exact 6x6 Hessian, mirrored eigenvalues, line search);
 * ``lbfgs``: jaxopt.LBFGS on the same phi, warm-started, tol 1e-10, maxiter 200 per outer
   iteration, same multiplier/penalty updates.
 
@@ -26,11 +26,12 @@ import jaxopt
 import numpy as np
 
 import jaxgrasp
-from jaxgrasp import solver as S
+from jaxgrasp.solver import _solver as S
 from jaxgrasp import EvaluateOptions
-from jaxgrasp.programs import constraints, objective, program_data, solve_programs
-from jaxgrasp.status import LaneStatus
-from jaxgrasp.model import model_params
+from jaxgrasp.tolerance._problems import constraints, objective, problem_data
+from jaxgrasp.tolerance._stages import solve_problems
+from jaxgrasp.solver._status import LaneStatus
+from jaxgrasp.model._potential import model_params
 
 
 def lbfgs_al(f, g, x0, eq_mask, nu0, o: S.SolverOptions, outer=40):
@@ -84,8 +85,8 @@ def main(argv=None):
 
     def lanes_for(grasp):
         p = model_params(grasp)
-        data = program_data(p)
-        progs = solve_programs(grasp, opts)
+        data = problem_data(p)
+        progs = solve_problems(grasp, opts)
         masks = jax.nn.one_hot(progs.constraint_index, 3 * p.c.shape[0])
         f = lambda z: objective(z, data)  # noqa: E731
         g = lambda z: constraints(z, data)  # noqa: E731

@@ -38,7 +38,7 @@ if str(TESTS) not in sys.path:
     sys.path.insert(0, str(TESTS))
 
 import jaxgrasp  # noqa: E402
-from jaxgrasp import plots  # noqa: E402
+from jaxgrasp.plots import _plots as plots  # noqa: E402
 
 EDGES = 8
 T0 = time.perf_counter()

@@ -1,6 +1,6 @@
 """Profile the batched solver on a fixed batch of cube grasps (float64, CPU).
 
-Times ``jax.jit(jax.vmap(lambda g: solve_programs(g, opts)))`` in the steady state on a
+Times ``jax.jit(jax.vmap(lambda g: solve_problems(g, opts)))`` in the steady state on a
 fixed batch (cube grasps over E and dr), reports the step counts of the solver, and the
 cost per lane of the pieces of one loop step (phi value, gradient, Hessian, eigh, line
 search), measured on a batch of lanes.
@@ -26,11 +26,12 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import jaxgrasp  # noqa: E402
-from jaxgrasp import solver as S  # noqa: E402
+from jaxgrasp.solver import _solver as S  # noqa: E402
 from jaxgrasp import EvaluateOptions
-from jaxgrasp.direction import ldl_direction  # noqa: E402
-from jaxgrasp.programs import objective_and_constraints, program_data, solve_programs  # noqa: E402
-from jaxgrasp.model import model_params  # noqa: E402
+from jaxgrasp.solver._direction import ldl_direction  # noqa: E402
+from jaxgrasp.tolerance._problems import objective_and_constraints, problem_data
+from jaxgrasp.tolerance._stages import solve_problems  # noqa: E402
+from jaxgrasp.model._potential import model_params  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
 
 
@@ -98,9 +99,9 @@ def parts(scene, ne, ndr, lanes=4096, repeats=5):
     """Cost per lane of the pieces of a Newton step on phi, at the boundary starts."""
     opts = EvaluateOptions()
     g0 = jax.tree_util.tree_map(lambda a: a[0], batch(scene, ne, ndr))
-    progs = solve_programs(g0, opts)
+    progs = solve_problems(g0, opts)
     p = model_params(g0)
-    data = program_data(p)
+    data = problem_data(p)
     L = progs.start.shape[0]
     reps = -(-lanes // L)
     z = jnp.tile(progs.start, (reps, 1))[:lanes]
@@ -162,7 +163,7 @@ def main():
         import dataclasses
         opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, max_steps=args.max_steps))
     b = batch(args.scene, args.grasps_E, args.grasps_dr)
-    fn = jax.vmap(lambda g: solve_programs(g, opts))
+    fn = jax.vmap(lambda g: solve_problems(g, opts))
     t0 = time.perf_counter()
     compiled = jax.jit(fn).lower(b).compile()
     t_compile = time.perf_counter() - t0

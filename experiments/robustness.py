@@ -124,7 +124,7 @@ def main() -> int:
     import os
 
     # before jaxgrasp is imported (test_properties imports it): this process and its
-    # spawned workers start warm (jaxgrasp.cache)
+    # spawned workers start warm (jaxgrasp.engine._store)
     os.environ.setdefault("JAXGRASP_CACHE_DIR", str(Path.home() / ".cache" / "jaxgrasp" / "xla"))
     from test_properties import literal, seeded_grasps
 

@@ -6,7 +6,7 @@ scaled pose space, then 8 seeded random directions) and keeps the lowest. This s
 finds grasps where fewer starts miss the lowest boundary point, so that a test can show
 the multi-start search is needed.
 
-One ``jit(vmap(solve_programs))`` per contact count solves every lane (start) of every
+One ``jit(vmap(solve_problems))`` per contact count solves every lane (start) of every
 boundary problem at the default options. Lanes are independent, so the value that a
 smaller set of starts would give is the same minimum taken over a subset of the lanes:
 
@@ -68,7 +68,7 @@ def subset_values(progs, n: int, num_starts: int) -> dict:
     Per boundary problem: the lowest converged, started lane of the subset (as
     ``evaluate.best_starts``); the value is the lowest over problems minus the
     equilibrium energy. ``nan`` where no lane of the subset converged anywhere."""
-    from jaxgrasp.status import LaneStatus
+    from jaxgrasp.solver._status import LaneStatus
 
     status = np.where(progs.found, progs.boundary.status, int(LaneStatus.NO_START)).reshape(2 * n, num_starts)
     obj = np.where(status == int(LaneStatus.CONVERGED), progs.boundary.objective.reshape(2 * n, num_starts), np.inf)
@@ -164,7 +164,7 @@ def recheck(path: Path, chunks, min_ratio: float, keep: int) -> int:
     import jax
 
     import jaxgrasp
-    from jaxgrasp.programs import solve_programs
+    from jaxgrasp.tolerance._stages import solve_problems
     from test_properties import literal
 
     rows = [json.loads(line) for line in open(path)]
@@ -181,11 +181,11 @@ def recheck(path: Path, chunks, min_ratio: float, keep: int) -> int:
     log(f"recheck {len(grasps)} distinct candidates (N={n}) unbatched and in batches of {chunks}")
     ctx = {}
     t0 = time.perf_counter()
-    ctx["unbatched"] = [subset_values(jax.tree_util.tree_map(np.asarray, solve_programs(g)), n, d) for g in grasps]
+    ctx["unbatched"] = [subset_values(jax.tree_util.tree_map(np.asarray, solve_problems(g)), n, d) for g in grasps]
     log(f"  unbatched ({time.perf_counter() - t0:.1f} s)")
     for c in chunks:
         t0 = time.perf_counter()
-        fn = jax.jit(jax.vmap(lambda g: solve_programs(g)))
+        fn = jax.jit(jax.vmap(lambda g: solve_problems(g)))
         ctx[f"batch{c}"] = solve_all(fn, grasps, n, c, d)
         log(f"  batch {c} ({time.perf_counter() - t0:.1f} s)")
     good = []
@@ -231,12 +231,12 @@ def main() -> int:
     import jax
 
     import jaxgrasp
-    from jaxgrasp.programs import solve_programs
+    from jaxgrasp.tolerance._stages import solve_problems
     from test_properties import NumpyDraw, build_grasp_fields, literal, random_rotation, random_unit, transform
 
     opts = jaxgrasp.EvaluateOptions()
     assert opts.num_starts == 20
-    fn = jax.jit(jax.vmap(lambda g: solve_programs(g, opts)))
+    fn = jax.jit(jax.vmap(lambda g: solve_problems(g, opts)))
     log(f"seed={args.seed} count={args.count} contacts={args.contacts} chunk={args.chunk} "
         f"fragile={args.fragile} rotations={args.rotations}")
     t_all = time.perf_counter()

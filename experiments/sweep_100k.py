@@ -106,10 +106,10 @@ def main() -> None:
     import jax
 
     import jaxgrasp
-    from jaxgrasp.cli.sweep import auto_chunk
-    from jaxgrasp.evaluate import EvaluateOptions
+    from jaxgrasp.cli._sweep import auto_chunk
+    from jaxgrasp.tolerance import EvaluateOptions
 
-    S = sys.modules["jaxgrasp.sweep"]
+    S = sys.modules["jaxgrasp.analysis._sweep"]
     if not args.no_cache:
         jaxgrasp.enable_compilation_cache()
     cube = jaxgrasp.presets.cube()
@@ -143,7 +143,7 @@ def main() -> None:
         initial_deformation=np.linspace(1e-3, 5e-3, 400),
     )
     total = math.prod(a.size for a in axes.values())
-    chunk = S.batch_size(args.chunk_size, total, n_dev)
+    chunk = S.bucket_size(args.chunk_size, total, n_dev)
     nchunks = math.ceil(total / chunk)
     say(f"100k grid: {' x '.join(str(a.size) for a in axes.values())} = {total} points, {nchunks} chunks of {chunk}")
 

@@ -8,11 +8,11 @@ breaks). Set the environment variable ``JAX_ENABLE_X64`` (to ``0`` or ``1``) bef
 importing to keep JAX's own setting: with ``JAX_ENABLE_X64=0`` jaxgrasp computes in
 float32. It also asks JAX for one CPU device per core, so that batches and sweeps run on
 every core (``JAXGRASP_CPU_DEVICES=1`` keeps JAX's single device; see
-:mod:`jaxgrasp.cores`). Every public function takes and returns SI units (m, Pa, N, kg, J, rad).
+:mod:`jaxgrasp.engine`). Every public function takes and returns SI units (m, Pa, N, kg, J, rad).
 
 Compilation takes seconds in every new process unless the caches on disk are on: call
 :func:`enable_compilation_cache` once, or set the environment variable
-``JAXGRASP_CACHE_DIR`` to a folder before importing (see :mod:`jaxgrasp.cache`). The
+``JAXGRASP_CACHE_DIR`` to a folder before importing (see :mod:`jaxgrasp.engine`). The
 ``jaxgrasp`` command turns them on by itself.
 
 Quick start::
@@ -25,7 +25,7 @@ Quick start::
 
 import os as _os
 
-from . import startup as _startup
+from jaxgrasp import _startup
 
 _startup.install_if_command_line()  # Ctrl-C while JAX loads: one line, exit 130 (the program only)
 
@@ -34,82 +34,68 @@ import jax as _jax  # noqa: E402
 if "JAX_ENABLE_X64" not in _os.environ:  # an explicit choice of the user's stands
     _jax.config.update("jax_enable_x64", True)
 
-from . import cores as _cores  # noqa: E402
+from jaxgrasp.engine import _devices  # noqa: E402
 
-_cores.configure_cpu_devices()  # one CPU device per core: batches run on every core
+_devices.configure_cpu_devices()  # before JAX makes its devices: batches run on every core
 
-from . import cache  # noqa: E402
+from jaxgrasp.engine import _store  # noqa: E402
 
-cache.enable_from_environment()  # $JAXGRASP_CACHE_DIR set: every process starts warm
+_store.enable_from_environment()  # $JAXGRASP_CACHE_DIR set: every process starts warm
 
-from . import presets  # noqa: E402
-from .evaluate import evaluate  # noqa: E402
-from .options import COMPILER_OPTIONS, EvaluateOptions  # noqa: E402
-from .grasp import STANDARD_GRAVITY, Grasp, stack  # noqa: E402
-from .gripfile import grasp_from_dict, grasp_to_dict, load, save  # noqa: E402
-from .mesh import MeshGrasp, from_mesh  # noqa: E402  (trimesh is imported when a mesh is used)
-from .dataset import GraspSet, load_batch, save_batch  # noqa: E402
-from .model import KINDS  # noqa: E402
-from .status import BoundaryKind, GraspStatus, LaneStatus, TuneStatus  # noqa: E402
-from .result import (  # noqa: E402
-    INFEASIBLE,
-    INVALID,
-    NOT_CONVERGED,
-    STABLE,
-    STATUS_NAMES,
-    UNSTABLE,
-    Evaluation,
+from jaxgrasp import presets  # noqa: E402
+from jaxgrasp.analysis import EpsilonResult, SweepResult, TuneResult, TuneStatus, epsilon, sweep, tune  # noqa: E402
+from jaxgrasp.engine import BatchResult, enable_compilation_cache, evaluate, evaluate_batch  # noqa: E402
+from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is used)
+    GraspSet,
+    MeshGrasp,
+    from_mesh,
+    grasp_from_dict,
+    grasp_to_dict,
+    load,
+    load_dataset,
+    save,
+    save_dataset,
 )
-from .solver import SolverOptions  # noqa: E402
-from .batch import evaluate_batch  # noqa: E402
-from .batch_result import BatchResult  # noqa: E402
-from .ferrari_canny import EpsilonResult, epsilon  # noqa: E402
-from .sweep import PARAMETERS, SweepResult, sweep  # noqa: E402
-from .tune import TuneResult, tune  # noqa: E402
-from .validation import GraspValueError  # noqa: E402
-from .cache import enable_compilation_cache  # noqa: E402
+from jaxgrasp.model import BoundaryKind, Grasp, GraspValueError, stack  # noqa: E402
+from jaxgrasp.solver import LaneStatus, SolverOptions  # noqa: E402
+from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus  # noqa: E402
 
 __version__ = "0.1.0"
 
 __all__ = [
+    # one grasp
     "Grasp",
     "stack",
-    "STANDARD_GRAVITY",
+    "presets",
     "evaluate",
     "EvaluateOptions",
-    "COMPILER_OPTIONS",
     "SolverOptions",
     "Evaluation",
-    "STATUS_NAMES",
-    "STABLE",
-    "UNSTABLE",
-    "INFEASIBLE",
-    "NOT_CONVERGED",
-    "INVALID",
-    "KINDS",
+    # statuses
     "GraspStatus",
     "LaneStatus",
     "BoundaryKind",
     "TuneStatus",
+    # files
     "load",
     "save",
     "grasp_from_dict",
     "grasp_to_dict",
     "from_mesh",
     "MeshGrasp",
-    "load_batch",
-    "save_batch",
+    "load_dataset",
+    "save_dataset",
     "GraspSet",
-    "presets",
+    # many grasps and analyses
     "evaluate_batch",
     "BatchResult",
     "sweep",
     "SweepResult",
-    "epsilon",
-    "EpsilonResult",
-    "PARAMETERS",
     "tune",
     "TuneResult",
+    "epsilon",
+    "EpsilonResult",
+    # errors and set-up
     "GraspValueError",
     "enable_compilation_cache",
 ]

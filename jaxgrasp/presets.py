@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from .grasp import STANDARD_GRAVITY, Grasp
+from jaxgrasp.model._grasp import STANDARD_GRAVITY, Grasp
 
 __all__ = ["cube", "prism", "PRESETS", "FINGERTIP_RADIUS", "FRICTION", "MAX_FORCE", "SIDE"]
 

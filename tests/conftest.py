@@ -35,7 +35,7 @@ TESTS_DIR = Path(__file__).resolve().parent
 if str(TESTS_DIR) not in sys.path:  # so that the Ipopt worker can import the reference
     sys.path.insert(0, str(TESTS_DIR))
 
-GRASP_FIELDS = jaxgrasp.fields.NAMES
+GRASP_FIELDS = jaxgrasp.model._fields.NAMES
 
 # Largest batch per compiled call. The batch size for each N is fixed by the first call
 # with that N (its grasps in balanced chunks of at most CHUNK), so every N compiles once.
@@ -196,14 +196,14 @@ def cache_dir(tmp_path_factory):
     (process-wide settings); both are restored after the module so the rest of the
     session is unaffected.
     """
-    from jaxgrasp import cache
+    from jaxgrasp.engine import _store as cache
 
     saved = {k: getattr(jax.config, k) for k in _CACHE_OPTIONS}
-    saved_programs = cache.program_dir()
+    saved_programs = cache.executable_dir()
     yield tmp_path_factory.mktemp("jaxgrasp-xla-cache")
     for k, v in saved.items():
         jax.config.update(k, v)
-    cache.set_program_dir(saved_programs)
+    cache.set_executable_dir(saved_programs)
 
 
 @pytest.fixture
@@ -228,8 +228,8 @@ import json
 import numpy as np
 import jaxgrasp
 r = jaxgrasp.evaluate(jaxgrasp.presets.cube(6e5, 0.002))
-fields = {f: np.asarray(getattr(r, f)).tolist() for f in jaxgrasp.result.FIELDS}
-print(json.dumps({"stats": jaxgrasp.cache.stats(), "fields": fields}))
+fields = {f: np.asarray(getattr(r, f)).tolist() for f in jaxgrasp.tolerance._result.FIELDS}
+print(json.dumps({"stats": jaxgrasp.engine._store.stats(), "fields": fields}))
 """
 
 
@@ -240,7 +240,7 @@ class WarmCache:
 
     Attributes:
         folder: the folder (``JAXGRASP_CACHE_DIR``).
-        first: what that process printed: ``stats`` (:func:`jaxgrasp.cache.stats`) and
+        first: what that process printed: ``stats`` (:func:`jaxgrasp.engine._store.stats`) and
             ``fields`` (every Evaluation field, as lists).
     """
 
@@ -258,14 +258,14 @@ class WarmCache:
         """A new library process evaluates the cube: its ``stats`` and ``fields``. With
         ``store`` false its program store is off (XLA's cache alone is on)."""
         script = _FILL_CACHE if store else _FILL_CACHE.replace(
-            "import jaxgrasp\n", "import jaxgrasp\njaxgrasp.cache.set_program_dir(None)\n", 1)
+            "import jaxgrasp\n", "import jaxgrasp\njaxgrasp.engine._store.set_executable_dir(None)\n", 1)
         return json.loads(self.run([sys.executable, "-c", script]).stdout)
 
     def program_files(self) -> set[str]:
         """The stored evaluators' files: jaxgrasp's compiled programs and XLA's cache entries."""
-        from jaxgrasp.cache import PROGRAM_SUBDIR
+        from jaxgrasp.engine._store import EXECUTABLE_SUBDIR
 
-        stored = {f"{PROGRAM_SUBDIR}/{p.name}" for p in (self.folder / PROGRAM_SUBDIR).glob("evaluate-*")}
+        stored = {f"{EXECUTABLE_SUBDIR}/{p.name}" for p in (self.folder / EXECUTABLE_SUBDIR).glob("evaluate-*")}
         return stored | {p.name for p in self.folder.glob("jit_evaluate_fields-*")}
 
 

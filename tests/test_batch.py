@@ -14,9 +14,10 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp import BatchResult, GraspSet, GraspValueError, evaluate_batch
-from jaxgrasp.batch import batch_size
-from jaxgrasp.result import FIELDS, Evaluation
-from jaxgrasp.status import GraspStatus, LaneStatus
+from jaxgrasp.engine._batch import bucket_size
+from jaxgrasp.tolerance._result import FIELDS, Evaluation
+from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.solver._status import LaneStatus
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -152,10 +153,10 @@ def test_csv_and_npz_round_trip(set_result, tmp_path):
 
 def test_batch_sizes_come_from_a_few_buckets():
     # a grid or set of any size up to the chunk uses one of 1, 4, 16, 64 lanes per device
-    assert [batch_size(64, t) for t in (1, 2, 4, 5, 6, 12, 16, 17, 100, 128, 369)] == [1, 4, 4, 16, 16, 16, 16, 64, 64, 64, 64]
-    assert len({batch_size(64, t) for t in range(1, 1000)}) == 4
-    assert batch_size(6, 14) == 6 and batch_size(4096, 369) == 1024  # an explicit chunk caps the bucket
-    assert batch_size(64, 6, n_devices=2) == 8 and batch_size(128, 369, n_devices=2) == 128  # per device: 4, 64
+    assert [bucket_size(64, t) for t in (1, 2, 4, 5, 6, 12, 16, 17, 100, 128, 369)] == [1, 4, 4, 16, 16, 16, 16, 64, 64, 64, 64]
+    assert len({bucket_size(64, t) for t in range(1, 1000)}) == 4
+    assert bucket_size(6, 14) == 6 and bucket_size(4096, 369) == 1024  # an explicit chunk caps the bucket
+    assert bucket_size(64, 6, n_devices=2) == 8 and bucket_size(128, 369, n_devices=2) == 128  # per device: 4, 64
 
 
 def test_errors_are_one_line_before_compiling():

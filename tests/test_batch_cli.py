@@ -18,8 +18,8 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp import BatchResult
-from jaxgrasp.partial import PartialBatch
-from jaxgrasp.result import FIELDS
+from jaxgrasp.engine._checkpoint import BatchCheckpoint
+from jaxgrasp.tolerance._result import FIELDS
 
 ROOT = Path(__file__).resolve().parent.parent
 BAD_LINE = 2  # the invalid grasp's index (its line is 3)
@@ -38,7 +38,7 @@ def _grasps():
 def dataset(tmp_path_factory) -> Path:
     """A .jsonl of the four grasps with an invalid one (friction -1) as line 3."""
     path = tmp_path_factory.mktemp("batch") / "set.jsonl"
-    jaxgrasp.save_batch(path, _grasps())
+    jaxgrasp.save_dataset(path, _grasps())
     lines = path.read_text().splitlines()
     bad = json.loads(lines[0])
     bad["fingertip"]["friction"] = -1
@@ -124,7 +124,7 @@ def test_strict_fails_before_computing(dataset, run_cli, tmp_path):
 def test_unfinished_run_is_never_overwritten_without_resume(dataset, run_cli, tmp_path):
     out = tmp_path / "o"
     (out / "results.partial").mkdir(parents=True)
-    PartialBatch(out / "results.partial", "other.jsonl", "0" * 64, 5, 4).start()
+    BatchCheckpoint(out / "results.partial", "other.jsonl", "0" * 64, 5, 4).start()
     rc, _, err = run_cli(["batch", dataset, "--out", out])
     assert rc == 2 and "holds an unfinished run: add --resume" in err and err.count("\n") == 1, err
     rc, _, err = run_cli(["batch", dataset, "--out", out, "--resume"])  # another input's checkpoint
@@ -140,7 +140,7 @@ def test_resume_of_a_finished_checkpoint_computes_nothing(dataset, first_run, ru
     out = tmp_path / "o"
     import hashlib
 
-    cp = PartialBatch(out / "results.partial", str(dataset), hashlib.sha256(dataset.read_bytes()).hexdigest(), 5, 4)
+    cp = BatchCheckpoint(out / "results.partial", str(dataset), hashlib.sha256(dataset.read_bytes()).hexdigest(), 5, 4)
     out.mkdir()
     cp.start()
     for rows in ([0, 1], [3, 4]):

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import jaxgrasp
-from jaxgrasp.cache import PROGRAM_SUBDIR
-from jaxgrasp.result import FIELDS
+from jaxgrasp.engine._store import EXECUTABLE_SUBDIR
+from jaxgrasp.tolerance._result import FIELDS
 
 from conftest import WarmCache
 
@@ -31,7 +31,7 @@ def test_variable_turns_the_caches_on(warm_cache):
     no second copy of it (writing one cost 0.16 s of a cold sweep)."""
     assert warm_cache.first["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 0}
     files = warm_cache.program_files()
-    assert any(f.startswith(PROGRAM_SUBDIR) for f in files), files  # the compiled program
+    assert any(f.startswith(EXECUTABLE_SUBDIR) for f in files), files  # the compiled program
     assert not any(f.startswith("jit_evaluate_fields-") for f in files), files  # no XLA entry
 
 
@@ -52,7 +52,7 @@ def test_program_from_xla_cache_is_not_stored(tmp_path):
     on the CPU (the file would load, then fail for missing kernels), so it is not
     stored: the next process traces again and still gets the same numbers."""
     folder = tmp_path / "cache"
-    programs = folder / PROGRAM_SUBDIR
+    programs = folder / EXECUTABLE_SUBDIR
     cache = WarmCache(folder, {})
     xla_only = cache.evaluate_in_new_process(store=False)
     assert xla_only["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 0}
@@ -74,7 +74,8 @@ def test_pipeline_runs_its_driver_and_is_stored(tmp_path):
     import jax
     import jax.numpy as jnp
 
-    from jaxgrasp import cache
+    from jaxgrasp.engine import _compile, _pipeline
+    from jaxgrasp.engine import _store as cache
 
     stages = {
         "step": jax.jit(lambda x, y: (jnp.sin(x) * 2.0 + y, x + 1.0)),
@@ -86,25 +87,25 @@ def test_pipeline_runs_its_driver_and_is_stored(tmp_path):
         a, b = call("step", a, b)  # the same stage again
         return call("total", x, a, b)
 
-    pipeline = cache.Pipeline(stages, drive)
+    pipeline = _pipeline.Pipeline(stages, drive)
     spec = (jax.ShapeDtypeStruct((5,), jnp.float64),)
     x = jnp.linspace(0.0, 1.0, 5)
     want = drive(lambda name, *xs: stages[name](*xs), x)
-    saved = cache.program_dir()
-    cache.set_program_dir(tmp_path)
+    saved = cache.executable_dir()
+    cache.set_executable_dir(tmp_path)
     try:
         key = ("test-staged", str(tmp_path))
         before = cache.stats()
-        built, _ = cache.compiled(key, lambda: pipeline, spec, name="staged", store_key=key, n_outputs=2)
-        assert isinstance(built, cache.Staged) and list(built.stages) == ["step", "total"]
-        cache.wait_for_saves()  # written in a thread
+        built, _ = _compile.compiled(key, lambda: pipeline, spec, name="staged", store_key=key, n_outputs=2)
+        assert isinstance(built, _pipeline.Staged) and list(built.stages) == ["step", "total"]
+        _compile.wait_for_saves()  # written in a thread
         stored = list(tmp_path.glob("staged-*.xla"))
         assert len(stored) == 1
-        cache.clear_compiled()
-        loaded, _ = cache.compiled(key, lambda: pipeline, spec, name="staged", store_key=key, n_outputs=2)
+        _compile.clear_compiled()
+        loaded, _ = _compile.compiled(key, lambda: pipeline, spec, name="staged", store_key=key, n_outputs=2)
         after = cache.stats()
         assert after["traced"] - before["traced"] == 1 and after["deserialized"] - before["deserialized"] == 1
-        assert isinstance(loaded, cache.Staged)
+        assert isinstance(loaded, _pipeline.Staged)
         for fn in (built, loaded):
             got = fn(x)
             for g, w in zip(got, want):
@@ -113,10 +114,10 @@ def test_pipeline_runs_its_driver_and_is_stored(tmp_path):
         # lowered; the stored stages (for (5,) arrays) are refused for (3,) arrays
         again = lambda call, x: call("step", *call("total", x, *call("step", x, x))[1:] * 2)
         with pytest.raises(ValueError, match="other shapes"):
-            cache.lower_stages(cache.Pipeline(stages, again), spec)
+            _pipeline.lower_stages(_pipeline.Pipeline(stages, again), spec)
         small = (jax.ShapeDtypeStruct((3,), jnp.float64),)
-        assert cache.load_program(stored[0], small, [cache.default_device()], 2, drive) is None
+        assert cache.load_executable(stored[0], small, [_compile.default_device()], 2, drive) is None
         assert cache.stats()["cache_errors"] == after["cache_errors"] + 1
     finally:
-        cache.set_program_dir(saved)
-        cache.clear_compiled()
+        cache.set_executable_dir(saved)
+        _compile.clear_compiled()

@@ -1,4 +1,4 @@
-"""One JAX CPU device per core (:mod:`jaxgrasp.cores`): what ``import jaxgrasp`` sets, and
+"""One JAX CPU device per core (:mod:`jaxgrasp.engine._devices`): what ``import jaxgrasp`` sets, and
 where it leaves the user's choice alone.
 
 JAX fixes its devices when its backends start, so each case imports jaxgrasp in a fresh
@@ -13,7 +13,7 @@ import sys
 
 import pytest
 
-from jaxgrasp import cores
+from jaxgrasp.engine import _devices as cores
 
 PROBE = "import jax, jaxgrasp; print(jax.device_count())"
 

@@ -1,4 +1,4 @@
-"""Dataset files (``jaxgrasp.load_batch`` / ``save_batch``, issue 12 part 3): round trips
+"""Dataset files (``jaxgrasp.load_dataset`` / ``save_dataset``, issue 12 part 3): round trips
 with mixed contact counts, the ``.npz`` broadcasting rules, invalid grasps reported one by
 one, and whole-file errors as one line. In-process and fast: nothing here compiles."""
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import jaxgrasp
-from jaxgrasp import GraspValueError, load_batch, save_batch
-from jaxgrasp.fields import NAMES
+from jaxgrasp import GraspValueError, load_dataset, save_dataset
+from jaxgrasp.model._fields import NAMES
 
 
 def _grasps():
@@ -42,8 +42,8 @@ def _assert_same(a, b):
 def test_round_trip_mixed_contact_counts(tmp_path, suffix):
     grasps = _grasps()
     path = tmp_path / f"set{suffix}"
-    save_batch(path, grasps)
-    got = load_batch(path)
+    save_dataset(path, grasps)
+    got = load_dataset(path)
     assert len(got) == 4 and got.valid.all() and got.errors == (None,) * 4
     assert got.num_contacts.tolist() == [2, 3, 4, 2]
     for a, b in zip(grasps, got.grasps):
@@ -53,7 +53,7 @@ def test_round_trip_mixed_contact_counts(tmp_path, suffix):
 
 def test_npz_pads_with_active_and_drops_inactive_contacts(tmp_path):
     path = tmp_path / "set.npz"
-    save_batch(path, _grasps())
+    save_dataset(path, _grasps())
     with np.load(path) as z:
         assert z["positions"].shape == (4, 4, 3)
         np.testing.assert_array_equal(z["active"].sum(axis=1), [2, 3, 4, 2])
@@ -61,7 +61,7 @@ def test_npz_pads_with_active_and_drops_inactive_contacts(tmp_path):
     # an inactive contact in the middle: the grasp is the one without it
     arrays["active"][2] = [True, False, True, True]
     np.savez(path, **arrays)
-    four = load_batch(path).grasps[2]
+    four = load_dataset(path).grasps[2]
     expect = _grasps()[2]
     keep = [0, 2, 3]
     assert four.num_contacts == 3
@@ -72,8 +72,8 @@ def test_npz_pads_with_active_and_drops_inactive_contacts(tmp_path):
 def test_batched_grasp_round_trip(tmp_path):
     cubes = [jaxgrasp.presets.cube(young_modulus=e, initial_deformation=0.002) for e in (2e5, 6e5, 1e6)]
     batch = jaxgrasp.Grasp(**{n: np.stack([np.asarray(getattr(g, n)) for g in cubes]) for n in NAMES})
-    save_batch(tmp_path / "b.npz", batch)
-    got = load_batch(tmp_path / "b.npz")
+    save_dataset(tmp_path / "b.npz", batch)
+    got = load_dataset(tmp_path / "b.npz")
     with np.load(tmp_path / "b.npz") as z:
         assert "active" not in z.files  # every contact active: no mask written
     for a, b in zip(cubes, got.grasps):
@@ -92,7 +92,7 @@ def test_npz_broadcast_shapes_with_b_equal_to_n(tmp_path):
         young_modulus=np.array([2e5, 4e5, 6e5]), friction=np.array([0.3, 0.5, 0.7]), max_force=15.0,
         gravity=np.array([0.0, 0.0, -9.81]),
     )
-    got = load_batch(path)
+    got = load_dataset(path)
     assert got.valid.all()
     for i, g in enumerate(got.grasps):
         np.testing.assert_array_equal(g.friction, np.full(3, [0.3, 0.5, 0.7][i]))
@@ -104,13 +104,13 @@ def test_npz_broadcast_shapes_with_b_equal_to_n(tmp_path):
 
 def test_npz_invalid_grasp_is_reported_not_fatal(tmp_path):
     path = tmp_path / "set.npz"
-    save_batch(path, _grasps())
+    save_dataset(path, _grasps())
     with np.load(path) as z:
         arrays = {k: np.array(z[k]) for k in z.files}
     arrays["friction"][1, 0] = -1.0
     arrays["initial_deformation"][3, 1] = 0.5  # beyond the radius
     np.savez(path, **arrays)
-    got = load_batch(path)
+    got = load_dataset(path)
     assert got.valid.tolist() == [True, False, True, False]
     assert got.num_contacts.tolist() == [2, 0, 4, 0]
     assert got.errors[1].startswith("grasp 1: friction") and "-1" in got.errors[1] and "\n" not in got.errors[1]
@@ -128,7 +128,7 @@ def test_jsonl_rows_reported_one_by_one(tmp_path):
     lines = [good, "", "{not json", json.dumps(bad_value), dup, "   ", json.dumps(jaxgrasp.grasp_to_dict(prism))]
     path = tmp_path / "set.jsonl"
     path.write_bytes(b"\xef\xbb\xbf" + "\n".join(lines).encode())  # a byte-order mark too
-    got = load_batch(path)
+    got = load_dataset(path)
     assert got.valid.tolist() == [True, False, False, False, True]  # blank lines skipped
     assert got.errors[1].startswith("grasp 1 (line 3): malformed JSON")
     assert got.errors[2].startswith("grasp 2 (line 4): ") and "friction" in got.errors[2]
@@ -154,14 +154,14 @@ def test_jsonl_rows_reported_one_by_one(tmp_path):
 )
 def test_whole_file_errors_are_one_line(tmp_path, make, message):
     src = tmp_path / "src.npz"
-    save_batch(src, _grasps())
+    save_dataset(src, _grasps())
     with np.load(src) as z:
         arrays = {k: np.array(z[k]) for k in z.files}
     path = tmp_path / "bad.npz"
     make(path, arrays)
     target = path.with_suffix(".csv") if "csv" in message else path
     with pytest.raises(GraspValueError) as info:
-        load_batch(target)
+        load_dataset(target)
     text = str(info.value)
     assert "\n" not in text and text.startswith(str(target)), text
     assert re.search(message, text), text
@@ -169,9 +169,9 @@ def test_whole_file_errors_are_one_line(tmp_path, make, message):
 
 def test_save_batch_rejects_what_is_not_a_grasp(tmp_path):
     with pytest.raises(GraspValueError, match="item 1 is dict"):
-        save_batch(tmp_path / "x.jsonl", [jaxgrasp.presets.cube(), {}])
+        save_dataset(tmp_path / "x.jsonl", [jaxgrasp.presets.cube(), {}])
     with pytest.raises(GraspValueError, match="no grasps"):
-        save_batch(tmp_path / "x.jsonl", [])
+        save_dataset(tmp_path / "x.jsonl", [])
     with pytest.raises(GraspValueError, match="unknown dataset file type"):
-        save_batch(tmp_path / "x.json", [jaxgrasp.presets.cube()])
+        save_dataset(tmp_path / "x.json", [jaxgrasp.presets.cube()])
     assert list(tmp_path.iterdir()) == []

@@ -30,7 +30,7 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp import presets
-from jaxgrasp.status import LaneStatus
+from jaxgrasp.solver._status import LaneStatus
 
 R_TIP, MU, FMAX, E0, DR0 = 0.025, 0.5, 15.0, 2e5, 0.002
 
@@ -418,7 +418,7 @@ def test_mirror_image_same_status(results):
 
 def test_mirror_image_same_value(results):
     """A mirror image of a grasp (world frame reflected and rotated) is the same grasp: the
-    start frame turns with it (jaxgrasp.programs.start_frame), so every boundary problem's
+    start frame turns with it (jaxgrasp.tolerance._starts.start_frame), so every boundary problem's
     minimum is the same, not just the value. With starts along the world's coordinate axes
     the mirror image's slip boundary of contact 2 ended 2.3 % higher (every start reached
     one of three higher local minima)."""
@@ -434,11 +434,12 @@ def test_start_frame_turns_with_the_grasp():
     (``dp -> M dp``, ``w -> det(M) M w``), signs included, to its grid of 2^-20."""
     import jax
 
-    from jaxgrasp.model import model_params
-    from jaxgrasp.programs import program_data, start_frame
+    from jaxgrasp.model._potential import model_params
+    from jaxgrasp.tolerance._problems import problem_data
+    from jaxgrasp.tolerance._starts import start_frame
 
     def frame(g):
-        return np.asarray(jax.jit(start_frame)(program_data(model_params(g))))
+        return np.asarray(jax.jit(start_frame)(problem_data(model_params(g))))
 
     a, b = frame(SPHERE_5), frame(SPHERE_5_MIRRORED)
     m = np.linalg.lstsq(np.asarray(SPHERE_5.positions), np.asarray(SPHERE_5_MIRRORED.positions), rcond=None)[0].T
@@ -526,11 +527,11 @@ def test_host_drivers_settle_only_where_needed(results, monkeypatch):
     gives the same results."""
     import importlib
 
-    evaluate_module = importlib.import_module("jaxgrasp.evaluate")  # jaxgrasp.evaluate is the function
+    evaluate_module = importlib.import_module("jaxgrasp.engine._evaluate")
     calls = []
-    program = evaluate_module.compiled_program
+    program = evaluate_module.compiled_executable
     monkeypatch.setattr(
-        evaluate_module, "compiled_program", lambda g, o, settle=True: calls.append(settle) or program(g, o, settle)
+        evaluate_module, "compiled_executable", lambda g, o, settle=True: calls.append(settle) or program(g, o, settle)
     )
     assert jaxgrasp.evaluate(presets.cube(mass=0.05)).status_name == "stable"
     assert calls == [False]  # every boundary settled without the stage

@@ -1,9 +1,9 @@
-"""``jaxgrasp.dense``, and the batch engine's program free of batched LAPACK calls that
+"""``jaxgrasp.solver._dense``, and the batch engine's program free of batched LAPACK calls that
 could split over the thread pool.
 
 jaxlib's LAPACK kernels split a large batch over XLA's thread pool and wait for the
 pieces; with one device per core (the batch engine) every device can be waiting at once
-and the process hangs (:mod:`jaxgrasp.dense`). The settling stage's polish used
+and the process hangs (:mod:`jaxgrasp.solver._dense`). The settling stage's polish used
 ``jnp.linalg.solve`` (``lapack_dgetrf_ffi``) on every grasp of a chunk and hung
 ``evaluate_batch`` on 2 devices; its systems are now solved by ``dense.solve``. The start
 frame's ``eigh``, one per grasp, hung ``evaluate_batch(..., chunk_size=512)`` (256 grasps
@@ -24,10 +24,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrasp import batch, batch_stages, cache
-from jaxgrasp.dense import eigh, solve
-from jaxgrasp.direction import EIGH_BLOCK
-from jaxgrasp.options import EvaluateOptions
+from jaxgrasp.engine import _batch as batch, _pipeline, _stages as batch_stages
+from jaxgrasp.solver._dense import eigh, solve
+from jaxgrasp.solver._direction import EIGH_BLOCK
+from jaxgrasp.tolerance._options import EvaluateOptions
 
 
 @pytest.mark.parametrize("m", [1, 2, 6, 27])
@@ -82,7 +82,7 @@ def test_batched_program_calls_no_lapack_but_small_eigh():
     for settle in (False, True):
         pipeline = batch._batched_fn(EvaluateOptions(), sharding, masked=True, settle=settle)
         spec = batch._batch_spec(3, 128 * len(jax.devices()), sharding, masked=True)
-        lowered = cache.lower_stages(pipeline, spec)
+        lowered = _pipeline.lower_stages(pipeline, spec)
         assert tuple(lowered) == batch_stages.STAGES  # every stage lowered, each once
         text = "".join(low.as_text() for low in lowered.values())
         calls = _lapack_calls(text)

@@ -1,4 +1,4 @@
-"""The solver's Newton direction (:mod:`jaxgrasp.direction`) on its own.
+"""The solver's Newton direction (:mod:`jaxgrasp.solver._direction`) on its own.
 
 The direction is a function of the Hessian as a matrix, ``-|H|^-1 g`` with ``|H|``'s
 eigenvalues floored at ``1e-10`` of the largest: checked against that closed form
@@ -16,7 +16,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrasp.direction import CONDITION_BOUND, EIGH_BLOCK, eigen_direction, ldl_direction, newton_direction  # importing jaxgrasp turns on float64
+from jaxgrasp.solver._direction import (
+    CONDITION_BOUND,
+    EIGH_BLOCK,
+    eigen_direction,
+    ldl_direction,
+    newton_direction,
+)  # importing jaxgrasp turns on float64
 
 
 def closed_form(h, g):

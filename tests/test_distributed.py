@@ -33,7 +33,7 @@ jax.distributed.initialize(f"127.0.0.1:{port}", 2, i)
 import numpy as np, jaxgrasp
 grasps = [jaxgrasp.presets.cube(young_modulus=e, initial_deformation=d) for e in %(E)r for d in %(DR)r]
 r = jaxgrasp.evaluate_batch(grasps)
-np.savez(out, **{f: np.asarray(getattr(r, f)) for f in jaxgrasp.result.FIELDS})
+np.savez(out, **{f: np.asarray(getattr(r, f)) for f in jaxgrasp.tolerance._result.FIELDS})
 print("RESULT " + json.dumps({"devices": r.devices, "processes": jax.process_count(),
                              "local_devices": jax.local_device_count()}))
 """ % {"E": E, "DR": DR}

@@ -36,9 +36,9 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull
 
 import jaxgrasp
-from jaxgrasp.ferrari_canny import FORCE_CLOSURE_TOL, tangent_basis, wrenches
+from jaxgrasp.analysis._epsilon import FORCE_CLOSURE_TOL, tangent_basis, wrenches
 from jaxgrasp.presets import cube, prism
-from jaxgrasp.validation import GraspValueError
+from jaxgrasp.model._validation import GraspValueError
 from test_properties import NumpyDraw, build_grasp_fields, random_rotation
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"

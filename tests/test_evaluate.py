@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import jaxgrasp
-from jaxgrasp import model as M
+from jaxgrasp.model import _potential as M
 from jaxgrasp import presets
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -364,7 +364,7 @@ def test_tolerates(results, case):
 
 
 def test_jit_matches_evaluate():
-    """A concrete grasp runs the memoised (or stored) program of ``jaxgrasp.cache``, a
+    """A concrete grasp runs the memoised (or stored) program of ``jaxgrasp.engine._store``, a
     traced one the caller's program: the same numbers to rounding (the two programs differ
     in XLA's view: the caller's bakes the temperature in as a constant, and may be compiled
     with other XLA options, so XLA may fuse and round differently, ~1e-15), same codes."""
@@ -441,7 +441,7 @@ def test_limiting_index_breaks_ties_by_order(objective, reached, expected):
     """The limiting boundary is the least reached one; boundaries within TIE_TOL of the
     value of each other go to the first, so that rounding does not pick among symmetric
     contacts (with a plain argmin the first case gives 1)."""
-    from jaxgrasp.evaluate import limiting_index
+    from jaxgrasp.tolerance._verdict import limiting_index
 
     got = limiting_index(jnp.asarray(objective), jnp.asarray(reached), jnp.asarray(0.5))
     assert int(got) == expected

@@ -29,9 +29,10 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp import presets
-from jaxgrasp.tune import tune
-from jaxgrasp.evaluate import TIE_TOL, soft_minimum
-from jaxgrasp.result import INFEASIBLE, STABLE, UNSTABLE
+from jaxgrasp.analysis._tune import tune
+from jaxgrasp.tolerance._verdict import TIE_TOL
+from jaxgrasp.engine._evaluate import soft_minimum
+from jaxgrasp.tolerance._result import INFEASIBLE, STABLE, UNSTABLE
 
 from conftest import GRASP_FIELDS, stack, unstack
 

@@ -27,8 +27,8 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp import presets
-from jaxgrasp.gripfile import load
-from jaxgrasp.validation import GraspValueError
+from jaxgrasp.io._grasp_file import load
+from jaxgrasp.model._validation import GraspValueError
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 ROOT = Path(jaxgrasp.__file__).resolve().parent.parent  # the jaxgrasp under test, for subprocesses
@@ -117,7 +117,7 @@ def test_inward_normals_are_named_not_silent(run_cli, tmp_path):
     """Inward normals stay valid input (an inside grip: test_degenerate.py), but the CLI
     says which contacts point towards the centre of mass; no negative energy is printed
     where a boundary lies within round-off of the equilibrium (one normal flipped)."""
-    from jaxgrasp.validation import inward_contacts
+    from jaxgrasp.model._validation import inward_contacts
 
     g = presets.cube()
     assert inward_contacts(g.positions, g.normals) == []
@@ -155,7 +155,7 @@ def test_energy_above_equilibrium_is_never_negative(cube_eval):
     first = d["boundaries"][0]
     assert (first["kind"], first["contact"]) == ("slip", 0)
     assert first["energy_above_equilibrium"] == 0.0 and first["energy"] == be[0, 0]
-    from jaxgrasp.cli.evaluate import format_summary
+    from jaxgrasp.cli._evaluate import format_summary
 
     assert "contact 0 slip     : 0.000000e+00 J" in format_summary(d, "x")
     # far below: the equilibrium solve missed a lower point, a bug, never printed as is
@@ -258,7 +258,7 @@ def test_folder_as_grasp_file(run_cli, tmp_path):
 
 
 def test_boundary_energies_named_unambiguously(cube_eval):
-    from jaxgrasp.cli.evaluate import format_summary
+    from jaxgrasp.cli._evaluate import format_summary
 
     d = cube_eval.to_dict()
     u0 = d["equilibrium_energy"]
@@ -286,7 +286,7 @@ def _fake_sweep(status: str, value: float, size: int):
 
 
 def test_sweep_summary_wording():
-    from jaxgrasp.cli.sweep import _summary_line
+    from jaxgrasp.cli._sweep import _summary_line
 
     line = _summary_line(_fake_sweep("infeasible", 0.0, 1), "preset cube", 1.0, Path("o"), ["sweep.npz"])
     assert "1 point " in line and "1 points" not in line, line
@@ -316,7 +316,7 @@ def test_read_only_cache_folder_is_quiet(tmp_path):
     code = textwrap.dedent(
         """
         import jax, jax.numpy as jnp
-        from jaxgrasp.cache import enable_compilation_cache
+        from jaxgrasp import enable_compilation_cache
         print(enable_compilation_cache())
         print(float(jax.jit(lambda x: jnp.sin(x) * 3.0 + 1.0)(jnp.float64(0.5))))
         """

@@ -13,10 +13,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from jaxgrasp.grasp import Grasp
-from jaxgrasp.gripfile import grasp_from_dict, grasp_to_dict, load, save, to_toml
+from jaxgrasp.model._grasp import Grasp
+from jaxgrasp.io._grasp_file import grasp_from_dict, grasp_to_dict, load, save, to_toml
 from jaxgrasp.presets import PRESETS, cube, prism
-from jaxgrasp.validation import GraspValueError, check_grasp_inputs
+from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 FIELDS = (

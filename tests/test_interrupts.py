@@ -237,7 +237,7 @@ def test_sigint_while_jax_loads_exits_130_in_one_line(delay_s):
 def test_startup_handler_only_in_the_program(orig_argv, expected):
     """The early Ctrl-C handler is for the jaxgrasp program alone: a program that imports
     jaxgrasp keeps Python's KeyboardInterrupt."""
-    from jaxgrasp.startup import is_command_line
+    from jaxgrasp._startup import is_command_line
 
     assert is_command_line(orig_argv) is expected
 
@@ -311,7 +311,7 @@ def test_sigint_while_matplotlib_imports(sweep_cache, previous_set):
     """Item 2: Ctrl-C during matplotlib's import (made slow here) used to raise inside
     the import (ImportError and fatal errors, or exit -2 without a message, by timing),
     after the new npz/csv had already replaced the previous ones. The command starts
-    that import in a thread while it compiles (jaxgrasp.prefetch); the signal comes once
+    that import in a thread while it compiles (jaxgrasp.engine._prefetch); the signal comes once
     every point is done, while the command waits for the import to write its figure."""
     out, before = previous_set
     run = Run(_slow("sweep", *SWEEP_ARGS, "--out", out), _env(sweep_cache, JAXGRASP_TEST_SLOW="import"))
@@ -400,7 +400,7 @@ def test_out_under_a_file_fails_before_computing(command, tmp_path, monkeypatch,
     after the computation (sweep) or not at all before it (tune)."""
     monkeypatch.setattr(cli, "enable_compilation_cache", lambda: None)
     computed = []
-    module = importlib.import_module(f"jaxgrasp.{command}")  # the module, not the function
+    module = importlib.import_module(f"jaxgrasp.analysis._{command}")
     monkeypatch.setattr(module, command, lambda *a, **k: computed.append(1) or pytest.fail("computed"))
     blocker = tmp_path / "a-file"
     blocker.write_text("not a folder")
@@ -432,7 +432,7 @@ def batch_file(tmp_path_factory) -> Path:
         for e in np.linspace(2e5, 1e6, 6)
         for d in np.linspace(1e-3, 4.9e-3, 8)
     ]
-    jaxgrasp.save_batch(path, grasps)
+    jaxgrasp.save_dataset(path, grasps)
     return path
 
 
@@ -494,7 +494,7 @@ def test_batch_killed_and_resumed_equals_an_uninterrupted_run(sweep_cache, batch
     assert rc == 0, stderr[-3000:]
     got = jaxgrasp.BatchResult.from_npz(out / "results.npz")
     ref = jaxgrasp.BatchResult.from_npz(tmp_path / "ref" / "results.npz")
-    for f in jaxgrasp.result.FIELDS:
+    for f in jaxgrasp.tolerance._result.FIELDS:
         a, b = getattr(got, f), getattr(ref, f)
         if np.issubdtype(a.dtype, np.floating):
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=0, err_msg=f)

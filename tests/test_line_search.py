@@ -1,4 +1,4 @@
-"""The batched backtracking ladder (:mod:`jaxgrasp.line_search`) against a plain walk of
+"""The batched backtracking ladder (:mod:`jaxgrasp.solver._line_search`) against a plain walk of
 each lane's own ladder, written here from its definition: the first length passing
 Armijo's test, else the length with the lowest merit, else no move."""
 
@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrasp.line_search import LADDER_BLOCK, line_search  # importing jaxgrasp turns on float64
+from jaxgrasp.solver._line_search import LADDER_BLOCK, line_search  # importing jaxgrasp turns on float64
 
 STEPS = 16
 ROUNDING = 1e-13

@@ -16,8 +16,8 @@ import pytest
 import trimesh
 
 import jaxgrasp
-from jaxgrasp.mesh import closest_on_triangles, from_mesh
-from jaxgrasp.scene import COLORS
+from jaxgrasp.io._mesh import closest_on_triangles, from_mesh
+from jaxgrasp.plots._scene import COLORS
 
 FINGER = dict(initial_deformation=2e-3, radius=0.025, young_modulus=6e5, friction=0.5, max_force=15.0)
 POINTS = np.array([[0.05, 0.0, 0.0], [-0.05, 0.0, 0.0]])  # m: centres of the +-x faces
@@ -83,7 +83,7 @@ def cube_value():
 def test_box_mesh_is_the_papers_cube(cube_value):
     made = from_mesh(box(), POINTS, **FINGER)
     preset = jaxgrasp.presets.cube(6e5, 2e-3)
-    for name in jaxgrasp.fields.NAMES:
+    for name in jaxgrasp.model._fields.NAMES:
         np.testing.assert_allclose(getattr(made.grasp, name), getattr(preset, name), rtol=0, atol=1e-15)
     # the design: the model pytree is exactly a plain grasp's (no new compilation, no new key)
     assert jax.tree_util.tree_structure(made.grasp) == jax.tree_util.tree_structure(preset)
@@ -215,7 +215,7 @@ def test_dataset_line_names_a_mesh_relative_to_the_file(mm_files):
 
     data = tomllib.loads(good.read_text())
     (folder / "set.jsonl").write_text(json.dumps(data) + "\n")
-    gset = jaxgrasp.load_batch(folder / "set.jsonl")
+    gset = jaxgrasp.load_dataset(folder / "set.jsonl")
     assert list(gset.errors) == [None]
     np.testing.assert_allclose(gset.grasps[0].positions, POINTS, atol=1e-12)
 
@@ -267,8 +267,8 @@ def test_show_writes_a_picture_and_a_glb(run_cli, tmp_path):
 
 
 def test_show_without_a_mesh_draws_the_contacts_hull(tmp_path, cube_value):
-    from jaxgrasp.plots import plot_grasp
-    from jaxgrasp.scene import grasp_scene
+    from jaxgrasp.plots._plots import plot_grasp
+    from jaxgrasp.plots._scene import grasp_scene
 
     grasp = jaxgrasp.presets.cube(6e5, 2e-3)
     result = jaxgrasp.evaluate(grasp)
@@ -279,7 +279,7 @@ def test_show_without_a_mesh_draws_the_contacts_hull(tmp_path, cube_value):
     # the ghost is the object at the limiting pose times the magnification
     k, i = int(result.limiting_kind), int(result.limiting_contact)
     m = scene.magnification
-    rot = np.asarray(jaxgrasp.model.rotation_matrix(m * np.asarray(result.boundary_rotation[k, i])))
+    rot = np.asarray(jaxgrasp.model._potential.rotation_matrix(m * np.asarray(result.boundary_rotation[k, i])))
     expect = hull.vertices @ rot.T + m * np.asarray(result.boundary_translation[k, i])
     np.testing.assert_allclose(scene.part("ghost").mesh.vertices, expect, atol=1e-12)
     fig = plot_grasp(grasp, tmp_path / "cube.png", result=result)

@@ -1,4 +1,4 @@
-"""Model-level tests of jaxgrasp.model (no solver): closed forms, kinematics, derivatives,
+"""Model-level tests of jaxgrasp.model._potential (no solver): closed forms, kinematics, derivatives,
 invariances and the equivalence of the scaled friction margin with the paper's eq. 9.
 
 Everything is in the model's internal units (mm, N, N/mm^2, mJ).
@@ -19,8 +19,8 @@ from scipy.spatial.transform import Rotation  # noqa: E402
 
 import jaxgrasp  # noqa: E402
 from jaxgrasp import presets  # noqa: E402
-from jaxgrasp import model as M  # noqa: E402
-from jaxgrasp.model import model_params  # noqa: E402
+from jaxgrasp.model import _potential as M  # noqa: E402
+from jaxgrasp.model._potential import model_params  # noqa: E402
 
 # jitted once per contact count: eager evaluation of these small functions (and above
 # all of their Hessians) dispatches op by op and is far slower than compiling them.
@@ -86,7 +86,7 @@ def contact_frame(n):
 def numpy_kinematics(x, g):
     """Eq. 11-16 of the paper, literally, in each contact frame ``R_i`` (internal units).
 
-    Independent of ``jaxgrasp.model``'s vector shortcuts: the displacement and rotation
+    Independent of ``jaxgrasp.model._potential``'s vector shortcuts: the displacement and rotation
     are expressed in the contact frame (eq. 11, 12), the deformations read off its axes
     ``e1`` (normal) and ``e2, e3`` (tangential, ``D23``), and the torsion is the ``e1``
     component of the rotation vector of ``R_i^T dR R_i`` (a matrix logarithm by SciPy, not
@@ -417,7 +417,7 @@ def test_contact_renumbering_invariance():
 
 # ------------------------------------------------------------------ against an independent transcription
 def test_kinematics_and_energy_match_numpy_transcription():
-    """jaxgrasp.model against eq. 11-19 computed literally in each contact frame, to 1e-12."""
+    """jaxgrasp.model._potential against eq. 11-19 computed literally in each contact frame, to 1e-12."""
     rng = np.random.default_rng(8)
     checked = 0
     for g in (four_finger(), random_grasp(rng), random_grasp(rng, n=3), presets.cube(6e5, 2e-3, 0.2)):
@@ -582,8 +582,8 @@ def test_contact_derivatives_written_out_equal_autodiff(name, grasp, x):
 def _program_derivatives(data, z, weights):
     """(fx, gx, grad f, jac, Lagrangian Hessian) from the grasp programs' Problem, and the
     same from the solver's autodiff default for the same fg."""
-    from jaxgrasp import programs as P
-    from jaxgrasp import solver as S
+    from jaxgrasp.tolerance import _problems as P
+    from jaxgrasp.solver import _solver as S
 
     def both(problem):
         d = S._first_order(problem, z)
@@ -596,9 +596,9 @@ def _program_derivatives(data, z, weights):
 def test_program_derivatives_equal_autodiff(name, grasp, x):
     """The grasp programs' Problem (first order and Lagrangian Hessian written from the
     kinematics) gives what the solver's autodiff default gives for the same fg."""
-    from jaxgrasp import programs as P
+    from jaxgrasp.tolerance import _problems as P
 
-    data = P.program_data(model_params(grasp))
+    data = P.problem_data(model_params(grasp))
     z = jnp.concatenate([x[:3], x[3:] * data.lever])
     weights = jnp.asarray(np.random.default_rng(5).normal(size=3 * grasp.num_contacts))
     got, want = _program_derivatives(data, z, weights)

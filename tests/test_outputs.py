@@ -1,4 +1,4 @@
-"""Atomic output files, sets, the folder lock and the writability check (``jaxgrasp.outputs``),
+"""Atomic output files, sets, the folder lock and the writability check (``jaxgrasp.io._outputs``),
 and the library writers that use them (``SweepResult.to_csv``/``to_npz``, ``jaxgrasp.save``,
 the plots). In-process and fast: nothing here compiles."""
 
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import jaxgrasp
-from jaxgrasp import outputs
-from jaxgrasp.partial import PartialSweep
-from jaxgrasp.sweep import SweepResult
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.engine._checkpoint import SweepCheckpoint
+from jaxgrasp.analysis._sweep import SweepResult
 
 
 def _tmp_files(folder) -> list[str]:
@@ -97,7 +97,7 @@ def test_save_grasp_and_figure_write_a_new_file(tmp_path):
     assert path.stat().st_ino != ino
     assert jaxgrasp.load(path).young_modulus.tolist() == [2e5, 2e5]
 
-    from jaxgrasp.plots import new_figure, save_figure
+    from jaxgrasp.plots._plots import new_figure, save_figure
 
     fig = new_figure(figsize=(1, 1))
     (tmp_path / "f.png").write_text("previous")
@@ -190,7 +190,7 @@ def test_folder_lock_takes_over_a_stale_lock(tmp_path):
 
 def test_folder_lock_held_by_another_process(tmp_path):
     code = (
-        "import sys, time; from jaxgrasp.outputs import FolderLock; "
+        "import sys, time; from jaxgrasp.io._outputs import FolderLock; "
         "l = FolderLock(sys.argv[1]).acquire(); print('held', flush=True); time.sleep(60)"
     )
     p = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], stdout=subprocess.PIPE, text=True)
@@ -218,9 +218,9 @@ def test_partial_round_trip(tmp_path):
         "equilibrium_energy": np.arange(6.0) + 10,
     }
     done = np.array([1, 1, 1, 1, 0, 0], bool)
-    p = PartialSweep.from_flat(axes, done, flat, jaxgrasp.presets.cube().to_numpy(), 2)
+    p = SweepCheckpoint.from_flat(axes, done, flat, jaxgrasp.presets.cube().to_numpy(), 2)
     outputs.write_file(tmp_path / "p.npz", p.save)
-    q = PartialSweep.load(tmp_path / "p.npz")
+    q = SweepCheckpoint.load(tmp_path / "p.npz")
     assert q.shape == (2, 3) and q.total == 6 and q.done_count == 4 and q.chunk_size == 2
     np.testing.assert_array_equal(q.results["value"], [[0, 1, 2], [3, np.nan, np.nan]])
     np.testing.assert_array_equal(q.results["status"], [[0, 0, 0], [0, -1, -1]])
@@ -228,7 +228,7 @@ def test_partial_round_trip(tmp_path):
     np.testing.assert_array_equal(q.grasp["radius"], jaxgrasp.presets.cube().radius)
     _result().to_npz(tmp_path / "r.npz")
     with pytest.raises(ValueError, match="not a jaxgrasp sweep checkpoint"):
-        PartialSweep.load(tmp_path / "r.npz")
+        SweepCheckpoint.load(tmp_path / "r.npz")
 
 
 def test_interrupt_writes_the_checkpoint_a_throttled_chunk_skipped(tmp_path, monkeypatch):
@@ -236,7 +236,7 @@ def test_interrupt_writes_the_checkpoint_a_throttled_chunk_skipped(tmp_path, mon
     the sweep is interrupted: abandon() runs the skipped write first."""
     import threading
 
-    from jaxgrasp.cli.sweep import _Checkpoint
+    from jaxgrasp.cli._sweep import _Checkpoint
 
     monkeypatch.setattr(outputs, "PUBLISH_LOCK", threading.Lock())  # abandon() keeps it forever
     monkeypatch.setattr(outputs, "_ABANDONED", False)
@@ -252,15 +252,15 @@ def test_interrupt_writes_the_checkpoint_a_throttled_chunk_skipped(tmp_path, mon
     cp = _Checkpoint(path, jaxgrasp.presets.cube(), axes, chunk=1)
     try:
         cp(0, 1, flat)  # the first chunk is always written
-        assert PartialSweep.load(path).done_count == 1
+        assert SweepCheckpoint.load(path).done_count == 1
         cp._cost = 1e9  # the last write was slow: the next ones are skipped
         cp(1, 2, flat)
         cp(2, 3, flat)
-        assert PartialSweep.load(path).done_count == 1
+        assert SweepCheckpoint.load(path).done_count == 1
         notes = outputs.abandon(0.1)
     finally:
         outputs.clear_notes()
-    kept = PartialSweep.load(path)
+    kept = SweepCheckpoint.load(path)
     assert kept.done_count == 3
     np.testing.assert_array_equal(kept.results["value"][:3], [0.0, 1.0, 2.0])
     assert notes == [f"kept 3 of 4 points in {path}"]

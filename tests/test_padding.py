@@ -19,8 +19,8 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp import Grasp, GraspValueError, stack
-from jaxgrasp.fields import FIELDS, NAMES
-from jaxgrasp.status import LaneStatus
+from jaxgrasp.model._fields import FIELDS, NAMES
+from jaxgrasp.solver._status import LaneStatus
 
 ROOT = Path(__file__).resolve().parent.parent
 N_PAD = 5
@@ -152,8 +152,8 @@ def test_compact_files_and_sweep_see_the_active_contacts(tmp_path):
         np.testing.assert_array_equal(np.asarray(getattr(compact, n)), np.asarray(getattr(cube, n)), err_msg=n)
     assert compact.active is None
     assert jaxgrasp.grasp_to_dict(padded) == jaxgrasp.grasp_to_dict(cube)
-    jaxgrasp.save_batch(tmp_path / "s.npz", stack([cube, jaxgrasp.presets.prism()]))
-    got = jaxgrasp.load_batch(tmp_path / "s.npz")
+    jaxgrasp.save_dataset(tmp_path / "s.npz", stack([cube, jaxgrasp.presets.prism()]))
+    got = jaxgrasp.load_dataset(tmp_path / "s.npz")
     assert got.num_contacts.tolist() == [2, 3]
     with pytest.raises(GraspValueError, match=r"sweep grasp.compact\(\)"):
         jaxgrasp.sweep(padded, mass=[0.0, 0.1])
@@ -182,9 +182,9 @@ def test_grasp_without_active_contacts_solves_nothing():
     grasp that has no active contact. Its energy would be the weight's alone, unbounded
     below: its equilibrium lane ran the whole step budget (300 steps, checked) while the
     rest of the chunk waited. It now has no lane at all."""
-    from jaxgrasp.programs import solve_programs
+    from jaxgrasp.tolerance._stages import solve_problems
 
     g = jaxgrasp.presets.cube(mass=0.05).replace(active=jnp.array([False, False]))
-    p = solve_programs(g, settle=False)
+    p = solve_problems(g, settle=False)
     assert int(p.equilibrium.status) == LaneStatus.NO_START and int(p.equilibrium.steps) == 0
     assert not np.any(np.asarray(p.found)) and int(np.sum(np.asarray(p.boundary.steps))) == 0

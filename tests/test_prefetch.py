@@ -1,11 +1,11 @@
-"""jaxgrasp.prefetch: a module imported in a background thread, a failing one ignored."""
+"""jaxgrasp.engine._prefetch: a module imported in a background thread, a failing one ignored."""
 
 from __future__ import annotations
 
 import sys
 import time
 
-from jaxgrasp.prefetch import prefetch
+from jaxgrasp.engine._prefetch import prefetch
 
 
 def _wait_for(name: str, seconds: float = 10.0) -> bool:

@@ -30,7 +30,7 @@ count, shared with the other test modules). Environment:
 :func:`test_seeded_grasps_converge` is its 16-grasp version.
 
 The value is a minimum over a multi-start search. The start directions live in the
-grasp's own frame (:func:`jaxgrasp.programs.start_frame`), so a rotated, mirrored or
+grasp's own frame (:func:`jaxgrasp.tolerance._starts.start_frame`), so a rotated, mirrored or
 renumbered grasp is searched from the same physical starts and reaches the same local
 minima, up to rounding (the frame's ties and open signs are settled by the world's
 coordinate axes, e.g. in symmetric grasps). A transformed grasp landing on a different (lower or

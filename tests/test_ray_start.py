@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrasp.programs import _ray_start  # importing jaxgrasp turns on float64
+from jaxgrasp.tolerance._starts import _ray_start  # importing jaxgrasp turns on float64
 
 GRID = 2.0 ** (-(47 - jnp.arange(48.0)) / 4.0)  # the default ray grid, t_max = 1
 
@@ -48,8 +48,9 @@ def test_one_contact_data_gives_that_contacts_constraint_rows():
     for every contact ``j`` of random 5-contact grasps (one with an inactive contact) at
     random poses, its three margins equal rows ``j, N + j, 2N + j`` of the whole grasp's."""
     import jaxgrasp
-    from jaxgrasp.model import model_params
-    from jaxgrasp.programs import _contact_data, constraints, program_data
+    from jaxgrasp.model._potential import model_params
+    from jaxgrasp.tolerance._starts import _contact_data
+    from jaxgrasp.tolerance._problems import constraints, problem_data
     from test_properties import NumpyDraw, build_grasp
 
     rng = np.random.default_rng(7)
@@ -57,7 +58,7 @@ def test_one_contact_data_gives_that_contacts_constraint_rows():
         g = build_grasp(NumpyDraw(rng), 5)
         if case == 3:
             g = g.replace(active=np.array([True, True, False, True, True]))
-        data = program_data(model_params(g))
+        data = problem_data(model_params(g))
         for _ in range(3):
             z = rng.normal(scale=0.5, size=6)
             whole = np.asarray(constraints(z, data)).reshape(3, 5)

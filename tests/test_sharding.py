@@ -15,7 +15,7 @@ Checked:
 * its values, statuses and limiting boundaries equal ``evaluate`` of every grid point on
   one device (statuses exactly, energies to 1e-12 relative);
 * a later process with the same cache folders loads the stored compiled program instead
-  of tracing and compiling (:mod:`jaxgrasp.cache`) and gives bit-identical results; a
+  of tracing and compiling (:mod:`jaxgrasp.engine._store`) and gives bit-identical results; a
   corrupt file falls back to tracing, again with identical results.
 
 Multi-host (``jax.distributed``) is not tested here: it needs several processes with a
@@ -34,7 +34,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from jaxgrasp.sweep import batch_size
+from jaxgrasp.analysis._sweep import bucket_size
 
 COLLECTIVES = ("all-gather", "all-reduce", "all-to-all", "collective-permute", "reduce-scatter")
 """XLA's cross-device operations: the compiled sweep must contain none (each device runs
@@ -50,31 +50,31 @@ WORKER = textwrap.dedent(
     import numpy as np
     import jax
     import jaxgrasp
-    from jaxgrasp import cache
-    from jaxgrasp.evaluate import EvaluateOptions
+    from jaxgrasp.engine import _compile, _store as cache
+    from jaxgrasp.tolerance import EvaluateOptions
 
-    S = sys.modules["jaxgrasp.sweep"]
+    S = sys.modules["jaxgrasp.analysis._sweep"]
     cfg = json.loads(sys.argv[1])
     if cfg.get("xla_cache"):
         jax.config.update("jax_compilation_cache_dir", cfg["xla_cache"])
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    if cfg.get("program_dir"):
-        cache.set_program_dir(cfg["program_dir"])
+    if cfg.get("executable_dir"):
+        cache.set_executable_dir(cfg["executable_dir"])
     E = np.array(%(E)r)
     DR = np.array(%(DR)r)
     out = {"device_count": jax.device_count(), "runs": []}
     for k, step in enumerate(cfg["steps"]):
         if step == "corrupt":
-            files = sorted(Path(cfg["program_dir"]).glob("*.xla"))
+            files = sorted(Path(cfg["executable_dir"]).glob("*.xla"))
             for f in files:
                 f.write_bytes(f.read_bytes()[:100] + b"not a program")
-            cache.clear_compiled()
+            _compile.clear_compiled()
             out["corrupted"] = len(files)
             continue
         before = cache.stats()
         r = jaxgrasp.sweep(jaxgrasp.presets.cube(), young_modulus=E, initial_deformation=DR)
-        chunk = S.batch_size(S.default_chunk_size(), r.size, jax.device_count())
+        chunk = S.bucket_size(S.default_chunk_size(), r.size, jax.device_count())
         fn, _ = S.compiled_evaluator(EvaluateOptions(), 2, chunk, settle=False)  # the one the sweep used (memoised)
         shardings = [s for stage in fn.stages.values() for s in jax.tree_util.tree_leaves(stage.input_shardings)
                      + jax.tree_util.tree_leaves(stage.output_shardings)]
@@ -126,17 +126,17 @@ def _assert_same(a: dict, b: dict, rtol: float) -> None:
 
 
 def test_batch_size_is_a_multiple_of_the_devices():
-    assert batch_size(4096, 369, 1) == 1024
-    assert batch_size(4096, 369, 2) == 512
-    assert batch_size(62, 369, 2) == 62
-    assert batch_size(61, 369, 4) == 64
-    assert batch_size(4096, 1, 8) == 8
+    assert bucket_size(4096, 369, 1) == 1024
+    assert bucket_size(4096, 369, 2) == 512
+    assert bucket_size(62, 369, 2) == 62
+    assert bucket_size(61, 369, 4) == 64
+    assert bucket_size(4096, 1, 8) == 8
 
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("sharding")
-    cache = {"xla_cache": str(tmp / "xla"), "program_dir": str(tmp / "xla" / "jaxgrasp-programs")}
+    cache = {"xla_cache": str(tmp / "xla"), "executable_dir": str(tmp / "xla" / "jaxgrasp-executables")}
     # a 2-device sweep that stores its program and fills the caches
     r_two = _finish(_start(2, {"steps": ["sweep"], "out": str(tmp / "two"), **cache}))
     # a later process: loads the stored program, then falls back after corruption

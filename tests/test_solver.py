@@ -24,9 +24,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrasp.lanes import solve_lanes  # importing jaxgrasp turns on float64
-from jaxgrasp.solver import SolverOptions, SolverResult, solve
-from jaxgrasp.status import LaneStatus
+from jaxgrasp.solver._lanes import solve_lanes  # importing jaxgrasp turns on float64
+from jaxgrasp.solver._solver import SolverOptions, SolverResult, solve
+from jaxgrasp.solver._status import LaneStatus
 
 SQRT2 = math.sqrt(2.0)
 
@@ -293,7 +293,7 @@ def test_solve_lanes_rank_orders_the_queue_not_the_results():
     """``rank`` decides which lanes the queue loads first (active lanes by rank, in lane
     order within a rank, inactive ones never), and nothing else: every lane's result is
     the same, bit for bit, whatever the order."""
-    from jaxgrasp.lanes import _queue_order
+    from jaxgrasp.solver._lanes import _queue_order
 
     active = jnp.array([True, False, True, True, True, False, True])
     rank = jnp.array([1, 0, 0, 2, 1, 0, 0])
@@ -321,7 +321,14 @@ def test_penalty_growth_after_a_stalled_violation(viol, stationarity, inner, gro
     penalty of a lane with an equality grows depends on how the inner solve ended and on
     how far from feasible the lane is (``solver._multiplier_update``). The multipliers are
     updated either way."""
-    from jaxgrasp.solver import FAR_VIOLATION, FirstOrder, _inner_tol, _multiplier_update, _rounding_floor, init
+    from jaxgrasp.solver._solver import (
+        FAR_VIOLATION,
+        FirstOrder,
+        _inner_tol,
+        _multiplier_update,
+        _rounding_floor,
+        init,
+    )
 
     o = SolverOptions()
     assert o.max_inner == 15 and (viol > FAR_VIOLATION) == (viol == 0.5)
@@ -344,7 +351,13 @@ def test_penalty_grows_after_grow_penalty_after_steps():
     """A lane with an equality whose inner solve was cut short near feasibility keeps its
     penalty, until it has taken ``grow_penalty_after`` steps: from then on a stalled
     violation raises it (a crawling lane ends converged or infeasible, not at the budget)."""
-    from jaxgrasp.solver import FirstOrder, _inner_tol, _multiplier_update, _rounding_floor, init
+    from jaxgrasp.solver._solver import (
+        FirstOrder,
+        _inner_tol,
+        _multiplier_update,
+        _rounding_floor,
+        init,
+    )
 
     o = SolverOptions()
     s = init(jnp.zeros(3), jnp.array([0.0, 1.0, 0.0]), 0.5, True, o)
@@ -362,7 +375,7 @@ def test_nan_nu0_is_the_least_squares_multiplier():
     (``grad f + nu grad h = 0``; here ``f = |x - a|^2 / 2``, ``h = b . x - 1``, x0 = 0, so
     ``nu = a . b / |b|^2``), and the lane is the one started there by hand. An inactive
     lane's multiplier is 0, not NaN."""
-    from jaxgrasp.solver import init, propose
+    from jaxgrasp.solver._solver import init, propose
 
     a, b = jnp.array([1.0, -2.0, 0.5]), jnp.array([0.3, 1.0, -0.7])
     fg = lambda x: (0.5 * _sq(x - a), jnp.stack([x[0] + 4.0, jnp.dot(b, x) - 1.0, 4.0 - x[2]]))
@@ -384,7 +397,7 @@ def test_stationarity_tolerance_is_the_gradient_rounding_floor_capped():
     (``ROUNDING_ULPS * eps * rho * max(|J|^T D |J| |x|)``), at most
     ``MAX_STATIONARITY_TOL * tol``; elsewhere at tol. Rows where phi is not quadratic (an
     inactive inequality) do not count."""
-    from jaxgrasp.solver import (
+    from jaxgrasp.solver._solver import (
         MAX_STATIONARITY_TOL,
         ROUNDING_ULPS,
         FirstOrder,

@@ -2,7 +2,7 @@
 
 The boundary problems are non-convex and ``evaluate`` solves each from
 ``EvaluateOptions().num_starts`` = 20 starts (the 12 half-axes of the start frame, then 8
-seeded random directions in it; :func:`jaxgrasp.programs.start_frame`), keeping the
+seeded random directions in it; :func:`jaxgrasp.tolerance._starts.start_frame`), keeping the
 lowest. The start frame was the world's coordinate axes until issue 13, when the grasps
 below were found by ``experiments/start_search.py`` (log: ``experiments/start_search.log``): two
 fingertips off the centre of mass (so gravity and the stiffer tip twist the object),
@@ -22,7 +22,7 @@ In all three the missing starts were a solver crawl, not a search miss: the lane
 the axes ran into their step budget on a strongly curved slip constraint while the
 penalty grew at every multiplier update (``offset_b`` even with 20 starts: a strict
 xfail until issue 13). Since the penalty stops growing after inner solves cut short
-near feasibility (``jaxgrasp.solver.FAR_VIOLATION``), the axes alone find the minimum
+near feasibility (``jaxgrasp.solver._solver.FAR_VIOLATION``), the axes alone find the minimum
 (``test_axis_starts_suffice``, which fails with the old rule). These cases no longer
 show that the random starts are needed; ``tests/test_degenerate.py``'s
 ``sphere_5_mirrored`` is a true search miss (every lane converges, to one of three
@@ -33,11 +33,11 @@ in, and these cases were chosen where it does not.
 ``test_default_starts_agree_with_ipopt`` checks the default evaluation against the
 independent CasADi/Ipopt reference to 1e-6.
 ``test_axis_starts_suffice`` solves every start lane of every boundary problem once
-(``jaxgrasp.programs.solve_programs``, default options); lanes are independent, so the
+(``jaxgrasp.tolerance._stages.solve_problems``, default options); lanes are independent, so the
 value a subset of the starts would give is the minimum over those lanes.
 
 The grasps go through the session's ``evaluate_many`` (the compiled 2-contact evaluator
-that ``test_evaluate.py`` already uses); ``solve_programs`` compiles once for 2 contacts.
+that ``test_evaluate.py`` already uses); ``solve_problems`` compiles once for 2 contacts.
 """
 
 from __future__ import annotations
@@ -46,8 +46,8 @@ import numpy as np
 import pytest
 
 import jaxgrasp
-from jaxgrasp.programs import solve_programs
-from jaxgrasp.status import LaneStatus
+from jaxgrasp.tolerance._stages import solve_problems
+from jaxgrasp.solver._status import LaneStatus
 
 CASES = {
     # experiments/start_search.py --offset 0.1, N = 2: generation 9 #15
@@ -127,9 +127,9 @@ def subset_values(grasp) -> dict:
     """Value (J) from the first 20 (all), 12 (half-axes) and 6 (positive axes) starts.
 
     Per boundary problem the lowest converged lane among the subset (as
-    ``jaxgrasp.evaluate.best_starts``), then the lowest problem minus ``U0``."""
+    ``jaxgrasp.tolerance._verdict.best_starts``), then the lowest problem minus ``U0``."""
     d = jaxgrasp.EvaluateOptions().num_starts
-    progs = solve_programs(grasp)
+    progs = solve_problems(grasp)
     status = np.where(np.asarray(progs.found), np.asarray(progs.boundary.status), int(LaneStatus.NO_START))
     obj = np.where(status == int(LaneStatus.CONVERGED), np.asarray(progs.boundary.objective), np.inf)
     obj = obj.reshape(-1, d)

@@ -18,11 +18,11 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp import cli
-from jaxgrasp.evaluate import evaluate
+from jaxgrasp.engine._evaluate import evaluate
 from jaxgrasp.presets import cube, prism
-from jaxgrasp.result import INFEASIBLE, STABLE, STATUS_NAMES
-from jaxgrasp.sweep import PARAMETERS, SweepResult, sweep
-from jaxgrasp.validation import GraspValueError
+from jaxgrasp.tolerance._result import INFEASIBLE, STABLE, STATUS_NAMES
+from jaxgrasp.analysis._sweep import PARAMETERS, SweepResult, sweep
+from jaxgrasp.model._validation import GraspValueError
 
 CHUNK = 6
 E_AXIS = np.array([2e5, 1e6])  # Pa
@@ -124,7 +124,7 @@ def test_npz_round_trip_and_plot(cube_sweep, tmp_path):
     assert back.names == res.names
     for f in ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy"):
         np.testing.assert_array_equal(getattr(back, f), getattr(res, f))
-    from jaxgrasp.plots import plot_max_over, plot_sweep
+    from jaxgrasp.plots._plots import plot_max_over, plot_sweep
 
     plot_sweep(res, tmp_path / "s.png")
     plot_max_over(res, tmp_path / "m.png")
@@ -320,7 +320,7 @@ def test_cli_bad_spec_subprocess(tmp_path):
 
 
 def test_parse_axis_spec():
-    from jaxgrasp.cli.sweep import parse_axis_spec
+    from jaxgrasp.cli._sweep import parse_axis_spec
 
     np.testing.assert_allclose(parse_axis_spec("--x", "1e-3:5e-3:5"), [1e-3, 2e-3, 3e-3, 4e-3, 5e-3])
     np.testing.assert_array_equal(parse_axis_spec("--x", "0,0.1, 0.2"), [0.0, 0.1, 0.2])

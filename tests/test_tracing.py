@@ -1,15 +1,15 @@
 """What a batched program costs to build: the solver's work queue is traced as few times as
 JAX allows (issue 13, "compile less").
 
-Under ``jax.vmap`` the queue (:func:`jaxgrasp.lanes.solve_lanes`, a ``custom_vmap``) is
+Under ``jax.vmap`` the queue (:func:`jaxgrasp.solver._lanes.solve_lanes`, a ``custom_vmap``) is
 traced once for one grasp (``custom_vmap`` builds its own jaxpr) and once folded over the
 batch (its batching rule). JAX's loop batching traces a loop body again when the body
 makes an unbatched carry batched; the two-stage loop of
-:func:`jaxgrasp.programs.programs_of` starts with a batched carry so that the folded
+:func:`jaxgrasp.tolerance._stages.problems_of` starts with a batched carry so that the folded
 queue, the largest part of the program, is traced once (it used to be traced twice: a
 batch of 128 cube grasps over 2 devices traced in 4.0-4.5 s instead of 2.6 s).
 
-The batch engine's program (:func:`jaxgrasp.evaluate.evaluate_batch_traced`) takes the
+The batch engine's program (:func:`jaxgrasp.engine._evaluate.evaluate_batch_traced`) takes the
 batch itself and traces the queue once, folded.
 
 Each case uses its own ``EvaluateOptions(seed=...)``, so that no trace cached by another
@@ -23,8 +23,8 @@ import jax.numpy as jnp
 import pytest
 
 import jaxgrasp
-from jaxgrasp import lanes
-from jaxgrasp.evaluate import evaluate_batch_traced, evaluate_traced
+from jaxgrasp.solver import _lanes as lanes
+from jaxgrasp.engine._evaluate import evaluate_batch_traced, evaluate_traced
 
 
 @pytest.fixture

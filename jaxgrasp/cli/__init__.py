@@ -14,11 +14,17 @@ from __future__ import annotations
 
 import sys
 
-from .. import cache
-from ..cache import enable_compilation_cache
-from . import batch, evaluate, show, sweep, tune
-from .common import EXIT_USAGE, Parser, UsageError, load_grasp, parse_number
-from .interrupt import run_interruptibly
+from jaxgrasp.engine import _compile
+from jaxgrasp.engine._store import enable_compilation_cache
+from jaxgrasp.cli import (
+    _batch as batch,
+    _evaluate as evaluate,
+    _show as show,
+    _sweep as sweep,
+    _tune as tune,
+)
+from jaxgrasp.cli._common import EXIT_USAGE, Parser, UsageError, load_grasp, parse_number
+from jaxgrasp.cli._interrupt import run_interruptibly
 
 __all__ = [
     "main",
@@ -62,8 +68,8 @@ def main(argv=None) -> int:
 
 def _main(argv) -> int:
     """Parse ``argv`` and run its command; input errors as one line, exit status 2."""
-    from ..outputs import OutputError, clear_notes
-    from ..validation import GraspValueError
+    from jaxgrasp.io._outputs import OutputError, clear_notes
+    from jaxgrasp.model._validation import GraspValueError
 
     parser = build_parser()
     try:
@@ -77,4 +83,4 @@ def _main(argv) -> int:
         return EXIT_USAGE
     finally:
         clear_notes()
-        cache.wait_for_saves()  # the process may end with os._exit next
+        _compile.wait_for_saves()  # the process may end with os._exit next

@@ -1,0 +1,67 @@
+"""Ctrl-C while the ``jaxgrasp`` command is still starting: one line and exit 130, no traceback.
+
+The command's own handling (:mod:`jaxgrasp.cli._interrupt`) begins once ``import jaxgrasp``
+has loaded JAX, about 0.4-0.6 s after the process starts. A Ctrl-C before that would
+unwind the import and print Python's multi-line ``KeyboardInterrupt`` traceback. So
+``jaxgrasp/__init__.py`` calls :func:`install_if_command_line` before it imports JAX:
+in the ``jaxgrasp`` program only (the console script, ``python -m jaxgrasp`` or
+``python -m jaxgrasp.cli``), SIGINT and SIGTERM then print ``jaxgrasp: interrupted``
+(``terminated``) and end the process with status 130 (143) at once; nothing has been
+written yet at that stage. A program that merely imports jaxgrasp keeps Python's own
+handlers. This module imports nothing heavy (it runs before JAX is loaded).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+
+__all__ = ["EXIT", "is_command_line", "install_if_command_line"]
+
+EXIT = {signal.SIGINT: (130, "interrupted"), signal.SIGTERM: (143, "terminated")}
+"""The signals the ``jaxgrasp`` program handles: signal -> (exit status, 128 + the signal
+number as a shell reports it; the word of its one line). :mod:`jaxgrasp.cli._interrupt`
+uses the same table once the command runs."""
+
+_PROGRAM = "jaxgrasp"
+_MODULES = ("jaxgrasp", "jaxgrasp.cli")
+_OPTIONS_WITH_VALUE = ("-X", "-W", "--check-hash-based-pycs")  # interpreter options taking the next word
+
+
+def is_command_line(orig_argv: list[str]) -> bool:
+    """Whether the interpreter's command line ``orig_argv`` (``sys.orig_argv``) runs the
+    ``jaxgrasp`` program: its console script, or ``python -m jaxgrasp[.cli]``."""
+    if len(orig_argv) >= 2 and os.path.basename(orig_argv[1]) == _PROGRAM:
+        return True  # python .../bin/jaxgrasp ... (how a console script is started)
+    i = 1
+    while i < len(orig_argv) - 1:
+        arg = orig_argv[i]
+        if arg == "-m":
+            return orig_argv[i + 1] in _MODULES
+        if arg == "-c" or not arg.startswith("-"):
+            return False  # -c code, or a script: not the program
+        i += 2 if arg in _OPTIONS_WITH_VALUE else 1
+    return False
+
+
+def _end_at_once(signum, _frame) -> None:
+    status, word = EXIT[signum]
+    try:
+        os.write(2, f"jaxgrasp: {word}\n".encode())
+    except OSError:  # pragma: no cover - stderr closed: the status still tells
+        pass
+    os._exit(status)
+
+
+def install_if_command_line() -> bool:
+    """In the ``jaxgrasp`` program's main thread, end the process on SIGINT/SIGTERM with
+    one line (status 130/143) until the command installs its own handlers; whether done."""
+    if not is_command_line(list(getattr(sys, "orig_argv", []))):
+        return False
+    if threading.current_thread() is not threading.main_thread():
+        return False
+    for signum in EXIT:
+        signal.signal(signum, _end_at_once)
+    return True

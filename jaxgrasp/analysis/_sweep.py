@@ -1,0 +1,510 @@
+"""Parameter sweeps: evaluate one grasp over a Cartesian grid of its scalar parameters.
+
+::
+
+    import numpy as np, jaxgrasp
+    result = jaxgrasp.sweep(
+        jaxgrasp.presets.cube(),
+        young_modulus=np.linspace(2e5, 1e6, 9),         # Pa
+        initial_deformation=np.linspace(1e-3, 5e-3, 41),  # m, every contact at once
+    )
+    result.value.shape          # (9, 41), J
+    result.to_csv("sweep.csv")  # one row per grid point, SI units in the column names
+
+A sweep is a grid of grasps for the batched engine (:mod:`jaxgrasp.engine._batch`, shared with
+:func:`jaxgrasp.evaluate_batch`): the grid points are evaluated as lanes of
+one program (:func:`jaxgrasp.engine._evaluate.evaluate_batch_traced`) in chunks whose size is a fixed bucket
+(:func:`jaxgrasp.engine._batch.bucket_size`: 1, 4, 16 or 64 points on a CPU); the last chunk is
+padded to the same size, so one sweep compiles once, and a later sweep or batch of
+grasps with the same number of contacts and options, in the same bucket, reuses that
+compilation. Memory is bounded by the chunk size, not by
+the grid size: apart from the result arrays (5 numbers per grid point) nothing grows with
+the grid, and no device buffer outlives its chunk.
+
+Each chunk is sharded along its batch axis over all ``jax.devices()`` (a 1-D
+``jax.sharding.Mesh`` with axis ``'batch'``; the chunk is rounded up to a multiple of the
+device count), so one call uses every GPU of a machine, or every device of several hosts
+after ``jax.distributed.initialize()``. Results are gathered to the host.
+
+The compiled batched evaluator comes from :mod:`jaxgrasp.engine._store`: memoised in the process
+and, with :func:`jaxgrasp.engine._store.set_executable_dir` (the CLI sets it), kept on disk compiled,
+so that a later process neither traces nor compiles :func:`jaxgrasp.evaluate`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from typing import Any, Callable, Mapping
+
+import jax
+import numpy as np
+
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.engine._batch import (
+    ACCELERATOR_CHUNK_SIZE,
+    DEFAULT_CHUNK_SIZE,
+    batch_sharding,
+    bucket_size,
+    check_chunk_size,
+    compiled_evaluator,
+    default_chunk_size,
+    grasp_fields,
+    run_chunks,
+    settling_evaluator,
+)
+from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.model._fields import FIELD, SWEEPABLE, Field
+from jaxgrasp.model._grasp import Grasp
+from jaxgrasp.tolerance._result import SUMMARY_FIELDS, SummaryNames
+from jaxgrasp.model._codes import BoundaryKind
+from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.model._validation import (
+    GraspValueError,
+    as_float_array,
+    check_grasp_inputs,
+    format_value,
+)
+
+__all__ = [
+    "sweep",
+    "check_inputs",
+    "grid_grasp",
+    "SweepResult",
+    "PARAMETERS",
+    "DEFAULT_CHUNK_SIZE",
+    "ACCELERATOR_CHUNK_SIZE",
+    "default_chunk_size",
+    "bucket_size",
+    "column_name",
+    "compiled_evaluator",
+]
+
+PARAMETERS: dict[str, Field] = {name: FIELD[name] for name in SWEEPABLE}
+"""Sweepable parameters: name -> its :class:`jaxgrasp.model._fields.Field` (``.unit`` SI unit,
+``.per_contact``, ``.rule`` and ``.allows(x)`` its allowed range).
+
+A per-contact parameter is set to the same value at every contact of a grid point."""
+
+_RESULT_FIELDS = SUMMARY_FIELDS
+_RESULT_UNITS = {"value": "J", "equilibrium_energy": "J"}
+
+
+def column_name(name: str) -> str:
+    """CSV column name with its SI unit: ``young_modulus_Pa``, ``mass_kg``, ``value_J``."""
+    unit = PARAMETERS[name].unit if name in PARAMETERS else _RESULT_UNITS.get(name, "")
+    return f"{name}_{unit}" if unit else name
+
+
+# --------------------------------------------------------------------------- result
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SweepResult(SummaryNames):
+    """Evaluation of a grasp over a parameter grid (SI units); a JAX pytree.
+
+    Every array is shaped like the grid, ``(len(ax1), len(ax2), ...)``, in the order the
+    axes were given to :func:`sweep`.
+
+    Attributes:
+        axes: dict parameter name -> 1-D float64 array of its grid values (SI units), in
+            the order given.
+        value: evaluation value ``Delta U_min``, J (0 where unstable or infeasible).
+        status: :class:`~jaxgrasp.tolerance._status.GraspStatus` codes (``STABLE`` ...
+            ``NOT_CONVERGED``; names ``GraspStatus.labels()``).
+        limiting_kind: :class:`~jaxgrasp.model._codes.BoundaryKind` codes (0 slip, 1 max_force),
+            -1 none (names ``BoundaryKind.labels()``).
+        limiting_contact: 0-based contact of the limiting boundary, -1 none.
+        equilibrium_energy: ``min U`` over the equilibrium region, J.
+        compile_seconds: time spent compiling the batched evaluator in this sweep (0 when
+            a compilation was reused). Static (not a pytree leaf).
+        run_seconds: time spent evaluating the chunks. Static (not a pytree leaf).
+        devices: number of devices the batch was sharded over. Static (not a pytree leaf).
+
+    As a pytree, the leaves are the axis arrays (in grid order) and the five result
+    arrays; the axis names and timings are static.
+    """
+
+    axes: dict
+    value: Any
+    status: Any
+    limiting_kind: Any
+    limiting_contact: Any
+    equilibrium_energy: Any
+    compile_seconds: float = 0.0
+    run_seconds: float = 0.0
+    devices: int = 1
+
+    # ---- shape and names
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Axis names, in grid order."""
+        return tuple(self.axes)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Grid shape ``(len(ax1), len(ax2), ...)``."""
+        return tuple(len(a) for a in self.axes.values())
+
+    @property
+    def size(self) -> int:
+        """Number of grid points."""
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    def grid(self) -> dict[str, np.ndarray]:
+        """Each axis' value at every grid point: dict name -> array shaped like the grid."""
+        mesh = np.meshgrid(*self.axes.values(), indexing="ij") if self.axes else []
+        return dict(zip(self.axes, mesh))
+
+    def best(self) -> dict | None:
+        """The grid point of highest value among trusted results (not ``not_converged``).
+
+        Returns ``None`` when every point is not_converged, else a dict with ``index``
+        (grid index tuple), ``value`` (J), ``status``, ``limiting_kind`` and
+        ``limiting_contact`` (names / int) and the point's parameters by name (SI).
+        """
+        v = np.where(np.asarray(self.status) == GraspStatus.NOT_CONVERGED, -np.inf, np.asarray(self.value))
+        if v.size == 0 or not np.any(np.isfinite(v)):
+            return None
+        idx = np.unravel_index(int(np.argmax(v)), v.shape)
+        out = {"index": tuple(int(i) for i in idx), "value": float(self.value[idx])}
+        out.update({name: float(ax[i]) for (name, ax), i in zip(self.axes.items(), idx)})
+        out["status"] = GraspStatus(int(self.status[idx])).label
+        out["limiting_kind"] = str(self.limiting_kind_names[idx])
+        out["limiting_contact"] = int(self.limiting_contact[idx])
+        return out
+
+    def max_over(self, name: str) -> tuple["SweepResult", np.ndarray]:
+        """Maximise the value over one axis (e.g. Fig. 7: best initial deformation per E).
+
+        Not-converged points are skipped unless every point along the axis is one.
+
+        Returns:
+            ``(reduced, argmax)``: a :class:`SweepResult` without axis ``name`` whose
+            entries are those of the maximising grid point, and the maximising value of
+            parameter ``name`` at every remaining grid point.
+        """
+        if name not in self.axes:
+            raise KeyError(f"no axis {name!r}; axes: {', '.join(self.axes)}")
+        k = list(self.axes).index(name)
+        value = np.asarray(self.value)
+        trusted = np.where(np.asarray(self.status) == GraspStatus.NOT_CONVERGED, -np.inf, value)
+        none_trusted = np.all(np.isneginf(trusted), axis=k, keepdims=True)
+        score = np.where(none_trusted, value, trusted)
+        arg = np.argmax(score, axis=k)
+        take = lambda a: np.take_along_axis(np.asarray(a), np.expand_dims(arg, k), axis=k).squeeze(k)
+        axes = {n: a for n, a in self.axes.items() if n != name}
+        reduced = SweepResult(
+            axes=axes,
+            **{f: take(getattr(self, f)) for f in _RESULT_FIELDS},
+            compile_seconds=self.compile_seconds,
+            run_seconds=self.run_seconds,
+            devices=self.devices,
+        )
+        return reduced, np.asarray(self.axes[name])[arg]
+
+    # ---- files
+    def to_csv(self, path, extra: Mapping[str, Any] | None = None) -> None:
+        """Write a tidy CSV to ``path``: one row per grid point (C order: last axis fastest).
+
+        ``path`` is written atomically (a temporary file renamed into place, see
+        :mod:`jaxgrasp.io._outputs`): a failure leaves the previous file as it was. A binary
+        file object is written to directly.
+
+        Columns: each axis with its SI unit (``young_modulus_Pa``, ``initial_deformation_m``,
+        ``mass_kg``, ``friction``, ``max_force_N``, ``radius_m``), then ``value_J``,
+        ``status`` (name), ``limiting_kind`` (``slip``/``max_force``/``none``),
+        ``limiting_contact`` (-1 for none) and ``equilibrium_energy_J``, then a column per
+        ``extra`` entry (name -> grid-shaped array, e.g. ``epsilon``). Floats are written
+        with 17 significant digits (they read back exactly).
+        """
+        extra = {k: np.asarray(v).ravel() for k, v in (extra or {}).items()}
+        cols = [column_name(n) for n in self.axes] + [
+            column_name("value"),
+            "status",
+            "limiting_kind",
+            "limiting_contact",
+            column_name("equilibrium_energy"),
+            *extra,
+        ]
+        flat = [g.ravel() for g in self.grid().values()]
+        value = np.asarray(self.value).ravel()
+        status = self.status_names.ravel()
+        kind = self.limiting_kind_names.ravel()
+        contact = np.asarray(self.limiting_contact).ravel()
+        energy = np.asarray(self.equilibrium_energy).ravel()
+        fmt = outputs.csv_cell
+        rows = (
+            [fmt(g[i]) for g in flat]
+            + [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
+            + [fmt(a[i]) for a in extra.values()]
+            for i in range(value.size)
+        )
+        outputs.write_to(path, outputs.csv_content(cols, rows))
+
+    def to_npz(self, path, extra: Mapping[str, Any] | None = None) -> None:
+        """Write a ``.npz``: ``axis_names``, ``axis_<name>`` (1-D, SI), the grid-shaped
+        result arrays, ``status_names``, ``kind_names``, the timings, ``devices`` and the
+        ``extra`` arrays by name (e.g. ``epsilon``).
+
+        Read it back with :meth:`from_npz`. No pickled objects (``allow_pickle=False``).
+        ``path`` gets the suffix ``.npz`` if it has none (as ``np.savez``) and is written
+        atomically (see :meth:`to_csv`); a binary file object is written to directly.
+        """
+        arrays = {
+            "axis_names": np.asarray(self.names, dtype=str),
+            "status_names": np.asarray(GraspStatus.labels(), dtype=str),
+            "kind_names": np.asarray(BoundaryKind.labels(), dtype=str),
+            "compile_seconds": np.float64(self.compile_seconds),
+            "run_seconds": np.float64(self.run_seconds),
+            "devices": np.int64(self.devices),
+        }
+        for n, a in self.axes.items():
+            arrays[f"axis_{n}"] = np.asarray(a, dtype=np.float64)
+        for f in _RESULT_FIELDS:
+            arrays[f] = np.asarray(getattr(self, f))
+        arrays.update({k: np.asarray(v) for k, v in (extra or {}).items()})
+        if not hasattr(path, "write"):
+            path = os.fspath(path)
+            path = path if path.endswith(".npz") else path + ".npz"
+        outputs.write_to(path, lambda fh: np.savez(fh, **arrays))
+
+    @classmethod
+    def from_npz(cls, path) -> "SweepResult":
+        """Read a file written by :meth:`to_npz`."""
+        with np.load(path, allow_pickle=False) as z:
+            names = [str(n) for n in z["axis_names"]]
+            return cls(
+                axes={n: np.array(z[f"axis_{n}"]) for n in names},
+                **{f: np.array(z[f]) for f in _RESULT_FIELDS},
+                compile_seconds=float(z["compile_seconds"]),
+                run_seconds=float(z["run_seconds"]),
+                devices=int(z["devices"]) if "devices" in z.files else 1,
+            )
+
+    def __repr__(self) -> str:
+        axes = ", ".join(f"{n}[{len(a)}]" for n, a in self.axes.items())
+        counts = ", ".join(f"{k} {v}" for k, v in self.counts().items() if v)
+        return f"SweepResult({axes or 'no axes'}; {counts})"
+
+
+def _flatten(r: SweepResult):
+    # axes as a tuple (not a dict, whose keys JAX would sort): the order is the grid's
+    children = (tuple(r.axes.values()), *(getattr(r, f) for f in _RESULT_FIELDS))
+    return children, (tuple(r.axes), r.compile_seconds, r.run_seconds, r.devices)
+
+
+def _unflatten(aux, children):
+    names, compile_seconds, run_seconds, devices = aux
+    axes, *arrays = children
+    return SweepResult(
+        dict(zip(names, axes)),
+        *arrays,
+        compile_seconds=compile_seconds,
+        run_seconds=run_seconds,
+        devices=devices,
+    )
+
+
+jax.tree_util.register_pytree_node(SweepResult, _flatten, _unflatten)
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _check_axes(base: dict[str, np.ndarray], axes: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """Validate the axes against the (validated) base grasp fields; one-line errors."""
+    out = {name: _check_axis(name, values) for name, values in axes.items()}
+    _check_deformation_below_radius(base, out)
+    return out
+
+
+def _check_axis(name: str, values: Any) -> np.ndarray:
+    """One axis as a 1-D float64 array, finite and within its field's range."""
+    if name not in PARAMETERS:
+        valid = ", ".join(PARAMETERS)
+        raise GraspValueError(f"cannot sweep unknown parameter {name!r}; valid parameters: {valid}")
+    field = PARAMETERS[name]
+    unit = f" {field.unit}" if field.unit else ""
+    a = as_float_array(f"sweep axis {name}", values)
+    if a.ndim > 1:
+        raise GraspValueError(
+            f"sweep axis {name} must be a number or a 1-D sequence of numbers, got shape {a.shape}"
+        )
+    a = np.atleast_1d(a).astype(np.float64)
+    if a.size == 0:
+        raise GraspValueError(f"sweep axis {name} is empty: give at least one value")
+    for rule, ok in (("finite", np.isfinite), (field.rule, field.allows)):
+        bad = np.flatnonzero(~ok(a))
+        if bad.size:
+            i = int(bad[0])
+            raise GraspValueError(f"sweep axis {name}[{i}] = {format_value(a[i])}{unit} must be {rule}")
+    return a
+
+
+def _check_deformation_below_radius(base: dict[str, np.ndarray], axes: dict[str, np.ndarray]) -> None:
+    """Every grid point must keep ``initial_deformation < radius`` at every contact."""
+    dr = axes.get("initial_deformation", base["initial_deformation"])
+    r = axes.get("radius", base["radius"])
+    dr_max, r_min = float(np.max(dr)), float(np.min(r))
+    if dr_max < r_min:
+        return
+    where_dr = ("sweep axis " if "initial_deformation" in axes else "the grasp's ") + "initial_deformation"
+    where_r = ("sweep axis " if "radius" in axes else "the grasp's ") + "radius"
+    dr_unit, r_unit = FIELD["initial_deformation"].unit, FIELD["radius"].unit
+    raise GraspValueError(
+        f"initial_deformation must be < radius at every grid point, but {where_dr} reaches "
+        f"{format_value(dr_max)} {dr_unit} and {where_r} goes down to {format_value(r_min)} {r_unit}"
+    )
+
+
+# --------------------------------------------------------------------------- compiled batch
+
+# --------------------------------------------------------------------------- sweep
+
+
+def sweep(
+    grasp: Grasp,
+    /,
+    *,
+    options: EvaluateOptions = EvaluateOptions(),
+    chunk_size: int | None = None,
+    progress: Callable[[int, int], Any] | None = None,
+    devices=None,
+    on_chunk: Callable[[int, int, Mapping[str, np.ndarray]], Any] | None = None,
+    **axes,
+) -> SweepResult:
+    """Evaluate ``grasp`` at every point of the Cartesian grid of ``axes``.
+
+    Args:
+        grasp: the base :class:`~jaxgrasp.Grasp` (SI units); parameters not swept keep
+            its values.
+        options: :class:`~jaxgrasp.EvaluateOptions` for every evaluation.
+        chunk_size: grid points per compiled batch, at most (bounds memory); default
+            :func:`default_chunk_size` (64 per CPU device, 1024 per GPU). The batch used is
+            the smallest bucket that holds ``min(chunk_size, number of points)``, capped
+            at ``chunk_size``, a multiple of the number of devices (:func:`bucket_size`);
+            the last chunk is padded to it.
+        progress: optional ``progress(done, total)`` called after each chunk with the
+            numbers of grid points done and in all.
+        on_chunk: optional ``on_chunk(start, stop, results)`` called after each chunk
+            (before ``progress``): grid points ``start .. stop - 1`` (C order, last axis
+            fastest) are done, and so is every point before them; ``results`` maps each
+            result field (``value``, ``status``, ``limiting_kind``, ``limiting_contact``,
+            ``equilibrium_energy``) to a flat ``(total,)`` array whose first ``stop``
+            entries are final. The arrays are the sweep's own buffers: read them, copy
+            what you keep, never write them. For checkpoints (``jaxgrasp sweep`` writes
+            ``sweep.partial.npz`` with it, :mod:`jaxgrasp.engine._checkpoint`).
+        devices: the devices the batch is sharded over (default: all of
+            ``jax.devices()``, which after ``jax.distributed.initialize()`` spans every
+            host). The batch is rounded up to a multiple of their number.
+        **axes: ``name=values`` for any of :data:`PARAMETERS` (``young_modulus`` Pa,
+            ``initial_deformation`` m, ``mass`` kg, ``friction``, ``max_force`` N,
+            ``radius`` m); ``values`` is a number or a 1-D sequence. Per-contact
+            parameters are set at every contact at once. The grid's axes follow the
+            keyword order.
+
+    Returns:
+        A :class:`SweepResult` whose arrays have shape ``(len(ax1), len(ax2), ...)``;
+        every entry equals :func:`jaxgrasp.evaluate` of that grid point's grasp.
+
+    Raises:
+        GraspValueError: before anything is compiled, for an invalid base grasp, an unknown
+            parameter name, an empty, non-numeric, non-finite or out-of-range axis, or a
+            grid point with ``initial_deformation >= radius``; the message is one line.
+    """
+    base, axes = _check_inputs(grasp, chunk_size, axes)
+    devices = tuple(jax.devices() if devices is None else devices)
+    if not devices:
+        raise GraspValueError("sweep needs at least one device")
+    n_contacts = base["positions"].shape[0]
+    total = int(math.prod(a.size for a in axes.values()))
+    if chunk_size is None:
+        chunk_size = default_chunk_size(devices)
+    chunk = bucket_size(chunk_size, total, len(devices))
+    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, settle=False)
+    settling = settling_evaluator(options, n_contacts, chunk, devices)
+    sharding = batch_sharding(devices)
+
+    own = _own_fields(grasp, base)
+    shape = tuple(a.size for a in axes.values())
+    outs, run_seconds = run_chunks(
+        fn, lambda start: _chunk_fields(own, axes, start, chunk), grasp_fields(False), total, chunk, sharding,
+        progress, on_chunk, keep=_RESULT_FIELDS, settling=settling,
+    )
+    return SweepResult(
+        axes=dict(axes),
+        **{f: outs[f].reshape(shape) for f in _RESULT_FIELDS},
+        compile_seconds=compile_seconds,
+        run_seconds=run_seconds,
+        devices=len(devices),
+    )
+
+
+def grid_grasp(grasp: Grasp, /, **axes) -> Grasp:
+    """Every grid point of ``sweep(grasp, **axes)`` as one batched :class:`Grasp` (leading
+    axis: the points in C order, last axis fastest), e.g. to compute another metric on the
+    same grid (``jaxgrasp.epsilon(grid_grasp(...))``).
+
+    Raises:
+        GraspValueError: as :func:`sweep` (one line).
+    """
+    base, checked = _check_inputs(grasp, None, axes)
+    total = int(math.prod(a.size for a in checked.values()))
+    return Grasp(**_chunk_fields(_own_fields(grasp, base), checked, 0, total))
+
+
+def _own_fields(grasp: Grasp, base: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The grasp's own values (not the validated copies, whose normals are re-normalised),
+    so that every grid point is exactly the grasp evaluate() would see."""
+    raw = grasp.to_numpy()
+    return {k: np.broadcast_to(np.asarray(raw[k], dtype=np.float64), v.shape) for k, v in base.items()}
+
+
+def check_inputs(grasp: Grasp, /, *, chunk_size: int | None = None, **axes) -> None:
+    """Raise what :func:`sweep` would raise for these arguments, computing nothing.
+
+    For a caller that must reject bad input before it prepares anything else (the
+    ``jaxgrasp sweep`` command checks its output folder only after this).
+
+    Raises:
+        GraspValueError: as :func:`sweep` (one line).
+    """
+    _check_inputs(grasp, chunk_size, axes)
+
+
+def _check_inputs(grasp, chunk_size, axes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The validated base grasp's fields and the validated axes; one-line errors."""
+    check_chunk_size(chunk_size)
+    if not isinstance(grasp, Grasp):
+        raise GraspValueError(f"sweep needs a jaxgrasp.Grasp, got {type(grasp).__name__}")
+    if grasp.active is not None:
+        raise GraspValueError(
+            "sweep needs a grasp without inactive contacts: sweep grasp.compact() (its active "
+            "contacts, renumbered from 0)"
+        )
+    try:
+        base = check_grasp_inputs(**grasp.to_numpy())
+    except GraspValueError as exc:
+        raise GraspValueError(f"base grasp: {exc}") from None
+    return base, _check_axes(base, axes)
+
+
+def _chunk_fields(own: dict, axes: dict, start: int, chunk: int) -> dict[str, np.ndarray]:
+    """The :class:`Grasp` fields of grid points ``start .. start + chunk - 1`` (C order),
+    the points past the end padded with the last one."""
+    shape = tuple(a.size for a in axes.values())
+    total = int(math.prod(shape))
+    n_contacts = own["positions"].shape[0]
+    idx = np.minimum(np.arange(start, start + chunk), total - 1)  # pad with the last point
+    fields = {k: np.broadcast_to(v, (chunk, *v.shape)) for k, v in own.items()}
+    grid_idx = np.unravel_index(idx, shape) if axes else ()
+    for (name, values), i_ax in zip(axes.items(), grid_idx):
+        v = values[i_ax]
+        if PARAMETERS[name].per_contact:
+            v = np.broadcast_to(v[:, None], (chunk, n_contacts))
+        fields[name] = v
+    return fields
+
+

@@ -1,0 +1,294 @@
+"""``jaxgrasp batch``: evaluate and rank every grasp of a dataset file; write csv, npz and a picture.
+
+The dataset is a ``.npz`` or ``.jsonl`` file (:mod:`jaxgrasp.io._dataset`), grasps with any
+contact counts, padded to the largest and evaluated in chunks of one compiled program
+(:func:`jaxgrasp.evaluate_batch`). An invalid grasp does not stop the run: its row has
+status ``invalid`` and its one-line error (``--strict``: exit 2 before computing).
+
+Nothing finished is lost: each finished chunk is kept at once in ``DIR/results.partial``
+(:class:`jaxgrasp.engine._checkpoint.BatchCheckpoint`, one atomic file per chunk), so a run stopped at
+any moment (Ctrl-C, SIGTERM, ``kill -9``) is finished by ``--resume`` without
+recomputing those chunks. At the end ``results.csv``, ``results.npz`` and
+``results.png`` replace the previous ones as one set and the checkpoint is removed.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.engine._prefetch import prefetch
+from jaxgrasp.model._validation import counted
+from jaxgrasp.cli._common import (
+    ChunkProgress,
+    UsageError,
+    add_epsilon_option,
+    check_chunk_size,
+    check_out,
+    epsilon_columns,
+    lock_out,
+    replaced_text,
+    say,
+)
+
+__all__ = ["add_parser", "run", "OUTPUT_NAMES", "PARTIAL_NAME", "DEFAULT_TOP"]
+
+OUTPUT_NAMES = ("results.csv", "results.npz", "results.png")
+"""The files of one batch's output set, in ``--out``."""
+
+PARTIAL_NAME = "results.partial"
+"""The checkpoint folder of the finished chunks (:class:`jaxgrasp.engine._checkpoint.BatchCheckpoint`), in ``--out``."""
+
+DEFAULT_TOP = 5
+"""Best grasps listed in the summary (``--top``)."""
+
+
+def add_parser(sub) -> None:
+    """Add the ``batch`` command to the ``jaxgrasp`` sub-parsers."""
+    sp = sub.add_parser(
+        "batch",
+        help="evaluate and rank every grasp of a dataset file (csv, npz, png)",
+        description=(
+            "Evaluate every grasp of a dataset file (.npz arrays named like the grasp fields, "
+            "or .jsonl with one grasp-file JSON object per line; SI units; any contact counts) "
+            "and rank them. Writes DIR/results.csv (one row per grasp in input order), "
+            "DIR/results.npz (every result array) and DIR/results.png (the ranking) as one set. "
+            "Finished chunks are kept in DIR/results.partial until then: an interrupted run "
+            "is finished by the same command with --resume."
+        ),
+        epilog="Example: jaxgrasp batch grasps.jsonl --out ranked/ --top 10",
+    )
+    sp.add_argument("file", help="dataset file (.npz or .jsonl)")
+    sp.add_argument("--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)")
+    sp.add_argument(
+        "--chunk-size",
+        type=int,
+        default=None,
+        metavar="N",
+        help="grasps per compiled batch (default 64 per CPU device, 1024 per GPU)",
+    )
+    sp.add_argument("--top", type=int, default=DEFAULT_TOP, metavar="K", help=f"list the K best grasps (default {DEFAULT_TOP})")
+    sp.add_argument("--strict", action="store_true", help="any invalid grasp: exit 2 before computing")
+    sp.add_argument("--resume", action="store_true", help="finish an interrupted run into the same DIR")
+    sp.add_argument("--no-plot", action="store_true", help="do not write results.png")
+    add_epsilon_option(sp)
+    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    sp.set_defaults(func=run)
+
+
+# --------------------------------------------------------------------------- the command
+
+
+def run(args) -> int:
+    """Evaluate the dataset of the command line; write the files and print a summary."""
+    from jaxgrasp.io._dataset import load_dataset
+    from jaxgrasp.engine._checkpoint import BatchCheckpoint
+
+    _check_numbers(args)
+    gset = load_dataset(args.file)
+    if args.strict:
+        gset.raise_if_invalid()
+    if not gset.valid.any():
+        raise UsageError(f"{args.file}: no valid grasp ({len(gset)} invalid; first: {gset.errors[0]})")
+    out = Path(args.out)
+    check_out(out)
+    n_contacts = int(gset.num_contacts.max())
+    if not args.no_plot:
+        prefetch("jaxgrasp.plots._plots")  # matplotlib's import overlaps the compile
+
+    t_start = time.perf_counter()
+    with lock_out(out):
+        checkpoint = BatchCheckpoint(out / PARTIAL_NAME, args.file, gset.source_sha256, len(gset), n_contacts)
+        done_rows, done = _open_checkpoint(checkpoint, args.resume, len(gset))
+        todo = np.flatnonzero(gset.valid & ~np.isin(np.arange(len(gset)), done_rows))
+        keeper = _Keeper(checkpoint, todo, len(done_rows), len(gset))
+        result = _evaluate(gset, todo, n_contacts, args, keeper)
+        merged = _merge(gset, done_rows, done, todo, result)
+        wall = time.perf_counter() - t_start
+        extra = _epsilon(gset) if args.epsilon else None
+        written, replaced, removed = _write_outputs(merged, out, checkpoint, args, extra)
+    print(_summary(merged, args.file, wall, result, len(done_rows), out, written, replaced, removed, args.top))
+    return 0
+
+
+def _check_numbers(args) -> None:
+    check_chunk_size(args.chunk_size)
+    if args.top < 0:
+        raise UsageError(f"--top must be >= 0, got {args.top}")
+
+
+def _open_checkpoint(checkpoint, resume: bool, total: int) -> tuple[np.ndarray, dict]:
+    """The rows a previous run finished (``--resume``) and their results; a fresh
+    checkpoint otherwise. An unfinished run's checkpoint is never overwritten silently."""
+    if checkpoint.exists():
+        if not resume:
+            raise UsageError(
+                f"--out: {checkpoint.folder} holds an unfinished run: add --resume to finish it, "
+                "or remove that folder to start afresh"
+            )
+        try:
+            checkpoint.check()
+        except ValueError as exc:
+            raise UsageError(f"--resume: {exc}") from None
+        rows, results = checkpoint.load()
+        say(f"jaxgrasp: resuming: {rows.size} of {counted(total, 'grasp')} were finished in {checkpoint.folder}")
+        return rows, results
+    if resume:
+        say(f"jaxgrasp: --resume: no unfinished run in {checkpoint.folder.parent}; starting afresh")
+    checkpoint.start()
+    return np.zeros(0, dtype=np.int64), {}
+
+
+def _evaluate(gset, todo: np.ndarray, n_contacts: int, args, keeper):
+    """Evaluate the grasps ``todo`` (input indices), padded to ``n_contacts``; ``None``
+    when there is nothing left to do."""
+    import jax
+
+    from jaxgrasp.engine._batch import bucket_size, default_chunk_size, evaluate_batch
+    from jaxgrasp.model._grasp import stack
+
+    if todo.size == 0:
+        return None
+    grasps = [gset.grasps[i] for i in todo]
+    same = all(g.num_contacts == n_contacts for g in grasps)
+    batch = grasps if same else stack(grasps, num_contacts=n_contacts)  # the full set's N: one compilation
+    chunk = bucket_size(args.chunk_size or default_chunk_size(), todo.size, jax.device_count())
+    progress = ChunkProgress("evaluating", "grasp", todo.size, chunk, jax.device_count(), not args.quiet and todo.size > chunk)
+    progress.start()
+    return evaluate_batch(batch, chunk_size=chunk, progress=progress, on_chunk=keeper)
+
+
+class _Keeper:
+    """``on_chunk`` of :func:`jaxgrasp.evaluate_batch`: each finished chunk to its own
+    checkpoint file at once (:meth:`jaxgrasp.engine._checkpoint.BatchCheckpoint.save_rows`), before
+    progress reports it; the note an interrupt prints says how much is kept."""
+
+    def __init__(self, checkpoint, todo: np.ndarray, before: int, total: int):
+        self.checkpoint = checkpoint
+        self.todo = todo  # input index of each grasp evaluated now
+        self.before = before  # rows finished by a previous run
+        self.total = total
+
+    def __call__(self, start: int, stop: int, results) -> None:
+        self.checkpoint.save_rows(self.todo[start:stop], {f: a[start:stop] for f, a in results.items()})
+        kept = self.before + stop
+        outputs.set_note(
+            "batch",
+            f"kept {kept} of {counted(self.total, 'grasp')} in {self.checkpoint.folder}; "
+            "the same command with --resume finishes the rest",
+        )
+
+
+def _merge(gset, done_rows: np.ndarray, done: dict, todo: np.ndarray, result):
+    """One :class:`~jaxgrasp.BatchResult` of every input row: the previous run's rows,
+    this run's, and the invalid ones (status ``invalid``, NaN, -1)."""
+    from jaxgrasp.engine._batch_result import BatchResult, mark_invalid
+    from jaxgrasp.tolerance._result import FIELDS, Evaluation
+
+    parts = [(done_rows, done)] if done_rows.size else []
+    if result is not None:
+        parts.append((todo, {f: np.asarray(getattr(result, f)) for f in FIELDS}))
+    total = len(gset)
+    arrays = {}
+    for f in FIELDS:
+        like = parts[0][1][f]
+        arrays[f] = np.empty((total, *like.shape[1:]), dtype=like.dtype)
+        for rows, res in parts:
+            arrays[f][rows] = res[f]
+    mark_invalid(arrays, ~gset.valid)  # every valid row is in one of the parts
+    counts = gset.num_contacts
+    active = np.arange(arrays["boundary_energy"].shape[-1]) < counts[:, None]  # own contacts first (jaxgrasp.stack)
+    return BatchResult(
+        evaluation=Evaluation(**arrays),
+        num_contacts=counts,
+        active=active,
+        errors=tuple(gset.errors),
+        compile_seconds=0.0 if result is None else result.compile_seconds,
+        run_seconds=0.0 if result is None else result.run_seconds,
+        devices=1 if result is None else result.devices,
+    )
+
+
+def _write_outputs(result, out: Path, checkpoint, args, extra=None) -> tuple[list[str], list[str], list[str]]:
+    """Write ``results.csv``, ``results.npz`` and (unless ``--no-plot``) ``results.png``
+    as one set, removing the checkpoint in the same step; ``extra``: more columns (``--epsilon``)."""
+    members = {
+        out / "results.csv": lambda fh: result.to_csv(fh, extra),
+        out / "results.npz": lambda fh: result.to_npz(fh, extra),
+    }
+    if not args.no_plot:
+        from jaxgrasp.plots._plots import plot_ranking, save_figure
+
+        fig = plot_ranking(result, top=args.top, title=f"jaxgrasp batch: {args.file} ({counted(len(result), 'grasp')})")
+        members[out / "results.png"] = lambda fh: save_figure(fig, fh, format="png")
+    stale = [out / n for n in OUTPUT_NAMES if out / n not in members and (out / n).exists()]
+    try:
+        replaced = outputs.write_set(
+            members,
+            remove=stale + checkpoint.files(),
+            on_publish=lambda: outputs.set_note("batch", f"the results are in {out}"),
+        )
+    except OSError as exc:
+        raise UsageError(f"cannot write to --out {str(out)!r}: {exc.strerror or exc}") from None
+    try:
+        checkpoint.folder.rmdir()
+    except OSError:
+        pass  # something else was put there: leave it
+    return [p.name for p in members], [p.name for p in replaced], [p.name for p in stale]
+
+
+def _epsilon(gset) -> dict:
+    """The ``--epsilon`` columns of every input row (NaN and False for an invalid grasp)."""
+    from jaxgrasp.model._grasp import stack
+
+    valid = gset.valid
+    cols = epsilon_columns(stack([g for g in gset.grasps if g is not None]))
+    out = {"epsilon": np.full(len(gset), np.nan), "force_closure": np.zeros(len(gset), dtype=bool)}
+    for k, v in cols.items():
+        out[k][valid] = v
+    return out
+
+
+def _summary(result, source, wall, run, resumed, out, written, replaced, removed, top) -> str:
+    """The summary: counts, timings, files, then the ``top`` best grasps, one per line."""
+    c = result.counts()
+    counts = ", ".join(f"{k} {v}" for k, v in c.items() if v or k != "invalid")
+    valid = result.num_contacts[result.num_contacts > 0]
+    span = f"{valid.min()}-{valid.max()}" if valid.min() != valid.max() else f"{valid.min()}"
+    timing = "no chunk left to evaluate" if run is None else (
+        f"compile {run.compile_seconds:.1f} s, run {run.run_seconds:.1f} s, "
+        f"{len(run) / max(run.run_seconds, 1e-9):.1f} grasps/s"
+    )
+    again = f"; {resumed} resumed from the checkpoint" if resumed else ""
+    lines = [
+        f"batch {source}: {counted(len(result), 'grasp')} ({span} contacts); {counts}; "
+        f"wall {wall:.1f} s ({timing}{again}); wrote {out}/{{{','.join(written)}}}"
+        + replaced_text(replaced, removed)
+    ]
+    lines += _top_lines(result, top)
+    if c.get("invalid"):
+        first = next(e for e in result.errors if e)
+        lines.append(f"note: {counted(c['invalid'], 'invalid grasp')} not evaluated (first: {first}); see the error column")
+    return "\n".join(lines)
+
+
+def _top_lines(result, top: int) -> list[str]:
+    """``top`` lines: rank, input index, value, contacts and limiting boundary of the best
+    stable grasps."""
+    from jaxgrasp.tolerance._status import GraspStatus
+
+    best = [int(i) for i in result.rank()[:top] if result.status[i] == GraspStatus.STABLE]
+    if top and not best:
+        return ["top: none (no stable grasp)"]
+    width = len(str(max(best, default=0)))
+    lines = []
+    for r, i in enumerate(best, start=1):
+        kind = result.limiting_kind_names[i]
+        lines.append(
+            f"  #{r} grasp {i:>{width}}: {float(result.value[i]):.6e} J "
+            f"({result.num_contacts[i]} contacts; limited by {kind} of contact {int(result.limiting_contact[i])})"
+        )
+    return [f"top {len(best)}:"] + lines if lines else []

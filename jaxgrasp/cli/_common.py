@@ -1,0 +1,271 @@
+"""What every ``jaxgrasp`` sub-command shares: one-line errors, numbers, the grasp to use.
+
+Every error in the input (bad file, bad value, bad option) is a :class:`UsageError` (or a
+:class:`~jaxgrasp.model._validation.GraspValueError`), which :func:`jaxgrasp.cli.main` prints as
+one line ``jaxgrasp: error: ...`` on stderr, exiting with :data:`EXIT_USAGE`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.model._fields import FIELD, SWEEPABLE
+from jaxgrasp.presets import PRESETS
+
+__all__ = [
+    "EXIT_USAGE",
+    "UsageError",
+    "Parser",
+    "parse_number",
+    "check_chunk_size",
+    "OVERRIDES",
+    "add_grasp_source",
+    "add_overrides",
+    "grasp_source",
+    "grasp_notes",
+    "load_grasp",
+    "check_out",
+    "lock_out",
+    "replaced_text",
+    "ChunkProgress",
+    "say",
+    "add_epsilon_option",
+    "epsilon_columns",
+]
+
+EXIT_USAGE = 2
+"""Exit status of a command whose input is wrong."""
+
+OVERRIDES = SWEEPABLE
+"""Fields one number sets for the whole grasp (every contact at once), in option order:
+``jaxgrasp evaluate --young-modulus PA ...`` and the sweep's axes."""
+
+
+class UsageError(Exception):
+    """A problem with the command line or its input; reported in one line, exit 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one :class:`UsageError` line, not usage + message."""
+
+    def error(self, message):
+        raise UsageError(f"{message} (see '{self.prog} --help')")
+
+
+def parse_number(option: str, text: str, what: str = "value") -> float:
+    """``text`` as a finite float; a :class:`UsageError` naming ``option`` otherwise."""
+    t = text.strip()
+    try:
+        x = float(t)
+    except ValueError:
+        raise UsageError(f"{option}: {what} {t!r} is not a number") from None
+    if not math.isfinite(x):
+        raise UsageError(f"{option}: {what} {t!r} must be finite")
+    return x
+
+
+def check_chunk_size(value: int | None) -> None:
+    """``--chunk-size`` must be at least 1 (``None``: the default)."""
+    if value is not None and value < 1:
+        raise UsageError(f"--chunk-size must be >= 1, got {value}")
+
+
+def add_grasp_source(p: argparse.ArgumentParser) -> None:
+    """The grasp to use: a positional ``file`` or ``--preset NAME``."""
+    p.add_argument("file", nargs="?", help="grasp file (.toml or .json, SI units)")
+    p.add_argument("--preset", choices=list(PRESETS), help="one of the paper's grasps instead of a file")
+
+
+def add_overrides(p: argparse.ArgumentParser) -> None:
+    """``--young-modulus PA`` etc.: one number for a field of the whole grasp (:data:`OVERRIDES`)."""
+    for name in OVERRIDES:
+        field = FIELD[name]
+        p.add_argument(field.option, dest=name, type=float, metavar=field.metavar, help=field.help)
+
+
+def grasp_source(args) -> str:
+    """The grasp's name in messages: the file, or ``preset cube``."""
+    return args.file or f"preset {args.preset}"
+
+
+def grasp_notes(grasp) -> list[str]:
+    """Remarks on a valid grasp that may not be what its author meant (one line each):
+    normals pointing towards the centre of mass (:func:`jaxgrasp.model._validation.inward_contacts`)."""
+    from jaxgrasp.model._validation import inward_contacts
+
+    inward = inward_contacts(grasp.positions, grasp.normals)
+    if not inward:
+        return []
+    names = [str(i) for i in inward]
+    which = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+    one = len(inward) == 1
+    return [
+        f"the normal{'' if one else 's'} of contact{'' if one else 's'} {which} "
+        f"point{'s' if one else ''} towards the centre of mass (n . c <= 0): evaluated as an "
+        "inside grip (a fingertip pressing outward on the wall of a cavity); if the fingertip "
+        "presses from outside, flip the normal: normals point out of the object"
+    ]
+
+
+def load_grasp(args, overrides: bool = True, keep_mesh: bool = False):
+    """The grasp named on the command line (file or preset), with overrides applied; with
+    ``keep_mesh``, a file naming a mesh gives its :class:`~jaxgrasp.io._mesh.MeshGrasp` (the
+    overrides applied to its grasp)."""
+    from jaxgrasp.io._grasp_file import load
+    from jaxgrasp.io._mesh import MeshGrasp
+
+    if (args.file is None) == (args.preset is None):
+        if args.file is None and getattr(args, "default_preset", None):
+            args.preset = args.default_preset
+        else:
+            raise UsageError(f"give either a grasp FILE or --preset {'|'.join(PRESETS)}")
+    loaded = load(args.file, keep_mesh=keep_mesh) if args.file is not None else PRESETS[args.preset]()
+    if not overrides:
+        return loaded
+    if isinstance(loaded, MeshGrasp):
+        return loaded.replace(grasp=_overridden(loaded.grasp, args))
+    return _overridden(loaded, args)
+
+
+def _overridden(grasp, args):
+    """``grasp`` with the command line's overrides (``--young-modulus`` ...) applied."""
+    import numpy as np
+
+    from jaxgrasp.model._grasp import Grasp
+    from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
+
+    given = {name: getattr(args, name) for name in OVERRIDES if getattr(args, name, None) is not None}
+    if not given:
+        return grasp
+    fields = grasp.to_numpy()
+    for name, value in given.items():
+        _check_override(name, value)
+        fields[name] = np.full_like(fields[name], value)
+    options = ", ".join(f"{FIELD[n].option} {v:g}" for n, v in given.items())
+    dr, r = fields["initial_deformation"], fields["radius"]
+    if ("initial_deformation" in given or "radius" in given) and not np.all(dr < r):
+        i = int(np.flatnonzero(~(dr < r))[0])
+        raise UsageError(
+            f"with {options}: initial_deformation ({dr[i]:g} m) must be below the fingertip "
+            f"radius ({r[i]:g} m)"
+        )
+    try:
+        return Grasp(**check_grasp_inputs(**fields))
+    except GraspValueError as exc:  # another rule between fields, e.g. the energy scale
+        raise UsageError(f"with {options}: {exc}") from None
+
+
+def _check_override(name: str, value: float) -> None:
+    """One override's own rules, named by its option (``--friction -1: must be positive``)."""
+    import numpy as np
+
+    field = FIELD[name]
+    text = f"{field.option} {value:g}"
+    if not math.isfinite(value):
+        raise UsageError(f"{text}: {name} must be finite")
+    if not field.allows(np.float64(value)):
+        raise UsageError(f"{text}: {name} must be {field.rule}" + (f" ({field.unit})" if field.unit else ""))
+
+
+# --------------------------------------------------------------------------- output folders
+
+
+def check_out(out: Path) -> None:
+    """``--out`` must be a folder (existing or not) where files can be created."""
+    try:
+        outputs.check_writable(out)
+    except outputs.OutputError as exc:
+        raise UsageError(f"--out: {exc}") from None
+
+
+def lock_out(out: Path) -> outputs.FolderLock:
+    """The lock of ``--out`` (created if needed), held; a one-line error if another run holds it."""
+    lock = outputs.FolderLock(out)
+    try:
+        return lock.acquire()
+    except outputs.FolderBusy as exc:
+        raise UsageError(f"--out: {exc}") from None
+    except OSError as exc:
+        raise UsageError(f"cannot create --out folder {str(out)!r}: {exc.strerror or exc}") from None
+
+
+def replaced_text(replaced, removed) -> str:
+    """`` (replacing the previous sweep.npz, ...; removing the previous sweep.png)`` or ''."""
+    parts = [f"{verb} the previous {', '.join(names)}" for verb, names in (("replacing", replaced), ("removing", removed)) if names]
+    return f" ({'; '.join(parts)})" if parts else ""
+
+
+# --------------------------------------------------------------------------- progress
+
+
+def say(line: str) -> None:
+    """One progress or note line on stderr, at once."""
+    print(line, file=sys.stderr, flush=True)
+
+
+class ChunkProgress:
+    """``progress(done, total)`` of the batched engine: a line before the first chunk and
+    one per chunk on stderr (``jaxgrasp: chunk 2/8 (6/24 points), elapsed 3.1 s, about
+    4 s left``); the time left is estimated from the chunks after the first, which
+    includes the compilation. Silent unless ``show``."""
+
+    def __init__(self, verb: str, noun: str, total: int, chunk: int, n_devices: int = 1, show: bool = True):
+        self.verb, self.noun, self.total, self.chunk, self.show = verb, noun, total, chunk, show
+        self.nchunks = math.ceil(total / chunk)
+        self.n_devices = n_devices
+        self.t_start = time.perf_counter()
+        self._first: tuple[int, float] | None = None  # (done, time) after the first chunk
+
+    def start(self) -> None:
+        """The line before the first chunk (how many items, chunks and devices)."""
+        self.t_start = time.perf_counter()
+        if self.show:
+            on = f" on {self.n_devices} devices" if self.n_devices > 1 else ""
+            say(
+                f"jaxgrasp: {self.verb} {self.total} {self.noun}s in {self.nchunks} chunks of {self.chunk}{on} "
+                "(the first chunk includes compilation)"
+            )
+
+    def __call__(self, done: int, total: int) -> None:
+        now = time.perf_counter()
+        if self._first is None:
+            self._first = (done, now)
+            left = "time left known after the next chunk" if done < total else "done"
+        elif done < total:
+            rate = (done - self._first[0]) / max(now - self._first[1], 1e-9)
+            left = f"about {math.ceil((total - done) / rate)} s left"
+        else:
+            left = "done"
+        if self.show:
+            k = math.ceil(done / self.chunk)
+            say(
+                f"jaxgrasp: chunk {k}/{self.nchunks} ({done}/{total} {self.noun}s), "
+                f"elapsed {now - self.t_start:.1f} s, {left}"
+            )
+
+
+# --------------------------------------------------------------------------- epsilon column
+
+
+def add_epsilon_option(p: argparse.ArgumentParser) -> None:
+    """``--epsilon``: add the Ferrari-Canny metric's columns to a command's tables."""
+    p.add_argument(
+        "--epsilon",
+        action="store_true",
+        help="add columns epsilon and force_closure (Ferrari-Canny metric, 8 cone edges, soft fingers)",
+    )
+
+
+def epsilon_columns(grasps, shape=None) -> dict:
+    """``{"epsilon": values, "force_closure": bools}`` of a batched grasp
+    (:func:`jaxgrasp.epsilon`), reshaped to ``shape`` (e.g. a sweep's grid)."""
+    from jaxgrasp.analysis._epsilon import epsilon
+
+    eps = epsilon(grasps)
+    cols = {"epsilon": eps.value, "force_closure": eps.force_closure}
+    return {k: v.reshape(shape) if shape is not None else v for k, v in cols.items()}

@@ -1,0 +1,95 @@
+"""``jaxgrasp show``: a 3-D picture of one grasp and the way it fails (and a GLB of the scene)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.cli._common import (
+    UsageError,
+    add_grasp_source,
+    add_overrides,
+    grasp_source,
+    load_grasp,
+)
+
+__all__ = ["add_parser", "run", "PICTURE_SUFFIXES"]
+
+PICTURE_SUFFIXES = (".png", ".pdf", ".svg")
+"""The picture formats ``--out`` may name."""
+
+
+def add_parser(sub) -> None:
+    """Add the ``show`` command to the ``jaxgrasp`` sub-parsers."""
+    p = sub.add_parser(
+        "show",
+        help="draw one grasp in 3-D with the motion that makes it fail (png; --glb for a 3-D viewer)",
+        description=(
+            "Evaluate one grasp and draw it in 3-D: the object (its mesh, or the contacts' hull), "
+            "each fingertip pressed into its contact with its normal and friction cone, the limiting "
+            "contact in red, and the object at the least-energy pose of the limiting boundary as a "
+            "ghost, the motion magnified by the factor the title states. --glb writes the same "
+            "scene as a GLB file for any 3-D viewer."
+        ),
+    )
+    add_grasp_source(p)
+    add_overrides(p)
+    p.add_argument("--out", default="grasp.png", metavar="FILE", help="the picture, .png, .pdf or .svg (default grasp.png)")
+    p.add_argument("--glb", metavar="FILE", help="also write the scene as a GLB file (.glb)")
+    p.add_argument("--magnification", type=float, metavar="X",
+                   help="factor the ghost's motion is magnified by (default: a round one that makes it visible)")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Evaluate the grasp, write the picture (and the GLB) as one set; one summary line."""
+    from jaxgrasp.engine._evaluate import evaluate
+    from jaxgrasp.io._mesh import MeshGrasp
+    from jaxgrasp.plots._plots import draw_scene, save_figure
+    from jaxgrasp.plots._scene import grasp_scene
+
+    targets = _check_outputs(args)
+    grasp = load_grasp(args, keep_mesh=True)
+    result = evaluate(grasp.grasp if isinstance(grasp, MeshGrasp) else grasp)
+    scene = grasp_scene(grasp, result, magnification=args.magnification)
+    fig = draw_scene(scene)
+    members = {targets[0]: lambda fh: save_figure(fig, fh, format=targets[0].suffix[1:].lower())}
+    if len(targets) > 1:
+        members[targets[1]] = scene.to_trimesh().export(file_type="glb")
+    try:
+        for t in targets:
+            t.parent.mkdir(parents=True, exist_ok=True)
+        replaced = outputs.write_set(members)
+    except OSError as exc:
+        raise UsageError(f"cannot write {', '.join(map(str, targets))}: {exc.strerror or exc}") from None
+    limit = (f", limited by {scene.limiting_kind} of contact {scene.limiting_contact} (ghost motion "
+             f"x{scene.magnification:g})" if scene.limiting_kind else "")
+    print(
+        f"show {grasp_source(args)}: {scene.status}, value {scene.value:.6e} J{limit}; wrote "
+        + ", ".join(map(str, targets))
+        + (f" (replacing the previous {', '.join(p.name for p in replaced)})" if replaced else "")
+    )
+    return 0
+
+
+def _check_outputs(args) -> list[Path]:
+    """The picture and GLB paths, checked before any computation (suffix, writable folder)."""
+    m = args.magnification
+    if m is not None and not (math.isfinite(m) and m > 0):
+        raise UsageError(f"--magnification must be a finite number > 0, got {m:g}")
+    targets = [("--out", Path(args.out), PICTURE_SUFFIXES)]
+    if args.glb is not None:
+        targets.append(("--glb", Path(args.glb), (".glb",)))
+    for option, path, suffixes in targets:
+        if path.suffix.lower() not in suffixes:
+            raise UsageError(f"{option} {str(path)!r}: the file must end in {' or '.join(suffixes)}")
+        if path.is_dir():
+            raise UsageError(f"{option} {str(path)!r} is a folder; give a file name")
+        try:
+            outputs.check_writable(path.parent)  # creates nothing
+        except outputs.OutputError as exc:
+            raise UsageError(f"{option} {str(path)!r}: {exc}") from None
+    if len(targets) > 1 and targets[0][1].resolve() == targets[1][1].resolve():
+        raise UsageError("--out and --glb name the same file")
+    return [path for _, path, _ in targets]

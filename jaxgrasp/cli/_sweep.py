@@ -1,0 +1,341 @@
+"""``jaxgrasp sweep``: evaluate a grasp over a grid of parameters; write npz, csv and a plot.
+
+Axis specs (SI units): ``start:stop:count`` (inclusive ``linspace``), a comma list
+``0,0.1,0.2`` or a single number. With no axis at all the paper's Fig. 6 grid is swept
+(E 2e5..1e6 Pa x 9, initial deformation 1..5 mm x 41); with no grasp, preset ``cube``.
+
+The output folder is checked for writability before anything is computed and locked
+(:class:`jaxgrasp.io._outputs.FolderLock`) for the whole run, so a second sweep into it fails
+at once. After each chunk the finished points are kept in ``DIR/sweep.partial.npz``
+(:mod:`jaxgrasp.engine._checkpoint`); at the end ``sweep.npz``, ``sweep.csv`` and ``sweep.png``
+replace the previous ones as one set (:func:`jaxgrasp.io._outputs.write_set`) and the
+checkpoint is removed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.model._fields import FIELD
+from jaxgrasp.engine._prefetch import prefetch
+from jaxgrasp.model._codes import NO_BOUNDARY
+from jaxgrasp.model._validation import counted
+from jaxgrasp.cli._common import (
+    OVERRIDES,
+    ChunkProgress,
+    add_epsilon_option,
+    epsilon_columns,
+    UsageError,
+    add_grasp_source,
+    check_chunk_size,
+    check_out,
+    grasp_source,
+    load_grasp,
+    lock_out,
+    parse_number,
+    replaced_text,
+)
+
+__all__ = ["add_parser", "run", "parse_axis_spec", "auto_chunk", "AXES", "PAPER_AXES"]
+
+AXES = OVERRIDES
+"""The parameters a sweep can vary (:data:`jaxgrasp.model._fields.SWEEPABLE`), in option order."""
+
+PAPER_AXES = {
+    "young_modulus": "2e5:1e6:9",
+    "initial_deformation": "1e-3:5e-3:41",
+}
+"""The grid of the paper's Fig. 6 (used when no axis is given)."""
+
+MIN_AUTO_CHUNK = 64
+"""The smallest batch per device :func:`auto_chunk` picks (smaller ones cost more per
+grasp: the paper's grid runs in 0.64 s in 6 chunks of 32 points per device, 0.53 s in
+3 of 64)."""
+AUTO_CHUNKS = 10
+"""About this many progress steps on a long sweep (:func:`auto_chunk`)."""
+
+OUTPUT_NAMES = ("sweep.npz", "sweep.csv", "sweep.png")
+"""The files of one sweep's output set, in ``--out``."""
+
+PARTIAL_NAME = "sweep.partial.npz"
+"""The checkpoint of the finished points (:mod:`jaxgrasp.engine._checkpoint`), in ``--out``."""
+
+CHECKPOINT_SHARE = 0.05
+"""Checkpoints take at most about this share of a sweep's time (later ones are skipped
+while the last one's cost exceeds it); the last chunk's is always written."""
+
+FIG6_TITLE = "Fig. 6: evaluation value for each Young's modulus and initial deformation (cube)"
+
+
+def parse_axis_spec(option: str, spec: str) -> np.ndarray:
+    """Parse ``start:stop:count``, ``a,b,c`` or ``x`` into a 1-D float array.
+
+    Raises:
+        UsageError: malformed spec (one line, naming the option).
+    """
+    text = spec.strip()
+    if not text:
+        raise UsageError(f"{option}: empty value; give START:STOP:COUNT, a comma list or a number")
+    if ":" in text:
+        return _parse_range(option, spec, text)
+    items = text.split(",")
+    if any(not s.strip() for s in items):
+        raise UsageError(f"{option}: list {spec!r} has an empty item")
+    return np.asarray([parse_number(option, s) for s in items], dtype=np.float64)
+
+
+def _parse_range(option: str, spec: str, text: str) -> np.ndarray:
+    parts = text.split(":")
+    if len(parts) != 3:
+        raise UsageError(f"{option}: range {spec!r} must be START:STOP:COUNT (e.g. 1e-3:5e-3:41)")
+    start = parse_number(option, parts[0], "start")
+    stop = parse_number(option, parts[1], "stop")
+    c = parts[2].strip()
+    try:
+        count = int(c)
+    except ValueError:
+        raise UsageError(f"{option}: count {c!r} of range {spec!r} must be a whole number") from None
+    if count < 1:
+        raise UsageError(f"{option}: range {spec!r} is empty (count {count}); the count must be >= 1")
+    if count == 1 and start != stop:
+        raise UsageError(f"{option}: range {spec!r} has count 1 but start != stop; give a single number")
+    return np.linspace(start, stop, count)
+
+
+def add_parser(sub) -> None:
+    """Add the ``sweep`` command to the ``jaxgrasp`` sub-parsers."""
+    sp = sub.add_parser(
+        "sweep",
+        help="evaluate a grasp over a grid of parameters (npz, csv, png)",
+        description=(
+            "Evaluate a grasp over the Cartesian grid of the given parameter axes; write "
+            "DIR/sweep.npz, DIR/sweep.csv (one row per grid point, SI units) and DIR/sweep.png "
+            "as one set, replacing a previous set at once. Until then the finished points are "
+            "kept in DIR/sweep.partial.npz (what an interrupted sweep leaves); one sweep at a "
+            "time per DIR."
+        ),
+        epilog=(
+            "SPEC is START:STOP:COUNT (inclusive), a comma list or a number, in SI units. "
+            "Without a grasp: preset cube. Without any axis: the paper's Fig. 6 grid "
+            f"(--young-modulus {PAPER_AXES['young_modulus']} "
+            f"--initial-deformation {PAPER_AXES['initial_deformation']}). "
+            "Example: jaxgrasp sweep --preset prism --young-modulus 2e5:1e6:5 "
+            "--initial-deformation 1e-3:5e-3:41 --mass 0,0.1,0.2 --out out/"
+        ),
+    )
+    add_grasp_source(sp)
+    for name in AXES:
+        field = FIELD[name]
+        sp.add_argument(field.option, dest=name, metavar="SPEC", help=f"{field.help} (axis spec)")
+    sp.add_argument(
+        "--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)"
+    )
+    sp.add_argument(
+        "--chunk-size",
+        type=int,
+        default=None,
+        metavar="N",
+        help=(
+            "grid points per compiled batch (default: about a tenth of the grid, "
+            "at most 64 per CPU device, 1024 per GPU)"
+        ),
+    )
+    sp.add_argument("--no-plot", action="store_true", help="do not write sweep.png")
+    add_epsilon_option(sp)
+    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    sp.set_defaults(func=run, default_preset="cube")
+
+
+def auto_chunk(total: int, cap: int = 64, n_devices: int = 1) -> int:
+    """About a tenth of the grid, at least :data:`MIN_AUTO_CHUNK` per device, at most
+    ``cap`` (jaxgrasp.analysis._sweep.default_chunk_size), as a batch bucket
+    (:func:`jaxgrasp.engine._batch.bucket_size`), so that sweeps share compilations."""
+    from jaxgrasp.engine._batch import bucket_size
+
+    return bucket_size(cap, max(MIN_AUTO_CHUNK * n_devices, math.ceil(total / AUTO_CHUNKS)))
+
+
+# --------------------------------------------------------------------------- the command
+
+
+def run(args) -> int:
+    """Sweep the grasp of the command line; write the files and print one summary line."""
+    from jaxgrasp.analysis._sweep import check_inputs, grid_grasp, sweep
+
+    axes, paper = _parse_axes(args)
+    check_chunk_size(args.chunk_size)
+    grasp = load_grasp(args, overrides=False)
+    check_inputs(grasp, chunk_size=args.chunk_size, **axes)  # bad input: nothing touched yet
+    out = Path(args.out)
+    check_out(out)
+
+    plan = _plan_chunks(int(np.prod([a.size for a in axes.values()])), args.chunk_size)
+    if not args.no_plot:
+        prefetch("jaxgrasp.plots._plots")  # matplotlib's import overlaps the compile
+    with lock_out(out):
+        checkpoint = _Checkpoint(out / PARTIAL_NAME, grasp, axes, plan.chunk)
+        show = not args.quiet and plan.nchunks > 1
+        progress = ChunkProgress("sweeping", "point", plan.total, plan.chunk, plan.n_devices, show)
+        progress.start()
+        result = sweep(grasp, chunk_size=plan.chunk, progress=progress, on_chunk=checkpoint, **axes)
+        wall = time.perf_counter() - progress.t_start
+
+        title = f"jaxgrasp sweep: {grasp_source(args)}"
+        if paper and args.preset == "cube" and args.file is None:
+            title = FIG6_TITLE
+        extra = epsilon_columns(grid_grasp(grasp, **axes), result.shape) if args.epsilon else None
+        written, replaced, removed = _write_outputs(result, out, None if args.no_plot else title, extra)
+    print(_summary_line(result, grasp_source(args), wall, out, written, replaced, removed))
+    return 0
+
+
+def _parse_axes(args) -> tuple[dict[str, np.ndarray], bool]:
+    """The axes given on the command line, or the paper's; (axes, whether the paper's)."""
+    given = {n: getattr(args, n) for n in AXES if getattr(args, n) is not None}
+    paper = not given
+    specs = dict(PAPER_AXES) if paper else given
+    return {n: parse_axis_spec(FIELD[n].option, s) for n, s in specs.items()}, paper
+
+
+@dataclasses.dataclass(frozen=True)
+class _Plan:
+    total: int  # grid points
+    chunk: int  # grid points per compiled batch, a multiple of n_devices
+    nchunks: int
+    n_devices: int
+
+
+def _plan_chunks(total: int, chunk_size: int | None) -> _Plan:
+    """The batch of ``--chunk-size`` (default :func:`auto_chunk`), a multiple of the devices."""
+    import jax
+
+    from jaxgrasp.analysis._sweep import bucket_size, default_chunk_size
+
+    n_devices = jax.device_count()
+    chunk = chunk_size if chunk_size is not None else auto_chunk(total, default_chunk_size(), n_devices)
+    chunk = bucket_size(chunk, total, n_devices)
+    return _Plan(total, chunk, math.ceil(total / chunk), n_devices)
+
+
+class _Checkpoint:
+    """``on_chunk`` of :func:`jaxgrasp.analysis._sweep.sweep`: keeps the finished points in
+    ``sweep.partial.npz`` (:class:`jaxgrasp.engine._checkpoint.SweepCheckpoint`), atomically.
+
+    Each write also leaves the note an interrupt prints (``kept K of N points in PATH``).
+    A write is skipped while the previous one cost more than :data:`CHECKPOINT_SHARE`
+    of the time since (fast chunks: of 8 chunks of 3 cube points, ~70 ms each, 5 were
+    written); the skipped write is then left to an interrupt
+    (:func:`jaxgrasp.io._outputs.set_last_write`), so a Ctrl-C or SIGTERM keeps every
+    finished point, and only a hard kill (``kill -9``) loses those since the last write.
+    The last chunk's is always written.
+    """
+
+    def __init__(self, path: Path, grasp, axes: dict, chunk: int):
+        self.path = path
+        self.grasp = grasp.to_numpy()
+        self.axes = axes
+        self.chunk = chunk
+        self.total = int(np.prod([a.size for a in axes.values()]))
+        self.done = np.zeros(self.total, dtype=bool)
+        self._results = None  # the sweep's flat result arrays (filled chunk by chunk)
+        self._lock = threading.Lock()  # the worker's chunk updates vs an interrupt's write
+        self._cost = 0.0  # seconds the last write took
+        self._end = 0.0  # when it ended
+
+    def __call__(self, start: int, stop: int, results) -> None:
+        with self._lock:
+            self.done[start:stop] = True
+            self._results = results
+        now = time.perf_counter()
+        if stop < self.total and self._cost > CHECKPOINT_SHARE * (now - self._end):
+            outputs.set_last_write("sweep", self.write)
+            return
+        self.write()
+        self._end = time.perf_counter()
+        self._cost = self._end - now
+
+    def write(self) -> None:
+        """Write the points finished so far (the worker's later chunks do not touch them)."""
+        from jaxgrasp.engine._checkpoint import SweepCheckpoint
+
+        outputs.set_last_write("sweep", None)
+        with self._lock:
+            partial = SweepCheckpoint.from_flat(self.axes, self.done.copy(), self._results, self.grasp, self.chunk)
+        note = f"kept {partial.done_count} of {self.total} points in {self.path}"
+        outputs.write_set({self.path: partial.save}, on_publish=lambda: outputs.set_note("sweep", note))
+
+
+def _write_outputs(result, out: Path, title: str | None, extra=None) -> tuple[list[str], list[str], list[str]]:
+    """Write ``sweep.npz``, ``sweep.csv`` and (with a ``title``) ``sweep.png`` as one set.
+
+    The set replaces the previous one at once, removing a previous ``sweep.png`` that the
+    new set lacks, and the checkpoint ``sweep.partial.npz``. Returns the names written,
+    those that replaced a previous file and the previous files removed.
+    """
+    members = {
+        out / "sweep.npz": lambda fh: result.to_npz(fh, extra),
+        out / "sweep.csv": lambda fh: result.to_csv(fh, extra),
+    }
+    if title is not None:
+        from jaxgrasp.plots._plots import plot_sweep, save_figure
+
+        fig = plot_sweep(result, title=title)
+        members[out / "sweep.png"] = lambda fh: save_figure(fig, fh, format="png")
+    stale = [out / n for n in OUTPUT_NAMES if out / n not in members and (out / n).exists()]
+    try:
+        replaced = outputs.write_set(
+            members,
+            remove=stale + [out / PARTIAL_NAME],
+            on_publish=lambda: _published(out),
+        )
+    except OSError as exc:
+        raise UsageError(f"cannot write to --out {str(out)!r}: {exc.strerror or exc}") from None
+    return [p.name for p in members], [p.name for p in replaced], [p.name for p in stale]
+
+
+def _published(out: Path) -> None:
+    """The whole set is in place: an interrupt now only says so (no checkpoint to write)."""
+    outputs.set_last_write("sweep", None)
+    outputs.set_note("sweep", f"the results are in {out}")
+
+
+def _fmt_param(name: str, x: float) -> str:
+    unit = FIELD[name].unit
+    return f"{name}={x:.6g}" + (f" {unit}" if unit else "")
+
+
+def _best_text(result) -> str:
+    best = result.best()
+    if best is None:
+        return "best: none (no converged point)"
+    if best["status"] != "stable":  # every trusted point has value 0
+        return "best: none (no stable point)"
+    where = ", ".join(_fmt_param(n, best[n]) for n in result.axes)
+    lim = (
+        f"{best['limiting_kind']} of contact {best['limiting_contact']}"
+        if best["limiting_contact"] != NO_BOUNDARY
+        else best["status"]
+    )
+    return f"best {best['value']:.6e} J at {where} ({lim})"
+
+
+def _summary_line(
+    result, source: str, wall: float, out: Path, written: list[str], replaced=(), removed=()
+) -> str:
+    c = result.counts()
+    shape = " x ".join(f"{len(a)} {n}" for n, a in result.axes.items())
+    return (
+        f"sweep {source}: {counted(result.size, 'point')} ({shape}); "
+        f"stable {c['stable']}, unstable {c['unstable']}, infeasible {c['infeasible']}, "
+        f"not_converged {c['not_converged']}; {_best_text(result)}; "
+        f"wall {wall:.1f} s (compile {result.compile_seconds:.1f} s, run {result.run_seconds:.1f} s); "
+        f"wrote {out}/{{{','.join(written)}}}"
+        + replaced_text(replaced, removed)
+    )

@@ -1,0 +1,235 @@
+"""``jaxgrasp tune``: maximise a grasp's value over chosen parameters; write the tuned grasp.
+
+Writes the tuned grasp to ``--out`` (``.toml`` or ``.json``) and a plot of the value over
+the iterations next to it (same name, ``.png``), and prints one summary line. The folder
+of ``--out`` is checked for writability before tuning; the grasp file and its plot then
+replace the previous ones as one set (:func:`jaxgrasp.io._outputs.write_set`).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.model._fields import TUNABLE
+from jaxgrasp.model._validation import counted
+from jaxgrasp.cli._common import (
+    UsageError,
+    add_grasp_source,
+    grasp_source,
+    load_grasp,
+    parse_number,
+)
+
+__all__ = ["add_parser", "run", "parse_bounds", "check_bounds"]
+
+
+def parse_bounds(items) -> dict:
+    """``["initial_deformation=0.001:0.005", "positions=0.01"]`` -> bounds dict (SI units).
+
+    ``NAME=LO:HI`` gives a range (every contact), ``positions=HALF_WIDTH`` a half-width in m;
+    errors name the option and its syntax (:class:`UsageError`).
+    """
+    out = {}
+    for item in items or []:
+        name, eq, spec = item.partition("=")
+        name = name.strip()
+        if not eq or not name or not spec.strip():
+            raise UsageError(f"--bounds: {item!r} must be NAME=LO:HI (or positions=HALF_WIDTH)")
+        if name in out:
+            raise UsageError(f"--bounds: {name!r} given more than once")
+        if name.partition(":")[0] == "positions":
+            if ":" in spec:
+                raise UsageError(
+                    f"--bounds {item}: give positions=HALF_WIDTH, one number: how far (m) each "
+                    "contact may move in its face"
+                )
+            h = parse_number("--bounds", spec, "half-width")
+            if not h > 0:
+                raise UsageError(f"--bounds {item}: the half-width must be > 0 m")
+            out[name] = h
+        elif ":" in spec:
+            parts = spec.split(":")
+            if len(parts) != 2:
+                raise UsageError(f"--bounds: {item!r} must be NAME=LO:HI")
+            lo = parse_number("--bounds", parts[0], "lower bound")
+            hi = parse_number("--bounds", parts[1], "upper bound")
+            if not lo < hi:
+                raise UsageError(f"--bounds {item}: LO must be below HI")
+            out[name] = (lo, hi)
+        else:
+            raise UsageError(f"--bounds {item}: give a range, {name}=LO:HI (only positions takes one number)")
+    return out
+
+
+def check_bounds(params, bounds: dict) -> None:
+    """Every ``--param`` without default bounds has ``--bounds``, and every ``--bounds`` is
+    of a ``--param`` (:class:`UsageError` naming the options; library messages would show
+    Python syntax such as ``bounds={'positions': 0.01}``)."""
+    from jaxgrasp.model._fields import FIELD
+    from jaxgrasp.analysis._tune import parse_param
+
+    specs = [parse_param(p) for p in params]
+    tuned = {s.name for s in specs} | {s.label for s in specs}
+    for key in bounds:
+        if key not in tuned:
+            raise UsageError(
+                f"--bounds {key}=...: {key} is not tuned (add --param {key.partition(':')[0]}, "
+                f"or drop these bounds)"
+            )
+    for s in specs:
+        if s.name == "initial_deformation" or s.name in bounds or s.label in bounds:
+            continue
+        if s.name == "positions":
+            form = "positions=HALF_WIDTH (m, how far each contact may move in its face)"
+        else:
+            form = f"{s.name}=LO:HI ({FIELD[s.name].unit or 'dimensionless'})"
+        raise UsageError(f"--param {s.label} needs --bounds {form}; only initial_deformation has default bounds")
+
+
+def add_parser(sub) -> None:
+    """Add the ``tune`` command to the ``jaxgrasp`` sub-parsers."""
+    from jaxgrasp.analysis._tune import METHODS
+
+    sp = sub.add_parser(
+        "tune",
+        help="maximise the value over chosen parameters; write the tuned grasp and a plot",
+        description=(
+            "Maximise the evaluation value of a grasp over the chosen parameters within "
+            "bounds (gradient-based, L-BFGS-B); write the tuned grasp to --out and a plot "
+            "of the value over the iterations next to it (.png)."
+        ),
+        epilog=(
+            f"PARAM is one of {', '.join(TUNABLE)}; per-contact ones tune one value per "
+            "contact, or one shared value with the suffix ':shared' (e.g. "
+            "initial_deformation:shared). 'positions' moves each contact within its face "
+            "(give --bounds positions=HALF_WIDTH in m). Only initial_deformation has "
+            "default bounds. Example: jaxgrasp tune --preset cube --param "
+            "initial_deformation:shared --bounds initial_deformation=0.001:0.005 --out tuned.toml"
+        ),
+    )
+    add_grasp_source(sp)
+    sp.add_argument(
+        "--param",
+        action="append",
+        metavar="PARAM",
+        help="a parameter to tune (repeatable; default initial_deformation)",
+    )
+    sp.add_argument(
+        "--bounds",
+        action="append",
+        metavar="NAME=LO:HI",
+        help="bounds of a parameter in SI units (repeatable); positions=HALF_WIDTH in m",
+    )
+    sp.add_argument("--maxiter", type=int, default=50, metavar="N", help="most iterations (default 50)")
+    sp.add_argument("--method", choices=METHODS, default=METHODS[0], help=f"optimiser (default {METHODS[0]})")
+    sp.add_argument(
+        "--smooth-min-temperature",
+        type=float,
+        default=None,
+        metavar="J",
+        help="tune the soft minimum over boundaries at this temperature, J (default: hard minimum)",
+    )
+    sp.add_argument(
+        "--out", default="tuned.toml", metavar="FILE", help="tuned grasp file, .toml or .json (default tuned.toml)"
+    )
+    sp.add_argument("--no-plot", action="store_true", help="do not write the .png plot")
+    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    sp.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Tune the grasp of the command line; write it (and a plot) and print one summary line."""
+    from jaxgrasp.tolerance._options import EvaluateOptions
+    from jaxgrasp.analysis._tune import tune
+
+    out = _check_options(args)
+    bounds = parse_bounds(args.bounds)
+    params = args.param or ["initial_deformation"]
+    check_bounds(params, bounds)
+    grasp = load_grasp(args, overrides=False)
+    source = grasp_source(args)
+    options = EvaluateOptions(smooth_min_temperature=args.smooth_min_temperature)
+    progress = _progress_printer(args.quiet)
+    res = tune(grasp, params, bounds, maxiter=args.maxiter, options=options, method=args.method, callback=progress)
+    replaced = _write_outputs(res, out, None if args.no_plot else f"jaxgrasp tune: {source}")
+    tuned = "; ".join(f"{k} = {_fmt(v)}" for k, v in res.params.items() if k != "positions")
+    if "positions" in res.params:
+        tuned = (tuned + "; " if tuned else "") + "positions moved"
+    note = res.start_note()
+    print(
+        f"tune {source}: value {res.start_value:.6e} J -> {res.value:.6e} J "
+        f"(x{res.gain:.4f}, {counted(res.iterations, 'iteration')}, {res.status}); {tuned}; "
+        + (f"{note}; " if note else "")
+        + f"wrote {out}"
+        + ("" if args.no_plot else f", {out.with_suffix('.png')}")
+        + (f" (replacing the previous {', '.join(replaced)})" if replaced else "")
+    )
+    return 0
+
+
+def _check_options(args) -> Path:
+    """Reject a bad ``--out``, ``--maxiter`` or ``--smooth-min-temperature``; the out path."""
+    out = Path(args.out)
+    if out.suffix.lower() not in (".toml", ".json"):
+        raise UsageError(f"--out {str(out)!r}: the tuned grasp file must end in .toml or .json")
+    if out.exists() and out.is_dir():
+        raise UsageError(f"--out {str(out)!r} is a folder; give a file name ending in .toml or .json")
+    if args.maxiter < 1:
+        raise UsageError(f"--maxiter must be >= 1, got {args.maxiter}")
+    t = args.smooth_min_temperature
+    if t is not None and not (math.isfinite(t) and t > 0):
+        raise UsageError(f"--smooth-min-temperature must be a finite number > 0 (J), got {t}")
+    try:
+        outputs.check_writable(out.parent)  # before any computation; creates nothing
+    except outputs.OutputError as exc:
+        raise UsageError(f"--out {str(out)!r}: {exc}") from None
+    return out
+
+
+def _progress_printer(quiet: bool):
+    """``callback(iteration, value, u)`` of :func:`jaxgrasp.tune`: one line per iteration."""
+    t0 = time.perf_counter()
+
+    def progress(it, value, _u):
+        if not quiet:
+            el = time.perf_counter() - t0
+            note = " (includes compilation)" if it == 1 else ""
+            print(
+                f"jaxgrasp: iteration {it}: value {value:.6e} J, elapsed {el:.1f} s{note}",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    return progress
+
+
+def _write_outputs(res, out: Path, title: str | None) -> list[str]:
+    """Write the tuned grasp to ``out`` and (with a ``title``) its history plot beside it,
+    as one set; the names of the previous files they replaced."""
+    from jaxgrasp.io._grasp_file import to_text
+
+    members = {out: to_text(res.grasp, out).encode("utf-8")}
+    if title is not None:
+        from jaxgrasp.plots._plots import save_figure
+        from jaxgrasp.analysis._tune import plot_history
+
+        fig = plot_history(res, title=title)
+        members[out.with_suffix(".png")] = lambda fh: save_figure(fig, fh, format="png")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        replaced = outputs.write_set(members)
+    except OSError as exc:
+        raise UsageError(f"cannot write {str(out)!r}: {exc.strerror or exc}") from None
+    return [p.name for p in replaced]
+
+
+def _fmt(v) -> str:
+    a = np.atleast_1d(np.asarray(v, dtype=np.float64))
+    s = ", ".join(f"{x:.6g}" for x in a)
+    return s if a.size == 1 else f"[{s}]"

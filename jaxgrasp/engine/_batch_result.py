@@ -1,0 +1,174 @@
+"""The result of :func:`jaxgrasp.evaluate_batch`: every grasp's evaluation, a ranking, tables.
+
+A :class:`BatchResult` holds one batched :class:`~jaxgrasp.Evaluation` (NumPy arrays
+with a leading axis of ``B`` grasps, in input order) and what the batch adds: each
+grasp's contact count and mask, the one-line error of an invalid grasp, timings.
+Every Evaluation field reads directly (``res.value`` is ``res.evaluation.value``);
+``res[i]`` is grasp ``i``'s own :class:`~jaxgrasp.Evaluation`.
+
+Files: :meth:`BatchResult.to_csv` (one row per grasp: ``index``, ``num_contacts``,
+``value_J``, ``status``, ``limiting_kind``, ``limiting_contact``,
+``equilibrium_energy_J``, ``error``) and :meth:`BatchResult.to_npz` (every array; read
+back with :meth:`BatchResult.from_npz`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import Any, Mapping
+
+import jax
+import numpy as np
+
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.tolerance._result import FIELDS, Evaluation, SummaryNames
+from jaxgrasp.model._codes import BoundaryKind
+from jaxgrasp.tolerance._status import GraspStatus
+
+__all__ = ["BatchResult", "CSV_COLUMNS", "mark_invalid"]
+
+CSV_COLUMNS = (
+    "index",
+    "num_contacts",
+    "value_J",
+    "status",
+    "limiting_kind",
+    "limiting_contact",
+    "equilibrium_energy_J",
+    "error",
+)
+"""The columns of :meth:`BatchResult.to_csv`, in order."""
+
+_RANK_GROUP = {GraspStatus.STABLE: 0, GraspStatus.NOT_CONVERGED: 2, GraspStatus.INVALID: 3}  # others: 1
+
+
+def mark_invalid(results: dict[str, np.ndarray], rows) -> None:
+    """Set the rows ``rows`` of :class:`~jaxgrasp.Evaluation` field arrays (by name, leading
+    axis ``B``) to those of grasps that were not evaluated: NaN for floats, -1 for integer
+    codes, ``status`` :data:`~jaxgrasp.tolerance._status.GraspStatus.INVALID`."""
+    for a in results.values():
+        a[rows] = np.nan if np.issubdtype(a.dtype, np.floating) else -1
+    results["status"][rows] = GraspStatus.INVALID
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class BatchResult(SummaryNames):
+    """The evaluation of ``B`` grasps, in input order (SI units).
+
+    Every :class:`~jaxgrasp.Evaluation` field is an attribute with a leading ``B`` axis
+    (``value (B,)`` J, ``status (B,)``, ``boundary_energy (B, 2, N)`` J, ...; ``N`` is
+    the batch's padded contact count, inactive contacts marked as in :class:`Evaluation`).
+    An invalid grasp (not evaluated) has status
+    :data:`~jaxgrasp.tolerance._status.GraspStatus.INVALID`, NaN floats and -1 codes.
+
+    Attributes:
+        evaluation: the batched :class:`~jaxgrasp.Evaluation` (NumPy leaves).
+        num_contacts: ``(B,)`` active contacts of each grasp (0 for an invalid one).
+        active: ``(B, N)`` bool, the contacts each grasp has (its others are padding).
+        errors: ``B`` entries: ``None``, or the one-line reason a grasp is invalid.
+        compile_seconds: time spent compiling (0 when a compilation was reused).
+        run_seconds: time spent evaluating the chunks.
+        devices: number of devices the batch was sharded over.
+    """
+
+    evaluation: Evaluation
+    num_contacts: np.ndarray
+    active: np.ndarray
+    errors: tuple
+    compile_seconds: float = 0.0
+    run_seconds: float = 0.0
+    devices: int = 1
+
+    def __getattr__(self, name: str) -> Any:
+        if name in FIELDS:  # only reached for names that are not attributes of self
+            return getattr(self.__dict__["evaluation"], name)
+        raise AttributeError(f"'BatchResult' object has no attribute {name!r}")
+
+    def __len__(self) -> int:
+        return len(self.errors)
+
+    def __getitem__(self, i: int) -> Evaluation:
+        """Grasp ``i``'s :class:`~jaxgrasp.Evaluation` (contacts numbered as in the batch)."""
+        return jax.tree_util.tree_map(lambda a: a[i], self.evaluation)
+
+    # ---- ranking
+    def rank(self) -> np.ndarray:
+        """Grasp indices, best first: stable grasps by value (highest first), then
+        unstable and infeasible ones (value 0), then not_converged ones (untrusted) by
+        value, then invalid ones; ties keep input order."""
+        status = np.asarray(self.status)
+        group = np.select([status == s for s in _RANK_GROUP], list(_RANK_GROUP.values()), default=1)
+        value = np.nan_to_num(np.asarray(self.value, dtype=np.float64), nan=-np.inf)
+        return np.lexsort((np.arange(len(self)), -value, group))
+
+    # ---- tables and files
+    def rows(self, extra: Mapping[str, Any] | None = None) -> list[list]:
+        """The rows of :meth:`to_csv` (:data:`CSV_COLUMNS`, then the ``extra`` columns), in
+        input order; an invalid grasp's numbers are empty strings."""
+        value, energy = np.asarray(self.value), np.asarray(self.equilibrium_energy)
+        status, kind = self.status_names, self.limiting_kind_names
+        contact, count = np.asarray(self.limiting_contact), np.asarray(self.num_contacts)
+        extra = [np.asarray(a) for a in (extra or {}).values()]
+        fmt = outputs.csv_cell
+        return [
+            [i, int(count[i]), fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i]), self.errors[i] or ""]
+            + [fmt(a[i]) for a in extra]
+            for i in range(len(self))
+        ]
+
+    def to_csv(self, path, extra: Mapping[str, Any] | None = None) -> None:
+        """Write one row per grasp, in input order (:data:`CSV_COLUMNS`): ``value_J`` and
+        ``equilibrium_energy_J`` with 17 significant digits (empty for an invalid grasp),
+        ``status`` and ``limiting_kind`` by name, ``limiting_contact`` (-1 none) and
+        ``error`` (empty for a valid grasp); then a column per ``extra`` entry (name ->
+        ``(B,)`` array, e.g. ``epsilon``). Atomic for a path; a binary file object is
+        written to directly."""
+        outputs.write_to(path, outputs.csv_content(CSV_COLUMNS + tuple(extra or ()), self.rows(extra)))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every array of :meth:`to_npz`, by name."""
+        out = {f: np.asarray(getattr(self.evaluation, f)) for f in FIELDS}
+        out.update(
+            num_contacts=np.asarray(self.num_contacts, dtype=np.int64),
+            active=np.asarray(self.active, dtype=bool),
+            error=np.asarray([e or "" for e in self.errors], dtype=str),
+            status_names=np.asarray(GraspStatus.labels(), dtype=str),
+            kind_names=np.asarray(BoundaryKind.labels(), dtype=str),
+            compile_seconds=np.float64(self.compile_seconds),
+            run_seconds=np.float64(self.run_seconds),
+            devices=np.int64(self.devices),
+        )
+        return out
+
+    def to_npz(self, path, extra: Mapping[str, Any] | None = None) -> None:
+        """Write a ``.npz`` with every :class:`~jaxgrasp.Evaluation` field (leading ``B``),
+        ``num_contacts``, ``active``, ``error`` (str, empty for a valid grasp),
+        ``status_names``, ``kind_names``, the timings, ``devices`` and the ``extra``
+        arrays by name; no pickled objects. Atomic for a path; read it back with
+        :meth:`from_npz`."""
+        arrays = self.arrays() | {k: np.asarray(v) for k, v in (extra or {}).items()}
+        outputs.write_to(path, lambda fh: np.savez(fh, **arrays))
+
+    @classmethod
+    def from_arrays(cls, z: Mapping[str, np.ndarray]) -> "BatchResult":
+        """From the arrays of :meth:`arrays` (e.g. an open ``np.load``)."""
+        return cls(
+            evaluation=Evaluation(**{f: np.array(z[f]) for f in FIELDS}),
+            num_contacts=np.array(z["num_contacts"]),
+            active=np.array(z["active"]),
+            errors=tuple(str(e) or None for e in z["error"]),
+            compile_seconds=float(z["compile_seconds"]),
+            run_seconds=float(z["run_seconds"]),
+            devices=int(z["devices"]),
+        )
+
+    @classmethod
+    def from_npz(cls, path: str | os.PathLike) -> "BatchResult":
+        """Read a file written by :meth:`to_npz`."""
+        with np.load(path, allow_pickle=False) as z:
+            return cls.from_arrays(z)
+
+    def __repr__(self) -> str:
+        counts = ", ".join(f"{k} {v}" for k, v in self.counts().items() if v)
+        return f"BatchResult({len(self)} grasps; {counts})"

@@ -1,0 +1,242 @@
+"""What an interrupted command keeps: a sweep's finished grid points, a batch's finished chunks.
+
+Sweeps: :class:`SweepCheckpoint`, the file ``sweep.partial.npz``. Batches:
+:class:`BatchCheckpoint`, the folder ``results.partial`` (one file per finished chunk, so a
+checkpoint costs the same at every chunk and survives ``kill -9``).
+
+The sweep's checkpoint ``sweep.partial.npz``:
+
+``jaxgrasp sweep --out DIR`` rewrites ``DIR/sweep.partial.npz`` (atomically, see
+:mod:`jaxgrasp.io._outputs`) after its chunks, and deletes it once the final
+``sweep.npz``/``sweep.csv``/``sweep.png`` are in place; an interrupted sweep leaves it
+behind with every point finished before the last checkpoint. Read it with
+:meth:`SweepCheckpoint.load`.
+
+File format (``np.load(path)``; no pickled objects), ``format`` =
+``"jaxgrasp-sweep-partial-1"``:
+
+* ``axis_names`` (str, 1-D) and ``axis_<name>`` (float64, 1-D, SI units): the grid, as
+  in ``sweep.npz``; grid points are numbered in C order (last axis fastest).
+* ``done`` (bool, grid shape): the points whose results are final.
+* ``value`` (J), ``status``, ``limiting_kind``, ``limiting_contact``,
+  ``equilibrium_energy`` (J): grid-shaped as in ``sweep.npz``; where ``done`` is False
+  the floats are NaN and the integer codes -1.
+* ``status_names``, ``kind_names``: the names of the codes.
+* ``grasp_<field>`` (float64, SI units): every field of the base
+  :class:`~jaxgrasp.Grasp` (``Grasp.to_numpy()``), so that a resumed sweep can check it
+  continues the same grasp.
+* ``chunk_size`` (int64): the grid points per compiled batch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from jaxgrasp.io import _outputs as outputs
+
+from jaxgrasp.tolerance._result import SUMMARY_FIELDS as RESULT_FIELDS
+from jaxgrasp.model._codes import BoundaryKind
+from jaxgrasp.tolerance._status import GraspStatus
+
+__all__ = ["SweepCheckpoint", "BatchCheckpoint", "FORMAT", "BATCH_FORMAT", "RESULT_FIELDS"]
+
+FORMAT = "jaxgrasp-sweep-partial-1"
+"""The ``format`` entry of a checkpoint file (changes when its layout does)."""
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SweepCheckpoint:
+    """A sweep's grid with the points finished so far (SI units).
+
+    Attributes:
+        axes: parameter name -> 1-D float64 grid values, in grid order.
+        done: bool array shaped like the grid; True where the results are final.
+        results: result field (:data:`RESULT_FIELDS`) -> grid-shaped array; NaN (floats)
+            or -1 (integer codes) where not ``done``.
+        grasp: the base grasp's fields (``Grasp.to_numpy()``), float64, SI units.
+        chunk_size: grid points per compiled batch.
+    """
+
+    axes: dict
+    done: np.ndarray
+    results: dict
+    grasp: dict
+    chunk_size: int
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Grid shape ``(len(ax1), len(ax2), ...)``."""
+        return tuple(len(a) for a in self.axes.values())
+
+    @property
+    def total(self) -> int:
+        """Number of grid points."""
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    @property
+    def done_count(self) -> int:
+        """Number of finished grid points."""
+        return int(np.count_nonzero(self.done))
+
+    @classmethod
+    def from_flat(
+        cls,
+        axes: Mapping[str, np.ndarray],
+        done: np.ndarray,
+        results: Mapping[str, np.ndarray],
+        grasp: Mapping[str, np.ndarray],
+        chunk_size: int,
+    ) -> "SweepCheckpoint":
+        """From flat (C-order, ``(total,)``) ``done`` and result arrays, which are copied
+        with the entries not ``done`` replaced by NaN / -1."""
+        shape = tuple(len(a) for a in axes.values())
+        done = np.asarray(done, dtype=bool).reshape(shape)
+        out = {}
+        for f in RESULT_FIELDS:
+            a = np.asarray(results[f]).reshape(shape)
+            fill = np.nan if np.issubdtype(a.dtype, np.floating) else -1
+            out[f] = np.where(done, a, np.asarray(fill, dtype=a.dtype))
+        return cls(
+            axes={n: np.asarray(a, dtype=np.float64) for n, a in axes.items()},
+            done=done,
+            results=out,
+            grasp={k: np.asarray(v, dtype=np.float64) for k, v in grasp.items()},
+            chunk_size=int(chunk_size),
+        )
+
+    def save(self, file) -> None:
+        """Write the checkpoint to ``file`` (a path or a binary file object); not atomic
+        by itself (the CLI writes it through :func:`jaxgrasp.io._outputs.write_file`)."""
+        arrays = {
+            "format": np.asarray(FORMAT),
+            "axis_names": np.asarray(list(self.axes), dtype=str),
+            "done": self.done,
+            "status_names": np.asarray(GraspStatus.labels(), dtype=str),
+            "kind_names": np.asarray(BoundaryKind.labels(), dtype=str),
+            "chunk_size": np.int64(self.chunk_size),
+        }
+        arrays.update({f"axis_{n}": a for n, a in self.axes.items()})
+        arrays.update(self.results)
+        arrays.update({f"grasp_{k}": v for k, v in self.grasp.items()})
+        np.savez(file, **arrays)
+
+    @classmethod
+    def load(cls, path) -> "SweepCheckpoint":
+        """Read a checkpoint file.
+
+        Raises:
+            ValueError: not a checkpoint of this format.
+        """
+        with np.load(path, allow_pickle=False) as z:
+            if "format" not in z.files or str(z["format"]) != FORMAT:
+                raise ValueError(f"{path}: not a jaxgrasp sweep checkpoint ({FORMAT})")
+            names = [str(n) for n in z["axis_names"]]
+            return cls(
+                axes={n: np.array(z[f"axis_{n}"]) for n in names},
+                done=np.array(z["done"]),
+                results={f: np.array(z[f]) for f in RESULT_FIELDS},
+                grasp={k[len("grasp_") :]: np.array(z[k]) for k in z.files if k.startswith("grasp_")},
+                chunk_size=int(z["chunk_size"]),
+            )
+
+
+# --------------------------------------------------------------------------- batches
+
+BATCH_FORMAT = "jaxgrasp-batch-partial-1"
+"""The ``format`` of a batch checkpoint's ``manifest.json`` (changes when its layout does)."""
+
+
+class BatchCheckpoint:
+    """The finished chunks of ``jaxgrasp batch FILE --out DIR``: the folder
+    ``DIR/results.partial``, which ``--resume`` continues.
+
+    Layout (no pickled objects):
+
+    * ``manifest.json``: ``format`` (:data:`BATCH_FORMAT`), ``source`` (the input file),
+      ``source_sha256`` (its bytes' SHA-256: a resumed run must read the same file),
+      ``grasps`` (``B``) and ``num_contacts`` (``N``, the padded contact count);
+    * ``rows-<first>.npz``, one per finished chunk, each written atomically once its
+      chunk is done: ``rows`` (int64, the input indices of its grasps) and every
+      :class:`~jaxgrasp.Evaluation` field for them (leading axis ``len(rows)``, contacts
+      padded to ``N``).
+
+    A chunk file is complete or absent, so a run killed at any moment (even ``kill -9``)
+    keeps every chunk finished before it.
+    """
+
+    MANIFEST = "manifest.json"
+
+    def __init__(self, folder, source: str, source_sha256: str, grasps: int, num_contacts: int):
+        self.folder = Path(folder)
+        self.manifest = {
+            "format": BATCH_FORMAT,
+            "source": str(source),
+            "source_sha256": source_sha256,
+            "grasps": int(grasps),
+            "num_contacts": int(num_contacts),
+        }
+
+    def exists(self) -> bool:
+        """Whether the folder holds a checkpoint (its manifest)."""
+        return (self.folder / self.MANIFEST).is_file()
+
+    def start(self) -> None:
+        """Create the folder and its manifest (a fresh run)."""
+        self.folder.mkdir(exist_ok=True)
+        text = json.dumps(self.manifest, indent=1) + "\n"
+        outputs.write_file(self.folder / self.MANIFEST, text.encode())
+
+    def check(self) -> None:
+        """Raise ``ValueError`` (one line) unless the checkpoint on disk is of this run:
+        same format, input bytes, number of grasps and padded contact count."""
+        path = self.folder / self.MANIFEST
+        try:
+            have = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{path}: not a readable checkpoint ({exc})") from None
+        if not isinstance(have, dict) or have.get("format") != BATCH_FORMAT:
+            raise ValueError(f"{path}: not a jaxgrasp batch checkpoint ({BATCH_FORMAT})")
+        if have.get("source_sha256") != self.manifest["source_sha256"]:
+            raise ValueError(
+                f"{self.folder} was made from other input ({have.get('source')}, whose contents "
+                f"differ from {self.manifest['source']}): remove it to start afresh"
+            )
+        for key in ("grasps", "num_contacts"):
+            if have.get(key) != self.manifest[key]:
+                raise ValueError(f"{path}: {key} {have.get(key)} differs from this run's {self.manifest[key]}")
+
+    def chunk_files(self) -> list[Path]:
+        """The finished chunks' files, in order of their first row."""
+        return sorted(self.folder.glob("rows-*.npz"))
+
+    def load(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Every finished row: ``(rows, results)``, ``rows`` the input indices (int64) and
+        ``results`` each :class:`~jaxgrasp.Evaluation` field for them (empty when no
+        chunk is finished). A chunk file that cannot be read is skipped (recomputed)."""
+        rows, parts = [], []
+        for path in self.chunk_files():
+            try:
+                with np.load(path, allow_pickle=False) as z:
+                    part = {k: np.array(z[k]) for k in z.files}
+            except (OSError, ValueError, EOFError):
+                continue
+            rows.append(part.pop("rows"))
+            parts.append(part)
+        if not rows:
+            return np.zeros(0, dtype=np.int64), {}
+        return np.concatenate(rows), {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    def save_rows(self, rows: np.ndarray, results: Mapping[str, np.ndarray]) -> None:
+        """Keep one finished chunk: input ``rows`` and their ``results`` (by field), atomically."""
+        arrays = {"rows": np.asarray(rows, dtype=np.int64), **{k: np.asarray(v) for k, v in results.items()}}
+        outputs.write_file(self.folder / f"rows-{int(arrays['rows'][0]):09d}.npz", lambda fh: np.savez(fh, **arrays))
+
+    def files(self) -> list[Path]:
+        """Every file of the checkpoint (to remove once the final results are written),
+        with the temporary files a killed run may have left (``*.tmp``: never complete)."""
+        stale = sorted(self.folder.glob("*" + outputs.TEMP_SUFFIX))
+        return self.chunk_files() + [self.folder / self.MANIFEST] + stale

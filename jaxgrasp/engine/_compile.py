@@ -1,0 +1,211 @@
+"""Compiling a pipeline: stages lowered and compiled in threads, memoised in the process, saved to the store."""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Hashable, Sequence
+
+import jax
+
+from jaxgrasp.engine._pipeline import Pipeline, Staged, lower_stages
+from jaxgrasp.engine._store import _STATS, load_executable, executable_path, save_executable
+
+__all__ = ['MEMO_SIZE', 'default_device', 'wait_for_saves', 'compiled', 'clear_compiled']
+
+
+MEMO_SIZE = 16
+
+"""Most compiled programs kept in this process (the least recently used is dropped first)."""
+
+_MEMO: dict[Hashable, Any] = {}
+
+_XLA_CACHE_HITS = [0]
+
+"""Problems JAX's persistent cache has served in this process (counted from its events)."""
+
+
+def _count_xla_cache_hits(event: str, **_) -> None:
+    if event == "/jax/compilation_cache/cache_hits":
+        _XLA_CACHE_HITS[0] += 1
+
+jax.monitoring.register_event_listener(_count_xla_cache_hits)
+
+
+def _compile(built, spec, quiet_xla: bool):
+    """Trace, lower and compile ``built`` (a jitted function, or a :class:`Pipeline`) for
+    the arguments ``spec``. A pipeline's stages are lowered as its driver first calls
+    them (:func:`lower_stages`), each compiled in a thread of its own (XLA's compiler
+    releases the GIL) while the driver goes on; the wait for those threads is not cut
+    short by an interrupt (it is raised once they are done: XLA still compiling in a
+    thread while the interpreter unwinds can crash the process). ``quiet_xla``: JAX's
+    persistent cache writes no entry for them (:func:`_no_xla_cache_write`)."""
+
+    def compile_one(lowered):
+        with _no_xla_cache_write() if quiet_xla else contextlib.nullcontext():
+            return lowered.compile()
+
+    if not isinstance(built, Pipeline):
+        return compile_one(built.lower(*spec))
+    results: dict[str, tuple] = {}
+    threads = []
+
+    def start(name, lowered):
+        thread = threading.Thread(target=lambda: results.__setitem__(name, _outcome(compile_one, lowered)),
+                                  name=f"jaxgrasp-compile-{name}", daemon=True)
+        thread.start()
+        threads.append(thread)
+
+    try:
+        names = list(lower_stages(built, spec, start))
+    finally:
+        _join_uninterrupted(threads)
+    for ok, value in results.values():
+        if not ok:
+            raise value
+    return Staged({name: results[name][1] for name in names}, built.drive)
+
+
+def _outcome(f, *args):
+    """``(True, f(*args))``, or ``(False, exception)``."""
+    try:
+        return True, f(*args)
+    except BaseException as exc:  # raised again in the calling thread
+        return False, exc
+
+
+def _join_uninterrupted(threads) -> None:
+    """Wait for every thread; a ``KeyboardInterrupt`` meanwhile is raised after the wait."""
+    interrupted = None
+    for thread in threads:
+        while thread.is_alive():
+            try:
+                thread.join()
+            except KeyboardInterrupt as exc:
+                interrupted = exc
+    if interrupted is not None:
+        raise interrupted
+
+
+def compiled(
+    key: Hashable,
+    build: Callable[[], Any],
+    spec: Sequence,
+    *,
+    name: str = "program",
+    store_key: Hashable | None = None,
+    devices: Sequence | None = None,
+    n_outputs: int | None = None,
+):
+    """A compiled program, from the memo, the program store or built now; ``(fn, seconds)``.
+
+    Args:
+        key: what makes the program unique in this process (the memo's key).
+        build: ``build()`` returns the jitted function (``jax.jit(...)`` with its
+            shardings and compiler options; arrays in, arrays out), or a
+            :class:`Pipeline` of them; called when the program is not in the memo
+            (it must be cheap: nothing is traced before the program is compiled).
+        spec: its arguments as ``jax.ShapeDtypeStruct`` (with their shardings).
+        name: prefix of its stored file.
+        store_key: what makes it unique across processes (device counts, not ids);
+            ``None``: never stored.
+        devices: the devices it runs on, in its order (default: JAX's default device).
+        n_outputs: the number of arrays it returns (a stored one must match).
+
+    Returns:
+        ``fn``, the compiled program (``jax.stages.Compiled``, or a :class:`Staged`),
+        and the seconds spent building or loading it (0 on a memo hit).
+    """
+    hit = _MEMO.pop(key, None)
+    if hit is not None:
+        _MEMO[key] = hit  # now the most recently used
+        return hit, 0.0
+    t0 = time.perf_counter()
+    path = None if store_key is None else executable_path(name, (store_key, len(devices or ())))
+    built = build()
+    fn = None
+    if path is not None:
+        fn = load_executable(path, spec, _devices(devices), n_outputs, built.drive if isinstance(built, Pipeline) else None)
+    if fn is None:
+        hits = _XLA_CACHE_HITS[0]
+        fn = _compile(built, spec, quiet_xla=path is not None)
+        _STATS["traced"] += 1
+        # An executable that XLA's cache served cannot be serialized again (XLA on the CPU
+        # then writes a program whose kernels are missing when it is loaded): store only
+        # one that was compiled here. (XLA's cache holds no stored program's executable,
+        # but may hold one written by another program of the same HLO or an older
+        # jaxgrasp; later processes then trace it and load XLA's copy.)
+        if path is not None and _XLA_CACHE_HITS[0] == hits:
+            _save_in_background(path, fn)
+    else:
+        _STATS["deserialized"] += 1
+    seconds = time.perf_counter() - t0
+    if len(_MEMO) >= MEMO_SIZE:
+        _MEMO.pop(next(iter(_MEMO)))
+    _MEMO[key] = fn
+    return fn, seconds
+
+_SAVES: list[threading.Thread] = []
+
+"""Threads writing a compiled program to the store (:func:`_save_in_background`)."""
+
+
+def _save_in_background(path: Path, fn) -> None:
+    """:func:`save_executable` in a thread, so that serializing the program (~0.1 s for a
+    batch evaluator) overlaps its first run instead of delaying it. The thread is not a
+    daemon (the interpreter waits for it at exit); a process that ends with ``os._exit``
+    (the ``jaxgrasp`` command) calls :func:`wait_for_saves` first."""
+    thread = threading.Thread(target=save_executable, args=(path, fn), name="jaxgrasp-save")
+    _SAVES.append(thread)
+    thread.start()
+
+
+def wait_for_saves(timeout: float | None = None) -> None:
+    """Wait until the programs being written to the store are on disk (each write is
+    atomic), at most ``timeout`` seconds in all (``None``: as long as they take)."""
+    end = None if timeout is None else time.monotonic() + timeout
+    for thread in list(_SAVES):
+        thread.join(None if end is None else max(0.0, end - time.monotonic()))
+        if thread.is_alive():
+            return  # timed out
+        try:
+            _SAVES.remove(thread)
+        except ValueError:  # another thread waited for it too (the command and an interrupt)
+            pass
+
+
+def _no_xla_cache_write():
+    """Context in which JAX's persistent cache writes no entry from this thread (its
+    minimum compile time for an entry raised to infinity, thread-locally): for programs
+    that the program store keeps. Where this JAX has no such setting, a context that
+    changes nothing."""
+    try:
+        from jax._src import config as jax_config
+
+        return jax_config.persistent_cache_min_compile_time_secs(float("inf"))
+    except (ImportError, AttributeError, TypeError):
+        return contextlib.nullcontext()
+
+
+def default_device():
+    """The device a program without ``devices`` runs on: JAX's default device
+    (``jax_default_device``: a device, or a platform name for its first device), else
+    the first device."""
+    default = jax.config.jax_default_device
+    if default is None:
+        return jax.devices()[0]
+    return jax.devices(default)[0] if isinstance(default, str) else default
+
+
+def _devices(devices: Sequence | None) -> list:
+    """``devices``, or ``[default_device()]``."""
+    return list(devices) if devices else [default_device()]
+
+
+def clear_compiled() -> None:
+    """Forget every compiled program of this process (the next build traces or loads),
+    once the programs being stored are on disk."""
+    wait_for_saves()
+    _MEMO.clear()

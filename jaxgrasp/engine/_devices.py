@@ -1,0 +1,82 @@
+"""One JAX CPU device per core, so that batches and sweeps run on every core.
+
+XLA runs one compiled program on one CPU device, and jaxgrasp's solver loop is a long
+chain of small operations that keeps one core busy. :func:`jaxgrasp.evaluate_batch` and
+:func:`jaxgrasp.sweep` split each batch over all devices, each device running its own
+work queue (:func:`jaxgrasp.engine._batch.over_devices`), so on the CPU they use as many cores
+as JAX has CPU devices, and JAX creates one unless told otherwise.
+
+So ``import jaxgrasp`` asks JAX for one CPU device per core this process may run on
+(``jax_num_cpu_devices``), as it turns on 64-bit mode. Measured on a 2-core machine
+(``evaluate_batch`` of the benchmark grids, ``experiments/BENCHMARK.md``): the cube grid
+1.60x faster with two devices than with one, the prism grid 1.28x. A single :func:`jaxgrasp.evaluate` and the
+user's own ``jit`` run on the first device as before.
+
+It is left alone where the choice is the user's or can no longer be made:
+
+* the environment variable ``JAXGRASP_CPU_DEVICES`` (:data:`ENV_VAR`) sets the number
+  (``1``: JAX's own single device);
+* ``JAX_NUM_CPU_DEVICES``, ``jax.config.update("jax_num_cpu_devices", n)`` before the
+  import, or ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS`` are kept;
+* JAX has already started its backends (some JAX computation ran before
+  ``import jaxgrasp``): JAX's devices stay as they are.
+"""
+
+from __future__ import annotations
+
+import os
+
+import jax
+
+__all__ = ["ENV_VAR", "usable_cores", "requested_cpu_devices", "configure_cpu_devices"]
+
+ENV_VAR = "JAXGRASP_CPU_DEVICES"
+
+
+def usable_cores() -> int:
+    """The CPU cores this process may run on (its affinity mask where the OS has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - macOS, Windows
+        return max(1, os.cpu_count() or 1)
+
+
+def requested_cpu_devices(environ=os.environ) -> int:
+    """``$JAXGRASP_CPU_DEVICES`` as a positive integer, else :func:`usable_cores`.
+
+    Raises:
+        ValueError: one line, if the variable is set to anything but a positive integer.
+    """
+    text = environ.get(ENV_VAR)
+    if text is None:
+        return usable_cores()
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"{ENV_VAR} must be a positive integer (CPU devices), got {text!r}")
+    return n
+
+
+def _user_chose(environ=os.environ) -> bool:
+    """Whether the CPU device count is already the user's choice (JAX's own settings)."""
+    return (
+        "JAX_NUM_CPU_DEVICES" in environ
+        or jax.config.jax_num_cpu_devices != -1
+        or "xla_force_host_platform_device_count" in environ.get("XLA_FLAGS", "")
+    )
+
+
+def configure_cpu_devices(environ=os.environ) -> int | None:
+    """Ask JAX for :func:`requested_cpu_devices` CPU devices; the number set, or ``None``
+    where it is left alone (see the module docstring). Called by ``import jaxgrasp``."""
+    explicit = ENV_VAR in environ
+    n = requested_cpu_devices(environ)  # a bad value fails even where it would not be used
+    if not explicit and _user_chose(environ):
+        return None
+    try:
+        jax.config.update("jax_num_cpu_devices", n)
+    except RuntimeError:  # JAX's backends are running already: its devices stay
+        return None
+    return n

@@ -1,0 +1,199 @@
+"""Energy-tolerance evaluation of a grasp (Tsuji et al., eq. 1), batched and differentiable.
+
+:func:`evaluate` follows the paper's steps, one named function each:
+
+1. solve the equilibrium problem and every boundary problem from its starts
+   (:func:`jaxgrasp.tolerance._stages.problems_of`);
+2. keep the lowest converged start of each boundary problem (:func:`best_starts`);
+3. decide the grasp's status from the solver's outputs (:func:`grasp_status`);
+4. the minimum energies with their envelope-theorem derivatives (:func:`energies`,
+   :mod:`jaxgrasp.tolerance._envelope`);
+5. the value: the least boundary energy above ``U0``, or a soft minimum (:func:`value_of`);
+6. the :class:`~jaxgrasp.Evaluation` in SI units (:func:`to_evaluation`).
+
+Derivatives of ``value`` (and of every energy) are exact and cheap (envelope theorem, see
+:mod:`jaxgrasp.tolerance._envelope`). The derivative is that of the *selected* boundary: where two
+boundaries tie for the minimum (e.g. the two contacts of a symmetric grasp) ``value`` has
+a kink and the gradient is that of the one reported in ``limiting_*`` (a one-sided
+derivative).
+
+Where ``value`` is 0 because the grasp is unstable or infeasible, its gradient is exactly 0
+(never NaN): the Lagrangian of a discarded problem is evaluated at a safe point (the
+initial state, zero multipliers) so that no non-finite partial derivative can leak into
+the zero cotangent.
+
+With ``EvaluateOptions(smooth_min_temperature=T)`` the hard minimum over boundaries is
+replaced by a soft minimum (log-sum-exp, temperature ``T`` in J): see
+:class:`~jaxgrasp.EvaluateOptions`.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import jax
+import numpy as np
+
+from jaxgrasp.engine import _compile
+from jaxgrasp.engine._xla_options import COMPILER_OPTIONS, LATENCY_CPU_OPTIONS
+from jaxgrasp.model._grasp import Grasp
+from jaxgrasp.model._potential import model_params
+from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
+from jaxgrasp.tolerance._result import Evaluation
+from jaxgrasp.tolerance._settle import needs_settling
+from jaxgrasp.tolerance._stages import problems_of, problems_of_batch
+from jaxgrasp.tolerance._verdict import (
+    _split_temperature,
+    evaluation_of,
+    evaluations_of,
+)
+
+__all__ = ['evaluate', 'evaluate_traced', 'evaluate_batch_traced', 'evaluate_compiled', 'compiled_executable']
+
+
+def _is_concrete(tree) -> bool:
+    return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
+
+
+def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Evaluation:
+    """Evaluate the energy tolerance of ``grasp`` (eq. 1 of Tsuji et al.).
+
+    Args:
+        grasp: a :class:`~jaxgrasp.Grasp` (SI units). Under ``jax.vmap``, any field may
+            carry a batch axis.
+        options: :class:`EvaluateOptions`.
+
+    Returns:
+        An :class:`~jaxgrasp.Evaluation` (SI units) with the value in J, a status, the
+        limiting boundary, the equilibrium and every boundary problem's minimum.
+
+    Raises:
+        GraspValueError: a grasp with batch axes (its fields' shapes are those of one
+            grasp inside ``jax.vmap``, so a batch needs ``jax.vmap(jaxgrasp.evaluate)``
+            or :func:`jaxgrasp.sweep`); or, for a concrete grasp, invalid fields (checked
+            before anything is compiled).
+
+    ``evaluate`` can be wrapped in ``jax.jit`` and ``jax.vmap`` and differentiated with
+    ``jax.grad``/``jax.jacfwd`` (envelope theorem; see :mod:`jaxgrasp.tolerance._envelope`); a traced
+    grasp becomes part of the caller's program. A concrete grasp runs a program compiled
+    once per process for its shapes and options (:func:`compiled_executable`), loaded from
+    disk instead where the caches are on (:mod:`jaxgrasp.engine._store`): first the one without
+    the settling stage, then, only if a boundary problem did not settle, the one with it
+    (:func:`~jaxgrasp.tolerance._stages.problems_of`); the result is the traced path's.
+    """
+    _check_unbatched(grasp)
+    if not _is_concrete(grasp):  # inside the caller's jit, vmap or grad
+        return evaluate_traced(grasp, options)
+    options, temperature = _split_temperature(options)
+    from jaxgrasp.model._validation import check_grasp_inputs
+
+    check_grasp_inputs(**grasp.to_numpy())
+    leaves = jax.tree_util.tree_leaves(grasp)
+    # the program without the settling stage first; the one with it only where a
+    # boundary problem did not settle (equal results elsewhere, see problems_of)
+    fn, _ = compiled_executable(grasp, options, settle=False)
+    out = fn(temperature, *leaves)
+    if needs_settling(out[RESULT_FIELDS.index("boundary_status")]):
+        fn, _ = compiled_executable(grasp, options, settle=True)
+        out = fn(temperature, *leaves)
+    return Evaluation(**dict(zip(RESULT_FIELDS, out)))
+
+
+def evaluate_traced(grasp: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:
+    """:func:`evaluate` of a grasp inside the caller's trace (``jit``, ``vmap``), with or
+    without the settling stage (``settle``, see :func:`~jaxgrasp.tolerance._stages.problems_of`):
+    what the batch engine compiles."""
+    options, temperature = _split_temperature(options)
+    return evaluate_compiled(grasp, temperature, options, settle)
+
+
+def _check_unbatched(grasp) -> None:
+    """One grasp, not a batch: a one-line error that points to ``jax.vmap`` otherwise
+    (shapes are static, so this holds for traced grasps too; inside ``vmap`` they are
+    those of one grasp)."""
+    from jaxgrasp.model._fields import FIELDS
+    from jaxgrasp.model._validation import GraspValueError
+
+    if not isinstance(grasp, Grasp):
+        raise GraspValueError(f"evaluate needs a jaxgrasp.Grasp, got {type(grasp).__name__}")
+    batched = [
+        f"{f.name} {tuple(np.shape(getattr(grasp, f.name)))}"
+        for f in FIELDS
+        if np.ndim(getattr(grasp, f.name)) > f.ndim
+    ]
+    if grasp.active is not None and np.ndim(grasp.active) > 1:
+        batched.append(f"active {tuple(np.shape(grasp.active))}")
+    if batched:
+        more = f" and {len(batched) - 3} more" if len(batched) > 3 else ""
+        raise GraspValueError(
+            f"evaluate takes one grasp, but this one has batch axes ({', '.join(batched[:3])}{more}; "
+            "one grasp has positions (N, 3), per-contact fields (N,), mass ()): "
+            "use jax.vmap(jaxgrasp.evaluate)(grasp) for a batch, or jaxgrasp.sweep for a grid"
+        )
+
+
+def compiled_executable(grasp: Grasp, options: EvaluateOptions, settle: bool = True):
+    """The compiled :func:`evaluate_compiled` (with ``settle``) for grasps shaped like the
+    concrete ``grasp``; ``(fn, seconds)``.
+
+    ``fn(temperature, *jax.tree_util.tree_leaves(grasp))`` takes the soft-minimum
+    temperature (mJ, ``()`` float) and the grasp's fields (with a contact mask, ``active``
+    last) and returns every :class:`~jaxgrasp.Evaluation` field (:data:`RESULT_FIELDS`).
+    It comes from :func:`jaxgrasp.engine._compile.compiled`, as the batches' programs do: memoised
+    in the process and, where the program store is on, loaded from it instead of built
+    (``seconds``: the time to build it, 0 on a memo hit). Its results are those of
+    :func:`evaluate_compiled` bit for bit (the same program).
+    """
+    leaves, treedef = jax.tree_util.tree_flatten(grasp)
+    avals = tuple((np.shape(x), _canonical_dtype(x).name) for x in leaves)
+    x64 = jax.config.jax_enable_x64
+    spec = [jax.ShapeDtypeStruct((), _canonical_dtype(np.float64(0.0)))]
+    spec += [jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in avals]
+
+    def build():
+        def evaluate_fields(temperature, *leaves):  # arrays in, arrays out: the program store keeps flat programs
+            r = evaluate_compiled(jax.tree_util.tree_unflatten(treedef, leaves), temperature, options, settle)
+            return tuple(getattr(r, f) for f in RESULT_FIELDS)
+
+        cpu = _compile.default_device().platform == "cpu"
+        return jax.jit(evaluate_fields, compiler_options=LATENCY_CPU_OPTIONS if cpu else COMPILER_OPTIONS)
+
+    masked = grasp.active is not None
+    return _compile.compiled(
+        ("evaluate", options, settle, masked, avals, x64, jax.config.jax_default_device),
+        build,
+        spec,
+        name="evaluate_settled" if settle else "evaluate",
+        store_key=(options, settle, masked, avals, x64),
+        n_outputs=len(RESULT_FIELDS),
+    )
+
+
+def _canonical_dtype(x) -> np.dtype:
+    """The dtype JAX gives ``x`` as an argument (float64 becomes float32 without x64)."""
+    return np.dtype(jax.dtypes.canonicalize_dtype(x.dtype if hasattr(x, "dtype") else np.result_type(x)))
+
+
+@partial(jax.jit, static_argnames=("options", "settle"))
+
+
+def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions, settle: bool = True) -> Evaluation:
+    """The jitted evaluator behind :func:`evaluate` (no input validation); ``settle`` as
+    in :func:`~jaxgrasp.tolerance._stages.problems_of`.
+
+    ``temperature`` is the soft-minimum temperature in mJ (``0``: the hard minimum) as a
+    traced argument, so tuning at any temperature shares one compilation;
+    ``options.smooth_min_temperature`` is ignored.
+    """
+    p = model_params(grasp)
+    return evaluation_of(p, problems_of(p, options, settle), temperature, options)
+
+
+def evaluate_batch_traced(grasps: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:
+    """:func:`evaluate_traced` of a batch of grasps (leading axis ``B`` on every field,
+    ``active`` included where given), the result with a leading ``B``: what the batch
+    engine computes, as the stages of :mod:`jaxgrasp.engine._stages`. Equal to
+    ``jax.vmap`` of :func:`evaluate_traced`, lane by lane, but the solver's work queue
+    is traced once (:func:`~jaxgrasp.tolerance._stages.problems_of_batch`)."""
+    return evaluations_of(grasps, problems_of_batch(jax.vmap(model_params)(grasps), options, settle), options)

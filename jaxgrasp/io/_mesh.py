@@ -1,0 +1,327 @@
+"""Objects from triangle meshes: contacts snapped to the surface, the centre of mass, the frame.
+
+:func:`from_mesh` turns a mesh (a ``trimesh.Trimesh`` or a mesh file: OBJ, STL, PLY, ...)
+and fingertip contact points given in the mesh's own frame into a :class:`MeshGrasp`:
+
+* each point is snapped to the closest point of the surface (an exact closest point over
+  every triangle, in NumPy: trimesh's own ``closest_point`` needs the optional ``rtree``);
+  the outward normal of the face there is the contact normal;
+* the centre of mass is the mesh's (a watertight mesh of uniform density) or the one
+  given; the mass is given, or ``density`` times the enclosed volume;
+* positions are moved into the model's frame (origin at the centre of mass, the mesh's
+  axes), and :class:`MeshGrasp` keeps the offset beside the grasp.
+
+Design (the one way the library keeps a grasp's mesh): the :class:`~jaxgrasp.Grasp`
+pytree is left exactly as for any other grasp, so ``evaluate``, ``sweep``, ``tune``,
+``evaluate_batch`` and their compiled programs and caches see nothing new. The mesh and the
+frame offset live beside it in :class:`MeshGrasp`, a small frozen object that is not a
+pytree and never enters ``jit``: evaluate ``mesh_grasp.grasp``; draw with
+``mesh_grasp.mesh`` and ``mesh_grasp.to_mesh_frame``. :func:`jaxgrasp.load` with
+``keep_mesh=True`` and ``jaxgrasp show`` use it.
+
+trimesh is imported when a mesh is used, so ``import jaxgrasp`` does not pay for it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS
+from jaxgrasp.model._grasp import Grasp
+from jaxgrasp.model._units import LENGTH_UNITS
+from jaxgrasp.model._validation import GraspValueError
+
+__all__ = ["MeshGrasp", "from_mesh", "load_mesh", "snap_to_surface", "closest_on_triangles", "DEFAULT_TOLERANCE", "SHARP_EDGE_DEG"]
+
+DEFAULT_TOLERANCE = 1e-3
+"""Farthest a contact point may lie from the mesh surface, m."""
+
+SHARP_EDGE_DEG = 30.0
+"""A contact where faces meet at more than this angle (degrees) is on a sharp edge or
+corner, where the surface has no normal: an error. Below it (a tessellated curved surface)
+the normals of the faces meeting there are averaged."""
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class MeshGrasp:
+    """A grasp made from a mesh, with the mesh and where the model's frame sits in it.
+
+    Not a pytree: pass :attr:`grasp` to :func:`jaxgrasp.evaluate` (and the other entry
+    points); the rest is for drawing results in the mesh's frame.
+
+    Attributes:
+        grasp: the :class:`~jaxgrasp.Grasp`, model frame: origin at the centre of mass,
+            axes of the mesh (SI units).
+        mesh: the ``trimesh.Trimesh`` in metres, in the mesh's own frame, faces outward.
+        center_of_mass: ``(3,)`` m, the centre of mass in the mesh's frame: a model-frame
+            point ``p`` is ``p + center_of_mass`` in the mesh's frame.
+        source: where the mesh came from (a path, or ``"<trimesh>"``).
+    """
+
+    grasp: Grasp
+    mesh: Any
+    center_of_mass: np.ndarray
+    source: str = "<trimesh>"
+
+    def to_mesh_frame(self, points) -> np.ndarray:
+        """Model-frame points ``(..., 3)`` (m) in the mesh's frame (m)."""
+        return np.asarray(points, dtype=np.float64) + self.center_of_mass
+
+    def replace(self, **changes) -> "MeshGrasp":
+        """A copy with some attributes replaced (e.g. ``grasp`` with other fingertips)."""
+        return dataclasses.replace(self, **changes)
+
+
+def load_mesh(mesh, units: str = "m"):
+    """A checked ``trimesh.Trimesh`` in metres from a ``Trimesh`` or a mesh file path.
+
+    Args:
+        mesh: ``trimesh.Trimesh`` or a path (any format trimesh reads; a scene of several
+            parts is joined into one mesh).
+        units: the length unit of the vertices: ``"m"``, ``"cm"`` or ``"mm"``.
+
+    Returns:
+        A new mesh, vertices in m (the input is not changed), faces turned outward when
+        the mesh is watertight with its faces inward.
+
+    Raises:
+        GraspValueError: unknown units, an unreadable file, or a degenerate mesh (no faces,
+            non-finite vertices, no area, a closed mesh enclosing no volume or with faces
+            not consistently oriented); one line.
+    """
+    import trimesh
+
+    if units not in LENGTH_UNITS:
+        raise GraspValueError(f"units = {units!r} is not a length unit; use one of {', '.join(LENGTH_UNITS)}")
+    if isinstance(mesh, (str, os.PathLike)):
+        where = f"mesh {str(mesh)!r}"
+        path = Path(mesh)
+        if not path.is_file():
+            raise GraspValueError(f"{where}: no such file")
+        try:
+            loaded = trimesh.load(path, force="mesh", process=True)
+        except Exception as exc:  # trimesh raises many kinds for unreadable files
+            raise GraspValueError(f"{where}: cannot read it as a mesh ({' '.join(str(exc).split()) or type(exc).__name__})") from None
+    elif isinstance(mesh, trimesh.Trimesh):
+        where, loaded = "mesh", mesh
+    else:
+        raise GraspValueError(f"mesh must be a trimesh.Trimesh or a file path, got {type(mesh).__name__}")
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise GraspValueError(f"{where} has no faces (a degenerate mesh)")
+    out = loaded.copy()
+    out.apply_scale(LENGTH_UNITS[units])
+    _check_surface(out, where)
+    return out
+
+
+def _check_surface(mesh, where: str) -> None:
+    """Reject a mesh that has no usable surface; turn a closed inward mesh outward (in place)."""
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise GraspValueError(f"{where} has vertices that are not finite numbers")
+    scale = float(np.ptp(mesh.vertices, axis=0).max())
+    if not scale > 0 or not mesh.area > 1e-12 * scale**2:
+        raise GraspValueError(f"{where} has no surface area (a degenerate mesh)")
+    if mesh.is_watertight:
+        with np.errstate(invalid="ignore", divide="ignore"):  # trimesh divides by a zero volume
+            volume = float(mesh.volume)
+        if not mesh.is_winding_consistent:
+            raise GraspValueError(f"{where}: its faces are not consistently oriented, so it has no inside")
+        if not abs(volume) > 1e-9 * scale**3:
+            raise GraspValueError(f"{where} encloses no volume (a degenerate mesh)")
+        if volume < 0:
+            mesh.invert()  # faces inward: turn them outward
+
+
+def from_mesh(
+    mesh,
+    points,
+    *,
+    initial_deformation,
+    radius,
+    young_modulus,
+    friction,
+    max_force,
+    mass=None,
+    density=None,
+    center_of_mass=None,
+    gravity=DEFAULT_GRAVITY,
+    units: str = "m",
+    normals=None,
+    tolerance: float = DEFAULT_TOLERANCE,
+) -> MeshGrasp:
+    """A grasp of a meshed object by fingertips touching it at ``points``.
+
+    Args:
+        mesh: ``trimesh.Trimesh`` or mesh file path; vertices in ``units``.
+        points: ``(N, 3)`` fingertip contact points, m, in the mesh's frame (its origin
+            and axes, after the unit conversion); each is snapped to the closest surface
+            point.
+        initial_deformation, radius, young_modulus, friction, max_force: as in
+            :meth:`jaxgrasp.Grasp.create` (m, m, Pa, -, N; scalar or ``(N,)``).
+        mass: object mass, kg. Give ``mass`` or ``density``, not both (neither: 0).
+        density: kg/m^3; mass = density x enclosed volume (watertight meshes only).
+        center_of_mass: ``(3,)`` m, mesh frame; default the watertight mesh's own (uniform
+            density); required for a mesh that is not watertight.
+        gravity: ``(3,)`` m/s^2 in the mesh's axes (the model frame has the same axes).
+        units: length unit of the mesh's vertices, ``"m"``, ``"cm"`` or ``"mm"``
+            (:data:`jaxgrasp.model._units.LENGTH_UNITS`); ``points`` stay in metres.
+        normals: ``None`` (every normal from the mesh) or a length-``N`` sequence whose
+            entries are ``None`` (from the mesh) or a 3-vector, mesh axes, that is used as
+            given.
+        tolerance: farthest a point may lie from the surface, m (default 1 mm).
+
+    Returns:
+        A :class:`MeshGrasp`: ``.grasp`` in the model frame, ``.mesh`` (m, mesh frame),
+        ``.center_of_mass`` (the offset).
+
+    Raises:
+        GraspValueError: one line: a point farther than ``tolerance`` from the surface
+            (naming the contact and its distance) or on a sharp edge, a mesh that is not
+            watertight without ``center_of_mass`` (or with ``density``), a degenerate
+            mesh, unknown units, or an invalid grasp value.
+    """
+    surface = load_mesh(mesh, units)
+    source = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "<trimesh>"
+    pts = _points(points)
+    com, mass = _mass_properties(surface, mass, density, center_of_mass)
+    snapped, found = snap_to_surface(surface, pts, tolerance)
+    given = [None] * len(pts) if normals is None else list(normals)
+    if len(given) != len(pts):
+        raise GraspValueError(f"normals has {len(given)} entries for {len(pts)} points")
+    normal = np.array([found[i] if g is None else np.asarray(g, dtype=np.float64) for i, g in enumerate(given)])
+    grasp = Grasp.create(
+        positions=snapped - com,
+        normals=normal,
+        initial_deformation=initial_deformation,
+        radius=radius,
+        young_modulus=young_modulus,
+        friction=friction,
+        max_force=max_force,
+        mass=mass,
+        gravity=gravity,
+    )
+    return MeshGrasp(grasp=grasp, mesh=surface, center_of_mass=com, source=source)
+
+
+def _points(points) -> np.ndarray:
+    try:
+        pts = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise GraspValueError("points must be an (N, 3) array of numbers, m") from None
+    if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
+        raise GraspValueError(f"points must be an (N, 3) array of finite numbers, m; got shape {pts.shape}")
+    return pts
+
+
+def _mass_properties(surface, mass, density, center_of_mass) -> tuple[np.ndarray, float]:
+    """``(centre of mass (3,) m, mass kg)`` of the object: given, or from its closed surface."""
+    closed = surface.is_watertight
+    if mass is not None and density is not None:
+        raise GraspValueError("give mass or density, not both")
+    if center_of_mass is None:
+        if not closed:
+            raise GraspValueError(
+                "the mesh is not watertight, so it has no centre of mass of its own: give center_of_mass (m, mesh frame)"
+            )
+        com = np.asarray(surface.center_mass, dtype=np.float64)
+    else:
+        com = np.asarray(center_of_mass, dtype=np.float64)
+        if com.shape != (3,) or not np.all(np.isfinite(com)):
+            raise GraspValueError(f"center_of_mass must be 3 finite numbers, m; got {center_of_mass!r}")
+    if density is None:
+        return com, DEFAULT_MASS if mass is None else mass
+    density = float(density)
+    if not closed:
+        raise GraspValueError("density needs a watertight mesh (its volume); give mass instead")
+    if not (np.isfinite(density) and density >= 0):
+        raise GraspValueError(f"density = {density:g} must be >= 0 (kg/m^3)")
+    return com, density * float(surface.volume)
+
+
+def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
+    """The closest surface point and the outward unit normal there, for each point.
+
+    Args:
+        surface: ``trimesh.Trimesh`` (m).
+        points: ``(N, 3)`` m, the mesh's frame.
+        tolerance: farthest a point may lie from the surface, m.
+
+    Returns:
+        ``(closest (N, 3) m, normals (N, 3))``: the normal of the face the closest point
+        lies on; where it lies on faces meeting at less than :data:`SHARP_EDGE_DEG`
+        (a tessellated curved surface), their mean normal.
+
+    Raises:
+        GraspValueError: a point farther than ``tolerance`` (naming the contact and the
+            distance in mm) or on a sharp edge or corner.
+    """
+    keep = surface.area_faces > 0
+    tri = np.asarray(surface.triangles, dtype=np.float64)[keep]
+    face_normals = np.asarray(surface.face_normals, dtype=np.float64)[keep]
+    scale = float(np.ptp(surface.vertices, axis=0).max())
+    closest, normals = [], []
+    for i, p in enumerate(points):
+        q = closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
+        dist = np.linalg.norm(q - p, axis=1)
+        best = float(dist.min())
+        if best > tolerance:
+            raise GraspValueError(
+                f"contact {i} at {_vec_mm(p)} mm is {best * 1e3:.3g} mm from the mesh surface "
+                f"(tolerance {tolerance * 1e3:.3g} mm): is it in the mesh's frame and units?"
+            )
+        near = dist <= best + 1e-9 * scale
+        ns = face_normals[near]
+        angle = np.degrees(np.arccos(np.clip(ns @ ns.T, -1.0, 1.0))).max()
+        if angle > SHARP_EDGE_DEG:
+            raise GraspValueError(
+                f"contact {i} at {_vec_mm(p)} mm lies on an edge or corner where faces meet at "
+                f"{angle:.0f} degrees, so it has no one normal: move it onto a face or give its normal"
+            )
+        n = ns.mean(axis=0)
+        closest.append(q[int(np.argmin(dist))])
+        normals.append(n / np.linalg.norm(n))
+    return np.array(closest), np.array(normals)
+
+
+def _vec_mm(p) -> str:
+    return "(" + ", ".join(f"{x * 1e3:.4g}" for x in p) + ")"
+
+
+def closest_on_triangles(p, a, b, c) -> np.ndarray:
+    """The closest point to ``p (3,)`` on each triangle ``(a, b, c)``, each ``(F, 3)``.
+
+    Exact, by the triangle's Voronoi regions (Ericson, *Real-Time Collision Detection*,
+    Sec. 5.1.5). Triangles must have non-zero area. Returns ``(F, 3)``.
+    """
+    ab, ac = b - a, c - a
+    ap, bp, cp = p - a, p - b, p - c
+
+    def dot(u, v):
+        return np.einsum("ij,ij->i", u, v)
+
+    d1, d2 = dot(ab, ap), dot(ac, ap)
+    d3, d4 = dot(ab, bp), dot(ac, bp)
+    d5, d6 = dot(ab, cp), dot(ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+
+    def ratio(num, den):
+        return (num / np.where(den == 0, 1.0, den))[:, None]
+
+    inside = 1.0 / np.where(va + vb + vc == 0, 1.0, va + vb + vc)
+    regions = [  # (condition, point), in Ericson's order: the first that holds applies
+        (((d1 <= 0) & (d2 <= 0)), a),
+        (((d3 >= 0) & (d4 <= d3)), b),
+        (((vc <= 0) & (d1 >= 0) & (d3 <= 0)), a + ratio(d1, d1 - d3) * ab),
+        (((d6 >= 0) & (d5 <= d6)), c),
+        (((vb <= 0) & (d2 >= 0) & (d6 <= 0)), a + ratio(d2, d2 - d6) * ac),
+        (((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)), b + ratio(d4 - d3, (d4 - d3) + (d5 - d6)) * (c - b)),
+    ]
+    out = a + ab * (vb * inside)[:, None] + ac * (vc * inside)[:, None]
+    for cond, point in reversed(regions):
+        out = np.where(cond[:, None], point, out)
+    return out

@@ -1,0 +1,328 @@
+"""Input validation for :class:`jaxgrasp.model._grasp.Grasp` (concrete values, SI units).
+
+:func:`check_grasp_inputs` is what :meth:`Grasp.create` calls. It converts every field to
+a float64 NumPy array, broadcasts per-fingertip scalars to one value per contact,
+normalises the normals and checks the physical rules. Every failure raises
+:class:`GraspValueError` with a one-line message naming the field, the offending value
+and the rule it breaks.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import numpy as np
+
+from jaxgrasp.model._fields import FIELD, FIELDS, NAMES, PER_CONTACT
+
+__all__ = [
+    "GraspValueError",
+    "check_grasp_inputs",
+    "check_batch_inputs",
+    "format_value",
+    "counted",
+    "as_float_array",
+    "inward_contacts",
+]
+
+NORMAL_MIN_NORM = 1e-12
+"""A normal shorter than this (absolute) is treated as zero."""
+
+MIN_ENERGY_SCALE = 1e-150
+"""Smallest ``young_modulus * initial_deformation**3`` (J) of a contact: the solver scales
+energies by the initial elastic energy, which must stay far from float64 underflow."""
+
+COINCIDENT_DISTANCE = 1e-12
+"""Two contacts closer than this, m, are at the same position."""
+
+_UNIT_TOLERANCE = 1e-14
+"""Normals within this of unit length are kept bit for bit (so validation is idempotent
+and a saved grasp loads back exactly); longer or shorter ones are divided by their norm."""
+
+
+class GraspValueError(ValueError):
+    """A grasp input is malformed or physically invalid; the message is one line."""
+
+    def __init__(self, message: str):
+        super().__init__(" ".join(str(message).split()))
+
+
+def format_value(value: Any) -> str:
+    """Compact one-line text of a number or array: ``0.03``, ``-5``, ``[0, 0, 0]``, ``nan``."""
+    arr = np.asarray(value)
+    if arr.ndim == 0:
+        x = float(arr)
+        text = repr(x)
+        if text.endswith(".0"):
+            text = text[:-2]
+        return text
+    return "[" + ", ".join(format_value(v) for v in arr) + "]"
+
+
+def counted(n: int, noun: str) -> str:
+    """``"1 point"``, ``"2 points"``: a count with its noun, singular for one."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def _with_unit(text: str, field: str) -> str:
+    unit = FIELD[field].unit if field in FIELD else ""
+    return f"{text} {unit}" if unit else text
+
+
+def _is_tracer(value: Any) -> bool:
+    try:
+        leaves = jax.tree_util.tree_leaves(value)
+    except Exception:  # pragma: no cover - exotic containers
+        return False
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
+
+
+def as_float_array(name: str, value: Any) -> np.ndarray:
+    """Convert to float64, rejecting non-numeric, boolean, complex and ragged input."""
+    try:
+        raw = np.asarray(value)
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise GraspValueError(
+            f"{name} must be a number or an array of numbers, got {type(value).__name__} "
+            f"that NumPy cannot convert ({exc})"
+        ) from None
+    kind = raw.dtype.kind
+    if kind == "b":
+        raise GraspValueError(f"{name} = {_short(value)} must be numeric, not boolean")
+    if kind not in "iuf":
+        raise GraspValueError(
+            f"{name} = {_short(value)} must be a number or an array of numbers "
+            f"(got dtype {raw.dtype}, shape {raw.shape})"
+        )
+    try:
+        return np.array(raw, dtype=np.float64)
+    except (ValueError, TypeError, OverflowError) as exc:  # pragma: no cover
+        raise GraspValueError(f"{name} cannot be converted to float64: {exc}") from None
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = " ".join(repr(value).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _check_finite(name: str, arr: np.ndarray) -> None:
+    if np.all(np.isfinite(arr)):
+        return
+    if arr.ndim == 0:
+        raise GraspValueError(f"{name} = {_with_unit(format_value(arr), name)} must be finite")
+    bad = np.argwhere(~np.isfinite(arr))[0]
+    row = int(bad[0])
+    raise GraspValueError(
+        f"{name}[{row}] = {_with_unit(format_value(arr[row]), name)} must be finite"
+    )
+
+
+def _index_name(name: str, original_ndim: int, i: int) -> str:
+    return f"{name}[{i}]" if original_ndim > 0 else name
+
+
+def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
+    """Validate and normalise the fields of one grasp (concrete values only).
+
+    Keyword arguments are the :class:`Grasp` fields by name, with the units, shapes and
+    ranges of :data:`jaxgrasp.model._fields.FIELDS`: ``positions`` ``(N, 3)`` m; ``normals``
+    ``(N, 3)`` (any non-zero length); ``initial_deformation`` m in ``(0, radius)``,
+    ``radius`` m, ``young_modulus`` Pa, ``friction``, ``max_force`` N, each a scalar or
+    ``(N,)`` and ``> 0``; ``mass`` kg ``>= 0`` and ``gravity`` ``(3,)`` m/s^2 may be left
+    out (defaults ``0`` and ``(0, 0, -9.81)``); ``active``, optional, ``None`` or ``(N,)``
+    bool with at least 2 true (every contact, active or not, must hold valid values).
+
+    Returns:
+        A dict with exactly the :class:`Grasp` field names: float64 arrays, per-fingertip
+        fields broadcast to ``(N,)``, normals of unit length; plus ``active`` (a bool
+        array) where a mask was given.
+
+    Raises:
+        GraspValueError: a field is unknown, missing, not numeric, has the wrong shape, is
+            not finite or breaks a physical rule; or a value is a JAX tracer (use
+            ``Grasp(...)`` or ``grasp.replace(...)`` inside ``jit``).
+    """
+    active = given.pop("active", None)
+    unknown = sorted(set(given) - set(NAMES))
+    if unknown:
+        raise GraspValueError(f"unknown grasp field {unknown[0]!r}; the fields are {', '.join(NAMES)}")
+    missing = [f.name for f in FIELDS if f.name not in given and f.default is None]
+    if missing:
+        raise GraspValueError(f"grasp field {missing[0]!r} is missing")
+    given = {f.name: given.get(f.name, f.default) for f in FIELDS}
+    _reject_tracers(given)
+    arrs = {name: as_float_array(name, value) for name, value in given.items()}
+    n = _check_shapes(arrs)
+    for name in NAMES:
+        _check_finite(name, arrs[name])
+    _check_ranges(arrs)
+    out = {name: np.array(np.broadcast_to(arrs[name], (n,)), dtype=np.float64) for name in PER_CONTACT}
+    _check_deformation(out, arrs)
+    out["normals"] = _unit_normals(arrs["normals"])
+    mask = _check_active(active, n)
+    _check_distinct(arrs["positions"] if mask is None else arrs["positions"][mask])
+    out.update(positions=arrs["positions"], mass=arrs["mass"], gravity=arrs["gravity"])
+    checked = {name: out[name] for name in NAMES}
+    return checked if mask is None else {**checked, "active": mask}
+
+
+def check_batch_inputs(fields: dict[str, np.ndarray], skip=()) -> None:
+    """Validate every grasp of batched fields (each with a leading axis ``B``, e.g.
+    :meth:`Grasp.to_numpy_batch`) with :func:`check_grasp_inputs`, except rows ``skip``.
+
+    Raises:
+        GraspValueError: ``grasp i: ...`` naming the first invalid grasp (one line).
+    """
+    skip = set(int(i) for i in skip)
+    for i in range(len(fields["positions"])):
+        if i in skip:
+            continue
+        try:
+            check_grasp_inputs(**{k: v[i] for k, v in fields.items()})
+        except GraspValueError as exc:
+            raise GraspValueError(f"grasp {i}: {exc}") from None
+
+
+def _check_active(active, n: int) -> np.ndarray | None:
+    """The contact mask as an ``(N,)`` bool array with at least 2 true, or ``None``."""
+    if active is None:
+        return None
+    if _is_tracer(active):
+        raise GraspValueError("active is a JAX tracer: Grasp.create needs concrete values")
+    a = np.asarray(active)
+    if a.dtype != np.bool_:
+        raise GraspValueError(f"active must be booleans (one per contact), got {_short(active)}")
+    if a.shape != (n,):
+        raise GraspValueError(f"active must have shape ({n},), one per contact, got {a.shape}")
+    if int(a.sum()) < 2:
+        raise GraspValueError(f"active must mark at least 2 contacts, got {int(a.sum())}")
+    return a.copy()
+
+
+def _reject_tracers(given: dict) -> None:
+    for name, value in given.items():
+        if _is_tracer(value):
+            raise GraspValueError(
+                f"{name} is a JAX tracer: Grasp.create needs concrete values; inside "
+                "jit/vmap/grad build the grasp with Grasp(...) directly or use "
+                "grasp.replace(...) on a grasp created outside"
+            )
+
+
+def _check_shapes(arrs: dict) -> int:
+    """Check every field's shape against the table; returns the number of contacts ``N``."""
+    pos = arrs["positions"]
+    if pos.ndim != 2 or pos.shape[1] != 3:
+        raise GraspValueError(f"positions must have shape (N, 3), got shape {pos.shape}")
+    n = pos.shape[0]
+    if n < 2:
+        raise GraspValueError(f"need at least 2 contacts, got {n}")
+    for field in FIELDS:
+        shape = arrs[field.name].shape
+        if field.shape == "directions" and shape != (n, 3):
+            raise GraspValueError(
+                f"{field.name} must have shape ({n}, 3) like positions, got shape {shape}"
+            )
+        if field.shape == "per_contact" and shape not in ((), (n,)):
+            raise GraspValueError(
+                f"{field.name} must be a scalar or have shape ({n},) (one per contact), "
+                f"got shape {shape}"
+            )
+        if field.shape == "scalar" and shape != ():
+            raise GraspValueError(f"{field.name} must be a scalar, got shape {shape}")
+        if field.shape == "vector" and shape != (3,):
+            raise GraspValueError(f"{field.name} must have shape (3,), got shape {shape}")
+    return n
+
+
+def _check_ranges(arrs: dict) -> None:
+    """Each field with a minimum respects it (:attr:`Field.rule`)."""
+    for field in FIELDS:
+        if field.minimum is None or field.name == "initial_deformation":
+            continue  # the deformation's range depends on the radius: _check_deformation
+        a = arrs[field.name]
+        flat = np.atleast_1d(a)
+        bad = np.flatnonzero(~field.allows(flat))
+        if bad.size:
+            i = int(bad[0])
+            label = _index_name(field.name, a.ndim, i)
+            raise GraspValueError(
+                f"{label} = {_with_unit(format_value(flat[i]), field.name)} must be {field.rule} and finite"
+            )
+
+
+def _check_deformation(out: dict, arrs: dict) -> None:
+    """``0 < initial_deformation < radius`` at every contact, and an initial elastic energy
+    ``E dr^3`` far from float64 underflow (the solver divides by it)."""
+    dr_n, radius_n, e_n = out["initial_deformation"], out["radius"], out["young_modulus"]
+    for i in range(dr_n.shape[0]):
+        if not (0 < dr_n[i] < radius_n[i]):
+            label = _index_name("initial_deformation", arrs["initial_deformation"].ndim, i)
+            rlabel = _index_name("radius", arrs["radius"].ndim, i)
+            raise GraspValueError(
+                f"{label} = {format_value(dr_n[i])} m must be in "
+                f"(0, {rlabel} = {format_value(radius_n[i])} m)"
+            )
+    with np.errstate(under="ignore", over="ignore"):
+        energy = e_n * dr_n**3
+    for i in range(dr_n.shape[0]):
+        if not energy[i] >= MIN_ENERGY_SCALE:
+            raise GraspValueError(
+                f"contact {i}: young_modulus * initial_deformation^3 = "
+                f"{format_value(e_n[i])} Pa * ({format_value(dr_n[i])} m)^3 is below "
+                f"{MIN_ENERGY_SCALE:g} J, too small to evaluate in floating point"
+            )
+
+
+def _unit_normals(nrm: np.ndarray) -> np.ndarray:
+    """Normals divided by their norm (kept bit for bit within :data:`_UNIT_TOLERANCE`)."""
+    # scaled norm: no overflow for huge components, no underflow for tiny ones
+    peak = np.max(np.abs(nrm), axis=1)
+    safe = np.where(peak > 0, peak, 1.0)
+    norms = peak * np.linalg.norm(nrm / safe[:, None], axis=1)
+    for i in range(nrm.shape[0]):
+        if not norms[i] > NORMAL_MIN_NORM:
+            raise GraspValueError(
+                f"normals[{i}] = {format_value(nrm[i])} must be a non-zero vector "
+                f"(norm > {NORMAL_MIN_NORM:g})"
+            )
+    unit = nrm.copy()
+    rescale = np.abs(norms - 1.0) > _UNIT_TOLERANCE
+    unit[rescale] = (nrm[rescale] / peak[rescale, None]) / (norms[rescale] / peak[rescale])[:, None]
+    return unit
+
+
+def inward_contacts(positions, normals) -> list[int]:
+    """Contacts whose normal does not point away from the centre of mass: ``n_i . c_i <= 0``.
+
+    Args:
+        positions: ``(N, 3)`` contact positions ``c_i``, m, object frame (origin at the
+            centre of mass).
+        normals: ``(N, 3)`` surface normals ``n_i`` (any length).
+
+    Returns:
+        The 0-based indices, in order (``[]`` for a grasp of a convex object from outside,
+        where every outward normal points away from the centre of mass).
+
+    Such normals are valid input, not an error: on a non-convex or hollow object the
+    outward normal can point towards the centre of mass (an inside grip on the walls of a
+    cavity or ring, a pinch of a rim), and the model needs nothing else. But a normal
+    flipped by mistake reads the same way, so the command line names these contacts.
+    """
+    c = np.asarray(positions, dtype=np.float64)
+    n = np.asarray(normals, dtype=np.float64)
+    return [int(i) for i in np.flatnonzero(~(np.einsum("ij,ij->i", n, c) > 0.0))]
+
+
+def _check_distinct(pos: np.ndarray) -> None:
+    with np.errstate(over="ignore", invalid="ignore"):
+        diff = pos[:, None, :] - pos[None, :, :]
+        dist = np.sqrt(np.sum(diff * diff, axis=-1))
+    close = np.argwhere(np.triu(dist < COINCIDENT_DISTANCE, k=1))
+    if close.size:
+        i, j = (int(k) for k in close[0])
+        raise GraspValueError(
+            f"positions[{i}] = positions[{j}] = {format_value(pos[i])} m: two contacts at the "
+            f"same position (distance < {COINCIDENT_DISTANCE:g} m)"
+        )

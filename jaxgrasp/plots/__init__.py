@@ -1,0 +1,17 @@
+"""Pictures (matplotlib, Agg backend): sweep and ranking plots, the 3-D scene of a grasp
+and the way it fails.
+"""
+
+from jaxgrasp.plots._plots import plot_sweep, plot_max, plot_max_over, plot_ranking, plot_grasp, draw_scene, save_figure
+from jaxgrasp.plots._scene import grasp_scene
+
+__all__ = [
+    "plot_sweep",
+    "plot_max",
+    "plot_max_over",
+    "plot_ranking",
+    "plot_grasp",
+    "draw_scene",
+    "save_figure",
+    "grasp_scene",
+]

@@ -1,0 +1,42 @@
+"""Work on the rows of a batch that need it, gathered in fixed-size blocks.
+
+Under ``vmap`` a branch taken by a few lanes costs as much as one taken by all of them.
+:func:`over_rows` instead runs a computation on the rows where a mask is true, ``block``
+rows at a time, in as many blocks as there are such rows (none where there are none):
+the shapes stay static, the cost follows the count. :mod:`jaxgrasp.solver._direction` uses it for
+``eigh``, :mod:`jaxgrasp.solver._line_search` for the ladder past the full step.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["over_rows", "put_rows"]
+
+
+def over_rows(use, block: int, update, carry):
+    """Fold ``update(rows, valid, carry) -> carry`` over the rows where ``use`` ``(B,)``
+    is true, ``block`` at a time (static; at most ``B``): ``rows`` ``(block,)`` uint32 are
+    row indices, ``valid`` ``(block,)`` bool is false on the padding rows of the last
+    block (which repeat a real row: write with :func:`put_rows`)."""
+    size = use.shape[0]
+    block = min(block, size)
+    num_blocks = -(-size // block)
+    # the rows in use first; unsigned, so that indexing with them adds no wrap-around of
+    # negative indices
+    order = jnp.argsort(~use, stable=True).astype(jnp.uint32)
+    order = jnp.concatenate([order, jnp.broadcast_to(order[-1:], (num_blocks * block - size,))])
+    count = jnp.sum(use.astype(jnp.int32))
+
+    def body(c):
+        i, carry = c
+        rows = jax.lax.dynamic_slice(order, (i * block,), (block,))
+        return i + 1, update(rows, i * block + jnp.arange(block) < count, carry)
+
+    return jax.lax.while_loop(lambda c: c[0] * block < count, body, (jnp.asarray(0, jnp.int32), carry))[1]
+
+
+def put_rows(a, rows, valid, values):
+    """``a`` with ``a[rows] = values`` where ``valid`` (the other writes are dropped)."""
+    return a.at[jnp.where(valid, rows, jnp.asarray(a.shape[0], rows.dtype))].set(values, mode="drop")

@@ -1,0 +1,284 @@
+"""Settling: stalled boundary lanes certified by a polish on a relaxed, well-conditioned problem."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrasp.model._potential import (
+    contact_kinematics,
+    energy_of,
+    margins_of,
+    rotation_matrix,
+)
+from jaxgrasp.solver._dense import solve as dense_solve
+from jaxgrasp.solver._rows import over_rows, put_rows
+from jaxgrasp.solver._solver import SolverOptions, SolverResult, kkt_tol
+from jaxgrasp.solver._status import LaneStatus
+from jaxgrasp.tolerance._problems import ProblemData, constraints, objective, to_pose
+
+__all__ = ['settle_stalled', 'needs_settling', 'RELEASED_TOL', 'MAX_POLISHED']
+
+
+def _at_equilibrium(eq: SolverResult, lanes: SolverResult, at_eq, g_eq, lane_k) -> SolverResult:
+    """The boundary lanes ``at_eq`` ``(L,)`` (leading axis ``L`` of ``lanes``; ``lane_k``
+    their equality rows, ``g_eq`` that row's margin at the equilibrium) given the
+    equilibrium's solution ``eq``: an equilibrium whose
+    margin of row ``k`` is within the solver's tolerance of 0 is a KKT point of boundary
+    problem ``k`` too, with the same residuals (the equality's multiplier
+    ``nu = -lam_k``, row ``k``'s ``lam`` 0), and its minimiser, as no point of the
+    boundary lies below the minimum of the region that holds it. Such lanes all start at
+    the equilibrium (where a degenerate one, several constraints active at once, could
+    stall: a grasp of the long property profile settled such a boundary in one
+    orientation and not in another), so they are not solved but given this solution."""
+    rows = jnp.arange(lanes.lam.shape[-1])
+    is_k = rows[None, :] == lane_k[:, None]  # (L, 3N)
+    given = SolverResult(
+        x=jnp.broadcast_to(eq.x, lanes.x.shape),
+        lam=jnp.where(is_k, 0.0, eq.lam[None, :]),
+        nu=-jnp.sum(jnp.where(is_k, eq.lam[None, :], 0.0), axis=1),
+        objective=jnp.broadcast_to(eq.objective, lanes.objective.shape),
+        status=jnp.full(lanes.status.shape, LaneStatus.CONVERGED, lanes.status.dtype),
+        stationarity=jnp.broadcast_to(eq.stationarity, lanes.stationarity.shape),
+        feasibility=jnp.maximum(eq.feasibility, jnp.abs(g_eq)),
+        complementarity=jnp.broadcast_to(eq.complementarity, lanes.complementarity.shape),
+        steps=jnp.zeros(lanes.steps.shape, lanes.steps.dtype),
+    )
+    return jax.tree_util.tree_map(
+        lambda a, b: jnp.where(at_eq.reshape((-1,) + (1,) * (a.ndim - 1)), a.astype(b.dtype), b), given, lanes
+    )
+
+_PYRAMID = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)  # face angles, rad
+
+RELEASED_TOL = 1e-6
+
+"""A stalled lane's contact ``j`` is released where its contact and slip margins are
+both within this (scaled margins), and the lane's violation too."""
+
+_POLISH_STEPS = 8
+
+MAX_POLISHED = 2
+
+"""Most boundary problems of one grasp that :func:`settle_stalled` polishes."""
+
+SETTLE_BLOCK = 4
+
+"""Grasps per block of the settling stage in a batch (:func:`_settle_where_stalled`)."""
+
+
+def _tangential(z, data: ProblemData, j):
+    """``(3,)`` mm, the displacement of contact ``j`` at scaled pose ``z`` (eq. 11), and
+    its normal ``n_j``."""
+    x = to_pose(z, data.lever)
+    u = (rotation_matrix(x[3:]) - jnp.eye(3, dtype=z.dtype)) @ data.params.c[j] + x[:3]
+    return u, data.params.n[j]
+
+
+def _pyramid_basis(z0, data: ProblemData, j):
+    """``(3, 3)`` the pyramid's face directions ``v_k`` for contact ``j``, with ``v_0``
+    against the tangential displacement at the stalled point ``z0``: the objective pushes
+    the stalled iterate out of the cone there, and a pyramid with a face across that push
+    certifies the apex exactly where the circular cone does (the tangential reaction
+    ``sum_k lam_k v_k`` may then reach the cone's bound ``2 / (mu / cos^2 phi)`` of the
+    normal one). Falls back to a fixed basis where that displacement vanishes."""
+    u, n = _tangential(z0, data, j)
+    t = u - jnp.dot(n, u) * n
+    tn = jnp.linalg.norm(t)
+    a = jax.nn.one_hot(jnp.argmin(jnp.abs(n)), 3, dtype=z0.dtype)
+    fixed = jnp.cross(n, a)
+    e1 = jnp.where(tn > 1e-14, -t / jnp.where(tn > 1e-14, tn, 1.0), fixed / jnp.linalg.norm(fixed))
+    e2 = jnp.cross(n, e1)
+    angles = jnp.asarray(_PYRAMID, z0.dtype)
+    return jnp.cos(angles)[:, None] * e1 + jnp.sin(angles)[:, None] * e2
+
+
+def _relaxed_problem(z, data: ProblemData, j, v, relaxed_rows):
+    """``(f, g)`` of the program at scaled pose ``z`` with contact ``j``'s rows replaced,
+    where ``relaxed_rows`` ``(3N,)``, by its pyramid rows ``P_k = (mu_j d_j / (2 cos^2
+    phi_j) + v_k . u_j) / dr_j`` (``v``: the ``(3, 3)`` face directions; row ``k * N + j``
+    holds ``P_k``). One evaluation of the contact kinematics serves every row, so that
+    the polish's derivatives are taken once."""
+    p = data.params
+    n = p.c.shape[0]
+    x = to_pose(z, data.lever)
+    kinematics = contact_kinematics(x, p)
+    f = energy_of(x, kinematics, p) / data.scale
+    g = margins_of(kinematics, p).reshape(-1)
+    d, cphi = kinematics[0][j], kinematics[1][j]
+    u, _ = _tangential(z, data, j)
+    pyramid = (p.mu[j] * d / (2.0 * cphi**2) + v @ u) / jax.lax.stop_gradient(p.dr[j])
+    return f, jnp.where(relaxed_rows, pyramid[jnp.arange(3 * n) // n], g)
+
+
+def _polish(data: ProblemData, z0, k, j, released, o: SolverOptions):
+    """Newton's method on the KKT equations of boundary program ``k`` (equality row), with
+    the active set fixed at the stalled point ``z0``: on the relaxation at contact ``j``
+    where ``released``, else on the program itself.
+
+    Returns ``(z, lam_rel, ok, (stat, feas, comp))``: ``lam_rel`` ``(3N,)`` multipliers
+    of the (relaxed) program (the equality's included, free in sign); ``ok`` whether ``z``
+    is a KKT point of it within tol and feasible for the original program."""
+    n = data.params.c.shape[0]
+    dtype = z0.dtype
+    tol = kkt_tol(dtype, o)
+    rows = jnp.arange(3 * n)
+    j_rows = (rows % n == j) & released
+    has_eq = ~released | (k != n + j)  # j's own slip equality is relaxed away
+    is_eq = (rows == k) & has_eq
+    v = _pyramid_basis(z0, data, j)
+    fg = lambda z: _relaxed_problem(z, data, j, v, j_rows)
+    active = j_rows | is_eq | (constraints(z0, data) <= RELEASED_TOL)
+
+    def residual(y):  # the KKT equations, and the constraints for the statistics
+        z, lam = y[:6], y[6:]
+        grad_l = jax.grad(lambda z: (lambda a: a[0] - jnp.dot(lam, a[1]))(fg(z)))(z)
+        gz = fg(z)[1]
+        r = jnp.concatenate([grad_l, jnp.where(active, gz, lam)])
+        return r, (r, gz)
+
+    def newton(i, carry):
+        # _POLISH_STEPS Newton steps, then one more pass for the residual at the last point
+        y, _, _ = carry
+        jac, (r, gz) = jax.jacfwd(residual, has_aux=True)(y)
+        step = jnp.where(i < _POLISH_STEPS, dense_solve(jac, r), 0.0)  # no LAPACK: see jaxgrasp.solver._dense
+        return y - step, r, gz
+
+    y0 = jnp.concatenate([z0, jnp.zeros(3 * n, dtype)])
+    y, r, gz = jax.lax.fori_loop(
+        0, _POLISH_STEPS + 1, newton, (y0, jnp.zeros(6 + 3 * n, dtype), jnp.zeros(3 * n, dtype))
+    )
+    z, lam = y[:6], y[6:]
+    stat = jnp.max(jnp.abs(r[:6]))
+    feas = jnp.max(jnp.where(is_eq, jnp.abs(gz), jnp.maximum(-gz, 0.0)))
+    comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gz)))
+    # With torsion (theta_j != 0) the slip margin is d_j (mu_j^2 d_j / cos^4 phi_j - K theta_j^2)
+    # - 4 dt_j^2 with K = (225/32) r_j / mu_j^2 at d_j = 0: negative for 0 < d_j < gap below,
+    # so near the apex contact j's rows hold exactly where d_j = 0 and t_j = 0, the pyramid
+    # rows' common zero: their multipliers are then free in sign.
+    p = data.params
+    _, cphi, _, theta = contact_kinematics(to_pose(z, data.lever), p)
+    gap = (225.0 / 32.0) * p.r[j] * theta[j] ** 2 * cphi[j] ** 4 / p.mu[j] ** 4
+    free = is_eq | (j_rows & (gap >= RELEASED_TOL * p.dr[j]))
+    dual = jnp.all(free | (lam >= -tol))  # rows held at lam = 0 end at +-1e-30
+    lam = jnp.where(free, lam, jnp.maximum(lam, 0.0))
+    g_orig = constraints(z, data)
+    orig_feas = jnp.max(jnp.where(rows == k, jnp.abs(g_orig), jnp.maximum(-g_orig, 0.0)))
+    ok = (stat <= tol) & (feas <= tol) & (comp <= tol) & dual & (orig_feas <= tol) & jnp.all(jnp.isfinite(y))
+    return z, lam, ok, (stat, jnp.maximum(feas, orig_feas), comp)
+
+
+def _polish_candidates(lanes: SolverResult, found, num_starts: int):
+    """``(2N, D)`` bool: the lanes :func:`settle_stalled` may polish, those that stalled
+    (``NOT_CONVERGED``) at a point feasible within :data:`RELEASED_TOL`, of problems
+    that no start settled (a settled problem keeps its answer: a stalled lane of one can
+    sit far from the converged ones, e.g. at a large rotation)."""
+    stalled = found & (lanes.status == LaneStatus.NOT_CONVERGED) & (lanes.feasibility <= RELEASED_TOL)
+    converged = (found & (lanes.status == LaneStatus.CONVERGED)).reshape(-1, num_starts)
+    return stalled.reshape(-1, num_starts) & ~jnp.any(converged, axis=1, keepdims=True)
+
+
+def _settle_where_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_starts: int,
+                          o: SolverOptions) -> SolverResult:
+    """:func:`settle_stalled` of each grasp of a batch (leading axis ``B`` on ``data``,
+    ``lanes`` and ``found``) that has a lane to polish, in gathered blocks of
+    :data:`SETTLE_BLOCK` grasps (:func:`jaxgrasp.solver._rows.over_rows`); every other
+    grasp's lanes are returned as they are, which is what :func:`settle_stalled` returns
+    for them. Under ``vmap`` the stage would cost every grasp its polish; stalls are rare
+    (some 5 % of random grasps have one, and grids hardly any), so a batch pays for the
+    few that need it (experiments/BENCHMARK.md)."""
+    need = jax.vmap(lambda l, f: jnp.any(_polish_candidates(l, f, num_starts)))(lanes, found)
+
+    def update(rows, valid, lanes):
+        pick = lambda t: jax.tree_util.tree_map(lambda a: a[rows], t)
+        settled = jax.vmap(lambda d, l, f: settle_stalled(d, l, lane_k, f, num_starts, o))(
+            pick(data), pick(lanes), found[rows]
+        )
+        return jax.tree_util.tree_map(lambda a, s: put_rows(a, rows, valid, s), lanes, settled)
+
+    return over_rows(need, SETTLE_BLOCK, update, lanes)
+
+
+def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
+    """Certify boundary lanes that stalled at a feasible point (a post-solve stage).
+
+    For each boundary problem that no start settled (at most :data:`MAX_POLISHED` per grasp), the lowest-energy lane that ended
+    ``NOT_CONVERGED`` with its violation within :data:`RELEASED_TOL` is polished by
+    Newton's method on the KKT equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
+    fixed: on the relaxation above where some contact ``j`` is released (contact and
+    slip margins within :data:`RELEASED_TOL`; ``j``'s force row not the equality), else
+    on the program itself (bounded multipliers, but an inner solve that stalled, e.g. at
+    the largest penalty). Where that gives a KKT point within ``tol`` (inequality
+    multipliers ``>= 0``) that is feasible for the original program, the lane becomes
+    ``CONVERGED`` there, with the polish's KKT residuals. A relaxation's multipliers are
+    mapped back: ``lam`` of ``j``'s contact row carries the pyramid rows' ``d_j`` part
+    (clipped at 0; the tangential part has no row of the original program, so the
+    envelope derivative of such a boundary misses it), ``nu`` the equality's. Every other
+    lane is returned unchanged; a lane that converged is never touched.
+
+    Args:
+        data: the grasp's :class:`ProblemData`.
+        lanes: the boundary lanes, leading axis ``2N * D``.
+        lane_k: ``(2N * D,)`` equality row of each lane.
+        found: ``(2N * D,)`` the lanes that were started.
+        num_starts: ``D``.
+        o: the :class:`~jaxgrasp.solver._solver.SolverOptions` the lanes were solved with.
+    """
+    n = data.params.c.shape[0]
+    g = jax.vmap(lambda z: constraints(z, data))(lanes.x).reshape(-1, 3, n)  # (L, 3, N)
+    released = (g[:, 0] <= RELEASED_TOL) & (g[:, 1] <= RELEASED_TOL) & data.params.on  # (L, N)
+    released = released & (lane_k[:, None] != 2 * n + jnp.arange(n))
+    j = jnp.argmax(released, axis=1)
+    released_any = jnp.any(released, axis=1)
+    candidate = _polish_candidates(lanes, found, num_starts)  # (2N, D)
+    pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
+    pick = jnp.arange(2 * n) * num_starts + pick  # (2N,) one lane per boundary problem
+    # Polish at most MAX_POLISHED problems per grasp, those with a candidate first: under
+    # vmap every grasp polishes as many as the one that needs most, and stalls are rare
+    # (42 of 8000 programs in the robustness set), so polishing all 2N would cost every
+    # grasp ~15% more for nothing.
+    has_candidate = jnp.any(candidate, axis=1)
+    chosen = jnp.argsort(~has_candidate, stable=True)[: min(MAX_POLISHED, 2 * n)]
+    pick = pick[chosen]
+    z, lam_rel, ok, (stat, feas, comp) = jax.vmap(
+        lambda l: _polish(data, lanes.x[l], lane_k[l], j[l], released_any[l], o)
+    )(pick)
+    ok = ok & has_candidate[chosen]
+    # the relaxation's multipliers in the original rows: the equality's as nu, the pyramid
+    # rows' d_j part on j's contact row (d P_k / d d_j = mu_j / (2 cos^2 phi_j) per dr_j)
+    jp = j[pick]
+    rows = jnp.arange(3 * n)
+    is_eq = rows[None, :] == lane_k[pick][:, None]
+    j_rows = (rows[None, :] % n == jp[:, None]) & released_any[pick][:, None]
+    cphi = jax.vmap(lambda z: contact_kinematics(to_pose(z, data.lever), data.params)[1])(z)  # (2N, N)
+    slope = data.params.mu[jp] / (2.0 * jnp.take_along_axis(cphi, jp[:, None], axis=1)[:, 0] ** 2)
+    lam_d = jnp.maximum(slope * jnp.sum(jnp.where(j_rows, lam_rel, 0.0), axis=1), 0.0)
+    lam = jnp.where(is_eq | j_rows, 0.0, lam_rel) + jnp.where(
+        released_any[pick][:, None], jax.nn.one_hot(jp, 3 * n, dtype=lam_rel.dtype) * lam_d[:, None], 0.0
+    )
+    nu = -jnp.sum(jnp.where(is_eq, lam_rel, 0.0), axis=1)
+    new = SolverResult(
+        x=z,
+        lam=lam,
+        nu=nu,
+        objective=jax.vmap(lambda z: objective(z, data))(z),
+        status=jnp.full(pick.shape, LaneStatus.CONVERGED, jnp.int32),
+        stationarity=stat,
+        feasibility=feas,
+        complementarity=comp,
+        steps=lanes.steps[pick] + _POLISH_STEPS,
+    )
+    old = jax.tree_util.tree_map(lambda a: a[pick], lanes)
+    upd = jax.tree_util.tree_map(
+        lambda a, b: jnp.where(ok.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), new, old
+    )
+    return jax.tree_util.tree_map(lambda a, u: a.at[pick].set(u.astype(a.dtype)), lanes, upd)
+
+
+def needs_settling(boundary_status) -> np.ndarray:
+    """``(...)`` bool: whether an evaluation with this ``boundary_status`` ``(..., 2, N)``
+    (an :class:`~jaxgrasp.Evaluation` field, host-side) has a boundary problem that no
+    start settled, the only case in which :func:`settle_stalled` can change anything."""
+    return np.any(np.asarray(boundary_status) == LaneStatus.NOT_CONVERGED, axis=(-2, -1))
