@@ -27,7 +27,7 @@ from jaxgrasp.presets import MAX_FORCE, cube
 from jaxgrasp.tolerance._result import STATUS_NAMES
 from jaxgrasp.analysis._sweep import SweepResult, sweep
 
-KIND_NAMES = tuple(jaxgrasp.KINDS) + ("none",)
+KIND_NAMES = tuple(jaxgrasp.BoundaryKind.labels()) + ("none",)
 
 
 def best_over_dr(grasp, E: float, n: int, label: str):
@@ -50,7 +50,7 @@ def best_over_dr(grasp, E: float, n: int, label: str):
         k = int(np.flatnonzero(dr == best_dr[0])[0])
         lo, hi2 = refine_interval(dr, k)
         dr = np.linspace(lo, hi2, n)
-    trusted = [p for p in points if p[3] != jaxgrasp.NOT_CONVERGED] or points
+    trusted = [p for p in points if p[3] != jaxgrasp.GraspStatus.NOT_CONVERGED] or points
     best = max(trusted, key=lambda p: p[2])
     return points, best, dlim, compile_s, run_s
 

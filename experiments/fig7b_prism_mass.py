@@ -28,7 +28,7 @@ from jaxgrasp.presets import MAX_FORCE, prism
 from jaxgrasp.tolerance._result import STATUS_NAMES
 from jaxgrasp.analysis._sweep import SweepResult, sweep
 
-KIND_NAMES = tuple(jaxgrasp.KINDS) + ("none",)
+KIND_NAMES = tuple(jaxgrasp.BoundaryKind.labels()) + ("none",)
 FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
 
 
@@ -54,9 +54,9 @@ def main() -> None:
                 for j, d in enumerate(dr):
                     p = (e, stage, m, d, *(getattr(r, f)[a, j, 0] for f in FIELDS))
                     points.append(p)
-                    trusted = p[5] != jaxgrasp.NOT_CONVERGED
+                    trusted = p[5] != jaxgrasp.GraspStatus.NOT_CONVERGED
                     old = best.get((i, a))
-                    if old is None or (trusted and (old[5] == jaxgrasp.NOT_CONVERGED or p[4] > old[4])):
+                    if old is None or (trusted and (old[5] == jaxgrasp.GraspStatus.NOT_CONVERGED or p[4] > old[4])):
                         best[(i, a)] = p
             # second pass: span every mass's best point and its neighbours
             _, best_dr = r.max_over("initial_deformation")

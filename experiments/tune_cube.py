@@ -38,7 +38,7 @@ from jaxgrasp.analysis._tune import plot_history, tune
 
 HERE = Path(__file__).resolve().parent
 EXAMPLES = HERE.parent / "examples"
-KINDS = tuple(jaxgrasp.KINDS) + ("none",)
+KINDS = tuple(jaxgrasp.BoundaryKind.labels()) + ("none",)
 
 
 class Tee:

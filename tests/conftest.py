@@ -77,7 +77,7 @@ class BatchEvaluator:
         self.chunk = chunk
         self._chunk_n: dict[int, int] = {}  # batch size used for each N (fixed at first use)
         # evaluate() skips input validation when traced, so the lambda is vmappable.
-        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)), compiler_options=jaxgrasp.COMPILER_OPTIONS)
+        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)), compiler_options=jaxgrasp.engine.COMPILER_OPTIONS)
         self._cache: dict = {}
         self.calls = 0
 

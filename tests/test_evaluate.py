@@ -183,7 +183,7 @@ def torsion_bound(E, dr, r=R_TIP, mu=MU):
 
 
 def name(res):
-    return jaxgrasp.STATUS_NAMES[int(res.status)]
+    return jaxgrasp.GraspStatus.labels()[int(res.status)]
 
 
 # ----------------------------------------------------------------------------- dtype
@@ -313,7 +313,7 @@ def test_result_structure(results, case):
     assert np.shape(res.equilibrium_translation) == (3,) and np.shape(res.equilibrium_rotation) == (3,)
     assert np.shape(res.kkt) == (1 + 2 * n, 3) and np.shape(res.steps) == (1 + 2 * n,)
     status = int(res.status)
-    assert status in (jaxgrasp.STABLE, jaxgrasp.UNSTABLE, jaxgrasp.INFEASIBLE, jaxgrasp.NOT_CONVERGED)
+    assert status in (jaxgrasp.GraspStatus.STABLE, jaxgrasp.GraspStatus.UNSTABLE, jaxgrasp.GraspStatus.INFEASIBLE, jaxgrasp.GraspStatus.NOT_CONVERGED)
     be, bs = np.asarray(res.boundary_energy), np.asarray(res.boundary_status)
     # 3 (not started) exactly when the equilibrium problem did not converge
     if int(res.equilibrium_status) == 0:
@@ -321,11 +321,11 @@ def test_result_structure(results, case):
     else:
         assert (bs == 3).all()
     assert np.isfinite(be[bs == 0]).all() and np.isposinf(be[(bs == 1) | (bs == 3)]).all()
-    if status in (jaxgrasp.UNSTABLE, jaxgrasp.INFEASIBLE):
+    if status in (jaxgrasp.GraspStatus.UNSTABLE, jaxgrasp.GraspStatus.INFEASIBLE):
         assert float(res.value) == 0.0
         assert int(res.limiting_kind) == -1 and int(res.limiting_contact) == -1
         assert not bool(res.tolerates(0.0))
-    if status == jaxgrasp.STABLE:
+    if status == jaxgrasp.GraspStatus.STABLE:
         v = float(res.value)
         assert v > 0.0 and np.isfinite(v)
         k, j = int(res.limiting_kind), int(res.limiting_contact)
@@ -344,8 +344,8 @@ def test_expected_statuses(results):
     for k in ("cube_E1e6_dr3e-3", "cube_heavy", "prism_heavy"):
         assert float(results[k].value) == 0.0
     # paper's cube, E = 1e6 Pa, dr = 2 mm: the force limit binds, not friction
-    assert jaxgrasp.KINDS[int(results["cube_E1e+06_dr2e-03"].limiting_kind)] == "max_force"
-    assert jaxgrasp.KINDS[int(results["cube_E6e+05_dr2e-03"].limiting_kind)] == "slip"
+    assert jaxgrasp.BoundaryKind.labels()[int(results["cube_E1e+06_dr2e-03"].limiting_kind)] == "max_force"
+    assert jaxgrasp.BoundaryKind.labels()[int(results["cube_E6e+05_dr2e-03"].limiting_kind)] == "slip"
 
 
 @pytest.mark.parametrize("case", ["cube_E6e+05_dr2e-03", "prism_E2e5_dr2e-3_m0.1", "four_finger"])
@@ -378,7 +378,7 @@ def test_jit_matches_evaluate():
             np.testing.assert_allclose(y, x, rtol=0, atol=1e-12)
         else:
             np.testing.assert_allclose(y, x, rtol=1e-13, atol=1e-20, err_msg=f.name)
-    assert int(a.status) == int(b.status) == jaxgrasp.STABLE
+    assert int(a.status) == int(b.status) == jaxgrasp.GraspStatus.STABLE
 
 
 def test_vmap_over_young_modulus_matches_pointwise(results):
@@ -418,10 +418,10 @@ def test_boundary_poses_lie_on_their_boundary(results, case):
             if int(res.boundary_status[k, j]) != 0:
                 continue
             m = _margins(g, res.boundary_translation[k, j], res.boundary_rotation[k, j])
-            assert abs(m[1 + k, j]) <= 1e-8, (case, jaxgrasp.KINDS[k], j, m[1 + k, j])
-            assert m.min() >= -1e-8, (case, jaxgrasp.KINDS[k], j, m)
+            assert abs(m[1 + k, j]) <= 1e-8, (case, jaxgrasp.BoundaryKind.labels()[k], j, m[1 + k, j])
+            assert m.min() >= -1e-8, (case, jaxgrasp.BoundaryKind.labels()[k], j, m)
             checked += 1
-    if int(res.status) == jaxgrasp.STABLE:
+    if int(res.status) == jaxgrasp.GraspStatus.STABLE:
         assert checked >= 1
         k, j = int(res.limiting_kind), int(res.limiting_contact)
         m = _margins(g, res.boundary_translation[k, j], res.boundary_rotation[k, j])

@@ -253,7 +253,7 @@ def check_outcome(rc, out, err, as_json, what):
         status, expl = fields["status"], fields["explanation"]
         assert "nan" not in fields["equilibrium energy"].lower(), ctx
     assert math.isfinite(value) and value >= 0.0, ctx
-    assert status in jaxgrasp.STATUS_NAMES, ctx
+    assert status in jaxgrasp.GraspStatus.labels(), ctx
     assert isinstance(expl, str) and expl and "\n" not in expl, ctx
     assert expl.startswith(status.replace("_", " ")), ctx
     return status

@@ -31,7 +31,7 @@ import jaxgrasp
 from jaxgrasp import presets
 from jaxgrasp.analysis._tune import tune
 from jaxgrasp.tolerance._verdict import TIE_TOL
-from jaxgrasp.engine._evaluate import soft_minimum
+from jaxgrasp.tolerance import soft_minimum
 from jaxgrasp.tolerance._result import INFEASIBLE, STABLE, UNSTABLE
 
 from conftest import GRASP_FIELDS, stack, unstack
@@ -111,8 +111,8 @@ def _value(g):
     return ev.value, ev
 
 
-_VG = jax.jit(jax.vmap(jax.value_and_grad(_value, has_aux=True)), compiler_options=jaxgrasp.COMPILER_OPTIONS)
-_JF = jax.jit(jax.vmap(jax.jacfwd(lambda g: jaxgrasp.evaluate(g, OPTS).value)), compiler_options=jaxgrasp.COMPILER_OPTIONS)
+_VG = jax.jit(jax.vmap(jax.value_and_grad(_value, has_aux=True)), compiler_options=jaxgrasp.engine.COMPILER_OPTIONS)
+_JF = jax.jit(jax.vmap(jax.jacfwd(lambda g: jaxgrasp.evaluate(g, OPTS).value)), compiler_options=jaxgrasp.engine.COMPILER_OPTIONS)
 
 
 def run_batched(fn, grasps):

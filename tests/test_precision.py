@@ -27,7 +27,7 @@ def test_float32_accuracy_on_the_cube():
         r64, r32 = jaxgrasp.evaluate(g64), jaxgrasp.evaluate(_as(g64, jnp.float32))
         assert r32.value.dtype == jnp.float32
         assert r32.equilibrium_energy.dtype == jnp.float32
-        assert int(r64.status) == jaxgrasp.STABLE
+        assert int(r64.status) == jaxgrasp.GraspStatus.STABLE
         assert int(r32.status) == int(r64.status)
         rel = abs(float(r32.value) - float(r64.value)) / float(r64.value)
         assert rel < 3e-3, (e, d, rel)  # README, section Precision

@@ -252,7 +252,7 @@ def reflection(m: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- checks
 def describe(res) -> str:
     return (
-        f"status={jaxgrasp.STATUS_NAMES[int(res.status)]} value={float(res.value)!r} "
+        f"status={jaxgrasp.GraspStatus.labels()[int(res.status)]} value={float(res.value)!r} "
         f"limiting=({int(res.limiting_kind)},{int(res.limiting_contact)}) "
         f"U0={float(res.equilibrium_energy)!r} boundary_energy={np.asarray(res.boundary_energy).tolist()} "
         f"boundary_status={np.asarray(res.boundary_status).tolist()}"
@@ -264,10 +264,10 @@ def check_sane(res, g) -> None:
     ``not_converged``: ``experiments/robustness.py`` finds none in 1000 such grasps)."""
     v = float(res.value)
     assert math.isfinite(v) and v >= 0.0, describe(res) + "\n" + literal(g)
-    assert int(res.status) in (jaxgrasp.STABLE, jaxgrasp.UNSTABLE, jaxgrasp.INFEASIBLE), (
+    assert int(res.status) in (jaxgrasp.GraspStatus.STABLE, jaxgrasp.GraspStatus.UNSTABLE, jaxgrasp.GraspStatus.INFEASIBLE), (
         f"{res.explain()}\n{describe(res)}\n{literal(g)}"
     )
-    if int(res.status) in (jaxgrasp.UNSTABLE, jaxgrasp.INFEASIBLE):
+    if int(res.status) in (jaxgrasp.GraspStatus.UNSTABLE, jaxgrasp.GraspStatus.INFEASIBLE):
         assert v == 0.0, describe(res)
 
 
@@ -290,7 +290,7 @@ def assert_same(a, b, ga, gb, what: str, perm=None, factor: float = 1.0) -> None
     va, vb = float(a.value), float(b.value)
     tiny = _rounding(a, factor)
     assert vb == pytest.approx(factor * va, rel=REL, abs=tiny), msg
-    if int(a.status) == jaxgrasp.INFEASIBLE:
+    if int(a.status) == jaxgrasp.GraspStatus.INFEASIBLE:
         return  # no equilibrium: the statuses must agree, no more
     u0a, u0b = factor * float(a.equilibrium_energy), float(b.equilibrium_energy)
     assert u0b == pytest.approx(u0a, rel=1e-8, abs=1e-12), msg
@@ -304,7 +304,7 @@ def assert_same(a, b, ga, gb, what: str, perm=None, factor: float = 1.0) -> None
     da, db = be_a[fa] - u0a, be_b[fb] - u0b
     np.testing.assert_allclose(db, da, rtol=REL, atol=REL * factor * va + tiny, err_msg=msg)
     # the limiting boundary maps to the transformed one, unless another one ties with it
-    if int(a.status) == jaxgrasp.STABLE:
+    if int(a.status) == jaxgrasp.GraspStatus.STABLE:
         gaps = np.sort(be_a[fa] - u0a)
         if gaps.size == 1 or gaps[1] - gaps[0] > 10 * (REL * factor * va + tiny):
             ka, ja = int(a.limiting_kind), int(a.limiting_contact)
@@ -342,11 +342,11 @@ def test_seeded_grasps_converge(evaluate_many):
     problems = []
     for i, (g, r) in enumerate(zip(gs, res)):
         v = float(r.value)
-        if int(r.status) == jaxgrasp.NOT_CONVERGED or not (math.isfinite(v) and v >= 0.0) or (
-            int(r.status) == jaxgrasp.STABLE and not v > 0.0
+        if int(r.status) == jaxgrasp.GraspStatus.NOT_CONVERGED or not (math.isfinite(v) and v >= 0.0) or (
+            int(r.status) == jaxgrasp.GraspStatus.STABLE and not v > 0.0
         ):
             problems.append(f"grasp {i}: {r.explain()} [{describe(r)}]\n  {literal(g)}")
-    statuses = sorted({jaxgrasp.STATUS_NAMES[int(r.status)] for r in res})
+    statuses = sorted({jaxgrasp.GraspStatus.labels()[int(r.status)] for r in res})
     assert not problems, "\n".join(problems)
     assert "stable" in statuses and len(statuses) >= 2  # the set is varied
 
@@ -363,7 +363,7 @@ def test_rotation_reflection_renumbering(evaluate_many, g, data):
     perm = data.draw(st.permutations(list(range(n))))
     rot, mir, ren = transform(g, Q), transform(g, H), permute(g, perm)
     a, b, c, e = evaluate_many([g, rot, mir, ren])
-    event(f"N={n} {jaxgrasp.STATUS_NAMES[int(a.status)]}")  # --hypothesis-show-statistics
+    event(f"N={n} {jaxgrasp.GraspStatus.labels()[int(a.status)]}")  # --hypothesis-show-statistics
     for res, gg in ((a, g), (b, rot), (c, mir), (e, ren)):
         check_sane(res, gg)
     assert_same(a, b, g, rot, f"rotation Q={Q.tolist()}")
@@ -378,7 +378,7 @@ def test_zero_mass_scaling(evaluate_many, g, s):
     g0 = g.replace(mass=jnp.zeros((), jnp.float64))  # not weakly typed: no recompilation
     gs = scaled(g0, s)
     a, b = evaluate_many([g0, gs])
-    event(f"N={g.num_contacts} {jaxgrasp.STATUS_NAMES[int(a.status)]}")
+    event(f"N={g.num_contacts} {jaxgrasp.GraspStatus.labels()[int(a.status)]}")
     check_sane(a, g0)
     check_sane(b, gs)
     assert_same(a, b, g0, gs, f"scaling E, f_max by {s!r}", factor=s)

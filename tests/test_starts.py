@@ -140,7 +140,7 @@ def subset_values(grasp) -> dict:
 
 def _ctx(case, res, ref) -> str:
     return (
-        f"{case}: jaxgrasp {jaxgrasp.STATUS_NAMES[int(res.status)]} value={float(res.value)!r} "
+        f"{case}: jaxgrasp {jaxgrasp.GraspStatus.labels()[int(res.status)]} value={float(res.value)!r} "
         f"limiting=({int(res.limiting_kind)},{int(res.limiting_contact)}) "
         f"starts={jaxgrasp.EvaluateOptions().num_starts} | ipopt {ref['status']} value={float(ref['value'])!r} "
         f"limiting={ref['limiting']}"
@@ -152,7 +152,7 @@ def test_default_starts_agree_with_ipopt(results, refs, case):
     """At the default options the value equals the multi-start Ipopt reference's to 1e-6."""
     res, ref = results[case][0], refs[case]
     ctx = _ctx(case, res, ref)
-    assert jaxgrasp.STATUS_NAMES[int(res.status)] == ref["status"] == "stable", ctx
+    assert jaxgrasp.GraspStatus.labels()[int(res.status)] == ref["status"] == "stable", ctx
     jv, iv = float(res.value), float(ref["value"])
     assert float(res.equilibrium_energy) == pytest.approx(float(ref["equilibrium_energy"]), rel=1e-8), ctx
     assert abs(jv - iv) <= 1e-6 * iv, ctx
