@@ -208,7 +208,7 @@ def phase_ipopt(grasps, sample: list[int]) -> dict:
 
     import jaxgrasp
     from experiments import benchmark as bm
-    from jaxgrasp.tolerance._stages import solve_problems
+    from jaxgrasp.engine._evaluate import solve_problems
 
     npad = max(g.num_contacts for g in grasps)
     batch = jaxgrasp.stack([grasps[i] for i in sample], num_contacts=npad)

@@ -14,7 +14,7 @@ Scenes:
 * ``cube``: the paper's grid, E = 2e5..1e6 Pa (9) x dr = 1..5 mm (41), m = 0 -> 369 grasps;
 * ``prism``: E = 2e5..1e6 Pa (5) x dr = 1..5 mm (9) x m in {0, 0.1, 0.2} kg -> 135 grasps.
 
-jaxgrasp: ``problems_of_batch(p, opts, settle=False)`` (what ``solve_problems`` solves
+jaxgrasp: ``run_inline(grasps, stage_functions(opts, settle=False), until="problems")`` (what ``solve_problems`` solves
 for one grasp) batched as ``evaluate_batch`` and ``sweep`` batch it
 (:func:`jaxgrasp.engine._batch.over_devices`: ``jit(shard_map(...))``,
 the batch split over every JAX device, one work queue per device; ``import jaxgrasp``
@@ -85,9 +85,8 @@ from jaxgrasp.solver._status import LaneStatus  # noqa: E402
 from jaxgrasp import EvaluateOptions
 from jaxgrasp.engine._batch import batch_sharding, over_devices  # noqa: E402
 from jaxgrasp.engine._evaluate import evaluate_batch_traced  # noqa: E402
-from jaxgrasp.model._potential import model_params  # noqa: E402
 from jaxgrasp.tolerance._settle import needs_settling
-from jaxgrasp.tolerance._stages import problems_of_batch  # noqa: E402
+from jaxgrasp.engine._stages import run_inline, stage_functions  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
 from tests.ipopt_reference import FEAS_TOL, _Model  # noqa: E402
 
@@ -366,7 +365,7 @@ def run_scene(name, params, grasps, opts, args):
     # --- jaxgrasp solve_problems: compile + first run. The program without the settling
     # stage: what evaluate and evaluate_batch run first; the settling program runs only on
     # grasps with an unsettled boundary problem (counted below: none on these grids).
-    fn = lambda gs: problems_of_batch(jax.vmap(model_params)(gs), opts, settle=False)  # noqa: E731
+    fn = lambda gs: run_inline(gs, stage_functions(opts, settle=False), until="problems")  # noqa: E731
     la = load()
     compiled, t_compile = compile_aot(fn, batch)
     progs, t_first, _ = timed_call(compiled)

@@ -29,7 +29,7 @@ import jaxgrasp
 from jaxgrasp.solver import _solver as S
 from jaxgrasp import EvaluateOptions
 from jaxgrasp.tolerance._problems import constraints, objective, problem_data
-from jaxgrasp.tolerance._stages import solve_problems
+from jaxgrasp.engine._evaluate import solve_problems
 from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.model._potential import model_params
 

@@ -30,7 +30,7 @@ from jaxgrasp.solver import _solver as S  # noqa: E402
 from jaxgrasp import EvaluateOptions
 from jaxgrasp.solver._direction import ldl_direction  # noqa: E402
 from jaxgrasp.tolerance._problems import objective_and_constraints, problem_data
-from jaxgrasp.tolerance._stages import solve_problems  # noqa: E402
+from jaxgrasp.engine._evaluate import solve_problems  # noqa: E402
 from jaxgrasp.model._potential import model_params  # noqa: E402
 from jaxgrasp.presets import cube, prism  # noqa: E402
 

@@ -164,7 +164,7 @@ def recheck(path: Path, chunks, min_ratio: float, keep: int) -> int:
     import jax
 
     import jaxgrasp
-    from jaxgrasp.tolerance._stages import solve_problems
+    from jaxgrasp.engine._evaluate import solve_problems
     from test_properties import literal
 
     rows = [json.loads(line) for line in open(path)]
@@ -231,7 +231,7 @@ def main() -> int:
     import jax
 
     import jaxgrasp
-    from jaxgrasp.tolerance._stages import solve_problems
+    from jaxgrasp.engine._evaluate import solve_problems
     from test_properties import NumpyDraw, build_grasp_fields, literal, random_rotation, random_unit, transform
 
     opts = jaxgrasp.EvaluateOptions()

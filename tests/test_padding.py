@@ -182,7 +182,7 @@ def test_grasp_without_active_contacts_solves_nothing():
     grasp that has no active contact. Its energy would be the weight's alone, unbounded
     below: its equilibrium lane ran the whole step budget (300 steps, checked) while the
     rest of the chunk waited. It now has no lane at all."""
-    from jaxgrasp.tolerance._stages import solve_problems
+    from jaxgrasp.engine._evaluate import solve_problems
 
     g = jaxgrasp.presets.cube(mass=0.05).replace(active=jnp.array([False, False]))
     p = solve_problems(g, settle=False)

@@ -47,7 +47,6 @@ def test_one_contact_data_gives_that_contacts_constraint_rows():
     """The start search evaluates a ray's own contact only (``programs._contact_data``):
     for every contact ``j`` of random 5-contact grasps (one with an inactive contact) at
     random poses, its three margins equal rows ``j, N + j, 2N + j`` of the whole grasp's."""
-    import jaxgrasp
     from jaxgrasp.model._potential import model_params
     from jaxgrasp.tolerance._starts import _contact_data
     from jaxgrasp.tolerance._problems import constraints, problem_data

@@ -46,7 +46,7 @@ import numpy as np
 import pytest
 
 import jaxgrasp
-from jaxgrasp.tolerance._stages import solve_problems
+from jaxgrasp.engine._evaluate import solve_problems
 from jaxgrasp.solver._status import LaneStatus
 
 CASES = {

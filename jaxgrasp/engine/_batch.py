@@ -105,13 +105,13 @@ def _batched_fn(options: EvaluateOptions, sharding, masked: bool = False, settle
     :class:`Grasp` fields (:func:`grasp_fields`) in, every :class:`~jaxgrasp.Evaluation`
     field (:data:`RESULT_FIELDS`) out. The last stage, the evaluation, runs once per chunk
     and briefly: on a CPU it is compiled with :data:`~jaxgrasp.engine._xla_options.LATENCY_CPU_OPTIONS`."""
-    functions = batch_stages.stage_functions(options, grasp_fields(masked), settle)
+    functions = batch_stages.flat_stages(options, grasp_fields(masked), settle)
     cpu = sharding.mesh.devices.flat[0].platform == "cpu"
     latency = LATENCY_CPU_OPTIONS if cpu else COMPILER_OPTIONS
     return _pipeline.Pipeline(
         stages={name: over_devices(f, sharding, latency if name == "evaluation" else COMPILER_OPTIONS)
                 for name, f in functions.items()},
-        drive=batch_stages.drive,
+        drive=batch_stages.run_staged,
     )
 
 

@@ -32,24 +32,21 @@ from __future__ import annotations
 from functools import partial
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.engine import _compile
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS, LATENCY_CPU_OPTIONS
 from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._potential import model_params
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._settle import needs_settling
-from jaxgrasp.tolerance._stages import problems_of, problems_of_batch
-from jaxgrasp.tolerance._verdict import (
-    _split_temperature,
-    evaluation_of,
-    evaluations_of,
-)
+from jaxgrasp.engine._stages import run_inline, stage_functions
+from jaxgrasp.tolerance._problems import Problems
+from jaxgrasp.tolerance._verdict import split_temperature
 
-__all__ = ['evaluate', 'evaluate_traced', 'evaluate_batch_traced', 'evaluate_compiled', 'compiled_executable']
+__all__ = ["evaluate", "evaluate_traced", "evaluate_batch_traced", "evaluate_compiled", "compiled_executable", "solve_problems"]
 
 
 def _is_concrete(tree) -> bool:
@@ -85,7 +82,7 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
     _check_unbatched(grasp)
     if not _is_concrete(grasp):  # inside the caller's jit, vmap or grad
         return evaluate_traced(grasp, options)
-    options, temperature = _split_temperature(options)
+    options, temperature = split_temperature(options)
     from jaxgrasp.model._validation import check_grasp_inputs
 
     check_grasp_inputs(**grasp.to_numpy())
@@ -104,7 +101,7 @@ def evaluate_traced(grasp: Grasp, options: EvaluateOptions, settle: bool = True)
     """:func:`evaluate` of a grasp inside the caller's trace (``jit``, ``vmap``), with or
     without the settling stage (``settle``, see :func:`~jaxgrasp.tolerance._stages.problems_of`):
     what the batch engine compiles."""
-    options, temperature = _split_temperature(options)
+    options, temperature = split_temperature(options)
     return evaluate_compiled(grasp, temperature, options, settle)
 
 
@@ -175,25 +172,37 @@ def _canonical_dtype(x) -> np.dtype:
     return np.dtype(jax.dtypes.canonicalize_dtype(x.dtype if hasattr(x, "dtype") else np.result_type(x)))
 
 
+def _one(grasp: Grasp) -> Grasp:
+    """``grasp`` as a batch of one (a leading axis of 1 on every field)."""
+    return jax.tree_util.tree_map(lambda a: jnp.asarray(a)[None], grasp)
+
+
+def _first(tree):
+    return jax.tree_util.tree_map(lambda a: a[0], tree)
+
+
 @partial(jax.jit, static_argnames=("options", "settle"))
-
-
 def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions, settle: bool = True) -> Evaluation:
-    """The jitted evaluator behind :func:`evaluate` (no input validation); ``settle`` as
-    in :func:`~jaxgrasp.tolerance._stages.problems_of`.
+    """The jitted evaluator behind :func:`evaluate` (no input validation): the pipeline
+    (:func:`~jaxgrasp.engine._stages.run_inline`) on a batch of one; ``settle`` as in
+    :func:`~jaxgrasp.engine._stages.stage_functions`.
 
     ``temperature`` is the soft-minimum temperature in mJ (``0``: the hard minimum) as a
     traced argument, so tuning at any temperature shares one compilation;
     ``options.smooth_min_temperature`` is ignored.
     """
-    p = model_params(grasp)
-    return evaluation_of(p, problems_of(p, options, settle), temperature, options)
+    return _first(run_inline(_one(grasp), stage_functions(options, settle, temperature)))
 
 
 def evaluate_batch_traced(grasps: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:
     """:func:`evaluate_traced` of a batch of grasps (leading axis ``B`` on every field,
-    ``active`` included where given), the result with a leading ``B``: what the batch
-    engine computes, as the stages of :mod:`jaxgrasp.engine._stages`. Equal to
-    ``jax.vmap`` of :func:`evaluate_traced`, lane by lane, but the solver's work queue
-    is traced once (:func:`~jaxgrasp.tolerance._stages.problems_of_batch`)."""
-    return evaluations_of(grasps, problems_of_batch(jax.vmap(model_params)(grasps), options, settle), options)
+    ``active`` included where given), the result with a leading ``B``: the pipeline run
+    inline on the whole batch, so the solver's work queue is traced once for it."""
+    return run_inline(grasps, stage_functions(options, settle))
+
+
+@partial(jax.jit, static_argnames=("options", "settle"))
+def solve_problems(grasp: Grasp, options: EvaluateOptions = EvaluateOptions(), settle: bool = True) -> Problems:
+    """Every problem of ``grasp`` solved, lane by lane (for diagnostics and benchmarks;
+    :func:`evaluate` is this plus the verdict): the pipeline up to its ``problems``."""
+    return _first(run_inline(_one(grasp), stage_functions(options, settle), until="problems"))

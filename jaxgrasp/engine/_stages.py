@@ -1,118 +1,210 @@
-"""The batch engine's evaluator as five compiled programs, and the driver that calls them.
+"""The evaluation pipeline, declared once, and its two runners.
 
-:func:`jaxgrasp.engine._evaluate.evaluate_batch_traced` is the batch's evaluation as one traced
-function. The batch engine (:func:`jaxgrasp.engine._batch.compiled_evaluator`) compiles the same
-work as these stages (a :class:`jaxgrasp.engine._pipeline.Pipeline`), each a function of the
-batch's :class:`~jaxgrasp.Grasp` fields (:func:`jaxgrasp.engine._batch.grasp_fields`) and of
-earlier stages' results, flat arrays in and out (the program store keeps flat programs):
+:data:`PIPELINE` lists the method's stages in order (Tsuji et al., eq. 1: the equilibrium
+problem, then the 2N boundary problems from starts around the equilibrium, then the
+verdict), each a :class:`Step` naming the values it reads and the value it makes. Every
+path of jaxgrasp runs this one list:
 
-1. ``equilibrium``: the lanes of the grasps' equilibrium problems
-   (:func:`~jaxgrasp.tolerance._starts.equilibrium_starts`);
-2. ``lanes``: lanes solved (:func:`~jaxgrasp.tolerance._stages.solve_stage`), every grasp's in
-   one work queue: called twice per batch, on the equilibrium's lanes and then on the
-   boundary problems';
-3. ``starts``: the boundary problems' lanes from the solved equilibria
-   (:func:`~jaxgrasp.tolerance._starts.boundary_starts`);
-4. ``finish``: the solved :class:`~jaxgrasp.tolerance._problems.Problems`
-   (:func:`~jaxgrasp.tolerance._stages.finish_problems`, with the settling stage where asked);
-5. ``evaluation``: every :class:`~jaxgrasp.Evaluation` field (steps 2-6,
-   :func:`~jaxgrasp.tolerance._verdict.evaluations_of`).
+* :func:`run_inline` runs it under the caller's trace (``jit``, ``vmap``, ``grad``):
+  :func:`jaxgrasp.evaluate` and :func:`jaxgrasp.tune`. The solve stage, which occurs
+  twice, is traced once: its occurrences are the iterations of a loop.
+* :func:`run_staged` runs it one compiled stage at a time on flat arrays (the stages of
+  :func:`flat_stages`, each compiled once, sharded over the devices and kept in the
+  executable store): :func:`jaxgrasp.evaluate_batch` and :func:`jaxgrasp.sweep`.
 
-:func:`drive` calls them in that order. Why stages: the solver's loop is most of the
-program (2.3 s of the default sweep's 3.4 s XLA compilation on 2 cores), and XLA
-compiles it in a thread of its own while Python traces and lowers the rest, which is
-then compiled beside it; in one program the rest had to be traced and lowered before
-XLA could start (``experiments/BENCHMARK.md``). Each stage runs the functions that
-:func:`~jaxgrasp.tolerance._stages.problems_of_batch` runs in one program, so the results are
-the same to rounding.
+The stages are the method's functions (:mod:`jaxgrasp.tolerance`), bound to the options
+by :func:`stage_functions`; each takes the batch of grasps (leading axis ``B``) and the
+earlier values it names.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from typing import Any, Callable, Mapping
 
 import jax
+import jax.numpy as jnp
 
-from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._verdict import evaluations_of
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._potential import model_params
-from jaxgrasp.tolerance._starts import (
-    LaneStarts,
-    boundary_starts,
-    equilibrium_of,
-    equilibrium_starts,
-)
-from jaxgrasp.tolerance._problems import ProblemData, batch_data, problems_treedef
-from jaxgrasp.tolerance._stages import finish_problems, solve_stage
-from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
 from jaxgrasp.solver._solver import SolverResult
+from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.tolerance._problems import batch_data, problems_treedef
+from jaxgrasp.tolerance._result import Evaluation
+from jaxgrasp.tolerance._stages import finish_problems, solve_stage, unsolved
+from jaxgrasp.tolerance._starts import LaneStarts, boundary_starts, equilibrium_of, equilibrium_starts
+from jaxgrasp.tolerance._verdict import evaluations_of, split_temperature
 
-__all__ = ["STAGES", "stage_functions", "drive"]
-
-STAGES = ("equilibrium", "lanes", "starts", "finish", "evaluation")
-"""The stages' names, in the order :func:`drive` first calls them."""
-
-_LANES_IN = 4  # LaneStarts fields the solver takes: x0, eq_mask, nu0, active
+__all__ = ["Step", "PIPELINE", "STAGES", "SOLVE", "stage_functions", "run_inline", "flat_stages", "run_staged"]
 
 
 def _tree(cls) -> jax.tree_util.PyTreeDef:
-    """The pytree structure of a dataclass of array leaves (no shape needed)."""
+    """The pytree structure of a dataclass of array leaves (it depends on no shape)."""
     return jax.tree_util.tree_structure(cls(*(0,) * len(dataclasses.fields(cls))))
 
 
-def stage_functions(options: EvaluateOptions, names: tuple[str, ...], settle: bool = True) -> dict[str, Callable]:
-    """The five stages as functions of flat arrays (each returns a tuple of arrays), for
-    a batch whose :class:`~jaxgrasp.Grasp` fields are ``names``, in that order, leading
-    axis ``B`` on every array; ``settle`` as in :func:`~jaxgrasp.tolerance._stages.problems_of`."""
-    n_fields = len(names)
-    starts_tree, lanes_tree, programs_tree = _tree(LaneStarts), _tree(SolverResult), problems_treedef()
-    n_lanes = lanes_tree.num_leaves
+@dataclasses.dataclass(frozen=True)
+class Step:
+    """One step of the pipeline: ``output = stage(*inputs)``.
 
-    def grasps(fields) -> Grasp:
-        return Grasp(**dict(zip(names, fields)))
+    Attributes:
+        stage: the stage's name (a key of :func:`stage_functions`).
+        inputs: names of the values it reads: ``"grasps"`` (the batch) or an earlier
+            step's output.
+        output: the name of the value it makes.
+        tree: the pytree structure of that value (to pass it between compiled stages
+            as flat arrays).
+    """
 
-    def data(fields) -> ProblemData:
-        return batch_data(jax.vmap(model_params)(grasps(fields)))
-
-    def flat(tree) -> tuple:
-        return tuple(jax.tree_util.tree_leaves(tree))
-
-    def equilibrium(*fields):
-        return flat(equilibrium_starts(data(fields), options))
-
-    def lanes(*args):
-        fields, (x0, eq_mask, nu0, active) = args[:n_fields], args[n_fields:]
-        return flat(solve_stage(data(fields), LaneStarts(x0, eq_mask, nu0, active, None, None), options))
-
-    def starts(*args):
-        fields, eq_lanes = args[:n_fields], jax.tree_util.tree_unflatten(lanes_tree, args[n_fields:])
-        return flat(boundary_starts(data(fields), equilibrium_of(eq_lanes), options))
-
-    def finish(*args):
-        fields, rest = args[:n_fields], args[n_fields:]
-        eq_lanes = jax.tree_util.tree_unflatten(lanes_tree, rest[:n_lanes])
-        solved = jax.tree_util.tree_unflatten(lanes_tree, rest[n_lanes : 2 * n_lanes])
-        lane_starts = jax.tree_util.tree_unflatten(starts_tree, rest[2 * n_lanes :])
-        return flat(finish_problems(data(fields), equilibrium_of(eq_lanes), solved, lane_starts, options, settle))
-
-    def evaluation(*args):
-        fields, progs = args[:n_fields], jax.tree_util.tree_unflatten(programs_tree, args[n_fields:])
-        r = evaluations_of(grasps(fields), progs, options)
-        return tuple(getattr(r, f) for f in RESULT_FIELDS)
-
-    return dict(equilibrium=equilibrium, lanes=lanes, starts=starts, finish=finish, evaluation=evaluation)
+    stage: str
+    inputs: tuple[str, ...]
+    output: str
+    tree: Callable[[], jax.tree_util.PyTreeDef]
 
 
-def drive(call: Callable, *fields) -> tuple:
-    """The batch's evaluation from its stages (:func:`stage_functions`), each run by
-    ``call(name, *arrays)``: every :class:`~jaxgrasp.Evaluation` field
-    (:data:`jaxgrasp.tolerance._result.FIELDS`), leading axis ``B``. A :class:`jaxgrasp.engine._pipeline.Pipeline`'s
-    driver: it only passes arrays on."""
-    eq_starts = call("equilibrium", *fields)
-    eq_lanes = call("lanes", *fields, *eq_starts[:_LANES_IN])
-    lane_starts = call("starts", *fields, *eq_lanes)
-    solved = call("lanes", *fields, *lane_starts[:_LANES_IN])
-    progs = call("finish", *fields, *eq_lanes, *solved, *lane_starts)
-    return call("evaluation", *fields, *progs)
+SOLVE = "lanes"
+"""The stage that runs the solver: every lane of every grasp in one work queue."""
+
+PIPELINE: tuple[Step, ...] = (
+    Step("equilibrium", ("grasps",), "eq_starts", lambda: _tree(LaneStarts)),
+    Step(SOLVE, ("grasps", "eq_starts"), "eq_lanes", lambda: _tree(SolverResult)),
+    Step("starts", ("grasps", "eq_lanes"), "lane_starts", lambda: _tree(LaneStarts)),
+    Step(SOLVE, ("grasps", "lane_starts"), "solved", lambda: _tree(SolverResult)),
+    Step("finish", ("grasps", "eq_lanes", "solved", "lane_starts"), "problems", problems_treedef),
+    Step("evaluation", ("grasps", "problems"), "evaluation", lambda: _tree(Evaluation)),
+)
+"""The evaluation of a batch of grasps, step by step: the equilibrium problem's lanes,
+solved; the boundary problems' lanes from starts around that equilibrium, solved; the
+solved :class:`~jaxgrasp.tolerance.Problems` (settled where asked); every
+:class:`~jaxgrasp.Evaluation` field (the verdict, steps 2-6 of the method)."""
+
+STAGES = tuple(dict.fromkeys(s.stage for s in PIPELINE))
+"""The stages' names, in the order the pipeline first calls them."""
+
+
+def stage_functions(options: EvaluateOptions, settle: bool = True, temperature=None) -> dict[str, Callable]:
+    """Each stage of :data:`PIPELINE` as a function of the batch of grasps (a
+    :class:`~jaxgrasp.Grasp` with a leading axis ``B`` on every field) and of the values
+    its step names.
+
+    ``settle`` (static): whether the finish stage certifies stalled boundary lanes
+    (:func:`~jaxgrasp.tolerance._settle.settle_stalled`); without it the stage is smaller,
+    and equal wherever no boundary problem ends unsettled. ``temperature``: the
+    soft-minimum temperature (mJ, ``0`` for the hard minimum; traced or not); default the
+    options' own.
+    """
+    if temperature is None:
+        options, temperature = split_temperature(options)
+
+    def data(grasps):
+        return batch_data(jax.vmap(model_params)(grasps))
+
+    return {
+        "equilibrium": lambda g: equilibrium_starts(data(g), options),
+        SOLVE: lambda g, starts: solve_stage(data(g), starts, options),
+        "starts": lambda g, eq: boundary_starts(data(g), equilibrium_of(eq), options),
+        "finish": lambda g, eq, lanes, starts: finish_problems(
+            data(g), equilibrium_of(eq), lanes, starts, options, settle
+        ),
+        "evaluation": lambda g, problems: evaluations_of(g, problems, temperature, options),
+    }
+
+
+def _call(functions: Mapping[str, Callable], step: Step, env: Mapping[str, Any]):
+    return functions[step.stage](*(env[name] for name in step.inputs))
+
+
+def _through(until: str) -> tuple[Step, ...]:
+    """The steps of :data:`PIPELINE` up to the one that makes ``until``."""
+    outputs = [s.output for s in PIPELINE]
+    if until not in outputs:
+        raise ValueError(f"no step of the pipeline makes {until!r}; its values are {outputs}")
+    return PIPELINE[: outputs.index(until) + 1]
+
+
+def run_inline(grasps: Grasp, functions: Mapping[str, Callable], until: str = "evaluation"):
+    """Run :data:`PIPELINE` on the batch ``grasps`` under the caller's trace, up to the
+    value ``until``, which it returns (leading axis ``B``); ``functions`` from
+    :func:`stage_functions`.
+
+    The solve stage occurs once per round (a round: a stage that makes lanes' starts,
+    then :data:`SOLVE`); the rounds are the iterations of one loop (:func:`_solved_rounds`),
+    so the solver's loop is traced and compiled once rather than once per round.
+    """
+    steps = _through(until)
+    solves = [i for i, s in enumerate(steps) if s.stage == SOLVE]
+    env: dict[str, Any] = {"grasps": grasps}
+    if solves:
+        env.update(_solved_rounds([(steps[i - 1], steps[i]) for i in solves], functions, env))
+        steps = steps[solves[-1] + 1 :]
+    for step in steps:
+        env[step.output] = _call(functions, step, env)
+    return env[until]
+
+
+def _solved_rounds(rounds, functions: Mapping[str, Callable], env: Mapping[str, Any]) -> dict[str, Any]:
+    """The values the ``rounds`` make (each ``(starts step, solve step)``), the solve stage
+    traced once: round ``k`` is iteration ``k`` of a ``fori_loop``, whose body picks the
+    round's starts stage with ``lax.switch`` on ``k``. The counter is not batched data, so
+    under a caller's ``vmap`` the switch stays a branch and the solver's queue runs once
+    per round on every lane of the batch."""
+    for starts, solve in rounds:
+        if solve.inputs[-1] != starts.output or any(n != "grasps" for n in solve.inputs[:-1]):
+            raise ValueError(f"the pipeline's {solve.output!r} must solve the starts made just before it")
+    first = _call(functions, rounds[0][0], env)  # every round's starts are shaped alike
+    lanes = unsolved(first)
+    carry = {name: value for s, v in rounds for name, value in ((s.output, first), (v.output, lanes))}
+    carry = _per_grasp(jax.tree_util.tree_map(jnp.zeros_like, carry), env["grasps"])
+
+    def body(k, carry):
+        starts = jax.lax.switch(k, [lambda c, s=s: _call(functions, s, {**env, **c}) for s, _ in rounds], carry)
+        solved = functions[SOLVE](env["grasps"], starts)
+        keep = [lambda c, a, b, s=s, v=v: {**c, s.output: a, v.output: b} for s, v in rounds]
+        return jax.lax.switch(k, keep, carry, starts, solved)
+
+    return jax.lax.fori_loop(0, len(rounds), body, carry)
+
+
+def _per_grasp(tree, grasps: Grasp):
+    """``tree``'s arrays made to depend on every field of ``grasps`` (the same values):
+    under a caller's ``vmap``, whichever fields it maps, the loop's carry is then batched
+    from the start. A carry that is not would be batched only after the first round, and
+    JAX's loop batching would trace the body (the whole solver) once more to find out."""
+    leaves = jax.tree_util.tree_leaves(grasps)
+    dtype = jnp.result_type(float)
+    flag = jnp.isnan(sum(jnp.sum(jnp.asarray(a, dtype)) for a in leaves))
+    return jax.tree_util.tree_map(lambda a: jnp.where(flag, a, a), tree)
+
+
+def flat_stages(options: EvaluateOptions, names: tuple[str, ...], settle: bool = True) -> dict[str, Callable]:
+    """The stages of :func:`stage_functions` as functions of flat arrays, for compiling
+    one at a time (the executable store keeps flat executables): each takes the arrays of
+    its step's inputs in order (the batch's :class:`~jaxgrasp.Grasp` fields ``names``
+    first, then each value's leaves) and returns its value's leaves as a tuple."""
+    functions = stage_functions(options, settle)
+    trees = {s.output: s.tree() for s in PIPELINE}
+
+    def flat(step: Step) -> Callable:
+        def run(*arrays):
+            args, rest = [Grasp(**dict(zip(names, arrays)))], arrays[len(names) :]
+            for name in step.inputs[1:]:
+                n = trees[name].num_leaves
+                args.append(jax.tree_util.tree_unflatten(trees[name], rest[:n]))
+                rest = rest[n:]
+            return tuple(jax.tree_util.tree_leaves(functions[step.stage](*args)))
+
+        return run
+
+    return {stage: flat(next(s for s in PIPELINE if s.stage == stage)) for stage in STAGES}
+
+
+def run_staged(call: Callable, *fields) -> tuple:
+    """Run :data:`PIPELINE` by ``call(stage, *arrays)`` (a tuple of arrays back; the
+    stages of :func:`flat_stages`, compiled) on the batch's :class:`~jaxgrasp.Grasp`
+    fields: every :class:`~jaxgrasp.Evaluation` field, in
+    :data:`jaxgrasp.tolerance._result.FIELDS` order. A
+    :class:`~jaxgrasp.engine._pipeline.Pipeline`'s driver: it only passes arrays on."""
+    env: dict[str, tuple] = {"grasps": fields}
+    for step in PIPELINE:
+        env[step.output] = call(step.stage, *(a for name in step.inputs for a in env[name]))
+    return env[PIPELINE[-1].output]

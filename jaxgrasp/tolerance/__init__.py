@@ -6,7 +6,6 @@ their starts, settling, the verdict (value, status, limiting boundary), the
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
-from jaxgrasp.tolerance._stages import problems_of
 from jaxgrasp.tolerance._verdict import evaluations_of
 from jaxgrasp.tolerance._envelope import envelope_energy, soft_minimum
 
@@ -14,7 +13,6 @@ __all__ = [
     "EvaluateOptions",
     "Evaluation",
     "GraspStatus",
-    "problems_of",
     "evaluations_of",
     "envelope_energy",
     "soft_minimum",

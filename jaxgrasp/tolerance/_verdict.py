@@ -20,7 +20,7 @@ from jaxgrasp.tolerance._problems import Problems, constraints, problem_data, to
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 
-__all__ = ['evaluations_of', 'evaluation_of', 'limiting_index', 'Boundaries', 'Verdict', 'TIE_TOL', 'SAME_MINIMUM']
+__all__ = ['split_temperature', 'evaluations_of', 'evaluation_of', 'limiting_index', 'Boundaries', 'Verdict', 'TIE_TOL', 'SAME_MINIMUM']
 
 
 TIE_TOL = 1e-8
@@ -30,7 +30,7 @@ solver settles each to ``tol = 1e-10`` of the scaled energy, some ``1e-9`` of a 
 value); the limiting boundary is then the first of them in (kind, contact) order."""
 
 
-def _split_temperature(options: EvaluateOptions):
+def split_temperature(options: EvaluateOptions):
     """``(options, temperature)``: the smoothing temperature as a traced argument (mJ,
     ``0``: the hard minimum), so that evaluations with and without smoothing, or with
     different temperatures, share one compilation."""
@@ -40,11 +40,10 @@ def _split_temperature(options: EvaluateOptions):
     return options, np.float64(0.0 if t is None else float(t) / MJ_TO_J)
 
 
-def evaluations_of(grasps: Grasp, progs: Problems, options: EvaluateOptions) -> Evaluation:
-    """Steps 2-6 of :func:`evaluate_batch_traced`: the evaluations of a batch of grasps
-    from their solved programs ``progs`` (:func:`~jaxgrasp.tolerance._stages.problems_of_batch`;
-    leading axis ``B``)."""
-    options, temperature = _split_temperature(options)
+def evaluations_of(grasps: Grasp, progs: Problems, temperature, options: EvaluateOptions) -> Evaluation:
+    """Steps 2-6 of the method for a batch of grasps (leading axis ``B``) whose problems
+    ``progs`` are solved: :func:`evaluation_of` of each (``temperature``: mJ, ``0`` for the
+    hard minimum)."""
     p = jax.vmap(model_params)(grasps)
     return jax.vmap(lambda p, progs: evaluation_of(p, progs, temperature, options))(p, progs)
 
