@@ -16,7 +16,7 @@ Scenes:
 
 jaxgrasp: ``run_inline(grasps, stage_functions(opts, settle=False), until="problems")`` (what ``solve_problems`` solves
 for one grasp) batched as ``evaluate_batch`` and ``sweep`` batch it
-(:func:`jaxgrasp.engine._batch.over_devices`: ``jit(shard_map(...))``,
+(:func:`jaxgrasp.engine._evaluator.over_devices`: ``jit(shard_map(...))``,
 the batch split over every JAX device, one work queue per device; ``import jaxgrasp``
 creates one CPU device per core, see :mod:`jaxgrasp.engine._devices`; ``JAXGRASP_CPU_DEVICES=1``
 measures one) on the stacked batch, padded to a multiple of the device count by
@@ -83,7 +83,8 @@ import jaxgrasp  # noqa: E402  (first: float64, and one JAX CPU device per core)
 from jaxgrasp.tolerance import _result as R  # noqa: E402
 from jaxgrasp.solver._status import LaneStatus  # noqa: E402
 from jaxgrasp import EvaluateOptions
-from jaxgrasp.engine._batch import batch_sharding, over_devices  # noqa: E402
+from jaxgrasp.engine._evaluator import over_devices  # noqa: E402
+from jaxgrasp.engine._plan import batch_sharding  # noqa: E402
 from jaxgrasp.engine._evaluate import evaluate_batch_traced  # noqa: E402
 from jaxgrasp.tolerance._settle import needs_settling
 from jaxgrasp.engine._stages import run_inline, stage_functions  # noqa: E402
@@ -146,7 +147,7 @@ def timed_call(fn):
 
 def compile_aot(fn, batch):
     """``fn`` of a batch of grasps, run as jaxgrasp's engine runs it
-    (:func:`jaxgrasp.engine._batch.over_devices`: the batch split over every device, each running
+    (:func:`jaxgrasp.engine._evaluator.over_devices`: the batch split over every device, each running
     its own work queue), compiled ahead of time for ``batch``, which is padded by
     repeating its last grasp to a multiple of the device count and placed on the devices
     once, as the engine places a chunk before it runs it. Returns ``(call, seconds)``:

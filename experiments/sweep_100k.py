@@ -27,7 +27,6 @@ import argparse
 import math
 import os
 import resource
-import sys
 import threading
 import time
 
@@ -106,10 +105,10 @@ def main() -> None:
     import jax
 
     import jaxgrasp
-    from jaxgrasp.cli._sweep import auto_chunk
+    from jaxgrasp.engine._evaluator import compiled_evaluator
+    from jaxgrasp.engine._plan import plan_chunks
     from jaxgrasp.tolerance import EvaluateOptions
 
-    S = sys.modules["jaxgrasp.analysis._sweep"]
     if not args.no_cache:
         jaxgrasp.enable_compilation_cache()
     cube = jaxgrasp.presets.cube()
@@ -124,7 +123,7 @@ def main() -> None:
     ref_rate = None
     if not args.no_reference:
         E9, dr41 = np.linspace(2e5, 1e6, 9), np.linspace(1e-3, 5e-3, 41)
-        chunk = auto_chunk(E9.size * dr41.size)
+        chunk = plan_chunks(E9.size * dr41.size, auto=True).chunk  # as jaxgrasp sweep picks it
         sampler.reset()
         t0 = time.perf_counter()
         r = jaxgrasp.sweep(cube, young_modulus=E9, initial_deformation=dr41, chunk_size=chunk)
@@ -143,13 +142,13 @@ def main() -> None:
         initial_deformation=np.linspace(1e-3, 5e-3, 400),
     )
     total = math.prod(a.size for a in axes.values())
-    chunk = S.bucket_size(args.chunk_size, total, n_dev)
+    chunk = plan_chunks(total, args.chunk_size).chunk
     nchunks = math.ceil(total / chunk)
     say(f"100k grid: {' x '.join(str(a.size) for a in axes.values())} = {total} points, {nchunks} chunks of {chunk}")
 
     sampler.reset()
     t0 = time.perf_counter()
-    fn, comp = S.compiled_evaluator(EvaluateOptions(), 2, chunk)  # memoised: the sweep below reuses it
+    fn, comp = compiled_evaluator(EvaluateOptions(), 2, chunk, settle=False)  # memoised: the sweep below reuses it
     say(f"compile for chunk {chunk}: {comp:.1f} s (wall {time.perf_counter() - t0:.1f} s), "
         f"peak RSS while compiling {sampler.peak:.0f} MiB")
     try:

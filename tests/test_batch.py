@@ -14,7 +14,7 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp import BatchResult, GraspSet, GraspValueError, evaluate_batch
-from jaxgrasp.engine._batch import bucket_size
+from jaxgrasp.engine._plan import bucket_size
 from jaxgrasp.tolerance._result import FIELDS, Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 from jaxgrasp.solver._status import LaneStatus

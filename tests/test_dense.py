@@ -24,7 +24,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrasp.engine import _batch as batch, _pipeline, _stages as batch_stages
+from jaxgrasp.engine import _evaluator, _pipeline, _plan
+from jaxgrasp.engine import _stages as batch_stages
 from jaxgrasp.solver._dense import eigh, solve
 from jaxgrasp.solver._direction import EIGH_BLOCK
 from jaxgrasp.tolerance._options import EvaluateOptions
@@ -77,11 +78,11 @@ def test_batched_program_calls_no_lapack_but_small_eigh():
     """The batch engine's programs (every stage), with and without the settling stage,
     for 128 grasps per device: every LAPACK custom call is the symmetric eigensolver (``syevd``) on at
     most ``EIGH_BLOCK`` matrices, never on one per grasp of the chunk."""
-    sharding = batch.batch_sharding()
+    sharding = _plan.batch_sharding()
     assert EIGH_BLOCK <= 64
     for settle in (False, True):
-        pipeline = batch._batched_fn(EvaluateOptions(), sharding, masked=True, settle=settle)
-        spec = batch._batch_spec(3, 128 * len(jax.devices()), sharding, masked=True)
+        pipeline = _evaluator._staged(EvaluateOptions(), sharding, masked=True, settle=settle)
+        spec = _evaluator._chunk_spec(3, 128 * len(jax.devices()), sharding, masked=True)
         lowered = _pipeline.lower_stages(pipeline, spec)
         assert tuple(lowered) == batch_stages.STAGES  # every stage lowered, each once
         text = "".join(low.as_text() for low in lowered.values())

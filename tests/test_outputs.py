@@ -236,7 +236,7 @@ def test_interrupt_writes_the_checkpoint_a_throttled_chunk_skipped(tmp_path, mon
     the sweep is interrupted: abandon() runs the skipped write first."""
     import threading
 
-    from jaxgrasp.cli._sweep import _Checkpoint
+    from jaxgrasp.engine._checkpoint import SweepKeeper
 
     monkeypatch.setattr(outputs, "PUBLISH_LOCK", threading.Lock())  # abandon() keeps it forever
     monkeypatch.setattr(outputs, "_ABANDONED", False)
@@ -249,7 +249,7 @@ def test_interrupt_writes_the_checkpoint_a_throttled_chunk_skipped(tmp_path, mon
         "equilibrium_energy": np.arange(4.0) + 10,
     }
     path = tmp_path / "sweep.partial.npz"
-    cp = _Checkpoint(path, jaxgrasp.presets.cube(), axes, chunk=1)
+    cp = SweepKeeper(path, jaxgrasp.presets.cube(), axes, chunk=1)
     try:
         cp(0, 1, flat)  # the first chunk is always written
         assert SweepCheckpoint.load(path).done_count == 1

@@ -34,7 +34,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from jaxgrasp.analysis._sweep import bucket_size
+from jaxgrasp.engine._plan import bucket_size
 
 COLLECTIVES = ("all-gather", "all-reduce", "all-to-all", "collective-permute", "reduce-scatter")
 """XLA's cross-device operations: the compiled sweep must contain none (each device runs
@@ -51,9 +51,9 @@ WORKER = textwrap.dedent(
     import jax
     import jaxgrasp
     from jaxgrasp.engine import _compile, _store as cache
+    from jaxgrasp.engine._evaluator import compiled_evaluator
+    from jaxgrasp.engine._plan import plan_chunks
     from jaxgrasp.tolerance import EvaluateOptions
-
-    S = sys.modules["jaxgrasp.analysis._sweep"]
     cfg = json.loads(sys.argv[1])
     if cfg.get("xla_cache"):
         jax.config.update("jax_compilation_cache_dir", cfg["xla_cache"])
@@ -74,8 +74,8 @@ WORKER = textwrap.dedent(
             continue
         before = cache.stats()
         r = jaxgrasp.sweep(jaxgrasp.presets.cube(), young_modulus=E, initial_deformation=DR)
-        chunk = S.bucket_size(S.default_chunk_size(), r.size, jax.device_count())
-        fn, _ = S.compiled_evaluator(EvaluateOptions(), 2, chunk, settle=False)  # the one the sweep used (memoised)
+        chunk = plan_chunks(r.size).chunk
+        fn, _ = compiled_evaluator(EvaluateOptions(), 2, chunk, settle=False)  # the one the sweep used (memoised)
         shardings = [s for stage in fn.stages.values() for s in jax.tree_util.tree_leaves(stage.input_shardings)
                      + jax.tree_util.tree_leaves(stage.output_shardings)]
         np.savez(cfg["out"] + f"_{k}.npz", **{f: np.asarray(getattr(r, f)) for f in %(fields)r})

@@ -11,24 +11,23 @@
     result.value.shape          # (9, 41), J
     result.to_csv("sweep.csv")  # one row per grid point, SI units in the column names
 
-A sweep is a grid of grasps for the batched engine (:mod:`jaxgrasp.engine._batch`, shared with
-:func:`jaxgrasp.evaluate_batch`): the grid points are evaluated as lanes of
-one program (:func:`jaxgrasp.engine._evaluate.evaluate_batch_traced`) in chunks whose size is a fixed bucket
-(:func:`jaxgrasp.engine._batch.bucket_size`: 1, 4, 16 or 64 points on a CPU); the last chunk is
-padded to the same size, so one sweep compiles once, and a later sweep or batch of
-grasps with the same number of contacts and options, in the same bucket, reuses that
-compilation. Memory is bounded by the chunk size, not by
-the grid size: apart from the result arrays (5 numbers per grid point) nothing grows with
-the grid, and no device buffer outlives its chunk.
+A sweep is a grid of grasps for the engine (:mod:`jaxgrasp.engine`, shared with
+:func:`jaxgrasp.evaluate_batch`): the grid points are cut into chunks whose size is a bucket
+(1, 4, 16 or 64 points per CPU device; :func:`~jaxgrasp.engine._plan.plan_chunks`), each
+evaluated by the compiled pipeline; the last chunk is padded to the same size, so one
+sweep compiles once, and a later sweep or batch of grasps with the same number of
+contacts and options, in the same bucket, reuses that compilation. Memory is bounded by
+the chunk size, not by the grid size: apart from the result arrays (5 numbers per grid
+point) nothing grows with the grid, and no device buffer outlives its chunk.
 
 Each chunk is sharded along its batch axis over all ``jax.devices()`` (a 1-D
 ``jax.sharding.Mesh`` with axis ``'batch'``; the chunk is rounded up to a multiple of the
 device count), so one call uses every GPU of a machine, or every device of several hosts
 after ``jax.distributed.initialize()``. Results are gathered to the host.
 
-The compiled batched evaluator comes from :mod:`jaxgrasp.engine._store`: memoised in the process
-and, with :func:`jaxgrasp.engine._store.set_executable_dir` (the CLI sets it), kept on disk compiled,
-so that a later process neither traces nor compiles :func:`jaxgrasp.evaluate`.
+The compiled evaluator is memoised in the process and, where the caches are on
+(:func:`jaxgrasp.enable_compilation_cache`; the CLI turns them on), kept in the executable
+store on disk, so that a later process neither traces nor compiles it.
 """
 
 from __future__ import annotations
@@ -42,18 +41,11 @@ import jax
 import numpy as np
 
 from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.engine._batch import (
-    ACCELERATOR_CHUNK_SIZE,
-    DEFAULT_CHUNK_SIZE,
-    batch_sharding,
-    bucket_size,
-    check_chunk_size,
-    compiled_evaluator,
-    default_chunk_size,
-    grasp_fields,
-    run_chunks,
-    settling_evaluator,
-)
+from jaxgrasp.engine._batch import start_progress
+from jaxgrasp.engine._checkpoint import SweepKeeper
+from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields
+from jaxgrasp.engine._plan import check_chunk_size, plan_chunks
+from jaxgrasp.engine._run import run_chunks
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.model._fields import FIELD, SWEEPABLE, Field
 from jaxgrasp.model._grasp import Grasp
@@ -73,12 +65,7 @@ __all__ = [
     "grid_grasp",
     "SweepResult",
     "PARAMETERS",
-    "DEFAULT_CHUNK_SIZE",
-    "ACCELERATOR_CHUNK_SIZE",
-    "default_chunk_size",
-    "bucket_size",
     "column_name",
-    "compiled_evaluator",
 ]
 
 PARAMETERS: dict[str, Field] = {name: FIELD[name] for name in SWEEPABLE}
@@ -373,6 +360,7 @@ def sweep(
     progress: Callable[[int, int], Any] | None = None,
     devices=None,
     on_chunk: Callable[[int, int, Mapping[str, np.ndarray]], Any] | None = None,
+    checkpoint: str | os.PathLike | None = None,
     **axes,
 ) -> SweepResult:
     """Evaluate ``grasp`` at every point of the Cartesian grid of ``axes``.
@@ -381,24 +369,28 @@ def sweep(
         grasp: the base :class:`~jaxgrasp.Grasp` (SI units); parameters not swept keep
             its values.
         options: :class:`~jaxgrasp.EvaluateOptions` for every evaluation.
-        chunk_size: grid points per compiled batch, at most (bounds memory); default
-            :func:`default_chunk_size` (64 per CPU device, 1024 per GPU). The batch used is
-            the smallest bucket that holds ``min(chunk_size, number of points)``, capped
-            at ``chunk_size``, a multiple of the number of devices (:func:`bucket_size`);
-            the last chunk is padded to it.
+        chunk_size: grid points per compiled call, at most (bounds memory; default 64
+            per CPU device, 1024 per accelerator). The chunk is the smallest bucket (1, 4,
+            16, 64, ... per device) that holds ``min(chunk_size, number of points)``,
+            capped at ``chunk_size``, a multiple of the number of devices
+            (:func:`~jaxgrasp.engine._plan.plan_chunks`); the last chunk is padded to it.
         progress: optional ``progress(done, total)`` called after each chunk with the
-            numbers of grid points done and in all.
+            numbers of grid points done and in all (an object with a ``start(plan)``
+            method is also told the chunk plan before the first).
         on_chunk: optional ``on_chunk(start, stop, results)`` called after each chunk
             (before ``progress``): grid points ``start .. stop - 1`` (C order, last axis
             fastest) are done, and so is every point before them; ``results`` maps each
             result field (``value``, ``status``, ``limiting_kind``, ``limiting_contact``,
             ``equilibrium_energy``) to a flat ``(total,)`` array whose first ``stop``
             entries are final. The arrays are the sweep's own buffers: read them, copy
-            what you keep, never write them. For checkpoints (``jaxgrasp sweep`` writes
-            ``sweep.partial.npz`` with it, :mod:`jaxgrasp.engine._checkpoint`).
-        devices: the devices the batch is sharded over (default: all of
+            what you keep, never write them.
+        checkpoint: optional path of a checkpoint file that keeps the finished points
+            while the sweep runs (the ``sweep.partial.npz`` format of
+            :class:`~jaxgrasp.engine._checkpoint.SweepCheckpoint`, written atomically;
+            ``jaxgrasp sweep`` keeps one in its ``--out`` folder).
+        devices: the devices each chunk is sharded over (default: all of
             ``jax.devices()``, which after ``jax.distributed.initialize()`` spans every
-            host). The batch is rounded up to a multiple of their number.
+            host). The chunk is rounded up to a multiple of their number.
         **axes: ``name=values`` for any of :data:`PARAMETERS` (``young_modulus`` Pa,
             ``initial_deformation`` m, ``mass`` kg, ``friction``, ``max_force`` N,
             ``radius`` m); ``values`` is a number or a 1-D sequence. Per-contact
@@ -415,22 +407,16 @@ def sweep(
             grid point with ``initial_deformation >= radius``; the message is one line.
     """
     base, axes = _check_inputs(grasp, chunk_size, axes)
-    devices = tuple(jax.devices() if devices is None else devices)
-    if not devices:
-        raise GraspValueError("sweep needs at least one device")
-    n_contacts = base["positions"].shape[0]
-    total = int(math.prod(a.size for a in axes.values()))
-    if chunk_size is None:
-        chunk_size = default_chunk_size(devices)
-    chunk = bucket_size(chunk_size, total, len(devices))
-    fn, compile_seconds = compiled_evaluator(options, n_contacts, chunk, devices, settle=False)
-    settling = settling_evaluator(options, n_contacts, chunk, devices)
-    sharding = batch_sharding(devices)
-
-    own = _own_fields(grasp, base)
     shape = tuple(a.size for a in axes.values())
+    plan = plan_chunks(int(math.prod(shape)), chunk_size, devices)
+    n_contacts = base["positions"].shape[0]
+    start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
+    fn, compile_seconds, settling = chunk_evaluator("sweep", options, n_contacts, plan, masked=False)
+    own = _own_fields(grasp, base)
+    if checkpoint is not None:
+        on_chunk = _also(SweepKeeper(checkpoint, grasp, axes, plan.chunk), on_chunk)
     outs, run_seconds = run_chunks(
-        fn, lambda start: _chunk_fields(own, axes, start, chunk), grasp_fields(False), total, chunk, sharding,
+        fn, lambda start: _chunk_fields(own, axes, start, plan.chunk), grasp_fields(False), plan,
         progress, on_chunk, keep=_RESULT_FIELDS, settling=settling,
     )
     return SweepResult(
@@ -438,8 +424,20 @@ def sweep(
         **{f: outs[f].reshape(shape) for f in _RESULT_FIELDS},
         compile_seconds=compile_seconds,
         run_seconds=run_seconds,
-        devices=len(devices),
+        devices=plan.n_devices,
     )
+
+
+def _also(first: Callable, then: Callable | None) -> Callable:
+    """``on_chunk`` calling ``first``, then ``then`` (where given)."""
+    if then is None:
+        return first
+
+    def both(start, stop, results):
+        first(start, stop, results)
+        then(start, stop, results)
+
+    return both
 
 
 def grid_grasp(grasp: Grasp, /, **axes) -> Grasp:

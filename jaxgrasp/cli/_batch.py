@@ -84,8 +84,9 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """Evaluate the dataset of the command line; write the files and print a summary."""
-    from jaxgrasp.io._dataset import load_dataset
+    from jaxgrasp.engine._batch import evaluate_dataset
     from jaxgrasp.engine._checkpoint import BatchCheckpoint
+    from jaxgrasp.io._dataset import load_dataset
 
     _check_numbers(args)
     gset = load_dataset(args.file)
@@ -102,15 +103,16 @@ def run(args) -> int:
     t_start = time.perf_counter()
     with lock_out(out):
         checkpoint = BatchCheckpoint(out / PARTIAL_NAME, args.file, gset.source_sha256, len(gset), n_contacts)
-        done_rows, done = _open_checkpoint(checkpoint, args.resume, len(gset))
-        todo = np.flatnonzero(gset.valid & ~np.isin(np.arange(len(gset)), done_rows))
-        keeper = _Keeper(checkpoint, todo, len(done_rows), len(gset))
-        result = _evaluate(gset, todo, n_contacts, args, keeper)
-        merged = _merge(gset, done_rows, done, todo, result)
+        rows, results = _open_checkpoint(checkpoint, args.resume, len(gset))
+        progress = ChunkProgress("evaluating", "grasp", show=not args.quiet)
+        merged, result = evaluate_dataset(
+            gset, done=(rows, results), on_chunk_rows=checkpoint.keeper(rows.size, len(gset)),
+            chunk_size=args.chunk_size, progress=progress,
+        )
         wall = time.perf_counter() - t_start
         extra = _epsilon(gset) if args.epsilon else None
         written, replaced, removed = _write_outputs(merged, out, checkpoint, args, extra)
-    print(_summary(merged, args.file, wall, result, len(done_rows), out, written, replaced, removed, args.top))
+    print(_summary(merged, args.file, wall, result, rows.size, out, written, replaced, removed, args.top))
     return 0
 
 
@@ -121,95 +123,24 @@ def _check_numbers(args) -> None:
 
 
 def _open_checkpoint(checkpoint, resume: bool, total: int) -> tuple[np.ndarray, dict]:
-    """The rows a previous run finished (``--resume``) and their results; a fresh
-    checkpoint otherwise. An unfinished run's checkpoint is never overwritten silently."""
-    if checkpoint.exists():
-        if not resume:
-            raise UsageError(
-                f"--out: {checkpoint.folder} holds an unfinished run: add --resume to finish it, "
-                "or remove that folder to start afresh"
-            )
-        try:
-            checkpoint.check()
-        except ValueError as exc:
-            raise UsageError(f"--resume: {exc}") from None
-        rows, results = checkpoint.load()
+    """The rows a previous run finished (``--resume``) and their results, saying so; a
+    fresh checkpoint otherwise. An unfinished run's checkpoint is never overwritten silently."""
+    from jaxgrasp.engine._checkpoint import CheckpointBusy
+
+    try:
+        rows, results, resumed = checkpoint.open(resume)
+    except CheckpointBusy as busy:
+        raise UsageError(
+            f"--out: {busy.folder} holds an unfinished run: add --resume to finish it, "
+            "or remove that folder to start afresh"
+        ) from None
+    except ValueError as exc:
+        raise UsageError(f"--resume: {exc}") from None
+    if resumed:
         say(f"jaxgrasp: resuming: {rows.size} of {counted(total, 'grasp')} were finished in {checkpoint.folder}")
-        return rows, results
-    if resume:
+    elif resume:
         say(f"jaxgrasp: --resume: no unfinished run in {checkpoint.folder.parent}; starting afresh")
-    checkpoint.start()
-    return np.zeros(0, dtype=np.int64), {}
-
-
-def _evaluate(gset, todo: np.ndarray, n_contacts: int, args, keeper):
-    """Evaluate the grasps ``todo`` (input indices), padded to ``n_contacts``; ``None``
-    when there is nothing left to do."""
-    import jax
-
-    from jaxgrasp.engine._batch import bucket_size, default_chunk_size, evaluate_batch
-    from jaxgrasp.model._grasp import stack
-
-    if todo.size == 0:
-        return None
-    grasps = [gset.grasps[i] for i in todo]
-    same = all(g.num_contacts == n_contacts for g in grasps)
-    batch = grasps if same else stack(grasps, num_contacts=n_contacts)  # the full set's N: one compilation
-    chunk = bucket_size(args.chunk_size or default_chunk_size(), todo.size, jax.device_count())
-    progress = ChunkProgress("evaluating", "grasp", todo.size, chunk, jax.device_count(), not args.quiet and todo.size > chunk)
-    progress.start()
-    return evaluate_batch(batch, chunk_size=chunk, progress=progress, on_chunk=keeper)
-
-
-class _Keeper:
-    """``on_chunk`` of :func:`jaxgrasp.evaluate_batch`: each finished chunk to its own
-    checkpoint file at once (:meth:`jaxgrasp.engine._checkpoint.BatchCheckpoint.save_rows`), before
-    progress reports it; the note an interrupt prints says how much is kept."""
-
-    def __init__(self, checkpoint, todo: np.ndarray, before: int, total: int):
-        self.checkpoint = checkpoint
-        self.todo = todo  # input index of each grasp evaluated now
-        self.before = before  # rows finished by a previous run
-        self.total = total
-
-    def __call__(self, start: int, stop: int, results) -> None:
-        self.checkpoint.save_rows(self.todo[start:stop], {f: a[start:stop] for f, a in results.items()})
-        kept = self.before + stop
-        outputs.set_note(
-            "batch",
-            f"kept {kept} of {counted(self.total, 'grasp')} in {self.checkpoint.folder}; "
-            "the same command with --resume finishes the rest",
-        )
-
-
-def _merge(gset, done_rows: np.ndarray, done: dict, todo: np.ndarray, result):
-    """One :class:`~jaxgrasp.BatchResult` of every input row: the previous run's rows,
-    this run's, and the invalid ones (status ``invalid``, NaN, -1)."""
-    from jaxgrasp.engine._batch_result import BatchResult, mark_invalid
-    from jaxgrasp.tolerance._result import FIELDS, Evaluation
-
-    parts = [(done_rows, done)] if done_rows.size else []
-    if result is not None:
-        parts.append((todo, {f: np.asarray(getattr(result, f)) for f in FIELDS}))
-    total = len(gset)
-    arrays = {}
-    for f in FIELDS:
-        like = parts[0][1][f]
-        arrays[f] = np.empty((total, *like.shape[1:]), dtype=like.dtype)
-        for rows, res in parts:
-            arrays[f][rows] = res[f]
-    mark_invalid(arrays, ~gset.valid)  # every valid row is in one of the parts
-    counts = gset.num_contacts
-    active = np.arange(arrays["boundary_energy"].shape[-1]) < counts[:, None]  # own contacts first (jaxgrasp.stack)
-    return BatchResult(
-        evaluation=Evaluation(**arrays),
-        num_contacts=counts,
-        active=active,
-        errors=tuple(gset.errors),
-        compile_seconds=0.0 if result is None else result.compile_seconds,
-        run_seconds=0.0 if result is None else result.run_seconds,
-        devices=1 if result is None else result.devices,
-    )
+    return rows, results
 
 
 def _write_outputs(result, out: Path, checkpoint, args, extra=None) -> tuple[list[str], list[str], list[str]]:

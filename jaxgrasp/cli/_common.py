@@ -209,25 +209,27 @@ def say(line: str) -> None:
 
 
 class ChunkProgress:
-    """``progress(done, total)`` of the batched engine: a line before the first chunk and
-    one per chunk on stderr (``jaxgrasp: chunk 2/8 (6/24 points), elapsed 3.1 s, about
-    4 s left``); the time left is estimated from the chunks after the first, which
-    includes the compilation. Silent unless ``show``."""
+    """``progress`` of the engine's batches: a line before the first chunk and one per
+    chunk on stderr (``jaxgrasp: chunk 2/8 (6/24 points), elapsed 3.1 s, about 4 s
+    left``); the time left is estimated from the chunks after the first, which includes
+    the compilation. Silent unless ``show`` and the run has more than one chunk."""
 
-    def __init__(self, verb: str, noun: str, total: int, chunk: int, n_devices: int = 1, show: bool = True):
-        self.verb, self.noun, self.total, self.chunk, self.show = verb, noun, total, chunk, show
-        self.nchunks = math.ceil(total / chunk)
-        self.n_devices = n_devices
+    def __init__(self, verb: str, noun: str, show: bool = True):
+        self.verb, self.noun, self.show = verb, noun, show
+        self.chunk = self.nchunks = 1
         self.t_start = time.perf_counter()
         self._first: tuple[int, float] | None = None  # (done, time) after the first chunk
 
-    def start(self) -> None:
-        """The line before the first chunk (how many items, chunks and devices)."""
+    def start(self, plan) -> None:
+        """The line before the first chunk (how many items, chunks and devices), from the
+        engine's :class:`~jaxgrasp.engine._plan.ChunkPlan`."""
+        self.chunk, self.nchunks = plan.chunk, plan.n_chunks
+        self.show = self.show and plan.n_chunks > 1
         self.t_start = time.perf_counter()
         if self.show:
-            on = f" on {self.n_devices} devices" if self.n_devices > 1 else ""
+            on = f" on {plan.n_devices} devices" if plan.n_devices > 1 else ""
             say(
-                f"jaxgrasp: {self.verb} {self.total} {self.noun}s in {self.nchunks} chunks of {self.chunk}{on} "
+                f"jaxgrasp: {self.verb} {plan.total} {self.noun}s in {plan.n_chunks} chunks of {plan.chunk}{on} "
                 "(the first chunk includes compilation)"
             )
 

@@ -14,9 +14,6 @@ checkpoint is removed.
 
 from __future__ import annotations
 
-import dataclasses
-import math
-import threading
 import time
 from pathlib import Path
 
@@ -43,7 +40,7 @@ from jaxgrasp.cli._common import (
     replaced_text,
 )
 
-__all__ = ["add_parser", "run", "parse_axis_spec", "auto_chunk", "AXES", "PAPER_AXES"]
+__all__ = ["add_parser", "run", "parse_axis_spec", "AXES", "PAPER_AXES"]
 
 AXES = OVERRIDES
 """The parameters a sweep can vary (:data:`jaxgrasp.model._fields.SWEEPABLE`), in option order."""
@@ -54,12 +51,6 @@ PAPER_AXES = {
 }
 """The grid of the paper's Fig. 6 (used when no axis is given)."""
 
-MIN_AUTO_CHUNK = 64
-"""The smallest batch per device :func:`auto_chunk` picks (smaller ones cost more per
-grasp: the paper's grid runs in 0.64 s in 6 chunks of 32 points per device, 0.53 s in
-3 of 64)."""
-AUTO_CHUNKS = 10
-"""About this many progress steps on a long sweep (:func:`auto_chunk`)."""
 
 OUTPUT_NAMES = ("sweep.npz", "sweep.csv", "sweep.png")
 """The files of one sweep's output set, in ``--out``."""
@@ -67,9 +58,6 @@ OUTPUT_NAMES = ("sweep.npz", "sweep.csv", "sweep.png")
 PARTIAL_NAME = "sweep.partial.npz"
 """The checkpoint of the finished points (:mod:`jaxgrasp.engine._checkpoint`), in ``--out``."""
 
-CHECKPOINT_SHARE = 0.05
-"""Checkpoints take at most about this share of a sweep's time (later ones are skipped
-while the last one's cost exceeds it); the last chunk's is always written."""
 
 FIG6_TITLE = "Fig. 6: evaluation value for each Young's modulus and initial deformation (cube)"
 
@@ -153,14 +141,6 @@ def add_parser(sub) -> None:
     sp.set_defaults(func=run, default_preset="cube")
 
 
-def auto_chunk(total: int, cap: int = 64, n_devices: int = 1) -> int:
-    """About a tenth of the grid, at least :data:`MIN_AUTO_CHUNK` per device, at most
-    ``cap`` (jaxgrasp.analysis._sweep.default_chunk_size), as a batch bucket
-    (:func:`jaxgrasp.engine._batch.bucket_size`), so that sweeps share compilations."""
-    from jaxgrasp.engine._batch import bucket_size
-
-    return bucket_size(cap, max(MIN_AUTO_CHUNK * n_devices, math.ceil(total / AUTO_CHUNKS)))
-
 
 # --------------------------------------------------------------------------- the command
 
@@ -168,6 +148,7 @@ def auto_chunk(total: int, cap: int = 64, n_devices: int = 1) -> int:
 def run(args) -> int:
     """Sweep the grasp of the command line; write the files and print one summary line."""
     from jaxgrasp.analysis._sweep import check_inputs, grid_grasp, sweep
+    from jaxgrasp.engine._plan import plan_chunks
 
     axes, paper = _parse_axes(args)
     check_chunk_size(args.chunk_size)
@@ -176,16 +157,14 @@ def run(args) -> int:
     out = Path(args.out)
     check_out(out)
 
-    plan = _plan_chunks(int(np.prod([a.size for a in axes.values()])), args.chunk_size)
+    plan = plan_chunks(int(np.prod([a.size for a in axes.values()])), args.chunk_size, auto=True)
     if not args.no_plot:
         prefetch("jaxgrasp.plots._plots")  # matplotlib's import overlaps the compile
     with lock_out(out):
-        checkpoint = _Checkpoint(out / PARTIAL_NAME, grasp, axes, plan.chunk)
-        show = not args.quiet and plan.nchunks > 1
-        progress = ChunkProgress("sweeping", "point", plan.total, plan.chunk, plan.n_devices, show)
-        progress.start()
-        result = sweep(grasp, chunk_size=plan.chunk, progress=progress, on_chunk=checkpoint, **axes)
-        wall = time.perf_counter() - progress.t_start
+        progress = ChunkProgress("sweeping", "point", show=not args.quiet)
+        t_start = time.perf_counter()
+        result = sweep(grasp, chunk_size=plan.chunk, progress=progress, checkpoint=out / PARTIAL_NAME, **axes)
+        wall = time.perf_counter() - t_start
 
         title = f"jaxgrasp sweep: {grasp_source(args)}"
         if paper and args.preset == "cube" and args.file is None:
@@ -202,74 +181,6 @@ def _parse_axes(args) -> tuple[dict[str, np.ndarray], bool]:
     paper = not given
     specs = dict(PAPER_AXES) if paper else given
     return {n: parse_axis_spec(FIELD[n].option, s) for n, s in specs.items()}, paper
-
-
-@dataclasses.dataclass(frozen=True)
-class _Plan:
-    total: int  # grid points
-    chunk: int  # grid points per compiled batch, a multiple of n_devices
-    nchunks: int
-    n_devices: int
-
-
-def _plan_chunks(total: int, chunk_size: int | None) -> _Plan:
-    """The batch of ``--chunk-size`` (default :func:`auto_chunk`), a multiple of the devices."""
-    import jax
-
-    from jaxgrasp.analysis._sweep import bucket_size, default_chunk_size
-
-    n_devices = jax.device_count()
-    chunk = chunk_size if chunk_size is not None else auto_chunk(total, default_chunk_size(), n_devices)
-    chunk = bucket_size(chunk, total, n_devices)
-    return _Plan(total, chunk, math.ceil(total / chunk), n_devices)
-
-
-class _Checkpoint:
-    """``on_chunk`` of :func:`jaxgrasp.analysis._sweep.sweep`: keeps the finished points in
-    ``sweep.partial.npz`` (:class:`jaxgrasp.engine._checkpoint.SweepCheckpoint`), atomically.
-
-    Each write also leaves the note an interrupt prints (``kept K of N points in PATH``).
-    A write is skipped while the previous one cost more than :data:`CHECKPOINT_SHARE`
-    of the time since (fast chunks: of 8 chunks of 3 cube points, ~70 ms each, 5 were
-    written); the skipped write is then left to an interrupt
-    (:func:`jaxgrasp.io._outputs.set_last_write`), so a Ctrl-C or SIGTERM keeps every
-    finished point, and only a hard kill (``kill -9``) loses those since the last write.
-    The last chunk's is always written.
-    """
-
-    def __init__(self, path: Path, grasp, axes: dict, chunk: int):
-        self.path = path
-        self.grasp = grasp.to_numpy()
-        self.axes = axes
-        self.chunk = chunk
-        self.total = int(np.prod([a.size for a in axes.values()]))
-        self.done = np.zeros(self.total, dtype=bool)
-        self._results = None  # the sweep's flat result arrays (filled chunk by chunk)
-        self._lock = threading.Lock()  # the worker's chunk updates vs an interrupt's write
-        self._cost = 0.0  # seconds the last write took
-        self._end = 0.0  # when it ended
-
-    def __call__(self, start: int, stop: int, results) -> None:
-        with self._lock:
-            self.done[start:stop] = True
-            self._results = results
-        now = time.perf_counter()
-        if stop < self.total and self._cost > CHECKPOINT_SHARE * (now - self._end):
-            outputs.set_last_write("sweep", self.write)
-            return
-        self.write()
-        self._end = time.perf_counter()
-        self._cost = self._end - now
-
-    def write(self) -> None:
-        """Write the points finished so far (the worker's later chunks do not touch them)."""
-        from jaxgrasp.engine._checkpoint import SweepCheckpoint
-
-        outputs.set_last_write("sweep", None)
-        with self._lock:
-            partial = SweepCheckpoint.from_flat(self.axes, self.done.copy(), self._results, self.grasp, self.chunk)
-        note = f"kept {partial.done_count} of {self.total} points in {self.path}"
-        outputs.write_set({self.path: partial.save}, on_publish=lambda: outputs.set_note("sweep", note))
 
 
 def _write_outputs(result, out: Path, title: str | None, extra=None) -> tuple[list[str], list[str], list[str]]:

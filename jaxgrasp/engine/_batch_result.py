@@ -26,7 +26,7 @@ from jaxgrasp.tolerance._result import FIELDS, Evaluation, SummaryNames
 from jaxgrasp.model._codes import BoundaryKind
 from jaxgrasp.tolerance._status import GraspStatus
 
-__all__ = ["BatchResult", "CSV_COLUMNS", "mark_invalid"]
+__all__ = ["BatchResult", "CSV_COLUMNS", "mark_invalid", "assemble"]
 
 CSV_COLUMNS = (
     "index",
@@ -50,6 +50,35 @@ def mark_invalid(results: dict[str, np.ndarray], rows) -> None:
     for a in results.values():
         a[rows] = np.nan if np.issubdtype(a.dtype, np.floating) else -1
     results["status"][rows] = GraspStatus.INVALID
+
+def assemble(parts, total: int, invalid, active: np.ndarray, errors, *, compile_seconds: float = 0.0,
+             run_seconds: float = 0.0, devices: int = 1) -> "BatchResult":
+    """One :class:`BatchResult` of ``total`` grasps from ``parts``, ``(rows, results)``
+    pairs that together cover every valid row (``results``: each
+    :class:`~jaxgrasp.Evaluation` field for those rows, leading axis ``len(rows)``); the
+    rows ``invalid`` (indices or a mask) marked as not evaluated (:func:`mark_invalid`).
+
+    ``active``: ``(B, N)`` each grasp's contacts; ``errors``: each grasp's error or
+    ``None``; the timings (s) and device count are those of the evaluation that made the
+    newest part.
+    """
+    arrays = {}
+    for f in FIELDS:
+        like = parts[0][1][f]
+        arrays[f] = np.empty((total, *np.shape(like)[1:]), dtype=np.asarray(like).dtype)
+        for rows, results in parts:
+            arrays[f][rows] = results[f]
+    mark_invalid(arrays, invalid)
+    return BatchResult(
+        evaluation=Evaluation(**arrays),
+        num_contacts=active.sum(axis=1),
+        active=active,
+        errors=tuple(errors),
+        compile_seconds=compile_seconds,
+        run_seconds=run_seconds,
+        devices=devices,
+    )
+
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

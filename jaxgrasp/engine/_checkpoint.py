@@ -32,18 +32,29 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import threading
+import time
 from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 
 from jaxgrasp.io import _outputs as outputs
-
+from jaxgrasp.model._validation import counted as _counted
 from jaxgrasp.tolerance._result import SUMMARY_FIELDS as RESULT_FIELDS
 from jaxgrasp.model._codes import BoundaryKind
 from jaxgrasp.tolerance._status import GraspStatus
 
-__all__ = ["SweepCheckpoint", "BatchCheckpoint", "FORMAT", "BATCH_FORMAT", "RESULT_FIELDS"]
+__all__ = [
+    "SweepCheckpoint",
+    "SweepKeeper",
+    "BatchCheckpoint",
+    "CheckpointBusy",
+    "FORMAT",
+    "BATCH_FORMAT",
+    "RESULT_FIELDS",
+    "CHECKPOINT_SHARE",
+]
 
 FORMAT = "jaxgrasp-sweep-partial-1"
 """The ``format`` entry of a checkpoint file (changes when its layout does)."""
@@ -144,7 +155,65 @@ class SweepCheckpoint:
             )
 
 
+CHECKPOINT_SHARE = 0.05
+"""Checkpoints take at most about this share of a sweep's time (later ones are skipped
+while the last one's cost exceeds it); the last chunk's is always written."""
+
+
+class SweepKeeper:
+    """``on_chunk`` of :func:`jaxgrasp.sweep` that keeps the finished points in a
+    :class:`SweepCheckpoint` file at ``path``, atomically.
+
+    Each write also leaves the note an interrupt prints (``kept K of N points in PATH``).
+    A write is skipped while the previous one cost more than :data:`CHECKPOINT_SHARE`
+    of the time since; the skipped write is then left to an interrupt
+    (:func:`jaxgrasp.io._outputs.set_last_write`), so a Ctrl-C or SIGTERM keeps every
+    finished point, and only a hard kill (``kill -9``) loses those since the last write.
+    The last chunk's is always written.
+    """
+
+    def __init__(self, path, grasp, axes: Mapping[str, np.ndarray], chunk: int):
+        self.path = Path(path)
+        self.grasp = grasp.to_numpy()
+        self.axes = axes
+        self.chunk = chunk
+        self.total = int(np.prod([a.size for a in axes.values()]))
+        self.done = np.zeros(self.total, dtype=bool)
+        self._results = None  # the sweep's flat result arrays (filled chunk by chunk)
+        self._lock = threading.Lock()  # the worker's chunk updates vs an interrupt's write
+        self._cost = 0.0  # seconds the last write took
+        self._end = 0.0  # when it ended
+
+    def __call__(self, start: int, stop: int, results) -> None:
+        with self._lock:
+            self.done[start:stop] = True
+            self._results = results
+        now = time.perf_counter()
+        if stop < self.total and self._cost > CHECKPOINT_SHARE * (now - self._end):
+            outputs.set_last_write("sweep", self.write)
+            return
+        self.write()
+        self._end = time.perf_counter()
+        self._cost = self._end - now
+
+    def write(self) -> None:
+        """Write the points finished so far (the worker's later chunks do not touch them)."""
+        outputs.set_last_write("sweep", None)
+        with self._lock:
+            partial = SweepCheckpoint.from_flat(self.axes, self.done.copy(), self._results, self.grasp, self.chunk)
+        note = f"kept {partial.done_count} of {self.total} points in {self.path}"
+        outputs.write_set({self.path: partial.save}, on_publish=lambda: outputs.set_note("sweep", note))
+
+
 # --------------------------------------------------------------------------- batches
+
+class CheckpointBusy(Exception):
+    """A batch checkpoint holds an unfinished run that was not asked to resume."""
+
+    def __init__(self, folder):
+        super().__init__(str(folder))
+        self.folder = Path(folder)
+
 
 BATCH_FORMAT = "jaxgrasp-batch-partial-1"
 """The ``format`` of a batch checkpoint's ``manifest.json`` (changes when its layout does)."""
@@ -208,6 +277,42 @@ class BatchCheckpoint:
         for key in ("grasps", "num_contacts"):
             if have.get(key) != self.manifest[key]:
                 raise ValueError(f"{path}: {key} {have.get(key)} differs from this run's {self.manifest[key]}")
+
+
+    def open(self, resume: bool) -> tuple[np.ndarray, dict[str, np.ndarray], bool]:
+        """``(rows, results, resumed)``: with ``resume`` and a checkpoint on disk, the rows
+        it holds and their results (after :meth:`check`, whose ``ValueError`` it raises);
+        otherwise a fresh checkpoint (:meth:`start`) and no rows.
+
+        Raises:
+            CheckpointBusy: the folder holds an unfinished run and ``resume`` is false (an
+                unfinished run's checkpoint is never overwritten silently).
+        """
+        if self.exists():
+            if not resume:
+                raise CheckpointBusy(self.folder)
+            self.check()
+            return (*self.load(), True)
+        self.start()
+        return np.zeros(0, dtype=np.int64), {}, False
+
+    def keeper(self, before: int, total: int):
+        """``on_chunk_rows(rows, results)`` for
+        :func:`~jaxgrasp.engine._batch.evaluate_dataset`: each finished chunk saved at once
+        (:meth:`save_rows`), and the note an interrupt prints says how much is kept
+        (``before`` rows from an earlier run, ``total`` in the dataset)."""
+        kept = [before]
+
+        def keep(rows: np.ndarray, results: Mapping[str, np.ndarray]) -> None:
+            self.save_rows(rows, results)
+            kept[0] += len(rows)
+            outputs.set_note(
+                "batch",
+                f"kept {kept[0]} of {_counted(total, 'grasp')} in {self.folder}; "
+                "the same command with --resume finishes the rest",
+            )
+
+        return keep
 
     def chunk_files(self) -> list[Path]:
         """The finished chunks' files, in order of their first row."""

@@ -1,0 +1,109 @@
+"""Running a compiled chunk evaluator over a batch, chunk by chunk, on the devices."""
+
+from __future__ import annotations
+
+import time
+from typing import Callable, Mapping
+
+import jax
+import numpy as np
+
+from jaxgrasp.engine._plan import ChunkPlan
+from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
+from jaxgrasp.tolerance._settle import needs_settling
+
+__all__ = ["run_chunks"]
+
+
+def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], names, plan: ChunkPlan,
+               progress=None, on_chunk=None, keep=RESULT_FIELDS,
+               settling: tuple[Callable[[], Callable], int] | None = None) -> tuple[dict[str, np.ndarray], float]:
+    """Evaluate the ``plan.total`` grasps of ``plan`` a chunk at a time with the compiled
+    ``fn``; the ``(total, ...)`` result arrays named in ``keep`` (of the
+    :class:`~jaxgrasp.Evaluation` fields) and the run seconds.
+
+    ``chunk_fields(start)`` gives the fields (``names``) of grasps ``start .. start +
+    chunk - 1``, each with a leading axis of ``chunk`` (past ``total``: any valid grasp,
+    e.g. the last one repeated). ``on_chunk(start, stop, results)`` (first: a checkpoint
+    it writes is on disk before ``progress`` reports the chunk) and ``progress(stop,
+    total)`` are called after each chunk. No device buffer outlives its chunk.
+
+    ``settling = (get, size)``, where given (``fn`` being the evaluator without the
+    settling stage, :func:`~jaxgrasp.engine._evaluator.chunk_evaluator`): the grasps of a
+    chunk that :func:`~jaxgrasp.tolerance._settle.needs_settling` are evaluated again by
+    ``get()``, ``size`` at a time, and take its results, so every grasp's result is the
+    same whatever chunk it is in. ``get`` is called (and compiles, its seconds counted as
+    run time) only once a chunk has such grasps.
+    """
+    outs: dict[str, np.ndarray] = {}  # host-side, filled chunk by chunk
+    deal, undeal = _dealt(plan.chunk, plan.n_devices)
+    sharding = plan.sharding
+    want = tuple(dict.fromkeys((*keep, "boundary_status"))) if settling else keep
+    run_seconds = 0.0
+    for start in range(0, plan.total, plan.chunk):
+        stop = min(start + plan.chunk, plan.total)
+        fields = chunk_fields(start)
+        batch = [_put(fields[k][deal], sharding) for k in names]
+        t0 = time.perf_counter()
+        res = dict(zip(RESULT_FIELDS, fn(*batch)))
+        res = {f: _gather(res[f])[undeal] for f in want}
+        del batch
+        if settling:
+            res = _settled(res, fields, names, stop - start, settling, sharding)
+        run_seconds += time.perf_counter() - t0
+        for f in keep:
+            if f not in outs:
+                outs[f] = np.empty((plan.total, *res[f].shape[1:]), dtype=res[f].dtype)
+            outs[f][start:stop] = res[f][: stop - start]
+        if on_chunk is not None:
+            on_chunk(start, stop, outs)
+        if progress is not None:
+            progress(stop, plan.total)
+    return outs, run_seconds
+
+
+def _settled(res: dict, fields, names, count: int, settling, sharding) -> dict:
+    """A chunk's results ``res``, those of its first ``count`` grasps that need the
+    settling stage replaced by ``settling``'s evaluator's (``size`` at a time, padded by
+    repeats)."""
+    rows = np.flatnonzero(needs_settling(res["boundary_status"])[:count])
+    if not len(rows):
+        return res
+    get, size = settling
+    settle = get()
+    res = {f: np.array(a) for f, a in res.items()}  # writable copies
+    for first in range(0, rows.size, size):
+        sel = rows[first : first + size]
+        sub = [_put(fields[k][np.resize(sel, size)], sharding) for k in names]
+        again = dict(zip(RESULT_FIELDS, settle(*sub)))
+        for f in res:
+            res[f][sel] = _gather(again[f])[: sel.size]
+    return res
+
+
+def _put(a: np.ndarray, sharding) -> jax.Array:
+    """Host array -> global array sharded along its first axis (each process supplies its
+    own devices' slices, so this works unchanged across hosts)."""
+    a = np.ascontiguousarray(a, dtype=np.bool_ if a.dtype == np.bool_ else np.float64)
+    if jax.process_count() == 1:
+        return jax.device_put(a, sharding)
+    return jax.make_array_from_callback(a.shape, sharding, lambda i: a[i])
+
+
+def _gather(x) -> np.ndarray:
+    """Global (sharded) result array -> the whole array as NumPy on this host."""
+    if getattr(x, "is_fully_addressable", True):
+        return np.asarray(jax.device_get(x))
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+
+
+def _dealt(chunk: int, n_devices: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(deal, undeal)``: the order in which a chunk's grasps go to the devices, dealt
+    as cards (device ``d`` gets grasps ``d, d + n_devices, ...``), and its inverse.
+    Neighbouring points of a grid are alike (a row of a sweep shares its Young's modulus,
+    say), so contiguous slices gave one device the chunk's hard grasps while the other
+    waited. Each grasp's result is its own, wherever it runs."""
+    deal = np.arange(chunk).reshape(-1, n_devices).T.reshape(-1)
+    return deal, np.argsort(deal)
