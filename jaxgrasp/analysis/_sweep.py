@@ -369,28 +369,12 @@ def sweep(
         grasp: the base :class:`~jaxgrasp.Grasp` (SI units); parameters not swept keep
             its values.
         options: :class:`~jaxgrasp.EvaluateOptions` for every evaluation.
-        chunk_size: grid points per compiled call, at most (bounds memory; default 64
-            per CPU device, 1024 per accelerator). The chunk is the smallest bucket (1, 4,
-            16, 64, ... per device) that holds ``min(chunk_size, number of points)``,
-            capped at ``chunk_size``, a multiple of the number of devices
-            (:func:`~jaxgrasp.engine._plan.plan_chunks`); the last chunk is padded to it.
-        progress: optional ``progress(done, total)`` called after each chunk with the
-            numbers of grid points done and in all (an object with a ``start(plan)``
-            method is also told the chunk plan before the first).
-        on_chunk: optional ``on_chunk(start, stop, results)`` called after each chunk
-            (before ``progress``): grid points ``start .. stop - 1`` (C order, last axis
-            fastest) are done, and so is every point before them; ``results`` maps each
-            result field (``value``, ``status``, ``limiting_kind``, ``limiting_contact``,
-            ``equilibrium_energy``) to a flat ``(total,)`` array whose first ``stop``
-            entries are final. The arrays are the sweep's own buffers: read them, copy
-            what you keep, never write them.
-        checkpoint: optional path of a checkpoint file that keeps the finished points
-            while the sweep runs (the ``sweep.partial.npz`` format of
-            :class:`~jaxgrasp.engine._checkpoint.SweepCheckpoint`, written atomically;
-            ``jaxgrasp sweep`` keeps one in its ``--out`` folder).
-        devices: the devices each chunk is sharded over (default: all of
-            ``jax.devices()``, which after ``jax.distributed.initialize()`` spans every
-            host). The chunk is rounded up to a multiple of their number.
+        chunk_size, progress, on_chunk, devices: as :func:`jaxgrasp.evaluate_batch`, for
+            the grid points in C order (last axis fastest); ``on_chunk``'s results are
+            the :data:`~jaxgrasp.tolerance._result.SUMMARY_FIELDS`.
+        checkpoint: optional path of a file that keeps the finished points while the
+            sweep runs (:class:`~jaxgrasp.engine._checkpoint.SweepCheckpoint`, written
+            atomically; ``jaxgrasp sweep`` keeps ``sweep.partial.npz`` in ``--out``).
         **axes: ``name=values`` for any of :data:`PARAMETERS` (``young_modulus`` Pa,
             ``initial_deformation`` m, ``mass`` kg, ``friction``, ``max_force`` N,
             ``radius`` m); ``values`` is a number or a 1-D sequence. Per-contact

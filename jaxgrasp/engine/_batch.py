@@ -103,9 +103,10 @@ def evaluate_batch(
             :class:`~jaxgrasp.GraspSet` from :func:`jaxgrasp.load_dataset`, whose invalid
             grasps are not evaluated: their status is ``invalid`` and their error kept.
         options: :class:`~jaxgrasp.EvaluateOptions` of every evaluation.
-        chunk_size: grasps per compiled call, at most (default 64 per CPU device, 1024 per
-            accelerator); the chunk is a bucket (1, 4, 16, 64, ... per device), so
-            batches of different sizes share compilations.
+        chunk_size: grasps per compiled call, at most (bounds memory; default 64 per CPU
+            device, 1024 per accelerator); the chunk is the smallest bucket (1, 4, 16, 64,
+            ... per device) that holds them, so batches of different sizes share
+            compilations (:func:`~jaxgrasp.engine._plan.plan_chunks`).
         progress: ``progress(done, total)`` after each chunk (an object with a
             ``start(plan)`` method is also told the chunk plan before the first).
         on_chunk: ``on_chunk(start, stop, results)`` after each chunk (before
@@ -113,20 +114,25 @@ def evaluate_batch(
             ``results`` maps each :class:`~jaxgrasp.Evaluation` field to a ``(B, ...)``
             array whose first ``stop`` rows are final (the engine's own buffers: read,
             never write).
-        devices: the devices each chunk is sharded over (default ``jax.devices()``).
+        devices: the devices each chunk is sharded over (default ``jax.devices()``,
+            which after ``jax.distributed.initialize()`` spans every host).
 
     Returns:
         A :class:`~jaxgrasp.BatchResult`: every :class:`~jaxgrasp.Evaluation` field with
         a leading ``B`` axis, in input order.
 
     Raises:
-        GraspValueError: before anything is compiled, naming the first invalid grasp of
-            a sequence or batched grasp (a :class:`~jaxgrasp.GraspSet` keeps its invalid
-            grasps as rows), or when a set has no valid grasp.
+        GraspValueError: before anything is compiled: the first invalid grasp of a
+            sequence or batched grasp (a set keeps them as rows), or a set without a valid one.
     """
     check_chunk_size(chunk_size)  # before the grasps: nothing is validated for a bad call
     fields, errors = _batched_fields(grasps)
-    plan = plan_chunks(len(errors), chunk_size, devices)
+    return _evaluate_fields(fields, errors, plan_chunks(len(errors), chunk_size, devices), options, progress, on_chunk)
+
+
+def _evaluate_fields(fields: dict[str, np.ndarray], errors, plan: ChunkPlan, options: EvaluateOptions,
+                     progress, on_chunk) -> BatchResult:
+    """:func:`evaluate_batch` of validated fields (:func:`_batched_fields`) by ``plan``."""
     masked = "active" in fields
     start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
     fn, compile_seconds, settling = chunk_evaluator("batch", options, fields["positions"].shape[1], plan, masked)

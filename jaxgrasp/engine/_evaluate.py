@@ -1,18 +1,23 @@
 """Energy-tolerance evaluation of a grasp (Tsuji et al., eq. 1), batched and differentiable.
 
-:func:`evaluate` follows the paper's steps, one named function each:
+:func:`evaluate` runs the engine's pipeline (:data:`~jaxgrasp.engine._stages.PIPELINE`),
+which follows the paper's steps, one named function each:
 
-1. solve the equilibrium problem and every boundary problem from its starts
-   (:func:`jaxgrasp.tolerance._stages.problems_of`);
-2. keep the lowest converged start of each boundary problem (:func:`best_starts`);
-3. decide the grasp's status from the solver's outputs (:func:`grasp_status`);
-4. the minimum energies with their envelope-theorem derivatives (:func:`energies`,
-   :mod:`jaxgrasp.tolerance._envelope`);
-5. the value: the least boundary energy above ``U0``, or a soft minimum (:func:`value_of`);
-6. the :class:`~jaxgrasp.Evaluation` in SI units (:func:`to_evaluation`).
+1. solve the equilibrium problem and every boundary problem from its starts (the
+   ``equilibrium``, ``lanes``, ``starts`` and ``finish`` stages);
+2. keep the lowest converged start of each boundary problem
+   (:func:`~jaxgrasp.tolerance._verdict.best_starts`);
+3. decide the grasp's status from the solver's outputs
+   (:func:`~jaxgrasp.tolerance._verdict.grasp_status`);
+4. the minimum energies with their envelope-theorem derivatives
+   (:func:`~jaxgrasp.tolerance._verdict.energies`);
+5. the value: the least boundary energy above ``U0``, or a soft minimum
+   (:func:`~jaxgrasp.tolerance._verdict.value_of`);
+6. the :class:`~jaxgrasp.Evaluation` in SI units
+   (:func:`~jaxgrasp.tolerance._verdict.to_evaluation`).
 
 Derivatives of ``value`` (and of every energy) are exact and cheap (envelope theorem, see
-:mod:`jaxgrasp.tolerance._envelope`). The derivative is that of the *selected* boundary: where two
+:func:`jaxgrasp.tolerance.envelope_energy`). The derivative is that of the *selected* boundary: where two
 boundaries tie for the minimum (e.g. the two contacts of a symmetric grasp) ``value`` has
 a kink and the gradient is that of the one reported in ``limiting_*`` (a one-sided
 derivative).
@@ -36,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.engine import _compile
+from jaxgrasp.engine._evaluator import SETTLE_INLINE
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS, LATENCY_CPU_OPTIONS
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.tolerance._options import EvaluateOptions
@@ -72,12 +78,14 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
             before anything is compiled).
 
     ``evaluate`` can be wrapped in ``jax.jit`` and ``jax.vmap`` and differentiated with
-    ``jax.grad``/``jax.jacfwd`` (envelope theorem; see :mod:`jaxgrasp.tolerance._envelope`); a traced
-    grasp becomes part of the caller's program. A concrete grasp runs a program compiled
-    once per process for its shapes and options (:func:`compiled_executable`), loaded from
-    disk instead where the caches are on (:mod:`jaxgrasp.engine._store`): first the one without
-    the settling stage, then, only if a boundary problem did not settle, the one with it
-    (:func:`~jaxgrasp.tolerance._stages.problems_of`); the result is the traced path's.
+    ``jax.grad``/``jax.jacfwd`` (envelope theorem, :func:`jaxgrasp.tolerance.envelope_energy`);
+    a traced grasp becomes part of the caller's program. A concrete grasp runs an
+    executable compiled once per process for its shapes and options
+    (:func:`compiled_executable`), loaded from the executable store instead where the
+    caches are on: as the settling policy has it
+    (:data:`~jaxgrasp.engine._evaluator.SETTLE_INLINE`), first the one without the
+    settling stage, then, only if a boundary problem did not settle, the one with it; the
+    result is the traced path's.
     """
     _check_unbatched(grasp)
     if not _is_concrete(grasp):  # inside the caller's jit, vmap or grad
@@ -87,11 +95,10 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
 
     check_grasp_inputs(**grasp.to_numpy())
     leaves = jax.tree_util.tree_leaves(grasp)
-    # the program without the settling stage first; the one with it only where a
-    # boundary problem did not settle (equal results elsewhere, see problems_of)
-    fn, _ = compiled_executable(grasp, options, settle=False)
+    inline = SETTLE_INLINE["evaluate"]
+    fn, _ = compiled_executable(grasp, options, settle=inline)
     out = fn(temperature, *leaves)
-    if needs_settling(out[RESULT_FIELDS.index("boundary_status")]):
+    if not inline and needs_settling(out[RESULT_FIELDS.index("boundary_status")]):
         fn, _ = compiled_executable(grasp, options, settle=True)
         out = fn(temperature, *leaves)
     return Evaluation(**dict(zip(RESULT_FIELDS, out)))

@@ -1,5 +1,5 @@
-"""The compiled chunk evaluator: the pipeline's stages, each ``jit`` over the devices,
-memoised in the process and kept in the executable store."""
+"""The compiled chunk evaluator (the pipeline's stages, each ``jit`` over the devices,
+memoised in the process and kept in the executable store) and the settling policy."""
 
 from __future__ import annotations
 
