@@ -109,7 +109,7 @@ def ipopt_sample(counts: list[int], k: int, seed: int) -> list[int]:
 
 
 def compilations() -> int:
-    """Problems traced or loaded by :mod:`jaxgrasp.engine._store` in this process so far."""
+    """Executables traced or loaded by the engine in this process so far."""
     from jaxgrasp.engine import _store as cache
 
     s = cache.stats()

@@ -1,7 +1,7 @@
 """``jaxgrasp batch``: evaluate and rank every grasp of a dataset file; write csv, npz and a picture.
 
 The dataset is a ``.npz`` or ``.jsonl`` file (:mod:`jaxgrasp.io._dataset`), grasps with any
-contact counts, padded to the largest and evaluated in chunks of one compiled program
+contact counts, padded to the largest and evaluated in chunks by one compiled evaluator
 (:func:`jaxgrasp.evaluate_batch`). An invalid grasp does not stop the run: its row has
 status ``invalid`` and its one-line error (``--strict``: exit 2 before computing).
 

@@ -18,13 +18,13 @@ __all__ = ['MEMO_SIZE', 'default_device', 'wait_for_saves', 'compiled', 'clear_c
 
 MEMO_SIZE = 16
 
-"""Most compiled programs kept in this process (the least recently used is dropped first)."""
+"""Most compiled executables kept in this process (the least recently used is dropped first)."""
 
 _MEMO: dict[Hashable, Any] = {}
 
 _XLA_CACHE_HITS = [0]
 
-"""Problems JAX's persistent cache has served in this process (counted from its events)."""
+"""Executables JAX's persistent cache has served in this process (counted from its events)."""
 
 
 def _count_xla_cache_hits(event: str, **_) -> None:
@@ -94,19 +94,19 @@ def compiled(
     build: Callable[[], Any],
     spec: Sequence,
     *,
-    name: str = "program",
+    name: str = "executable",
     store_key: Hashable | None = None,
     devices: Sequence | None = None,
     n_outputs: int | None = None,
 ):
-    """A compiled program, from the memo, the program store or built now; ``(fn, seconds)``.
+    """A compiled executable, from the memo, the executable store or built now; ``(fn, seconds)``.
 
     Args:
-        key: what makes the program unique in this process (the memo's key).
+        key: what makes the executable unique in this process (the memo's key).
         build: ``build()`` returns the jitted function (``jax.jit(...)`` with its
             shardings and compiler options; arrays in, arrays out), or a
-            :class:`Pipeline` of them; called when the program is not in the memo
-            (it must be cheap: nothing is traced before the program is compiled).
+            :class:`~jaxgrasp.engine._pipeline.Pipeline` of them; called when the executable is
+            not in the memo (it must be cheap: nothing is traced before it is compiled).
         spec: its arguments as ``jax.ShapeDtypeStruct`` (with their shardings).
         name: prefix of its stored file.
         store_key: what makes it unique across processes (device counts, not ids);
@@ -115,7 +115,8 @@ def compiled(
         n_outputs: the number of arrays it returns (a stored one must match).
 
     Returns:
-        ``fn``, the compiled program (``jax.stages.Compiled``, or a :class:`Staged`),
+        ``fn``, the compiled executable (``jax.stages.Compiled``, or a
+        :class:`~jaxgrasp.engine._pipeline.Staged`),
         and the seconds spent building or loading it (0 on a memo hit).
     """
     hit = _MEMO.pop(key, None)
@@ -133,10 +134,10 @@ def compiled(
         fn = _compile(built, spec, quiet_xla=path is not None)
         _STATS["traced"] += 1
         # An executable that XLA's cache served cannot be serialized again (XLA on the CPU
-        # then writes a program whose kernels are missing when it is loaded): store only
-        # one that was compiled here. (XLA's cache holds no stored program's executable,
-        # but may hold one written by another program of the same HLO or an older
-        # jaxgrasp; later processes then trace it and load XLA's copy.)
+        # then writes one whose kernels are missing when it is loaded): store only one
+        # that was compiled here. (XLA's cache holds no stored executable, but may hold
+        # one written for another function of the same HLO or by an older jaxgrasp;
+        # later processes then trace it and load XLA's copy.)
         if path is not None and _XLA_CACHE_HITS[0] == hits:
             _save_in_background(path, fn)
     else:
@@ -149,12 +150,12 @@ def compiled(
 
 _SAVES: list[threading.Thread] = []
 
-"""Threads writing a compiled program to the store (:func:`_save_in_background`)."""
+"""Threads writing a compiled executable to the store (:func:`_save_in_background`)."""
 
 
 def _save_in_background(path: Path, fn) -> None:
-    """:func:`save_executable` in a thread, so that serializing the program (~0.1 s for a
-    batch evaluator) overlaps its first run instead of delaying it. The thread is not a
+    """:func:`save_executable` in a thread, so that serializing the executable overlaps its
+    first run instead of delaying it. The thread is not a
     daemon (the interpreter waits for it at exit); a process that ends with ``os._exit``
     (the ``jaxgrasp`` command) calls :func:`wait_for_saves` first."""
     thread = threading.Thread(target=save_executable, args=(path, fn), name="jaxgrasp-save")
@@ -163,7 +164,7 @@ def _save_in_background(path: Path, fn) -> None:
 
 
 def wait_for_saves(timeout: float | None = None) -> None:
-    """Wait until the programs being written to the store are on disk (each write is
+    """Wait until the executables being written to the store are on disk (each write is
     atomic), at most ``timeout`` seconds in all (``None``: as long as they take)."""
     end = None if timeout is None else time.monotonic() + timeout
     for thread in list(_SAVES):
@@ -178,8 +179,8 @@ def wait_for_saves(timeout: float | None = None) -> None:
 
 def _no_xla_cache_write():
     """Context in which JAX's persistent cache writes no entry from this thread (its
-    minimum compile time for an entry raised to infinity, thread-locally): for programs
-    that the program store keeps. Where this JAX has no such setting, a context that
+    minimum compile time for an entry raised to infinity, thread-locally): for executables
+    that the executable store keeps. Where this JAX has no such setting, a context that
     changes nothing."""
     try:
         from jax._src import config as jax_config
@@ -190,7 +191,7 @@ def _no_xla_cache_write():
 
 
 def default_device():
-    """The device a program without ``devices`` runs on: JAX's default device
+    """The device an executable without ``devices`` runs on: JAX's default device
     (``jax_default_device``: a device, or a platform name for its first device), else
     the first device."""
     default = jax.config.jax_default_device
@@ -205,7 +206,7 @@ def _devices(devices: Sequence | None) -> list:
 
 
 def clear_compiled() -> None:
-    """Forget every compiled program of this process (the next build traces or loads),
-    once the programs being stored are on disk."""
+    """Forget every compiled executable of this process (the next build traces or loads),
+    once the executables being stored are on disk."""
     wait_for_saves()
     _MEMO.clear()

@@ -79,7 +79,7 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
 
     ``evaluate`` can be wrapped in ``jax.jit`` and ``jax.vmap`` and differentiated with
     ``jax.grad``/``jax.jacfwd`` (envelope theorem, :func:`jaxgrasp.tolerance.envelope_energy`);
-    a traced grasp becomes part of the caller's program. A concrete grasp runs an
+    a traced grasp becomes part of the caller's computation. A concrete grasp runs an
     executable compiled once per process for its shapes and options
     (:func:`compiled_executable`), loaded from the executable store instead where the
     caches are on: as the settling policy has it
@@ -144,10 +144,10 @@ def compiled_executable(grasp: Grasp, options: EvaluateOptions, settle: bool = T
     ``fn(temperature, *jax.tree_util.tree_leaves(grasp))`` takes the soft-minimum
     temperature (mJ, ``()`` float) and the grasp's fields (with a contact mask, ``active``
     last) and returns every :class:`~jaxgrasp.Evaluation` field (:data:`RESULT_FIELDS`).
-    It comes from :func:`jaxgrasp.engine._compile.compiled`, as the batches' programs do: memoised
-    in the process and, where the program store is on, loaded from it instead of built
+    It comes from :func:`jaxgrasp.engine._compile.compiled`, as the batches' executables do:
+    memoised in the process and, where the executable store is on, loaded from it instead of built
     (``seconds``: the time to build it, 0 on a memo hit). Its results are those of
-    :func:`evaluate_compiled` bit for bit (the same program).
+    :func:`evaluate_compiled` bit for bit (the same computation).
     """
     leaves, treedef = jax.tree_util.tree_flatten(grasp)
     avals = tuple((np.shape(x), _canonical_dtype(x).name) for x in leaves)
@@ -156,7 +156,7 @@ def compiled_executable(grasp: Grasp, options: EvaluateOptions, settle: bool = T
     spec += [jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in avals]
 
     def build():
-        def evaluate_fields(temperature, *leaves):  # arrays in, arrays out: the program store keeps flat programs
+        def evaluate_fields(temperature, *leaves):  # arrays in, arrays out: the store keeps flat executables
             r = evaluate_compiled(jax.tree_util.tree_unflatten(treedef, leaves), temperature, options, settle)
             return tuple(getattr(r, f) for f in RESULT_FIELDS)
 

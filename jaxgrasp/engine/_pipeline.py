@@ -19,19 +19,19 @@ def _spec_of(x) -> jax.ShapeDtypeStruct:
 
 
 class Pipeline:
-    """A program as several jitted stages and the Python function that calls them: what
-    ``build`` of :func:`compiled` returns for a program compiled in stages.
+    """An executable as several jitted stages and the Python function that calls them: what
+    ``build`` of :func:`compiled` returns for an executable compiled in stages.
 
     Attributes:
         stages: stage name -> jitted function (``jax.jit(...)`` with its shardings and
             compiler options; arrays in, a tuple of arrays out).
-        drive: ``drive(call, *args)`` -> a tuple of arrays, the program: it runs stage
+        drive: ``drive(call, *args)`` -> a tuple of arrays, the whole computation: it runs stage
             ``name`` on arrays ``xs`` by ``call(name, *xs)`` (a tuple of arrays back),
             in any order and as often as it likes, a stage always on arrays of the same
             shapes. It must do nothing else with the arrays but pass them on: it also
             runs on their shapes alone, to compile the stages and to check stored ones.
 
-    A program in stages compiles faster than the same work as one: each stage is
+    Stages compile sooner than the same work as one executable: each stage is
     compiled by XLA in a thread of its own (XLA's compiler releases the GIL) while the
     next is traced and lowered, a stage called twice is compiled once, and each stage
     has its own compiler options (one that runs briefly can be compiled for latency).
@@ -43,7 +43,7 @@ class Pipeline:
 
 class Staged:
     """A compiled :class:`Pipeline`: ``Staged(stages, drive)(*args)`` runs ``drive``
-    with each stage's compiled program (``jax.stages.Compiled``, in :attr:`stages`,
+    with each stage's compiled executable (``jax.stages.Compiled``, in :attr:`stages`,
     by name, in the order the driver first calls them). Results between stages stay
     on the devices."""
 

@@ -1,34 +1,34 @@
-"""Every cache of jaxgrasp: compiled programs in this process, on disk, and XLA's.
+"""The executable store on disk and the switches of every cache of jaxgrasp.
 
 Three layers, each skipping more of the work of building an evaluator:
 
-* the in-process memo (:func:`compiled`): a program compiled once is reused by every
-  later call with the same key (at most :data:`MEMO_SIZE` are kept);
-* the program store (:func:`set_executable_dir`): the compiled program itself, serialized
-  (``jax.experimental.serialize_executable``), so that a later process neither traces
-  :func:`jaxgrasp.evaluate` in Python nor lowers nor compiles it: it loads the machine
-  code (the cube: ~0.3 s instead of 3-5 s on 2 cores; ``experiments/compile_time.py``);
-* JAX's persistent compilation cache, for the user's own ``jit`` programs and
-  jaxgrasp's programs that are not stored. A program the store keeps is not written
-  there as well: a second copy of the same machine code, whose writing cost 0.16 s of a
-  cold default sweep (``experiments/compile_time.py``); a program whose stored file is
-  missing, stale or corrupt is traced and compiled again, and stored again.
+* the in-process memo (:func:`jaxgrasp.engine._compile.compiled`): an executable
+  compiled once is reused by every later call with the same key;
+* the executable store (:func:`set_executable_dir`): the compiled executable itself,
+  serialized (``jax.experimental.serialize_executable``), so that a later process neither
+  traces :func:`jaxgrasp.evaluate` in Python nor lowers nor compiles it: it loads the
+  machine code;
+* JAX's persistent compilation cache, for the user's own ``jit`` functions and
+  jaxgrasp's executables that are not stored. An executable the store keeps is not
+  written there as well (a second copy of the same machine code, written for nothing); an
+  executable whose stored file is missing, stale or corrupt is traced and compiled again,
+  and stored again.
 
-The programs of :func:`jaxgrasp.evaluate` on a concrete grasp
-(:func:`jaxgrasp.engine._evaluate.compiled_executable`), of :func:`jaxgrasp.evaluate_batch` and of
-:func:`jaxgrasp.sweep` (:func:`jaxgrasp.engine._batch.compiled_evaluator`) all come from
-:func:`compiled`. A traced grasp (inside the caller's ``jit``, ``vmap`` or ``grad``) is
-traced with the caller's program and uses none of these.
+The executables of :func:`jaxgrasp.evaluate` on a concrete grasp
+(:func:`jaxgrasp.engine._evaluate.compiled_executable`), of :func:`jaxgrasp.evaluate_batch`
+and of :func:`jaxgrasp.sweep` (:func:`jaxgrasp.engine._evaluator.compiled_evaluator`) all
+come from :func:`~jaxgrasp.engine._compile.compiled`. A traced grasp (inside the caller's
+``jit``, ``vmap`` or ``grad``) is traced with the caller's function and uses none of these.
 
 The two stores on disk are off by default, as JAX's own cache is. One call turns both on,
 :func:`enable_compilation_cache` (``jaxgrasp.enable_compilation_cache()``): XLA's cache in
-the folder :func:`default_dir`, the programs in its subfolder ``jaxgrasp-executables``. Two
+the folder :func:`default_dir`, the executables in its subfolder ``jaxgrasp-executables``. Two
 things call it by themselves:
 
 * the ``jaxgrasp`` command, always;
 * ``import jaxgrasp``, when the environment variable ``JAXGRASP_CACHE_DIR`` (:data:`ENV_VAR`)
-  names a folder (:func:`enable_from_environment`): so every process of a program, or of
-  a test runner, starts warm without a change to its code.
+  names a folder (:func:`enable_from_environment`): so every process of an application,
+  or of a test runner, starts warm without a change to its code.
 
 ``JAXGRASP_CACHE_DIR`` is also the folder the command uses (default
 ``~/.cache/jaxgrasp/xla``). Like XLA's cache, the folder holds machine code that is loaded
@@ -63,7 +63,7 @@ the caches on (:func:`enable_from_environment`)."""
 
 EXECUTABLE_SUBDIR = "jaxgrasp-executables"
 
-"""Folder of the stored compiled programs inside the compilation cache folder."""
+"""Folder of the executable store inside the compilation cache folder."""
 
 _EXECUTABLE_DIR: Path | None = None
 
@@ -88,9 +88,9 @@ def enable_compilation_cache(path=None) -> Path | None:
     """Turn on both caches on disk, so that a new process neither traces nor compiles again.
 
     JAX's persistent compilation cache lives in ``path`` (default :func:`default_dir`),
-    the compiled programs in its subfolder ``jaxgrasp-executables`` (:func:`set_executable_dir`):
+    the compiled executables in its subfolder ``jaxgrasp-executables`` (:func:`set_executable_dir`):
     a repeated :func:`jaxgrasp.evaluate` of a concrete grasp, batch or sweep in a new
-    process loads its compiled program instead of tracing, lowering and compiling it.
+    process loads its compiled executable instead of tracing, lowering and compiling it.
     Calling it again (with the same folder) changes nothing. A folder that cannot be
     created leaves every setting as it was (every run compiles). A folder that exists
     but cannot be written is still read (a shared, pre-filled cache works) and new
@@ -129,11 +129,11 @@ def _writable(folder: Path) -> bool:
 
 
 def set_executable_dir(path) -> None:
-    """Keep compiled programs in folder ``path``; ``None``: don't.
+    """Keep compiled executables in folder ``path``; ``None``: don't.
 
-    A later process building the same program (same jaxgrasp source, JAX and jaxlib
+    A later process building the same executable (same jaxgrasp source, JAX and jaxlib
     versions, key, device count, precision, backend and processor) loads it instead of
-    tracing and compiling it. A missing, stale or corrupt file is ignored (the program is
+    tracing and compiling it. A missing, stale or corrupt file is ignored (the executable is
     built and the file rewritten).
     """
     global _EXECUTABLE_DIR
@@ -141,7 +141,7 @@ def set_executable_dir(path) -> None:
 
 
 def executable_dir() -> Path | None:
-    """The folder of stored programs, ``None`` when they are not kept."""
+    """The folder of stored executables, ``None`` when they are not kept."""
     return _EXECUTABLE_DIR
 
 
@@ -173,9 +173,9 @@ def _machine() -> str:
 
 
 def executable_path(name: str, key: Hashable) -> Path | None:
-    """File of the stored program ``name`` (``"sweep"``) for ``key``; ``None`` when
-    programs are not kept. ``key`` must be the same in every process that builds the same
-    program (device counts, not device ids)."""
+    """File of the stored executable ``name`` (``"sweep"``) for ``key``; ``None`` when
+    executables are not kept. ``key`` must be the same in every process that builds the same
+    executable (device counts, not device ids)."""
     if _EXECUTABLE_DIR is None:
         return None
     import jaxlib
@@ -185,14 +185,14 @@ def executable_path(name: str, key: Hashable) -> Path | None:
 
 _FORMAT = "jaxgrasp-executable-3"
 
-"""Tag of a stored program's file (a file without it is stale)."""
+"""Tag of a stored executable's file (a file without it is stale)."""
 
 
 def _register_handlers() -> None:
-    """Register the CPU's LAPACK handlers (``eigh``, ``solve``), which a loaded program
-    calls. JAX registers them while it lowers such a program; a program loaded without
+    """Register the CPU's LAPACK handlers (``eigh``, ``solve``), which a loaded executable
+    calls. JAX registers them while it lowers such a function; an executable loaded without
     lowering would call unregistered handlers and crash the process. JAX's own loader of
-    exported programs does the same (``jax._src.export``); where that private entry point
+    exported functions does the same (``jax._src.export``); where that private entry point
     is gone, lowering a 2 x 2 ``eigh`` registers them through public API."""
     try:
         from jax._src.lib import lapack
@@ -205,9 +205,9 @@ def _register_handlers() -> None:
 
 
 def _registering(devices: Sequence):
-    """A started thread that runs :func:`_register_handlers` for a CPU program (it imports
-    SciPy's LAPACK, ~0.15 s, while the program's machine code loads; join it before the
-    program runs), or ``None`` where there is nothing to register."""
+    """A started thread that runs :func:`_register_handlers` for a CPU executable (it imports
+    SciPy's LAPACK while the executable's machine code loads; join it before the
+    executable runs), or ``None`` where there is nothing to register."""
     if devices[0].platform != "cpu":
         return None
     thread = threading.Thread(target=_register_handlers, name="jaxgrasp-lapack", daemon=True)
@@ -221,7 +221,7 @@ def _shapes(xs) -> list:
 
 def load_executable(path: Path, spec: Sequence, devices: Sequence, n_outputs: int | None = None,
                  drive: Callable | None = None):
-    """The compiled program stored at ``path`` (a ``jax.stages.Compiled``, or a
+    """The compiled executable stored at ``path`` (a ``jax.stages.Compiled``, or a
     :class:`Staged` of several, called by ``drive``: :class:`Pipeline`), loaded onto
     ``devices``, if it takes ``spec`` (``jax.ShapeDtypeStruct`` leaves) and returns
     ``n_outputs`` arrays; ``None`` otherwise (missing, stale, corrupt, or built for
@@ -238,13 +238,13 @@ def load_executable(path: Path, spec: Sequence, devices: Sequence, n_outputs: in
     try:
         tag, stages = pickle.loads(data)
         if tag != _FORMAT or not stages or (drive is None) != (len(stages) == 1 and stages[0][0] is None):
-            raise ValueError("stale stored program")
+            raise ValueError("stale stored executable")
         registering = _registering(devices)
         loaded = {}
         try:
             for name, payload, in_tree, out_tree in stages:
                 if in_tree != jax.tree_util.tree_structure(((0,) * in_tree.num_leaves, {})):  # flat arrays
-                    raise ValueError("stale stored program")
+                    raise ValueError("stale stored executable")
                 loaded[name] = serialize_executable.deserialize_and_load(
                     payload, in_tree, out_tree, backend=devices[0].client, execution_devices=list(devices)
                 )
@@ -255,12 +255,12 @@ def load_executable(path: Path, spec: Sequence, devices: Sequence, n_outputs: in
         def call(name, *args):  # each stage must take what the driver gives it
             fn = loaded[name]
             if _shapes(fn.args_info) != _shapes(args):
-                raise ValueError("stale stored program")
+                raise ValueError("stale stored executable")
             return tuple(jax.ShapeDtypeStruct(o.shape, o.dtype) for o in jax.tree_util.tree_leaves(fn.out_info))
 
         out = call(None, *spec) if drive is None else drive(call, *spec)
         if n_outputs is not None and len(out) != n_outputs:
-            raise ValueError("stale stored program")
+            raise ValueError("stale stored executable")
         return loaded[None] if drive is None else Staged(loaded, drive)
     except Exception:  # corrupt, stale, or from an incompatible JAX: build it again
         _STATS["cache_errors"] += 1
@@ -268,8 +268,8 @@ def load_executable(path: Path, spec: Sequence, devices: Sequence, n_outputs: in
 
 
 def save_executable(path: Path, fn) -> None:
-    """Write the compiled program ``fn`` (``jax.stages.Compiled`` or :class:`Staged`) to
-    ``path`` atomically; never raises (a program that cannot be serialized is built again
+    """Write the compiled executable ``fn`` (``jax.stages.Compiled`` or :class:`Staged`) to
+    ``path`` atomically; never raises (an executable that cannot be serialized is built again
     next time)."""
     from jax.experimental import serialize_executable
 
@@ -292,8 +292,8 @@ def save_executable(path: Path, fn) -> None:
 def stats() -> dict[str, int]:
     """What the caches did in this process, counted since it started (a copy):
 
-    * ``traced``: programs traced and compiled (and stored, where the store is on);
-    * ``deserialized``: compiled programs loaded from the program store instead;
+    * ``traced``: executables traced and compiled (and stored, where the store is on);
+    * ``deserialized``: compiled executables loaded from the executable store instead;
     * ``cache_errors``: stored files that could not be used or written.
     """
     return dict(_STATS)

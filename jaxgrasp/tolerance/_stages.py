@@ -26,16 +26,15 @@ __all__ = ["solve_stage", "unsolved", "finish_problems"]
 
 
 def solve_stage(data: ProblemData, starts: LaneStarts, options: EvaluateOptions) -> SolverResult:
-    """The solve stage: the lanes ``starts`` of a batch
-    ``data`` solved, every grasp's lanes in one work queue
-    (:func:`~jaxgrasp.solver._lanes.solve_lane_batches`); leading axes ``(B, L)``.
+    """The solve stage: the lanes ``starts`` of a batch ``data`` solved, every grasp's
+    lanes in one work queue (:func:`jaxgrasp.solver.solve_lane_batches`); leading axes
+    ``(B, L)``.
 
     Each lane gets its grasp's data as its theta (not closed over): the queue then runs
     the lanes of all grasps (and, under a caller's vmap, of all batches) together. The
-    queue starts the force-limit lanes first: on random grasps they take 46 steps on
-    average against 27 for the slip lanes (two thirds of them prove their boundary
-    infeasible), so started last they would run on with the other slots idle
-    (experiments/BENCHMARK.md). The equilibrium stage has one lane per grasp."""
+    queue starts the force-limit lanes first: they take more steps than the slip lanes
+    (most of them prove their boundary infeasible), so started last they would run on
+    with the other slots idle. The equilibrium stage has one lane per grasp."""
     b, n = data.params.c.shape[:2]
     num_lanes = _num_lanes(data, options)
     theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a[:, None], (b, num_lanes) + a.shape[1:]), data)
