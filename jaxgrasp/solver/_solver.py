@@ -80,7 +80,8 @@ __all__ = [
 
 @dataclasses.dataclass(frozen=True)
 class SolverOptions:
-    """Static settings of :func:`solve` (hashable; all quantities in the scaled units).
+    """Static settings of :func:`jaxgrasp.solver.solve` and of every lane it runs (hashable;
+    all quantities in the solver's scaled units).
 
     Attributes:
         tol: KKT tolerance on stationarity, feasibility and complementarity (float64;
