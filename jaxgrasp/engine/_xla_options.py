@@ -39,9 +39,9 @@ LATENCY_CPU_OPTIONS = {**COMPILER_OPTIONS, "xla_backend_optimization_level": 0}
 call: the executable :func:`jaxgrasp.evaluate` compiles for one concrete grasp, and the
 batch engine's ``evaluation`` stage, which runs once per chunk after the solver.
 
-Without LLVM's optimisation passes such an executable compiles in much less time and a
-call runs somewhat slower; the value agrees to 2 ulp. For an executable called once the
-compile dominates. The executables that run the solver over many grasps (the batch
+LLVM's optimisation passes are skipped: they take much of the compile and pay for
+themselves only over many calls; the value agrees to 2 ulp. For an executable called
+once the compile dominates. The executables that run the solver over many grasps (the batch
 engine's solver stages, tuning) keep :data:`COMPILER_OPTIONS`: there the calls dominate,
 and a lower optimisation level would cost throughput. Other backends use
 :data:`COMPILER_OPTIONS` for both."""

@@ -80,8 +80,8 @@ __all__ = [
 
 @dataclasses.dataclass(frozen=True)
 class SolverOptions:
-    """Static settings of :func:`jaxgrasp.solver.solve` and of every lane it runs (hashable;
-    all quantities in the solver's scaled units).
+    """Static settings of the solver's lanes (:func:`jaxgrasp.solver.solve`,
+    :func:`jaxgrasp.solver.solve_lanes`; hashable; all quantities in the scaled units).
 
     Attributes:
         tol: KKT tolerance on stationarity, feasibility and complementarity (float64;
