@@ -1,14 +1,29 @@
 """jaxgrasp: energy-tolerance grasp stability (Tsuji et al.) as a batched, differentiable JAX evaluator.
 
+The names here (``jaxgrasp.__all__``) are the public API. The implementation lives in
+packages, each importing only from those before it in this list:
+
+* :mod:`jaxgrasp.solver`: a generic augmented-Lagrangian solver and its lane queue;
+* :mod:`jaxgrasp.model`: grasp fields, :class:`Grasp`, the potential field (eq. 3-21);
+* :mod:`jaxgrasp.presets`: the paper's two grasps (Sec. VII);
+* :mod:`jaxgrasp.io`: grasp files, datasets, meshes, output files;
+* :mod:`jaxgrasp.tolerance`: the method (eq. 1): problems, starts, settling, verdict;
+* :mod:`jaxgrasp.engine`: :func:`evaluate` and :func:`evaluate_batch`, compiled stages,
+  the executable store, checkpoints;
+* :mod:`jaxgrasp.analysis`: :func:`sweep`, :func:`tune`, :func:`epsilon`;
+* :mod:`jaxgrasp.plots` and :mod:`jaxgrasp.cli` (the ``jaxgrasp`` command).
+
 Importing jaxgrasp turns on JAX's 64-bit mode (``jax_enable_x64``) for the whole process,
 so that results are float64 without the user touching JAX's configuration, also where the
-user's own ``jit``/``vmap``/``grad`` trace :func:`evaluate` (JAX fixes dtypes when it
-traces, in the caller's mode: ``experiments/x64_scope.py`` measures what a narrower scope
-breaks). Set the environment variable ``JAX_ENABLE_X64`` (to ``0`` or ``1``) before
-importing to keep JAX's own setting: with ``JAX_ENABLE_X64=0`` jaxgrasp computes in
-float32. It also asks JAX for one CPU device per core, so that batches and sweeps run on
-every core (``JAXGRASP_CPU_DEVICES=1`` keeps JAX's single device; see
-:mod:`jaxgrasp.engine`). Every public function takes and returns SI units (m, Pa, N, kg, J, rad).
+user's own ``jit``/``vmap``/``grad`` trace :func:`evaluate`. JAX fixes dtypes when it
+traces, in the caller's mode: with x64 on only inside jaxgrasp's own calls, the user's
+``jax.jit`` and ``jax.grad`` of :func:`evaluate` would mix float32 and float64 and fail,
+and the user's own arrays would be float32. Set the environment variable
+``JAX_ENABLE_X64`` (to ``0`` or ``1``) before importing to keep JAX's own setting: with
+``JAX_ENABLE_X64=0`` jaxgrasp computes in float32. It also asks JAX for one CPU device
+per core, so that batches and sweeps run on every core (``JAXGRASP_CPU_DEVICES=1`` keeps
+JAX's single device; see :mod:`jaxgrasp.engine`). Every public function takes and
+returns SI units (m, Pa, N, kg, J, rad).
 
 Compilation takes seconds in every new process unless the caches on disk are on: call
 :func:`enable_compilation_cache` once, or set the environment variable
@@ -27,7 +42,7 @@ import os as _os
 
 from jaxgrasp import _startup
 
-_startup.install_if_command_line()  # Ctrl-C while JAX loads: one line, exit 130 (the program only)
+_startup.install_if_command_line()  # Ctrl-C while JAX loads: one line, exit 130 (the command only)
 
 import jax as _jax  # noqa: E402
 

@@ -1,13 +1,13 @@
 """Ctrl-C while the ``jaxgrasp`` command is still starting: one line and exit 130, no traceback.
 
-The command's own handling (:mod:`jaxgrasp.cli._interrupt`) begins once ``import jaxgrasp``
-has loaded JAX, about 0.4-0.6 s after the process starts. A Ctrl-C before that would
+The command's own handling (:mod:`jaxgrasp.cli._interrupt`) begins only once ``import
+jaxgrasp`` has loaded JAX, which takes a while. A Ctrl-C before that would
 unwind the import and print Python's multi-line ``KeyboardInterrupt`` traceback. So
 ``jaxgrasp/__init__.py`` calls :func:`install_if_command_line` before it imports JAX:
-in the ``jaxgrasp`` program only (the console script, ``python -m jaxgrasp`` or
+in the ``jaxgrasp`` command only (the console script, ``python -m jaxgrasp`` or
 ``python -m jaxgrasp.cli``), SIGINT and SIGTERM then print ``jaxgrasp: interrupted``
 (``terminated``) and end the process with status 130 (143) at once; nothing has been
-written yet at that stage. A program that merely imports jaxgrasp keeps Python's own
+written yet at that stage. A script that merely imports jaxgrasp keeps Python's own
 handlers. This module imports nothing heavy (it runs before JAX is loaded).
 """
 
@@ -21,19 +21,19 @@ import threading
 __all__ = ["EXIT", "is_command_line", "install_if_command_line"]
 
 EXIT = {signal.SIGINT: (130, "interrupted"), signal.SIGTERM: (143, "terminated")}
-"""The signals the ``jaxgrasp`` program handles: signal -> (exit status, 128 + the signal
+"""The signals the ``jaxgrasp`` command handles: signal -> (exit status, 128 + the signal
 number as a shell reports it; the word of its one line). :mod:`jaxgrasp.cli._interrupt`
 uses the same table once the command runs."""
 
-_PROGRAM = "jaxgrasp"
+_COMMAND = "jaxgrasp"
 _MODULES = ("jaxgrasp", "jaxgrasp.cli")
 _OPTIONS_WITH_VALUE = ("-X", "-W", "--check-hash-based-pycs")  # interpreter options taking the next word
 
 
 def is_command_line(orig_argv: list[str]) -> bool:
     """Whether the interpreter's command line ``orig_argv`` (``sys.orig_argv``) runs the
-    ``jaxgrasp`` program: its console script, or ``python -m jaxgrasp[.cli]``."""
-    if len(orig_argv) >= 2 and os.path.basename(orig_argv[1]) == _PROGRAM:
+    ``jaxgrasp`` command: its console script, or ``python -m jaxgrasp[.cli]``."""
+    if len(orig_argv) >= 2 and os.path.basename(orig_argv[1]) == _COMMAND:
         return True  # python .../bin/jaxgrasp ... (how a console script is started)
     i = 1
     while i < len(orig_argv) - 1:
@@ -41,7 +41,7 @@ def is_command_line(orig_argv: list[str]) -> bool:
         if arg == "-m":
             return orig_argv[i + 1] in _MODULES
         if arg == "-c" or not arg.startswith("-"):
-            return False  # -c code, or a script: not the program
+            return False  # -c code, or a script: not the command
         i += 2 if arg in _OPTIONS_WITH_VALUE else 1
     return False
 
@@ -56,7 +56,7 @@ def _end_at_once(signum, _frame) -> None:
 
 
 def install_if_command_line() -> bool:
-    """In the ``jaxgrasp`` program's main thread, end the process on SIGINT/SIGTERM with
+    """In the ``jaxgrasp`` command's main thread, end the process on SIGINT/SIGTERM with
     one line (status 130/143) until the command installs its own handlers; whether done."""
     if not is_command_line(list(getattr(sys, "orig_argv", []))):
         return False

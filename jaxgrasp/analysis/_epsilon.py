@@ -24,7 +24,7 @@ Convention (the README states it too). For each active contact ``i`` with positi
 
 The metric depends on the contacts' geometry and friction only (and, with torsion, on
 the fingertip radius and initial deformation), not on Young's modulus, the squeeze force,
-the mass or gravity: that is where it and the energy tolerance part (issue 15, README).
+the mass or gravity: that is where it and the energy tolerance part (README).
 The finite cone is inscribed in the true one, so the value grows towards its limit as
 ``cone_edges`` grows; with finite ``cone_edges`` it depends slightly on where the first
 edge lies (``t1_i``), so a rotated grasp agrees to about ``1 - cos(pi / cone_edges)``.
@@ -115,8 +115,9 @@ def wrenches(fields: dict, *, cone_edges: int = 8, torsion: bool = True) -> tupl
 
 def prefetch_qhull() -> None:
     """Start importing SciPy's qhull in a background thread (returns at once;
-    :func:`jaxgrasp.engine._prefetch.prefetch`): a caller that will need :func:`epsilon` after a
-    compile or a cached program's load gets ``scipy.spatial``'s ~0.3 s import for free."""
+    :func:`jaxgrasp.engine._prefetch.prefetch`): a caller that will need :func:`epsilon`
+    after a compile or the load of a stored executable has ``scipy.spatial`` imported
+    during that wait rather than after it."""
     from jaxgrasp.engine._prefetch import prefetch
 
     prefetch("scipy.spatial")

@@ -1,7 +1,8 @@
 """Ctrl-C and SIGTERM for the ``jaxgrasp`` command: exit within a second, one line, no crash.
 
 A Python signal handler runs only in the main thread and only between bytecodes, so
-while the main thread is inside XLA's compiler (C++, 5-20 s) a Ctrl-C waits for it; and
+while the main thread is inside XLA's compiler (C++, seconds at a time) a Ctrl-C waits
+for it; and
 an interrupt that unwinds the interpreter while XLA's threads still run ends in a
 segfault at teardown, or, inside an import, in a fatal error. Therefore
 :func:`run_interruptibly` runs the command in a worker thread (a daemon) while the main
@@ -13,7 +14,8 @@ the main thread only. On SIGINT or SIGTERM the main thread:
 2. calls :func:`jaxgrasp.io._outputs.abandon`: waits at most :data:`PUBLISH_WAIT_SECONDS`
    for a set of output files being renamed into place, removes this run's temporary
    files and lock files, and forbids later writes; then waits as long again at most
-   for a compiled program being written to the store (:func:`jaxgrasp.engine._compile.wait_for_saves`);
+   for a compiled executable being written to the executable store
+   (:func:`jaxgrasp.engine._compile.wait_for_saves`);
 3. flushes stdout and stderr and prints one line ``jaxgrasp: interrupted``
    (``terminated`` for SIGTERM) with the notes commands left, e.g. ``; kept 128 of 369
    points in out/sweep.partial.npz``, as the process's last output;
@@ -67,7 +69,7 @@ def _raise_interrupted(signum, _frame):
 def run_interruptibly(func: Callable[[], int], *, end_process: bool = False) -> int:
     """``func()`` in a worker thread, the main thread handling SIGINT and SIGTERM; its result.
 
-    With ``end_process`` (the ``jaxgrasp`` program itself), once ``func`` has returned
+    With ``end_process`` (the ``jaxgrasp`` command itself), once ``func`` has returned
     the process ends at once with ``os._exit(result)`` after flushing stdout and stderr:
     a Ctrl-C can then never land in the interpreter's teardown (where Python's
     handlers are gone and it killed the process without a word, exit -2, in 5 of 12
@@ -126,7 +128,7 @@ def _block_signals() -> None:
     Linux already prefers the main thread for a signal sent to the process; this makes
     it certain (no signal interrupts a system call inside XLA). When the main thread
     itself was inside XLA's compiler (the old, single-threaded command), Ctrl-C made the
-    compilation end early and the process segfault about 0.2 s later (exit -11).
+    compilation end early and the process segfault soon after (exit -11).
     """
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_BLOCK, set(EXIT_STATUS))
@@ -137,7 +139,7 @@ def _exit_interrupted(signum: int) -> int:
     for s in EXIT_STATUS:
         signal.signal(s, signal.SIG_IGN)
     notes = outputs.abandon(PUBLISH_WAIT_SECONDS)
-    _compile.wait_for_saves(PUBLISH_WAIT_SECONDS)  # a stored program being written: no temporary file left
+    _compile.wait_for_saves(PUBLISH_WAIT_SECONDS)  # an executable being stored: no temporary file left
     _say_last(f"jaxgrasp: {_WORDS.get(signum, 'interrupted')}" + "".join(f"; {n}" for n in notes))
     status = EXIT_STATUS.get(signum, 130)
     _exit(status)

@@ -1,16 +1,15 @@
 """One JAX CPU device per core, so that batches and sweeps run on every core.
 
-XLA runs one compiled program on one CPU device, and jaxgrasp's solver loop is a long
+XLA runs one compiled executable on one CPU device, and jaxgrasp's solver loop is a long
 chain of small operations that keeps one core busy. :func:`jaxgrasp.evaluate_batch` and
-:func:`jaxgrasp.sweep` split each batch over all devices, each device running its own
-work queue (:func:`jaxgrasp.engine._batch.over_devices`), so on the CPU they use as many cores
-as JAX has CPU devices, and JAX creates one unless told otherwise.
+:func:`jaxgrasp.sweep` split each chunk over all devices, each device running its own
+work queue (:func:`jaxgrasp.engine._batch.over_devices`), so on the CPU they use as many
+cores as JAX has CPU devices, and JAX creates one unless told otherwise.
 
 So ``import jaxgrasp`` asks JAX for one CPU device per core this process may run on
-(``jax_num_cpu_devices``), as it turns on 64-bit mode. Measured on a 2-core machine
-(``evaluate_batch`` of the benchmark grids, ``experiments/BENCHMARK.md``): the cube grid
-1.60x faster with two devices than with one, the prism grid 1.28x. A single :func:`jaxgrasp.evaluate` and the
-user's own ``jit`` run on the first device as before.
+(``jax_num_cpu_devices``), as it turns on 64-bit mode: a batch then runs on every core
+instead of one. A single :func:`jaxgrasp.evaluate` and the user's own ``jit`` run on the
+first device as before.
 
 It is left alone where the choice is the user's or can no longer be made:
 
@@ -31,6 +30,8 @@ import jax
 __all__ = ["ENV_VAR", "usable_cores", "requested_cpu_devices", "configure_cpu_devices"]
 
 ENV_VAR = "JAXGRASP_CPU_DEVICES"
+"""The environment variable that sets the number of CPU devices (a positive integer;
+``1``: JAX's own single device)."""
 
 
 def usable_cores() -> int:

@@ -1,11 +1,11 @@
 """Import a module in a background thread while the caller's long native call runs.
 
-A module that a command needs only after a compile or a cached program's load (both
-release Python's GIL: XLA works in C++) is imported meanwhile for free: SciPy's qhull for
-the epsilon metric (~0.3 s), matplotlib for a sweep's or a batch's figure (~0.4 s, its
-first result 0.3-0.4 s sooner). A later ``import`` of the module simply waits for the
-thread's (Python's per-module import locks); an import that fails in the thread is left
-for that later import to report.
+A module that a command needs only after a compile or the load of a stored executable
+(both release Python's GIL: XLA works in C++) is imported meanwhile, so that its import
+overlaps that wait instead of following it: SciPy's qhull for the epsilon metric,
+matplotlib for the figure of ``jaxgrasp sweep`` or ``jaxgrasp batch``. A later
+``import`` of the module simply waits for the thread's (Python's per-module import
+locks); an import that fails in the thread is left for that later import to report.
 """
 
 from __future__ import annotations

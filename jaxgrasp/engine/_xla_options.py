@@ -16,35 +16,32 @@ COMPILER_OPTIONS = {
     "xla_cpu_use_fusion_emitters": False,
     **({"xla_cpu_experimental_ynn_fusion_type": ""} if _jaxlib_version() >= _YNN_FUSION_JAXLIB else {}),
 }
+"""XLA options every jaxgrasp executable is compiled with (``jax.jit(..., compiler_options=...)``).
 
-"""XLA options every jaxgrasp program is compiled with (``jax.jit(..., compiler_options=...)``).
+* ``xla_cpu_use_fusion_emitters`` off: on the CPU, XLA's newer fusion emitters take
+  longer to compile jaxgrasp's solver loop and run it no better; without them the
+  results are the same to the last digit.
+* ``xla_cpu_experimental_ynn_fusion_type`` empty (no YNNPACK fusion): from jaxlib 0.8.1
+  on, XLA hands small products and reductions to YNNPACK kernels, but on the solver's
+  arrays (a few hundred lanes of ``6 x 6`` and ``3N x 6`` pieces) XLA's own fused loops
+  do better, the more so where the Jacobian's and the Hessian's small products are
+  written to fuse (:func:`jaxgrasp.tolerance._problems._first_order`). Results change
+  by rounding only. Older jaxlib does not know the option, so it is set only where it
+  exists.
 
-On the CPU, XLA's newer fusion emitters take twice as long to compile jaxgrasp's solver
-loop and run it no faster; without them the cube's evaluator compiles in about half the
-CPU time and runs ~15% faster, with the same results to the last digit
-(``experiments/compile_time.py``). From jaxlib 0.8.1 on, XLA also hands small products
-and reductions to YNNPACK kernels; on the solver's arrays (a few hundred lanes of 6 x 6
-and 21 x 6 pieces) XLA's own loops are faster: with the option empty (no YNNPACK
-fusion) a random batch runs ~8 % faster, and ~18 % faster once the Jacobian's and the
-Hessian's small products are fused (:func:`jaxgrasp.tolerance._problems._first_order`;
-``experiments/BENCHMARK.md``); results change by rounding only.
-Older jaxlib does not know the option, so it is set only where it exists. Other backends
-ignore both options. JAX takes compiler
-options only on the outermost ``jax.jit``: jaxgrasp passes them where it compiles a
-program itself (batches, sweeps, tuning, :func:`jaxgrasp.evaluate` of a concrete grasp);
-pass them to your own outermost ``jax.jit`` around :func:`jaxgrasp.evaluate` to get the
-same."""
+Other backends ignore both options. JAX takes compiler options only on the outermost
+``jax.jit``: jaxgrasp passes them where it compiles an executable itself (batches,
+sweeps, tuning, :func:`jaxgrasp.evaluate` of a concrete grasp); pass them to your own
+outermost ``jax.jit`` around :func:`jaxgrasp.evaluate` to get the same."""
 
 LATENCY_CPU_OPTIONS = {**COMPILER_OPTIONS, "xla_backend_optimization_level": 0}
+"""XLA options of the CPU executables whose first result matters more than their time per
+call: the executable :func:`jaxgrasp.evaluate` compiles for one concrete grasp, and the
+batch engine's ``evaluation`` stage, which runs once per chunk after the solver.
 
-"""XLA options of the CPU programs whose first result matters more than their time per
-call: the program :func:`jaxgrasp.evaluate` compiles for one concrete grasp, and the
-batch engine's evaluation stage (:func:`jaxgrasp.engine._batch.compiled_evaluator`), which runs
-once per chunk after the solver.
-
-Without LLVM's optimisation passes the cube's one-grasp program compiles in about half
-the time (1.1-1.25 s against 2.2-2.3 s on 2 cores) and a call takes 16-17 ms instead of
-9-10 ms; the value agrees to 2 ulp (``experiments/compile_time.py``). The programs that
-run the solver over many grasps (the batch engine's first stage, tuning) keep
-:data:`COMPILER_OPTIONS`: level 1 there already costs 10 % of a random set's rate. Other
-backends use :data:`COMPILER_OPTIONS` for both."""
+LLVM's optimisation passes are skipped: they take much of the compile and pay for
+themselves only over many calls; the value agrees to 2 ulp. For an executable called
+once the compile dominates. The executables that run the solver over many grasps (the batch
+engine's solver stages, tuning) keep :data:`COMPILER_OPTIONS`: there the calls dominate,
+and a lower optimisation level would cost throughput. Other backends use
+:data:`COMPILER_OPTIONS` for both."""

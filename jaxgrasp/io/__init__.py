@@ -1,5 +1,9 @@
-"""Files in and out: grasp files (TOML, JSON), datasets (JSONL, NPZ), meshes, and output
-files that are written whole or not at all.
+"""Files in and out: grasp files, datasets, meshes, and output files written whole or not at all.
+
+Grasp files (TOML, JSON; :func:`load`, :func:`save`), datasets of many grasps (NPZ,
+JSONL; :func:`load_dataset`, :func:`save_dataset`), grasps on an object's mesh
+(:func:`from_mesh`), and :class:`OutputError` for an output that cannot be written. All
+in SI units.
 """
 
 from jaxgrasp.io._grasp_file import load, save, grasp_from_dict, grasp_to_dict

@@ -28,7 +28,7 @@ Two formats, chosen by the file's suffix:
 
 ``.jsonl``
     One grasp per line, each a JSON object in the grasp-file schema
-    (:mod:`jaxgrasp.io._grasp_file`: ``fingertip``, ``object``, ``contacts``), any numbers of
+    (:func:`jaxgrasp.load`: ``fingertip``, ``object``, ``contacts``), any numbers of
     contacts (an ``object.mesh`` path is relative to the dataset file). Blank lines are
     skipped; UTF-8, with or without a byte-order mark.
 
@@ -36,7 +36,7 @@ A grasp with an invalid value does not stop the reading: :func:`load_dataset` re
 every grasp in input order, ``None`` with a one-line error (naming the grasp, field and
 value) where one is invalid. A file that cannot be read as a whole (missing, wrong
 suffix, a missing or misshapen array, an unknown array) raises
-:class:`~jaxgrasp.model._validation.GraspValueError`.
+:class:`~jaxgrasp.GraspValueError`.
 """
 
 from __future__ import annotations

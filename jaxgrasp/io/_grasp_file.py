@@ -27,12 +27,12 @@ With ``mesh``, contact positions are in metres in the mesh's own frame (its orig
 axes, after the unit conversion), each is snapped to the surface, ``normal`` may be
 omitted (the mesh's outward normal there), and the grasp is moved to the centre-of-mass
 frame (:func:`jaxgrasp.from_mesh`); ``load(path, keep_mesh=True)`` returns the
-:class:`~jaxgrasp.io._mesh.MeshGrasp` with the mesh and that offset.
+:class:`~jaxgrasp.MeshGrasp` with the mesh and that offset.
 
 Each fingertip key must be given in ``[fingertip]`` or in every contact. Unknown keys,
 keys given twice in one table (JSON too, not only TOML), wrong types (booleans are not
 numbers), malformed files and physically invalid values all raise
-:class:`~jaxgrasp.model._validation.GraspValueError` with a one-line message prefixed by the
+:class:`~jaxgrasp.GraspValueError` with a one-line message prefixed by the
 file name. Files are UTF-8, with or without a byte-order mark.
 """
 
@@ -319,7 +319,7 @@ def load(path: str | os.PathLike, *, keep_mesh: bool = False) -> Grasp | MeshGra
     UTF-8 text, with or without a byte-order mark. A key given twice in one table is an
     error in both formats. A file whose ``[object]`` names a ``mesh`` (path relative to
     the file) gives the grasp in the centre-of-mass frame (:func:`jaxgrasp.from_mesh`);
-    with ``keep_mesh=True`` it gives its :class:`~jaxgrasp.io._mesh.MeshGrasp` instead (the
+    with ``keep_mesh=True`` it gives its :class:`~jaxgrasp.MeshGrasp` instead (the
     grasp, the mesh and the frame offset), for drawing. A file without a mesh gives its
     :class:`Grasp` either way.
 

@@ -1,5 +1,9 @@
-"""The physical model: grasp fields and units, the :class:`Grasp` pytree and its
-validation, and the potential field of a soft-fingertip grasp (Tsuji et al., eq. 3-21).
+"""The physical model of a soft-fingertip grasp: its fields, the Grasp, the potential field.
+
+The table of grasp fields and their units (:data:`FIELDS`), the :class:`Grasp` pytree and
+its validation (:class:`GraspValueError`), the conversion to internal units
+(:func:`model_params`), the potential energy and constraint margins of a grasp (Tsuji et
+al., eq. 3-21), and the model's codes (:class:`BoundaryKind`, :class:`Constraint`).
 """
 
 from jaxgrasp.model._grasp import Grasp, stack, STANDARD_GRAVITY

@@ -21,13 +21,14 @@ class BoundaryKind(Coded):
         (:data:`NO_BOUNDARY`) is ``'none'``."""
         return np.asarray(cls.labels() + ("none",), dtype=object)[np.asarray(codes)]
 
-NO_BOUNDARY = -1
 
+NO_BOUNDARY = -1
 """``limiting_kind`` and ``limiting_contact`` where no boundary limits the value."""
 
 
 class Constraint(Coded):
-    """Rows of the ``(3, N)`` constraint margins, ``>= 0`` where satisfied."""
+    """Rows of the ``(3, N)`` constraint margins (:func:`jaxgrasp.model.constraint_margins`),
+    ``>= 0`` where satisfied."""
 
     CONTACT = 0, "the fingertip keeps touching: d / dr >= 0"
     SLIP = 1, "no slip: friction carries the tangential force and torsion (eq. 9)"

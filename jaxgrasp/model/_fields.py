@@ -143,7 +143,7 @@ FIELDS: tuple[Field, ...] = (
     _field("positions", "m", "points", None, None, "contact position", "position", "contacts", "p",
            (1e3, "mm")),
     _field("normals", "", "directions", None, None, "outward surface normal", "normal", "contacts", "n"),
-    # also < radius, checked with the radius (validation._check_deformation)
+    # also < radius, checked with the radius (_validation._check_deformation)
     _field("initial_deformation", "m", "per_contact", 0.0, None, "initial deformation",
            "initial_deformation", "contacts", "Δr", (1e3, "mm")),
     _field("radius", "m", "per_contact", 0.0, None, "fingertip radius", "radius", "fingertip", "r",

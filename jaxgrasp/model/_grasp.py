@@ -26,7 +26,8 @@ __all__ = ["Grasp", "STANDARD_GRAVITY", "stack"]
 _PER_CONTACT = tuple(f.name for f in FIELDS if f.per_contact)  # fields with one entry per contact
 
 STANDARD_GRAVITY = DEFAULT_GRAVITY
-"""Default gravity vector, m/s^2, object frame (:data:`jaxgrasp.model._fields.DEFAULT_GRAVITY`)."""
+"""Default gravity vector, m/s^2, object frame: ``(0, 0, -9.81)``, standard gravity along ``-z``
+(the ``gravity`` default of :data:`jaxgrasp.model.FIELDS`)."""
 
 
 @jax.tree_util.register_dataclass
@@ -35,7 +36,7 @@ class Grasp:
     """All parameters of one grasp (SI units). Build it with :meth:`Grasp.create`.
 
     The fields, their units, shapes and allowed ranges are listed once, in
-    :data:`jaxgrasp.model._fields.FIELDS`; in short:
+    :data:`jaxgrasp.model.FIELDS`; in short:
 
     Attributes:
         positions: ``(N, 3)`` contact positions, m, object frame (origin at the centre of mass).

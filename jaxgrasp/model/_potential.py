@@ -9,8 +9,8 @@ Constraint margins are returned *scaled* so that each is ~1 in the initial state
 ``>= 0`` means satisfied. Positive scale factors do not move the feasible set, the
 minimisers or the minimum energies; they only condition the solver. The scale factors
 depend on the parameters only through ``stop_gradient`` constants, so derivatives with
-respect to the parameters (envelope theorem) see the unscaled constraints times a
-constant, which leaves the value's gradient exact.
+respect to the parameters (envelope theorem, :mod:`jaxgrasp.tolerance._envelope`) see the
+unscaled constraints times a constant, which leaves the value's gradient exact.
 """
 
 from __future__ import annotations
@@ -48,7 +48,8 @@ __all__ = [
 
 KINDS = BoundaryKind.labels()
 """Boundary kind names (``"slip"``, ``"max_force"``), indexed by
-:class:`~jaxgrasp.model._codes.BoundaryKind`: the order of every ``(2, N)`` array of the library."""
+:class:`~jaxgrasp.BoundaryKind`: the order of every ``(2, N)`` array of the library
+(``BoundaryKind.labels()``)."""
 
 
 @jax.tree_util.register_dataclass
@@ -238,7 +239,7 @@ def energy_scale(p: ModelParams):
 def constraint_margins(x, p: ModelParams):
     """Scaled constraint margins ``(3, N)``, ``>= 0`` where satisfied.
 
-    Rows (:class:`~jaxgrasp.model._codes.Constraint`), for each contact ``i``:
+    Rows (:class:`~jaxgrasp.model.Constraint`), for each contact ``i``:
 
     0. contact kept: ``d_i / dr_i``;
     1. no slip (Howe-Cutkosky with torsion, eq. 9 divided by ``(pi E d)^2`` and by
@@ -362,7 +363,7 @@ def contact_hessians(kinematics, p: ModelParams):
 
 def energy_and_margins(x, p: ModelParams):
     """``(potential_energy(x, p), constraint_margins(x, p))`` from one evaluation of the
-    contact kinematics (the solver's programs need both at every point; sharing the
+    contact kinematics (the solver's problems need both at every point; sharing the
     kinematics also shares their derivatives)."""
     kinematics = contact_kinematics(x, p)
     return energy_of(x, kinematics, p), margins_of(kinematics, p)

@@ -1,4 +1,4 @@
-"""Input validation for :class:`jaxgrasp.model._grasp.Grasp` (concrete values, SI units).
+"""Input validation for :class:`jaxgrasp.Grasp` (concrete values, SI units).
 
 :func:`check_grasp_inputs` is what :meth:`Grasp.create` calls. It converts every field to
 a float64 NumPy array, broadcasts per-fingertip scalars to one value per contact,
@@ -126,7 +126,7 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     """Validate and normalise the fields of one grasp (concrete values only).
 
     Keyword arguments are the :class:`Grasp` fields by name, with the units, shapes and
-    ranges of :data:`jaxgrasp.model._fields.FIELDS`: ``positions`` ``(N, 3)`` m; ``normals``
+    ranges of :data:`jaxgrasp.model.FIELDS`: ``positions`` ``(N, 3)`` m; ``normals``
     ``(N, 3)`` (any non-zero length); ``initial_deformation`` m in ``(0, radius)``,
     ``radius`` m, ``young_modulus`` Pa, ``friction``, ``max_force`` N, each a scalar or
     ``(N,)`` and ``> 0``; ``mass`` kg ``>= 0`` and ``gravity`` ``(3,)`` m/s^2 may be left

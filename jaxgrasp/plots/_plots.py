@@ -3,9 +3,9 @@
 :func:`plot_grasp` draws one grasp in 3-D (object, fingertips, friction cones, the
 limiting contact) with the motion that makes it fail (:mod:`jaxgrasp.plots._scene`).
 
-:func:`plot_ranking` draws a batch's grasps ranked by value (a log scale: values span
-decades), coloured by status, beside the count of each status. The sweep plots below
-follow these conventions:
+:func:`plot_ranking` draws the grasps of a :class:`~jaxgrasp.BatchResult` ranked by value
+(a log scale: values span decades), coloured by status, beside the count of each status.
+The sweep plots below follow these conventions:
 
 * the evaluation value is drawn in mJ (labelled), parameters in readable units (mm,
   kPa, kg, N; labelled);
@@ -210,7 +210,7 @@ def plot_sweep(result, path=None, *, x=None, curves=None, panels=None, title=Non
     Any further axes become more panels (one per combination, at most ``max_panels``).
 
     Args:
-        result: a :class:`~jaxgrasp.analysis._sweep.SweepResult`.
+        result: a :class:`~jaxgrasp.SweepResult`.
         path: where to save the figure (PNG, ...); ``None`` returns it open.
         title: figure title.
 
@@ -308,7 +308,7 @@ def plot_max(reduced, best, path=None, *, over="initial_deformation", x=None, cu
     """Like :func:`plot_max_over`, from an already reduced result.
 
     Args:
-        reduced: a :class:`~jaxgrasp.analysis._sweep.SweepResult` of the maximising points (one or
+        reduced: a :class:`~jaxgrasp.SweepResult` of the maximising points (one or
             two axes), e.g. the first output of ``SweepResult.max_over``.
         best: the maximising value of parameter ``over`` at each of its points (SI).
     """
@@ -440,7 +440,7 @@ def plot_grasp(grasp, path=None, *, result=None, magnification=None, title=None,
     hemisphere pressed into its contact, its outward normal and friction cone, the
     limiting contact's fingertip in red, and the object moved by the least-energy pose of
     the limiting boundary as an orange ghost, the motion magnified by the factor the
-    title states (:func:`jaxgrasp.plots._scene.grasp_scene`). Axes in mm, the mesh's frame.
+    title states (:func:`jaxgrasp.plots.grasp_scene`). Axes in mm, the mesh's frame.
 
     Args:
         grasp: a :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp` (one grasp).

@@ -15,7 +15,7 @@
   object (the forces a fingertip can press on it without slipping);
 * each normal: an arrow from the contact along the outward normal.
 
-:func:`jaxgrasp.plots._plots.plot_grasp` draws it with matplotlib and
+:func:`jaxgrasp.plots.plot_grasp` draws it with matplotlib and
 :meth:`GraspScene.to_trimesh` exports it (``jaxgrasp show --glb``).
 """
 
@@ -121,8 +121,8 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
     Args:
         magnification: factor applied to the limiting pose (translation and rotation
             vector) for the ghost; default: a round number (1, 2 or 5 times a power of
-            ten, at least 1) that moves the object's farthest point by about 15 % of its
-            size.
+            ten, at least 1) that moves the object's farthest point by about 0.15 of its
+            size (:func:`nice_magnification`).
     """
     from jaxgrasp.io._mesh import MeshGrasp
     from jaxgrasp.model._potential import KINDS

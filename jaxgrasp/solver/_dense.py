@@ -1,24 +1,23 @@
 """Small dense linear algebra that never lets LAPACK split a batch over XLA's threads.
 
 On the CPU, ``jnp.linalg.solve`` or ``jnp.linalg.eigh`` of a batch of matrices calls one
-of jaxlib's LAPACK kernels, which splits a large enough batch over XLA's intra-op thread
-pool and waits for the pieces. The batch engine runs one program per device on that same
-pool (one device per core, :mod:`jaxgrasp.engine._devices`): when every device is inside such a
-kernel at once, every pool thread waits for pieces that no thread is left to run, and
-the process hangs, using no CPU. Seen twice with 2 devices on 2 cores: the settling
-stage's batched polish (each device in ``lapack_dgetrf_ffi`` -> ``ParallelBatchMap`` ->
-``BlockingCounter::Wait``), and ``evaluate_batch(..., chunk_size=512)`` (256 grasps per
-device), each device in ``lapack_dsyevd_ffi`` for the start frames of its grasps.
+of jaxlib's LAPACK kernels (``lapack_dgetrf_ffi``, ``lapack_dsyevd_ffi``), which splits a
+large enough batch over XLA's intra-op thread pool and waits for the pieces. The batch
+engine runs one executable per device on that same pool (one device per core,
+:mod:`jaxgrasp.engine._devices`): when every device is inside such a kernel at once,
+every pool thread waits for pieces that no thread is left to run, and the process hangs,
+using no CPU (a deadlock, not a slowdown: it happened with as many devices as cores, in
+the settling stage's batched polish and in the start frames of a large chunk).
 
 * :func:`solve`: the systems solved here are tiny (at most ``6 + 3N`` unknowns), so
-  Gaussian elimination written out in XLA costs nothing noticeable and never leaves the
-  device's own thread.
+  Gaussian elimination written out in XLA (Golub & Van Loan, Sec. 3.4, partial
+  pivoting) is cheap and never leaves the device's own thread.
 * :func:`eigh`: ``jnp.linalg.eigh`` that, under ``vmap`` on the CPU, calls LAPACK on one
   matrix at a time (``lax.map``): a batch of one is never split (other backends get the
   batched solver). Meant for a few matrices per grasp, whose count grows with the batch.
-  (The solver's own ``eigh``, on every loop step, runs
-  on gathered blocks of :data:`jaxgrasp.solver._direction.EIGH_BLOCK` lanes, a batch far below
-  any that was seen to split.)
+  (The solver's own ``eigh``, on every loop step, runs on gathered blocks of
+  :data:`jaxgrasp.solver._direction.EIGH_BLOCK` lanes, a batch far below any that was
+  seen to split.)
 """
 
 from __future__ import annotations

@@ -4,7 +4,8 @@ For a symmetric ``(n, n)`` Hessian ``H`` and gradient ``g`` the direction is
 
     p = -V diag(1 / max(|e|, floor)) V^T g,   H = V diag(e) V^T,   floor = 1e-10 max|e|,
 
-a descent direction whatever the inertia of ``H``, and the same in any rotated or
+a descent direction whatever the inertia of ``H`` (a Hessian modification, Nocedal &
+Wright Sec. 3.4), and the same in any rotated or
 mirrored frame of the variables (it is a function of the matrix, not of its entries'
 order): a symmetric grasp stays symmetric along the solver's path.
 
@@ -14,11 +15,11 @@ the plain Newton step ``-H^-1 g``, which an ``LDL^T`` factorisation without pivo
 at a fraction of ``eigh``'s cost (written out entry by entry, so that under ``vmap`` every
 operation is one vector operation over the lanes). Under ``vmap`` (:func:`newton_direction`
 is a ``custom_vmap``) every lane takes the factorisation, and ``eigh`` runs only on the
-lanes that fail the test, gathered in blocks of :data:`EIGH_BLOCK`: on the grasp grids
-20-44 % of the Newton lanes of a loop step are indefinite, and lanes that take no Newton
-step this loop step (``needed`` false) take no ``eigh``. A batch of at most one block (a
-single grasp's few slots) takes ``eigh`` on every lane: a smaller program, nothing to
-gather.
+lanes that fail the test, gathered in blocks of :data:`EIGH_BLOCK`: on grasp grids a
+minority of the Newton lanes of a loop step are indefinite, and lanes that take no
+Newton step this loop step (``needed`` false) take no ``eigh``. A batch of at most one
+block (a single grasp's few slots) takes ``eigh`` on every lane: a smaller executable,
+nothing to gather.
 """
 
 from __future__ import annotations

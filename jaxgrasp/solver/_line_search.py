@@ -1,8 +1,9 @@
 """Backtracking on a fixed ladder of step lengths, for a batch of lanes at once.
 
 Each lane tries ``alpha = 1, 1/2, 1/4, ...`` (``line_search_steps`` lengths) along its
-direction and takes the first that passes Armijo's test, or, where none does, the one
-with the lowest merit; where no length lowers the merit at all it stays put.
+direction and takes the first that passes Armijo's test (backtracking, Nocedal & Wright
+Alg. 3.1), or, where none does, the one with the lowest merit; where no length lowers the
+merit at all it stays put.
 
 Almost every Newton step takes the full length, but in a batch of a hundred lanes some
 lane nearly always walks the whole ladder (a converged lane whose merit cannot fall
@@ -11,8 +12,8 @@ So the full length is tried for every lane, and only the lanes that fail it walk
 gathered in blocks of :data:`LADDER_BLOCK` lanes whose remaining lengths are all
 evaluated at once: the cost follows the number of such lanes (none: no block at all),
 and each lane's step is what a walk of its own ladder would give. A batch of at most
-one block (a single grasp's few slots, one lane of :func:`jaxgrasp.solver._solver.solve`) walks
-each lane's ladder lazily instead: a smaller program, and the same steps.
+one block (a single grasp's few slots, one lane of :func:`jaxgrasp.solver.solve`) walks
+each lane's ladder lazily instead: a smaller executable, and the same steps.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
     size = x.shape[0]
     alphas = 0.5 ** jnp.arange(steps, dtype=x.dtype)
     slack = rounding * (jnp.abs(phi0) + 1.0)
-    if size <= LADDER_BLOCK:  # one block: each lane walks its own ladder (a smaller program)
+    if size <= LADDER_BLOCK:  # one block: each lane walks its own ladder (a smaller executable)
         return jax.vmap(partial(_walk, merit, alphas))(x, p, phi0, slope, slack, needs_step, jnp.arange(size, dtype=jnp.uint32))
 
     values = lambda xs, lanes: _finite(jax.vmap(merit)(xs, lanes))

@@ -1,4 +1,4 @@
-"""A batched augmented-Lagrangian solver for small smooth programs.
+"""The augmented-Lagrangian solver: one lane of a small smooth constrained problem.
 
 Solves, for one lane,
 
@@ -23,12 +23,12 @@ flattened into one ``lax.while_loop`` whose body does a multiplier update where 
 solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
 need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
 
-Derivatives: a program is a :class:`Problem`, ``fg(x) = (f, g)`` in one call. Each step
-takes the program's first-order data once (:class:`FirstOrder`: ``f``, ``g``, ``grad f``
+Derivatives: a problem is a :class:`Problem`, ``fg(x) = (f, g)`` in one call. Each step
+takes the problem's first-order data once (:class:`FirstOrder`: ``f``, ``g``, ``grad f``
 and the Jacobian ``J`` of ``g``; by default one forward-mode pass); every gradient it needs
 is then ``grad f + J^T w`` for some weights ``w`` (phi's before and after the multiplier
 update, the violation's), and phi's Hessian is ``hess(f + w . g) + rho J^T D J``. A
-program with structure may supply its own first-order data and Lagrangian Hessian
+problem with structure may supply its own first-order data and Lagrangian Hessian
 (:mod:`jaxgrasp.tolerance._problems` does, from the contact kinematics); otherwise autodiff.
 
 Each lane ends with a status and its KKT residuals at ``(x, lam, nu)``:
@@ -37,7 +37,7 @@ stationarity ``|grad f + nu grad h - sum lam grad g|_inf``, feasibility
 
 :func:`solve` runs one lane; its pieces :func:`init`, :func:`step` (itself
 :func:`propose`, :func:`line_search` and :func:`accept`), :func:`running` and
-:func:`to_result` are public so that the work queue of :mod:`jaxgrasp.solver._lanes`, which runs
+:func:`to_result` are public so that the work queue of :func:`jaxgrasp.solver.solve_lanes`, which runs
 many lanes with early exit, can drive them: it runs one line search over all its slots.
 The direction is :func:`jaxgrasp.solver._direction.newton_direction` and the ladder
 :func:`jaxgrasp.solver._line_search.line_search`; under ``vmap`` each pays for ``eigh`` and for
@@ -80,7 +80,8 @@ __all__ = [
 
 @dataclasses.dataclass(frozen=True)
 class SolverOptions:
-    """Static settings of :func:`solve` (hashable; all quantities in the scaled units).
+    """Static settings of the solver's lanes (:func:`jaxgrasp.solver.solve`,
+    :func:`jaxgrasp.solver.solve_lanes`; hashable; all quantities in the scaled units).
 
     Attributes:
         tol: KKT tolerance on stationarity, feasibility and complementarity (float64;
@@ -101,11 +102,11 @@ class SolverOptions:
             gradient (inf-norm) is below this times the violation.
         max_step: largest Newton step (inf-norm, scaled variables).
         line_search_steps: number of step lengths ``1, 1/2, 1/4, ...`` tried per Newton step.
-        slot_fraction: :func:`jaxgrasp.solver._lanes.solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
+        slot_fraction: :func:`jaxgrasp.solver.solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
             flight (finished lanes hand their slot to the next), at most ``max_slots``.
         max_slots: upper bound on those slots. A loop step over a few hundred lanes keeps
-            its working set in the CPU caches; over thousands it runs at memory speed and
-            costs much more per lane.
+            its working set in the CPU caches; over thousands it spills to main memory
+            and costs much more per lane.
         grow_penalty_after: loop steps after which a lane with an equality grows its
             penalty whenever its violation stalls, as a lane without one does (before, not after
             an inner solve cut short at ``max_inner`` while the violation is below
@@ -140,7 +141,7 @@ class SolverResult:
         lam: ``(m,)`` inequality multipliers, ``>= 0`` (zero at the equality's index).
         nu: ``()`` equality multiplier (0 when there is no equality).
         objective: ``()`` ``f(x)``.
-        status: ``()`` int32 :class:`~jaxgrasp.solver._status.LaneStatus` (``NO_START`` for an
+        status: ``()`` int32 :class:`~jaxgrasp.LaneStatus` (``NO_START`` for an
             inactive lane).
         stationarity, feasibility, complementarity: ``()`` KKT residuals at ``(x, lam, nu)``.
         steps: ``()`` int32, Newton steps plus multiplier updates taken.
@@ -174,7 +175,7 @@ class SolverState:
         prev_viol: ``()`` constraint violation at the last multiplier update (``inf`` before
             the first).
         steps: ``()`` int32, Newton steps plus multiplier updates taken.
-        status: ``()`` int32 :class:`~jaxgrasp.solver._status.LaneStatus`, ``NOT_CONVERGED``
+        status: ``()`` int32 :class:`~jaxgrasp.LaneStatus`, ``NOT_CONVERGED``
             while running.
         stationarity, feasibility, complementarity: ``()`` KKT residuals at the last
             multiplier update (``inf`` before the first).
@@ -222,8 +223,8 @@ def augmented_lagrangian(fg, x, lam, nu, rho, eq_mask):
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class FirstOrder:
-    """A program at one point: ``fx`` ``()``, ``gx`` ``(m,)``, ``grad_f`` ``(n,)``, the
-    constraint Jacobian ``jac`` ``(m, n)``, and ``aux``: whatever the program's
+    """A problem at one point: ``fx`` ``()``, ``gx`` ``(m,)``, ``grad_f`` ``(n,)``, the
+    constraint Jacobian ``jac`` ``(m, n)``, and ``aux``: whatever the problem's
     :attr:`Problem.lagrangian_hessian` reuses (``None`` for the autodiff default). Every
     gradient a step needs is a product with ``jac``: phi's before and after the multiplier
     update and the violation's, with no reverse pass."""
@@ -237,7 +238,7 @@ class FirstOrder:
 
 @dataclasses.dataclass(frozen=True)
 class Problem:
-    """A smooth program ``min f(x) s.t. g(x) >= 0`` (one row of ``g`` may be made an
+    """A smooth problem ``min f(x) s.t. g(x) >= 0`` (one row of ``g`` may be made an
     equality by the lane's ``eq_mask``), as the solver evaluates it.
 
     Attributes:
@@ -248,8 +249,9 @@ class Problem:
         lagrangian_hessian: ``(FirstOrder, x, w) -> (n, n)``, the Hessian of
             ``f + w . g`` at ``x`` for fixed weights ``w`` ``(m,)``, given the
             ``first_order`` at ``x``; or ``None``: ``jax.hessian`` of ``f + w . g``. A
-            program with structure supplies both (:mod:`jaxgrasp.tolerance._problems` writes them
-            from the contact kinematics' derivatives, several times cheaper).
+            problem with structure supplies both (:mod:`jaxgrasp.tolerance._problems` writes
+            them from the contact kinematics' derivatives, cheaper than autodiff's nested
+            passes).
     """
 
     fg: Callable
@@ -328,8 +330,8 @@ def _phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
     ``hess(f + w . g)`` with the weights ``w = d phi / d g`` held fixed
     (:func:`_lagrangian_hessian`), plus ``rho J^T D J`` with ``D`` selecting the equality
     and the inequalities whose shifted multiplier is positive (where phi's penalty is
-    quadratic in ``g``). This equals ``jax.hessian`` of phi (to rounding) at a fraction
-    of its program size and cost."""
+    quadratic in ``g``). This equals ``jax.hessian`` of phi (to rounding) with a smaller
+    traced graph and less work: ``J`` is already at hand."""
     _, shifted, weights = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
     quadratic = ((s.eq_mask > 0) | (shifted > 0)).astype(d.jac.dtype)
     return _lagrangian_hessian(problem, d, s.x, weights) + s.rho * (d.jac.T * quadratic) @ d.jac
@@ -382,7 +384,7 @@ def line_search(merit_of, trials: Trial, o: SolverOptions):
 
 
 def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, floor, o: SolverOptions):
-    """``()`` :class:`~jaxgrasp.solver._status.LaneStatus` after a multiplier update, from the KKT
+    """``()`` :class:`~jaxgrasp.LaneStatus` after a multiplier update, from the KKT
     residuals ``stat``, ``viol``, ``comp`` at ``s.x`` and the violation ``s.prev_viol``
     before it: converged (stationarity within :func:`_stationarity_tol` of the rounding
     ``floor``, feasibility and complementarity within tol), infeasible, or not converged
@@ -419,23 +421,20 @@ def _multiplier_update(s: SolverState, d: FirstOrder, gphi, floor, o: SolverOpti
     viol = jnp.maximum(jnp.abs(h), jnp.max(jnp.where(is_eq, 0.0, jnp.maximum(-gx, 0.0))))
     comp = jnp.max(jnp.where(is_eq, 0.0, jnp.abs(lam * gx)))
     stat = jnp.max(jnp.abs(gphi))
-    # The penalty grows where the violation did not fall 4x, but on a lane with an
-    # equality not after an inner solve cut short at max_inner Newton steps while the
-    # violation is already small: on a strongly curved equality each Newton step on phi
-    # leaves the constraint and the next comes back, the inner solve runs out of steps,
-    # and a penalty raised at every update only worsens phi's conditioning until the lane
-    # crawls into its step budget with garbage multipliers (a 2-finger slip boundary: 17
-    # of 20 starts at 300 steps, 0.65 % above Ipopt's minimum; without the growth its
-    # start converges to Ipopt's minimiser in 65 steps). Far from feasibility, or on an
-    # infeasible program, the penalty must grow either way (only a large one shows a
-    # violation that cannot fall); and without an equality (the equilibrium) the rule
-    # buys nothing and a degenerate equilibrium (three contacts at their force limits)
-    # ended infeasible under it, so the penalty grows as before. Past grow_penalty_after
-    # steps the rule ends: a lane of an infeasible boundary problem whose violation swings
-    # around 1e-3 at penalty 1e4, its inner solves cut short, would otherwise stall into
-    # the step budget (robustness set, grasp 312); with the growth it ends infeasible at
-    # rho_max, as the problem's other lanes do, some 100-150 steps later (so not 150: a
-    # lane then still ran out). On the 1000 robustness grasps nothing else changed.
+    # The penalty grows where the violation did not fall by a factor 4 (Powell's rule;
+    # Nocedal & Wright Sec. 17.4), except on a lane with an equality after an inner solve
+    # cut short at max_inner Newton steps while the violation is already small: on a
+    # strongly curved equality each Newton step on phi leaves the constraint and the next
+    # comes back, the inner solve runs out of steps, and a penalty raised at every update
+    # only worsens phi's conditioning until the lane crawls into its step budget with
+    # meaningless multipliers (seen on a 2-finger slip boundary). Far from feasibility
+    # (FAR_VIOLATION), or on an infeasible problem, the penalty must grow either way: only a
+    # large one shows a violation that cannot fall. Without an equality (the equilibrium)
+    # the exception buys nothing and made a degenerate equilibrium (three contacts at their
+    # force limits) end infeasible, so it does not apply there. Past grow_penalty_after
+    # steps it ends: a lane of an infeasible boundary problem whose violation swings at a
+    # moderate penalty, its inner solves cut short, would otherwise stall into the step
+    # budget instead of ending infeasible at rho_max as the problem's other lanes do.
     late = s.steps >= o.grow_penalty_after
     finished = (stat <= _inner_tol(s, floor, o)) | (s.inner > o.max_inner) | ~jnp.any(is_eq) | late
     stalled = (viol > 0.25 * s.prev_viol) & (finished | (viol > FAR_VIOLATION))
@@ -495,7 +494,7 @@ def _rounding_floor(s: SolverState, d: FirstOrder):
     constraints active in six unknowns, rows of norm 17) that is 1-1.4e-10, and the
     gradient swung between 2e-10 and 1e-9 from one Newton step of 1e-14 to the next: with
     tol 1e-10 the lane converged only by luck in some batch layouts and ran its whole
-    budget in others (``tests/test_degenerate.py::test_boundaries_through_the_equilibrium``).
+    budget in others (the test ``test_boundaries_through_the_equilibrium`` holds it).
     Computed once per loop step, from the multipliers before its update (the rows where
     phi is quadratic barely change in an update)."""
     _, shifted, _ = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
@@ -569,7 +568,7 @@ def accept(t: Trial, x_new, improve, o: SolverOptions) -> SolverState:
 
 def step(problem, s: SolverState, o: SolverOptions) -> SolverState:
     """One loop step of one lane: :func:`propose`, the line search, :func:`accept`. A
-    finished lane is returned unchanged. (:func:`jaxgrasp.solver._lanes.solve_lanes` runs the same
+    finished lane is returned unchanged. (:func:`jaxgrasp.solver.solve_lanes` runs the same
     three for many lanes, with one line search over all of them.)
 
     Args:
@@ -612,7 +611,7 @@ def solve(
     options: SolverOptions = SolverOptions(),
     active=True,
 ) -> SolverResult:
-    """Solve one lane (``vmap`` it for many, or use :func:`jaxgrasp.solver._lanes.solve_lanes`).
+    """Solve one lane (``vmap`` it for many, or use :func:`jaxgrasp.solver.solve_lanes`).
 
     ``init``, then ``step`` while ``running``, then ``to_result``.
 

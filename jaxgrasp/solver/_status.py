@@ -1,19 +1,24 @@
-"""Every status and kind code of jaxgrasp, as named integer enums with a message each.
+"""Named integer codes: :class:`Coded`, the base of every status and kind code of
+jaxgrasp, and the solver's own :class:`LaneStatus`.
 
 Arrays carry the integer codes (so they live inside ``jit``/``vmap`` results); these
 enums give the codes names and one-line meanings. A member *is* its integer
-(``enum.IntEnum``), so ``result.status == GraspStatus.STABLE`` works on arrays, and
-``GraspStatus(int(code)).label`` is the name written to files and JSON.
+(``enum.IntEnum``), so ``result.status == jaxgrasp.GraspStatus.STABLE`` works on arrays,
+and ``GraspStatus(int(code)).label`` is the name written to files and JSON.
 
-Four kinds of integer code, never to be mixed up (they share some names, not their numbers):
+Four kinds of integer code, never to be mixed up (they share some names, not their
+numbers), each defined in the package it belongs to:
 
-* :class:`LaneStatus`: how one solver lane (one program from one start) ended;
-* :class:`GraspStatus`: what an evaluation says of a grasp;
-* :class:`BoundaryKind`: which boundary of the equilibrium region (eq. 20, 21);
-* :class:`Constraint`: the rows of :func:`jaxgrasp.model._potential.constraint_margins`.
+* :class:`LaneStatus` (here): how one solver lane (one problem from one start) ended;
+* :class:`jaxgrasp.GraspStatus` (:mod:`jaxgrasp.tolerance`): what an evaluation says of
+  a grasp;
+* :class:`jaxgrasp.BoundaryKind` (:mod:`jaxgrasp.model`): which boundary of the
+  equilibrium region (eq. 20, 21);
+* :class:`jaxgrasp.model.Constraint`: the rows of
+  :func:`jaxgrasp.model.constraint_margins`;
 
-and one string status, :class:`TuneStatus`: how :func:`jaxgrasp.tune` stopped (a Python
-loop, not an array, so its members are strings).
+and one string status, :class:`jaxgrasp.TuneStatus`: how :func:`jaxgrasp.tune` stopped
+(a Python loop, not an array, so its members are strings).
 """
 
 from __future__ import annotations
@@ -57,7 +62,7 @@ class Coded(enum.IntEnum):
 
 
 class LaneStatus(Coded):
-    """How one lane of :func:`jaxgrasp.solver._solver.solve` ended."""
+    """How one lane of :func:`jaxgrasp.solver.solve` (one problem from one start) ended."""
 
     CONVERGED = 0, "KKT conditions hold within tolerance"
     INFEASIBLE = 1, "the constraint violation stagnated above infeasible_tol: no feasible point"

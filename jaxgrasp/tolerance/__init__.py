@@ -1,6 +1,10 @@
-"""The energy-tolerance method (Tsuji et al., eq. 1): the 1 + 2N problems of a grasp,
-their starts, settling, the verdict (value, status, limiting boundary), the
-:class:`Evaluation` result and its :class:`GraspStatus`.
+"""The energy-tolerance method (Tsuji et al., eq. 1): from a grasp's problems to its evaluation.
+
+The 1 + 2N problems of a grasp (the equilibrium, and a slip and a force-limit boundary
+per contact; Sec. VI), their starts, settling of stalled lanes, the verdict (value,
+status, limiting boundary), the minimum energies with their envelope-theorem
+derivatives, and the :class:`Evaluation` result with its :class:`GraspStatus`. Running
+it over many grasps, compiled and sharded, is :mod:`jaxgrasp.engine`'s job.
 """
 
 from jaxgrasp.tolerance._options import EvaluateOptions

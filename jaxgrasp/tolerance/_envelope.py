@@ -21,9 +21,9 @@ __all__ = ["envelope_energy", "soft_minimum"]
 
 @jax.custom_jvp
 def envelope_energy(params, z, lam, nu, eq_mask, objective):
-    """A program's minimum energy with its envelope-theorem derivative, mJ.
+    """A problem's minimum energy with its envelope-theorem derivative, mJ.
 
-    ``objective`` is the solver's scaled minimum ``f(z*) = U(z*) / scale`` of the program
+    ``objective`` is the solver's scaled minimum ``f(z*) = U(z*) / scale`` of the problem
     with constraints ``g(z; params) >= 0`` and equality row ``eq_mask``, attained at
     ``z`` with multipliers ``lam`` (inequalities) and ``nu`` (equality). Returns
     ``scale * objective``; its tangent in ``params`` is
@@ -33,7 +33,8 @@ def envelope_energy(params, z, lam, nu, eq_mask, objective):
     with ``(z, lam, nu)`` held fixed (envelope theorem, valid at a regular KKT point).
     Tangents of ``z``, ``lam``, ``nu``, ``eq_mask`` and ``objective`` are ignored: they
     are the solver's outputs, which are never differentiated. Works under ``jax.grad``,
-    ``jax.jacfwd``, ``jax.jvp`` and ``jax.vmap`` (``params`` is a :class:`ModelParams`).
+    ``jax.jacfwd``, ``jax.jvp`` and ``jax.vmap`` (``params`` is a
+    :class:`jaxgrasp.model.ModelParams`).
     """
     return energy_scale(params) * objective
 

@@ -12,13 +12,11 @@ __all__ = ['EvaluateOptions']
 
 
 @dataclasses.dataclass(frozen=True)
-
-
 class EvaluateOptions:
     """Static settings of :func:`jaxgrasp.evaluate` (hashable, so it can be a ``jit`` static argument).
 
     Attributes:
-        solver: settings of the augmented-Lagrangian solver.
+        solver: settings of the augmented-Lagrangian solver (:class:`jaxgrasp.SolverOptions`).
         num_random_starts: random start directions per boundary problem, on top of the 12
             half-axes of the start frame (:func:`jaxgrasp.tolerance._starts.start_frame`: the
             grasp's modes of motion, so that the starts do not depend on the world
@@ -47,7 +45,7 @@ class EvaluateOptions:
             biased low: with ``K`` reachable boundaries,
             ``hard - T log K <= value <= hard``, where ``hard`` is the value without
             smoothing (equality on the right when one boundary dominates by many ``T``).
-            Choose ``T`` well below the values of interest (e.g. 1% of them).
+            Choose ``T`` well below the values of interest (e.g. a hundredth of them).
             ``Evaluation.value`` is then the smoothed value; ``limiting_kind`` and
             ``limiting_contact`` still name the hard minimiser and every other field is
             unchanged.

@@ -1,30 +1,24 @@
-"""The 1 + 2N programs of a grasp (eq. 1), their starts, and solving them as solver lanes.
+"""The 1 + 2N problems of a grasp (eq. 1; Sec. VI), their derivatives, and the
+:class:`Problems` type that holds them solved.
 
 * the *equilibrium* problem ``U0 = min U`` subject to every contact, friction and
   force-limit constraint, solved from the initial grasping state;
-* for each contact ``j`` a *slip* problem (friction of ``j`` as an equality) and a
-  *max_force* problem (force limit of ``j`` as an equality), each with every other
-  constraint kept.
+* for each contact ``j`` a *slip* problem (friction of ``j`` as an equality, eq. 20) and
+  a *max_force* problem (force limit of ``j`` as an equality, eq. 21), each with every
+  other constraint kept.
 
-Every program has the same scaled objective and constraints (:func:`objective`,
+Every problem has the same scaled objective and constraints (:func:`objective`,
 :func:`constraints`), in the scaled pose ``z = (dp [mm], lever * w [mm])`` so that
 rotations and translations move the contacts by comparable amounts, with the energy
-divided by the initial elastic energy. A boundary program is one equality row of the
-same constraint vector (``eq_mask``), so every program of every grasp runs as a lane of
-one :func:`jaxgrasp.solver._lanes.solve_lanes` call.
+divided by the initial elastic energy. A boundary problem is one equality row of the
+same constraint vector (``eq_mask``), so every problem of every grasp runs as a lane of
+one :func:`jaxgrasp.solver.solve_lanes` call. :func:`lane_problem` gives the solver the
+first and second derivatives written from the contact kinematics
+(:func:`jaxgrasp.model._potential.kinematics_jacobian`) instead of autodiff.
 
-Boundary problems are non-convex, so each is solved from several starts (the caller
-keeps the lowest converged energy): a start is found by walking from the equilibrium
-along a direction until the boundary's constraint is crossed, then bisecting onto it,
-along the 12 half-axes of the grasp's own frame (its modes of motion, :func:`start_frame`)
-plus ``EvaluateOptions.num_random_starts`` seeded random directions in that frame: the
-starts turn with the grasp, so a grasp written in a rotated or mirrored world frame, or
-with its contacts renumbered, gets the same starts and the same minima.
-
-A lane that stalls at a feasible point (status ``NOT_CONVERGED``: typically a released
-fingertip whose slip margin is active at the apex of its friction cone, where no bounded
-multiplier exists) is then certified, or left as it is, by a Newton polish of its KKT
-equations (:func:`settle_stalled`).
+The starts of the boundary problems are found in :mod:`jaxgrasp.tolerance._starts`,
+stalled lanes are settled in :mod:`jaxgrasp.tolerance._settle`, and
+:func:`jaxgrasp.tolerance.problems_of` runs the whole sequence.
 """
 
 from __future__ import annotations
@@ -55,16 +49,12 @@ __all__ = ['ProblemData', 'problem_data', 'to_pose', 'objective', 'constraints',
 
 
 @jax.tree_util.register_dataclass
-
-
 @dataclasses.dataclass(frozen=True)
-
-
 class ProblemData:
-    """What the programs of one grasp depend on (a pytree; one per lane under ``solve_lanes``).
+    """What the problems of one grasp depend on (a pytree; one per lane under ``solve_lanes``).
 
     Attributes:
-        params: the grasp in internal units (:class:`~jaxgrasp.model._potential.ModelParams`).
+        params: the grasp in internal units (:class:`jaxgrasp.model.ModelParams`).
         lever: ``()`` mm, the length that scales rotations in ``z`` (no gradient).
         scale: ``()`` mJ, the energy scale dividing the objective (no gradient).
     """
@@ -75,7 +65,7 @@ class ProblemData:
 
 
 def problem_data(p: ModelParams) -> ProblemData:
-    """The scaling of ``p``'s programs: lever = largest contact distance or radius, scale =
+    """The scaling of ``p``'s problems: lever = largest contact distance or radius, scale =
     initial elastic energy (active contacts only); both constants (``stop_gradient``)."""
     reach = jnp.where(p.on, jnp.maximum(jnp.linalg.norm(p.c, axis=-1), p.r), 0.0)
     lever = jax.lax.stop_gradient(jnp.max(reach))
@@ -93,14 +83,14 @@ def objective(z, data: ProblemData):
 
 
 def constraints(z, data: ProblemData):
-    """Scaled constraint margins ``(3N,)``, rows of :func:`~jaxgrasp.model._potential.constraint_margins`
+    """Scaled constraint margins ``(3N,)``, rows of :func:`jaxgrasp.model.constraint_margins`
     flattened (index ``row * N + contact``), ``>= 0`` where satisfied."""
     return constraint_margins(to_pose(z, data.lever), data.params).reshape(-1)
 
 
 def objective_and_constraints(z, data: ProblemData):
     """``(objective(z, data), constraints(z, data))`` from one evaluation of the contact
-    kinematics: the function the solver's lanes run (:func:`~jaxgrasp.solver._solver.solve`'s ``fg``)."""
+    kinematics: the function the solver's lanes run (:func:`jaxgrasp.solver.solve`'s ``fg``)."""
     energy, margins = energy_and_margins(to_pose(z, data.lever), data.params)
     return energy / data.scale, margins.reshape(-1)
 
@@ -112,9 +102,9 @@ def _pose_scale(data: ProblemData, dtype):
 
 
 def _first_order(z, data: ProblemData) -> FirstOrder:
-    """The program at ``z`` with its gradient and constraint Jacobian, from the contact
-    kinematics' Jacobian (:func:`~jaxgrasp.model._potential.kinematics_jacobian`) and each contact's
-    derivatives in its own kinematics (:func:`~jaxgrasp.model._potential.contact_gradients`), both
+    """The problem at ``z`` with its gradient and constraint Jacobian, from the contact
+    kinematics' Jacobian (:func:`jaxgrasp.model._potential.kinematics_jacobian`) and each contact's
+    derivatives in its own kinematics (:func:`jaxgrasp.model._potential.contact_gradients`), both
     kept in ``aux`` for :func:`_lagrangian_hessian`."""
     p = data.params
     x = to_pose(z, data.lever)
@@ -124,10 +114,9 @@ def _first_order(z, data: ProblemData) -> FirstOrder:
     gravity = jnp.concatenate([p.weight, jnp.zeros(3, z.dtype)])
     grad_f = (jnp.einsum("nk,nkj->j", de, dq) - gravity) * scale / data.scale
     # (3, N, 6) products over the 4 kinematic coordinates, written as a product and a sum
-    # that XLA fuses into one loop: as an einsum each is a dot of 4-long rows per contact,
-    # which XLA's CPU runtime runs one small matrix at a time: this one and the Hessian's
-    # H_i dq_i took 9 % of the solver loop's profiled time, and written this way a random
-    # batch runs 15 % faster (experiments/BENCHMARK.md)
+    # that XLA fuses into one loop with its neighbours: as an einsum each would be a dot of
+    # 4-long rows per contact, which XLA's CPU runtime runs one small matrix at a time (the
+    # Hessian's H_i dq_i likewise)
     jac = jnp.sum(dm[:, :, :, None] * dq[None], axis=2).reshape(-1, 6) * scale
     fx = energy_of(x, tuple(q.T), p) / data.scale
     return FirstOrder(fx, margins_of(tuple(q.T), p).reshape(-1), grad_f, jac, aux=(q, dq, geometry, de, dm))
@@ -137,8 +126,8 @@ def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProblemData):
     """``(6, 6)`` Hessian in ``z`` of ``f + weights . g`` (``weights`` ``(3N,)`` fixed), from
     the kinematics' derivatives in ``d.aux``: ``sum_i dq_i^T H_i dq_i + sum_ik
     (d psi / d q_ik) d2q_ik`` with ``psi_i`` contact ``i``'s share of the function of its
-    own kinematics, ``H_i`` its ``4 x 4`` Hessian (:func:`~jaxgrasp.model._potential.contact_hessians`,
-    written out) and the second sum :func:`~jaxgrasp.model._potential.kinematics_curvature`."""
+    own kinematics, ``H_i`` its ``4 x 4`` Hessian (:func:`jaxgrasp.model._potential.contact_hessians`,
+    written out) and the second sum :func:`jaxgrasp.model._potential.kinematics_curvature`."""
     p = data.params
     q, dq, geometry, de, dm = d.aux
     w = weights.reshape(3, -1)
@@ -152,7 +141,7 @@ def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProblemData):
 
 
 def lane_problem(data: ProblemData) -> Problem:
-    """The solver's view of a program of the grasp ``data``: values, first and second
+    """The solver's view of a problem of the grasp ``data``: values, first and second
     derivatives from the contact kinematics (the equality row is the lane's ``eq_mask``)."""
     return Problem(
         fg=lambda z: objective_and_constraints(z, data),
@@ -162,31 +151,27 @@ def lane_problem(data: ProblemData) -> Problem:
 
 
 def lagrangian(z, lam, nu, eq_mask, data: ProblemData):
-    """``L = f(z) + nu h(z) - lam . g(z)`` of the program with equality row ``eq_mask``."""
+    """``L = f(z) + nu h(z) - lam . g(z)`` of the problem with equality row ``eq_mask``."""
     gz = constraints(z, data)
     return objective(z, data) + nu * jnp.sum(eq_mask * gz) - jnp.sum(lam * gz)
 
 
 @jax.tree_util.register_dataclass
-
-
 @dataclasses.dataclass(frozen=True)
-
-
 class Problems:
-    """Every program of one grasp as solved, lane by lane (internal, scaled units).
+    """Every problem of one grasp as solved, lane by lane (internal, scaled units).
 
-    The pose variable of every program is ``z = (dp [mm], lever * w [mm])``. With ``N``
+    The pose variable of every problem is ``z = (dp [mm], lever * w [mm])``. With ``N``
     contacts and ``D`` starts per boundary problem (``EvaluateOptions.num_starts``):
 
     Attributes:
-        equilibrium: :class:`~jaxgrasp.solver._solver.SolverResult` of the equilibrium problem.
-        boundary: :class:`~jaxgrasp.solver._solver.SolverResult` with a leading lane axis
+        equilibrium: :class:`jaxgrasp.solver.SolverResult` of the equilibrium problem.
+        boundary: :class:`jaxgrasp.solver.SolverResult` with a leading lane axis
             ``(2N * D,)``: lane ``b * D + s`` is start ``s`` of boundary problem
             ``b = kind * N + contact``.
         start: ``(2N * D, 6)`` starting points of the boundary lanes.
         found: ``(2N * D,)`` whether the start search crossed the boundary (lanes where it
-            did not carry status :attr:`~jaxgrasp.solver._status.LaneStatus.NO_START`).
+            did not carry status :attr:`jaxgrasp.LaneStatus.NO_START`).
         constraint_index: ``(2N * D,)`` index ``k`` of the equality in the flattened
             ``(3N,)`` constraint vector (``N + b``).
         lever: ``()`` mm, the length that scales rotations.

@@ -33,7 +33,8 @@ NOT_CONVERGED = GraspStatus.NOT_CONVERGED
 INVALID = GraspStatus.INVALID  # a dataset row that was not evaluated; evaluate() never gives it
 
 STATUS_NAMES = GraspStatus.labels()
-"""Grasp status names, indexed by the :class:`~jaxgrasp.tolerance._status.GraspStatus` codes."""
+"""Grasp status names, indexed by the :class:`~jaxgrasp.GraspStatus` codes
+(``GraspStatus.labels()``)."""
 
 
 @jax.tree_util.register_dataclass
@@ -42,17 +43,17 @@ class Evaluation:
     """Energy-tolerance evaluation of one grasp (SI units; add leading axes under ``vmap``).
 
     ``N`` is the number of contacts; every ``(2, N, ...)`` array is indexed
-    ``[kind, contact]`` by :class:`~jaxgrasp.model._codes.BoundaryKind`: 0 = ``slip`` (eq. 20),
+    ``[kind, contact]`` by :class:`~jaxgrasp.BoundaryKind`: 0 = ``slip`` (eq. 20),
     1 = ``max_force`` (eq. 21).
 
     Attributes:
         value: ``()`` evaluation value ``Delta U_min`` of eq. 1, J: the least energy that
             brings the object from its equilibrium to a boundary of the equilibrium region.
             0 when ``status`` is unstable or infeasible.
-        status: ``()`` int, a :class:`~jaxgrasp.tolerance._status.GraspStatus` code: :data:`STABLE`,
-            :data:`UNSTABLE`, :data:`INFEASIBLE` or :data:`NOT_CONVERGED` (names in
-            :data:`STATUS_NAMES`).
-        limiting_kind: ``()`` int, :class:`~jaxgrasp.model._codes.BoundaryKind` of the boundary
+        status: ``()`` int, a :class:`~jaxgrasp.GraspStatus` code: ``STABLE``,
+            ``UNSTABLE``, ``INFEASIBLE`` or ``NOT_CONVERGED`` (names:
+            ``GraspStatus.labels()``, or :attr:`status_name`).
+        limiting_kind: ``()`` int, :class:`~jaxgrasp.BoundaryKind` of the boundary
             that sets ``value`` (0 slip, 1 max_force), -1 (``NO_BOUNDARY``) when there is none.
         limiting_contact: ``()`` int, 0-based contact of that boundary, -1 when none.
         equilibrium_energy: ``()`` J, ``min U`` over the equilibrium region (energy zero
@@ -64,14 +65,15 @@ class Evaluation:
         boundary_translation: ``(2, N, 3)`` m, pose of each boundary minimum (the
             equilibrium pose where the boundary cannot be reached).
         boundary_rotation: ``(2, N, 3)`` rad, likewise.
-        boundary_status: ``(2, N)`` int, :class:`~jaxgrasp.solver._status.LaneStatus` of each
+        boundary_status: ``(2, N)`` int, :class:`~jaxgrasp.LaneStatus` of each
             boundary problem (converged; infeasible = unreachable; not converged; no start
             because the equilibrium problem did not converge).
-        equilibrium_status: ``()`` int, solver status of the equilibrium problem.
+        equilibrium_status: ``()`` int, :class:`~jaxgrasp.LaneStatus` of the equilibrium
+            problem.
         equilibrium_margins: ``(3, N)`` scaled constraint margins at the equilibrium (or,
             for an infeasible grasp, at the least-violating pose found), rows: contact
             kept ``d / dr``, no slip, force below its limit; ``>= 0`` where satisfied
-            (:func:`jaxgrasp.model._potential.constraint_margins`).
+            (:func:`jaxgrasp.model.constraint_margins`).
         kkt: ``(1 + 2N, 3)`` KKT residuals (stationarity, feasibility, complementarity,
             in the solver's scaled units) of the equilibrium problem (row 0) and of the
             kept start of each boundary problem (rows ``1 + kind * N + contact``).

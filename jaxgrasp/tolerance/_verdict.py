@@ -1,4 +1,21 @@
-"""Steps 2-6 of the method: from solved problems to the value, the status and the limiting boundary."""
+"""Steps 2-6 of the method: from solved problems to the value, the status and the limiting boundary.
+
+An evaluation of a grasp follows the paper (Sec. III, VI) in six steps, one named function
+each:
+
+1. solve the equilibrium problem and every boundary problem from its starts
+   (:func:`jaxgrasp.tolerance.problems_of`);
+2. keep the lowest converged start of each boundary problem (:func:`best_starts`);
+3. decide the grasp's status from the solver's outputs (:func:`grasp_status`; Sec. III-B);
+4. the minimum energies with their envelope-theorem derivatives (:func:`energies`,
+   :mod:`jaxgrasp.tolerance._envelope`);
+5. the value, eq. 1: the least boundary energy above ``U0``, or a soft minimum
+   (:func:`value_of`);
+6. the :class:`~jaxgrasp.Evaluation` in SI units (:func:`to_evaluation`).
+
+This module does steps 2-6 (:func:`evaluation_of` for one grasp, :func:`evaluations_of`
+for a batch); the engine runs step 1 before them.
+"""
 
 from __future__ import annotations
 
@@ -24,7 +41,6 @@ __all__ = ['split_temperature', 'evaluations_of', 'evaluation_of', 'limiting_ind
 
 
 TIE_TOL = 1e-8
-
 """Boundary energies within this fraction of the value of the least one are a tie (the
 solver settles each to ``tol = 1e-10`` of the scaled energy, some ``1e-9`` of a typical
 value); the limiting boundary is then the first of them in (kind, contact) order."""
@@ -41,16 +57,16 @@ def split_temperature(options: EvaluateOptions):
 
 
 def evaluations_of(grasps: Grasp, progs: Problems, temperature, options: EvaluateOptions) -> Evaluation:
-    """Steps 2-6 of the method for a batch of grasps (leading axis ``B``) whose problems
-    ``progs`` are solved: :func:`evaluation_of` of each (``temperature``: mJ, ``0`` for the
-    hard minimum)."""
+    """Steps 2-6 for a batch of grasps (leading axis ``B``): their evaluations from their
+    solved problems ``progs`` (:class:`~jaxgrasp.tolerance._problems.Problems` with the
+    same leading axis; ``temperature``: mJ, ``0`` for the hard minimum)."""
     p = jax.vmap(model_params)(grasps)
     return jax.vmap(lambda p, progs: evaluation_of(p, progs, temperature, options))(p, progs)
 
 
 def evaluation_of(p: ModelParams, progs: Problems, temperature, options: EvaluateOptions) -> Evaluation:
-    """Steps 2-6 of :func:`evaluate` for one grasp ``p`` whose programs ``progs`` are
-    solved (``temperature``: mJ, ``0`` for the hard minimum)."""
+    """Steps 2-6 for one grasp ``p`` (internal units) whose problems ``progs`` are solved
+    (``temperature``: mJ, ``0`` for the hard minimum)."""
     temperature = jnp.asarray(temperature, p.c.dtype)  # float32 grasps stay float32
     best = best_starts(progs, options.num_starts, options.boundary_tol)
     verdict = grasp_status(p, progs, best, options.boundary_tol)
@@ -60,11 +76,7 @@ def evaluation_of(p: ModelParams, progs: Problems, temperature, options: Evaluat
 
 
 @jax.tree_util.register_dataclass
-
-
 @dataclasses.dataclass(frozen=True)
-
-
 class Boundaries:
     """Each boundary problem at its lowest converged start (``B = 2N`` problems,
     ``b = kind * N + contact``; scaled units as in :class:`~jaxgrasp.tolerance._problems.Problems`).
@@ -75,7 +87,7 @@ class Boundaries:
         lam, nu: ``(B, 3N)``, ``(B,)`` its multipliers.
         objective: ``(B,)`` its scaled energy (the equilibrium's where not reached).
         reached: ``(B,)`` some start converged.
-        status: ``(B,)`` :class:`~jaxgrasp.solver._status.LaneStatus` of the problem: converged
+        status: ``(B,)`` :class:`~jaxgrasp.LaneStatus` of the problem: converged
             (reached), infeasible (every start infeasible or not started), not converged,
             or no start (the equilibrium did not converge).
         estimate: ``(B,)`` lowest scaled energy of a feasible start that did not converge
@@ -91,16 +103,16 @@ class Boundaries:
     status: Any
     estimate: Any
 
-SAME_MINIMUM = 3e-10
 
+SAME_MINIMUM = 3e-10
 """Converged lanes of one boundary problem whose energies above ``U0`` lie within this
-(relative) of the lowest one's reached the same minimum: lanes that do so end 6e-12 to
-1.1e-10 apart (the solver stops at feasibility and complementarity of 1e-10, and at
-stationarity of 1e-10, or up to 1e-9 where phi is too stiff to reach it, which moves the
-energy only at second order). :func:`best_starts` reports
-the first of them by start, so the reported lane (its energy, pose and steps) does not
-depend on the rounding of the program it ran in (a single grasp, a batch, a grasp padded
-with inactive contacts); the energy is at most this much above the lowest lane's."""
+(relative) of the lowest one's reached the same minimum: the solver stops at feasibility
+and complementarity of 1e-10, and at stationarity of 1e-10 (or up to 1e-9 where phi is
+too stiff to reach it, which moves the energy only at second order), so lanes at one
+minimum end about that far apart. :func:`best_starts` reports the first of them by
+start, so the reported lane (its energy, pose and steps) does not depend on the rounding
+of the executable it ran in (a single grasp, a batch, a grasp padded with inactive
+contacts); the energy is at most this much above the lowest lane's."""
 
 
 def best_starts(progs: Problems, num_starts: int, boundary_tol: float) -> Boundaries:
@@ -115,7 +127,7 @@ def best_starts(progs: Problems, num_starts: int, boundary_tol: float) -> Bounda
     low = jnp.min(lane_energy, axis=1, keepdims=True)
     # the first lane (by start) of those that reached the lowest minimum: which of them
     # ends lowest is rounding, and would differ between a single, a batched and a padded
-    # program (SAME_MINIMUM)
+    # executable (SAME_MINIMUM)
     same = lane_energy <= low + SAME_MINIMUM * jnp.maximum(low - eq.objective, 1e-300)
     best = jnp.argmax(same, axis=1)
     reached = jnp.isfinite(low[:, 0])
@@ -150,16 +162,12 @@ def best_starts(progs: Problems, num_starts: int, boundary_tol: float) -> Bounda
 
 
 @jax.tree_util.register_dataclass
-
-
 @dataclasses.dataclass(frozen=True)
-
-
 class Verdict:
     """The grasp's status and what decided it (no derivative).
 
     Attributes:
-        status: ``()`` :class:`~jaxgrasp.tolerance._status.GraspStatus` code.
+        status: ``()`` :class:`~jaxgrasp.GraspStatus` code.
         limit: ``()`` index ``b`` of the lowest reached boundary problem (0 if none); of
             boundaries tied within :data:`TIE_TOL` of the value, the first.
         any_reached: ``()`` some boundary problem was reached.
@@ -209,7 +217,8 @@ def grasp_status(p: ModelParams, progs: Problems, best: Boundaries, boundary_tol
     # a boundary reached within the solver's accuracy of U0: the equilibrium is on it
     zero_value = any_reached & (hard_scaled <= boundary_tol)
     # a boundary problem that did not settle decides the status only if it could be
-    # limiting: no feasible point of it found, or one within 10 % of the value
+    # limiting: no feasible point of it found, or one at most a tenth above the value
+    # (its energy is only an upper estimate of the problem's minimum)
     could_limit = ~(jnp.isfinite(best.estimate) & (best.estimate - eq.objective > 1.1 * hard_scaled))
     any_unsettled = jnp.any((best.status == LaneStatus.NOT_CONVERGED) & (could_limit | ~any_reached))
     status = jnp.select(
@@ -240,9 +249,9 @@ def _all_finite(*xs):
 def energies(p: ModelParams, eq, best: Boundaries, keep_value):
     """Minimum energies with envelope-theorem derivatives, mJ: ``(u_eq, u_b, v_eq, v_b)``.
 
-    ``u_*`` are the reported energies (derivative wherever the program was solved),
+    ``u_*`` are the reported energies (derivative wherever the problem was solved),
     ``v_*`` the value's (derivative only where the value uses them); ``u_b``, ``v_b`` are
-    ``(2N,)`` and ``+inf`` where the boundary was not reached. A program whose solution is
+    ``(2N,)`` and ``+inf`` where the boundary was not reached. A problem whose solution is
     not used is differentiated at a safe point (initial state, zero multipliers), where
     the Lagrangian's partials are finite: a zero cotangent then gives an exact zero.
     """
