@@ -17,13 +17,11 @@ __all__ = ['MEMO_SIZE', 'default_device', 'wait_for_saves', 'compiled', 'clear_c
 
 
 MEMO_SIZE = 16
-
 """Most compiled executables kept in this process (the least recently used is dropped first)."""
 
 _MEMO: dict[Hashable, Any] = {}
 
 _XLA_CACHE_HITS = [0]
-
 """Executables JAX's persistent cache has served in this process (counted from its events)."""
 
 
@@ -149,7 +147,6 @@ def compiled(
     return fn, seconds
 
 _SAVES: list[threading.Thread] = []
-
 """Threads writing a compiled executable to the store (:func:`_save_in_background`)."""
 
 

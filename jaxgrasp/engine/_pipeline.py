@@ -16,8 +16,6 @@ def _spec_of(x) -> jax.ShapeDtypeStruct:
 
 
 @dataclasses.dataclass(frozen=True)
-
-
 class Pipeline:
     """An executable as several jitted stages and the Python function that calls them: what
     ``build`` of :func:`compiled` returns for an executable compiled in stages.

@@ -57,12 +57,10 @@ __all__ = ['ENV_VAR', 'EXECUTABLE_SUBDIR', 'default_dir', 'enable_compilation_ca
 
 
 ENV_VAR = "JAXGRASP_CACHE_DIR"
-
 """The environment variable naming the cache folder; where set, ``import jaxgrasp`` turns
 the caches on (:func:`enable_from_environment`)."""
 
 EXECUTABLE_SUBDIR = "jaxgrasp-executables"
-
 """Folder of the executable store inside the compilation cache folder."""
 
 _EXECUTABLE_DIR: Path | None = None
@@ -114,7 +112,6 @@ def enable_compilation_cache(path=None) -> Path | None:
     return folder
 
 _JAX_WRITE_ERROR = r"Error writing persistent compilation cache entry"
-
 """The start of the warning JAX gives for every cache entry it fails to write."""
 
 
@@ -184,7 +181,6 @@ def executable_path(name: str, key: Hashable) -> Path | None:
     return _EXECUTABLE_DIR / f"{name}-{hashlib.sha256(text.encode()).hexdigest()[:32]}.xla"
 
 _FORMAT = "jaxgrasp-executable-3"
-
 """Tag of a stored executable's file (a file without it is stale)."""
 
 
