@@ -93,7 +93,12 @@ def cube_study(out: Path, log, quick: bool):
         )
         for r in rows:
             w.writerow([repr(float(v)) if isinstance(v, (float, np.floating)) else v for v in r])
+    _plot_cube(out, young, dr, values, histories)
+    return rows
 
+
+def _plot_cube(out: Path, young, dr, values, histories):
+    """figures/tune_cube.png: the grid and the tuned optima (left), the tuning histories (right)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -116,7 +121,6 @@ def cube_study(out: Path, log, quick: bool):
     ax2.set_title("value over the iterations of jaxgrasp.tune")
     ax2.grid(True, alpha=0.3)
     fig.savefig(out / "tune_cube.png", dpi=150, bbox_inches="tight")
-    return rows
 
 
 def four_finger_study(out: Path, log, quick: bool):
