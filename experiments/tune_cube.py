@@ -10,7 +10,7 @@
 3. Cost of a gradient: steady-state time of a jitted ``value`` and a jitted
    ``jax.grad(value)`` (w.r.t. every field of the grasp) on the same grasp, several repeats.
 4. Optimisers: the cube's shared deformation tuned from 1.5 mm with each of
-   ``jaxgrasp.analysis._tune.METHODS`` (SciPy's L-BFGS-B, ``jaxopt.LBFGSB``,
+   ``jaxgrasp.analysis._tune_drivers.METHODS`` (SciPy's L-BFGS-B, ``jaxopt.LBFGSB``,
    ``jaxopt.ProjectedGradient``) at three Young's moduli: value reached, iterations,
    evaluations and time (the second call of each, so compilation is not counted).
 
@@ -32,9 +32,9 @@ import jax
 import numpy as np
 
 import jaxgrasp
+from jaxgrasp.analysis import sweep, tune
+from jaxgrasp.plots import plot_history
 from jaxgrasp.presets import MAX_FORCE, cube
-from jaxgrasp.analysis._sweep import sweep
-from jaxgrasp.analysis._tune import plot_history, tune
 
 HERE = Path(__file__).resolve().parent
 EXAMPLES = HERE.parent / "examples"
@@ -93,7 +93,12 @@ def cube_study(out: Path, log, quick: bool):
         )
         for r in rows:
             w.writerow([repr(float(v)) if isinstance(v, (float, np.floating)) else v for v in r])
+    _plot_cube(out, young, dr, values, histories)
+    return rows
 
+
+def _plot_cube(out: Path, young, dr, values, histories):
+    """figures/tune_cube.png: the grid and the tuned optima (left), the tuning histories (right)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -116,7 +121,6 @@ def cube_study(out: Path, log, quick: bool):
     ax2.set_title("value over the iterations of jaxgrasp.tune")
     ax2.grid(True, alpha=0.3)
     fig.savefig(out / "tune_cube.png", dpi=150, bbox_inches="tight")
-    return rows
 
 
 def four_finger_study(out: Path, log, quick: bool):
@@ -176,7 +180,7 @@ def gradient_cost(log, repeats: int):
 
 
 def method_study(log, quick: bool):
-    from jaxgrasp.analysis._tune import METHODS
+    from jaxgrasp.analysis._tune_drivers import METHODS
 
     log("\n== optimisers on the cube's shared deformation (start 1.5 mm, maxiter 50) ==")
     log(f"{'E [Pa]':>9} {'method':<20} {'tuned [mJ]':>11} {'dr [mm]':>8} {'iters':>5} {'evals':>5} {'time [s]':>8}  status")

@@ -72,7 +72,7 @@ def check_bounds(params, bounds: dict) -> None:
     of a ``--param`` (:class:`UsageError` naming the options; library messages would show
     Python syntax such as ``bounds={'positions': 0.01}``)."""
     from jaxgrasp.model._fields import FIELD
-    from jaxgrasp.analysis._tune import parse_param
+    from jaxgrasp.analysis._tune_spec import parse_param
 
     specs = [parse_param(p) for p in params]
     tuned = {s.name for s in specs} | {s.label for s in specs}
@@ -94,7 +94,7 @@ def check_bounds(params, bounds: dict) -> None:
 
 def add_parser(sub) -> None:
     """Add the ``tune`` command to the ``jaxgrasp`` sub-parsers."""
-    from jaxgrasp.analysis._tune import METHODS
+    from jaxgrasp.analysis._tune_drivers import METHODS
 
     sp = sub.add_parser(
         "tune",
@@ -146,7 +146,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Tune the grasp of the command line; write it (and a plot) and print one summary line."""
     from jaxgrasp.tolerance._options import EvaluateOptions
-    from jaxgrasp.analysis._tune import tune
+    from jaxgrasp.analysis import tune
 
     out = _check_options(args)
     bounds = parse_bounds(args.bounds)
@@ -216,8 +216,7 @@ def _write_outputs(res, out: Path, title: str | None) -> list[str]:
 
     members = {out: to_text(res.grasp, out).encode("utf-8")}
     if title is not None:
-        from jaxgrasp.plots._plots import save_figure
-        from jaxgrasp.analysis._tune import plot_history
+        from jaxgrasp.plots import plot_history, save_figure
 
         fig = plot_history(res, title=title)
         members[out.with_suffix(".png")] = lambda fh: save_figure(fig, fh, format="png")

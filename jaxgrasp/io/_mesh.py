@@ -13,7 +13,7 @@ and fingertip contact points given in the mesh's own frame into a :class:`MeshGr
 
 Design (the one way the library keeps a grasp's mesh): the :class:`~jaxgrasp.Grasp`
 pytree is left exactly as for any other grasp, so ``evaluate``, ``sweep``, ``tune``,
-``evaluate_batch`` and their compiled programs and caches see nothing new. The mesh and the
+``evaluate_batch`` and their compiled executables and caches see nothing new. The mesh and the
 frame offset live beside it in :class:`MeshGrasp`, a small frozen object that is not a
 pytree and never enters ``jit``: evaluate ``mesh_grasp.grasp``; draw with
 ``mesh_grasp.mesh`` and ``mesh_grasp.to_mesh_frame``. :func:`jaxgrasp.load` with
@@ -138,21 +138,9 @@ def _check_surface(mesh, where: str) -> None:
 
 
 def from_mesh(
-    mesh,
-    points,
-    *,
-    initial_deformation,
-    radius,
-    young_modulus,
-    friction,
-    max_force,
-    mass=None,
-    density=None,
-    center_of_mass=None,
-    gravity=DEFAULT_GRAVITY,
-    units: str = "m",
-    normals=None,
-    tolerance: float = DEFAULT_TOLERANCE,
+    mesh, points, *, initial_deformation, radius, young_modulus, friction, max_force,
+    mass=None, density=None, center_of_mass=None, gravity=DEFAULT_GRAVITY, units: str = "m",
+    normals=None, tolerance: float = DEFAULT_TOLERANCE,
 ) -> MeshGrasp:
     """A grasp of a meshed object by fingertips touching it at ``points``.
 
@@ -189,23 +177,24 @@ def from_mesh(
     source = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "<trimesh>"
     pts = _points(points)
     com, mass = _mass_properties(surface, mass, density, center_of_mass)
+    snapped, normal = _contacts(surface, pts, normals, tolerance)
+    grasp = Grasp.create(
+        positions=snapped - com, normals=normal, initial_deformation=initial_deformation, radius=radius,
+        young_modulus=young_modulus, friction=friction, max_force=max_force, mass=mass, gravity=gravity,
+    )
+    return MeshGrasp(grasp=grasp, mesh=surface, center_of_mass=com, source=source)
+
+
+def _contacts(surface, pts, normals, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(positions (N, 3) m, normals (N, 3))`` of the contacts, mesh frame: ``pts`` snapped
+    to the surface (:func:`snap_to_surface`), each normal the one given in ``normals``
+    (``None`` or a length-``N`` sequence of ``None`` or 3-vectors) or else the surface's."""
     snapped, found = snap_to_surface(surface, pts, tolerance)
     given = [None] * len(pts) if normals is None else list(normals)
     if len(given) != len(pts):
         raise GraspValueError(f"normals has {len(given)} entries for {len(pts)} points")
     normal = np.array([found[i] if g is None else np.asarray(g, dtype=np.float64) for i, g in enumerate(given)])
-    grasp = Grasp.create(
-        positions=snapped - com,
-        normals=normal,
-        initial_deformation=initial_deformation,
-        radius=radius,
-        young_modulus=young_modulus,
-        friction=friction,
-        max_force=max_force,
-        mass=mass,
-        gravity=gravity,
-    )
-    return MeshGrasp(grasp=grasp, mesh=surface, center_of_mass=com, source=source)
+    return snapped, normal
 
 
 def _points(points) -> np.ndarray:

@@ -1,9 +1,10 @@
 """Pictures (matplotlib, Agg backend): sweep and ranking plots, the 3-D scene of a grasp
-and the way it fails.
+and the way it fails, the value over the iterations of a tuning.
 """
 
 from jaxgrasp.plots._plots import plot_sweep, plot_max, plot_max_over, plot_ranking, plot_grasp, draw_scene, save_figure
 from jaxgrasp.plots._scene import grasp_scene
+from jaxgrasp.plots._tune_plot import plot_history
 
 __all__ = [
     "plot_sweep",
@@ -14,4 +15,5 @@ __all__ = [
     "draw_scene",
     "save_figure",
     "grasp_scene",
+    "plot_history",
 ]

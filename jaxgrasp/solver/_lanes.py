@@ -8,6 +8,13 @@ every grasp of a batch share one queue. It drives the solver through its pieces
 (:func:`~jaxgrasp.solver._solver.propose`, one :func:`~jaxgrasp.solver._solver.line_search` over every
 slot, :func:`~jaxgrasp.solver._solver.accept`), :func:`~jaxgrasp.solver._solver.running` and
 :func:`~jaxgrasp.solver._solver.to_result`.
+
+Lanes of one ``vmap`` advance in lockstep, so a plain batched loop costs ``L * max(steps)``
+lane-steps although most lanes finish early (or never start). The queue keeps
+``W = min(ceil(slot_fraction * L), max_slots)`` slots busy: each loop step advances every
+slot; a slot whose lane has finished writes it back and takes the next lane not yet
+started (active lanes only). One ``while_loop`` with static shapes, so it composes with
+``jit`` and ``vmap``; the cost is near ``sum(steps) + W * max(steps)`` lane-steps.
 """
 
 from __future__ import annotations
@@ -36,25 +43,15 @@ def solve_lanes(
 ) -> SolverResult:
     """Solve a batch of lanes with early exit of finished lanes (leading axis ``L``).
 
-    Lanes of one ``vmap`` advance in lockstep, so a plain batched loop costs
-    ``L * max(steps)`` although most lanes finish early (or never start). Here a work
-    queue keeps ``W = min(ceil(slot_fraction * L), max_slots)`` slots busy: each loop step advances
-    every slot; a slot whose lane has finished writes it back and takes the next lane
-    not yet started (active lanes only). One ``while_loop`` with static shapes, so this
-    composes with ``jit`` and ``vmap``; the cost is near ``sum(steps) + W * max(steps)``
-    lane-steps instead of ``L * max(steps)``. Each lane's result is what
-    :func:`jaxgrasp.solver._solver.solve` gives.
-
-    Under ``jax.vmap`` (e.g. one call per grasp, vmapped over grasps) the batch axis is
-    folded into the lane axis (``custom_vmap``): all ``B * L`` lanes share one queue
-    of ``min(ceil(slot_fraction * B * L), max_slots)`` slots, instead of ``B`` queues advancing in
-    lockstep until the slowest of them is empty. Results are the same lane by lane.
-    ``problem`` must therefore take every lane-dependent quantity through ``theta``
-    (it must not close over traced values).
+    A work queue keeps ``W = min(ceil(slot_fraction * L), max_slots)`` slots busy (see the
+    module docstring); each lane's result is what :func:`jaxgrasp.solver._solver.solve`
+    gives. Under ``jax.vmap`` the batch axis is folded into the lane axis
+    (:func:`_queue_over_lanes`), so ``problem`` must take every lane-dependent quantity
+    through ``theta`` (it must not close over traced values).
 
     Args:
         problem: ``theta_lane -> Problem`` (or ``-> fg``, see
-            :func:`~jaxgrasp.solver._solver.as_problem`): the lane's program.
+            :func:`~jaxgrasp.solver._solver.as_problem`): the lane's problem.
         theta: pytree of per-lane problem data, leading axis ``L`` (may be empty).
         x0: ``(L, n)`` starting points.
         eq_mask: ``(L, m)`` one-hot equality selectors (rows of zeros: no equality).
@@ -73,6 +70,19 @@ def solve_lanes(
         :class:`~jaxgrasp.solver._solver.SolverResult` with leading axis ``L``.
     """
     rank = jnp.zeros(jnp.shape(active), jnp.int32) if rank is None else jnp.asarray(rank, jnp.int32)
+    run = _queue_over_lanes(problem, options)
+    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active), rank)
+
+
+def _queue_over_lanes(problem: Callable, options: SolverOptions):
+    """``run(theta, x0, eq_mask, nu0, active, rank) -> SolverResult``: :func:`_solve_lanes`
+    as a ``custom_vmap`` whose batching rule folds the batch axis into the lane axis.
+
+    Under ``jax.vmap`` (e.g. one call per grasp, vmapped over grasps) all ``B * L`` lanes
+    then share one queue of ``min(ceil(slot_fraction * B * L), max_slots)`` slots, instead
+    of ``B`` queues advancing in lockstep until the slowest of them is empty. Results are
+    the same lane by lane.
+    """
 
     @jax.custom_batching.custom_vmap
     def run(theta, x0, eq_mask, nu0, active, rank):
@@ -89,7 +99,7 @@ def solve_lanes(
         out = solve_lane_batches(problem, *args, options, rank=rank)  # a nested vmap folds into it in turn
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
-    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active), rank)
+    return run
 
 
 def solve_lane_batches(
@@ -186,12 +196,9 @@ def _advance(problem, theta, order, num_active, o: SolverOptions, q: _Queue) -> 
 def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, rank, o: SolverOptions) -> SolverResult:
     """:func:`solve_lanes` on one flat batch of ``L`` lanes: the queue loop.
 
-    One loop of ``W`` slots to the end. (A second, ``W // 8``-slot loop for the last long
-    lanes once the queue was empty used to follow: it duplicated the whole solver step in
-    the program, 2.5 s of the batched program's 5.5 s XLA compile, and after the penalty
-    rule cut the lanes that run the whole step budget it saved 2-3 % of a random set's run
-    (512 grasps: 43.2-43.8 against 41.8-43.0 grasps/s) and nothing on the grids, with
-    identical results: experiments/BENCHMARK.md.)"""
+    One loop of ``W`` slots to the end. A second, narrower loop for the last long lanes
+    once the queue is empty would copy the whole solver step into the executable again,
+    for the same results lane by lane."""
     num_lanes = x0.shape[0]
     width = _num_slots(num_lanes, o)
     states = jax.vmap(lambda x, m, nu, a: solver.init(x, m, nu, a, o))(x0, eq_mask, nu0, active)

@@ -51,21 +51,19 @@ def _at_equilibrium(eq: SolverResult, lanes: SolverResult, at_eq, g_eq, lane_k) 
         lambda a, b: jnp.where(at_eq.reshape((-1,) + (1,) * (a.ndim - 1)), a.astype(b.dtype), b), given, lanes
     )
 
+
 _PYRAMID = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)  # face angles, rad
 
 RELEASED_TOL = 1e-6
-
 """A stalled lane's contact ``j`` is released where its contact and slip margins are
 both within this (scaled margins), and the lane's violation too."""
 
 _POLISH_STEPS = 8
 
 MAX_POLISHED = 2
-
 """Most boundary problems of one grasp that :func:`settle_stalled` polishes."""
 
 SETTLE_BLOCK = 4
-
 """Grasps per block of the settling stage in a batch (:func:`_settle_where_stalled`)."""
 
 
@@ -96,7 +94,7 @@ def _pyramid_basis(z0, data: ProblemData, j):
 
 
 def _relaxed_problem(z, data: ProblemData, j, v, relaxed_rows):
-    """``(f, g)`` of the program at scaled pose ``z`` with contact ``j``'s rows replaced,
+    """``(f, g)`` of the problem at scaled pose ``z`` with contact ``j``'s rows replaced,
     where ``relaxed_rows`` ``(3N,)``, by its pyramid rows ``P_k = (mu_j d_j / (2 cos^2
     phi_j) + v_k . u_j) / dr_j`` (``v``: the ``(3, 3)`` face directions; row ``k * N + j``
     holds ``P_k``). One evaluation of the contact kinematics serves every row, so that
@@ -114,16 +112,15 @@ def _relaxed_problem(z, data: ProblemData, j, v, relaxed_rows):
 
 
 def _polish(data: ProblemData, z0, k, j, released, o: SolverOptions):
-    """Newton's method on the KKT equations of boundary program ``k`` (equality row), with
+    """Newton's method on the KKT equations of boundary problem ``k`` (equality row), with
     the active set fixed at the stalled point ``z0``: on the relaxation at contact ``j``
-    where ``released``, else on the program itself.
+    where ``released``, else on the problem itself.
 
     Returns ``(z, lam_rel, ok, (stat, feas, comp))``: ``lam_rel`` ``(3N,)`` multipliers
-    of the (relaxed) program (the equality's included, free in sign); ``ok`` whether ``z``
-    is a KKT point of it within tol and feasible for the original program."""
+    of the (relaxed) problem (the equality's included, free in sign); ``ok`` whether ``z``
+    is a KKT point of it within tol and feasible for the original problem."""
     n = data.params.c.shape[0]
-    dtype = z0.dtype
-    tol = kkt_tol(dtype, o)
+    tol = kkt_tol(z0.dtype, o)
     rows = jnp.arange(3 * n)
     j_rows = (rows % n == j) & released
     has_eq = ~released | (k != n + j)  # j's own slip equality is relaxed away
@@ -131,25 +128,7 @@ def _polish(data: ProblemData, z0, k, j, released, o: SolverOptions):
     v = _pyramid_basis(z0, data, j)
     fg = lambda z: _relaxed_problem(z, data, j, v, j_rows)
     active = j_rows | is_eq | (constraints(z0, data) <= RELEASED_TOL)
-
-    def residual(y):  # the KKT equations, and the constraints for the statistics
-        z, lam = y[:6], y[6:]
-        grad_l = jax.grad(lambda z: (lambda a: a[0] - jnp.dot(lam, a[1]))(fg(z)))(z)
-        gz = fg(z)[1]
-        r = jnp.concatenate([grad_l, jnp.where(active, gz, lam)])
-        return r, (r, gz)
-
-    def newton(i, carry):
-        # _POLISH_STEPS Newton steps, then one more pass for the residual at the last point
-        y, _, _ = carry
-        jac, (r, gz) = jax.jacfwd(residual, has_aux=True)(y)
-        step = jnp.where(i < _POLISH_STEPS, dense_solve(jac, r), 0.0)  # no LAPACK: see jaxgrasp.solver._dense
-        return y - step, r, gz
-
-    y0 = jnp.concatenate([z0, jnp.zeros(3 * n, dtype)])
-    y, r, gz = jax.lax.fori_loop(
-        0, _POLISH_STEPS + 1, newton, (y0, jnp.zeros(6 + 3 * n, dtype), jnp.zeros(3 * n, dtype))
-    )
+    y, r, gz = _kkt_newton(fg, active, z0)
     z, lam = y[:6], y[6:]
     stat = jnp.max(jnp.abs(r[:6]))
     feas = jnp.max(jnp.where(is_eq, jnp.abs(gz), jnp.maximum(-gz, 0.0)))
@@ -170,6 +149,32 @@ def _polish(data: ProblemData, z0, k, j, released, o: SolverOptions):
     return z, lam, ok, (stat, jnp.maximum(feas, orig_feas), comp)
 
 
+def _kkt_newton(fg, active, z0):
+    """:data:`_POLISH_STEPS` Newton steps on the KKT equations of ``fg`` (``z -> (f,
+    g (3N,))``) with the rows ``active`` ``(3N,)`` held at ``g = 0`` and the others at
+    ``lam = 0``, from ``(z0, lam = 0)``. Returns ``(y, r, gz)``: ``y = (z, lam)``
+    ``(6 + 3N,)``, the residual ``r`` and the constraints ``gz`` at the last point."""
+    n3 = active.shape[0]
+    dtype = z0.dtype
+
+    def residual(y):  # the KKT equations, and the constraints for the statistics
+        z, lam = y[:6], y[6:]
+        grad_l = jax.grad(lambda z: (lambda a: a[0] - jnp.dot(lam, a[1]))(fg(z)))(z)
+        gz = fg(z)[1]
+        r = jnp.concatenate([grad_l, jnp.where(active, gz, lam)])
+        return r, (r, gz)
+
+    def newton(i, carry):
+        # _POLISH_STEPS Newton steps, then one more pass for the residual at the last point
+        y, _, _ = carry
+        jac, (r, gz) = jax.jacfwd(residual, has_aux=True)(y)
+        step = jnp.where(i < _POLISH_STEPS, dense_solve(jac, r), 0.0)  # no LAPACK: see jaxgrasp.solver._dense
+        return y - step, r, gz
+
+    y0 = jnp.concatenate([z0, jnp.zeros(n3, dtype)])
+    return jax.lax.fori_loop(0, _POLISH_STEPS + 1, newton, (y0, jnp.zeros(6 + n3, dtype), jnp.zeros(n3, dtype)))
+
+
 def _polish_candidates(lanes: SolverResult, found, num_starts: int):
     """``(2N, D)`` bool: the lanes :func:`settle_stalled` may polish, those that stalled
     (``NOT_CONVERGED``) at a point feasible within :data:`RELEASED_TOL`, of problems
@@ -186,9 +191,8 @@ def _settle_where_stalled(data: ProblemData, lanes: SolverResult, lane_k, found,
     ``lanes`` and ``found``) that has a lane to polish, in gathered blocks of
     :data:`SETTLE_BLOCK` grasps (:func:`jaxgrasp.solver._rows.over_rows`); every other
     grasp's lanes are returned as they are, which is what :func:`settle_stalled` returns
-    for them. Under ``vmap`` the stage would cost every grasp its polish; stalls are rare
-    (some 5 % of random grasps have one, and grids hardly any), so a batch pays for the
-    few that need it (experiments/BENCHMARK.md)."""
+    for them. Under ``vmap`` the stage would cost every grasp its polish; stalls are rare,
+    so a batch pays for the few grasps that need it."""
     need = jax.vmap(lambda l, f: jnp.any(_polish_candidates(l, f, num_starts)))(lanes, found)
 
     def update(rows, valid, lanes):
@@ -204,18 +208,16 @@ def _settle_where_stalled(data: ProblemData, lanes: SolverResult, lane_k, found,
 def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
     """Certify boundary lanes that stalled at a feasible point (a post-solve stage).
 
-    For each boundary problem that no start settled (at most :data:`MAX_POLISHED` per grasp), the lowest-energy lane that ended
-    ``NOT_CONVERGED`` with its violation within :data:`RELEASED_TOL` is polished by
-    Newton's method on the KKT equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
-    fixed: on the relaxation above where some contact ``j`` is released (contact and
-    slip margins within :data:`RELEASED_TOL`; ``j``'s force row not the equality), else
-    on the program itself (bounded multipliers, but an inner solve that stalled, e.g. at
-    the largest penalty). Where that gives a KKT point within ``tol`` (inequality
-    multipliers ``>= 0``) that is feasible for the original program, the lane becomes
-    ``CONVERGED`` there, with the polish's KKT residuals. A relaxation's multipliers are
-    mapped back: ``lam`` of ``j``'s contact row carries the pyramid rows' ``d_j`` part
-    (clipped at 0; the tangential part has no row of the original program, so the
-    envelope derivative of such a boundary misses it), ``nu`` the equality's. Every other
+    For each boundary problem that no start settled (at most :data:`MAX_POLISHED` per
+    grasp, :func:`_lanes_to_polish`), the lowest-energy lane that ended ``NOT_CONVERGED``
+    with its violation within :data:`RELEASED_TOL` is polished by Newton's method on the
+    KKT equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
+    fixed: on the relaxation above where some contact ``j`` is released
+    (:func:`_released_contacts`), else on the problem itself (bounded multipliers, but an
+    inner solve that stalled, e.g. at the largest penalty). Where that gives a KKT point
+    within ``tol`` (inequality multipliers ``>= 0``) that is feasible for the original
+    problem, the lane becomes ``CONVERGED`` there, with the polish's KKT residuals and
+    the relaxation's multipliers mapped back (:func:`_original_multipliers`). Every other
     lane is returned unchanged; a lane that converged is never touched.
 
     Args:
@@ -226,39 +228,12 @@ def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_st
         num_starts: ``D``.
         o: the :class:`~jaxgrasp.solver._solver.SolverOptions` the lanes were solved with.
     """
-    n = data.params.c.shape[0]
-    g = jax.vmap(lambda z: constraints(z, data))(lanes.x).reshape(-1, 3, n)  # (L, 3, N)
-    released = (g[:, 0] <= RELEASED_TOL) & (g[:, 1] <= RELEASED_TOL) & data.params.on  # (L, N)
-    released = released & (lane_k[:, None] != 2 * n + jnp.arange(n))
-    j = jnp.argmax(released, axis=1)
-    released_any = jnp.any(released, axis=1)
-    candidate = _polish_candidates(lanes, found, num_starts)  # (2N, D)
-    pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
-    pick = jnp.arange(2 * n) * num_starts + pick  # (2N,) one lane per boundary problem
-    # Polish at most MAX_POLISHED problems per grasp, those with a candidate first: under
-    # vmap every grasp polishes as many as the one that needs most, and stalls are rare
-    # (42 of 8000 programs in the robustness set), so polishing all 2N would cost every
-    # grasp ~15% more for nothing.
-    has_candidate = jnp.any(candidate, axis=1)
-    chosen = jnp.argsort(~has_candidate, stable=True)[: min(MAX_POLISHED, 2 * n)]
-    pick = pick[chosen]
+    j, released_any = _released_contacts(data, lanes, lane_k)
+    pick, wanted = _lanes_to_polish(lanes, found, num_starts)
     z, lam_rel, ok, (stat, feas, comp) = jax.vmap(
         lambda l: _polish(data, lanes.x[l], lane_k[l], j[l], released_any[l], o)
     )(pick)
-    ok = ok & has_candidate[chosen]
-    # the relaxation's multipliers in the original rows: the equality's as nu, the pyramid
-    # rows' d_j part on j's contact row (d P_k / d d_j = mu_j / (2 cos^2 phi_j) per dr_j)
-    jp = j[pick]
-    rows = jnp.arange(3 * n)
-    is_eq = rows[None, :] == lane_k[pick][:, None]
-    j_rows = (rows[None, :] % n == jp[:, None]) & released_any[pick][:, None]
-    cphi = jax.vmap(lambda z: contact_kinematics(to_pose(z, data.lever), data.params)[1])(z)  # (2N, N)
-    slope = data.params.mu[jp] / (2.0 * jnp.take_along_axis(cphi, jp[:, None], axis=1)[:, 0] ** 2)
-    lam_d = jnp.maximum(slope * jnp.sum(jnp.where(j_rows, lam_rel, 0.0), axis=1), 0.0)
-    lam = jnp.where(is_eq | j_rows, 0.0, lam_rel) + jnp.where(
-        released_any[pick][:, None], jax.nn.one_hot(jp, 3 * n, dtype=lam_rel.dtype) * lam_d[:, None], 0.0
-    )
-    nu = -jnp.sum(jnp.where(is_eq, lam_rel, 0.0), axis=1)
+    lam, nu = _original_multipliers(data, z, lam_rel, lane_k[pick], j[pick], released_any[pick])
     new = SolverResult(
         x=z,
         lam=lam,
@@ -270,6 +245,57 @@ def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_st
         complementarity=comp,
         steps=lanes.steps[pick] + _POLISH_STEPS,
     )
+    return _write_back(lanes, pick, ok & wanted, new)
+
+
+def _released_contacts(data: ProblemData, lanes: SolverResult, lane_k):
+    """``(j, released_any)``, each ``(L,)``: the first contact released at each lane's
+    point (contact and slip margins within :data:`RELEASED_TOL`, active, its force row
+    not the lane's equality), and whether there is one."""
+    n = data.params.c.shape[0]
+    g = jax.vmap(lambda z: constraints(z, data))(lanes.x).reshape(-1, 3, n)  # (L, 3, N)
+    released = (g[:, 0] <= RELEASED_TOL) & (g[:, 1] <= RELEASED_TOL) & data.params.on  # (L, N)
+    released = released & (lane_k[:, None] != 2 * n + jnp.arange(n))
+    return jnp.argmax(released, axis=1), jnp.any(released, axis=1)
+
+
+def _lanes_to_polish(lanes: SolverResult, found, num_starts: int):
+    """``(pick, wanted)``, each ``(min(MAX_POLISHED, 2N),)``: the lane polished for each
+    chosen boundary problem (its lowest-energy candidate, :func:`_polish_candidates`) and
+    whether the problem has a candidate at all. Problems with a candidate come first:
+    under ``vmap`` every grasp polishes as many as the one that needs most, and stalls
+    are rare, so a grasp polishes at most :data:`MAX_POLISHED`, not all ``2N``."""
+    candidate = _polish_candidates(lanes, found, num_starts)  # (2N, D)
+    two_n = candidate.shape[0]
+    pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
+    pick = jnp.arange(two_n) * num_starts + pick  # (2N,) one lane per boundary problem
+    has_candidate = jnp.any(candidate, axis=1)
+    chosen = jnp.argsort(~has_candidate, stable=True)[: min(MAX_POLISHED, two_n)]
+    return pick[chosen], has_candidate[chosen]
+
+
+def _original_multipliers(data: ProblemData, z, lam_rel, k, j, released):
+    """``(lam (P, 3N), nu (P,))``: the polish's multipliers ``lam_rel`` ``(P, 3N)`` at
+    ``z`` ``(P, 6)`` in the original problem's rows (``k`` ``(P,)`` the equality row,
+    ``j`` the released contact where ``released``). The equality's goes to ``nu``; the
+    pyramid rows' ``d_j`` part to ``j``'s contact row, ``d P_k / d d_j = mu_j / (2 cos^2
+    phi_j)`` per ``dr_j``, clipped at 0 (the tangential part has no row of the original
+    problem, so the envelope derivative of such a boundary misses it)."""
+    n = data.params.c.shape[0]
+    rows = jnp.arange(3 * n)
+    is_eq = rows[None, :] == k[:, None]
+    j_rows = (rows[None, :] % n == j[:, None]) & released[:, None]
+    cphi = jax.vmap(lambda z: contact_kinematics(to_pose(z, data.lever), data.params)[1])(z)  # (P, N)
+    slope = data.params.mu[j] / (2.0 * jnp.take_along_axis(cphi, j[:, None], axis=1)[:, 0] ** 2)
+    lam_d = jnp.maximum(slope * jnp.sum(jnp.where(j_rows, lam_rel, 0.0), axis=1), 0.0)
+    lam = jnp.where(is_eq | j_rows, 0.0, lam_rel) + jnp.where(
+        released[:, None], jax.nn.one_hot(j, 3 * n, dtype=lam_rel.dtype) * lam_d[:, None], 0.0
+    )
+    return lam, -jnp.sum(jnp.where(is_eq, lam_rel, 0.0), axis=1)
+
+
+def _write_back(lanes: SolverResult, pick, ok, new: SolverResult) -> SolverResult:
+    """``lanes`` with lanes ``pick`` ``(P,)`` replaced by ``new`` where ``ok`` ``(P,)``."""
     old = jax.tree_util.tree_map(lambda a: a[pick], lanes)
     upd = jax.tree_util.tree_map(
         lambda a, b: jnp.where(ok.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), new, old

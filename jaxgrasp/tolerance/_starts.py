@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from functools import partial
 from typing import Any
 
 import jax
@@ -37,44 +38,13 @@ def _ray_start(gk, z0, v, t_grid, crossing_steps):
     Every value comes from ONE call site of ``gk``, in one loop: the origin, then the grid
     point by point, then the narrowing steps (``1 + len(t_grid) + crossing_steps``
     iterations). ``gk`` is the grasp model, and each call site of it is a copy of the
-    model in the compiled program: five sites (the origin, the grid, the bracket's lower
-    end, the narrowing, a Jacobian) made the start search a fifth of a sweep's program
-    and about 1.4 s of its 6-7 s cold start (trace, lowering and XLA; experiments/BENCHMARK.md).
+    model in the compiled executable, to be traced, lowered and compiled: one site instead
+    of five (the origin, the grid, the bracket's lower end, the narrowing, a Jacobian).
     """
     num_grid = t_grid.shape[0]
     ts = jnp.concatenate([jnp.zeros(1, t_grid.dtype), t_grid])  # the origin, then the grid
     zero = jnp.zeros((), t_grid.dtype)
-
-    def body(i, c):
-        lo, hi, g_lo, g_hi, side, crossed, g0, g1 = c
-        scanning = i <= num_grid
-        secant = hi - g_hi * (hi - lo) / (g_hi - g_lo)
-        inside = jnp.isfinite(secant) & (secant > lo) & (secant < hi)
-        t = jnp.where(scanning, ts[jnp.minimum(i, num_grid)], jnp.where(inside, secant, 0.5 * (lo + hi)))
-        g_t = gk(z0 + t * v)
-        neg = g_t < 0.0  # NaN (invalid pose) never counts as a crossing
-        # scanning: the bracket's lower end follows the grid up to the first crossing
-        # (the origin's value included), its upper end is that crossing
-        first = scanning & (i > 0) & ~crossed & neg
-        scan_lo = scanning & ~crossed & ~first
-        # narrowing, Illinois: the end that stays for the second time in a row has its
-        # value halved
-        narrowing = ~scanning
-        n_lo = jnp.where(neg, jnp.where(side < 0, 0.5 * g_lo, g_lo), g_t)
-        n_hi = jnp.where(neg, g_t, jnp.where(side > 0, 0.5 * g_hi, g_hi))
-        lo = jnp.where(scan_lo | (narrowing & ~neg), t, lo)
-        g_lo = jnp.where(scan_lo, g_t, jnp.where(narrowing, n_lo, g_lo))
-        hi = jnp.where(first | (narrowing & neg), t, hi)
-        g_hi = jnp.where(first, g_t, jnp.where(narrowing, n_hi, g_hi))
-        side = jnp.where(narrowing, jnp.where(neg, -1, 1), side)
-        g0 = jnp.where(i == 0, g_t, g0)
-        g1 = jnp.where(i == 1, g_t, g1)
-        # no crossing on the grid: the first grid interval, as a bracket that is none
-        last = ~crossed & ~first & (i == num_grid)
-        lo, g_lo = jnp.where(last, 0.0, lo), jnp.where(last, g0, g_lo)
-        hi, g_hi = jnp.where(last, t_grid[0], hi), jnp.where(last, g1, g_hi)
-        return lo, hi, g_lo, g_hi, side, crossed | first, g0, g1
-
+    body = partial(_ray_step, gk, z0, v, t_grid, ts)
     init = (zero, t_grid[0], zero, zero, jnp.asarray(0), jnp.asarray(False), zero, zero)
     lo, hi, g_lo, g_hi, _, found, g0, _ = jax.lax.fori_loop(0, 1 + num_grid + crossing_steps, body, init)
     # a secant step can land on the crossing itself (to rounding, on the feasible side):
@@ -83,8 +53,45 @@ def _ray_start(gk, z0, v, t_grid, crossing_steps):
     t = jnp.where(jnp.abs(g_lo) < jnp.abs(g_hi), lo, hi)  # NaN compares false: hi
     return z0 + t * v, found, g0
 
-FRAME_TIE = 1e-6
 
+def _ray_step(gk, z0, v, t_grid, ts, i, c):
+    """Iteration ``i`` of :func:`_ray_start`'s loop: ``gk`` at ``ts[i]`` (the origin, then
+    the grid) while ``i <= len(t_grid)``, else at the next regula falsi point. The carry
+    ``c`` is ``(lo, hi, g_lo, g_hi, side, crossed, g0, g1)``: the bracket ``[lo, hi]``
+    along the ray and ``gk``'s (Illinois-halved) values at its ends, the end that moved
+    last (``-1`` hi, ``1`` lo), whether the grid has crossed, and ``gk`` at the origin and
+    at the first grid point."""
+    num_grid = t_grid.shape[0]
+    lo, hi, g_lo, g_hi, side, crossed, g0, g1 = c
+    scanning = i <= num_grid
+    secant = hi - g_hi * (hi - lo) / (g_hi - g_lo)
+    inside = jnp.isfinite(secant) & (secant > lo) & (secant < hi)
+    t = jnp.where(scanning, ts[jnp.minimum(i, num_grid)], jnp.where(inside, secant, 0.5 * (lo + hi)))
+    g_t = gk(z0 + t * v)
+    neg = g_t < 0.0  # NaN (invalid pose) never counts as a crossing
+    # scanning: the bracket's lower end follows the grid up to the first crossing
+    # (the origin's value included), its upper end is that crossing
+    first = scanning & (i > 0) & ~crossed & neg
+    scan_lo = scanning & ~crossed & ~first
+    # narrowing, Illinois: the end that stays for the second time in a row has its
+    # value halved
+    narrowing = ~scanning
+    n_lo = jnp.where(neg, jnp.where(side < 0, 0.5 * g_lo, g_lo), g_t)
+    n_hi = jnp.where(neg, g_t, jnp.where(side > 0, 0.5 * g_hi, g_hi))
+    lo = jnp.where(scan_lo | (narrowing & ~neg), t, lo)
+    g_lo = jnp.where(scan_lo, g_t, jnp.where(narrowing, n_lo, g_lo))
+    hi = jnp.where(first | (narrowing & neg), t, hi)
+    g_hi = jnp.where(first, g_t, jnp.where(narrowing, n_hi, g_hi))
+    side = jnp.where(narrowing, jnp.where(neg, -1, 1), side)
+    g0 = jnp.where(i == 0, g_t, g0)
+    g1 = jnp.where(i == 1, g_t, g1)
+    # no crossing on the grid: the first grid interval, as a bracket that is none
+    last = ~crossed & ~first & (i == num_grid)
+    lo, g_lo = jnp.where(last, 0.0, lo), jnp.where(last, g0, g_lo)
+    hi, g_hi = jnp.where(last, t_grid[0], hi), jnp.where(last, g1, g_hi)
+    return lo, hi, g_lo, g_hi, side, crossed | first, g0, g1
+
+FRAME_TIE = 1e-6
 """:func:`start_frame` takes eigenvalues of the grasp's stiffness closer than this (relative
 to the largest) as one eigenspace, and a reference sum that cancels to within this of its
 terms' lengths as none."""
@@ -92,7 +99,6 @@ terms' lengths as none."""
 _FRAME_SPAN = 0.3  # a reference vector joins an eigenspace's basis if its residual is longer
 
 FRAME_BITS = 20
-
 """:func:`start_frame`'s entries are multiples of ``2^-FRAME_BITS`` (about 1e-6)."""
 
 
@@ -100,24 +106,14 @@ def start_frame(data: ProblemData):
     """``(6, 6)`` orthonormal columns: the frame of the start directions in the scaled pose
     space ``z`` of the grasp ``data``.
 
-    The columns are the eigenvectors of the grasp's stiffness in its initial state, each
-    fingertip a spring at its contact point: ``sum_i k_i (A_i^T A_i + a_i b_i b_i^T)`` with
-    ``k_i = E_i dr_i`` (the elastic energy's second derivative in the normal and in the
-    tangential displacement are both ``2 pi E d``), ``A_i`` the ``(3, 6)`` map from ``z`` to
-    the displacement ``dp + w x c_i`` of contact ``i``, ``b_i`` the twist ``n_i . w``
-    about its normal and ``a_i = dr_i (r_i - dr_i / 3)`` the torsion's share; inactive
-    contacts have none. These are the object's modes of motion in the grasp, softest
-    first, from the grasp's fields alone: no derivative of the model is traced (the
-    energy's own Hessian at the equilibrium served as well and made the one-grasp program
-    21 % longer). Their signs, and the basis of an eigenspace of equal eigenvalues (within
-    :data:`FRAME_TIE`, as in every symmetric grasp), come from reference vectors projected
-    onto the eigenspace and orthonormalised in order: first the weight ``(m g, 0)``, the
-    sum of the fingertips' normal wrenches ``k_i (n_i, c_i x n_i)`` and of their
-    positions ``k_i (c_i, 0)`` (unit length; kept where their residual is longer than
-    :data:`FRAME_TIE`, and left out where a sum cancels to within :data:`FRAME_TIE` of its
-    terms' lengths, as by symmetry), then the coordinate axes, kept where their residual
-    is longer than 0.3 (which completes every basis: six unit vectors whose residuals
-    were all at most 0.3 cannot leave an eigenspace dimension uncovered).
+    The columns are the eigenvectors of the grasp's stiffness in its initial state
+    (:func:`_stiffness`): the object's modes of motion in the grasp, softest first, from
+    the grasp's fields alone, so that no derivative of the model is traced (the energy's
+    own Hessian at the equilibrium served as well, at the price of the model's second
+    derivative in the executable). Their signs, and the basis of an eigenspace of equal
+    eigenvalues (within :data:`FRAME_TIE`, as in every symmetric grasp), come from
+    reference vectors (:func:`_frame_references`) projected onto the eigenspace and
+    orthonormalised in order (:func:`_eigenspace_bases`).
 
     Rotating or mirroring the world frame maps the pose space by an orthogonal ``T``
     (``dp -> R dp``, ``w -> det(R) R w``), the stiffness to ``T K T^T`` and each reference
@@ -131,17 +127,44 @@ def start_frame(data: ProblemData):
     leave open is settled by the coordinate axes, away from any threshold, so that
     rounding (e.g. a grasp padded with inactive contacts) does not turn the frame.
     """
+    k, hmat = _stiffness(data)
+    evals, vecs = serial_eigh(hmat / jnp.max(jnp.abs(hmat)))  # one LAPACK call per grasp: jaxgrasp.solver._dense
+    refs = _frame_references(data, k)
+    basis, rank = _eigenspace_bases(evals, vecs, refs)
+    # snapped to a grid of 2^-FRAME_BITS: a rounding-level change of the stiffness (the same
+    # grasp padded with inactive contacts) then leaves the starts bit-identical
+    return jnp.round(basis[jnp.arange(6), rank].T * 2.0**FRAME_BITS) / 2.0**FRAME_BITS
+
+
+def _stiffness(data: ProblemData):
+    """``(k, K)``: ``k`` ``(N,)`` each fingertip's stiffness ``E_i dr_i`` (0 where inactive)
+    and ``K`` ``(6, 6)`` the grasp's stiffness in its initial state in the scaled pose
+    space ``z``, each fingertip a spring at its contact point:
+    ``K = sum_i k_i (A_i^T A_i + a_i b_i b_i^T)``. The elastic energy's second derivative
+    in the normal and in the tangential displacement are both ``2 pi E d`` (the common
+    ``2 pi`` is left out); ``A_i`` is the ``(3, 6)`` map from ``z`` to the displacement
+    ``dp + w x c_i`` of contact ``i``, ``b_i`` the twist ``n_i . w`` about its normal and
+    ``a_i = dr_i (r_i - dr_i / 3)`` (mm^2) the torsion's share."""
     p = data.params
-    dtype = p.c.dtype
     lever = data.lever
     k = jnp.where(p.on, p.E * p.dr, 0.0)  # (N,) stiffness of each fingertip (normal = tangential), / 2 pi
-    eye = jnp.broadcast_to(jnp.eye(3, dtype=dtype), p.c.shape + (3,))
+    eye = jnp.broadcast_to(jnp.eye(3, dtype=p.c.dtype), p.c.shape + (3,))
     cross = jnp.cross(p.c[:, None, :], eye)  # (N, 3, 3): cross @ v = v x c
     a = jnp.concatenate([eye, cross / lever], axis=2)  # (N, 3, 6): z -> displacement w x c + dp of the contact
     b = jnp.concatenate([jnp.zeros_like(p.n), p.n / lever], axis=1)  # (N, 6): z -> twist n . w about the normal
     arm = p.dr * (p.r - p.dr / 3.0)  # mm^2: torsion stiffness / k
-    hmat = jnp.einsum("n,nia,nib->ab", k, a, a) + jnp.einsum("n,na,nb->ab", k * arm, b, b)
-    evals, vecs = serial_eigh(hmat / jnp.max(jnp.abs(hmat)))  # one LAPACK call per grasp: jaxgrasp.solver._dense
+    return k, jnp.einsum("n,nia,nib->ab", k, a, a) + jnp.einsum("n,na,nb->ab", k * arm, b, b)
+
+
+def _frame_references(data: ProblemData, k):
+    """``(9, 6)`` the reference vectors of :func:`start_frame`, in order: the weight
+    ``(m g, 0)``, the sum of the fingertips' normal wrenches ``k_i (n_i, c_i x n_i)`` and
+    of their positions ``k_i (c_i, 0)`` (``k`` ``(N,)`` from :func:`_stiffness`; unit
+    length, or zero where a sum cancels to within :data:`FRAME_TIE` of its terms' lengths,
+    as by symmetry), then the six coordinate axes."""
+    p = data.params
+    dtype = p.c.dtype
+    lever = data.lever
     wrench = jnp.concatenate([p.n, jnp.cross(p.c, p.n) / lever], axis=1)  # (N, 6)
     place = jnp.concatenate([p.c / lever, jnp.zeros_like(p.c)], axis=1)  # (N, 6)
     rows = jnp.stack([k[:, None] * wrench, k[:, None] * place])  # (2, N, 6); inactive: k = 0
@@ -151,8 +174,20 @@ def start_frame(data: ProblemData):
     lengths = jnp.concatenate([jnp.linalg.norm(weight)[None], jnp.sum(jnp.linalg.norm(rows, axis=2), axis=1)])
     # a sum that cancels (a symmetric grasp) is rounding noise: no reference
     kept = norms > FRAME_TIE * lengths[:, None]
-    refs = jnp.concatenate([jnp.where(kept, sums / jnp.where(kept, norms, 1.0), 0.0), jnp.eye(6, dtype=dtype)])
-    # eigenspaces: runs of eigenvalues (ascending) with gaps within FRAME_TIE
+    return jnp.concatenate([jnp.where(kept, sums / jnp.where(kept, norms, 1.0), 0.0), jnp.eye(6, dtype=dtype)])
+
+
+def _eigenspace_bases(evals, vecs, refs):
+    """``(basis, rank)``: Gram-Schmidt of the reference vectors ``refs`` ``(9, 6)`` in the
+    eigenspace of every column of ``vecs`` ``(6, 6)`` (eigenvalues ``evals`` ``(6,)``,
+    ascending; runs of gaps within :data:`FRAME_TIE` are one eigenspace). ``basis``
+    ``(6, 6, 6)`` ``[column, slot, :]`` is each column's eigenspace basis in the order
+    the references filled it, ``rank`` ``(6,)`` the slot of each column in its eigenspace.
+    A reference sum joins a basis where its residual is longer than :data:`FRAME_TIE`, a
+    coordinate axis where it is longer than 0.3, which completes every basis: six unit
+    vectors whose residuals were all at most 0.3 cannot leave an eigenspace dimension
+    uncovered."""
+    dtype = vecs.dtype
     tie = jnp.diff(evals) <= FRAME_TIE * jnp.max(jnp.abs(evals))
     label = jnp.cumsum(jnp.concatenate([jnp.zeros(1, jnp.int32), (~tie).astype(jnp.int32)]))
     same = label[:, None] == label[None, :]  # (6, 6): column j in column i's eigenspace
@@ -175,9 +210,7 @@ def start_frame(data: ProblemData):
 
     init = (jnp.zeros((6, 6, 6), dtype), jnp.zeros(6, jnp.int32))
     (basis, _), _ = jax.lax.scan(orthonormalise, init, (refs, spans))
-    # snapped to a grid of 2^-FRAME_BITS: a rounding-level change of the stiffness (the same
-    # grasp padded with inactive contacts) then leaves the starts bit-identical
-    return jnp.round(basis[jnp.arange(6), rank].T * 2.0**FRAME_BITS) / 2.0**FRAME_BITS
+    return basis, rank
 
 
 def _lane_rays(data: ProblemData, options: EvaluateOptions):
@@ -248,11 +281,7 @@ def _equilibrium_lanes(data: ProblemData, num_lanes: int):
 
 
 @jax.tree_util.register_dataclass
-
-
 @dataclasses.dataclass(frozen=True)
-
-
 class LaneStarts:
     """What the solver's lanes of one stage start from (leading axes ``(B, L)``: grasps,
     then each grasp's ``L = 2N * D`` lanes).

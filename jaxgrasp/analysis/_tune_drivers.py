@@ -1,0 +1,164 @@
+"""The optimisers of :func:`jaxgrasp.tune` and the record of their iterates.
+
+Every driver minimises a compiled ``vg(u, data) -> ((objective, Evaluation), grad)`` over
+the box ``[0, 1]^k`` and adds each iterate to a :class:`SearchRecord`; they
+know nothing of grasps beyond the evaluation's value and status.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrasp.analysis._tune_status import TuneStatus
+from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.tolerance._status import GraspStatus
+
+__all__ = ["METHODS", "SearchRecord", "run_search"]
+
+METHODS = ("scipy_lbfgsb", "jaxopt_lbfgsb", "projected_gradient")
+"""Optimisers, all on the same compiled value and envelope gradient: SciPy's L-BFGS-B
+(default; ``scipy.optimize.minimize``), ``jaxopt.LBFGSB`` and ``jaxopt.ProjectedGradient``
+with ``projection_box``. At a maximum on a kink (the cube's shared deformation)
+``jaxopt.LBFGSB`` takes short steps and compiles its update separately, and projected
+gradient oscillates around the kink; SciPy's L-BFGS-B is the default."""
+
+
+class SearchRecord:
+    """The value and status of every iterate, and the best trusted one."""
+
+    def __init__(self, v0: float, u0, ev0):
+        self.history = [v0]
+        self.statuses = [int(ev0.status)]
+        self.best = (v0, np.asarray(u0), ev0)
+
+    @property
+    def initial_value(self) -> float:
+        return self.history[0]
+
+    @classmethod
+    def start(cls, vg, box, data) -> "SearchRecord":
+        """Evaluate the start ``box.u0`` (a :class:`~jaxgrasp.analysis._tune_spec.ParamBox`);
+        a start without a positive value is an error."""
+        (_, ev0), _ = vg(jnp.asarray(box.u0), data)
+        v0 = float(ev0.value)
+        if not (v0 > 0.0 and math.isfinite(v0)):
+            where = f" after clipping {', '.join(box.clipped)} to its bounds" if box.clipped else ""
+            raise GraspValueError(
+                f"tune: the starting grasp{where} has value {v0:g} J "
+                f"(status {GraspStatus(int(ev0.status)).label}): "
+                "its gradient is 0, so there is nothing to follow; start from a stable grasp"
+            )
+        return cls(v0, box.u0, ev0)
+
+    def add(self, u, ev) -> float:
+        """Record an iterate; returns its value, J."""
+        v = float(ev.value)
+        s = int(ev.status)
+        self.history.append(v)
+        self.statuses.append(s)
+        if s in (GraspStatus.STABLE, GraspStatus.NOT_CONVERGED) and v > self.best[0]:
+            self.best = (v, np.asarray(u), ev)
+        return v
+
+
+def run_search(method: str, vg, u0, data, rec: SearchRecord, **stop):
+    """Run the optimiser ``method`` (one of :data:`METHODS`) on ``vg`` from ``u0``;
+    ``stop`` holds ``maxiter``, ``tol``, ``ftol``, ``patience`` and ``callback``
+    (:func:`jaxgrasp.tune`). Returns ``(status, iterations, evaluations)``."""
+    if method == "scipy_lbfgsb":
+        return _run_scipy(vg, u0, data, rec, **stop)
+    return _run_jaxopt(_jaxopt_solver(vg, method), u0, data, rec, **stop)
+
+
+def _run_jaxopt(solver, u0, data, rec: SearchRecord, *, maxiter, tol, ftol, patience, callback):
+    """A jaxopt solver's iterations, one record each; ``(status, iterations, evaluations)``."""
+    box = (jnp.zeros_like(jnp.asarray(u0)), jnp.ones_like(jnp.asarray(u0)))
+    u = jnp.asarray(u0)
+    state = solver.init_state(u, box, data)
+    status, iters, stall = TuneStatus.MAX_ITERATIONS, 0, 0
+    for it in range(1, maxiter + 1):
+        u_prev = u
+        prev_best = rec.best[0]
+        u, state = solver.update(u, state, box, data)
+        iters = it
+        v = rec.add(u, state.aux)
+        if callback is not None:
+            callback(it, v, np.asarray(u))
+        stall = stall + 1 if rec.best[0] <= prev_best * (1.0 + ftol) else 0
+        if float(state.error) <= tol:
+            status = TuneStatus.CONVERGED
+            break
+        if bool(getattr(state, "failed_linesearch", False)) and np.array_equal(np.asarray(u), np.asarray(u_prev)):
+            status = TuneStatus.LINE_SEARCH_FAILED
+            break
+        if stall >= patience:
+            status = TuneStatus.STALLED
+            break
+    return status, iters, int(getattr(state, "num_fun_eval", iters + 1))
+
+
+@lru_cache(maxsize=32)
+def _jaxopt_solver(vg, method: str):
+    """A jaxopt solver of the compiled ``vg``, cached so that its ``update`` compiles once
+    per compiled objective and method."""
+    import jaxopt
+
+    if method == "jaxopt_lbfgsb":
+        return jaxopt.LBFGSB(fun=vg, value_and_grad=True, has_aux=True, maxiter=10**6, tol=0.0)
+    from jaxopt.projection import projection_box
+
+    return jaxopt.ProjectedGradient(
+        fun=vg, projection=projection_box, value_and_grad=True, has_aux=True, maxiter=10**6, tol=0.0
+    )
+
+
+def _run_scipy(vg, u0, data, rec: SearchRecord, *, maxiter, tol, ftol, patience, callback):
+    """SciPy's L-BFGS-B on the compiled value and gradient in ``[0, 1]^k``, one record per
+    iteration; ``(status, iterations, evaluations)``. (``patience`` is jaxopt's: SciPy
+    stops on ``ftol`` itself.)"""
+    import scipy.optimize
+
+    last = {}
+    count = {"it": 0, "evals": 0}
+
+    def fun(u):
+        count["evals"] += 1
+        (f, ev), g = vg(jnp.asarray(u), data)
+        last["u"], last["ev"] = np.array(u), ev
+        return float(f), np.asarray(g, dtype=np.float64)
+
+    def cb(intermediate_result):
+        xk = np.asarray(intermediate_result.x)
+        count["it"] += 1
+        if "u" in last and np.array_equal(last["u"], xk):
+            ev = last["ev"]  # the line search's last point is the accepted iterate
+        else:
+            count["evals"] += 1
+            (_, ev), _ = vg(jnp.asarray(xk), data)
+        v = rec.add(xk, ev)
+        if callback is not None:
+            callback(count["it"], v, xk)
+
+    out = scipy.optimize.minimize(
+        fun,
+        np.asarray(u0, dtype=np.float64),
+        jac=True,
+        method="L-BFGS-B",
+        bounds=[(0.0, 1.0)] * len(u0),
+        callback=cb,
+        options={"maxiter": maxiter, "gtol": tol, "ftol": ftol},
+    )
+    return _scipy_status(out, count["it"], maxiter), count["it"], count["evals"]
+
+
+def _scipy_status(out, iterations: int, maxiter: int) -> TuneStatus:
+    """How SciPy's L-BFGS-B run ``out`` stopped, as a :class:`TuneStatus`."""
+    if out.success:
+        return TuneStatus.CONVERGED if "PROJ" in str(out.message).upper() else TuneStatus.STALLED
+    if iterations >= maxiter:
+        return TuneStatus.MAX_ITERATIONS
+    return TuneStatus.LINE_SEARCH_FAILED
