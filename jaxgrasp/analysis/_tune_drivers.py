@@ -103,9 +103,12 @@ def _run_jaxopt(solver, u0, data, rec: SearchRecord, *, maxiter, tol, ftol, pati
 
 @lru_cache(maxsize=32)
 def _jaxopt_solver(vg, method: str):
-    """A jaxopt solver of the compiled ``vg``, cached so that its ``update`` compiles once
-    per compiled objective and method."""
+    """A jaxopt solver of ``vg``. jaxopt compiles its own ``update`` around the objective,
+    and a ``jit`` inside another may not carry compiler options, so the solver gets the
+    function ``vg`` compiles (``__wrapped__``), not the compiled one."""
     import jaxopt
+
+    vg = getattr(vg, "__wrapped__", vg)
 
     if method == "jaxopt_lbfgsb":
         return jaxopt.LBFGSB(fun=vg, value_and_grad=True, has_aux=True, maxiter=10**6, tol=0.0)
