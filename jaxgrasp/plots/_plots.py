@@ -188,17 +188,19 @@ def _status_legend(ax, status, kind):
     return handles
 
 
+def _role(given, preferred: str, names: list) -> tuple:
+    """The axis that plays a role (x, curves, panels): ``given``, else ``preferred`` where
+    it is swept, else the first of ``names`` (``None`` when none is left); and the names
+    left for the other roles."""
+    if given is None:
+        given = preferred if preferred in names else (names[0] if names else None)
+    return given, [n for n in names if n != given]
+
+
 def _pick_roles(names, x, curves, panels):
-    names = list(names)
-    if x is None:
-        x = "initial_deformation" if "initial_deformation" in names else names[0]
-    rest = [n for n in names if n != x]
-    if curves is None:
-        curves = "young_modulus" if "young_modulus" in rest else (rest[0] if rest else None)
-    rest = [n for n in rest if n != curves]
-    if panels is None:
-        panels = "mass" if "mass" in rest else (rest[0] if rest else None)
-    rest = [n for n in rest if n != panels]
+    x, rest = _role(x, "initial_deformation", list(names))
+    curves, rest = _role(curves, "young_modulus", rest)
+    panels, rest = _role(panels, "mass", rest)
     return x, curves, panels, rest
 
 
@@ -316,12 +318,8 @@ def plot_max(reduced, best, path=None, *, over="initial_deformation", x=None, cu
     names = list(reduced.names)
     if not names:
         raise ValueError("plot_max_over needs a sweep with at least two axes")
-    if x is None:
-        x = "young_modulus" if "young_modulus" in names else names[0]
-    rest = [n for n in names if n != x]
-    if curves is None:
-        curves = "mass" if "mass" in rest else (rest[0] if rest else None)
-    rest = [n for n in rest if n != curves]
+    x, rest = _role(x, "young_modulus", names)
+    curves, rest = _role(curves, "mass", rest)
     if rest:
         raise ValueError(f"plot_max_over: too many axes left ({', '.join(rest)}); reduce them first")
     order = [x] + ([curves] if curves else [])
