@@ -1,10 +1,10 @@
 """Analyses built on the engine: parameter sweeps, gradient tuning, the Ferrari-Canny epsilon.
 """
 
-from jaxgrasp.analysis._sweep import sweep, SweepResult, PARAMETERS
-from jaxgrasp.analysis._tune import tune, TuneResult
+from jaxgrasp.analysis._epsilon import EpsilonResult, epsilon
+from jaxgrasp.analysis._sweep import PARAMETERS, SweepResult, sweep
+from jaxgrasp.analysis._tune import TuneResult, tune
 from jaxgrasp.analysis._tune_status import TuneStatus
-from jaxgrasp.analysis._epsilon import epsilon, EpsilonResult
 
 __all__ = [
     "sweep",

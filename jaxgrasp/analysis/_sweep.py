@@ -40,24 +40,24 @@ from typing import Any, Callable, Mapping
 import jax
 import numpy as np
 
-from jaxgrasp.io import _outputs as outputs
 from jaxgrasp.engine._batch import start_progress
 from jaxgrasp.engine._checkpoint import SweepKeeper
 from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields
 from jaxgrasp.engine._plan import check_chunk_size, plan_chunks
 from jaxgrasp.engine._run import run_chunks
-from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.model._codes import BoundaryKind
 from jaxgrasp.model._fields import FIELD, SWEEPABLE, Field
 from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.tolerance._result import SUMMARY_FIELDS, SummaryNames
-from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.tolerance._status import GraspStatus
 from jaxgrasp.model._validation import (
     GraspValueError,
     as_float_array,
     check_grasp_inputs,
     format_value,
 )
+from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.tolerance._result import SUMMARY_FIELDS, SummaryNames
+from jaxgrasp.tolerance._status import GraspStatus
 
 __all__ = [
     "sweep",

@@ -14,17 +14,25 @@ from __future__ import annotations
 
 import sys
 
-from jaxgrasp.engine import _compile
-from jaxgrasp.engine._store import enable_compilation_cache
 from jaxgrasp.cli import (
     _batch as batch,
+)
+from jaxgrasp.cli import (
     _evaluate as evaluate,
+)
+from jaxgrasp.cli import (
     _show as show,
+)
+from jaxgrasp.cli import (
     _sweep as sweep,
+)
+from jaxgrasp.cli import (
     _tune as tune,
 )
 from jaxgrasp.cli._common import EXIT_USAGE, Parser, UsageError, load_grasp, parse_number
 from jaxgrasp.cli._interrupt import run_interruptibly
+from jaxgrasp.engine import _compile
+from jaxgrasp.engine._store import enable_compilation_cache
 
 __all__ = [
     "main",

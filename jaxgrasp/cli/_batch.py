@@ -19,9 +19,6 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.engine._prefetch import prefetch
-from jaxgrasp.model._validation import counted
 from jaxgrasp.cli._common import (
     ChunkProgress,
     UsageError,
@@ -33,6 +30,9 @@ from jaxgrasp.cli._common import (
     replaced_text,
     say,
 )
+from jaxgrasp.engine._prefetch import prefetch
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.model._validation import counted
 
 __all__ = ["add_parser", "run", "OUTPUT_NAMES", "PARTIAL_NAME", "DEFAULT_TOP"]
 

@@ -26,8 +26,8 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """Evaluate the grasp of the command line and print the result; exit status 0."""
-    from jaxgrasp.engine._evaluate import evaluate
     from jaxgrasp.analysis._epsilon import epsilon, prefetch_qhull
+    from jaxgrasp.engine._evaluate import evaluate
 
     prefetch_qhull()  # SciPy's import overlaps the evaluation's compile or cache load
 

@@ -34,9 +34,9 @@ import sys
 import threading
 from typing import Callable
 
+from jaxgrasp._startup import EXIT
 from jaxgrasp.engine import _compile
 from jaxgrasp.io import _outputs as outputs
-from jaxgrasp._startup import EXIT
 
 __all__ = ["run_interruptibly", "Interrupted", "EXIT_STATUS", "POLL_SECONDS", "PUBLISH_WAIT_SECONDS"]
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from jaxgrasp.io import _outputs as outputs
 from jaxgrasp.cli._common import (
     UsageError,
     add_grasp_source,
@@ -13,6 +12,7 @@ from jaxgrasp.cli._common import (
     grasp_source,
     load_grasp,
 )
+from jaxgrasp.io import _outputs as outputs
 
 __all__ = ["add_parser", "run", "PICTURE_SUFFIXES"]
 

@@ -19,26 +19,26 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.model._fields import FIELD
-from jaxgrasp.engine._prefetch import prefetch
-from jaxgrasp.model._codes import NO_BOUNDARY
-from jaxgrasp.model._validation import counted
 from jaxgrasp.cli._common import (
     OVERRIDES,
     ChunkProgress,
-    add_epsilon_option,
-    epsilon_columns,
     UsageError,
+    add_epsilon_option,
     add_grasp_source,
     check_chunk_size,
     check_out,
+    epsilon_columns,
     grasp_source,
     load_grasp,
     lock_out,
     parse_number,
     replaced_text,
 )
+from jaxgrasp.engine._prefetch import prefetch
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.model._codes import NO_BOUNDARY
+from jaxgrasp.model._fields import FIELD
+from jaxgrasp.model._validation import counted
 
 __all__ = ["add_parser", "run", "parse_axis_spec", "AXES", "PAPER_AXES"]
 

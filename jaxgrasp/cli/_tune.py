@@ -15,9 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.model._fields import TUNABLE
-from jaxgrasp.model._validation import counted
 from jaxgrasp.cli._common import (
     UsageError,
     add_grasp_source,
@@ -25,6 +22,9 @@ from jaxgrasp.cli._common import (
     load_grasp,
     parse_number,
 )
+from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.model._fields import TUNABLE
+from jaxgrasp.model._validation import counted
 
 __all__ = ["add_parser", "run", "parse_bounds", "check_bounds"]
 
@@ -71,8 +71,8 @@ def check_bounds(params, bounds: dict) -> None:
     """Every ``--param`` without default bounds has ``--bounds``, and every ``--bounds`` is
     of a ``--param`` (:class:`UsageError` naming the options; library messages would show
     Python syntax such as ``bounds={'positions': 0.01}``)."""
-    from jaxgrasp.model._fields import FIELD
     from jaxgrasp.analysis._tune_spec import parse_param
+    from jaxgrasp.model._fields import FIELD
 
     specs = [parse_param(p) for p in params]
     tuned = {s.name for s in specs} | {s.label for s in specs}
@@ -145,8 +145,8 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """Tune the grasp of the command line; write it (and a plot) and print one summary line."""
-    from jaxgrasp.tolerance._options import EvaluateOptions
     from jaxgrasp.analysis import tune
+    from jaxgrasp.tolerance._options import EvaluateOptions
 
     out = _check_options(args)
     bounds = parse_bounds(args.bounds)

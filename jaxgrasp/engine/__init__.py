@@ -2,9 +2,9 @@
 kept in an executable store on disk, with checkpoints.
 """
 
-from jaxgrasp.engine._evaluate import evaluate
 from jaxgrasp.engine._batch import evaluate_batch
 from jaxgrasp.engine._batch_result import BatchResult
+from jaxgrasp.engine._evaluate import evaluate
 from jaxgrasp.engine._store import enable_compilation_cache
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
 

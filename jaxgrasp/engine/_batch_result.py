@@ -22,8 +22,8 @@ import jax
 import numpy as np
 
 from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.tolerance._result import FIELDS, Evaluation, SummaryNames
 from jaxgrasp.model._codes import BoundaryKind
+from jaxgrasp.tolerance._result import FIELDS, Evaluation, SummaryNames
 from jaxgrasp.tolerance._status import GraspStatus
 
 __all__ = ["BatchResult", "CSV_COLUMNS", "mark_invalid", "assemble"]

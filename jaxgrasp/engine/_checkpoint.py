@@ -40,9 +40,9 @@ from typing import Mapping
 import numpy as np
 
 from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.model._codes import BoundaryKind
 from jaxgrasp.model._validation import counted as _counted
 from jaxgrasp.tolerance._result import SUMMARY_FIELDS as RESULT_FIELDS
-from jaxgrasp.model._codes import BoundaryKind
 from jaxgrasp.tolerance._status import GraspStatus
 
 __all__ = [

@@ -11,7 +11,7 @@ from typing import Any, Callable, Hashable, Sequence
 import jax
 
 from jaxgrasp.engine._pipeline import Pipeline, Staged, lower_stages
-from jaxgrasp.engine._store import _STATS, load_executable, executable_path, save_executable
+from jaxgrasp.engine._store import _STATS, executable_path, load_executable, save_executable
 
 __all__ = ['MEMO_SIZE', 'default_device', 'wait_for_saves', 'compiled', 'clear_compiled']
 

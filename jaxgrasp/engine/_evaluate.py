@@ -42,14 +42,14 @@ import numpy as np
 
 from jaxgrasp.engine import _compile
 from jaxgrasp.engine._evaluator import SETTLE_INLINE
+from jaxgrasp.engine._stages import run_inline, stage_functions
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS, LATENCY_CPU_OPTIONS
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.tolerance._problems import Problems
 from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._settle import needs_settling
-from jaxgrasp.engine._stages import run_inline, stage_functions
-from jaxgrasp.tolerance._problems import Problems
 from jaxgrasp.tolerance._verdict import split_temperature
 
 __all__ = ["evaluate", "evaluate_traced", "evaluate_batch_traced", "evaluate_compiled", "compiled_executable", "solve_problems"]

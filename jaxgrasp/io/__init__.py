@@ -6,8 +6,8 @@ JSONL; :func:`load_dataset`, :func:`save_dataset`), grasps on an object's mesh
 in SI units.
 """
 
-from jaxgrasp.io._grasp_file import load, save, grasp_from_dict, grasp_to_dict
 from jaxgrasp.io._dataset import GraspSet, load_dataset, save_dataset
+from jaxgrasp.io._grasp_file import grasp_from_dict, grasp_to_dict, load, save
 from jaxgrasp.io._mesh import MeshGrasp, from_mesh
 from jaxgrasp.io._outputs import OutputError
 

@@ -52,9 +52,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.io._grasp_file import _parse_json, grasp_from_dict, grasp_to_dict, read_input
 from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS, FIELD, NAMES
 from jaxgrasp.model._grasp import Grasp, stack
-from jaxgrasp.io._grasp_file import _parse_json, grasp_from_dict, grasp_to_dict, read_input
 from jaxgrasp.model._validation import GraspValueError
 
 __all__ = ["GraspSet", "load_dataset", "save_dataset", "SUFFIXES"]

@@ -48,9 +48,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.io._mesh import MeshGrasp, from_mesh
 from jaxgrasp.model._fields import FIELD, FIELDS, FINGERTIP
 from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.io._mesh import MeshGrasp, from_mesh
 from jaxgrasp.model._validation import GraspValueError
 
 __all__ = ["load", "save", "to_text", "grasp_from_dict", "grasp_to_dict", "to_toml"]

@@ -6,11 +6,11 @@ its validation (:class:`GraspValueError`), the conversion to internal units
 al., eq. 3-21), and the model's codes (:class:`BoundaryKind`, :class:`Constraint`).
 """
 
-from jaxgrasp.model._grasp import Grasp, stack, STANDARD_GRAVITY
-from jaxgrasp.model._fields import Field, FIELDS, FIELD
+from jaxgrasp.model._codes import NO_BOUNDARY, BoundaryKind, Constraint
+from jaxgrasp.model._fields import FIELD, FIELDS, Field
+from jaxgrasp.model._grasp import STANDARD_GRAVITY, Grasp, stack
+from jaxgrasp.model._potential import ModelParams, constraint_margins, model_params, potential_energy
 from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
-from jaxgrasp.model._potential import ModelParams, model_params, potential_energy, constraint_margins
-from jaxgrasp.model._codes import BoundaryKind, Constraint, NO_BOUNDARY
 
 __all__ = [
     "Grasp",

@@ -21,8 +21,8 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._codes import BoundaryKind
+from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._units import M_TO_MM, PA_TO_MPA
 
 __all__ = [

@@ -2,7 +2,7 @@
 and the way it fails, the value over the iterations of a tuning.
 """
 
-from jaxgrasp.plots._plots import plot_sweep, plot_max, plot_max_over, plot_ranking, plot_grasp, draw_scene, save_figure
+from jaxgrasp.plots._plots import draw_scene, plot_grasp, plot_max, plot_max_over, plot_ranking, plot_sweep, save_figure
 from jaxgrasp.plots._scene import grasp_scene
 from jaxgrasp.plots._tune_plot import plot_history
 

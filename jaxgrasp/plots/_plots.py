@@ -37,10 +37,10 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.model._fields import FIELD
 from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.model._fields import FIELD
 from jaxgrasp.model._units import MJ_TO_J
+from jaxgrasp.tolerance._status import GraspStatus
 
 __all__ = [
     "plot_sweep",

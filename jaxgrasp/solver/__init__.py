@@ -6,8 +6,8 @@ work queue. Its statuses are :class:`LaneStatus`; :class:`Coded` is the base of 
 named integer code of jaxgrasp.
 """
 
-from jaxgrasp.solver._solver import Problem, FirstOrder, SolverOptions, SolverResult, solve
-from jaxgrasp.solver._lanes import solve_lanes, solve_lane_batches
+from jaxgrasp.solver._lanes import solve_lane_batches, solve_lanes
+from jaxgrasp.solver._solver import FirstOrder, Problem, SolverOptions, SolverResult, solve
 from jaxgrasp.solver._status import Coded, LaneStatus
 
 __all__ = [

@@ -7,11 +7,11 @@ derivatives, and the :class:`Evaluation` result with its :class:`GraspStatus`. R
 it over many grasps, compiled and sharded, is :mod:`jaxgrasp.engine`'s job.
 """
 
+from jaxgrasp.tolerance._envelope import envelope_energy, soft_minimum
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 from jaxgrasp.tolerance._verdict import evaluations_of
-from jaxgrasp.tolerance._envelope import envelope_energy, soft_minimum
 
 __all__ = [
     "EvaluateOptions",
