@@ -11,6 +11,10 @@ and about a second per grasp to run, so:
   (``tests/ipopt_reference.py``) in a separate worker process, so that Ipopt runs while
   JAX compiles. Submit early (``ipopt_reference.submit``), collect late
   (``ipopt_reference.get``). Results are cached per (grasp, n_starts, seed).
+* The ``slow`` marker (``pyproject.toml``): compile-heavy, subprocess and long tests. The
+  developer's loop is ``python -m pytest -m "not slow"``; CI runs everything. A test that
+  uses one of :data:`SLOW_FIXTURES` is slow by itself (:func:`pytest_collection_modifyitems`),
+  so that no fast test pays for those fixtures; others carry ``@pytest.mark.slow``.
 """
 
 from __future__ import annotations
@@ -276,3 +280,18 @@ def warm_cache(tmp_path_factory) -> WarmCache:
     folder = tmp_path_factory.mktemp("warm") / "cache"  # not there yet: jaxgrasp creates it
     filler = WarmCache(folder, {})
     return WarmCache(folder, filler.evaluate_in_new_process())
+
+
+# ----------------------------------------------------------------------------- slow tests
+SLOW_FIXTURES = frozenset({"evaluate_many", "ipopt_reference", "warm_cache"})
+"""Session fixtures that compile an evaluator per contact count, run Ipopt in a worker
+process, or fill a cache folder in a cold process: a test that uses one is slow."""
+
+
+@pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects
+def pytest_collection_modifyitems(config, items):
+    """Mark ``slow`` every test that uses one of :data:`SLOW_FIXTURES`, directly or through
+    another fixture (a module fixture's cost falls on whichever test uses it first)."""
+    for item in items:
+        if SLOW_FIXTURES.intersection(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)
