@@ -114,21 +114,25 @@ def hidden_modules(package: types.ModuleType) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- jaxgrasp
-import_everything(jaxgrasp)
-SUBPACKAGES = subpackages(jaxgrasp)
+@pytest.fixture(scope="module")
+def packages() -> list[types.ModuleType]:
+    """The subpackages of jaxgrasp, once every module below jaxgrasp is imported (here,
+    not at collection, so that other test files see jaxgrasp as they would alone)."""
+    import_everything(jaxgrasp)
+    return subpackages(jaxgrasp)
 
 
 def test_at_most_30_public_names():
     assert len(jaxgrasp.__all__) <= MAX_PUBLIC_NAMES, f"{len(jaxgrasp.__all__)} names: {jaxgrasp.__all__}"
 
 
-def test_every_public_name_exists_and_has_its_own_docstring():
+def test_every_public_name_exists_and_has_its_own_docstring(packages):
     _fail_if("problems with jaxgrasp.__all__", missing_names(jaxgrasp) + undocumented_names(jaxgrasp))
 
 
-def test_no_function_hides_a_module():
+def test_no_function_hides_a_module(packages):
     offenders = hidden_modules(jaxgrasp)
-    for package in SUBPACKAGES:
+    for package in packages:
         offenders += hidden_modules(package)
     _fail_if("names bound to something other than the submodule of that name", offenders)
 
@@ -140,10 +144,10 @@ def test_enum_aliases_and_internals_are_off_the_top_level():
     _fail_if("enum aliases or internals at the top level (the enums carry the names)", offenders)
 
 
-def test_the_package_and_its_subpackages_have_a_face():
-    assert len(SUBPACKAGES) >= 5, [p.__name__ for p in SUBPACKAGES]
-    offenders = [f"{p.__name__}: no docstring" for p in [jaxgrasp, *SUBPACKAGES] if not (p.__doc__ or "").strip()]
-    for package in SUBPACKAGES:
+def test_the_package_and_its_subpackages_have_a_face(packages):
+    assert len(packages) >= 5, [p.__name__ for p in packages]
+    offenders = [f"{p.__name__}: no docstring" for p in [jaxgrasp, *packages] if not (p.__doc__ or "").strip()]
+    for package in packages:
         offenders += missing_names(package)
     _fail_if("subpackages without a docstring or a sound __all__", offenders)
 
