@@ -11,6 +11,14 @@ and about a second per grasp to run, so:
   (``tests/ipopt_reference.py``) in a separate worker process, so that Ipopt runs while
   JAX compiles. Submit early (``ipopt_reference.submit``), collect late
   (``ipopt_reference.get``). Results are cached per (grasp, n_starts, seed).
+* One cache folder for the session (:func:`store_dir`): XLA's cache and jaxgrasp's
+  executable store for every ``jaxgrasp.cli.main`` run (:func:`cache_dir`). A test that
+  needs a cold or a broken store makes its own (``warm_cache``, ``tmp_path``); the
+  developer's own ``JAXGRASP_CACHE_DIR`` is never used.
+* The ``slow`` marker (``pyproject.toml``): compile-heavy, subprocess and long tests. The
+  developer's loop is ``python -m pytest -m "not slow"``; CI runs everything. A test that
+  uses one of :data:`SLOW_FIXTURES` is slow by itself (:func:`pytest_collection_modifyitems`),
+  so that no fast test pays for those fixtures; others carry ``@pytest.mark.slow``.
 """
 
 from __future__ import annotations
@@ -29,7 +37,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import jaxgrasp  # turns on jax_enable_x64 by itself (tested in test_evaluate.py)
+# Where set, the developer's JAXGRASP_CACHE_DIR would turn on their own stores at
+# ``import jaxgrasp``: tests would load programs compiled elsewhere, and count no traces.
+os.environ.pop("JAXGRASP_CACHE_DIR", None)
+
+import jaxgrasp  # noqa: E402  turns on jax_enable_x64 by itself (tested in test_evaluate.py)
 
 TESTS_DIR = Path(__file__).resolve().parent
 if str(TESTS_DIR) not in sys.path:  # so that the Ipopt worker can import the reference
@@ -188,11 +200,20 @@ _CACHE_OPTIONS = (
 )
 
 
-@pytest.fixture(scope="module")
-def cache_dir(tmp_path_factory):
-    """A compilation-cache folder for ``jaxgrasp.cli.main`` (and its subprocesses).
+@pytest.fixture(scope="session")
+def store_dir(tmp_path_factory) -> Path:
+    """The session's cache folder (``JAXGRASP_CACHE_DIR``): XLA's compilation cache, and
+    jaxgrasp's executable store in its subfolder. Every test module that runs the command
+    shares it, so a program compiled by one is loaded by the next."""
+    return tmp_path_factory.mktemp("jaxgrasp-cache")
 
-    ``main`` turns on JAX's persistent compilation cache and jaxgrasp's program store
+
+@pytest.fixture(scope="module")
+def cache_dir(store_dir):
+    """The session's cache folder (:func:`store_dir`) for ``jaxgrasp.cli.main`` (and its
+    subprocesses).
+
+    ``main`` turns on JAX's persistent compilation cache and jaxgrasp's executable store
     (process-wide settings); both are restored after the module so the rest of the
     session is unaffected.
     """
@@ -200,7 +221,7 @@ def cache_dir(tmp_path_factory):
 
     saved = {k: getattr(jax.config, k) for k in _CACHE_OPTIONS}
     saved_programs = cache.executable_dir()
-    yield tmp_path_factory.mktemp("jaxgrasp-xla-cache")
+    yield store_dir
     for k, v in saved.items():
         jax.config.update(k, v)
     cache.set_executable_dir(saved_programs)
@@ -272,7 +293,25 @@ class WarmCache:
 @pytest.fixture(scope="session")
 def warm_cache(tmp_path_factory) -> WarmCache:
     """:class:`WarmCache`: one cold library process (traces and compiles the cube, ~10 s
-    on 2 cores) whose stores later processes load."""
+    on 2 cores) whose stores later processes load.
+
+    Its folder is its own, not :func:`store_dir`: the first process must find it empty
+    (``test_cache`` checks that it traced once), whichever tests ran before."""
     folder = tmp_path_factory.mktemp("warm") / "cache"  # not there yet: jaxgrasp creates it
     filler = WarmCache(folder, {})
     return WarmCache(folder, filler.evaluate_in_new_process())
+
+
+# ----------------------------------------------------------------------------- slow tests
+SLOW_FIXTURES = frozenset({"evaluate_many", "ipopt_reference", "warm_cache"})
+"""Session fixtures that compile an evaluator per contact count, run Ipopt in a worker
+process, or fill a cache folder in a cold process: a test that uses one is slow."""
+
+
+@pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects
+def pytest_collection_modifyitems(config, items):
+    """Mark ``slow`` every test that uses one of :data:`SLOW_FIXTURES`, directly or through
+    another fixture (a module fixture's cost falls on whichever test uses it first)."""
+    for item in items:
+        if SLOW_FIXTURES.intersection(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)

@@ -174,6 +174,7 @@ def test_errors_are_one_line_before_compiling():
         evaluate_batch([cube, bad])
 
 
+@pytest.mark.slow  # compiles a batch evaluator of its own
 def test_smooth_minimum_is_applied_in_a_batch():
     """``EvaluateOptions(smooth_min_temperature=T)``: each batch value is
     :func:`jaxgrasp.evaluate`'s soft minimum with the same options, below the hard one."""

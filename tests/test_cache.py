@@ -45,6 +45,7 @@ def test_second_process_loads_the_same_program(warm_cache):
         _assert_same_fields(other, here)
 
 
+@pytest.mark.slow  # compiles cold against caches of its own
 def test_program_from_xla_cache_is_not_stored(tmp_path):
     """A process whose program store is off (XLA's cache on) leaves XLA's cache entry of
     the cube's program. A later process with both on finds no stored program, traces,

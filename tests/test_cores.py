@@ -26,15 +26,18 @@ def _devices(code: str = PROBE, **env_over) -> int:
     return int(out.stdout.split()[-1])
 
 
+@pytest.mark.slow  # a subprocess
 def test_one_device_per_usable_core():
     assert _devices() == cores.usable_cores()
 
 
+@pytest.mark.slow  # a subprocess
 def test_environment_variable_sets_the_number():
     assert _devices(JAXGRASP_CPU_DEVICES="3") == 3
     assert _devices(JAXGRASP_CPU_DEVICES="1") == 1
 
 
+@pytest.mark.slow  # a subprocess
 def test_jax_settings_of_the_user_are_kept():
     assert _devices(XLA_FLAGS="--xla_force_host_platform_device_count=3") == 3
     assert _devices(JAX_NUM_CPU_DEVICES="5") == 5
@@ -42,6 +45,7 @@ def test_jax_settings_of_the_user_are_kept():
     assert _devices(set_first) == 4
 
 
+@pytest.mark.slow  # a subprocess
 def test_backends_already_running_are_left_alone():
     ran_first = "import jax; jax.numpy.ones(1).block_until_ready(); " + PROBE
     assert _devices(ran_first) == 1  # JAX's own single CPU device; the import does not fail

@@ -74,6 +74,7 @@ def test_eigh_under_vmap_is_one_lapack_call_per_matrix():
     assert np.array_equal(np.asarray(w_one), np.asarray(w_ref[7]))
 
 
+@pytest.mark.slow  # compiles a batched evaluator
 def test_batched_program_calls_no_lapack_but_small_eigh():
     """The batch engine's programs (every stage), with and without the settling stage,
     for 128 grasps per device: every LAPACK custom call is the symmetric eigensolver (``syevd``) on at
@@ -93,6 +94,7 @@ def test_batched_program_calls_no_lapack_but_small_eigh():
             assert dims[-2:] == [6, 6] and int(np.prod(dims[:-2])) <= EIGH_BLOCK, (settle, operand)
 
 
+@pytest.mark.slow  # a subprocess running a large chunk
 def test_large_chunk_does_not_hang():
     """``evaluate_batch`` of 300 cube grasps in one chunk of 512 (256 grasps per device on
     2 devices): it hung, every device waiting in the start frames' batched ``eigh``

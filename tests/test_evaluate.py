@@ -187,6 +187,7 @@ def name(res):
 
 
 # ----------------------------------------------------------------------------- dtype
+@pytest.mark.slow  # a subprocess
 def test_float64_by_default_in_a_fresh_interpreter():
     """Importing jaxgrasp alone turns on 64-bit mode (no conftest, no user configuration)."""
     code = (
@@ -363,6 +364,7 @@ def test_tolerates(results, case):
     np.testing.assert_array_equal(np.asarray(res.tolerates(jnp.array([0.0, 0.5 * v, 2 * v]))), [True, True, False])
 
 
+@pytest.mark.slow  # compiles evaluate under the caller's jit
 def test_jit_matches_evaluate():
     """A concrete grasp runs the memoised (or stored) program of ``jaxgrasp.engine._store``, a
     traced one the caller's program: the same numbers to rounding (the two programs differ

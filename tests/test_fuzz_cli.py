@@ -399,6 +399,7 @@ def _console():
     return [str(script)] if script.exists() else [sys.executable, "-m", "jaxgrasp.cli"]
 
 
+@pytest.mark.slow  # subprocesses
 @pytest.mark.parametrize(
     "content, name, fragment",
     [

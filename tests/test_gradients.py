@@ -180,6 +180,7 @@ def smooth_here(c, plus, minus, slope):
     return np.max(np.abs(tp - tm)) < 2e-5 and np.max(np.abs(rp - rm)) < 2e-3
 
 
+@pytest.mark.slow  # uses fd: gradients of a batch, compile-heavy
 def test_random_grasps_are_varied_and_mostly_stable(fd):
     statuses = [int(r[0][1].status) for r in fd["centers"][:N_RANDOM]]
     assert statuses.count(STABLE) >= 20, statuses
@@ -187,6 +188,7 @@ def test_random_grasps_are_varied_and_mostly_stable(fd):
     assert kinds == {0, 1}, "both slip and force-limit boundaries should be limiting somewhere"
 
 
+@pytest.mark.slow  # uses fd: gradients of a batch, compile-heavy
 @pytest.mark.parametrize("field", GRASP_FIELDS)
 def test_grad_matches_central_differences(fd, field):
     errors, zero_slopes = [], 0
@@ -222,6 +224,7 @@ def test_grad_matches_central_differences(fd, field):
     assert errors.max() <= REL_TOL, (field, errors)
 
 
+@pytest.mark.slow  # compiles jacfwd and grad under vmap
 def test_jacfwd_matches_grad_under_vmap(fd):
     centers = [r for r in fd["grasps"]] + fd["special"]
     jac = run_batched(_JF, centers)
@@ -232,6 +235,7 @@ def test_jacfwd_matches_grad_under_vmap(fd):
             np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-12 * max(1.0, np.abs(a).max()))
 
 
+@pytest.mark.slow  # uses fd: gradients of a batch, compile-heavy
 def test_zero_value_has_exact_zero_gradient(fd):
     got = [int(r[0][1].status) for r in fd["centers"][N_RANDOM:]]
     assert got == [UNSTABLE, UNSTABLE, INFEASIBLE, INFEASIBLE]
@@ -327,6 +331,7 @@ def test_smooth_min_evaluate_brackets_hard_min(cube_grid):
         assert _limit(soft) == _limit(hard)
 
 
+@pytest.mark.slow  # compiles and runs tune
 def test_tune_cube_reaches_grid_best(cube_grid):
     dr_best, v_best = cube_grid
     res = tune(presets.cube(E_TUNE, 1.5e-3), ["initial_deformation:shared"], maxiter=50)

@@ -309,6 +309,7 @@ def _not_writable_folder(tmp_path) -> Path | None:
     return None
 
 
+@pytest.mark.slow  # a subprocess
 def test_read_only_cache_folder_is_quiet(tmp_path):
     folder = _not_writable_folder(tmp_path)
     if folder is None:

@@ -89,6 +89,9 @@ sys.exit(main())
 # ----------------------------------------------------------------------------- helpers
 
 
+pytestmark = pytest.mark.slow  # subprocesses that compile and are signalled
+
+
 @pytest.fixture(scope="module")
 def sweep_cache(tmp_path_factory):
     """The compilation cache folder of every sweep subprocess of this module."""

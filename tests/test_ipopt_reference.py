@@ -28,6 +28,9 @@ MU = 0.5
 FMAX = 15.0
 
 
+pytestmark = pytest.mark.slow  # checks the Ipopt oracle, not the library; runs Ipopt
+
+
 def cube(young=2e5, dr=2e-3, mu=MU, fmax=FMAX):
     """Two fingertips at the centres of opposite faces of a 100 mm cube, m = 0."""
     return {

@@ -556,6 +556,7 @@ def _autodiff_per_contact(fn, q):
     return jnp.einsum("...iik->...ik", full)
 
 
+@pytest.mark.slow  # compiles autodiff of the model
 @pytest.mark.parametrize("name, grasp, x", _derivative_cases()[::3], ids=lambda v: v if isinstance(v, str) else "")
 def test_contact_derivatives_written_out_equal_autodiff(name, grasp, x):
     """model.contact_gradients / contact_hessians (each contact's energy and margins in its
@@ -592,6 +593,7 @@ def _program_derivatives(data, z, weights):
     return both(P.lane_problem(data)), both(S.Problem(lambda z: P.objective_and_constraints(z, data)))
 
 
+@pytest.mark.slow  # compiles autodiff of the model
 @pytest.mark.parametrize("name, grasp, x", _derivative_cases()[1::2], ids=lambda v: v if isinstance(v, str) else "")
 def test_program_derivatives_equal_autodiff(name, grasp, x):
     """The grasp programs' Problem (first order and Lagrangian Hessian written from the

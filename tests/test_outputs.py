@@ -135,6 +135,7 @@ for path in sys.argv[1:]:
 """
 
 
+@pytest.mark.slow  # a subprocess
 def test_check_writable_read_only_folder(tmp_path):
     """A read-only folder, and a folder to be made under it, are refused. Run in a
     subprocess that, as root, drops root's override of permission bits (setpriv), so the
@@ -188,6 +189,7 @@ def test_folder_lock_takes_over_a_stale_lock(tmp_path):
     assert not (folder / outputs.LOCK_NAME).exists()
 
 
+@pytest.mark.slow  # a subprocess
 def test_folder_lock_held_by_another_process(tmp_path):
     code = (
         "import sys, time; from jaxgrasp.io._outputs import FolderLock; "

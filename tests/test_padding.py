@@ -159,6 +159,7 @@ def test_compact_files_and_sweep_see_the_active_contacts(tmp_path):
         jaxgrasp.sweep(padded, mass=[0.0, 0.1])
 
 
+@pytest.mark.slow  # compiles evaluators of its own
 def test_scalar_per_contact_fields_stand_for_every_contact():
     """A per-contact field set to a scalar by ``Grasp.replace`` (``Grasp.create`` broadcasts
     it itself) means that value at every contact: ``evaluate``, ``stack`` and
@@ -177,6 +178,7 @@ def test_scalar_per_contact_fields_stand_for_every_contact():
     assert got.value[0] != got.value[1]
 
 
+@pytest.mark.slow  # compiles evaluators of its own
 def test_grasp_without_active_contacts_solves_nothing():
     """The batch engine stands in for an invalid grasp, and pads its last chunk, with a
     grasp that has no active contact. Its energy would be the weight's alone, unbounded

@@ -92,6 +92,9 @@ WORKER = textwrap.dedent(
 )
 
 
+pytestmark = pytest.mark.slow  # subprocesses with two devices
+
+
 def _start(n_devices: int, cfg: dict) -> subprocess.Popen:
     env = dict(os.environ)
     flags = env.get("XLA_FLAGS", "").replace("--xla_force_host_platform_device_count", "--ignored")

@@ -268,6 +268,7 @@ def _queue(theta, x0, eq_mask, nu0, active):
     return solve_lanes(lambda t: lambda x: fg(x, t), theta, x0, eq_mask, nu0, active, QUEUE_OPTIONS)
 
 
+@pytest.mark.slow  # compiles solve_lanes batches
 def test_solve_lanes_equals_vmap_of_solve():
     lanes = _lane_batch(0)
     want = _solve_batch(QUEUE_CASES, *lanes, QUEUE_OPTIONS)
@@ -275,6 +276,7 @@ def test_solve_lanes_equals_vmap_of_solve():
     _assert_same_lanes(jax.jit(_queue)(*lanes), want)
 
 
+@pytest.mark.slow  # compiles solve_lanes batches
 def test_solve_lanes_under_outer_vmap():
     """An outer ``vmap`` folds its batch into the lanes (``custom_vmap``): one queue of 32
     slots for 3 x 96 lanes, each lane still what ``solve`` gives it. The equality rows are
@@ -370,6 +372,7 @@ def test_penalty_grows_after_grow_penalty_after_steps():
         assert float(new.rho) == (o.rho0 * o.rho_growth if grows else o.rho0), steps
 
 
+@pytest.mark.slow  # compile-heavy
 def test_nan_nu0_is_the_least_squares_multiplier():
     """``nu0 = NaN``: the equality multiplier starts at its least-squares estimate at x0
     (``grad f + nu grad h = 0``; here ``f = |x - a|^2 / 2``, ``h = b . x - 1``, x0 = 0, so

@@ -173,6 +173,7 @@ def test_cube_max_value_falls_as_E_grows(cube_sweep):
     assert best_dr[0] > best_dr[1]
 
 
+@pytest.mark.slow  # compiles a sweep of its own
 def test_prism_heavier_object_lower_value():
     res = sweep(prism(), mass=[0.0, 0.2], young_modulus=2e5, initial_deformation=3e-3)
     assert res.value.shape == (2, 1, 1)
@@ -299,6 +300,7 @@ def test_cli_bad_spec_exits_2_with_one_line(run_cli, tmp_path, spec):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow  # a subprocess
 def test_cli_bad_spec_subprocess(tmp_path):
     p = subprocess.run(
         [

@@ -67,6 +67,7 @@ def test_batch_over_one_field_traces_the_folded_queue_once(queue_traces):
     assert queue_traces == [per, 2 * per]
 
 
+@pytest.mark.slow  # compiles the engine's programs of its own
 def test_engine_traces_the_queue_once(queue_traces):
     """The engine's evaluator of a batch: no trace for one grasp, the folded queue once;
     its results are those of the vmap of the one-grasp evaluator."""

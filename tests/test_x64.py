@@ -32,6 +32,9 @@ WORKER = textwrap.dedent(
 CUBE_VALUE = 2.638202983905735e-4  # J, float64, cube E = 6e5 Pa, dr = 2 mm (test_evaluate)
 
 
+pytestmark = pytest.mark.slow  # subprocesses
+
+
 def _run(env_value):
     env = dict(os.environ, JAX_PLATFORMS="cpu")
     env.pop("JAX_ENABLE_X64", None)

@@ -1,0 +1,222 @@
+"""The public face of jaxgrasp (issue 34): a curated, documented ``__all__`` of at most 30
+names; no function hides a module of the same name; the enum aliases and internals off the
+top level; each subpackage documented with an ``__all__``; the ``jaxgrasp`` command's entry
+point.
+
+Each check is a function of a package that returns its offenders, one line each;
+``test_checks_find_planted_offenders`` runs them on a small fake package that breaks each
+rule once.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import inspect
+import pkgutil
+import sys
+import textwrap
+import tomllib
+import types
+from pathlib import Path
+
+import pytest
+
+import jaxgrasp
+
+MAX_PUBLIC_NAMES = 30
+OFF_THE_TOP_LEVEL = ("STABLE", "STATUS_NAMES", "KINDS", "COMPILER_OPTIONS")
+"""Names that left the top level in issue 34: an enum alias, tables and an internal."""
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _fail_if(what: str, offenders: list[str]) -> None:
+    """Fail with every offender on a line of its own."""
+    if offenders:
+        pytest.fail(f"{len(offenders)} {what}:\n" + "\n".join(offenders), pytrace=False)
+
+
+def subpackages(package: types.ModuleType) -> list[types.ModuleType]:
+    """The direct subpackages of ``package``, imported."""
+    return [
+        importlib.import_module(f"{package.__name__}.{info.name}")
+        for info in pkgutil.iter_modules(package.__path__)
+        if info.ispkg
+    ]
+
+
+def import_everything(package: types.ModuleType) -> None:
+    """Import every module below ``package``, so that each submodule's name is bound in
+    its parent: to the module, or to a function imported after it that hides it."""
+    for info in pkgutil.walk_packages(package.__path__, package.__name__ + "."):
+        if not info.name.endswith("__main__"):
+            importlib.import_module(info.name)
+
+
+def own_docstring(obj, package: str) -> str | None:
+    """``obj``'s docstring, not one it inherits or one Python writes for it.
+
+    A class defined in ``package`` has one only if its source has one: dataclasses,
+    named tuples and enums otherwise get a generated ``__doc__``, or their base's.
+    """
+    if isinstance(obj, type):
+        if obj.__module__.split(".")[0] == package:
+            try:
+                source = textwrap.dedent(inspect.getsource(obj))
+            except (OSError, TypeError):
+                return None
+            node = ast.parse(source).body[0]
+            return ast.get_docstring(node) if isinstance(node, ast.ClassDef) else None
+        return obj.__dict__.get("__doc__")
+    if isinstance(obj, types.ModuleType) or callable(obj):
+        return obj.__doc__
+    return None  # a value: its __doc__ is its type's
+
+
+def undocumented_names(package: types.ModuleType) -> list[str]:
+    """Names of ``package.__all__`` that are missing or have no docstring of their own."""
+    out = []
+    root = package.__name__.split(".")[0]
+    for name in package.__all__:
+        if not hasattr(package, name):
+            out.append(f"{package.__name__}.{name}: in __all__ but missing")
+            continue
+        obj = getattr(package, name)
+        doc = own_docstring(obj, root)
+        if not (doc and doc.strip()):
+            kind = "a value, not a module, class or function" if not (
+                isinstance(obj, (type, types.ModuleType)) or callable(obj)) else type(obj).__name__
+            out.append(f"{package.__name__}.{name}: no docstring of its own ({kind})")
+    return out
+
+
+def missing_names(package: types.ModuleType) -> list[str]:
+    """Names of ``package.__all__`` that it lacks, repeated names, and no ``__all__``."""
+    names = getattr(package, "__all__", None)
+    if names is None:
+        return [f"{package.__name__}: no __all__"]
+    out = [f"{package.__name__}.{n}: in __all__ but missing" for n in names if not hasattr(package, n)]
+    out += [f"{package.__name__}.{n}: {names.count(n)} times in __all__" for n in sorted(set(names)) if names.count(n) > 1]
+    return out
+
+
+def hidden_modules(package: types.ModuleType) -> list[str]:
+    """Submodules of ``package`` whose name is bound in it to something else (a function
+    of the same name hides the module: ``package.name.X`` fails)."""
+    out = []
+    for info in pkgutil.iter_modules(package.__path__):
+        module = sys.modules.get(f"{package.__name__}.{info.name}")
+        attr = getattr(package, info.name, module)
+        if attr is not module:
+            out.append(f"{package.__name__}.{info.name}: a {type(attr).__name__}, and a submodule of that name")
+    return out
+
+
+# ----------------------------------------------------------------------------- jaxgrasp
+@pytest.fixture(scope="module")
+def packages() -> list[types.ModuleType]:
+    """The subpackages of jaxgrasp, once every module below jaxgrasp is imported (here,
+    not at collection, so that other test files see jaxgrasp as they would alone)."""
+    import_everything(jaxgrasp)
+    return subpackages(jaxgrasp)
+
+
+def test_at_most_30_public_names():
+    assert len(jaxgrasp.__all__) <= MAX_PUBLIC_NAMES, f"{len(jaxgrasp.__all__)} names: {jaxgrasp.__all__}"
+
+
+def test_every_public_name_exists_and_has_its_own_docstring(packages):
+    _fail_if("problems with jaxgrasp.__all__", missing_names(jaxgrasp) + undocumented_names(jaxgrasp))
+
+
+def test_no_function_hides_a_module(packages):
+    offenders = hidden_modules(jaxgrasp)
+    for package in packages:
+        offenders += hidden_modules(package)
+    _fail_if("names bound to something other than the submodule of that name", offenders)
+
+
+def test_enum_aliases_and_internals_are_off_the_top_level():
+    statuses = (jaxgrasp.GraspStatus, jaxgrasp.LaneStatus, jaxgrasp.BoundaryKind, jaxgrasp.TuneStatus)
+    names = dict.fromkeys([*OFF_THE_TOP_LEVEL, *(member.name for enum in statuses for member in enum)])
+    offenders = [f"jaxgrasp.{n}" for n in names if hasattr(jaxgrasp, n) or n in jaxgrasp.__all__]
+    _fail_if("enum aliases or internals at the top level (the enums carry the names)", offenders)
+
+
+def test_the_package_and_its_subpackages_have_a_face(packages):
+    assert len(packages) >= 5, [p.__name__ for p in packages]
+    offenders = [f"{p.__name__}: no docstring" for p in [jaxgrasp, *packages] if not (p.__doc__ or "").strip()]
+    for package in packages:
+        offenders += missing_names(package)
+    _fail_if("subpackages without a docstring or a sound __all__", offenders)
+
+
+def test_cli_entry_point():
+    from jaxgrasp import cli
+
+    assert callable(cli.main) and "main" in cli.__all__
+    scripts = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts == {"jaxgrasp": "jaxgrasp.cli:main"}
+
+
+# ----------------------------------------------------------------------------- the checks can fail
+_FAKE = {
+    "__init__.py": '''"""Fake."""
+import dataclasses, enum
+from typing import NamedTuple
+from fakeapi.sub import sub  # the function hides its module, as jaxgrasp.sweep once did
+from fakeapi import inner
+
+@dataclasses.dataclass
+class Plain:  # no docstring: dataclasses write one
+    x: int = 0
+
+class Pair(NamedTuple):  # no docstring: NamedTuple writes one
+    a: int
+
+class Color(enum.IntEnum):  # no docstring
+    RED = 1
+
+class Documented:
+    """Has one."""
+
+def undocumented():
+    pass
+
+TABLE = {"a": 1}
+__all__ = ["Plain", "Pair", "Color", "Documented", "undocumented", "TABLE", "gone", "sub", "sub"]
+''',
+    "sub.py": 'def sub():\n    """Hides its module."""\n',
+    "inner/__init__.py": "from fakeapi.inner._impl import run\n__all__ = ['run', 'absent']\n",
+    "inner/_impl.py": 'def run():\n    """Run."""\n',
+}
+
+
+def test_checks_find_planted_offenders(tmp_path, monkeypatch):
+    for rel, text in _FAKE.items():
+        path = tmp_path / "fakeapi" / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for name in [m for m in sys.modules if m == "fakeapi" or m.startswith("fakeapi.")]:
+        monkeypatch.delitem(sys.modules, name)
+    fake = importlib.import_module("fakeapi")
+    import_everything(fake)
+    try:
+        assert missing_names(fake) == ["fakeapi.gone: in __all__ but missing", "fakeapi.sub: 2 times in __all__"]
+        assert undocumented_names(fake) == [
+            "fakeapi.Plain: no docstring of its own (type)",
+            "fakeapi.Pair: no docstring of its own (type)",
+            "fakeapi.Color: no docstring of its own (EnumType)",
+            "fakeapi.undocumented: no docstring of its own (function)",
+            "fakeapi.TABLE: no docstring of its own (a value, not a module, class or function)",
+            "fakeapi.gone: in __all__ but missing",
+        ]
+        assert hidden_modules(fake) == ["fakeapi.sub: a function, and a submodule of that name"]
+        (inner,) = subpackages(fake)
+        assert missing_names(inner) == ["fakeapi.inner.absent: in __all__ but missing"]
+        assert hidden_modules(inner) == []
+    finally:
+        for name in [m for m in sys.modules if m == "fakeapi" or m.startswith("fakeapi.")]:
+            del sys.modules[name]
