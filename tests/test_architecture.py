@@ -295,7 +295,7 @@ MEASUREMENT = re.compile(
 
 ALLOWED = {
     # (file, phrase on the line): numbers that define something, not measurements
-    ("jaxgrasp/analysis/_tune.py", "1% of the radius"),  # a default bound
+    ("jaxgrasp/analysis/_tune_spec.py", "1% of the radius"),  # a default bound
     ("jaxgrasp/tolerance/_options.py", "1% of them"),  # advice on choosing T
     ("jaxgrasp/plots/_scene.py", "15 % of its"),  # the ghost's drawing scale
     ("jaxgrasp/tolerance/_verdict.py", "10 % of the value"),  # the rule in the code below it

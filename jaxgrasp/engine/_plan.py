@@ -39,8 +39,8 @@ device; see :func:`bucket_size`), so sets and grids of different sizes share com
 
 DEFAULT_CHUNK_SIZE = 64
 """Default grasps per chunk and per CPU device (see :func:`default_chunk_size`). A larger
-chunk is slower per grasp (the lanes of a chunk iterate until its slowest converges) and
-needs more memory for XLA's temporaries, in proportion to the chunk and the contacts."""
+chunk costs more per grasp (the lanes of a chunk iterate until its last one converges)
+and needs more memory for XLA's temporaries, in proportion to the chunk and the contacts."""
 
 ACCELERATOR_CHUNK_SIZE = 1024
 """Default grasps per chunk and per GPU/TPU device: an accelerator runs many lanes at
