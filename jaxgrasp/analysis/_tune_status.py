@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import enum
 
-__all__ = ['TuneStatus']
+__all__ = ["TuneStatus"]
 
 
 class TuneStatus(enum.StrEnum):

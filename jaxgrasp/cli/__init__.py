@@ -3,32 +3,18 @@
 Every error in the input (bad file, bad value, bad option, an output that cannot be
 written) prints one line ``jaxgrasp: error: ...`` on stderr and exits with status 2, never
 a traceback. Ctrl-C (or SIGTERM) at any moment ends the command within a second with one
-line ``jaxgrasp: interrupted ...`` and status 130 (143), see :mod:`.interrupt`.
+line ``jaxgrasp: interrupted ...`` and status 130 (143), see :mod:`._interrupt`.
 
-One module per sub-command (:mod:`.evaluate`, :mod:`.sweep`, :mod:`.batch`, :mod:`.tune`,
-:mod:`.show`), each with
-``add_parser(sub)`` and ``run(args)``; what they share is in :mod:`.common`.
+One module per sub-command (:mod:`._evaluate`, :mod:`._sweep`, :mod:`._batch`,
+:mod:`._tune`, :mod:`._show`), each with ``add_parser(sub)`` and ``run(args)``; what they
+share is in :mod:`._common`. The commands parse, call the library, print and write.
 """
 
 from __future__ import annotations
 
 import sys
 
-from jaxgrasp.cli import (
-    _batch as batch,
-)
-from jaxgrasp.cli import (
-    _evaluate as evaluate,
-)
-from jaxgrasp.cli import (
-    _show as show,
-)
-from jaxgrasp.cli import (
-    _sweep as sweep,
-)
-from jaxgrasp.cli import (
-    _tune as tune,
-)
+from jaxgrasp.cli import _batch, _evaluate, _show, _sweep, _tune
 from jaxgrasp.cli._common import EXIT_USAGE, Parser, UsageError, load_grasp, parse_number
 from jaxgrasp.cli._interrupt import run_interruptibly
 from jaxgrasp.engine import _compile
@@ -45,7 +31,7 @@ __all__ = [
     "enable_compilation_cache",
 ]
 
-COMMANDS = (evaluate, sweep, batch, tune, show)
+COMMANDS = (_evaluate, _sweep, _batch, _tune, _show)
 """The sub-command modules, in the order of ``jaxgrasp --help``."""
 
 
@@ -63,7 +49,7 @@ def main(argv=None) -> int:
     """Run ``jaxgrasp`` with ``argv``; the exit status.
 
     The command runs in a worker thread while this (main) thread handles Ctrl-C and
-    SIGTERM (:mod:`.interrupt`): on either, the process ends within a second with status
+    SIGTERM (:mod:`._interrupt`): on either, the process ends within a second with status
     130 (143), one line ``jaxgrasp: interrupted ...`` and no temporary file left.
 
     Without ``argv`` (the installed ``jaxgrasp`` command, ``python -m jaxgrasp``) it reads

@@ -13,7 +13,7 @@ import jax
 from jaxgrasp.engine._pipeline import Pipeline, Staged, lower_stages
 from jaxgrasp.engine._store import _STATS, executable_path, load_executable, save_executable
 
-__all__ = ['MEMO_SIZE', 'default_device', 'wait_for_saves', 'compiled', 'clear_compiled']
+__all__ = ["MEMO_SIZE", "default_device", "wait_for_saves", "compiled", "clear_compiled"]
 
 
 MEMO_SIZE = 16

@@ -7,7 +7,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import jax
 
-__all__ = ['Pipeline', 'Staged', 'lower_stages']
+__all__ = ["Pipeline", "Staged", "lower_stages"]
 
 
 def _spec_of(x) -> jax.ShapeDtypeStruct:

@@ -53,7 +53,20 @@ import numpy as np
 
 from jaxgrasp.engine._pipeline import Staged
 
-__all__ = ['ENV_VAR', 'EXECUTABLE_SUBDIR', 'default_dir', 'enable_compilation_cache', 'enable_from_environment', 'set_executable_dir', 'executable_dir', 'source_digest', 'executable_path', 'load_executable', 'save_executable', 'stats']
+__all__ = [
+    "ENV_VAR",
+    "EXECUTABLE_SUBDIR",
+    "default_dir",
+    "enable_compilation_cache",
+    "enable_from_environment",
+    "set_executable_dir",
+    "executable_dir",
+    "source_digest",
+    "executable_path",
+    "load_executable",
+    "save_executable",
+    "stats",
+]
 
 
 ENV_VAR = "JAXGRASP_CACHE_DIR"

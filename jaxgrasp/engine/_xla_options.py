@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ['COMPILER_OPTIONS', 'LATENCY_CPU_OPTIONS']
+__all__ = ["COMPILER_OPTIONS", "LATENCY_CPU_OPTIONS"]
 
 
 def _jaxlib_version() -> tuple[int, ...]:

@@ -6,7 +6,7 @@ import numpy as np
 
 from jaxgrasp.solver._status import Coded
 
-__all__ = ['BoundaryKind', 'Constraint', 'NO_BOUNDARY']
+__all__ = ["BoundaryKind", "Constraint", "NO_BOUNDARY"]
 
 
 class BoundaryKind(Coded):

@@ -27,7 +27,7 @@ import enum
 
 import numpy as np
 
-__all__ = ['LaneStatus']
+__all__ = ["Coded", "LaneStatus"]
 
 
 class Coded(enum.IntEnum):

@@ -8,7 +8,7 @@ import numpy as np
 
 from jaxgrasp.solver._solver import SolverOptions
 
-__all__ = ['EvaluateOptions']
+__all__ = ["EvaluateOptions"]
 
 
 @dataclasses.dataclass(frozen=True)

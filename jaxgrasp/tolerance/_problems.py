@@ -45,7 +45,19 @@ from jaxgrasp.model._potential import (
 from jaxgrasp.solver._solver import FirstOrder, Problem, SolverResult
 from jaxgrasp.tolerance._options import EvaluateOptions
 
-__all__ = ['ProblemData', 'problem_data', 'to_pose', 'objective', 'constraints', 'objective_and_constraints', 'lane_problem', 'lagrangian', 'Problems', 'problems_treedef', 'batch_data']
+__all__ = [
+    "ProblemData",
+    "problem_data",
+    "to_pose",
+    "objective",
+    "constraints",
+    "objective_and_constraints",
+    "lane_problem",
+    "lagrangian",
+    "Problems",
+    "problems_treedef",
+    "batch_data",
+]
 
 
 @jax.tree_util.register_dataclass

@@ -20,7 +20,7 @@ from jaxgrasp.solver._solver import SolverOptions, SolverResult, kkt_tol
 from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.tolerance._problems import ProblemData, constraints, objective, to_pose
 
-__all__ = ['settle_stalled', 'needs_settling', 'RELEASED_TOL', 'MAX_POLISHED']
+__all__ = ["settle_stalled", "needs_settling", "RELEASED_TOL", "MAX_POLISHED"]
 
 
 def _at_equilibrium(eq: SolverResult, lanes: SolverResult, at_eq, g_eq, lane_k) -> SolverResult:

@@ -20,7 +20,15 @@ from jaxgrasp.tolerance._problems import (
     constraints,
 )
 
-__all__ = ['LaneStarts', 'equilibrium_starts', 'equilibrium_of', 'boundary_starts', 'start_frame', 'FRAME_TIE', 'FRAME_BITS']
+__all__ = [
+    "LaneStarts",
+    "equilibrium_starts",
+    "equilibrium_of",
+    "boundary_starts",
+    "start_frame",
+    "FRAME_TIE",
+    "FRAME_BITS",
+]
 
 
 def _ray_start(gk, z0, v, t_grid, crossing_steps):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from jaxgrasp.solver._status import Coded
 
-__all__ = ['GraspStatus']
+__all__ = ["GraspStatus"]
 
 
 class GraspStatus(Coded):

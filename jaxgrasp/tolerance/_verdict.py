@@ -37,7 +37,16 @@ from jaxgrasp.tolerance._problems import Problems, constraints, problem_data, to
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 
-__all__ = ['split_temperature', 'evaluations_of', 'evaluation_of', 'limiting_index', 'Boundaries', 'Verdict', 'TIE_TOL', 'SAME_MINIMUM']
+__all__ = [
+    "split_temperature",
+    "evaluations_of",
+    "evaluation_of",
+    "limiting_index",
+    "Boundaries",
+    "Verdict",
+    "TIE_TOL",
+    "SAME_MINIMUM",
+]
 
 
 TIE_TOL = 1e-8
