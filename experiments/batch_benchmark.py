@@ -1,7 +1,7 @@
 """Batch benchmark (issue 12): one padded compilation against one per contact count, and Ipopt.
 
 The set: ``--count`` (default 1000) seeded random grasps from the property tests'
-generator (``tests/test_properties.py:build_grasp``), contact counts cycling 2, 3, 4, 5,
+generator (``tests/grasp_draws.py:build_grasp``), contact counts cycling 2, 3, 4, 5,
 6, 7 (``n = 2 + i % 6``), default :class:`jaxgrasp.EvaluateOptions`, default chunk size.
 Measured in one run of this script, each phase in its own subprocess of it (``--phase
 NAME``), so that each phase's compile time starts from a cold process (no JAX tracing
@@ -88,7 +88,7 @@ def peak_mib() -> float:
 
 def make_grasps(count: int, seed: int) -> list:
     """``count`` seeded grasps of ``build_grasp``, contact counts ``2 + i % 6``."""
-    from test_properties import NumpyDraw, build_grasp
+    from grasp_draws import NumpyDraw, build_grasp
 
     rng = np.random.default_rng(seed)
     return [build_grasp(NumpyDraw(rng), n=2 + i % 6) for i in range(count)]

@@ -2,7 +2,7 @@
 
 Computes, in one run:
 
-1. on ``--count`` seeded random grasps (``tests/test_properties.py:seeded_grasps``:
+1. on ``--count`` seeded random grasps (``tests/grasp_draws.py:seeded_grasps``:
    contact counts cycling 2..5): ``jaxgrasp.epsilon`` (torsion, 8 cone edges) and the
    energy tolerance ``J`` (``jaxgrasp.evaluate_batch``); force-closure vs stable counts, a
    2x2 contingency table, Spearman rank correlations;
@@ -114,7 +114,7 @@ def main() -> None:
     import jaxgrasp
 
     jaxgrasp.enable_compilation_cache()
-    from test_properties import seeded_grasps
+    from grasp_draws import seeded_grasps
 
     say(f"# metrics_compare: Ferrari-Canny epsilon (torsion, {EDGES} edges) vs energy tolerance J")
     say(f"start: {load()} (2 cores shared)")

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The long property-test profile (200 examples per property, tests/test_properties.py),
+# The long property-test profile (200 examples per property, tests/tolerance/test_properties.py),
 # logged with its command, date, load, examples run, result and wall time.
 #   experiments/property_long.sh [python]   ->   experiments/property_long.log
 # Environment: LOG (another log file), EXTRA (more pytest arguments, e.g. with
@@ -9,7 +9,7 @@ cd "$(dirname "$0")/.."
 PY="${1:-python}"
 LOG="${LOG:-experiments/property_long.log}"
 EXTRA="${EXTRA:-}"
-CMD="JAXGRASP_PROPERTY_PROFILE=long $PY -m pytest -q -p no:cacheprovider tests/test_properties.py -k 'rotation_reflection or zero_mass_scaling' --hypothesis-show-statistics --durations=5 $EXTRA"
+CMD="JAXGRASP_PROPERTY_PROFILE=long $PY -m pytest -q -p no:cacheprovider tests/tolerance/test_properties.py -k 'rotation_reflection or zero_mass_scaling' --hypothesis-show-statistics --durations=5 $EXTRA"
 {
   echo "# long property profile"
   echo "command: $CMD"
@@ -19,7 +19,7 @@ CMD="JAXGRASP_PROPERTY_PROFILE=long $PY -m pytest -q -p no:cacheprovider tests/t
   echo "host: $(nproc) cores; load average at start: $(cut -d' ' -f1-3 /proc/loadavg)"
 } > "$LOG"
 start=$(date +%s)
-JAXGRASP_PROPERTY_PROFILE=long "$PY" -m pytest -q -p no:cacheprovider tests/test_properties.py \
+JAXGRASP_PROPERTY_PROFILE=long "$PY" -m pytest -q -p no:cacheprovider tests/tolerance/test_properties.py \
   -k 'rotation_reflection or zero_mass_scaling' --hypothesis-show-statistics --durations=5 $EXTRA >> "$LOG" 2>&1
 rc=$?
 end=$(date +%s)

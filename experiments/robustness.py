@@ -1,6 +1,6 @@
 """Robustness of ``jaxgrasp.evaluate`` on a seeded set of varied valid grasps (issue #6).
 
-The grasps come from ``tests/test_properties.py:build_grasp`` (2 to 5 fingertips on a
+The grasps come from ``tests/grasp_draws.py:build_grasp`` (2 to 5 fingertips on a
 sphere or a box around the centre of mass, outward normals, random fingertips, masses
 and gravity directions), contact counts cycling 2, 3, 4, 5. Every grasp is evaluated at
 the default :class:`jaxgrasp.EvaluateOptions` through one ``jit(vmap(evaluate))`` per
@@ -123,10 +123,10 @@ def main() -> int:
     args = parse_args()
     import os
 
-    # before jaxgrasp is imported (test_properties imports it): this process and its
+    # before jaxgrasp is imported (grasp_draws imports it): this process and its
     # spawned workers start warm (jaxgrasp.engine._store)
     os.environ.setdefault("JAXGRASP_CACHE_DIR", str(Path.home() / ".cache" / "jaxgrasp" / "xla"))
-    from test_properties import literal, seeded_grasps
+    from grasp_draws import literal, seeded_grasps
 
     t_start = time.perf_counter()
     grasps = seeded_grasps(args.count, seed=args.seed)
@@ -178,7 +178,7 @@ def write_report(args, grasps, results, rows, timing, comps, refs, t_jax, t_tota
         f"--n-starts {args.n_starts} --seed {args.seed} --chunk {args.chunk}` "
         f"on {time.strftime('%Y-%m-%d %H:%M')}; wall time {t_total:.0f} s "
         f"(JAX part {t_jax:.0f} s, compilations included). Grasps: "
-        "`tests/test_properties.py:build_grasp` (2-5 fingertips on a sphere or box around the "
+        "`tests/grasp_draws.py:build_grasp` (2-5 fingertips on a sphere or box around the "
         "centre of mass, outward normals, random fingertips, masses, gravity directions), "
         "default `EvaluateOptions`."
     )

@@ -19,7 +19,7 @@ Candidates (``v12 > v20 (1 + 1e-3)``, or ``v6`` alone) are then checked against 
 independent CasADi/Ipopt multi-start reference (``tests/ipopt_reference.py``): a useful
 case has the 20-start value equal to Ipopt's to 1e-6 relative.
 
-Grasps come from ``tests/test_properties.py:build_grasp_fields`` (seeded NumPy draws).
+Grasps come from ``tests/grasp_draws.py:build_grasp_fields`` (seeded NumPy draws).
 Those alone almost never need more than the 6 positive axes (0 of ~1900 stable grasps
 with N = 2, 3, 4; see the log). What finds cases:
 
@@ -37,7 +37,7 @@ Usage (about 0.05 s per 2-contact grasp batched, ~20 s compilation per contact c
         --rotations 0 --generations 12 --ipopt 0 --dump experiments/start_candidates.jsonl
     python experiments/start_search.py --recheck experiments/start_candidates.jsonl --min-ratio 1.01
 
-``experiments/start_search.log`` holds the runs behind ``tests/test_starts.py``.
+``experiments/start_search.log`` holds the runs behind ``tests/tolerance/test_starts.py``.
 """
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ def is_stable(v) -> bool:
 def mutate(g, rng, strength):
     """A perturbed copy of the grasp ``g`` (``None`` if the copy is not a valid grasp)."""
     import jaxgrasp
-    from test_properties import NumpyDraw, random_rotation, random_unit, transform
+    from grasp_draws import NumpyDraw, random_rotation, random_unit, transform
 
     f = {k: np.array(v, dtype=float) for k, v in g.to_numpy().items()}
     n = f["positions"].shape[0]
@@ -165,7 +165,7 @@ def recheck(path: Path, chunks, min_ratio: float, keep: int) -> int:
 
     import jaxgrasp
     from jaxgrasp.engine._evaluate import solve_problems
-    from test_properties import literal
+    from grasp_draws import literal
 
     rows = [json.loads(line) for line in open(path)]
     rows = [r for r in rows if r["r12"] > min_ratio]
@@ -232,7 +232,7 @@ def main() -> int:
 
     import jaxgrasp
     from jaxgrasp.engine._evaluate import solve_problems
-    from test_properties import NumpyDraw, build_grasp_fields, literal, random_rotation, random_unit, transform
+    from grasp_draws import NumpyDraw, build_grasp_fields, literal, random_rotation, random_unit, transform
 
     opts = jaxgrasp.EvaluateOptions()
     assert opts.num_starts == 20

@@ -102,7 +102,7 @@ def main() -> None:
         "(plain calls and vmap work), and the user's own arrays are float32; float64 by "
         "default therefore needs the process-wide flag. jaxgrasp keeps it, documents it at "
         "the top of the README, and leaves an explicit JAX_ENABLE_X64 in the environment "
-        "alone (tests/test_x64.py)."
+        "alone (tests/model/test_x64.py)."
     )
 
 

@@ -131,7 +131,7 @@ def start_frame(data: ProblemData):
     motions in any world frame and numbering, wherever the references fix the signs and
     the eigenspaces are single. Coordinate axes were not: a mirror image of a 5-finger
     grasp missed its slip boundary's lowest point from every one of the 20 starts
-    (``tests/test_degenerate.py``, ``sphere_5_mirrored``). A tie or a sign the references
+    (``tests/tolerance/test_degenerate.py``, ``sphere_5_mirrored``). A tie or a sign the references
     leave open is settled by the coordinate axes, away from any threshold, so that
     rounding (e.g. a grasp padded with inactive contacts) does not turn the frame.
     """

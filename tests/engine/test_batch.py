@@ -19,7 +19,7 @@ from jaxgrasp.tolerance._result import FIELDS, Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 from jaxgrasp.solver._status import LaneStatus
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _grasps():

@@ -22,7 +22,7 @@ from jaxgrasp import Grasp, GraspValueError, stack
 from jaxgrasp.model._fields import FIELDS, NAMES
 from jaxgrasp.solver._status import LaneStatus
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 N_PAD = 5
 PER_CONTACT = [f.name for f in FIELDS if f.per_contact]
 

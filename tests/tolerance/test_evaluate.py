@@ -23,7 +23,7 @@ import jaxgrasp
 from jaxgrasp.model import _potential as M
 from jaxgrasp import presets
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 R_TIP, MU, FMAX = 0.025, 0.5, 15.0
 G = 9.81
 

@@ -6,7 +6,7 @@ chunks sharded over both devices, each process supplying its own slice, the resu
 gathered to both; sweeps run through the same engine). Both must get the same arrays,
 equal to ``evaluate`` of every grasp in one process. Cost: both compile the batch's
 program at once (~25 s on 2 cores); the set is of 2-contact grasps (padding has its own
-tests in one process, ``tests/test_batch.py``; a 3-contact program costs ~10 s more).
+tests in one process, ``tests/engine/test_batch.py``; a 3-contact program costs ~10 s more).
 """
 
 from __future__ import annotations

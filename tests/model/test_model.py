@@ -31,7 +31,7 @@ constraint_margins = jax.jit(M.constraint_margins)
 grad_U = jax.jit(jax.grad(M.potential_energy))
 hess_U = jax.jit(jax.hessian(M.potential_energy))
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 CUBE_POINTS = [(2e5, 1e-3), (2e5, 5e-3), (6e5, 2e-3), (1e6, 3e-3), (3.7e5, 2.4e-3)]
 

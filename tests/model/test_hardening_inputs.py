@@ -4,7 +4,7 @@ One test (or a few) per item, each failing on the code before its fix. Cheap by 
 most run no evaluation at all; the few that do reuse the 2-contact cube's compilations
 (unbatched ``evaluate`` as in ``test_cli.py``, the shared-deformation tune objective as
 in ``test_gradients.py``), so within the suite they add seconds, not compilations.
-Item 11 (``JAX_ENABLE_X64=0`` left alone) is covered by ``tests/test_x64.py``.
+Item 11 (``JAX_ENABLE_X64=0`` left alone) is covered by ``tests/model/test_x64.py``.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from jaxgrasp import presets
 from jaxgrasp.io._grasp_file import load
 from jaxgrasp.model._validation import GraspValueError
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 ROOT = Path(jaxgrasp.__file__).resolve().parent.parent  # the jaxgrasp under test, for subprocesses
 
 

@@ -50,7 +50,7 @@ def test_one_contact_data_gives_that_contacts_constraint_rows():
     from jaxgrasp.model._potential import model_params
     from jaxgrasp.tolerance._starts import _contact_data
     from jaxgrasp.tolerance._problems import constraints, problem_data
-    from test_properties import NumpyDraw, build_grasp
+    from grasp_draws import NumpyDraw, build_grasp
 
     rng = np.random.default_rng(7)
     for case in range(4):

@@ -1,6 +1,6 @@
 """Hostile input to the command line: ``jaxgrasp evaluate FILE`` and its options.
 
-``tests/test_inputs.py`` fuzzes ``grasp_from_dict``/``load``; this module fuzzes the whole
+``tests/model/test_inputs.py`` fuzzes ``grasp_from_dict``/``load``; this module fuzzes the whole
 command, in-process (``jaxgrasp.cli.main`` with ``capsys``) and, for a few cases, as a
 subprocess. The contract for every input:
 

@@ -18,7 +18,7 @@ from jaxgrasp.io._grasp_file import grasp_from_dict, grasp_to_dict, load, save, 
 from jaxgrasp.presets import PRESETS, cube, prism
 from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 FIELDS = (
     "positions",
     "normals",

@@ -32,7 +32,7 @@ import pytest
 import jaxgrasp
 from jaxgrasp import cli
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 EXIT_LIMIT_S = 1.0  # the bound from signal to exit
 
 E_SPEC, DR_SPEC, CHUNK = "2e5:1e6:3", "1e-3:5e-3:8", "3"  # 24 points, 8 chunks of 3

@@ -39,9 +39,9 @@ import jaxgrasp
 from jaxgrasp.analysis._epsilon import FORCE_CLOSURE_TOL, tangent_basis, wrenches
 from jaxgrasp.presets import cube, prism
 from jaxgrasp.model._validation import GraspValueError
-from test_properties import NumpyDraw, build_grasp_fields, random_rotation
+from grasp_draws import NumpyDraw, build_grasp_fields, random_rotation
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 PER_CONTACT = ("positions", "normals", "initial_deformation", "radius", "young_modulus", "friction", "max_force")
 LP_TOL = 1e-9
 HIGHS = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}
@@ -66,7 +66,7 @@ def eps(g, m=8, torsion=True) -> float:
 
 
 def random_grasps(count=6, seed=11):
-    """Seeded grasps of ``tests/test_properties.py``'s generator, 2 to 5 contacts."""
+    """Seeded grasps of ``tests/grasp_draws.py``'s generator, 2 to 5 contacts."""
     rng = np.random.default_rng(seed)
     return [make(**build_grasp_fields(NumpyDraw(rng), n=2 + i % 4)) for i in range(count)]
 

@@ -2,9 +2,9 @@
 invalid rows, ``--strict``, ``--top``, and how it treats an unfinished run's checkpoint.
 
 The dataset mixes 2, 3 and 4 contacts with one invalid grasp and runs with
-``--chunk-size 2``: the same compiled program as ``tests/test_batch.py`` (4 contacts,
+``--chunk-size 2``: the same compiled program as ``tests/engine/test_batch.py`` (4 contacts,
 masked, batch 2), so nothing compiles here when both run. The kill -9 / resume runs are in
-``tests/test_interrupts.py`` (subprocesses sharing that module's compiled program).
+``tests/cli/test_interrupts.py`` (subprocesses sharing that module's compiled program).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from jaxgrasp import BatchResult
 from jaxgrasp.engine._checkpoint import BatchCheckpoint
 from jaxgrasp.tolerance._result import FIELDS
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 BAD_LINE = 2  # the invalid grasp's index (its line is 3)
 
 

@@ -24,7 +24,7 @@ penalty grew at every multiplier update (``offset_b`` even with 20 starts: a str
 xfail until issue 13). Since the penalty stops growing after inner solves cut short
 near feasibility (``jaxgrasp.solver._solver.FAR_VIOLATION``), the axes alone find the minimum
 (``test_axis_starts_suffice``, which fails with the old rule). These cases no longer
-show that the random starts are needed; ``tests/test_degenerate.py``'s
+show that the random starts are needed; ``tests/tolerance/test_degenerate.py``'s
 ``sphere_5_mirrored`` is a true search miss (every lane converges, to one of three
 higher local minima). The old ratios held unbatched and in batches of 3, 13 and 16 grasps
 (``start_search.py --recheck``): a lane's outcome can depend on the batch it is solved

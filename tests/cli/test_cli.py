@@ -16,7 +16,7 @@ import pytest
 import jaxgrasp
 from jaxgrasp import cli
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CUBE_TOML = ROOT / "examples" / "cube.toml"
 PRESET_ARGS = ["evaluate", "--preset", "cube", "--young-modulus", "6e5", "--initial-deformation", "0.002", "--json"]
 
