@@ -1,17 +1,31 @@
-"""Running the method: one grasp or many, in stages compiled once, sharded over devices,
-kept in an executable store on disk, with checkpoints.
+"""Running the method: one grasp or many, through one declared pipeline, compiled in
+stages, sharded over the devices, kept in an executable store on disk, with checkpoints.
+
+:data:`PIPELINE` is the evaluation, step by step; :func:`evaluate` runs it inline under
+the caller's trace (``jit``, ``vmap``, ``grad``), :func:`evaluate_batch` and
+:func:`evaluate_dataset` run it one compiled stage at a time over chunks of grasps cut by
+:func:`plan_chunks`. :func:`solve_problems` stops it at the solved problems.
 """
 
-from jaxgrasp.engine._batch import evaluate_batch
+from jaxgrasp.engine._batch import evaluate_batch, evaluate_dataset
 from jaxgrasp.engine._batch_result import BatchResult
-from jaxgrasp.engine._evaluate import evaluate
+from jaxgrasp.engine._evaluate import evaluate, solve_problems
+from jaxgrasp.engine._plan import ChunkPlan, plan_chunks
+from jaxgrasp.engine._stages import PIPELINE, run_inline, stage_functions
 from jaxgrasp.engine._store import enable_compilation_cache
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
 
 __all__ = [
     "evaluate",
     "evaluate_batch",
+    "evaluate_dataset",
     "BatchResult",
+    "solve_problems",
+    "PIPELINE",
+    "run_inline",
+    "stage_functions",
+    "ChunkPlan",
+    "plan_chunks",
     "enable_compilation_cache",
     "COMPILER_OPTIONS",
 ]
