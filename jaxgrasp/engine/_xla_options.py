@@ -10,17 +10,21 @@ def _jaxlib_version() -> tuple[int, ...]:
 
     return tuple(int(part) for part in __version__.split(".")[:3] if part.isdigit())
 
-_YNN_FUSION_JAXLIB = (0, 8, 1)  # the first jaxlib whose XLA has the option below
+
+_YNN_FUSION_JAXLIB = (0, 8, 1)  # the first jaxlib whose XLA has xla_cpu_experimental_ynn_fusion_type
+_NO_LEGACY_EMITTERS_JAXLIB = (0, 11, 0)  # from here XLA has no xla_cpu_use_fusion_emitters (0.11.2 rejects it)
 
 COMPILER_OPTIONS = {
-    "xla_cpu_use_fusion_emitters": False,
+    **({"xla_cpu_use_fusion_emitters": False} if _jaxlib_version() < _NO_LEGACY_EMITTERS_JAXLIB else {}),
     **({"xla_cpu_experimental_ynn_fusion_type": ""} if _jaxlib_version() >= _YNN_FUSION_JAXLIB else {}),
 }
 """XLA options every jaxgrasp executable is compiled with (``jax.jit(..., compiler_options=...)``).
 
 * ``xla_cpu_use_fusion_emitters`` off: on the CPU, XLA's newer fusion emitters take
   longer to compile jaxgrasp's solver loop and run it no better; without them the
-  results are the same to the last digit.
+  results are the same to the last digit. XLA dropped the option (and the older
+  emitters) in jaxlib 0.11, whose XLA refuses to compile with it, so it is set only
+  before that.
 * ``xla_cpu_experimental_ynn_fusion_type`` empty (no YNNPACK fusion): from jaxlib 0.8.1
   on, XLA hands small products and reductions to YNNPACK kernels, but on the solver's
   arrays (a few hundred lanes of ``6 x 6`` and ``3N x 6`` pieces) XLA's own fused loops
@@ -29,7 +33,7 @@ COMPILER_OPTIONS = {
   by rounding only. Older jaxlib does not know the option, so it is set only where it
   exists.
 
-Other backends ignore both options. JAX takes compiler options only on the outermost
+Other backends ignore both options (XLA checks only that it knows their names). JAX takes compiler options only on the outermost
 ``jax.jit``: jaxgrasp passes them where it compiles an executable itself (batches,
 sweeps, tuning, :func:`jaxgrasp.evaluate` of a concrete grasp); pass them to your own
 outermost ``jax.jit`` around :func:`jaxgrasp.evaluate` to get the same."""

@@ -14,7 +14,7 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp.engine import _stages
-from jaxgrasp.engine._plan import AUTO_CHUNKS, MIN_AUTO_CHUNK, ChunkPlan, bucket_size, plan_chunks
+from jaxgrasp.engine._plan import AUTO_CHUNKS, MIN_AUTO_CHUNK, ChunkPlan, bucket_size, default_chunk_size, plan_chunks
 
 
 def test_every_step_reads_values_made_before_it():
@@ -89,19 +89,19 @@ def test_plan_covers_the_batch_in_buckets(total, chunk_size):
     assert isinstance(plan, ChunkPlan) and plan.total == total and plan.n_devices == n
     assert plan.chunk % n == 0
     assert plan.n_chunks == math.ceil(total / plan.chunk)
-    cap = 64 * n if chunk_size is None else chunk_size
+    cap = default_chunk_size() if chunk_size is None else chunk_size
     assert plan.chunk <= -(-cap // n) * n  # never above the cap (rounded up to the devices)
     per = plan.chunk // n
     assert per == -(-cap // n) or per in {4**k for k in range(12)}  # a bucket, or the cap
 
 
 def test_auto_plan_is_about_a_tenth_of_a_long_run():
-    n = len(jax.devices())
-    assert plan_chunks(369, auto=True).chunk == bucket_size(bucket_size(64 * n, max(MIN_AUTO_CHUNK * n, 37)), 369, n)
+    n, cap = len(jax.devices()), default_chunk_size()
+    assert plan_chunks(369, auto=True).chunk == bucket_size(bucket_size(cap, max(MIN_AUTO_CHUNK * n, 37)), 369, n)
     long = plan_chunks(10**6, chunk_size=None, auto=True)
-    assert long.chunk == 64 * n  # a tenth is more than the default: the default caps it
+    assert long.chunk == cap  # a tenth is more than the default: the default caps it
     short = plan_chunks(AUTO_CHUNKS * MIN_AUTO_CHUNK * n, auto=True)
-    assert short.chunk == bucket_size(64 * n, MIN_AUTO_CHUNK * n * AUTO_CHUNKS, n)
+    assert short.chunk == bucket_size(cap, MIN_AUTO_CHUNK * n * AUTO_CHUNKS, n)
     assert plan_chunks(369, 16, auto=True).chunk == plan_chunks(369, 16).chunk  # an explicit size wins
 
 
