@@ -101,7 +101,7 @@ def test_auto_plan_is_about_a_tenth_of_a_long_run():
     long = plan_chunks(10**6, chunk_size=None, auto=True)
     assert long.chunk == cap  # a tenth is more than the default: the default caps it
     short = plan_chunks(AUTO_CHUNKS * MIN_AUTO_CHUNK * n, auto=True)
-    assert short.chunk == bucket_size(cap, MIN_AUTO_CHUNK * n * AUTO_CHUNKS, n)
+    assert short.chunk == bucket_size(bucket_size(cap, MIN_AUTO_CHUNK * n), AUTO_CHUNKS * MIN_AUTO_CHUNK * n, n)
     assert plan_chunks(369, 16, auto=True).chunk == plan_chunks(369, 16).chunk  # an explicit size wins
 
 
