@@ -125,7 +125,7 @@ def test_check_writable_creates_nothing_and_names_the_file(tmp_path):
 
 READ_ONLY_CHECK = """
 import sys
-from jaxgrasp import outputs
+from jaxgrasp.io import _outputs as outputs
 for path in sys.argv[1:]:
     try:
         outputs.check_writable(path)
