@@ -13,8 +13,8 @@ path of jaxgrasp runs this one list:
   executable store): :func:`jaxgrasp.evaluate_batch` and :func:`jaxgrasp.sweep`.
 
 The stages are the method's functions (:mod:`jaxgrasp.tolerance`), bound to the options
-by :func:`stage_functions`; each takes the batch of grasps (leading axis ``B``) and the
-earlier values it names.
+by :func:`stage_functions`; each takes the batch's data or parameters (:func:`inputs_of`,
+derived once from the grasps; leading axis ``B``) and the earlier values it names.
 """
 
 from __future__ import annotations
@@ -35,7 +35,18 @@ from jaxgrasp.tolerance._stages import finish_problems, solve_stage, unsolved
 from jaxgrasp.tolerance._starts import LaneStarts, boundary_starts, equilibrium_of, equilibrium_starts
 from jaxgrasp.tolerance._verdict import evaluations_of, split_temperature
 
-__all__ = ["Step", "PIPELINE", "STAGES", "SOLVE", "stage_functions", "run_inline", "flat_stages", "run_staged"]
+__all__ = [
+    "Step",
+    "PIPELINE",
+    "STAGES",
+    "SOLVE",
+    "INPUTS",
+    "inputs_of",
+    "stage_functions",
+    "run_inline",
+    "flat_stages",
+    "run_staged",
+]
 
 
 def _tree(cls) -> jax.tree_util.PyTreeDef:
@@ -49,8 +60,8 @@ class Step:
 
     Attributes:
         stage: the stage's name (a key of :func:`stage_functions`).
-        inputs: names of the values it reads: ``"grasps"`` (the batch) or an earlier
-            step's output.
+        inputs: names of the values it reads: an input of the pipeline (:data:`INPUTS`)
+            or an earlier step's output.
         output: the name of the value it makes.
         tree: the pytree structure of that value (to pass it between compiled stages
             as flat arrays).
@@ -66,12 +77,12 @@ SOLVE = "lanes"
 """The stage that runs the solver: every lane of every grasp in one work queue."""
 
 PIPELINE: tuple[Step, ...] = (
-    Step("equilibrium", ("grasps",), "eq_starts", lambda: _tree(LaneStarts)),
-    Step(SOLVE, ("grasps", "eq_starts"), "eq_lanes", lambda: _tree(SolverResult)),
-    Step("starts", ("grasps", "eq_lanes"), "lane_starts", lambda: _tree(LaneStarts)),
-    Step(SOLVE, ("grasps", "lane_starts"), "solved", lambda: _tree(SolverResult)),
-    Step("finish", ("grasps", "eq_lanes", "solved", "lane_starts"), "problems", problems_treedef),
-    Step("evaluation", ("grasps", "problems"), "evaluation", lambda: _tree(Evaluation)),
+    Step("equilibrium", ("data",), "eq_starts", lambda: _tree(LaneStarts)),
+    Step(SOLVE, ("data", "eq_starts"), "eq_lanes", lambda: _tree(SolverResult)),
+    Step("starts", ("data", "eq_lanes"), "lane_starts", lambda: _tree(LaneStarts)),
+    Step(SOLVE, ("data", "lane_starts"), "solved", lambda: _tree(SolverResult)),
+    Step("finish", ("data", "eq_lanes", "solved", "lane_starts"), "problems", problems_treedef),
+    Step("evaluation", ("params", "problems"), "evaluation", lambda: _tree(Evaluation)),
 )
 """The evaluation of a batch of grasps, step by step: the equilibrium problem's lanes,
 solved; the boundary problems' lanes from starts around that equilibrium, solved; the
@@ -81,11 +92,22 @@ solved :class:`~jaxgrasp.tolerance.Problems` (settled where asked); every
 STAGES = tuple(dict.fromkeys(s.stage for s in PIPELINE))
 """The stages' names, in the order the pipeline first calls them."""
 
+INPUTS = ("params", "data")
+"""The pipeline's inputs, both derived from the batch of grasps by :func:`inputs_of`."""
+
+
+def inputs_of(grasps: Grasp) -> dict[str, Any]:
+    """The pipeline's inputs for a batch of grasps (leading axis ``B``): ``params``, the
+    grasps in internal units (:func:`jaxgrasp.model.model_params`, differentiable: the
+    verdict's envelope derivatives go through them), and ``data``, the problems' data
+    (:func:`~jaxgrasp.tolerance._problems.batch_data`, no gradient: the solver sees none)."""
+    params = jax.vmap(model_params)(grasps)
+    return {"params": params, "data": batch_data(params)}
+
 
 def stage_functions(options: EvaluateOptions, settle: bool = True, temperature=None) -> dict[str, Callable]:
-    """Each stage of :data:`PIPELINE` as a function of the batch of grasps (a
-    :class:`~jaxgrasp.Grasp` with a leading axis ``B`` on every field) and of the values
-    its step names.
+    """Each stage of :data:`PIPELINE` as a function of the values its step names (the
+    pipeline's inputs, :func:`inputs_of`, and earlier steps' outputs; leading axis ``B``).
 
     ``settle`` (static): whether the finish stage certifies stalled boundary lanes
     (:func:`~jaxgrasp.tolerance._settle.settle_stalled`); without it the stage is smaller,
@@ -95,18 +117,14 @@ def stage_functions(options: EvaluateOptions, settle: bool = True, temperature=N
     """
     if temperature is None:
         options, temperature = split_temperature(options)
-
-    def data(grasps):
-        return batch_data(jax.vmap(model_params)(grasps))
-
     return {
-        "equilibrium": lambda g: equilibrium_starts(data(g), options),
-        SOLVE: lambda g, starts: solve_stage(data(g), starts, options),
-        "starts": lambda g, eq: boundary_starts(data(g), equilibrium_of(eq), options),
-        "finish": lambda g, eq, lanes, starts: finish_problems(
-            data(g), equilibrium_of(eq), lanes, starts, options, settle
+        "equilibrium": lambda data: equilibrium_starts(data, options),
+        SOLVE: lambda data, starts: solve_stage(data, starts, options),
+        "starts": lambda data, eq: boundary_starts(data, equilibrium_of(eq), options),
+        "finish": lambda data, eq, lanes, starts: finish_problems(
+            data, equilibrium_of(eq), lanes, starts, options, settle
         ),
-        "evaluation": lambda g, problems: evaluations_of(g, problems, temperature, options),
+        "evaluation": lambda params, problems: evaluations_of(params, problems, temperature, options),
     }
 
 
@@ -133,44 +151,61 @@ def run_inline(grasps: Grasp, functions: Mapping[str, Callable], until: str = "e
     """
     steps = _through(until)
     solves = [i for i, s in enumerate(steps) if s.stage == SOLVE]
-    env: dict[str, Any] = {"grasps": grasps}
+    env: dict[str, Any] = inputs_of(grasps)
     if solves:
-        env.update(_solved_rounds([(steps[i - 1], steps[i]) for i in solves], functions, env))
-        steps = steps[solves[-1] + 1 :]
+        rounds, steps = [(steps[i - 1], steps[i]) for i in solves], steps[solves[-1] + 1 :]
+        env.update(_solved_rounds(rounds, _read_later(rounds, steps, until), functions, env))
     for step in steps:
         env[step.output] = _call(functions, step, env)
     return env[until]
 
 
-def _solved_rounds(rounds, functions: Mapping[str, Callable], env: Mapping[str, Any]) -> dict[str, Any]:
-    """The values the ``rounds`` make (each ``(starts step, solve step)``), the solve stage
-    traced once: round ``k`` is iteration ``k`` of a ``fori_loop``, whose body picks the
-    round's starts stage with ``lax.switch`` on ``k``. The counter is not batched data, so
-    under a caller's ``vmap`` the switch stays a branch and the solver's queue runs once
-    per round on every lane of the batch."""
+def _read_later(rounds, after, until: str) -> set[str]:
+    """The values the ``rounds`` make that a later round's starts, a step ``after`` them,
+    or the caller (``until``) reads: what the loop carries."""
+    made = [(k, name) for k, (s, v) in enumerate(rounds) for name in (s.output, v.output)]
+    later = {until} | {n for step in after for n in step.inputs}
+    return {name for k, name in made if name in later or any(name in s.inputs for s, _ in rounds[k + 1 :])}
+
+
+def _solved_rounds(rounds, carried: set[str], functions: Mapping[str, Callable], env: Mapping[str, Any]):
+    """The values ``carried`` of those the ``rounds`` make (each ``(starts step, solve
+    step)``), the solve stage traced once: round ``k`` is iteration ``k`` of a
+    ``fori_loop``, whose body picks the round's starts stage with ``lax.switch`` on ``k``.
+    The counter is not batched data, so under a caller's ``vmap`` the switch stays a branch
+    and the solver's queue runs once per round on every lane of the batch."""
     for starts, solve in rounds:
-        if solve.inputs[-1] != starts.output or any(n != "grasps" for n in solve.inputs[:-1]):
+        if solve.inputs[-1] != starts.output or any(n not in INPUTS for n in solve.inputs[:-1]):
             raise ValueError(f"the pipeline's {solve.output!r} must solve the starts made just before it")
     first = _call(functions, rounds[0][0], env)  # every round's starts are shaped alike
     lanes = unsolved(first)
     carry = {name: value for s, v in rounds for name, value in ((s.output, first), (v.output, lanes))}
-    carry = _per_grasp(jax.tree_util.tree_map(jnp.zeros_like, carry), env["grasps"])
+    carry = {name: value for name, value in carry.items() if name in carried}
+    carry = _per_grasp(jax.tree_util.tree_map(jnp.zeros_like, carry), env["data"])
 
     def body(k, carry):
         starts = jax.lax.switch(k, [lambda c, s=s: _call(functions, s, {**env, **c}) for s, _ in rounds], carry)
-        solved = functions[SOLVE](env["grasps"], starts)
-        keep = [lambda c, a, b, s=s, v=v: {**c, s.output: a, v.output: b} for s, v in rounds]
-        return jax.lax.switch(k, keep, carry, starts, solved)
+        solved = functions[SOLVE](*(env[n] for n in rounds[0][1].inputs[:-1]), starts)
+        out = {}
+        for i, (s, v) in enumerate(rounds):
+            for name, value in ((s.output, starts), (v.output, solved)):
+                if name not in carried:
+                    continue
+                if i == len(rounds) - 1:  # written every round: the last round's is what stays
+                    out[name] = value
+                else:
+                    out[name] = jax.lax.cond(k == i, lambda x=value: x, lambda n=name: carry[n])
+        return out
 
     return jax.lax.fori_loop(0, len(rounds), body, carry)
 
 
-def _per_grasp(tree, grasps: Grasp):
-    """``tree``'s arrays made to depend on every field of ``grasps`` (the same values):
+def _per_grasp(tree, data):
+    """``tree``'s arrays made to depend on every array of the batch's ``data`` (the same values):
     under a caller's ``vmap``, whichever fields it maps, the loop's carry is then batched
     from the start. A carry that is not would be batched only after the first round, and
     JAX's loop batching would trace the body (the whole solver) once more to find out."""
-    leaves = jax.tree_util.tree_leaves(grasps)
+    leaves = jax.tree_util.tree_leaves(data)
     dtype = jnp.result_type(float)
     flag = jnp.isnan(sum(jnp.sum(jnp.asarray(a, dtype)) for a in leaves))
     return jax.tree_util.tree_map(lambda a: jnp.where(flag, a, a), tree)
@@ -178,16 +213,21 @@ def _per_grasp(tree, grasps: Grasp):
 
 def flat_stages(options: EvaluateOptions, names: tuple[str, ...], settle: bool = True) -> dict[str, Callable]:
     """The stages of :func:`stage_functions` as functions of flat arrays, for compiling
-    one at a time (the executable store keeps flat executables): each takes the arrays of
-    its step's inputs in order (the batch's :class:`~jaxgrasp.Grasp` fields ``names``
-    first, then each value's leaves) and returns its value's leaves as a tuple."""
+    one at a time (the executable store keeps flat executables): each takes the batch's
+    :class:`~jaxgrasp.Grasp` fields ``names`` (from which it derives the pipeline's inputs,
+    :func:`inputs_of`), then the leaves of each earlier value its step names, and returns
+    its value's leaves as a tuple."""
     functions = stage_functions(options, settle)
     trees = {s.output: s.tree() for s in PIPELINE}
 
     def flat(step: Step) -> Callable:
         def run(*arrays):
-            args, rest = [Grasp(**dict(zip(names, arrays)))], arrays[len(names) :]
-            for name in step.inputs[1:]:
+            inputs, rest = inputs_of(Grasp(**dict(zip(names, arrays)))), arrays[len(names) :]
+            args = []
+            for name in step.inputs:
+                if name in INPUTS:
+                    args.append(inputs[name])
+                    continue
                 n = trees[name].num_leaves
                 args.append(jax.tree_util.tree_unflatten(trees[name], rest[:n]))
                 rest = rest[n:]
@@ -204,7 +244,8 @@ def run_staged(call: Callable, *fields) -> tuple:
     fields: every :class:`~jaxgrasp.Evaluation` field, in
     :data:`jaxgrasp.tolerance._result.FIELDS` order. A
     :class:`~jaxgrasp.engine._pipeline.Pipeline`'s driver: it only passes arrays on."""
-    env: dict[str, tuple] = {"grasps": fields}
+    env: dict[str, tuple] = {}
     for step in PIPELINE:
-        env[step.output] = call(step.stage, *(a for name in step.inputs for a in env[name]))
+        values = (a for name in step.inputs if name not in INPUTS for a in env[name])
+        env[step.output] = call(step.stage, *fields, *values)
     return env[PIPELINE[-1].output]

@@ -27,8 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.model._codes import NO_BOUNDARY, Constraint
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._potential import ModelParams, model_params
+from jaxgrasp.model._potential import ModelParams
 from jaxgrasp.model._units import M_TO_MM, MJ_TO_J
 from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.tolerance._envelope import envelope_energy, soft_minimum
@@ -65,11 +64,11 @@ def split_temperature(options: EvaluateOptions):
     return options, np.float64(0.0 if t is None else float(t) / MJ_TO_J)
 
 
-def evaluations_of(grasps: Grasp, progs: Problems, temperature, options: EvaluateOptions) -> Evaluation:
-    """Steps 2-6 for a batch of grasps (leading axis ``B``): their evaluations from their
-    solved problems ``progs`` (:class:`~jaxgrasp.tolerance._problems.Problems` with the
-    same leading axis; ``temperature``: mJ, ``0`` for the hard minimum)."""
-    p = jax.vmap(model_params)(grasps)
+def evaluations_of(p: ModelParams, progs: Problems, temperature, options: EvaluateOptions) -> Evaluation:
+    """Steps 2-6 for a batch of grasps ``p`` (:func:`jaxgrasp.model.model_params` of each,
+    leading axis ``B``): their evaluations from their solved problems ``progs``
+    (:class:`~jaxgrasp.tolerance._problems.Problems` with the same leading axis;
+    ``temperature``: mJ, ``0`` for the hard minimum)."""
     return jax.vmap(lambda p, progs: evaluation_of(p, progs, temperature, options))(p, progs)
 
 

@@ -18,7 +18,7 @@ from jaxgrasp.engine._plan import AUTO_CHUNKS, MIN_AUTO_CHUNK, ChunkPlan, bucket
 
 
 def test_every_step_reads_values_made_before_it():
-    made = {"grasps"}
+    made = set(_stages.INPUTS)
     for step in _stages.PIPELINE:
         assert set(step.inputs) <= made, (step, made)
         assert step.output not in made, step  # each value is made once
@@ -28,15 +28,16 @@ def test_every_step_reads_values_made_before_it():
 
 def test_the_data_flow_is_the_methods():
     """Eq. 1: the boundary problems start around the *solved* equilibrium, and the
-    verdict reads every solved problem."""
+    verdict reads every solved problem and the differentiable parameters (its envelope
+    derivatives go through them; the solver's data carries no gradient)."""
     flow = {s.output: (s.stage, s.inputs) for s in _stages.PIPELINE}
     assert flow == {
-        "eq_starts": ("equilibrium", ("grasps",)),
-        "eq_lanes": ("lanes", ("grasps", "eq_starts")),
-        "lane_starts": ("starts", ("grasps", "eq_lanes")),
-        "solved": ("lanes", ("grasps", "lane_starts")),
-        "problems": ("finish", ("grasps", "eq_lanes", "solved", "lane_starts")),
-        "evaluation": ("evaluation", ("grasps", "problems")),
+        "eq_starts": ("equilibrium", ("data",)),
+        "eq_lanes": ("lanes", ("data", "eq_starts")),
+        "lane_starts": ("starts", ("data", "eq_lanes")),
+        "solved": ("lanes", ("data", "lane_starts")),
+        "problems": ("finish", ("data", "eq_lanes", "solved", "lane_starts")),
+        "evaluation": ("evaluation", ("params", "problems")),
     }
 
 
@@ -49,7 +50,7 @@ def test_stage_names_and_functions_agree():
 
 def test_run_staged_calls_the_declared_steps_in_order():
     """A recording ``call``: each stage gets the grasp fields, then the leaves of the
-    values its step names, and returns its own value's leaves."""
+    earlier values its step names, and returns its own value's leaves."""
     calls = []
     sizes = {s.output: s.tree().num_leaves for s in _stages.PIPELINE}
 
@@ -57,7 +58,7 @@ def test_run_staged_calls_the_declared_steps_in_order():
         step = _stages.PIPELINE[len(calls)]
         calls.append((stage, arrays))
         assert stage == step.stage
-        expect = sum(2 if n == "grasps" else sizes[n] for n in step.inputs)
+        expect = 2 + sum(sizes[n] for n in step.inputs if n not in _stages.INPUTS)
         assert len(arrays) == expect, (stage, len(arrays), expect)
         return tuple((step.output, i) for i in range(sizes[step.output]))
 
@@ -74,6 +75,14 @@ def test_evaluation_leaves_are_the_result_fields_in_order():
     tree = _stages.PIPELINE[-1].tree()
     leaves = jax.tree_util.tree_unflatten(tree, list(FIELDS))
     assert tuple(getattr(leaves, f) for f in FIELDS) == FIELDS
+
+
+def test_the_inline_loop_carries_what_later_steps_read():
+    """The equilibrium's starts feed only its own solve: the loop carries the rest."""
+    steps = _stages.PIPELINE
+    rounds = [(steps[0], steps[1]), (steps[2], steps[3])]
+    assert _stages._read_later(rounds, steps[4:], "evaluation") == {"eq_lanes", "lane_starts", "solved"}
+    assert _stages._read_later(rounds, (), "eq_starts") == {"eq_starts", "eq_lanes"}
 
 
 def test_run_inline_names_a_value_that_exists():
