@@ -125,7 +125,7 @@ class TuneResult:
             where ``clipped`` names parameters, the grasp with them clipped into the bounds.
         history: ``(iterations + 1,)`` value at the search's start and after each iteration, J.
         history_status: ``(iterations + 1,)`` evaluation status at those iterates
-            (:data:`~jaxgrasp.STATUS_NAMES`).
+            (:class:`~jaxgrasp.GraspStatus` codes).
         params: tuned values by parameter label (``"initial_deformation"``,
             ``"initial_deformation:shared"``, ``"positions"`` ...): per-contact ``(N,)``,
             shared ``()``, ``"positions"`` the ``(N, 3)`` contact positions (m).

@@ -3,7 +3,7 @@
 XLA runs one compiled executable on one CPU device, and jaxgrasp's solver loop is a long
 chain of small operations that keeps one core busy. :func:`jaxgrasp.evaluate_batch` and
 :func:`jaxgrasp.sweep` split each chunk over all devices, each device running its own
-work queue (:func:`jaxgrasp.engine._batch.over_devices`), so on the CPU they use as many
+work queue (:func:`jaxgrasp.engine._evaluator.over_devices`), so on the CPU they use as many
 cores as JAX has CPU devices, and JAX creates one unless told otherwise.
 
 So ``import jaxgrasp`` asks JAX for one CPU device per core this process may run on

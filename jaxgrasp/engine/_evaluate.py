@@ -106,8 +106,8 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
 
 def evaluate_traced(grasp: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:
     """:func:`evaluate` of a grasp inside the caller's trace (``jit``, ``vmap``), with or
-    without the settling stage (``settle``, see :func:`~jaxgrasp.tolerance._stages.problems_of`):
-    what the batch engine compiles."""
+    without the settling stage (``settle``, see
+    :func:`~jaxgrasp.engine._stages.stage_functions`)."""
     options, temperature = split_temperature(options)
     return evaluate_compiled(grasp, temperature, options, settle)
 

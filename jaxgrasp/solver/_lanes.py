@@ -118,7 +118,7 @@ def solve_lane_batches(
 
     This is what :func:`solve_lanes` does under ``jax.vmap`` (its batching rule calls it),
     called directly: a caller that holds a batch, such as
-    :func:`jaxgrasp.tolerance._stages.problems_of_batch`, gets the same lanes while the queue is
+    :func:`jaxgrasp.tolerance._stages.solve_stage`, gets the same lanes while the queue is
     traced once, where ``vmap`` traces it once for one batch (``custom_vmap`` builds a
     jaxpr of the function it wraps) and again folded.
     """

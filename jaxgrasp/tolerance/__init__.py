@@ -9,6 +9,7 @@ it over many grasps, compiled and sharded, is :mod:`jaxgrasp.engine`'s job.
 
 from jaxgrasp.tolerance._envelope import envelope_energy, soft_minimum
 from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.tolerance._problems import Problems
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 from jaxgrasp.tolerance._verdict import evaluations_of
@@ -16,6 +17,7 @@ from jaxgrasp.tolerance._verdict import evaluations_of
 __all__ = [
     "EvaluateOptions",
     "Evaluation",
+    "Problems",
     "GraspStatus",
     "evaluations_of",
     "envelope_energy",

@@ -18,7 +18,7 @@ first and second derivatives written from the contact kinematics
 
 The starts of the boundary problems are found in :mod:`jaxgrasp.tolerance._starts`,
 stalled lanes are settled in :mod:`jaxgrasp.tolerance._settle`, and
-:func:`jaxgrasp.tolerance.problems_of` runs the whole sequence.
+the engine's pipeline (:data:`jaxgrasp.engine.PIPELINE`) runs the whole sequence.
 """
 
 from __future__ import annotations

@@ -313,7 +313,7 @@ class LaneStarts:
 
 
 def equilibrium_starts(data: ProblemData, options: EvaluateOptions) -> LaneStarts:
-    """Stage 1 of :func:`problems_of_batch`: the lanes of the equilibrium problem of a
+    """The equilibrium stage of :data:`jaxgrasp.engine.PIPELINE`: the lanes of the equilibrium problem of a
     batch ``data`` (:func:`_equilibrium_lanes`: lane 0 of each grasp from its initial
     grasping state, the others inactive)."""
     num_lanes = _num_lanes(data, options)
@@ -329,7 +329,7 @@ def equilibrium_of(lanes: SolverResult) -> SolverResult:
 
 
 def boundary_starts(data: ProblemData, eq: SolverResult, options: EvaluateOptions) -> LaneStarts:
-    """Stage 3 of :func:`problems_of_batch`: the lanes of every boundary problem of a
+    """The starts stage of :data:`jaxgrasp.engine.PIPELINE`: the lanes of every boundary problem of a
     batch ``data`` from its equilibria ``eq`` (leading axis ``B``): each lane's ray
     (:func:`_lane_rays`) walked to its crossing (:func:`_ray_lane`). Without a converged
     equilibrium there is nothing to start from: every lane is skipped; an inactive

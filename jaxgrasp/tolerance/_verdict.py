@@ -3,8 +3,8 @@
 An evaluation of a grasp follows the paper (Sec. III, VI) in six steps, one named function
 each:
 
-1. solve the equilibrium problem and every boundary problem from its starts
-   (:func:`jaxgrasp.tolerance.problems_of`);
+1. solve the equilibrium problem and every boundary problem from its starts (the
+   stages of :data:`jaxgrasp.engine.PIPELINE` before its ``evaluation``);
 2. keep the lowest converged start of each boundary problem (:func:`best_starts`);
 3. decide the grasp's status from the solver's outputs (:func:`grasp_status`; Sec. III-B);
 4. the minimum energies with their envelope-theorem derivatives (:func:`energies`,
