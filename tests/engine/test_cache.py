@@ -15,12 +15,11 @@ import stat
 
 import numpy as np
 import pytest
+from conftest import WarmCache
 
 import jaxgrasp
 from jaxgrasp.engine._store import EXECUTABLE_SUBDIR
 from jaxgrasp.tolerance._result import FIELDS
-
-from conftest import WarmCache
 
 
 def _assert_same_fields(a: dict, b) -> None:
@@ -43,10 +42,10 @@ def test_import_turns_the_store_on(warm_cache):
     for folder in (warm_cache.home / ".cache", warm_cache.folder, warm_cache.folder / EXECUTABLE_SUBDIR):
         assert stat.S_IMODE(folder.stat().st_mode) == 0o700, folder
     reports = [line for line in first["log"].splitlines() if "compiling" in line]
-    assert reports == [
-        f"jaxgrasp INFO jaxgrasp: compiling evaluate for 2 contacts (no stored executable yet); "
+    assert reports == [(
+        "jaxgrasp INFO jaxgrasp: compiling evaluate for 2 contacts (no stored executable yet); "
         f"it will be stored in {warm_cache.folder / EXECUTABLE_SUBDIR}"
-    ], first["log"]
+    )], first["log"]
 
 
 def test_second_process_loads_the_same_program(warm_cache):

@@ -190,10 +190,10 @@ def test_file_of_other_options_is_rebuilt(clean, caplog):
     assert counted == {"traced": 1, "deserialized": 0, "cache_errors": 1}
     np.testing.assert_array_equal(_result(fn), want)
     _assert_replaced(want)
-    assert [r.getMessage() for r in caplog.records] == [
+    assert [r.getMessage() for r in caplog.records] == [(
         "jaxgrasp: compiling tiny (its stored file is unusable: it was built for another key (other options, "
         f"shapes, versions or machine)); it will be stored in {_entry().path.parent}"
-    ]
+    )]
 
 
 def test_links_are_never_written_through(folder, tmp_path, monkeypatch, caplog):
@@ -225,11 +225,11 @@ def test_stale_temporary_files_are_removed(tmp_path):
     """Turning the store on removes its temporary files of dead processes and old ones,
     and keeps a fresh one of a live process and every other file."""
     live, dead = os.getpid(), 99_999_999  # above any pid_max: no such process
-    names = {".a.xla.%d.00ff.tmp" % dead: False, "b.tmp%d" % dead: False, ".c.xla.%d.00ff.tmp" % live: True,
-             ".d.xla.%d.00ff.tmp" % live: False, "e.xla": True}
+    names = {f".a.xla.{dead}.00ff.tmp": False, f"b.tmp{dead}": False, f".c.xla.{live}.00ff.tmp": True,
+             f".d.xla.{live}.00ff.tmp": False, "e.xla": True}
     for name in names:
         (tmp_path / name).write_bytes(b"")
-    old = tmp_path / (".d.xla.%d.00ff.tmp" % live)
+    old = tmp_path / f".d.xla.{live}.00ff.tmp"
     os.utime(old, (old.stat().st_atime - 2 * store.STALE_TEMP_SECONDS,) * 2)
     saved = store.executable_dir()
     try:
