@@ -152,11 +152,13 @@ def default_dir() -> Path | None:
     if value:
         return Path(value).expanduser()
     xdg = os.environ.get("XDG_CACHE_HOME", "")
+    if os.path.isabs(xdg):  # XDG: a relative value is ignored
+        return Path(xdg) / "jaxgrasp" / "xla"
     try:
-        base = Path(xdg) if os.path.isabs(xdg) else Path.home() / ".cache"  # XDG: a relative value is ignored
+        home = Path.home()
     except (RuntimeError, KeyError):  # no home folder
         return None
-    return base / "jaxgrasp" / "xla"
+    return home / ".cache" / "jaxgrasp" / "xla" if home.is_absolute() else None  # HOME="": not the working folder
 
 
 def enable_from_environment() -> Path | None:
@@ -319,6 +321,7 @@ _OLD_TEMP = re.compile(r"^[\w.-]+\.tmp(?P<pid>\d+)$")
 
 
 def _process_is_gone(pid: int) -> bool:
+    """Whether no process ``pid`` runs on this machine."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
