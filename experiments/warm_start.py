@@ -60,7 +60,8 @@ def run_once(home: Path) -> dict:
     if proc.returncode != 0:
         raise SystemExit(f"warm_start: the example failed:\n{proc.stderr[-3000:]}")
     lines = proc.stderr.strip().splitlines()
-    return {"wall": wall, "load": load, "stdout": proc.stdout.strip(), "reports": lines[:-1],
+    reports = [line for line in lines[:-1] if line.startswith("jaxgrasp")]  # not JAX's own INFO lines
+    return {"wall": wall, "load": load, "stdout": proc.stdout.strip(), "reports": reports,
             "stats": json.loads(lines[-1])}
 
 
