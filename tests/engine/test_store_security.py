@@ -269,3 +269,21 @@ def test_log_lines_go_to_stderr_in_the_command(capsys):
         store.LOGGER.debug("jaxgrasp: not shown")
     store.LOGGER.info("jaxgrasp: not shown either")
     assert capsys.readouterr().err == "jaxgrasp: compiling something (why); it is not stored\n"
+
+
+def test_command_prints_the_compilation_report(monkeypatch, capsys):
+    """The ``jaxgrasp`` command prints the store's reports on its stderr (a command whose
+    run reports a compilation, as an evaluator's does, stands in for a real one)."""
+    from jaxgrasp import cli
+    from jaxgrasp.cli import _evaluate
+
+    def run(args):
+        store.LOGGER.info("jaxgrasp: compiling evaluate for 2 contacts (no stored executable yet); it is not stored")
+        return 0
+
+    monkeypatch.setattr(cli, "enable_compilation_cache", lambda: None)  # no process-wide setting
+    monkeypatch.setattr(_evaluate, "run", run)
+    assert cli.main(["evaluate", "--preset", "cube"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == "jaxgrasp: compiling evaluate for 2 contacts (no stored executable yet); it is not stored\n"
+    assert captured.out == ""
