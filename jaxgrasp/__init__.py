@@ -25,10 +25,13 @@ per core, so that batches and sweeps run on every core (``JAXGRASP_CPU_DEVICES=1
 JAX's single device; see :mod:`jaxgrasp.engine`). Every public function takes and
 returns SI units (m, Pa, N, kg, J, rad).
 
-Compilation takes seconds in every new process unless the caches on disk are on: call
-:func:`enable_compilation_cache` once, or set the environment variable
-``JAXGRASP_CACHE_DIR`` to a folder before importing (see :mod:`jaxgrasp.engine`). The
-``jaxgrasp`` command turns them on by itself.
+Compiling an evaluator takes seconds. Importing jaxgrasp turns on its executable store
+in the user's cache folder (``~/.cache/jaxgrasp/xla``, private): a later process loads
+what an earlier one compiled (each compilation is reported once on the ``logging`` logger
+``"jaxgrasp"``). The environment variable ``JAXGRASP_CACHE_DIR`` moves the folder, and
+``JAXGRASP_CACHE_DIR=off`` switches it off. JAX's own persistent cache (for the user's
+``jit`` functions too) is turned on only by :func:`enable_compilation_cache` and the
+``jaxgrasp`` command (see :mod:`jaxgrasp.engine._store`).
 
 Quick start::
 
@@ -55,7 +58,7 @@ _devices.configure_cpu_devices()  # before JAX makes its devices: batches run on
 
 from jaxgrasp.engine import _store  # noqa: E402
 
-_store.enable_from_environment()  # $JAXGRASP_CACHE_DIR set: every process starts warm
+_store.enable_from_environment()  # the executable store, in the user's cache folder: every process starts warm
 
 from jaxgrasp import presets  # noqa: E402
 from jaxgrasp.analysis import EpsilonResult, SweepResult, TuneResult, TuneStatus, epsilon, sweep, tune  # noqa: E402

@@ -28,8 +28,11 @@ import dataclasses
 import json
 import multiprocessing
 import os
+import re
+import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import jax
@@ -37,9 +40,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-# Where set, the developer's JAXGRASP_CACHE_DIR would turn on their own stores at
-# ``import jaxgrasp``: tests would load programs compiled elsewhere, and count no traces.
-os.environ.pop("JAXGRASP_CACHE_DIR", None)
+# ``import jaxgrasp`` turns on its executable store in JAXGRASP_CACHE_DIR, else in the
+# user's ~/.cache: the suite (and every subprocess it starts, which inherits the variable)
+# uses a folder of its own instead, so that it neither loads programs compiled elsewhere
+# (and counts no traces) nor fills the developer's or the CI's cache. Removed at the end.
+SESSION_CACHE = Path(tempfile.mkdtemp(prefix="jaxgrasp-test-cache-"))
+os.environ["JAXGRASP_CACHE_DIR"] = str(SESSION_CACHE)
 
 import jaxgrasp  # noqa: E402  turns on jax_enable_x64 by itself (tested in test_evaluate.py)
 
@@ -200,12 +206,31 @@ _CACHE_OPTIONS = (
 )
 
 
+def pytest_sessionfinish(session, exitstatus):
+    """Remove the session's cache folder (:data:`SESSION_CACHE`)."""
+    from jaxgrasp.engine import _compile
+
+    _compile.wait_for_saves(timeout=60)  # no write into a folder being removed
+    shutil.rmtree(SESSION_CACHE, ignore_errors=True)
+
+
 @pytest.fixture(scope="session")
-def store_dir(tmp_path_factory) -> Path:
-    """The session's cache folder (``JAXGRASP_CACHE_DIR``): XLA's compilation cache, and
-    jaxgrasp's executable store in its subfolder. Every test module that runs the command
-    shares it, so a program compiled by one is loaded by the next."""
-    return tmp_path_factory.mktemp("jaxgrasp-cache")
+def store_dir() -> Path:
+    """The session's cache folder (``JAXGRASP_CACHE_DIR``, :data:`SESSION_CACHE`): XLA's
+    compilation cache (once the command turns it on), and jaxgrasp's executable store in
+    its subfolder (on from the import). Every test module and subprocess shares it, so a
+    program compiled by one is loaded by the next."""
+    return SESSION_CACHE
+
+
+COMPILE_REPORT = re.compile(r"^jaxgrasp: compiling .*$\n?", re.MULTILINE)
+"""A line the command prints on stderr before it compiles an evaluator (once per shape)."""
+
+
+def without_compile_reports(err: str) -> str:
+    """``err`` (the command's stderr) without its compilation reports, which appear only
+    where the session's store did not hold the program yet (it depends on test order)."""
+    return COMPILE_REPORT.sub("", err)
 
 
 @pytest.fixture(scope="module")
@@ -245,42 +270,58 @@ def run_cli(cache_dir, capsys, monkeypatch):
 
 # ----------------------------------------------------------------------------- warm caches
 _FILL_CACHE = """
-import json
+import json, logging
 import numpy as np
+logging.basicConfig(level=logging.INFO, format="%(name)s %(levelname)s %(message)s")
 import jaxgrasp
+{setup}
 r = jaxgrasp.evaluate(jaxgrasp.presets.cube(6e5, 0.002))
-fields = {f: np.asarray(getattr(r, f)).tolist() for f in jaxgrasp.tolerance._result.FIELDS}
-print(json.dumps({"stats": jaxgrasp.engine._store.stats(), "fields": fields}))
+fields = {{f: np.asarray(getattr(r, f)).tolist() for f in jaxgrasp.tolerance._result.FIELDS}}
+print(json.dumps({{"stats": jaxgrasp.engine._store.stats(), "fields": fields}}))
 """
+
+_SETUPS = {
+    "store": "",  # what import jaxgrasp turns on: the executable store alone
+    "both": "jaxgrasp.enable_compilation_cache()",  # as the command does
+    "xla": "jaxgrasp.enable_compilation_cache(); jaxgrasp.engine._store.set_executable_dir(None)",
+}
+"""What a process turns on after ``import jaxgrasp``, by name (:meth:`WarmCache.evaluate_in_new_process`)."""
 
 
 @dataclasses.dataclass(frozen=True)
 class WarmCache:
-    """A cache folder filled by a library process that only set ``JAXGRASP_CACHE_DIR``
-    and evaluated the cube (``jaxgrasp.presets.cube(6e5, 0.002)``, = examples/cube.toml).
+    """The cache of a user with a fresh home folder (``HOME``; no ``JAXGRASP_CACHE_DIR``,
+    no ``XDG_CACHE_HOME``), filled by a library process that only imported jaxgrasp and
+    evaluated the cube (``jaxgrasp.presets.cube(6e5, 0.002)``, = examples/cube.toml).
 
     Attributes:
-        folder: the folder (``JAXGRASP_CACHE_DIR``).
-        first: what that process printed: ``stats`` (:func:`jaxgrasp.engine._store.stats`) and
-            ``fields`` (every Evaluation field, as lists).
+        home: the home folder; the cache is :attr:`folder`, ``~/.cache/jaxgrasp/xla``.
+        first: what that process printed: ``stats`` (:func:`jaxgrasp.engine._store.stats`),
+            ``fields`` (every Evaluation field, as lists) and ``log`` (its stderr: logging
+            at INFO level).
     """
 
-    folder: Path
+    home: Path
     first: dict
 
+    @property
+    def folder(self) -> Path:
+        return self.home / ".cache" / "jaxgrasp" / "xla"
+
     def run(self, argv: list[str]) -> subprocess.CompletedProcess:
-        """Run ``argv`` in the repository with ``JAXGRASP_CACHE_DIR`` set to the folder."""
-        env = dict(os.environ, JAXGRASP_CACHE_DIR=str(self.folder))
+        """Run ``argv`` in the repository as the user of :attr:`home`."""
+        env = {k: v for k, v in os.environ.items() if k not in ("JAXGRASP_CACHE_DIR", "XDG_CACHE_HOME")}
+        env["HOME"] = str(self.home)
         proc = subprocess.run(argv, capture_output=True, text=True, env=env, cwd=TESTS_DIR.parent, timeout=300)
         assert proc.returncode == 0, proc.stderr[-2000:]
         return proc
 
-    def evaluate_in_new_process(self, store: bool = True) -> dict:
-        """A new library process evaluates the cube: its ``stats`` and ``fields``. With
-        ``store`` false its program store is off (XLA's cache alone is on)."""
-        script = _FILL_CACHE if store else _FILL_CACHE.replace(
-            "import jaxgrasp\n", "import jaxgrasp\njaxgrasp.engine._store.set_executable_dir(None)\n", 1)
-        return json.loads(self.run([sys.executable, "-c", script]).stdout)
+    def evaluate_in_new_process(self, setup: str = "store") -> dict:
+        """A new library process evaluates the cube: its ``stats``, ``fields`` and ``log``.
+        ``setup``: the caches it turns on after the import (:data:`_SETUPS`: ``"store"``,
+        the import's default; ``"both"``; ``"xla"``, XLA's cache alone)."""
+        proc = self.run([sys.executable, "-c", _FILL_CACHE.format(setup=_SETUPS[setup])])
+        return json.loads(proc.stdout) | {"log": proc.stderr}
 
     def program_files(self) -> set[str]:
         """The stored evaluators' files: jaxgrasp's compiled programs and XLA's cache entries."""
@@ -293,13 +334,13 @@ class WarmCache:
 @pytest.fixture(scope="session")
 def warm_cache(tmp_path_factory) -> WarmCache:
     """:class:`WarmCache`: one cold library process (traces and compiles the cube, ~10 s
-    on 2 cores) whose stores later processes load.
+    on 2 cores) whose store later processes load.
 
-    Its folder is its own, not :func:`store_dir`: the first process must find it empty
-    (``test_cache`` checks that it traced once), whichever tests ran before."""
-    folder = tmp_path_factory.mktemp("warm") / "cache"  # not there yet: jaxgrasp creates it
-    filler = WarmCache(folder, {})
-    return WarmCache(folder, filler.evaluate_in_new_process())
+    Its home is its own, not :func:`store_dir`: the first process must find no cache
+    (``test_cache`` checks that it traced once, and created the folder), whichever tests
+    ran before."""
+    home = tmp_path_factory.mktemp("warm-home")
+    return WarmCache(home, WarmCache(home, {}).evaluate_in_new_process())
 
 
 # ----------------------------------------------------------------------------- slow tests

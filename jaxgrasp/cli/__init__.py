@@ -18,7 +18,7 @@ from jaxgrasp.cli import _batch, _evaluate, _show, _sweep, _tune
 from jaxgrasp.cli._common import EXIT_USAGE, Parser, UsageError, load_grasp, parse_number
 from jaxgrasp.cli._interrupt import run_interruptibly
 from jaxgrasp.engine import _compile
-from jaxgrasp.engine._store import enable_compilation_cache
+from jaxgrasp.engine._store import enable_compilation_cache, log_lines_on_stderr
 
 __all__ = [
     "main",
@@ -70,8 +70,9 @@ def _main(argv) -> int:
         args = parser.parse_args(argv)
         if args.command is None:
             raise UsageError("choose a command: evaluate, sweep, batch, tune or show (see 'jaxgrasp --help')")
-        enable_compilation_cache()  # looked up here, so that tests can replace it
-        return args.func(args)
+        with log_lines_on_stderr():  # "jaxgrasp: compiling ...", and cache warnings, one line each
+            enable_compilation_cache()  # looked up here, so that tests can replace it
+            return args.func(args)
     except (UsageError, GraspValueError, OutputError) as exc:
         print(f"jaxgrasp: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

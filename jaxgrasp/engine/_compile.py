@@ -5,15 +5,23 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from pathlib import Path
-from typing import Any, Callable, Hashable, Sequence
+from collections.abc import Callable, Hashable, Sequence
+from typing import Any
 
 import jax
 
 from jaxgrasp.engine._pipeline import Pipeline, Staged, lower_stages
-from jaxgrasp.engine._store import _STATS, executable_path, load_executable, save_executable
+from jaxgrasp.engine._store import (
+    _STATS,
+    LOGGER,
+    StoreEntry,
+    discard,
+    executable_entry,
+    load_executable,
+    save_executable,
+)
 
-__all__ = ["MEMO_SIZE", "default_device", "wait_for_saves", "compiled", "clear_compiled"]
+__all__ = ["MEMO_SIZE", "clear_compiled", "compiled", "default_device", "wait_for_saves"]
 
 
 MEMO_SIZE = 16
@@ -70,7 +78,7 @@ def _outcome(f, *args):
     """``(True, f(*args))``, or ``(False, exception)``."""
     try:
         return True, f(*args)
-    except BaseException as exc:  # raised again in the calling thread
+    except BaseException as exc:  # noqa: BLE001  raised again in the calling thread
         return False, exc
 
 
@@ -93,6 +101,7 @@ def compiled(
     spec: Sequence,
     *,
     name: str = "executable",
+    what: str | None = None,
     store_key: Hashable | None = None,
     devices: Sequence | None = None,
     n_outputs: int | None = None,
@@ -107,6 +116,7 @@ def compiled(
             not in the memo (it must be cheap: nothing is traced before it is compiled).
         spec: its arguments as ``jax.ShapeDtypeStruct`` (with their shardings).
         name: prefix of its stored file.
+        what: what it is, in words, for the report of its compilation (default ``name``).
         store_key: what makes it unique across processes (device counts, not ids);
             ``None``: never stored.
         devices: the devices it runs on, in its order (default: JAX's default device).
@@ -122,40 +132,55 @@ def compiled(
         _MEMO[key] = hit  # now the most recently used
         return hit, 0.0
     t0 = time.perf_counter()
-    path = None if store_key is None else executable_path(name, (store_key, len(devices or ())))
+    entry = None if store_key is None else executable_entry(name, (store_key, len(devices or ())), spec)
     built = build()
-    fn = None
-    if path is not None:
-        fn = load_executable(path, spec, _devices(devices), n_outputs, built.drive if isinstance(built, Pipeline) else None)
+    fn, why = None, "the executable store is off"
+    if entry is not None:
+        drive = built.drive if isinstance(built, Pipeline) else None
+        fn, why = load_executable(entry, spec, _devices(devices), n_outputs, drive)
     if fn is None:
-        hits = _XLA_CACHE_HITS[0]
-        fn = _compile(built, spec, quiet_xla=path is not None)
-        _STATS["traced"] += 1
-        # An executable that XLA's cache served cannot be serialized again (XLA on the CPU
-        # then writes one whose kernels are missing when it is loaded): store only one
-        # that was compiled here. (XLA's cache holds no stored executable, but may hold
-        # one written for another function of the same HLO or by an older jaxgrasp;
-        # later processes then trace it and load XLA's copy.)
-        if path is not None and _XLA_CACHE_HITS[0] == hits:
-            _save_in_background(path, fn)
+        fn = _build(built, spec, entry, what or name, why)
     else:
         _STATS["deserialized"] += 1
+        LOGGER.debug("jaxgrasp: loaded %s from %s", what or name, entry.path)
     seconds = time.perf_counter() - t0
     if len(_MEMO) >= MEMO_SIZE:
         _MEMO.pop(next(iter(_MEMO)))
     _MEMO[key] = fn
     return fn, seconds
 
+
+def _build(built, spec, entry: StoreEntry | None, what: str, why: str):
+    """Compile ``built`` for ``spec`` (reported once, at INFO, on :data:`LOGGER`: ``what``,
+    ``why`` it is compiled, and where it will be stored) and store it at ``entry``."""
+    where = "it will be stored in " + str(entry.path.parent) if entry is not None else "it is not stored"
+    LOGGER.info("jaxgrasp: compiling %s (%s); %s", what, why, where)
+    hits = _XLA_CACHE_HITS[0]
+    fn = _compile(built, spec, quiet_xla=entry is not None)
+    _STATS["traced"] += 1
+    if entry is None:
+        return fn
+    # An executable that XLA's cache served cannot be serialized again (XLA on the CPU
+    # then writes one whose kernels are missing when it is loaded): store only one
+    # that was compiled here. (XLA's cache holds no stored executable, but may hold
+    # one written for another function of the same HLO or by an older jaxgrasp;
+    # later processes then trace it and load XLA's copy.)
+    if _XLA_CACHE_HITS[0] == hits:
+        _save_in_background(entry, fn)
+    elif entry.path.exists():  # a file that was not usable, and is not replaced: not read again
+        discard(entry)
+    return fn
+
 _SAVES: list[threading.Thread] = []
 """Threads writing a compiled executable to the store (:func:`_save_in_background`)."""
 
 
-def _save_in_background(path: Path, fn) -> None:
+def _save_in_background(entry: StoreEntry, fn) -> None:
     """:func:`save_executable` in a thread, so that serializing the executable overlaps its
     first run instead of delaying it. The thread is not a
     daemon (the interpreter waits for it at exit); a process that ends with ``os._exit``
     (the ``jaxgrasp`` command) calls :func:`wait_for_saves` first."""
-    thread = threading.Thread(target=save_executable, args=(path, fn), name="jaxgrasp-save")
+    thread = threading.Thread(target=save_executable, args=(entry, fn), name="jaxgrasp-save")
     _SAVES.append(thread)
     thread.start()
 

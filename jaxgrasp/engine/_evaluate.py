@@ -169,6 +169,7 @@ def compiled_executable(grasp: Grasp, options: EvaluateOptions, settle: bool = T
         build,
         spec,
         name="evaluate_settled" if settle else "evaluate",
+        what=f"evaluate for {np.shape(grasp.positions)[0]} contacts",
         store_key=(options, settle, masked, avals, x64),
         n_outputs=len(RESULT_FIELDS),
     )

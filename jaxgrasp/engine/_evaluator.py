@@ -102,6 +102,7 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
         lambda: _staged(options, sharding, masked, settle),
         _chunk_spec(n_contacts, chunk, sharding, masked),
         name="sweep_settled" if settle else "sweep",
+        what=f"the batch evaluator for chunks of {chunk} grasps of {n_contacts} contacts",
         store_key=(options, n_contacts, chunk, x64, masked, settle),
         devices=list(sharding.mesh.devices.flat),
         n_outputs=len(RESULT_FIELDS),

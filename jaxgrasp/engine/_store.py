@@ -10,43 +10,80 @@ Three layers, each skipping more of the work of building an evaluator:
   machine code;
 * JAX's persistent compilation cache, for the user's own ``jit`` functions and
   jaxgrasp's executables that are not stored. An executable the store keeps is not
-  written there as well (a second copy of the same machine code, written for nothing); an
-  executable whose stored file is missing, stale or corrupt is traced and compiled again,
-  and stored again.
+  written there as well (a second copy of the same machine code, written for nothing).
 
-The executables of :func:`jaxgrasp.evaluate` on a concrete grasp
-(:func:`jaxgrasp.engine._evaluate.compiled_executable`), of :func:`jaxgrasp.evaluate_batch`
-and of :func:`jaxgrasp.sweep` (:func:`jaxgrasp.engine._evaluator.compiled_evaluator`) all
-come from :func:`~jaxgrasp.engine._compile.compiled`. A traced grasp (inside the caller's
-``jit``, ``vmap`` or ``grad``) is traced with the caller's function and uses none of these.
+The executables of :func:`jaxgrasp.evaluate` on a concrete grasp, of
+:func:`jaxgrasp.evaluate_batch` and of :func:`jaxgrasp.sweep` all come from
+:func:`~jaxgrasp.engine._compile.compiled`. A traced grasp (inside the caller's ``jit``,
+``vmap`` or ``grad``) is traced with the caller's function and uses none of these.
 
-The two stores on disk are off by default, as JAX's own cache is. One call turns both on,
-:func:`enable_compilation_cache` (``jaxgrasp.enable_compilation_cache()``): XLA's cache in
-the folder :func:`default_dir`, the executables in its subfolder ``jaxgrasp-executables``. Two
-things call it by themselves:
+Which caches are on:
 
-* the ``jaxgrasp`` command, always;
-* ``import jaxgrasp``, when the environment variable ``JAXGRASP_CACHE_DIR`` (:data:`ENV_VAR`)
-  names a folder (:func:`enable_from_environment`): so every process of an application,
-  or of a test runner, starts warm without a change to its code.
+* ``import jaxgrasp`` turns on the executable store alone (:func:`enable_from_environment`),
+  in the subfolder ``jaxgrasp-executables`` of :func:`default_dir`: every process of a
+  script starts warm, without a change to its code. It does not turn on JAX's persistent
+  compilation cache, which is global to the process: it would change how the user's own
+  ``jit`` functions are compiled and stored, which is the user's choice.
+* :func:`enable_compilation_cache` (``jaxgrasp.enable_compilation_cache()``) and the
+  ``jaxgrasp`` command turn on both: JAX's cache in :func:`default_dir`, the executables
+  in its subfolder.
+* The environment variable ``JAXGRASP_CACHE_DIR`` (:data:`ENV_VAR`) moves the folder;
+  ``JAXGRASP_CACHE_DIR=off`` switches every jaxgrasp cache off (the import's, the
+  command's and ``enable_compilation_cache()``'s; a folder passed to it explicitly is
+  still used). Unset, the folder is ``$XDG_CACHE_HOME/jaxgrasp/xla``, else
+  ``~/.cache/jaxgrasp/xla``.
 
-``JAXGRASP_CACHE_DIR`` is also the folder the command uses (default
-``~/.cache/jaxgrasp/xla``). Like XLA's cache, the folder holds machine code that is loaded
-and run: keep it where only you can write. Tests and benchmarks read what the caches did
-with :func:`stats` and start afresh with :func:`clear_compiled`.
+Both caches load machine code that is then run, and a stored executable is a pickle
+(so is the payload of ``serialize_executable``): whoever can write a file there can run
+code as the user. So nothing is read that another user could have written:
+
+* a folder jaxgrasp creates is private (mode 0700, every level it creates);
+* before any cache is turned on, the folder and the executable subfolder must be owned by
+  the user, not writable by group or others, and not symbolic links; otherwise neither
+  cache is turned on and one warning line names the folder and why;
+* every stored file is opened without following links and checked the same way (a regular
+  file, the user's, not writable by group or others) before a byte of it is unpickled;
+  otherwise it is skipped with a warning (and counted in :func:`stats`);
+* a stored file starts with a format line and a JSON header holding the executable's full
+  key (options, shapes, versions, jaxgrasp's source digest, machine) and the SHA-256 and
+  length of its payload; a file whose key is not exactly the expected one, or whose
+  payload does not match, is not unpickled: the executable is compiled again and the file
+  replaced;
+* files are written through a temporary file created exclusively (``O_EXCL``,
+  ``O_NOFOLLOW``, mode 0600) under a random name in the same folder, synced, then renamed
+  over the file (atomic: a reader sees the old file or the new one); a failed write
+  removes it, and temporary files of dead processes (or older than an hour) are removed
+  when the store is turned on.
+
+Warnings and the report of each compilation go to the ``logging`` logger ``"jaxgrasp"``
+(:data:`LOGGER`): a compilation is reported at INFO level (what, why, where it is stored),
+which the ``jaxgrasp`` command prints on stderr. Tests and benchmarks read what the caches
+did with :func:`stats` and start afresh with
+:func:`jaxgrasp.engine._compile.clear_compiled`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import functools
 import hashlib
+import json
+import logging
 import os
 import pickle
 import platform
+import re
+import secrets
+import stat
+import sys
 import tempfile
 import threading
+import time
 import warnings
+from collections.abc import Callable, Hashable, Sequence
 from pathlib import Path
-from typing import Callable, Hashable, Sequence
+from typing import NamedTuple
 
 import jax
 import numpy as np
@@ -56,66 +93,113 @@ from jaxgrasp.engine._pipeline import Staged
 __all__ = [
     "ENV_VAR",
     "EXECUTABLE_SUBDIR",
+    "LOGGER",
+    "OFF",
+    "StoreEntry",
     "default_dir",
+    "discard",
     "enable_compilation_cache",
     "enable_from_environment",
-    "set_executable_dir",
     "executable_dir",
-    "source_digest",
-    "executable_path",
+    "executable_entry",
     "load_executable",
+    "log_lines_on_stderr",
+    "remove_stale_temp_files",
     "save_executable",
+    "set_executable_dir",
+    "source_digest",
     "stats",
 ]
 
 
 ENV_VAR = "JAXGRASP_CACHE_DIR"
-"""The environment variable naming the cache folder; where set, ``import jaxgrasp`` turns
-the caches on (:func:`enable_from_environment`)."""
+"""The environment variable that moves the cache folder (:func:`default_dir`), or with the
+value :data:`OFF` switches every jaxgrasp cache off."""
+
+OFF = "off"
+"""The value of ``JAXGRASP_CACHE_DIR`` (any case) that switches every jaxgrasp cache off."""
 
 EXECUTABLE_SUBDIR = "jaxgrasp-executables"
-"""Folder of the executable store inside the compilation cache folder."""
+"""Folder of the executable store inside the cache folder."""
+
+LOGGER = logging.getLogger("jaxgrasp")
+"""Where the caches report: refused folders and files (WARNING), compilations (INFO)."""
+
+STALE_TEMP_SECONDS = 3600.0
+"""Age (s) after which a temporary file of the store is removed even if its process lives."""
 
 _EXECUTABLE_DIR: Path | None = None
 
 _STATS = {"traced": 0, "deserialized": 0, "cache_errors": 0}
 
+_WARNED: set[str] = set()
+"""Warnings already given in this process (each is given once)."""
 
-def default_dir() -> Path:
-    """The compilation cache folder: ``$JAXGRASP_CACHE_DIR`` or ``~/.cache/jaxgrasp/xla``."""
-    return Path(os.environ.get(ENV_VAR) or str(Path.home() / ".cache" / "jaxgrasp" / "xla"))
+
+def _warn_once(message: str) -> None:
+    if message not in _WARNED:
+        _WARNED.add(message)
+        LOGGER.warning(message)
+
+
+def default_dir() -> Path | None:
+    """The cache folder: ``$JAXGRASP_CACHE_DIR``, else ``$XDG_CACHE_HOME/jaxgrasp/xla``,
+    else ``~/.cache/jaxgrasp/xla``; ``None`` where ``JAXGRASP_CACHE_DIR=off`` or no home
+    folder is known."""
+    value = os.environ.get(ENV_VAR, "").strip()
+    if value.lower() == OFF:
+        return None
+    if value:
+        return Path(value).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME", "")
+    if os.path.isabs(xdg):  # XDG: a relative value is ignored
+        return Path(xdg) / "jaxgrasp" / "xla"
+    try:
+        home = Path.home()
+    except (RuntimeError, KeyError):  # no home folder
+        return None
+    return home / ".cache" / "jaxgrasp" / "xla" if home.is_absolute() else None  # HOME="": not the working folder
 
 
 def enable_from_environment() -> Path | None:
-    """Turn the caches on (:func:`enable_compilation_cache`) if ``$JAXGRASP_CACHE_DIR``
-    names a folder (unset or empty: leave them as they are); the folder or ``None``.
-    ``import jaxgrasp`` calls it once."""
-    if not os.environ.get(ENV_VAR):
+    """Turn on the executable store alone in :func:`default_dir`'s subfolder
+    ``jaxgrasp-executables`` (not JAX's own cache, see the module docstring); the folder
+    of the store, or ``None`` (switched off, refused, or it cannot be created).
+    ``import jaxgrasp`` calls it once; it starts no JAX backend."""
+    folder = default_dir()
+    if folder is None:
         return None
-    return enable_compilation_cache()
+    problem = _private_folder(folder, create=True)
+    if problem is not None:
+        _refuse(folder, problem)
+        return None
+    return set_executable_dir(folder / EXECUTABLE_SUBDIR)
 
 
 def enable_compilation_cache(path=None) -> Path | None:
     """Turn on both caches on disk, so that a new process neither traces nor compiles again.
 
-    JAX's persistent compilation cache lives in ``path`` (default :func:`default_dir`),
-    the compiled executables in its subfolder ``jaxgrasp-executables`` (:func:`set_executable_dir`):
-    a repeated :func:`jaxgrasp.evaluate` of a concrete grasp, batch or sweep in a new
-    process loads its compiled executable instead of tracing, lowering and compiling it.
+    JAX's persistent compilation cache lives in ``path`` (default :func:`default_dir`; with
+    ``JAXGRASP_CACHE_DIR=off`` and no ``path``: nothing is turned on), the compiled
+    executables in its subfolder ``jaxgrasp-executables`` (:func:`set_executable_dir`).
+    A folder that does not exist is created, private (0700). A folder another user owns
+    or can write (or a symbolic link) turns on neither cache: one warning line says why.
     Calling it again (with the same folder) changes nothing. A folder that cannot be
-    created leaves every setting as it was (every run compiles). A folder that exists
-    but cannot be written is still read (a shared, pre-filled cache works) and new
+    created leaves every setting as it was (every run compiles). A folder of the user's
+    that exists but cannot be written is still read (a pre-filled cache works) and new
     compilations are not saved, quietly: JAX's own warning for every entry it fails to
     write (two lines on stderr per compilation, every run) is silenced.
 
     Returns:
-        The folder, or ``None`` when it could not be created.
+        The folder, or ``None`` where no cache was turned on.
     """
-    folder = default_dir() if path is None else Path(path)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return None  # no writable cache: compile every time
+    folder = default_dir() if path is None else Path(path).expanduser()
+    if folder is None:
+        return None
+    problem = _private_folder(folder, create=True) or _private_folder(folder / EXECUTABLE_SUBDIR, create=False)
+    if problem is not None:
+        _refuse(folder, problem)
+        return None
     if not _writable(folder):
         warnings.filterwarnings("ignore", message=_JAX_WRITE_ERROR, category=UserWarning)
     jax.config.update("jax_compilation_cache_dir", str(folder))
@@ -124,8 +208,20 @@ def enable_compilation_cache(path=None) -> Path | None:
     set_executable_dir(folder / EXECUTABLE_SUBDIR)
     return folder
 
+
 _JAX_WRITE_ERROR = r"Error writing persistent compilation cache entry"
 """The start of the warning JAX gives for every cache entry it fails to write."""
+
+
+def _refuse(folder: Path, problem: str) -> None:
+    """Warn (once) that ``folder`` is not used, and stop storing executables there."""
+    global _EXECUTABLE_DIR
+    if problem.startswith("cannot be created"):  # nowhere to write: quietly compile every run
+        LOGGER.info("jaxgrasp: cache folder %s %s; compiling every run", folder, problem)
+    else:
+        _warn_once(f"jaxgrasp: not using cache folder {folder}: {problem}; compiling every run")
+    if _EXECUTABLE_DIR is not None and folder in (_EXECUTABLE_DIR, _EXECUTABLE_DIR.parent):
+        _EXECUTABLE_DIR = None
 
 
 def _writable(folder: Path) -> bool:
@@ -138,16 +234,78 @@ def _writable(folder: Path) -> bool:
         return False
 
 
-def set_executable_dir(path) -> None:
-    """Keep compiled executables in folder ``path``; ``None``: don't.
+def _make_private(folder: Path) -> None:
+    """Create ``folder`` and its missing parents, each with mode 0700 whatever the umask;
+    raises ``OSError`` where it cannot. Folders that exist are left as they are."""
+    missing = []
+    for level in (folder, *folder.parents):
+        if os.path.lexists(level):
+            break
+        missing.append(level)
+    for level in reversed(missing):
+        try:
+            os.mkdir(level, 0o700)
+        except FileExistsError:  # made by another process meanwhile: checked as any other
+            continue
+        os.chmod(level, 0o700)  # the umask may have removed the owner's bits
 
-    A later process building the same executable (same jaxgrasp source, JAX and jaxlib
-    versions, key, device count, precision, backend and processor) loads it instead of
-    tracing and compiling it. A missing, stale or corrupt file is ignored (the executable is
-    built and the file rewritten).
+
+def _not_private(st: os.stat_result, kind: str) -> str | None:
+    """Why a file or folder with status ``st`` (of ``lstat`` or ``fstat``) could hold what
+    another user wrote; ``None`` where it is the user's alone. ``kind``: ``"folder"`` or
+    ``"file"``."""
+    if stat.S_ISLNK(st.st_mode):
+        return "it is a symbolic link"
+    if not (stat.S_ISDIR if kind == "folder" else stat.S_ISREG)(st.st_mode):
+        return f"not a {'folder' if kind == 'folder' else 'regular file'}"
+    if st.st_uid != os.geteuid():
+        return f"owned by user id {st.st_uid}, not by this user ({os.geteuid()})"
+    if st.st_mode & 0o022:
+        return f"writable by group or others (mode {stat.S_IMODE(st.st_mode):o})"
+    return None
+
+
+def _private_folder(folder: Path, create: bool) -> str | None:
+    """Why ``folder`` must not be used as a cache; ``None`` where it may. With ``create``,
+    a missing folder is created private; without, a missing one may be used (nothing to
+    read; it is created when the first file is written)."""
+    try:
+        if create:
+            _make_private(folder)
+        return _not_private(os.lstat(folder), "folder")
+    except FileNotFoundError:
+        return None if not create else "cannot be created (a parent was removed)"
+    except OSError as exc:
+        return f"cannot be created ({exc.strerror or exc})"
+
+
+def set_executable_dir(path) -> Path | None:
+    """Keep compiled executables in folder ``path``; ``None``: don't. Returns the folder,
+    or ``None`` where it is not used.
+
+    The folder is created private (0700) where it is missing and the folder above it can
+    be written. A folder another user owns or can write, or a symbolic link, is refused
+    (one warning; the store is off). A later process building the same executable (same
+    jaxgrasp source, JAX and jaxlib versions, key, shapes, device count, precision,
+    backend and processor) loads it instead of tracing and compiling it. A missing,
+    stale or damaged file is ignored (the executable is built and the file replaced).
+    Temporary files of the store left by dead processes are removed.
     """
     global _EXECUTABLE_DIR
-    _EXECUTABLE_DIR = None if path is None else Path(path)
+    if path is None:
+        _EXECUTABLE_DIR = None
+        return None
+    folder = Path(path).expanduser()
+    problem = _private_folder(folder, create=True)
+    if problem is not None and os.path.isdir(folder.parent) and problem.startswith("cannot be created"):
+        problem = _private_folder(folder, create=False)  # a read-only cache: read what it has
+    if problem is not None:
+        _refuse(folder, problem)
+        _EXECUTABLE_DIR = None
+        return None
+    _EXECUTABLE_DIR = folder
+    remove_stale_temp_files(folder)
+    return folder
 
 
 def executable_dir() -> Path | None:
@@ -155,10 +313,53 @@ def executable_dir() -> Path | None:
     return _EXECUTABLE_DIR
 
 
+_TEMP = re.compile(r"^\.(?P<name>[^/]+)\.(?P<pid>\d+)\.[0-9a-f]+\.tmp$")
+"""A temporary file of the store (:func:`_write_atomically`): ``.NAME.PID.RANDOM.tmp``."""
+
+_OLD_TEMP = re.compile(r"^[\w.-]+\.tmp(?P<pid>\d+)$")
+"""A temporary file of earlier versions of the store: ``NAME.tmpPID``."""
+
+
+def _process_is_gone(pid: int) -> bool:
+    """Whether no process ``pid`` runs on this machine."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except OSError:  # another user's process: alive
+        return False
+    return False
+
+
+def remove_stale_temp_files(folder: Path, now: float | None = None) -> int:
+    """Remove the store's temporary files in ``folder`` whose process is gone or that are
+    older than :data:`STALE_TEMP_SECONDS` (a write killed half-way leaves one); how many.
+    Never follows a link (a link is removed as a link)."""
+    now = time.time() if now is None else now
+    removed = 0
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return 0
+    for entry in entries:
+        match = _TEMP.match(entry.name) or _OLD_TEMP.match(entry.name)
+        if match is None:
+            continue
+        try:
+            age = now - entry.stat(follow_symlinks=False).st_mtime
+            if age > STALE_TEMP_SECONDS or _process_is_gone(int(match["pid"])):
+                os.unlink(entry.path)
+                removed += 1
+        except OSError:  # gone meanwhile, or not ours to remove
+            continue
+    return removed
+
+
+@functools.cache
 def source_digest() -> str:
     """Hash of jaxgrasp's own source files, subpackages included (an editable install
     keeps its version number while its code changes)."""
-    root = Path(__file__).resolve().parent
+    root = Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
     for f in sorted(root.rglob("*.py")):
         h.update(f.relative_to(root).as_posix().encode())
@@ -182,19 +383,102 @@ def _machine() -> str:
     return repr(parts)
 
 
-def executable_path(name: str, key: Hashable) -> Path | None:
-    """File of the stored executable ``name`` (``"sweep"``) for ``key``; ``None`` when
-    executables are not kept. ``key`` must be the same in every process that builds the same
-    executable (device counts, not device ids)."""
+class StoreEntry(NamedTuple):
+    """Where an executable is stored, and the full text of its key (written in the file's
+    header and compared on load)."""
+
+    path: Path
+    key: str
+
+
+def _shapes(xs) -> list:
+    return [(tuple(x.shape), np.dtype(x.dtype)) for x in jax.tree_util.tree_leaves(xs)]
+
+
+def executable_entry(name: str, key: Hashable, spec: Sequence = ()) -> StoreEntry | None:
+    """The file of the stored executable ``name`` (``"sweep"``) for ``key`` and arguments
+    ``spec`` (``jax.ShapeDtypeStruct`` leaves), with its full key text; ``None`` when
+    executables are not kept. ``key`` must be the same in every process that builds the
+    same executable (device counts, not device ids), and its ``repr`` must hold every
+    option (it is compared as text)."""
     if _EXECUTABLE_DIR is None:
         return None
     import jaxlib
 
-    text = repr((key, source_digest(), jax.__version__, jaxlib.__version__, _machine()))
-    return _EXECUTABLE_DIR / f"{name}-{hashlib.sha256(text.encode()).hexdigest()[:32]}.xla"
+    text = repr((key, _shapes(spec), source_digest(), jax.__version__, jaxlib.__version__, _machine()))
+    return StoreEntry(_EXECUTABLE_DIR / f"{name}-{hashlib.sha256(text.encode()).hexdigest()[:32]}.xla", text)
 
-_FORMAT = "jaxgrasp-executable-3"
-"""Tag of a stored executable's file (a file without it is stale)."""
+
+_MAGIC = b"jaxgrasp-executable-4"
+"""First line of a stored executable's file (a file of another format is stale)."""
+
+_MAX_HEADER = 1 << 20
+"""Longest header line read (bytes); a longer one is damaged."""
+
+
+class _Unusable(Exception):
+    """A stored file that is not loaded; the message says why."""
+
+
+class _Refused(_Unusable):
+    """A stored file that another user could have written: not read at all."""
+
+
+def _read_private(path: Path) -> bytes:
+    """The bytes of ``path``, opened without following a link, if it is a regular file of
+    the user's that no one else can write; raises ``FileNotFoundError``, :class:`_Refused`
+    or :class:`_Unusable`."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise _Refused("it is a symbolic link") from None
+        raise _Unusable(f"it cannot be read ({exc.strerror})") from None
+    with os.fdopen(fd, "rb") as f:
+        problem = _not_private(os.fstat(f.fileno()), "file")  # the file opened, not a name
+        if problem is not None:
+            raise _Refused(problem)
+        return f.read()
+
+
+def _encode(key: str, payload: bytes) -> bytes:
+    """A stored file: :data:`_MAGIC`, a JSON header (key, payload's length and SHA-256),
+    the payload."""
+    header = {"key": key, "payload_bytes": len(payload), "payload_sha256": hashlib.sha256(payload).hexdigest()}
+    return b"\n".join([_MAGIC, json.dumps(header, sort_keys=True).encode(), payload])
+
+
+def _decode(data: bytes, key: str) -> bytes:
+    """The payload of a stored file ``data`` whose header holds exactly ``key`` and whose
+    payload has the length and SHA-256 the header gives; raises :class:`_Unusable`."""
+    magic, _, rest = data.partition(b"\n")
+    if magic != _MAGIC:
+        raise _Unusable("not a stored executable of this version's format")
+    end = rest.find(b"\n", 0, _MAX_HEADER + 1)
+    try:
+        if end < 0:
+            raise ValueError("no end of header")
+        header = json.loads(rest[:end])
+    except ValueError:
+        raise _Unusable("its header is damaged") from None
+    payload = rest[end + 1 :]
+    if not isinstance(header, dict) or header.get("key") != key:
+        raise _Unusable("it was built for another key (other options, shapes, versions or machine)")
+    if header.get("payload_bytes") != len(payload) or header.get("payload_sha256") != hashlib.sha256(payload).hexdigest():
+        raise _Unusable("its checksum does not match (damaged)")
+    return payload
+
+
+def _registering(devices: Sequence):
+    """A started thread that registers the CPU's LAPACK handlers for a CPU executable (see
+    :func:`_register_handlers`; join it before the executable runs), or ``None``."""
+    if devices[0].platform != "cpu":
+        return None
+    thread = threading.Thread(target=_register_handlers, name="jaxgrasp-lapack", daemon=True)
+    thread.start()
+    return thread
 
 
 def _register_handlers() -> None:
@@ -207,95 +491,155 @@ def _register_handlers() -> None:
         from jax._src.lib import lapack
 
         lapack._lapack.initialize()
-    except Exception:
+    except Exception:  # noqa: BLE001  any failure: the public route below
         import jax.numpy as jnp
 
         jax.jit(jnp.linalg.eigh).lower(jax.ShapeDtypeStruct((2, 2), np.float32))
 
 
-def _registering(devices: Sequence):
-    """A started thread that runs :func:`_register_handlers` for a CPU executable (it imports
-    SciPy's LAPACK while the executable's machine code loads; join it before the
-    executable runs), or ``None`` where there is nothing to register."""
-    if devices[0].platform != "cpu":
-        return None
-    thread = threading.Thread(target=_register_handlers, name="jaxgrasp-lapack", daemon=True)
-    thread.start()
-    return thread
-
-
-def _shapes(xs) -> list:
-    return [(tuple(x.shape), np.dtype(x.dtype)) for x in jax.tree_util.tree_leaves(xs)]
-
-
-def load_executable(path: Path, spec: Sequence, devices: Sequence, n_outputs: int | None = None,
-                 drive: Callable | None = None):
-    """The compiled executable stored at ``path`` (a ``jax.stages.Compiled``, or a
-    :class:`Staged` of several, called by ``drive``: :class:`Pipeline`), loaded onto
-    ``devices``, if it takes ``spec`` (``jax.ShapeDtypeStruct`` leaves) and returns
-    ``n_outputs`` arrays; ``None`` otherwise (missing, stale, corrupt, or built for
-    other devices)."""
+def _load_stages(stages, spec: Sequence, devices: Sequence, n_outputs: int | None, drive: Callable | None):
+    """The executable of the unpickled ``stages`` (``[(name, payload, in_tree, out_tree)]``),
+    loaded onto ``devices``, if it takes ``spec`` and returns ``n_outputs`` arrays; raises
+    ``ValueError`` otherwise."""
     from jax.experimental import serialize_executable
 
+    if not stages or (drive is None) != (len(stages) == 1 and stages[0][0] is None):
+        raise ValueError("its stages do not fit the driver")
+    registering = _registering(devices)
+    loaded = {}
     try:
-        data = path.read_bytes()
+        for name, payload, in_tree, out_tree in stages:
+            if in_tree != jax.tree_util.tree_structure(((0,) * in_tree.num_leaves, {})):  # flat arrays
+                raise ValueError("its arguments are not flat arrays")
+            loaded[name] = serialize_executable.deserialize_and_load(
+                payload, in_tree, out_tree, backend=devices[0].client, execution_devices=list(devices)
+            )
+    finally:
+        if registering is not None:
+            registering.join()
+
+    def call(name, *args):  # each stage must take what the driver gives it
+        fn = loaded[name]
+        if _shapes(fn.args_info) != _shapes(args):
+            raise ValueError("a stage takes other shapes")
+        return tuple(jax.ShapeDtypeStruct(o.shape, o.dtype) for o in jax.tree_util.tree_leaves(fn.out_info))
+
+    out = call(None, *spec) if drive is None else drive(call, *spec)
+    if n_outputs is not None and len(out) != n_outputs:
+        raise ValueError("it returns another number of arrays")
+    return loaded[None] if drive is None else Staged(loaded, drive)
+
+
+def load_executable(entry: StoreEntry, spec: Sequence, devices: Sequence, n_outputs: int | None = None,
+                    drive: Callable | None = None):
+    """The compiled executable stored at ``entry`` (a ``jax.stages.Compiled``, or a
+    :class:`Staged` of several, called by ``drive``: :class:`Pipeline`), loaded onto
+    ``devices``, if it takes ``spec`` (``jax.ShapeDtypeStruct`` leaves) and returns
+    ``n_outputs`` arrays; ``(executable, None)``, or ``(None, why)`` (a phrase: missing;
+    refused with a warning, as another user could have written it; built for another key;
+    damaged; built for other devices). Nothing is unpickled before the file's owner,
+    mode, key and checksum are checked. Every file that is there but not loaded counts
+    in ``stats()["cache_errors"]``."""
+    try:
+        stages = pickle.loads(_decode(_read_private(entry.path), entry.key))
     except FileNotFoundError:
-        return None
-    except OSError:
+        return None, "no stored executable yet"
+    except _Refused as exc:
         _STATS["cache_errors"] += 1
-        return None
+        _warn_once(f"jaxgrasp: not loading stored executable {entry.path}: {exc}")
+        return None, f"its stored file is refused: {exc}"
+    except Exception as exc:  # noqa: BLE001  _Unusable, or a payload that does not unpickle
+        _STATS["cache_errors"] += 1
+        return None, f"its stored file is unusable: {exc if isinstance(exc, _Unusable) else 'it does not unpickle'}"
     try:
-        tag, stages = pickle.loads(data)
-        if tag != _FORMAT or not stages or (drive is None) != (len(stages) == 1 and stages[0][0] is None):
-            raise ValueError("stale stored executable")
-        registering = _registering(devices)
-        loaded = {}
-        try:
-            for name, payload, in_tree, out_tree in stages:
-                if in_tree != jax.tree_util.tree_structure(((0,) * in_tree.num_leaves, {})):  # flat arrays
-                    raise ValueError("stale stored executable")
-                loaded[name] = serialize_executable.deserialize_and_load(
-                    payload, in_tree, out_tree, backend=devices[0].client, execution_devices=list(devices)
-                )
-        finally:
-            if registering is not None:
-                registering.join()
-
-        def call(name, *args):  # each stage must take what the driver gives it
-            fn = loaded[name]
-            if _shapes(fn.args_info) != _shapes(args):
-                raise ValueError("stale stored executable")
-            return tuple(jax.ShapeDtypeStruct(o.shape, o.dtype) for o in jax.tree_util.tree_leaves(fn.out_info))
-
-        out = call(None, *spec) if drive is None else drive(call, *spec)
-        if n_outputs is not None and len(out) != n_outputs:
-            raise ValueError("stale stored executable")
-        return loaded[None] if drive is None else Staged(loaded, drive)
-    except Exception:  # corrupt, stale, or from an incompatible JAX: build it again
+        return _load_stages(stages, spec, devices, n_outputs, drive), None
+    except Exception as exc:  # noqa: BLE001  stale, or from an incompatible JAX: build it again
         _STATS["cache_errors"] += 1
-        return None
+        return None, f"its stored file does not load here ({exc})"
 
 
-def save_executable(path: Path, fn) -> None:
+def _random_suffix() -> str:
+    return secrets.token_hex(8)
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path``: into a new temporary file in the same folder (created
+    exclusively, never through a link, mode 0600), synced, then renamed over ``path`` (which
+    replaces a link there, not its target). Raises ``OSError``; the temporary file is
+    removed on any failure."""
+    if not path.parent.is_dir():
+        _make_private(path.parent)
+    flags = os.O_CREAT | os.O_EXCL | os.O_WRONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(8):  # a name that exists (planted, or another writer's): another name
+        tmp = path.parent / f".{path.name}.{os.getpid()}.{_random_suffix()}.tmp"
+        try:
+            fd = os.open(tmp, flags, 0o600)
+            break
+        except FileExistsError:
+            continue
+    else:
+        raise FileExistsError(errno.EEXIST, "no free temporary name", str(path))
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)  # atomic: a concurrent reader sees the old file or the new one
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def save_executable(entry: StoreEntry, fn) -> bool:
     """Write the compiled executable ``fn`` (``jax.stages.Compiled`` or :class:`Staged`) to
-    ``path`` atomically; never raises (an executable that cannot be serialized is built again
-    next time)."""
+    ``entry`` atomically, with its key and checksum; whether it was written. Never raises
+    (an executable that cannot be serialized or written is built again next time, and
+    counts in ``stats()["cache_errors"]``)."""
     from jax.experimental import serialize_executable
 
     try:
         named = fn.stages.items() if isinstance(fn, Staged) else [(None, fn)]
         stages = [(name, *serialize_executable.serialize(f)) for name, f in named]
-        data = pickle.dumps((_FORMAT, stages), protocol=pickle.HIGHEST_PROTOCOL)
-    except Exception:
+        data = _encode(entry.key, pickle.dumps(stages, protocol=pickle.HIGHEST_PROTOCOL))
+        _write_atomically(entry.path, data)
+        return True
+    except Exception:  # noqa: BLE001  not serializable, or no writable cache: build every time
         _STATS["cache_errors"] += 1
-        return
+        return False
+
+
+def discard(entry: StoreEntry) -> None:
+    """Remove the stored file of ``entry`` (one that could not be used and is not replaced),
+    so that later processes do not read it again; quietly where it cannot."""
+    with contextlib.suppress(OSError):
+        os.unlink(entry.path)
+
+
+class _StderrLines(logging.Handler):
+    """Each record's message as one line on the current ``sys.stderr`` (looked up at each
+    line, so that a redirected stderr gets it)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            print(record.getMessage().splitlines()[0], file=sys.stderr, flush=True)
+        except Exception:  # noqa: BLE001  pragma: no cover - stderr closed
+            self.handleError(record)
+
+
+@contextlib.contextmanager
+def log_lines_on_stderr(level: int = logging.INFO):
+    """Within the block, what :data:`LOGGER` reports at ``level`` or above is printed on
+    stderr, one line each (the ``jaxgrasp`` command's compilation reports and warnings)."""
+    handler = _StderrLines(level)
+    before = LOGGER.level
+    LOGGER.addHandler(handler)
+    LOGGER.setLevel(min(level, before) if before else level)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_bytes(data)
-        os.replace(tmp, path)  # atomic: a concurrent reader sees the old file or the new one
-    except OSError:
-        pass  # no writable cache: build every time
+        yield
+    finally:
+        LOGGER.removeHandler(handler)
+        LOGGER.setLevel(before)
 
 
 def stats() -> dict[str, int]:

@@ -57,13 +57,13 @@ def first_run(dataset, tmp_path_factory, cache_dir):
     from jaxgrasp import cli
 
     out = tmp_path_factory.mktemp("batch-out") / "out"
-    os.environ["JAXGRASP_CACHE_DIR"] = str(cache_dir)
+    before, os.environ["JAXGRASP_CACHE_DIR"] = os.environ.get("JAXGRASP_CACHE_DIR"), str(cache_dir)
     try:
         o, e = io.StringIO(), io.StringIO()
         with contextlib.redirect_stdout(o), contextlib.redirect_stderr(e):
             rc = cli.main(["batch", str(dataset), "--out", str(out), "--chunk-size", "2", "--top", "2"])
     finally:
-        os.environ.pop("JAXGRASP_CACHE_DIR", None)
+        os.environ.update(JAXGRASP_CACHE_DIR=before) if before is not None else os.environ.pop("JAXGRASP_CACHE_DIR")
     return out, rc, o.getvalue(), e.getvalue()
 
 

@@ -1,22 +1,25 @@
-"""Every process starts warm (issue 13): ``JAXGRASP_CACHE_DIR`` turns the caches on at
-``import jaxgrasp``, a concrete :func:`jaxgrasp.evaluate` stores its compiled program,
-and a later process loads it instead of tracing and compiling.
+"""Every process starts warm (issues 13 and 35): ``import jaxgrasp`` turns on the
+executable store in the user's cache folder, a concrete :func:`jaxgrasp.evaluate` stores
+its compiled program (and reports its compilation on the ``jaxgrasp`` logger), and a later
+process loads it instead of tracing and compiling.
 
-The ``warm_cache`` fixture (conftest) fills a folder in one cold library process; a
-second library process here loads from it, and ``test_cli.py``'s console-script test
-runs ``jaxgrasp evaluate examples/cube.toml`` on it (neither tracing nor compiling).
+The ``warm_cache`` fixture (conftest) fills the cache of a fresh home folder in one cold
+library process; a second library process here loads from it, and ``test_cli.py``'s
+console-script test runs ``jaxgrasp evaluate examples/cube.toml`` on it (neither tracing
+nor compiling).
 """
 
 from __future__ import annotations
 
+import stat
+
 import numpy as np
 import pytest
+from conftest import WarmCache
 
 import jaxgrasp
 from jaxgrasp.engine._store import EXECUTABLE_SUBDIR
 from jaxgrasp.tolerance._result import FIELDS
-
-from conftest import WarmCache
 
 
 def _assert_same_fields(a: dict, b) -> None:
@@ -26,13 +29,23 @@ def _assert_same_fields(a: dict, b) -> None:
         np.testing.assert_array_equal(np.asarray(a["fields"][f], dtype=mine.dtype), mine, err_msg=f)
 
 
-def test_variable_turns_the_caches_on(warm_cache):
-    """The first process stores its compiled program, and only there: XLA's cache gets
-    no second copy of it (writing one cost 0.16 s of a cold sweep)."""
-    assert warm_cache.first["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 0}
+def test_import_turns_the_store_on(warm_cache):
+    """With no environment set, the first process stores its compiled program in
+    ``~/.cache/jaxgrasp/xla/jaxgrasp-executables``, every folder it made private, and
+    says once, on the ``jaxgrasp`` logger, what it compiled, why and where it stores it.
+    XLA's own cache is not turned on by the import: no entry of the program there."""
+    first = warm_cache.first
+    assert first["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 0}
     files = warm_cache.program_files()
     assert any(f.startswith(EXECUTABLE_SUBDIR) for f in files), files  # the compiled program
     assert not any(f.startswith("jit_evaluate_fields-") for f in files), files  # no XLA entry
+    for folder in (warm_cache.home / ".cache", warm_cache.folder, warm_cache.folder / EXECUTABLE_SUBDIR):
+        assert stat.S_IMODE(folder.stat().st_mode) == 0o700, folder
+    reports = [line for line in first["log"].splitlines() if "compiling" in line]
+    assert reports == [(
+        "jaxgrasp INFO jaxgrasp: compiling evaluate for 2 contacts (no stored executable yet); "
+        f"it will be stored in {warm_cache.folder / EXECUTABLE_SUBDIR}"
+    )], first["log"]
 
 
 def test_second_process_loads_the_same_program(warm_cache):
@@ -40,6 +53,7 @@ def test_second_process_loads_the_same_program(warm_cache):
     this process's own evaluate (the stored program is the jit path's)."""
     second = warm_cache.evaluate_in_new_process()
     assert second["stats"] == {"traced": 0, "deserialized": 1, "cache_errors": 0}
+    assert "compiling" not in second["log"], second["log"]
     here = jaxgrasp.evaluate(jaxgrasp.presets.cube(6e5, 0.002))
     for other in (warm_cache.first, second):
         _assert_same_fields(other, here)
@@ -52,16 +66,16 @@ def test_program_from_xla_cache_is_not_stored(tmp_path):
     and XLA's cache serves the compilation. Such an executable cannot be serialized again
     on the CPU (the file would load, then fail for missing kernels), so it is not
     stored: the next process traces again and still gets the same numbers."""
-    folder = tmp_path / "cache"
+    cache = WarmCache(tmp_path, {})
+    folder = cache.folder
     programs = folder / EXECUTABLE_SUBDIR
-    cache = WarmCache(folder, {})
-    xla_only = cache.evaluate_in_new_process(store=False)
+    xla_only = cache.evaluate_in_new_process("xla")
     assert xla_only["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 0}
     assert any(p.name.startswith("jit_evaluate_fields-") for p in folder.iterdir())
     assert not programs.exists() or not any(programs.iterdir())
     here = jaxgrasp.evaluate(jaxgrasp.presets.cube(6e5, 0.002))
     for _ in range(2):
-        both = cache.evaluate_in_new_process()
+        both = cache.evaluate_in_new_process("both")
         assert both["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 0}
         assert not programs.exists() or not any(programs.iterdir())
         _assert_same_fields(both, here)
@@ -117,7 +131,10 @@ def test_pipeline_runs_its_driver_and_is_stored(tmp_path):
         with pytest.raises(ValueError, match="other shapes"):
             _pipeline.lower_stages(_pipeline.Pipeline(stages, again), spec)
         small = (jax.ShapeDtypeStruct((3,), jnp.float64),)
-        assert cache.load_executable(stored[0], small, [_compile.default_device()], 2, drive) is None
+        entry = cache.executable_entry("staged", (key, 0), spec)
+        assert entry.path == stored[0]
+        assert cache.load_executable(entry, small, [_compile.default_device()], 2, drive) == (
+            None, "its stored file does not load here (a stage takes other shapes)")
         assert cache.stats()["cache_errors"] == after["cache_errors"] + 1
     finally:
         cache.set_executable_dir(saved)

@@ -1,0 +1,289 @@
+"""The executable store cannot be used against its user (issue 40, item 1; issue 35, item 4).
+
+A stored executable is a pickle, and its payload loads machine code: whoever can write a
+file the store reads can run code as the user. These tests plant what another user could
+(files and folders owned by ``nobody``, uid 65534: the suite runs as root, which may give
+files away), damage stored files, and plant symbolic links, and check that nothing planted
+is unpickled, a damaged or foreign file is rebuilt and replaced with the same results as a
+clean build, and no link is written through. They store a tiny jitted function through the
+same path as the evaluators (:func:`jaxgrasp.engine._compile.compiled`): no evaluator is
+compiled here.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import pickle
+import stat
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgrasp.engine import _compile
+from jaxgrasp.engine import _store as store
+
+NOBODY = 65534
+SPEC = (jax.ShapeDtypeStruct((4,), jnp.float64),)
+X = np.linspace(0.0, 1.0, 4)
+
+
+def _build(scale: float = 2.0):
+    return lambda: jax.jit(lambda x: (jnp.sin(x) * scale + 1.0,))
+
+
+def _compiled(scale: float = 2.0):
+    """``(fn, stats difference)``: the tiny executable for option ``scale``, from the memo
+    (cleared first), the store, or built now (and stored: waited for)."""
+    _compile.clear_compiled()
+    before = store.stats()
+    fn, _ = _compile.compiled(("tiny", scale), _build(scale), SPEC, name="tiny", store_key=("tiny", scale))
+    _compile.wait_for_saves()
+    return fn, {k: v - before[k] for k, v in store.stats().items()}
+
+
+def _entry(scale: float = 2.0) -> store.StoreEntry:
+    return store.executable_entry("tiny", (("tiny", scale), 0), SPEC)
+
+
+def _result(fn) -> np.ndarray:
+    return np.asarray(fn(X)[0])
+
+
+def _assert_replaced(want: np.ndarray) -> None:
+    """The stored file is the user's, private, and loads (not traced) with ``want``'s numbers."""
+    st = os.lstat(_entry().path)
+    assert stat.S_ISREG(st.st_mode) and st.st_uid == os.geteuid() and stat.S_IMODE(st.st_mode) == 0o600
+    fn, counted = _compiled()
+    assert counted == {"traced": 0, "deserialized": 1, "cache_errors": 0}
+    np.testing.assert_array_equal(_result(fn), want)
+
+
+@pytest.fixture
+def folder(tmp_path):
+    """A store folder turned on for the test (restored after it), empty."""
+    saved = store.executable_dir()
+    path = tmp_path / "cache" / store.EXECUTABLE_SUBDIR
+    assert store.set_executable_dir(path) == path
+    yield path
+    store.set_executable_dir(saved)
+    _compile.clear_compiled()
+
+
+@pytest.fixture
+def clean(folder):
+    """The tiny executable's results and its stored file's bytes, from a clean build."""
+    fn, counted = _compiled()
+    assert counted == {"traced": 1, "deserialized": 0, "cache_errors": 0}
+    return _result(fn), _entry().path.read_bytes()
+
+
+def _planted_pickle(marker) -> bytes:
+    """A pickle that creates ``marker`` when it is unpickled."""
+
+    class Payload:
+        def __reduce__(self):
+            return exec, (f"open({str(marker)!r}, 'w').close()",)
+
+    return pickle.dumps(Payload())
+
+
+def test_folders_are_created_private(tmp_path):
+    """Every level of a new folder is 0700, even under a umask that would leave less."""
+    saved, old_umask = store.executable_dir(), os.umask(0o277)
+    try:
+        path = tmp_path / "a" / "b" / "c"
+        assert store.set_executable_dir(path) == path
+    finally:
+        os.umask(old_umask)
+        store.set_executable_dir(saved)
+    for level in (tmp_path / "a", tmp_path / "a" / "b", path):
+        assert stat.S_IMODE(level.stat().st_mode) == 0o700, level
+
+
+def test_planted_pickle_does_not_run(clean, tmp_path, caplog):
+    """A file in the right format, with the right key and checksum, but owned by another
+    user: never unpickled (the marker its pickle would create is absent), one warning,
+    a cache error; the executable is rebuilt and the planted file replaced by the user's."""
+    marker = tmp_path / "marker"
+    payload = _planted_pickle(marker)
+    path = _entry().path
+    path.write_bytes(store._encode(_entry().key, payload))
+    os.chown(path, NOBODY, NOBODY)
+    with caplog.at_level(logging.WARNING, logger="jaxgrasp"):
+        fn, counted = _compiled()
+    assert not marker.exists()
+    assert counted == {"traced": 1, "deserialized": 0, "cache_errors": 1}
+    assert [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING] == [
+        f"jaxgrasp: not loading stored executable {path}: owned by user id {NOBODY}, not by this user ({os.geteuid()})"
+    ]
+    np.testing.assert_array_equal(_result(fn), clean[0])
+    _assert_replaced(clean[0])
+    # the same file, the user's but writable by others: refused too, for its mode
+    path.write_bytes(store._encode(_entry().key, payload))
+    path.chmod(0o666)
+    fn, counted = _compiled()
+    assert not marker.exists() and counted["cache_errors"] == 1 and counted["deserialized"] == 0
+
+
+def test_foreign_or_open_folder_is_neither_used_nor_read(clean, folder, caplog):
+    """A store folder writable by others (0777), or owned by another user, turns on no
+    cache (neither the store nor XLA's), with one warning naming it; its files are not
+    read (the executable is traced although a good file is there)."""
+    xla_dir = jax.config.jax_compilation_cache_dir
+    for problem, spoil in [("writable by group or others (mode 777)", lambda: folder.chmod(0o777)),
+                           (f"owned by user id {NOBODY}", lambda: os.chown(folder, NOBODY, NOBODY))]:
+        spoil()
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="jaxgrasp"):
+            assert store.set_executable_dir(folder) is None
+            assert store.enable_compilation_cache(folder.parent) is None
+        assert store.executable_dir() is None and jax.config.jax_compilation_cache_dir == xla_dir
+        assert any(r.getMessage().startswith(f"jaxgrasp: not using cache folder {folder}: {problem}")
+                   for r in caplog.records), [r.getMessage() for r in caplog.records]
+        _, counted = _compiled()
+        assert counted == {"traced": 1, "deserialized": 0, "cache_errors": 0}
+        os.chown(folder, 0, 0)
+        folder.chmod(0o700)
+
+
+DAMAGE = {  # where a byte is flipped -> why the file is not loaded
+    "magic": "not a stored executable of this version's format",
+    "key": "it was built for another key (other options, shapes, versions or machine)",
+    "separator": "its header is damaged",
+    "payload": "its checksum does not match (damaged)",
+    "last": "its checksum does not match (damaged)",
+}
+
+
+@pytest.mark.parametrize("where", DAMAGE)
+def test_damaged_file_is_rebuilt_and_replaced(clean, where, caplog):
+    """One flipped byte anywhere in a stored file (the payload's middle is the machine
+    code): found before anything is unpickled, rebuilt (the same numbers as a clean build)
+    and the file replaced, so that the next process loads again."""
+    want, good = clean
+    path = _entry().path
+    header_end = good.index(b"\n", len(store._MAGIC) + 1)
+    at = {"magic": 3, "key": good.index(b'"key"') + 10, "separator": header_end,
+          "payload": (header_end + len(good)) // 2, "last": len(good) - 1}[where]
+    path.write_bytes(good[:at] + bytes([good[at] ^ 0x01]) + good[at + 1:])
+    with caplog.at_level(logging.INFO, logger="jaxgrasp"):
+        fn, counted = _compiled()
+    assert counted == {"traced": 1, "deserialized": 0, "cache_errors": 1}
+    assert f"(its stored file is unusable: {DAMAGE[where]})" in caplog.text
+    np.testing.assert_array_equal(_result(fn), want)
+    _assert_replaced(want)
+
+
+def test_file_of_other_options_is_rebuilt(clean, caplog):
+    """An executable built with other options (its key differs), copied over the
+    default's file name: refused by its header's key, rebuilt, same numbers as clean; the
+    compilation is reported with why and where."""
+    want = clean[0]
+    other, _ = _compiled(scale=0.5)
+    assert not np.array_equal(_result(other), want)  # it would give other numbers
+    _entry().path.write_bytes(_entry(0.5).path.read_bytes())
+    with caplog.at_level(logging.INFO, logger="jaxgrasp"):
+        fn, counted = _compiled()
+    assert counted == {"traced": 1, "deserialized": 0, "cache_errors": 1}
+    np.testing.assert_array_equal(_result(fn), want)
+    _assert_replaced(want)
+    assert [r.getMessage() for r in caplog.records] == [(
+        "jaxgrasp: compiling tiny (its stored file is unusable: it was built for another key (other options, "
+        f"shapes, versions or machine)); it will be stored in {_entry().path.parent}"
+    )]
+
+
+def test_links_are_never_written_through(folder, tmp_path, monkeypatch, caplog):
+    """A link planted at the stored file's name is not read (refused) and replaced by a
+    file; a link planted at the temporary file's name is skipped (another name is used);
+    neither link's target changes. A failed write leaves no temporary file."""
+    target = tmp_path / "precious"
+    target.write_bytes(b"precious")
+    path = _entry().path
+    path.symlink_to(target)
+    names = iter(["0" * 16, "1" * 16])
+    monkeypatch.setattr(store, "_random_suffix", lambda: next(names))
+    (folder / f".{path.name}.{os.getpid()}.{'0' * 16}.tmp").symlink_to(target)
+    with caplog.at_level(logging.WARNING, logger="jaxgrasp"):
+        built, counted = _compiled()
+    assert counted == {"traced": 1, "deserialized": 0, "cache_errors": 1}
+    assert "it is a symbolic link" in caplog.text
+    assert target.read_bytes() == b"precious"
+    _assert_replaced(_result(built))
+    assert not (folder / f".{path.name}.{os.getpid()}.{'1' * 16}.tmp").exists()
+    # a write that fails at the rename removes its temporary file
+    monkeypatch.setattr(store, "_random_suffix", lambda: "2" * 16)
+    monkeypatch.setattr(store.os, "replace", lambda *a: (_ for _ in ()).throw(OSError(28, "No space left")))
+    assert store.save_executable(_entry(), built) is False
+    assert not (folder / f".{path.name}.{os.getpid()}.{'2' * 16}.tmp").exists()
+
+
+def test_stale_temporary_files_are_removed(tmp_path):
+    """Turning the store on removes its temporary files of dead processes and old ones,
+    and keeps a fresh one of a live process and every other file."""
+    live, dead = os.getpid(), 99_999_999  # above any pid_max: no such process
+    names = {f".a.xla.{dead}.00ff.tmp": False, f"b.tmp{dead}": False, f".c.xla.{live}.00ff.tmp": True,
+             f".d.xla.{live}.00ff.tmp": False, "e.xla": True}
+    for name in names:
+        (tmp_path / name).write_bytes(b"")
+    old = tmp_path / f".d.xla.{live}.00ff.tmp"
+    os.utime(old, (old.stat().st_atime - 2 * store.STALE_TEMP_SECONDS,) * 2)
+    saved = store.executable_dir()
+    try:
+        store.set_executable_dir(tmp_path)
+    finally:
+        store.set_executable_dir(saved)
+    assert {n: (tmp_path / n).exists() for n in names} == names
+
+
+def test_environment_moves_or_switches_off(tmp_path, monkeypatch):
+    """``JAXGRASP_CACHE_DIR=off``: no folder and no cache turned on; another value moves
+    the folder; unset, ``$XDG_CACHE_HOME`` or ``~/.cache``."""
+    saved, xla_dir = store.executable_dir(), jax.config.jax_compilation_cache_dir
+    try:
+        monkeypatch.setenv(store.ENV_VAR, "OFF")
+        assert store.default_dir() is None
+        assert store.enable_from_environment() is None and store.enable_compilation_cache() is None
+        assert store.executable_dir() == saved and jax.config.jax_compilation_cache_dir == xla_dir
+        monkeypatch.setenv(store.ENV_VAR, str(tmp_path / "moved"))
+        assert store.enable_from_environment() == tmp_path / "moved" / store.EXECUTABLE_SUBDIR
+        assert stat.S_IMODE((tmp_path / "moved").stat().st_mode) == 0o700
+        monkeypatch.delenv(store.ENV_VAR)
+        monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+        assert store.default_dir() == tmp_path / "xdg" / "jaxgrasp" / "xla"
+        monkeypatch.delenv("XDG_CACHE_HOME")
+        monkeypatch.setenv("HOME", str(tmp_path / "home"))
+        assert store.default_dir() == tmp_path / "home" / ".cache" / "jaxgrasp" / "xla"
+    finally:
+        store.set_executable_dir(saved)
+
+
+def test_log_lines_go_to_stderr_in_the_command(capsys):
+    """What the command prints of the ``jaxgrasp`` logger: INFO lines, one line each, only
+    inside the block."""
+    with store.log_lines_on_stderr():
+        store.LOGGER.info("jaxgrasp: compiling something (why); it is not stored")
+        store.LOGGER.debug("jaxgrasp: not shown")
+    store.LOGGER.info("jaxgrasp: not shown either")
+    assert capsys.readouterr().err == "jaxgrasp: compiling something (why); it is not stored\n"
+
+
+def test_command_prints_the_compilation_report(monkeypatch, capsys):
+    """The ``jaxgrasp`` command prints the store's reports on its stderr (a command whose
+    run reports a compilation, as an evaluator's does, stands in for a real one)."""
+    from jaxgrasp import cli
+    from jaxgrasp.cli import _evaluate
+
+    def run(args):
+        store.LOGGER.info("jaxgrasp: compiling evaluate for 2 contacts (no stored executable yet); it is not stored")
+        return 0
+
+    monkeypatch.setattr(cli, "enable_compilation_cache", lambda: None)  # no process-wide setting
+    monkeypatch.setattr(_evaluate, "run", run)
+    assert cli.main(["evaluate", "--preset", "cube"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == "jaxgrasp: compiling evaluate for 2 contacts (no stored executable yet); it is not stored\n"
+    assert captured.out == ""
