@@ -77,9 +77,9 @@ A per-contact parameter is set to the same value at every contact of a grid poin
 
 MAX_GRID_POINTS = 10_000_000
 """The most grid points one :func:`sweep` takes. Its result arrays hold 5 numbers of 8 bytes
-per point (0.4 GB at the cap), ``jaxgrasp sweep``'s CSV about 150 bytes per point (1.5 GB)
+per point (0.4 GB at the cap), ``jaxgrasp sweep``'s CSV about 100 bytes per point (1 GB)
 and its grid of axis values 8 bytes per point and axis, all in memory at the end; and a
-2-core CPU needs about a day for that many points. A larger grid (three axes of 465
+2-core CPU needs a day or more for that many points. A larger grid (three axes of 465
 points: 1e8) is refused before anything is allocated; split it into several sweeps."""
 
 _RESULT_FIELDS = SUMMARY_FIELDS

@@ -45,7 +45,8 @@ def add_parser(sub) -> None:
     p.add_argument("--out", default="grasp.png", metavar="FILE", help="the picture, .png, .pdf or .svg (default grasp.png)")
     p.add_argument("--glb", metavar="FILE", help="also write the scene as a GLB file (.glb)")
     p.add_argument("--magnification", type=float, metavar="X",
-                   help="factor the ghost's motion is magnified by (default: a round one that makes it visible)")
+                   help=(f"factor the ghost's motion is magnified by, {MAGNIFICATION_RANGE[0]:g} to "
+                         f"{MAGNIFICATION_RANGE[1]:g} (default: a round one that makes it visible)"))
     p.set_defaults(func=run)
 
 

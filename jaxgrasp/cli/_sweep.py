@@ -1,8 +1,11 @@
 """``jaxgrasp sweep``: evaluate a grasp over a grid of parameters; write npz, csv and a plot.
 
-Axis specs (SI units): ``start:stop:count`` (inclusive ``linspace``), a comma list
-``0,0.1,0.2`` or a single number. With no axis at all the paper's Fig. 6 grid is swept
-(E 2e5..1e6 Pa x 9, initial deformation 1..5 mm x 41); with no grasp, preset ``cube``.
+Axis specs (SI units): ``start:stop:count`` (inclusive, evenly spaced; each value the
+float nearest its decimal, so ``0.1:0.5:5`` gives ``0.4``), a comma list ``0,0.1,0.2`` or
+a single number. The grid's axes follow the order they are given in, and it has at most
+:data:`~jaxgrasp.analysis._sweep.MAX_GRID_POINTS` points (checked before anything is
+allocated). With no axis at all the paper's Fig. 6 grid is swept (E 2e5..1e6 Pa x 9,
+initial deformation 1..5 mm x 41); with no grasp, preset ``cube``.
 
 The output folder is checked for writability before anything is computed and locked
 (:class:`jaxgrasp.io._outputs.FolderLock`) for the whole run, so a second sweep into it fails
@@ -158,7 +161,8 @@ def add_parser(sub) -> None:
             "time per DIR."
         ),
         epilog=(
-            "SPEC is START:STOP:COUNT (inclusive), a comma list or a number, in SI units. "
+            "SPEC is START:STOP:COUNT (inclusive), a comma list or a number, in SI units; "
+            f"the grid may have at most {MAX_GRID_POINTS:,} points, in the order the axes are given. "
             "Without a grasp: preset cube. Without any axis: the paper's Fig. 6 grid "
             f"(--young-modulus {PAPER_AXES['young_modulus']} "
             f"--initial-deformation {PAPER_AXES['initial_deformation']}). "
