@@ -19,7 +19,8 @@ class TuneStatus(enum.StrEnum):
     - ``converged``: the projected gradient vanished: a (local) maximum within the bounds.
     - ``stalled``: no further improvement along the gradient, typically at a maximum on a
       kink of the value (where the limiting boundary switches); counts as converged.
-    - ``max_iterations``: still improving when the iterations ran out; more may raise it.
+    - ``max_iterations``: the iterations ran out before the search converged; more may
+      raise the value.
     - ``line_search_failed``: no better point along the search direction (a kink or
       noise); perhaps not a maximum.
     """
@@ -37,7 +38,7 @@ class TuneStatus(enum.StrEnum):
         "and usable"
     )
     MAX_ITERATIONS = "max_iterations", (
-        "stopped after maxiter={maxiter} iterations, still improving; the result is the best found and usable, "
+        "reached maxiter={maxiter} before the search converged; the result is the best found and usable, "
         "and more iterations may raise it"
     )
     LINE_SEARCH_FAILED = "line_search_failed", (

@@ -251,12 +251,13 @@ def say(line: str) -> None:
 def announce_run(command: str, source: str, count: int, noun: str, quiet: bool = False) -> None:
     """The first line of a command that evaluates many grasps, on stderr, once its input
     is checked and before the first long step (stacking the grasps, compiling or loading
-    the evaluator): ``jaxgrasp: batch set.jsonl: 5 grasps to go; ...``. Nothing where
-    ``count`` is 0 (a resumed run with nothing left) or ``quiet``."""
+    the evaluator): ``jaxgrasp: batch set.jsonl: 5 grasps to go; ...``; ``count``: the
+    valid grasps (points) not yet done. Nothing where it is 0 (a resumed run with nothing
+    left) or ``quiet``."""
     if count and not quiet:
         say(
             f"jaxgrasp: {command} {source}: {counted(count, noun)} to go; compiling the evaluator "
-            "(or loading it from the cache), then evaluating"
+            "(or loading it from the cache) first"
         )
 
 

@@ -247,7 +247,9 @@ def test_cli_sweep_writes_files(run_cli, tmp_path, cube_sweep):
     )
     assert rc == 0, stderr
     # one chunk: no chunk lines, only the first line saying what is about to happen
-    assert stderr == "jaxgrasp: sweep preset cube: 6 points to go; compiling the evaluator (or loading it from the cache), then evaluating\n"
+    assert stderr == (
+        "jaxgrasp: sweep preset cube: 6 points to go; compiling the evaluator (or loading it from the cache) first\n"
+    )
     for name in ("sweep.npz", "sweep.csv", "sweep.png"):
         assert (out / name).stat().st_size > 0, name
     lines = stdout.strip().splitlines()

@@ -265,6 +265,7 @@ def _first_line_seconds(argv, env, wait: float) -> tuple[float, str]:
         proc.wait()
 
 
+@pytest.mark.slow  # three subprocesses
 def test_tune_and_batch_print_a_first_line_within_a_second(tmp_path):
     """``tune`` and a one-chunk ``batch`` say what they do before compiling (which takes
     tens of seconds on a fresh cache): within 1 s of starting, or, on a machine so busy
