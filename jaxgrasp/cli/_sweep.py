@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from decimal import Decimal, localcontext
+from decimal import Decimal, Inexact, localcontext
 from pathlib import Path
 
 import numpy as np
@@ -136,8 +136,9 @@ def _decimal_range(start: str, stop: str, count: int) -> np.ndarray:
         return np.asarray([float(a)])
     with localcontext() as ctx:
         ctx.prec = 60
+        ctx.clear_flags()
         step = (b - a) / (count - 1)
-        exact = step * (count - 1) == b - a
+        exact = not ctx.flags[Inexact]  # a terminating decimal step (not 1/3)
     digits = -min(a.as_tuple().exponent, step.normalize().as_tuple().exponent) if exact else None
     if digits is None or abs(digits) > 22:  # 10**22 is the largest power of ten exact in float64
         return np.linspace(float(a), float(b), count)
