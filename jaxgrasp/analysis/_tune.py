@@ -311,7 +311,7 @@ def _result(specs, grasp, box: ParamBox, data, rec: SearchRecord, status, iters,
     if n_nc:
         message += f"; {n_nc} iterate(s) had not-converged evaluations"
     if int(ev_best.status) == GraspStatus.NOT_CONVERGED:
-        message += "; the best iterate's evaluation did not converge, so its value is not to be trusted"
+        message += "; but the best iterate's evaluation did not converge: check it with jaxgrasp.evaluate before use"
     return TuneResult(
         grasp=tuned,
         value=v_best,
