@@ -3,6 +3,11 @@
 Both use the paper's fingertips: hemisphere radius 0.025 m, static friction
 coefficient 0.5, normal-force limit 15 N. The object frame has its origin at the
 object's centre of mass.
+
+Each preset at its defaults is the example file of the same name (``presets.cube()`` is
+``examples/cube.toml``, ``presets.prism()`` is ``examples/prism.toml``), so ``--preset
+cube`` and ``examples/cube.toml`` give the same answer. The defaults are the first point
+of the paper's sweeps (E = 2e5 Pa of 2e5 to 1e6, Figs. 6 and 7) at 2 mm, weightless.
 """
 
 from __future__ import annotations

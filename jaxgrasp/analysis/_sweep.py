@@ -65,6 +65,7 @@ __all__ = [
     "grid_grasp",
     "SweepResult",
     "PARAMETERS",
+    "MAX_GRID_POINTS",
     "column_name",
 ]
 
@@ -73,6 +74,13 @@ PARAMETERS: dict[str, Field] = {name: FIELD[name] for name in SWEEPABLE}
 ``.per_contact``, ``.rule`` and ``.allows(x)`` its allowed range).
 
 A per-contact parameter is set to the same value at every contact of a grid point."""
+
+MAX_GRID_POINTS = 10_000_000
+"""The most grid points one :func:`sweep` takes. Its result arrays hold 5 numbers of 8 bytes
+per point (0.4 GB at the cap), ``jaxgrasp sweep``'s CSV about 100 bytes per point (1 GB)
+and its grid of axis values 8 bytes per point and axis, all in memory at the end; and a
+2-core CPU needs a day or more for that many points. A larger grid (three axes of 465
+points: 1e8) is refused before anything is allocated; split it into several sweeps."""
 
 _RESULT_FIELDS = SUMMARY_FIELDS
 _RESULT_UNITS = {"value": "J", "equilibrium_energy": "J"}
@@ -387,8 +395,9 @@ def sweep(
 
     Raises:
         GraspValueError: before anything is compiled, for an invalid base grasp, an unknown
-            parameter name, an empty, non-numeric, non-finite or out-of-range axis, or a
-            grid point with ``initial_deformation >= radius``; the message is one line.
+            parameter name, an empty, non-numeric, non-finite or out-of-range axis, a grid
+            point with ``initial_deformation >= radius``, or a grid of more than
+            :data:`MAX_GRID_POINTS` points; the message is one line.
     """
     base, axes = _check_inputs(grasp, chunk_size, axes)
     shape = tuple(a.size for a in axes.values())
@@ -470,7 +479,15 @@ def _check_inputs(grasp, chunk_size, axes) -> tuple[dict[str, np.ndarray], dict[
         base = check_grasp_inputs(**grasp.to_numpy())
     except GraspValueError as exc:
         raise GraspValueError(f"base grasp: {exc}") from None
-    return base, _check_axes(base, axes)
+    checked = _check_axes(base, axes)
+    total = math.prod(a.size for a in checked.values())
+    if total > MAX_GRID_POINTS:
+        shape = " x ".join(f"{a.size:,}" for a in checked.values())
+        raise GraspValueError(
+            f"the sweep grid has {total:,} points ({shape}), more than MAX_GRID_POINTS = {MAX_GRID_POINTS:,} "
+            "(its results must fit in memory); use fewer points per axis or split the sweep"
+        )
+    return base, checked
 
 
 def _chunk_fields(own: dict, axes: dict, start: int, chunk: int) -> dict[str, np.ndarray]:

@@ -132,17 +132,22 @@ class TuneResult:
         initial_params: the same at the start.
         bounds: ``(lo, hi)`` by label as used (``"positions"``: in-face offsets, m).
         evaluation: the :class:`~jaxgrasp.Evaluation` of ``grasp``.
-        status: a :class:`~jaxgrasp.analysis._tune_status.TuneStatus`, equal to its string:
-            ``"converged"`` (projected gradient below ``tol``), ``"stalled"`` (no
-            relative improvement above ``ftol`` in ``patience`` iterations: typically a
-            maximum on a kink, where the limiting boundary switches),
-            ``"max_iterations"`` or ``"line_search_failed"``.
+        status: a :class:`~jaxgrasp.analysis._tune_status.TuneStatus`, equal to its string;
+            ``grasp`` is usable after each (the best found): ``"converged"`` (projected
+            gradient below ``tol``: a maximum), ``"stalled"`` (no relative improvement
+            above ``ftol`` in ``patience`` iterations: typically a maximum on a kink,
+            where the limiting boundary switches), ``"max_iterations"`` (still improving:
+            more iterations may raise it) or ``"line_search_failed"`` (no better point
+            along the search direction: perhaps not a maximum).
         iterations: optimiser iterations run.
         evaluations: value-and-gradient evaluations.
         not_converged_evaluations: iterates whose evaluation did not converge
             (``history_status`` not_converged); their values are not to be trusted.
         method: the optimiser.
-        message: a one-line explanation of ``status``.
+        message: a one-line explanation of ``status`` and whether ``grasp`` is usable
+            (``status.message`` with its numbers), then any note: a start clipped into
+            the bounds, not-converged iterates, a best iterate whose evaluation did not
+            converge (then its value is not to be trusted).
         start_value: the value of the grasp as given, J: ``initial_value`` unless the
             start was moved (``clipped``, or a ``:shared`` parameter whose contacts
             differed set to their mean). ``gain`` is measured from it.
@@ -190,12 +195,12 @@ class TuneResult:
         )
 
     def summary(self) -> str:
-        """One line: value of the grasp as given -> tuned value, gain, status (and a note
-        where the start was clipped into the bounds)."""
+        """One line: value of the grasp as given -> tuned value, gain, status with its
+        explanation (is the result usable?) and a note where the start was clipped."""
         note = self.start_note()
         return (
             f"tuned value: {self.start_value:.6e} J -> {self.value:.6e} J "
-            f"(x{self.gain:.4f}) in {counted(self.iterations, 'iteration')}, {self.status}"
+            f"(x{self.gain:.4f}) in {counted(self.iterations, 'iteration')}, {self.status}: {self.message}"
             + (f"; {note}" if note else "")
         )
 
@@ -305,6 +310,8 @@ def _result(specs, grasp, box: ParamBox, data, rec: SearchRecord, status, iters,
         message += f"; start of {', '.join(box.clipped)} clipped into the bounds"
     if n_nc:
         message += f"; {n_nc} iterate(s) had not-converged evaluations"
+    if int(ev_best.status) == GraspStatus.NOT_CONVERGED:
+        message += "; but the best iterate's evaluation did not converge: check it with jaxgrasp.evaluate before use"
     return TuneResult(
         grasp=tuned,
         value=v_best,

@@ -10,7 +10,19 @@ __all__ = ["TuneStatus"]
 class TuneStatus(enum.StrEnum):
     """How :func:`jaxgrasp.tune` stopped. A member *is* its string (``== "converged"``).
 
-    ``message`` is a template with ``{ftol}``, ``{patience}`` and ``{maxiter}``.
+    ``message`` is a template with ``{ftol}``, ``{patience}`` and ``{maxiter}``: why the
+    search stopped, then whether its result is usable. Every status returns the best grasp
+    found (its value is never below the start's), so the result is usable in every case
+    (unless :attr:`~jaxgrasp.analysis._tune.TuneResult.message` adds that the best
+    iterate's evaluation did not converge); the statuses differ in whether it is a maximum:
+
+    - ``converged``: the projected gradient vanished: a (local) maximum within the bounds.
+    - ``stalled``: no further improvement along the gradient, typically at a maximum on a
+      kink of the value (where the limiting boundary switches); counts as converged.
+    - ``max_iterations``: the iterations ran out before the search converged; more may
+      raise the value.
+    - ``line_search_failed``: no better point along the search direction (a kink or
+      noise); perhaps not a maximum.
     """
 
     def __new__(cls, value: str, message: str):
@@ -19,13 +31,20 @@ class TuneStatus(enum.StrEnum):
         obj.message = message
         return obj
 
-    CONVERGED = "converged", "the projected gradient vanished"
+    CONVERGED = "converged", "the projected gradient vanished: a (local) maximum within the bounds; the result is usable"
     STALLED = "stalled", (
-        "no relative improvement above {ftol:g} in {patience} iterations "
-        "(typically a maximum on a kink, where the limiting boundary switches)"
+        "no further improvement along the gradient (relative gain below {ftol:g} in {patience} iterations; "
+        "typically a maximum on a kink, where the limiting boundary switches); the result is the best found "
+        "and usable"
     )
-    MAX_ITERATIONS = "max_iterations", "stopped after maxiter={maxiter} iterations"
-    LINE_SEARCH_FAILED = "line_search_failed", "the line search found no better point (a kink of the value, or noise)"
+    MAX_ITERATIONS = "max_iterations", (
+        "reached maxiter={maxiter} before the search converged; the result is the best found and usable, "
+        "and more iterations may raise it"
+    )
+    LINE_SEARCH_FAILED = "line_search_failed", (
+        "the line search found no better point (a kink of the value, or noise); the result is the best found "
+        "and usable, but perhaps not a maximum"
+    )
 
     @property
     def converged(self) -> bool:

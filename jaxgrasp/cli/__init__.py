@@ -15,7 +15,7 @@ from __future__ import annotations
 import sys
 
 from jaxgrasp.cli import _batch, _evaluate, _show, _sweep, _tune
-from jaxgrasp.cli._common import EXIT_USAGE, Parser, UsageError, load_grasp, parse_number
+from jaxgrasp.cli._common import EXIT_USAGE, Parser, UsageError, check_names, load_grasp, parse_number
 from jaxgrasp.cli._interrupt import run_interruptibly
 from jaxgrasp.engine import _compile
 from jaxgrasp.engine._store import enable_compilation_cache, log_lines_on_stderr
@@ -70,6 +70,7 @@ def _main(argv) -> int:
         args = parser.parse_args(argv)
         if args.command is None:
             raise UsageError("choose a command: evaluate, sweep, batch, tune or show (see 'jaxgrasp --help')")
+        check_names(args)  # a name that is not UTF-8 would fail only when printed, after the work
         with log_lines_on_stderr():  # "jaxgrasp: compiling ...", and cache warnings, one line each
             enable_compilation_cache()  # looked up here, so that tests can replace it
             return args.func(args)

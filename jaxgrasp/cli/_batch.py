@@ -23,6 +23,7 @@ from jaxgrasp.cli._common import (
     ChunkProgress,
     UsageError,
     add_epsilon_option,
+    announce_run,
     check_chunk_size,
     check_out,
     epsilon_columns,
@@ -105,6 +106,7 @@ def run(args) -> int:
         checkpoint = BatchCheckpoint(out / PARTIAL_NAME, args.file, gset.source_sha256, len(gset), n_contacts)
         rows, results = _open_checkpoint(checkpoint, args.resume, len(gset))
         progress = ChunkProgress("evaluating", "grasp", show=not args.quiet)
+        announce_run("batch", args.file, int(np.count_nonzero(np.delete(gset.valid, rows))), "grasp", args.quiet)
         merged, result = evaluate_dataset(
             gset, done=(rows, results), on_chunk_rows=checkpoint.keeper(rows.size, len(gset)),
             chunk_size=args.chunk_size, progress=progress,

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
 
 from jaxgrasp.io import _outputs as outputs
 from jaxgrasp.model._fields import FIELD, SWEEPABLE
+from jaxgrasp.model._validation import counted
 from jaxgrasp.presets import PRESETS
 
 __all__ = [
@@ -36,6 +38,10 @@ __all__ = [
     "say",
     "add_epsilon_option",
     "epsilon_columns",
+    "check_names",
+    "LONG_EVALUATION_CONTACTS",
+    "announce_large_grasp",
+    "announce_run",
 ]
 
 EXIT_USAGE = 2
@@ -172,6 +178,40 @@ def _check_override(name: str, value: float) -> None:
         raise UsageError(f"{text}: {name} must be {field.rule}" + (f" ({field.unit})" if field.unit else ""))
 
 
+# --------------------------------------------------------------------------- names
+
+
+def check_names(args) -> None:
+    """Every text argument (input file, ``--out``, ``--glb`` ...) must be valid UTF-8.
+
+    A file name made of bytes that are not UTF-8 (``b"\\xff"``) reaches Python as lone
+    surrogates (:func:`os.fsdecode`); it can be opened, but not printed, written into a
+    CSV or drawn in a figure title, so it would fail only after all the computing. Here it
+    is a :class:`UsageError` before anything is read or computed.
+    """
+    for dest, value in sorted(vars(args).items()):
+        for text in value if isinstance(value, (list, tuple)) else [value]:
+            if not isinstance(text, str):
+                continue
+            try:
+                text.encode("utf-8")
+            except UnicodeEncodeError:
+                what = "the input file name" if dest == "file" else f"--{dest.replace('_', '-')}"
+                raise UsageError(
+                    f"{what} {_shown(text)} is not valid UTF-8 text (jaxgrasp prints it and writes it "
+                    "into files and figure titles); rename it or use another name"
+                ) from None
+
+
+def _shown(text: str) -> str:
+    """``text`` with its undecodable bytes as ``\\xff`` escapes, quoted, printable."""
+    try:
+        raw = os.fsencode(text)  # the bytes as given on the command line
+    except UnicodeEncodeError:
+        raw = text.encode("utf-8", "backslashreplace")
+    return "'" + raw.decode("utf-8", "backslashreplace") + "'"
+
+
 # --------------------------------------------------------------------------- output folders
 
 
@@ -208,11 +248,25 @@ def say(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
+def announce_run(command: str, source: str, count: int, noun: str, quiet: bool = False) -> None:
+    """The first line of a command that evaluates many grasps, on stderr, once its input
+    is checked and before the first long step (stacking the grasps, compiling or loading
+    the evaluator): ``jaxgrasp: batch set.jsonl: 5 grasps to go; ...``; ``count``: the
+    valid grasps (points) not yet done. Nothing where it is 0 (a resumed run with nothing
+    left) or ``quiet``."""
+    if count and not quiet:
+        say(
+            f"jaxgrasp: {command} {source}: {counted(count, noun)} to go; compiling the evaluator "
+            "(or loading it from the cache) first"
+        )
+
+
 class ChunkProgress:
     """``progress`` of the engine's batches: a line before the first chunk and one per
     chunk on stderr (``jaxgrasp: chunk 2/8 (6/24 points), elapsed 3.1 s, about 4 s
     left``); the time left is estimated from the chunks after the first, which includes
-    the compilation. Silent unless ``show`` and the run has more than one chunk."""
+    the compilation. Silent unless ``show`` and the run has more than one chunk (a run
+    of one chunk has said what it does with :func:`announce_run`)."""
 
     def __init__(self, verb: str, noun: str, show: bool = True):
         self.verb, self.noun, self.show = verb, noun, show
@@ -249,6 +303,28 @@ class ChunkProgress:
                 f"jaxgrasp: chunk {k}/{self.nchunks} ({done}/{total} {self.noun}s), "
                 f"elapsed {now - self.t_start:.1f} s, {left}"
             )
+
+
+LONG_EVALUATION_CONTACTS = 32
+"""Grasps of more contacts than this get a line on stderr before their evaluation
+(:func:`announce_large_grasp`). The evaluation of one grasp is one compiled call without
+progress of its own; its 2 N boundary problems of N contacts each cost time and memory
+that grow more than in proportion to N. The commands do not cap N: such a grasp is valid and its result
+exact, only slow, and the memory it needs depends on the machine's other work; the line
+tells the user what the wait is for."""
+
+
+def announce_large_grasp(n_contacts: int, source: str) -> None:
+    """Say on stderr what is about to be compiled and evaluated, where the grasp has more
+    than :data:`LONG_EVALUATION_CONTACTS` contacts (the one-grasp commands print nothing
+    else until the result)."""
+    if n_contacts > LONG_EVALUATION_CONTACTS:
+        say(
+            f"jaxgrasp: {source} has {n_contacts} contacts: compiling and solving its "
+            f"{2 * n_contacts} boundary problems of {n_contacts} contacts each, in one step without "
+            f"progress; above {LONG_EVALUATION_CONTACTS} contacts its time and memory grow more than in "
+            "proportion to the number of contacts, so expect a wait"
+        )
 
 
 # --------------------------------------------------------------------------- epsilon column

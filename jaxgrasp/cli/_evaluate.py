@@ -7,6 +7,7 @@ import json
 from jaxgrasp.cli._common import (
     add_grasp_source,
     add_overrides,
+    announce_large_grasp,
     grasp_notes,
     grasp_source,
     load_grasp,
@@ -32,6 +33,7 @@ def run(args) -> int:
     prefetch_qhull()  # SciPy's import overlaps the evaluation's compile or cache load
 
     grasp = load_grasp(args)
+    announce_large_grasp(grasp.num_contacts, grasp_source(args))
     d = evaluate(grasp).to_dict()
     eps = epsilon(grasp)  # the Ferrari-Canny metric on the same contacts, beside the value
     d["epsilon"] = float(eps.value)

@@ -9,15 +9,22 @@ from jaxgrasp.cli._common import (
     UsageError,
     add_grasp_source,
     add_overrides,
+    announce_large_grasp,
     grasp_source,
     load_grasp,
 )
 from jaxgrasp.io import _outputs as outputs
 
-__all__ = ["add_parser", "run", "PICTURE_SUFFIXES"]
+__all__ = ["add_parser", "run", "PICTURE_SUFFIXES", "MAGNIFICATION_RANGE"]
 
 PICTURE_SUFFIXES = (".png", ".pdf", ".svg")
 """The picture formats ``--out`` may name."""
+
+MAGNIFICATION_RANGE = (1e-3, 1e12)
+"""The ``--magnification`` factors ``show`` accepts, inclusive. Below 1e-3 the ghost cannot
+be told from the object at any picture size; above 1e12 the motion drawn is float64's
+rounding of the pose (about 1e-16 of the object's size) magnified into view, not the
+motion, and factors near 1e300 overflow the coordinates to infinity."""
 
 
 def add_parser(sub) -> None:
@@ -38,7 +45,8 @@ def add_parser(sub) -> None:
     p.add_argument("--out", default="grasp.png", metavar="FILE", help="the picture, .png, .pdf or .svg (default grasp.png)")
     p.add_argument("--glb", metavar="FILE", help="also write the scene as a GLB file (.glb)")
     p.add_argument("--magnification", type=float, metavar="X",
-                   help="factor the ghost's motion is magnified by (default: a round one that makes it visible)")
+                   help=(f"factor the ghost's motion is magnified by, {MAGNIFICATION_RANGE[0]:g} to "
+                         f"{MAGNIFICATION_RANGE[1]:g} (default: a round one that makes it visible)"))
     p.set_defaults(func=run)
 
 
@@ -51,7 +59,9 @@ def run(args) -> int:
 
     targets = _check_outputs(args)
     grasp = load_grasp(args, keep_mesh=True)
-    result = evaluate(grasp.grasp if isinstance(grasp, MeshGrasp) else grasp)
+    plain = grasp.grasp if isinstance(grasp, MeshGrasp) else grasp
+    announce_large_grasp(plain.num_contacts, grasp_source(args))
+    result = evaluate(plain)
     scene = grasp_scene(grasp, result, magnification=args.magnification)
     fig = draw_scene(scene)
     members = {targets[0]: lambda fh: save_figure(fig, fh, format=targets[0].suffix[1:].lower())}
@@ -76,8 +86,9 @@ def run(args) -> int:
 def _check_outputs(args) -> list[Path]:
     """The picture and GLB paths, checked before any computation (suffix, writable folder)."""
     m = args.magnification
-    if m is not None and not (math.isfinite(m) and m > 0):
-        raise UsageError(f"--magnification must be a finite number > 0, got {m:g}")
+    lo, hi = MAGNIFICATION_RANGE
+    if m is not None and not (math.isfinite(m) and lo <= m <= hi):
+        raise UsageError(f"--magnification must be a number from {lo:g} to {hi:g}, got {m:g}")
     targets = [("--out", Path(args.out), PICTURE_SUFFIXES)]
     if args.glb is not None:
         targets.append(("--glb", Path(args.glb), (".glb",)))

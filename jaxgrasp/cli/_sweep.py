@@ -1,8 +1,11 @@
 """``jaxgrasp sweep``: evaluate a grasp over a grid of parameters; write npz, csv and a plot.
 
-Axis specs (SI units): ``start:stop:count`` (inclusive ``linspace``), a comma list
-``0,0.1,0.2`` or a single number. With no axis at all the paper's Fig. 6 grid is swept
-(E 2e5..1e6 Pa x 9, initial deformation 1..5 mm x 41); with no grasp, preset ``cube``.
+Axis specs (SI units): ``start:stop:count`` (inclusive, evenly spaced; each value the
+float nearest its decimal, so ``0.1:0.5:5`` gives ``0.4``), a comma list ``0,0.1,0.2`` or
+a single number. The grid's axes follow the order they are given in, and it has at most
+:data:`~jaxgrasp.analysis._sweep.MAX_GRID_POINTS` points (checked before anything is
+allocated). With no axis at all the paper's Fig. 6 grid is swept (E 2e5..1e6 Pa x 9,
+initial deformation 1..5 mm x 41); with no grasp, preset ``cube``.
 
 The output folder is checked for writability before anything is computed and locked
 (:class:`jaxgrasp.io._outputs.FolderLock`) for the whole run, so a second sweep into it fails
@@ -14,17 +17,22 @@ checkpoint is removed.
 
 from __future__ import annotations
 
+import argparse
+import math
 import time
+from decimal import Decimal, Inexact, localcontext
 from pathlib import Path
 
 import numpy as np
 
+from jaxgrasp.analysis._sweep import MAX_GRID_POINTS
 from jaxgrasp.cli._common import (
     OVERRIDES,
     ChunkProgress,
     UsageError,
     add_epsilon_option,
     add_grasp_source,
+    announce_run,
     check_chunk_size,
     check_out,
     epsilon_columns,
@@ -65,9 +73,23 @@ FIG6_TITLE = "Fig. 6: evaluation value for each Young's modulus and initial defo
 def parse_axis_spec(option: str, spec: str) -> np.ndarray:
     """Parse ``start:stop:count``, ``a,b,c`` or ``x`` into a 1-D float array.
 
+    Every value is the float nearest to the decimal number it stands for: ``0.1:0.5:5``
+    gives ``0.4``, not ``np.linspace``'s ``0.39999999999999997``, so that the CSV shows
+    the values as typed (:func:`_decimal_range`).
+
     Raises:
-        UsageError: malformed spec (one line, naming the option).
+        UsageError: malformed spec, or a range of more than :data:`MAX_GRID_POINTS` (one
+            line, naming the option), before the array is allocated.
     """
+    parsed = _parse_spec(option, spec)
+    if isinstance(parsed, np.ndarray):
+        return parsed
+    return _decimal_range(*parsed)
+
+
+def _parse_spec(option: str, spec: str) -> np.ndarray | tuple[str, str, int]:
+    """A list or number as its array; a range as its checked ``(start, stop, count)`` text
+    and count, not yet expanded (its count is checked against the cap first)."""
     text = spec.strip()
     if not text:
         raise UsageError(f"{option}: empty value; give START:STOP:COUNT, a comma list or a number")
@@ -79,7 +101,7 @@ def parse_axis_spec(option: str, spec: str) -> np.ndarray:
     return np.asarray([parse_number(option, s) for s in items], dtype=np.float64)
 
 
-def _parse_range(option: str, spec: str, text: str) -> np.ndarray:
+def _parse_range(option: str, spec: str, text: str) -> tuple[str, str, int]:
     parts = text.split(":")
     if len(parts) != 3:
         raise UsageError(f"{option}: range {spec!r} must be START:STOP:COUNT (e.g. 1e-3:5e-3:41)")
@@ -94,7 +116,37 @@ def _parse_range(option: str, spec: str, text: str) -> np.ndarray:
         raise UsageError(f"{option}: range {spec!r} is empty (count {count}); the count must be >= 1")
     if count == 1 and start != stop:
         raise UsageError(f"{option}: range {spec!r} has count 1 but start != stop; give a single number")
-    return np.linspace(start, stop, count)
+    if count > MAX_GRID_POINTS:
+        raise UsageError(f"{option}: range {spec!r} has {count:,} points, more than a whole grid may have "
+                         f"({MAX_GRID_POINTS:,}); split the sweep")
+    return parts[0].strip(), parts[1].strip(), count
+
+
+def _decimal_range(start: str, stop: str, count: int) -> np.ndarray:
+    """``count`` evenly spaced values from ``start`` to ``stop`` (decimal texts), each the
+    float nearest to its exact decimal value.
+
+    Where the step is a terminating decimal (``1e-4`` for ``1e-3:5e-3:41``), every value
+    is an integer times a power of ten, both exact in float64, so one IEEE division (or
+    product) rounds it correctly; otherwise (``0:1:4``, step 1/3) ``np.linspace``, whose
+    endpoints are the typed numbers.
+    """
+    a, b = Decimal(start), Decimal(stop)
+    if count == 1:
+        return np.asarray([float(a)])
+    with localcontext() as ctx:
+        ctx.prec = 60
+        ctx.clear_flags()
+        step = (b - a) / (count - 1)
+        exact = not ctx.flags[Inexact]  # a terminating decimal step (not 1/3)
+    digits = -min(a.as_tuple().exponent, step.normalize().as_tuple().exponent) if exact else None
+    if digits is None or abs(digits) > 22:  # 10**22 is the largest power of ten exact in float64
+        return np.linspace(float(a), float(b), count)
+    first, inc = int(a.scaleb(digits)), int(step.scaleb(digits))
+    if max(abs(first), abs(first + (count - 1) * inc)) >= 2**53:  # not every integer exact in float64
+        return np.linspace(float(a), float(b), count)
+    n = (first + inc * np.arange(count, dtype=np.int64)).astype(np.float64)
+    return n / 10.0**digits if digits >= 0 else n * 10.0**-digits
 
 
 def add_parser(sub) -> None:
@@ -110,7 +162,8 @@ def add_parser(sub) -> None:
             "time per DIR."
         ),
         epilog=(
-            "SPEC is START:STOP:COUNT (inclusive), a comma list or a number, in SI units. "
+            "SPEC is START:STOP:COUNT (inclusive), a comma list or a number, in SI units; "
+            f"the grid may have at most {MAX_GRID_POINTS:,} points, in the order the axes are given. "
             "Without a grasp: preset cube. Without any axis: the paper's Fig. 6 grid "
             f"(--young-modulus {PAPER_AXES['young_modulus']} "
             f"--initial-deformation {PAPER_AXES['initial_deformation']}). "
@@ -121,7 +174,7 @@ def add_parser(sub) -> None:
     add_grasp_source(sp)
     for name in AXES:
         field = FIELD[name]
-        sp.add_argument(field.option, dest=name, metavar="SPEC", help=f"{field.help} (axis spec)")
+        sp.add_argument(field.option, dest=name, metavar="SPEC", action=_AxisInOrder, help=f"{field.help} (axis spec)")
     sp.add_argument(
         "--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)"
     )
@@ -140,6 +193,16 @@ def add_parser(sub) -> None:
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
     sp.set_defaults(func=run, default_preset="cube")
 
+
+
+class _AxisInOrder(argparse.Action):
+    """Store an axis spec and remember the order the axes were given in (``args.axis_order``):
+    the grid's axes follow it, as the library's keyword order."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        order = [n for n in getattr(namespace, "axis_order", None) or [] if n != self.dest]
+        namespace.axis_order = order + [self.dest]
 
 
 # --------------------------------------------------------------------------- the command
@@ -162,6 +225,7 @@ def run(args) -> int:
         prefetch("jaxgrasp.plots._plots")  # matplotlib's import overlaps the compile
     with lock_out(out):
         progress = ChunkProgress("sweeping", "point", show=not args.quiet)
+        announce_run("sweep", grasp_source(args), plan.total, "point", args.quiet)
         t_start = time.perf_counter()
         result = sweep(grasp, chunk_size=plan.chunk, progress=progress, checkpoint=out / PARTIAL_NAME, **axes)
         wall = time.perf_counter() - t_start
@@ -176,11 +240,24 @@ def run(args) -> int:
 
 
 def _parse_axes(args) -> tuple[dict[str, np.ndarray], bool]:
-    """The axes given on the command line, or the paper's; (axes, whether the paper's)."""
-    given = {n: getattr(args, n) for n in AXES if getattr(args, n) is not None}
+    """The axes given on the command line, in the order given, or the paper's; (axes,
+    whether the paper's). The grid's size is checked against :data:`MAX_GRID_POINTS`
+    before any axis is expanded."""
+    order = getattr(args, "axis_order", None) or AXES  # AXES: a namespace not made by the parser
+    given = {n: getattr(args, n) for n in order if getattr(args, n, None) is not None}
     paper = not given
     specs = dict(PAPER_AXES) if paper else given
-    return {n: parse_axis_spec(FIELD[n].option, s) for n, s in specs.items()}, paper
+    parsed = {n: _parse_spec(FIELD[n].option, s) for n, s in specs.items()}
+    sizes = [p.size if isinstance(p, np.ndarray) else p[2] for p in parsed.values()]
+    total = math.prod(sizes)
+    if total > MAX_GRID_POINTS:
+        shape = " x ".join(f"{k:,}" for k in sizes)
+        raise UsageError(
+            f"the grid has {total:,} points ({shape}), more than the {MAX_GRID_POINTS:,} a sweep may have "
+            "(its results and CSV must fit in memory); use fewer points per axis or split the sweep"
+        )
+    axes = {n: p if isinstance(p, np.ndarray) else _decimal_range(*p) for n, p in parsed.items()}
+    return axes, paper
 
 
 def _write_outputs(result, out: Path, title: str | None, extra=None) -> tuple[list[str], list[str], list[str]]:

@@ -9,7 +9,6 @@ replace the previous ones as one set (:func:`jaxgrasp.io._outputs.write_set`).
 from __future__ import annotations
 
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -18,9 +17,11 @@ import numpy as np
 from jaxgrasp.cli._common import (
     UsageError,
     add_grasp_source,
+    add_overrides,
     grasp_source,
     load_grasp,
     parse_number,
+    say,
 )
 from jaxgrasp.io import _outputs as outputs
 from jaxgrasp.model._fields import TUNABLE
@@ -114,6 +115,7 @@ def add_parser(sub) -> None:
         ),
     )
     add_grasp_source(sp)
+    add_overrides(sp)  # --young-modulus PA etc., as every other command
     sp.add_argument(
         "--param",
         action="append",
@@ -144,7 +146,13 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    """Tune the grasp of the command line; write it (and a plot) and print one summary line."""
+    """Tune the grasp of the command line; write it (and a plot) and print one summary line.
+
+    Unless ``--quiet``, a first line on stderr says what is tuned, before the value and
+    its gradient are compiled; then one line per iteration. The summary line names the
+    :class:`~jaxgrasp.TuneStatus` with its explanation: why the search stopped and
+    whether the tuned grasp is usable.
+    """
     from jaxgrasp.analysis import tune
     from jaxgrasp.tolerance._options import EvaluateOptions
 
@@ -152,25 +160,36 @@ def run(args) -> int:
     bounds = parse_bounds(args.bounds)
     params = args.param or ["initial_deformation"]
     check_bounds(params, bounds)
-    grasp = load_grasp(args, overrides=False)
+    grasp = load_grasp(args)  # with the overrides (--young-modulus ...)
     source = grasp_source(args)
+    if not args.quiet:
+        say(
+            f"jaxgrasp: tuning {', '.join(params)} of {source} ({grasp.num_contacts} contacts) by {args.method}, "
+            f"at most {counted(args.maxiter, 'iteration')}; compiling the value and its gradient first"
+        )
     options = EvaluateOptions(smooth_min_temperature=args.smooth_min_temperature)
     progress = _progress_printer(args.quiet)
     res = tune(grasp, params, bounds, maxiter=args.maxiter, options=options, method=args.method, callback=progress)
     replaced = _write_outputs(res, out, None if args.no_plot else f"jaxgrasp tune: {source}")
+    print(_summary_line(res, source, out, args.no_plot, replaced))
+    return 0
+
+
+def _summary_line(res, source: str, out: Path, no_plot: bool, replaced: list[str]) -> str:
+    """``tune SOURCE: value A J -> B J (xG, N iterations, STATUS: why it stopped; whether
+    usable); tuned values; wrote FILES``."""
     tuned = "; ".join(f"{k} = {_fmt(v)}" for k, v in res.params.items() if k != "positions")
     if "positions" in res.params:
         tuned = (tuned + "; " if tuned else "") + "positions moved"
     note = res.start_note()
-    print(
+    return (
         f"tune {source}: value {res.start_value:.6e} J -> {res.value:.6e} J "
-        f"(x{res.gain:.4f}, {counted(res.iterations, 'iteration')}, {res.status}); {tuned}; "
+        f"(x{res.gain:.4f}, {counted(res.iterations, 'iteration')}, {res.status}: {res.message}); {tuned}; "
         + (f"{note}; " if note else "")
         + f"wrote {out}"
-        + ("" if args.no_plot else f", {out.with_suffix('.png')}")
+        + ("" if no_plot else f", {out.with_suffix('.png')}")
         + (f" (replacing the previous {', '.join(replaced)})" if replaced else "")
     )
-    return 0
 
 
 def _check_options(args) -> Path:
@@ -200,11 +219,7 @@ def _progress_printer(quiet: bool):
         if not quiet:
             el = time.perf_counter() - t0
             note = " (includes compilation)" if it == 1 else ""
-            print(
-                f"jaxgrasp: iteration {it}: value {value:.6e} J, elapsed {el:.1f} s{note}",
-                file=sys.stderr,
-                flush=True,
-            )
+            say(f"jaxgrasp: iteration {it}: value {value:.6e} J, elapsed {el:.1f} s{note}")
 
     return progress
 

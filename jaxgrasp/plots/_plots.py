@@ -51,6 +51,7 @@ __all__ = [
     "draw_scene",
     "new_figure",
     "save_figure",
+    "plain_text",
     "J_TO_MJ",
 ]
 
@@ -75,6 +76,13 @@ def _fmt(name: str, x: float) -> str:
     field = FIELD[name]
     factor, unit = field.display
     return f"{field.symbol} = {x * factor:.4g}" + (f" {unit}" if unit else "")
+
+
+def plain_text(text: str) -> str:
+    """``text`` (a title that may hold a file name) drawn as written: its ``$`` escaped, so
+    that matplotlib does not parse ``a$b$.toml`` as mathtext (which fails for ``$\\x$``
+    only when the figure is saved, after all the computing)."""
+    return text.replace("$", r"\$")
 
 
 def new_figure(**kwargs) -> Figure:
@@ -214,7 +222,7 @@ def plot_sweep(result, path=None, *, x=None, curves=None, panels=None, title=Non
     Args:
         result: a :class:`~jaxgrasp.SweepResult`.
         path: where to save the figure (PNG, ...); ``None`` returns it open.
-        title: figure title.
+        title: figure title, drawn as written (a ``$`` is a dollar sign, not mathtext).
 
     Returns:
         The matplotlib ``Figure``.
@@ -260,7 +268,7 @@ def plot_sweep(result, path=None, *, x=None, curves=None, panels=None, title=Non
         t = title or ""
         if truncated:
             t += f" (first {max_panels} panels shown)"
-        fig.suptitle(t)
+        fig.suptitle(plain_text(t))
     fig.tight_layout()
     return _save(fig, path)
 
@@ -356,7 +364,7 @@ def plot_max(reduced, best, path=None, *, over="initial_deformation", x=None, cu
     ax2.set_ylabel(f"best {sym_o} [{unit_o}]" if unit_o else f"best {sym_o}")
     ax2.grid(True, alpha=0.3)
     if title:
-        ax.set_title(title, fontsize=11)
+        ax.set_title(plain_text(title), fontsize=11)
     fig.tight_layout()
     return _save(fig, path)
 
@@ -423,7 +431,7 @@ def plot_ranking(result, path=None, *, top: int = 5, title=None):
     bars.invert_yaxis()
     bars.set_xlabel("grasps")
     bars.set_xlim(0, max(1, max(counts.values())) * 1.25)
-    fig.suptitle(title or f"{len(result)} grasps ranked by evaluation value")
+    fig.suptitle(plain_text(title or f"{len(result)} grasps ranked by evaluation value"))
     fig.tight_layout()
     return _save(fig, path)
 
@@ -446,7 +454,7 @@ def plot_grasp(grasp, path=None, *, result=None, magnification=None, title=None,
         result: its :class:`~jaxgrasp.Evaluation` (default: evaluated here).
         magnification: the ghost's motion factor (default: a round one, see
             :func:`jaxgrasp.plots._scene.nice_magnification`).
-        title: first title line (default: the status, value and limiting boundary).
+        title: first title line, drawn as written (default: the status, value and limiting boundary).
         view: ``(elevation, azimuth)`` of the camera, degrees.
 
     Returns:
@@ -516,7 +524,7 @@ def draw_scene(scene, *, title=None, view=(22.0, -58.0)):
                                  label=f"object at the least-energy pose on that boundary (motion x{scene.magnification:g})"))
         handles.insert(2, Line2D([], [], color="0.25", lw=1.2, label="object axes at the centre of mass"))
     fig.legend(handles=handles, loc="lower center", ncol=2, fontsize=8, frameon=False)
-    fig.suptitle(title or _grasp_title(scene), fontsize=10.5)
+    fig.suptitle(plain_text(title) if title else _grasp_title(scene), fontsize=10.5)
     fig.subplots_adjust(left=0.0, right=1.0, top=0.93, bottom=0.15)
     return fig
 

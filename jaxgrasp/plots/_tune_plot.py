@@ -8,7 +8,7 @@ from matplotlib.figure import Figure
 
 from jaxgrasp.analysis import TuneResult
 from jaxgrasp.model._units import MJ_TO_J
-from jaxgrasp.plots._plots import VALUE_LABEL, _save
+from jaxgrasp.plots._plots import VALUE_LABEL, _save, plain_text
 from jaxgrasp.tolerance._status import GraspStatus
 
 __all__ = ["plot_history"]
@@ -36,7 +36,7 @@ def plot_history(result: TuneResult, path=None, *, title: str | None = None):
     ax.set_xlabel("iteration")
     ax.set_ylabel(VALUE_LABEL)
     params = ", ".join(result.params)
-    ax.set_title(title or f"tuning {params}: {result.initial_value / MJ_TO_J:.4g} → {result.value / MJ_TO_J:.4g} mJ")
+    ax.set_title(plain_text(title) if title else f"tuning {params}: {result.initial_value / MJ_TO_J:.4g} → {result.value / MJ_TO_J:.4g} mJ")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="lower right", fontsize=8)
     return _save(fig, path)

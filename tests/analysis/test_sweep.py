@@ -201,6 +201,11 @@ def test_prism_heavier_object_lower_value():
         ({"initial_deformation": [0.0]}, "must be positive"),
         ({"young_modulus": "abc"}, "must be a number"),
         ({"young_modulus": [[1e5, 2e5]]}, "1-D"),
+        (  # three axes of 465 points: refused before any grid-sized array is made
+            {"young_modulus": np.linspace(2e5, 1e6, 465), "initial_deformation": np.linspace(1e-3, 5e-3, 465),
+             "mass": np.linspace(0.0, 1.0, 465)},
+            r"100,544,625 points \(465 x 465 x 465\), more than MAX_GRID_POINTS = 10,000,000",
+        ),
     ],
 )
 def test_bad_axes_raise_one_line(axes, match):
@@ -242,7 +247,10 @@ def test_cli_sweep_writes_files(run_cli, tmp_path, cube_sweep):
         "--out", str(out), "--chunk-size", str(CHUNK),  # the module's compiled program
     )
     assert rc == 0, stderr
-    assert without_compile_reports(stderr) == ""  # one chunk: no progress lines
+    # one chunk: no chunk lines, only the first line saying what is about to happen
+    assert without_compile_reports(stderr) == (
+        "jaxgrasp: sweep preset cube: 6 points to go; compiling the evaluator (or loading it from the cache) first\n"
+    )
     for name in ("sweep.npz", "sweep.csv", "sweep.png"):
         assert (out / name).stat().st_size > 0, name
     lines = stdout.strip().splitlines()

@@ -72,13 +72,18 @@ def test_evaluate_preset_json(preset_json, expected_cube):
 
 
 def test_evaluate_file_matches_preset(run_cli, preset_json):
+    """``examples/cube.toml`` is ``--preset cube`` (issue 35: a name means one grasp), and
+    the overrides reach the grasp: E = 6e5 Pa gives another value than the file's 2e5."""
     rc, out, err = run_cli(["evaluate", CUBE_TOML, "--json"])
     assert rc == 0, err
-    assert json.loads(out) == json.loads(preset_json[1])
+    rc, preset_out, err = run_cli(["evaluate", "--preset", "cube", "--json"])
+    assert rc == 0, err
+    assert json.loads(out) == json.loads(preset_out)
+    assert json.loads(out)["value"] < json.loads(preset_json[1])["value"]
 
 
 def test_evaluate_summary_text(run_cli, expected_cube):
-    rc, out, err = run_cli(["evaluate", CUBE_TOML])
+    rc, out, err = run_cli(["evaluate", CUBE_TOML, "--young-modulus", "6e5"])  # the file is E = 2e5 Pa
     assert rc == 0, err
     assert "status: stable" in out
     assert f"{expected_cube['value']:.6e}" in out
@@ -148,7 +153,7 @@ def test_console_script_subprocess(warm_cache, preset_json):
     else:
         cmd = [sys.executable, "-m", "jaxgrasp.cli"]
     before = warm_cache.program_files()
-    proc = warm_cache.run(cmd + ["evaluate", str(CUBE_TOML), "--json"])
+    proc = warm_cache.run(cmd + [*PRESET_ARGS[:1], str(CUBE_TOML), *PRESET_ARGS[3:]])  # the file, E = 6e5 Pa
     assert "Traceback" not in proc.stderr
     assert json.loads(proc.stdout) == json.loads(preset_json[1])
     assert warm_cache.program_files() == before
