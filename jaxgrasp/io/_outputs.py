@@ -281,8 +281,9 @@ def write_set(
         The destinations that replaced an existing file.
 
     Raises:
-        OSError or whatever a ``write`` raises: nothing was replaced, and every temporary
-        file is gone.
+        DiskFull: no space for a member (an :class:`OutputError` naming it); nothing was
+            replaced, and every temporary file is gone.
+        OSError or whatever a ``write`` raises: likewise.
         OutputError: writing was abandoned (:func:`abandon`).
     """
     staged: list[tuple[Path, Path]] = []
@@ -637,9 +638,10 @@ def abandon(timeout: float = 0.5) -> list[str]:
 
     First runs the last writes left with :func:`set_last_write` (a failing one is
     skipped: its previous file stays). Then waits at most ``timeout`` seconds for a
-    rename phase in progress (so a set is never published half), then keeps :data:`PUBLISH_LOCK` (nothing is published after this),
-    deletes every temporary file and lock file of this process and makes later writes
-    raise :class:`OutputError`. Meant to be followed by ``os._exit``.
+    rename phase in progress (so a set is never published half), then keeps
+    :data:`PUBLISH_LOCK` (nothing is published after this), deletes every temporary file
+    and lock file of this process and makes later writes raise :class:`OutputError`.
+    Meant to be followed by ``os._exit``.
 
     Returns:
         The notes left with :func:`set_note`, oldest first.
