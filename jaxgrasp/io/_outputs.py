@@ -124,9 +124,16 @@ class DiskFull(OutputError):
 
 
 def _no_space(exc: BaseException, path) -> BaseException:
-    """``exc`` as a :class:`DiskFull` of ``path`` where it is one, else ``exc`` itself."""
-    if isinstance(exc, OSError) and not isinstance(exc, OutputError) and exc.errno in NO_SPACE:
-        return DiskFull(path, exc)
+    """``exc`` as a :class:`DiskFull` of ``path`` where it, or an exception it was raised
+    from or while handling (a writer's clean-up failing in turn), is a want of space;
+    else ``exc`` itself."""
+    cause: BaseException | None = exc
+    for _ in range(8):  # a short chain; never a cycle
+        if cause is None or isinstance(cause, OutputError):
+            break
+        if isinstance(cause, OSError) and cause.errno in NO_SPACE:
+            return DiskFull(path, cause)
+        cause = cause.__cause__ or cause.__context__
     return exc
 
 

@@ -208,6 +208,14 @@ def test_failed_write_removes_its_temp_and_full_disk_is_one_line(out):
     assert str(info.value) == f"no space left on device writing {out / 'results.csv'}"
     assert info.value.__cause__ is None and info.value.__suppress_context__  # no chained traceback
     assert sorted(os.listdir(out)) == ["results.csv"] and (out / "results.csv").read_bytes() == b"previous"
+    def cleanup_fails_too(fh):
+        try:
+            full(fh)
+        finally:
+            raise ValueError("I/O operation on closed file")  # a writer's own clean-up failing after ENOSPC
+
+    with pytest.raises(outputs.DiskFull, match="^no space left on device writing"):
+        outputs.write_file(out / "results.npz", cleanup_fails_too)
     with pytest.raises(OSError, match="Permission"):  # any other error: as it was, temporary file gone
         outputs.write_file(out / "x.csv", lambda fh: (_ for _ in ()).throw(PermissionError("Permission denied")))
     assert sorted(os.listdir(out)) == ["results.csv"]
