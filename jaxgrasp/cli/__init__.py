@@ -88,13 +88,20 @@ def _main(argv) -> int:
             raise UsageError("choose a command: evaluate, sweep, batch, tune or show (see 'jaxgrasp --help')")
         enable_compilation_cache()  # looked up here, so that tests can replace it
         return args.func(args)
-    except (UsageError, GraspValueError, OutputError, OSError) as exc:
-        status, line = _error_line(exc)
-        print(f"jaxgrasp: error: {line}", file=sys.stderr)
-        return status
+    except (UsageError, GraspValueError, OutputError) as exc:
+        return _report(exc)
+    except OSError as exc:  # the machine, not the input: a full disk, an I/O error
+        return _report(exc)
     finally:
         clear_notes()
         _compile.wait_for_saves()  # the process may end with os._exit next
+
+
+def _report(exc: Exception) -> int:
+    """Print the one line of an error that ended a command (:func:`_error_line`); its exit status."""
+    status, line = _error_line(exc)
+    print(f"jaxgrasp: error: {line}", file=sys.stderr)
+    return status
 
 
 def _error_line(exc: Exception) -> tuple[int, str]:
