@@ -2,7 +2,9 @@
 
 Every error in the input (bad file, bad value, bad option, an output that cannot be
 written) prints one line ``jaxgrasp: error: ...`` on stderr and exits with status 2, never
-a traceback. Ctrl-C (or SIGTERM) at any moment ends the command within a second with one
+a traceback. A failure of the machine while writing (a full disk, an I/O error) is one
+line too, with status 1; a batch's finished chunks stay in its checkpoint for
+``--resume``. Ctrl-C (or SIGTERM) at any moment ends the command within a second with one
 line ``jaxgrasp: interrupted ...`` and status 130 (143), see :mod:`._interrupt`.
 
 One module per sub-command (:mod:`._evaluate`, :mod:`._sweep`, :mod:`._batch`,
@@ -26,6 +28,8 @@ __all__ = [
     "COMMANDS",
     "UsageError",
     "EXIT_USAGE",
+    "EXIT_ENVIRONMENT",
+    "EXIT_STATUS_HELP",
     "parse_number",
     "load_grasp",
     "enable_compilation_cache",
@@ -33,6 +37,16 @@ __all__ = [
 
 COMMANDS = (_evaluate, _sweep, _batch, _tune, _show)
 """The sub-command modules, in the order of ``jaxgrasp --help``."""
+
+EXIT_ENVIRONMENT = 1
+"""Exit status of a command the machine failed: no space left on the device, an I/O error."""
+
+EXIT_STATUS_HELP = (
+    "exit status: 0 done; 1 the machine failed (e.g. no space left on the device: a batch's "
+    "finished chunks are kept, rerun with --resume); 2 bad input or options; 130 (143) "
+    "interrupted by Ctrl-C (SIGTERM)"
+)
+"""The epilog of ``jaxgrasp --help``."""
 
 
 def build_parser() -> Parser:
@@ -42,6 +56,7 @@ def build_parser() -> Parser:
     sub = parser.add_subparsers(dest="command", parser_class=Parser)
     for command in COMMANDS:
         command.add_parser(sub)
+    parser.epilog = EXIT_STATUS_HELP
     return parser
 
 
@@ -61,7 +76,8 @@ def main(argv=None) -> int:
 
 
 def _main(argv) -> int:
-    """Parse ``argv`` and run its command; input errors as one line, exit status 2."""
+    """Parse ``argv`` and run its command; input errors as one line, exit status 2; a
+    failure of the machine (a full disk, an I/O error) as one line, exit status 1."""
     from jaxgrasp.io._outputs import OutputError, clear_notes
     from jaxgrasp.model._validation import GraspValueError
 
@@ -75,8 +91,37 @@ def _main(argv) -> int:
             enable_compilation_cache()  # looked up here, so that tests can replace it
             return args.func(args)
     except (UsageError, GraspValueError, OutputError) as exc:
-        print(f"jaxgrasp: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        return _report(exc)
+    except OSError as exc:  # the machine, not the input: a full disk, an I/O error
+        return _report(exc)
     finally:
         clear_notes()
         _compile.wait_for_saves()  # the process may end with os._exit next
+
+
+def _report(exc: Exception) -> int:
+    """Print the one line of an error that ended a command (:func:`_error_line`); its exit status."""
+    status, line = _error_line(exc)
+    print(f"jaxgrasp: error: {line}", file=sys.stderr)
+    return status
+
+
+def _error_line(exc: Exception) -> tuple[int, str]:
+    """The exit status and one-line message of an error that ended a command.
+
+    A full disk (:class:`~jaxgrasp.io._outputs.DiskFull`, or an ``OSError`` with its errno
+    that no writer turned into one) and any other ``OSError`` (the machine, not the input:
+    an I/O error, a file removed meanwhile) exit 1; a full disk's line also says what
+    the command kept (:func:`~jaxgrasp.io._outputs.keeping`). The rest is bad input, exit 2.
+    """
+    from jaxgrasp.io import _outputs as outputs
+
+    full = isinstance(exc, outputs.DiskFull) or (isinstance(exc, OSError) and exc.errno in outputs.NO_SPACE)
+    if isinstance(exc, OSError) and not full:
+        what = (exc.strerror or str(exc) or type(exc).__name__).lower()
+        return EXIT_ENVIRONMENT, f"{exc.filename}: {what}" if exc.filename else what
+    if not full:
+        return EXIT_USAGE, str(exc)
+    if not isinstance(exc, outputs.DiskFull):
+        exc = outputs.DiskFull(exc.filename or "an output file", exc)
+    return EXIT_ENVIRONMENT, "; ".join([str(exc), *outputs.keeping()])

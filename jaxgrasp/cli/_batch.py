@@ -140,6 +140,8 @@ def _open_checkpoint(checkpoint, resume: bool, total: int) -> tuple[np.ndarray, 
         raise UsageError(f"--resume: {exc}") from None
     if resumed:
         say(f"jaxgrasp: resuming: {rows.size} of {counted(total, 'grasp')} were finished in {checkpoint.folder}")
+        if checkpoint.skipped_note():  # damaged chunk files: their rows are evaluated again
+            say(checkpoint.skipped_note())
     elif resume:
         say(f"jaxgrasp: --resume: no unfinished run in {checkpoint.folder.parent}; starting afresh")
     return rows, results

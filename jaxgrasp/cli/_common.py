@@ -216,19 +216,30 @@ def _shown(text: str) -> str:
 
 
 def check_out(out: Path) -> None:
-    """``--out`` must be a folder (existing or not) where files can be created."""
+    """``--out`` must be a folder (existing or not) where files can be created, and hold
+    no symbolic link where jaxgrasp keeps its own files (the lock file and the
+    checkpoints): a link there is refused, before anything is computed, not followed."""
+    from jaxgrasp.engine._checkpoint import BATCH_FOLDER, SWEEP_FILE
+
     try:
         outputs.check_writable(out)
+        for name, what in ((outputs.LOCK_NAME, "its lock file"), (BATCH_FOLDER, "a batch's finished chunks"),
+                           (SWEEP_FILE, "a sweep's finished points")):
+            outputs.refuse_link(out / name, what)
     except outputs.OutputError as exc:
         raise UsageError(f"--out: {exc}") from None
 
 
 def lock_out(out: Path) -> outputs.FolderLock:
-    """The lock of ``--out`` (created if needed), held; a one-line error if another run holds it."""
+    """The lock of ``--out`` (created if needed), held; a one-line error if another run
+    holds it or its lock file is a link. Taking it removes the stale temporary files of
+    killed runs in ``--out``."""
     lock = outputs.FolderLock(out)
     try:
         return lock.acquire()
-    except outputs.FolderBusy as exc:
+    except outputs.DiskFull:
+        raise  # exit 1, not an input error
+    except outputs.OutputError as exc:  # FolderBusy, or a link at the lock file's path
         raise UsageError(f"--out: {exc}") from None
     except OSError as exc:
         raise UsageError(f"cannot create --out folder {str(out)!r}: {exc.strerror or exc}") from None

@@ -31,9 +31,14 @@ File format (``np.load(path)``; no pickled objects), ``format`` =
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
+import os
+import re
+import stat
 import threading
 import time
+import zipfile
 from pathlib import Path
 from typing import Mapping
 
@@ -54,7 +59,16 @@ __all__ = [
     "BATCH_FORMAT",
     "RESULT_FIELDS",
     "CHECKPOINT_SHARE",
+    "SWEEP_FILE",
+    "BATCH_FOLDER",
+    "chunk_layout",
 ]
+
+SWEEP_FILE = "sweep.partial.npz"
+"""Name of a sweep's checkpoint file in ``jaxgrasp sweep``'s ``--out``."""
+
+BATCH_FOLDER = "results.partial"
+"""Name of a batch's checkpoint folder in ``jaxgrasp batch``'s ``--out``."""
 
 FORMAT = "jaxgrasp-sweep-partial-1"
 """The ``format`` entry of a checkpoint file (changes when its layout does)."""
@@ -137,22 +151,39 @@ class SweepCheckpoint:
 
     @classmethod
     def load(cls, path) -> "SweepCheckpoint":
-        """Read a checkpoint file.
+        """Read a checkpoint file (without following a link).
 
         Raises:
-            ValueError: not a checkpoint of this format.
+            ValueError: (one line) not a checkpoint of this format, or a damaged one:
+                unreadable, an array missing, or shapes that disagree with its grid.
         """
-        with np.load(path, allow_pickle=False) as z:
-            if "format" not in z.files or str(z["format"]) != FORMAT:
-                raise ValueError(f"{path}: not a jaxgrasp sweep checkpoint ({FORMAT})")
-            names = [str(n) for n in z["axis_names"]]
-            return cls(
-                axes={n: np.array(z[f"axis_{n}"]) for n in names},
-                done=np.array(z["done"]),
-                results={f: np.array(z[f]) for f in RESULT_FIELDS},
-                grasp={k[len("grasp_") :]: np.array(z[k]) for k in z.files if k.startswith("grasp_")},
-                chunk_size=int(z["chunk_size"]),
-            )
+        try:
+            data = outputs.read_own(path)
+            with np.load(io.BytesIO(data), allow_pickle=False) as z:
+                if "format" not in z.files or str(z["format"]) != FORMAT:
+                    raise ValueError(f"{path}: not a jaxgrasp sweep checkpoint ({FORMAT})")
+                names = [str(n) for n in z["axis_names"]]
+                loaded = cls(
+                    axes={n: np.array(z[f"axis_{n}"], dtype=np.float64) for n in names},
+                    done=np.array(z["done"]),
+                    results={f: np.array(z[f]) for f in RESULT_FIELDS},
+                    grasp={k[len("grasp_") :]: np.array(z[k]) for k in z.files if k.startswith("grasp_")},
+                    chunk_size=int(z["chunk_size"]),
+                )
+        except ValueError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - any damage (BadZipFile, KeyError, ...) is one line
+            raise ValueError(f"{path}: a damaged sweep checkpoint ({_reason(exc)})") from None
+        return loaded._checked(path)
+
+    def _checked(self, path) -> SweepCheckpoint:
+        """``self``, if its arrays fit its grid; else ``ValueError`` (one line)."""
+        if self.done.dtype != bool or self.done.shape != self.shape or any(a.ndim != 1 for a in self.axes.values()):
+            raise ValueError(f"{path}: a damaged sweep checkpoint (done {self.done.shape}, grid {self.shape})")
+        for f, a in self.results.items():
+            if a.shape != self.shape:
+                raise ValueError(f"{path}: a damaged sweep checkpoint ({f} {a.shape}, grid {self.shape})")
+        return self
 
 
 CHECKPOINT_SHARE = 0.05
@@ -202,7 +233,12 @@ class SweepKeeper:
         with self._lock:
             partial = SweepCheckpoint.from_flat(self.axes, self.done.copy(), self._results, self.grasp, self.chunk)
         note = f"kept {partial.done_count} of {self.total} points in {self.path}"
-        outputs.write_set({self.path: partial.save}, on_publish=lambda: outputs.set_note("sweep", note))
+
+        def published() -> None:
+            outputs.set_note("sweep", note)
+            outputs.set_keeping("sweep", f"{partial.done_count} of {self.total} finished points kept in {self.path}")
+
+        outputs.write_set({self.path: partial.save}, on_publish=published)
 
 
 # --------------------------------------------------------------------------- batches
@@ -219,6 +255,41 @@ BATCH_FORMAT = "jaxgrasp-batch-partial-1"
 """The ``format`` of a batch checkpoint's ``manifest.json`` (changes when its layout does)."""
 
 
+def chunk_layout(num_contacts: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """Each :class:`~jaxgrasp.Evaluation` field's shape per grasp and dtype, for grasps
+    padded to ``num_contacts`` (``N``) contacts: what a batch checkpoint's chunk must hold
+    (the evaluator's output: float64 and int32 arrays, see :class:`~jaxgrasp.Evaluation`)."""
+    n, f8, i4 = int(num_contacts), np.dtype(np.float64), np.dtype(np.int32)
+    return {
+        "value": ((), f8),
+        "status": ((), i4),
+        "limiting_kind": ((), i4),
+        "limiting_contact": ((), i4),
+        "equilibrium_energy": ((), f8),
+        "equilibrium_translation": ((3,), f8),
+        "equilibrium_rotation": ((3,), f8),
+        "boundary_energy": ((2, n), f8),
+        "boundary_translation": ((2, n, 3), f8),
+        "boundary_rotation": ((2, n, 3), f8),
+        "boundary_status": ((2, n), i4),
+        "equilibrium_status": ((), i4),
+        "equilibrium_margins": ((3, n), f8),
+        "kkt": ((1 + 2 * n, 3), f8),
+        "steps": ((1 + 2 * n,), i4),
+    }
+
+
+_CHUNK_NAME = re.compile(r"rows-\d+\.npz")  # rows-<first row, 9 digits>.npz, fullmatch
+_NPY_HEADER_BYTES = 4096  # at most, per array of a chunk file (NumPy's header, padded)
+
+
+def _reason(exc: BaseException) -> str:
+    """An exception as a short, one-line reason."""
+    text = str(exc).strip().splitlines()
+    line = text[0] if text else ""
+    return f"{type(exc).__name__}: {line[:200]}" if line else type(exc).__name__
+
+
 class BatchCheckpoint:
     """The finished chunks of ``jaxgrasp batch FILE --out DIR``: the folder
     ``DIR/results.partial``, which ``--resume`` continues.
@@ -231,13 +302,21 @@ class BatchCheckpoint:
     * ``rows-<first>.npz``, one per finished chunk, each written atomically once its
       chunk is done: ``rows`` (int64, the input indices of its grasps) and every
       :class:`~jaxgrasp.Evaluation` field for them (leading axis ``len(rows)``, contacts
-      padded to ``N``).
+      padded to ``N``; :func:`chunk_layout`).
 
     A chunk file is complete or absent, so a run killed at any moment (even ``kill -9``)
-    keeps every chunk finished before it.
+    keeps every chunk finished before it. A damaged chunk file (truncated, arrays missing
+    or of other shapes or dtypes, rows out of range or held by another chunk) is skipped
+    by :meth:`load` and its rows are evaluated again (:attr:`skipped` says which).
+
+    No link is followed: the folder, its manifest and its chunks must be real folders and
+    files (a link at the folder's path is refused, :class:`~jaxgrasp.io.OutputError`;
+    a linked chunk is skipped), and only real files in it are ever deleted.
     """
 
     MANIFEST = "manifest.json"
+    MANIFEST_LIMIT = 1 << 20
+    """The most bytes a manifest may hold, read back."""
 
     def __init__(self, folder, source: str, source_sha256: str, grasps: int, num_contacts: int):
         self.folder = Path(folder)
@@ -248,14 +327,30 @@ class BatchCheckpoint:
             "grasps": int(grasps),
             "num_contacts": int(num_contacts),
         }
+        self.skipped: list[str] = []
+        """The chunk files the last :meth:`load` skipped, each ``NAME: reason``."""
+
+    def check_folder(self) -> None:
+        """Raise :class:`~jaxgrasp.io.OutputError` (one line) unless the folder is absent
+        or a real folder (not a link, not a file)."""
+        outputs.refuse_link(self.folder, "a batch's finished chunks")
+        if os.path.lexists(self.folder) and not self.folder.is_dir():
+            raise outputs.OutputError(
+                f"{str(self.folder)!r} is not a folder; jaxgrasp keeps a batch's finished chunks there: remove it"
+            )
 
     def exists(self) -> bool:
-        """Whether the folder holds a checkpoint (its manifest)."""
-        return (self.folder / self.MANIFEST).is_file()
+        """Whether the folder holds a checkpoint (its manifest, a real file)."""
+        try:
+            return stat.S_ISREG(os.lstat(self.folder / self.MANIFEST).st_mode)
+        except OSError:
+            return False
 
     def start(self) -> None:
         """Create the folder and its manifest (a fresh run)."""
+        self.check_folder()
         self.folder.mkdir(exist_ok=True)
+        self.check_folder()  # nothing put a link there meanwhile
         text = json.dumps(self.manifest, indent=1) + "\n"
         outputs.write_file(self.folder / self.MANIFEST, text.encode())
 
@@ -264,8 +359,8 @@ class BatchCheckpoint:
         same format, input bytes, number of grasps and padded contact count."""
         path = self.folder / self.MANIFEST
         try:
-            have = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
+            have = json.loads(outputs.read_own(path, self.MANIFEST_LIMIT).decode("utf-8"))
+        except (OSError, ValueError, outputs.OutputError) as exc:
             raise ValueError(f"{path}: not a readable checkpoint ({exc})") from None
         if not isinstance(have, dict) or have.get("format") != BATCH_FORMAT:
             raise ValueError(f"{path}: not a jaxgrasp batch checkpoint ({BATCH_FORMAT})")
@@ -278,23 +373,32 @@ class BatchCheckpoint:
             if have.get(key) != self.manifest[key]:
                 raise ValueError(f"{path}: {key} {have.get(key)} differs from this run's {self.manifest[key]}")
 
-
     def open(self, resume: bool) -> tuple[np.ndarray, dict[str, np.ndarray], bool]:
         """``(rows, results, resumed)``: with ``resume`` and a checkpoint on disk, the rows
-        it holds and their results (after :meth:`check`, whose ``ValueError`` it raises);
-        otherwise a fresh checkpoint (:meth:`start`) and no rows.
+        it holds and their results (after :meth:`check`, whose ``ValueError`` it raises;
+        damaged chunks skipped, :attr:`skipped`); otherwise a fresh checkpoint
+        (:meth:`start`) and no rows. Stale temporary files of killed runs in the folder are
+        removed first, and from then on a failed write's error says the folder is kept
+        (:func:`jaxgrasp.io._outputs.set_keeping`).
 
         Raises:
             CheckpointBusy: the folder holds an unfinished run and ``resume`` is false (an
                 unfinished run's checkpoint is never overwritten silently).
+            OutputError: the folder's path holds a link or a file (before anything is read).
         """
+        self.check_folder()
+        if self.folder.is_dir():
+            outputs.remove_stale_temps(self.folder)
         if self.exists():
             if not resume:
                 raise CheckpointBusy(self.folder)
             self.check()
-            return (*self.load(), True)
-        self.start()
-        return np.zeros(0, dtype=np.int64), {}, False
+            opened = (*self.load(), True)
+        else:
+            self.start()
+            opened = (np.zeros(0, dtype=np.int64), {}, False)
+        outputs.set_keeping("batch", f"finished chunks kept in {self.folder}, rerun with --resume")
+        return opened
 
     def keeper(self, before: int, total: int):
         """``on_chunk_rows(rows, results)`` for
@@ -315,25 +419,75 @@ class BatchCheckpoint:
         return keep
 
     def chunk_files(self) -> list[Path]:
-        """The finished chunks' files, in order of their first row."""
-        return sorted(self.folder.glob("rows-*.npz"))
+        """Every entry named like a chunk file (``rows-<first>.npz``), in order of its
+        first row; links among them too (which :meth:`load` skips)."""
+        try:
+            names = [e.name for e in os.scandir(self.folder) if _CHUNK_NAME.fullmatch(e.name)]
+        except OSError:
+            return []
+        return [self.folder / n for n in sorted(names)]
 
     def load(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Every finished row: ``(rows, results)``, ``rows`` the input indices (int64) and
         ``results`` each :class:`~jaxgrasp.Evaluation` field for them (empty when no
-        chunk is finished). A chunk file that cannot be read is skipped (recomputed)."""
-        rows, parts = [], []
+        chunk is finished).
+
+        A chunk file that is damaged in any way (unreadable, a link, not a zip, arrays
+        missing or unknown, shapes or dtypes other than :func:`chunk_layout`'s for the
+        manifest's contact count, rows out of range or held by an earlier chunk) is
+        skipped, so its rows are evaluated again; :attr:`skipped` lists them with the reason.
+        """
+        seen = np.zeros(self.manifest["grasps"], dtype=bool)
+        rows, parts, self.skipped = [], [], []
         for path in self.chunk_files():
             try:
-                with np.load(path, allow_pickle=False) as z:
-                    part = {k: np.array(z[k]) for k in z.files}
-            except (OSError, ValueError, EOFError):
+                r, part = self._read_chunk(path, seen)
+            except Exception as exc:  # noqa: BLE001 - any damage: skipped, its rows recomputed
+                self.skipped.append(f"{path.name}: {_reason(exc)}")
                 continue
-            rows.append(part.pop("rows"))
+            seen[r] = True
+            rows.append(r)
             parts.append(part)
         if not rows:
             return np.zeros(0, dtype=np.int64), {}
         return np.concatenate(rows), {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    def skipped_note(self) -> str | None:
+        """One line on the chunk files the last :meth:`load` skipped (``None``: none)."""
+        if not self.skipped:
+            return None
+        n = len(self.skipped)
+        return (
+            f"jaxgrasp: --resume: skipped {n} damaged chunk file{'s' if n > 1 else ''} in {self.folder} "
+            f"(first: {self.skipped[0]}); {'their' if n > 1 else 'its'} grasps are evaluated again"
+        )
+
+    def _read_chunk(self, path: Path, seen: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """A chunk file's ``(rows, results)``, checked against the manifest (``seen``: rows
+        of earlier chunks); ``ValueError`` (or whatever reading raises) where damaged."""
+        layout = chunk_layout(self.manifest["num_contacts"])
+        total = self.manifest["grasps"]
+        row_bytes = 8 + sum(int(np.prod(shape)) * dt.itemsize for shape, dt in layout.values())
+        limit = total * row_bytes + (len(layout) + 1) * _NPY_HEADER_BYTES
+        data = outputs.read_own(path, limit)
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:  # compressed members: bound what they inflate to
+            if sum(i.file_size for i in zf.infolist()) > limit:
+                raise ValueError(f"its arrays would take more than {limit} bytes")
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            if set(z.files) != {"rows", *layout}:
+                raise ValueError(f"arrays {sorted(set(z.files) ^ {'rows', *layout})} missing or unknown")
+            rows = np.asarray(z["rows"])
+            part = {k: np.asarray(z[k]) for k in layout}
+        if rows.dtype != np.int64 or rows.ndim != 1 or rows.size == 0:
+            raise ValueError(f"rows {rows.dtype} {rows.shape}, not a 1-D int64 list")
+        if rows.min() < 0 or rows.max() >= total:
+            raise ValueError(f"rows {rows.min()}..{rows.max()} outside 0..{total - 1}")
+        if np.unique(rows).size != rows.size or seen[rows].any():
+            raise ValueError("rows held twice")
+        for k, (shape, dtype) in layout.items():
+            if part[k].shape != (rows.size, *shape) or part[k].dtype != dtype:
+                raise ValueError(f"{k} {part[k].dtype} {part[k].shape}, not {dtype} {(rows.size, *shape)}")
+        return rows, part
 
     def save_rows(self, rows: np.ndarray, results: Mapping[str, np.ndarray]) -> None:
         """Keep one finished chunk: input ``rows`` and their ``results`` (by field), atomically."""
@@ -341,7 +495,20 @@ class BatchCheckpoint:
         outputs.write_file(self.folder / f"rows-{int(arrays['rows'][0]):09d}.npz", lambda fh: np.savez(fh, **arrays))
 
     def files(self) -> list[Path]:
-        """Every file of the checkpoint (to remove once the final results are written),
-        with the temporary files a killed run may have left (``*.tmp``: never complete)."""
-        stale = sorted(self.folder.glob("*" + outputs.TEMP_SUFFIX))
-        return self.chunk_files() + [self.folder / self.MANIFEST] + stale
+        """Every file of the checkpoint, to remove once the final results are written: its
+        chunk files and manifest, with the temporary files a killed run may have left
+        (``*.tmp``: never complete). Real files only, and none where the folder is not a
+        real folder: a link is never followed to delete what it points at."""
+        try:
+            self.check_folder()
+        except outputs.OutputError:
+            return []
+        found = self.chunk_files() + [self.folder / self.MANIFEST] + sorted(self.folder.glob("*" + outputs.TEMP_SUFFIX))
+        return [p for p in found if _is_real_file(p)]
+
+
+def _is_real_file(path: Path) -> bool:
+    try:
+        return stat.S_ISREG(os.lstat(path).st_mode)
+    except OSError:
+        return False

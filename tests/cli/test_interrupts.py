@@ -504,3 +504,99 @@ def test_batch_killed_and_resumed_equals_an_uninterrupted_run(sweep_cache, batch
         else:
             np.testing.assert_array_equal(a, b, err_msg=f)
     assert len(set(got.status_names)) >= 2  # the set has more than one status
+
+
+# ----------------------------------------------------------------------------- a full disk (issue 40, item 4)
+
+
+def _small_dataset(folder: Path) -> Path:
+    """The grasps of ``tests/cli/test_batch_cli.py`` (2, 3, 4 and 2 contacts): with
+    ``--chunk-size 2`` the program that module and ``tests/engine/test_batch.py`` compile."""
+    path = folder / "set.jsonl"
+    cube, prism = jaxgrasp.presets.cube, jaxgrasp.presets.prism
+    jaxgrasp.save_dataset(path, [
+        cube(young_modulus=6e5, initial_deformation=0.002), prism(mass=0.1),
+        jaxgrasp.load(ROOT / "examples" / "four_finger.json"), cube(young_modulus=1e6, initial_deformation=4.5e-3),
+    ])
+    return path
+
+
+def _fsync_full_after(count: int, where: str):
+    """``os.fsync`` that fails with ENOSPC for the temporary files under ``where`` after
+    ``count`` of them (the folder's own fsync is not counted)."""
+    import errno
+
+    real, seen = os.fsync, []
+
+    def fsync(fd):
+        name = os.readlink(f"/proc/self/fd/{fd}")
+        if name.startswith(where) and name.endswith(".tmp"):
+            seen.append(fd)
+            if len(seen) > count:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real(fd)
+
+    return fsync
+
+
+def test_full_disk_is_one_line_exit_1_and_resume_finishes(run_cli, tmp_path, monkeypatch):
+    """Issue 40, item 4: a full disk while ``batch`` kept its second chunk used to end in
+    three chained tracebacks. Now: one line naming the file and the checkpoint, exit 1,
+    the first chunk kept byte for byte; ``--resume`` then finishes with the results of an
+    uninterrupted run. A link planted at ``results.csv`` is replaced, its target untouched."""
+    data, out, ref = _small_dataset(tmp_path), tmp_path / "out", tmp_path / "ref"
+    partial = out / "results.partial"
+    out.mkdir()
+    elsewhere = tmp_path / "elsewhere.csv"
+    elsewhere.write_bytes(b"not jaxgrasp's")
+    (out / "results.csv").symlink_to(elsewhere)
+    argv = ["batch", data, "--chunk-size", "2", "--no-plot"]
+
+    with monkeypatch.context() as m:
+        m.setattr(os, "fsync", _fsync_full_after(2, str(partial)))  # the manifest and the first chunk
+        rc, stdout, err = run_cli([*argv, "--out", out])
+    assert rc == 1 and stdout == "", err
+    assert "Traceback" not in err and err.splitlines()[-1] == (
+        f"jaxgrasp: error: no space left on device writing {partial / 'rows-000000002.npz'}; "
+        f"finished chunks kept in {partial}, rerun with --resume"
+    ), err
+    assert sorted(os.listdir(partial)) == ["manifest.json", "rows-000000000.npz"]  # no temporary file
+    first = (partial / "rows-000000000.npz").read_bytes()
+    (partial / "rows-000000002.npz").write_bytes(first[: len(first) // 2])  # as if cut short (item 4 too)
+
+    rc, stdout, err = run_cli([*argv, "--out", out, "--resume"])
+    assert rc == 0, err
+    assert "resuming: 2 of 4 grasps were finished" in err, err
+    assert f"jaxgrasp: --resume: skipped 1 damaged chunk file in {partial} (first: rows-000000002.npz: " in err, err
+    assert sorted(os.listdir(out)) == ["results.csv", "results.npz"] and not (out / "results.csv").is_symlink()
+    assert elsewhere.read_bytes() == b"not jaxgrasp's"
+
+    rc, _, err = run_cli([*argv, "--out", ref, "--quiet"])
+    assert rc == 0, err
+    assert (out / "results.csv").read_bytes() == (ref / "results.csv").read_bytes()
+    got, want = jaxgrasp.BatchResult.from_npz(out / "results.npz"), jaxgrasp.BatchResult.from_npz(ref / "results.npz")
+    for f in jaxgrasp.tolerance._result.FIELDS:
+        np.testing.assert_array_equal(getattr(got, f), getattr(want, f), err_msg=f)
+    import io
+
+    assert np.load(io.BytesIO(first))["rows"].tolist() == [0, 1]
+
+
+@pytest.mark.parametrize(
+    "error, line",
+    [
+        (OSError(5, "Input/output error", "out/results.npz"), "out/results.npz: input/output error"),
+        (OSError(28, "No space left on device", "out/x.csv"), "no space left on device writing out/x.csv"),
+    ],
+)
+def test_machine_failures_are_one_line_exit_1(error, line, monkeypatch, capsys):
+    """An OSError out of a command (the machine, not the input) used to be a traceback;
+    one that no writer named a full disk is still one. The exit statuses are in --help."""
+    from jaxgrasp.cli import _evaluate
+
+    monkeypatch.setattr(cli, "enable_compilation_cache", lambda: None)
+    monkeypatch.setattr(_evaluate, "run", lambda args: (_ for _ in ()).throw(error))
+    assert cli.main(["evaluate", "--preset", "cube"]) == 1
+    assert capsys.readouterr().err == f"jaxgrasp: error: {line}\n"
+    help_text = " ".join(cli.build_parser().format_help().split())
+    assert "1 the machine failed (e.g. no space left on the device" in help_text and "2 bad input" in help_text

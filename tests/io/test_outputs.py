@@ -267,3 +267,26 @@ def test_interrupt_writes_the_checkpoint_a_throttled_chunk_skipped(tmp_path, mon
     np.testing.assert_array_equal(kept.results["value"][:3], [0.0, 1.0, 2.0])
     assert notes == [f"kept 3 of 4 points in {path}"]
     assert not _tmp_files(tmp_path)
+
+
+def test_full_disk_keeps_the_last_sweep_checkpoint(tmp_path, monkeypatch):
+    """A full disk while a sweep rewrites its checkpoint: one DiskFull naming it, the
+    previous checkpoint whole, no temporary file, and the error can say what is kept."""
+    import errno
+
+    from jaxgrasp.engine._checkpoint import SweepKeeper
+
+    path = tmp_path / "sweep.partial.npz"
+    flat = {"value": np.arange(2.0), "status": np.zeros(2, np.int32), "limiting_kind": np.zeros(2, np.int32),
+            "limiting_contact": np.zeros(2, np.int32), "equilibrium_energy": np.zeros(2)}
+    keeper = SweepKeeper(path, jaxgrasp.presets.cube(), {"mass": np.array([0.0, 0.1])}, chunk=1)
+    try:
+        keeper(0, 1, flat)
+        monkeypatch.setattr(os, "fsync", lambda fd: (_ for _ in ()).throw(OSError(errno.ENOSPC, "No space left on device")))
+        with pytest.raises(outputs.DiskFull, match=f"^no space left on device writing {path}$"):
+            keeper(1, 2, flat)
+        assert outputs.keeping() == [f"1 of 2 finished points kept in {path}"]
+    finally:
+        outputs.clear_notes()
+    monkeypatch.undo()
+    assert SweepCheckpoint.load(path).done_count == 1 and _tmp_files(tmp_path) == []
