@@ -134,13 +134,17 @@ def test_statuses_tables_name_every_status(name):
     assert rows == list(jaxgrasp.GraspStatus.labels())
 
 
-def test_every_page_is_in_the_navigation_and_every_image_exists():
+def test_every_page_is_in_the_navigation_and_every_link_resolves():
     nav = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
     pages = {p.relative_to(DOCS).as_posix() for p in DOCS.rglob("*.md")}
     assert {p for p in pages if f": {p}" not in nav} == set()
     for page in PAGES:
         for target in re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", page.read_text(encoding="utf-8")):
             assert (page.parent / target).is_file(), f"{rel(page)}: {target}"
+    # the README's links into the docs (mkdocs build --strict checks the site's own)
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    targets = [t.split("#")[0] for t in re.findall(r"\]\(([^)\s]+)\)", readme) if "://" not in t]
+    assert targets and [t for t in targets if not (ROOT / t).is_file()] == []
 
 
 def test_site_uses_material_and_mkdocstrings_strictly():
