@@ -185,4 +185,4 @@ def test_page_blocks_run(name, page_folder):
         if RUN[block.language] == "shell":
             _run_shell(name, block, page_folder)
         else:
-            exec(compile(block.code, f"{name}:{block.line}", "exec"), namespace)  # noqa: S102 - the page's own code
+            exec(compile("\n" * block.line + block.code, name, "exec"), namespace)  # noqa: S102 - the page's own code; tracebacks name page lines
