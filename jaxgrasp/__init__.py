@@ -42,6 +42,7 @@ Quick start::
 """
 
 import os as _os
+from importlib import metadata as _metadata
 
 from jaxgrasp import _startup
 
@@ -78,7 +79,10 @@ from jaxgrasp.model import BoundaryKind, Grasp, GraspValueError, stack  # noqa: 
 from jaxgrasp.solver import LaneStatus, SolverOptions  # noqa: E402
 from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus  # noqa: E402
 
-__version__ = "0.1.0"
+try:  # the version is defined once, in pyproject.toml; the installed metadata carries it
+    __version__ = _metadata.version("jaxgrasp")
+except _metadata.PackageNotFoundError:  # a source tree on sys.path that was never installed
+    __version__ = "0+unknown"
 
 __all__ = [
     # one grasp

@@ -15,6 +15,7 @@ share is in :mod:`._common`. The commands parse, call the library, print and wri
 from __future__ import annotations
 
 import sys
+from importlib import metadata
 
 from jaxgrasp.cli import _batch, _evaluate, _show, _sweep, _tune
 from jaxgrasp.cli._common import EXIT_USAGE, Parser, UsageError, check_names, load_grasp, parse_number
@@ -53,11 +54,21 @@ def build_parser() -> Parser:
     """The ``jaxgrasp`` argument parser with every sub-command."""
     # the docstring's first line without its reStructuredText markup
     parser = Parser(prog="jaxgrasp", description=__doc__.splitlines()[0].replace("``", ""))
+    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
     sub = parser.add_subparsers(dest="command", parser_class=Parser)
     for command in COMMANDS:
         command.add_parser(sub)
     parser.epilog = EXIT_STATUS_HELP
     return parser
+
+
+def package_version() -> str:
+    """The installed jaxgrasp's version, as ``jaxgrasp.__version__`` reads it: defined once,
+    in ``pyproject.toml``, and carried by the package's installed metadata."""
+    try:
+        return metadata.version("jaxgrasp")
+    except metadata.PackageNotFoundError:  # a source tree on sys.path that was never installed
+        return "0+unknown"
 
 
 def main(argv=None) -> int:
