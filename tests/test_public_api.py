@@ -152,6 +152,33 @@ def test_the_package_and_its_subpackages_have_a_face(packages):
     _fail_if("subpackages without a docstring or a sound __all__", offenders)
 
 
+SHORT_DEFAULT = 40
+"""Characters a default value may take in a public signature (issue 35: ``help`` showed a
+600-character ``EvaluateOptions(...)``)."""
+
+
+def test_signatures_are_readable_in_help():
+    offenders = []
+    for name in jaxgrasp.__all__:
+        obj = getattr(jaxgrasp, name)
+        if not inspect.isfunction(obj):
+            continue
+        for param in inspect.signature(obj).parameters.values():
+            if param.default is not param.empty and len(repr(param.default)) > SHORT_DEFAULT:
+                offenders.append(f"{name}({param.name}=...): {len(repr(param.default))} characters")
+    _fail_if(f"defaults longer than {SHORT_DEFAULT} characters in help()", offenders)
+    assert len(str(inspect.signature(jaxgrasp.evaluate))) < 200
+
+
+def test_options_repr_names_only_what_differs_and_round_trips():
+    from jaxgrasp import EvaluateOptions, SolverOptions
+
+    assert repr(EvaluateOptions()) == "EvaluateOptions()"
+    changed = EvaluateOptions(seed=3, solver=SolverOptions(tol=1e-12))
+    assert repr(changed) == "EvaluateOptions(solver=SolverOptions(tol=1e-12), seed=3)"
+    assert eval(repr(changed), {"EvaluateOptions": EvaluateOptions, "SolverOptions": SolverOptions}) == changed
+
+
 def test_cli_entry_point():
     from jaxgrasp import cli
 
