@@ -24,7 +24,8 @@ import pytest
 
 import jaxgrasp
 
-MAX_PUBLIC_NAMES = 30
+MAX_PUBLIC_NAMES = 31
+"""30 in issue 34, plus :func:`jaxgrasp.check` (issue 40: validation inside ``jit``)."""
 OFF_THE_TOP_LEVEL = ("STABLE", "STATUS_NAMES", "KINDS", "COMPILER_OPTIONS")
 """Names that left the top level in issue 34: an enum alias, tables and an internal."""
 
@@ -122,7 +123,7 @@ def packages() -> list[types.ModuleType]:
     return subpackages(jaxgrasp)
 
 
-def test_at_most_30_public_names():
+def test_at_most_31_public_names():
     assert len(jaxgrasp.__all__) <= MAX_PUBLIC_NAMES, f"{len(jaxgrasp.__all__)} names: {jaxgrasp.__all__}"
 
 
