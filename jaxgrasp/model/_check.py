@@ -80,7 +80,8 @@ class GraspCheck:
 
     @property
     def reason_names(self) -> np.ndarray:
-        """``reason`` as labels (``'ok'``, ``'friction'``, ...), same shape (concrete only)."""
+        """``reason`` as labels (``'ok'``, ``'friction'``, ...): an array of the batch shape, one label
+        for one grasp (concrete only)."""
         return CheckReason.names_of(self.reason)
 
     def raise_if_invalid(self) -> GraspCheck:
@@ -168,11 +169,27 @@ def check(grasp: Grasp) -> GraspCheck:
     shape = tuple(np.shape(grasp.positions))
     if len(shape) < 2 or shape[-1] != 3:
         raise GraspValueError(f"positions must have shape (..., N, 3), got {shape}")
-    try:
-        return _check_arrays(grasp)
+    try:  # fields broadcast to one shape per (batch, N): one compiled check for them all
+        return _check_arrays(_broadcast(grasp, shape[:-2], shape[-2]))
     except (ValueError, TypeError) as exc:  # a field that does not broadcast to the grasp's shape
         names = ", ".join(f"{f.name} {tuple(np.shape(getattr(grasp, f.name)))}" for f in FIELDS)
         raise GraspValueError(f"grasp fields do not fit positions {shape}: {names} ({exc})") from None
+
+
+def _broadcast(g: Grasp, batch: tuple, n: int) -> Grasp:
+    """``g`` with every field at its full shape: ``batch + (N,)`` per contact (``active``
+    too, all true where ``None``), ``batch`` for the mass, ``batch + (3,)`` for gravity."""
+    full = {name: jnp.broadcast_to(jnp.asarray(getattr(g, name)), batch + (n,)) for name in
+            ("initial_deformation", "radius", "young_modulus", "friction", "max_force")}
+    active = jnp.ones(batch + (n,), bool) if g.active is None else jnp.asarray(g.active, bool)
+    return Grasp(
+        positions=jnp.asarray(g.positions),
+        normals=jnp.broadcast_to(jnp.asarray(g.normals), batch + (n, 3)),
+        mass=jnp.broadcast_to(jnp.asarray(g.mass), batch),
+        gravity=jnp.broadcast_to(jnp.asarray(g.gravity), batch + (3,)),
+        active=jnp.broadcast_to(active, batch + (n,)),
+        **full,
+    )
 
 
 @jax.jit
