@@ -100,23 +100,12 @@ class GraspCheck:
         raise GraspValueError(f"{', '.join(where) or 'grasp'}: {code.message} (rule {code.label!r})")
 
 
-def _per_contact(grasp: Grasp, name: str, batch: tuple, n: int):
-    """A per-contact field as a ``batch + (N,)`` array (a scalar stands for every contact)."""
-    a = jnp.asarray(getattr(grasp, name))
-    return jnp.broadcast_to(a, batch + (n,))
-
-
-def _rules(g: Grasp, batch: tuple, n: int) -> list:
-    """``(CheckReason, bad)`` in the order checked: ``bad`` of shape ``batch + (N,)`` for a
-    rule of a contact, ``batch`` for one of the whole grasp."""
-    f = {name: _per_contact(g, name, batch, n) for name in
-         ("initial_deformation", "radius", "young_modulus", "friction", "max_force")}
-    pos = jnp.broadcast_to(jnp.asarray(g.positions), batch + (n, 3))
-    nrm = jnp.broadcast_to(jnp.asarray(g.normals), batch + (n, 3))
-    mass = jnp.broadcast_to(jnp.asarray(g.mass), batch)
-    gravity = jnp.broadcast_to(jnp.asarray(g.gravity), batch + (3,))
-    on = jnp.ones(batch + (n,), bool) if g.active is None else jnp.broadcast_to(jnp.asarray(g.active, bool),
-                                                                                batch + (n,))
+def _rules(g: Grasp, n: int) -> list:
+    """``(CheckReason, bad)`` in the order checked, for fields at their full shapes
+    (:func:`_broadcast`): ``bad`` of shape ``batch + (N,)`` for a rule of a contact,
+    ``batch`` for one of the whole grasp."""
+    f = {name: getattr(g, name) for name in ("initial_deformation", "radius", "young_modulus", "friction", "max_force")}
+    pos, nrm, mass, gravity, on = g.positions, g.normals, g.mass, g.gravity, g.active
     finite = jnp.all(jnp.isfinite(pos), -1) & jnp.all(jnp.isfinite(nrm), -1)
     for a in f.values():
         finite &= jnp.isfinite(a)
@@ -198,7 +187,7 @@ def _check_arrays(grasp: Grasp) -> GraspCheck:
     some fifty small array operations: run one by one they cost more than the compile)."""
     shape = tuple(np.shape(grasp.positions))
     batch, n = shape[:-2], shape[-2]
-    rules = _rules(grasp, batch, n)
+    rules = _rules(grasp, n)
     per_contact = [jnp.broadcast_to(bad if bad.ndim > len(batch) else bad[..., None], batch + (n,))
                    for _, bad in rules]
     contact_rule = np.array([bad.ndim > len(batch) for _, bad in rules])
