@@ -75,7 +75,7 @@ from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is use
     save,
     save_dataset,
 )
-from jaxgrasp.model import BoundaryKind, Grasp, GraspValueError, stack  # noqa: E402
+from jaxgrasp.model import BoundaryKind, Grasp, GraspValueError, check, stack  # noqa: E402
 from jaxgrasp.solver import LaneStatus, SolverOptions  # noqa: E402
 from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus  # noqa: E402
 
@@ -119,5 +119,6 @@ __all__ = [
     "EpsilonResult",
     # errors and set-up
     "GraspValueError",
+    "check",
     "enable_compilation_cache",
 ]

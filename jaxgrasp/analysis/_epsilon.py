@@ -25,6 +25,11 @@ Convention (the README states it too). For each active contact ``i`` with positi
 The metric depends on the contacts' geometry and friction only (and, with torsion, on
 the fingertip radius and initial deformation), not on Young's modulus, the squeeze force,
 the mass or gravity: that is where it and the energy tolerance part (README).
+Friction is at most :data:`~jaxgrasp.model._validation.MAX_FRICTION` (1e3, validation):
+the wrenches' tangential parts grow as ``mu`` and the torsion as ``mu^2``, and at
+``mu = 1e7`` they swamp the unit normal forces that bound the hull, so that qhull's float64
+lost the value (1 fell to 0). Up to the bound the value is within round-off of the closed
+form of the two-finger cube, which tends to 1 as ``1 - 1.17 / mu^2``.
 The finite cone is inscribed in the true one, so the value grows towards its limit as
 ``cone_edges`` grows; with finite ``cone_edges`` it depends slightly on where the first
 edge lies (``t1_i``), so a rotated grasp agrees to about ``1 - cos(pi / cone_edges)``.

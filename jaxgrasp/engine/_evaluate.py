@@ -79,7 +79,11 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
 
     ``evaluate`` can be wrapped in ``jax.jit`` and ``jax.vmap`` and differentiated with
     ``jax.grad``/``jax.jacfwd`` (envelope theorem, :func:`jaxgrasp.tolerance.envelope_energy`);
-    a traced grasp becomes part of the caller's computation. A concrete grasp runs an
+    a traced grasp becomes part of the caller's computation. Validation happens outside
+    traced code only: a traced grasp's values are unknown when it is traced, so an invalid
+    one (a negative friction, a NaN) is evaluated as given, with a meaningless result.
+    Check traced or batched grasps with :func:`jaxgrasp.check`, which states the same
+    rules as arrays (``jnp.where(jaxgrasp.check(g).valid, value, jnp.nan)``). A concrete grasp runs an
     executable compiled once per process for its shapes and options
     (:func:`compiled_executable`), loaded from the executable store instead where the
     caches are on: as the settling policy has it

@@ -36,6 +36,23 @@ energies by the initial elastic energy, which must stay far from float64 underfl
 COINCIDENT_DISTANCE = 1e-12
 """Two contacts closer than this, m, are at the same position."""
 
+MAX_FRICTION = 1e3
+"""Largest static friction coefficient accepted. Real materials stay below about 10
+(soft rubber on a rough surface: 1-4); past 1e3 the friction cone is a half-space for every
+practical purpose, and its linearised edges (length ``mu``, torsion ``mu^2``) swamp the
+Ferrari-Canny hull's unit normal forces in float64 (:func:`jaxgrasp.epsilon` fell from
+1 to 0 at ``mu = 1e7``)."""
+
+MAX_LOAD_RATIO = 1e4
+"""Largest ratio of the object's weight ``mass * |gravity|`` (N) to the fingertips' initial
+squeeze, the sum of their initial normal forces ``pi E dr^2`` (N, eq. 4). The evaluator
+scales energies by the initial elastic energy, so the weight's pull grows with this ratio
+until the equilibrium solve ends where the penalty and rounding leave it: on the cube of
+``examples/cube.toml`` (squeeze 15 N) a single grasp and the same grasp in a batch agreed
+on status and equilibrium (to 1e-15 m) up to a ratio of 2e4 and disagreed from 6.5e4
+(issue 40). No grip holds an object ten thousand times heavier than it squeezes (the
+paper's heavy examples are below 10), so such a grasp is rejected."""
+
 _UNIT_TOLERANCE = 1e-14
 """Normals within this of unit length are kept bit for bit (so validation is idempotent
 and a saved grasp loads back exactly); longer or shorter ones are divided by their norm."""
@@ -129,8 +146,9 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     ranges of :data:`jaxgrasp.model.FIELDS`: ``positions`` ``(N, 3)`` m; ``normals``
     ``(N, 3)`` (any non-zero length); ``initial_deformation`` m in ``(0, radius)``,
     ``radius`` m, ``young_modulus`` Pa, ``friction``, ``max_force`` N, each a scalar or
-    ``(N,)`` and ``> 0``; ``mass`` kg ``>= 0`` and ``gravity`` ``(3,)`` m/s^2 may be left
-    out (defaults ``0`` and ``(0, 0, -9.81)``); ``active``, optional, ``None`` or ``(N,)``
+    ``(N,)`` and ``> 0``, friction at most :data:`MAX_FRICTION`; ``mass`` kg ``>= 0`` and
+    ``gravity`` ``(3,)`` m/s^2 may be left out (defaults ``0`` and ``(0, 0, -9.81)``), the
+    weight at most :data:`MAX_LOAD_RATIO` times the initial squeeze; ``active``, optional, ``None`` or ``(N,)``
     bool with at least 2 true (every contact, active or not, must hold valid values).
 
     Returns:
@@ -157,11 +175,13 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     for name in NAMES:
         _check_finite(name, arrs[name])
     _check_ranges(arrs)
+    _check_friction(arrs)
     out = {name: np.array(np.broadcast_to(arrs[name], (n,)), dtype=np.float64) for name in PER_CONTACT}
     _check_deformation(out, arrs)
     out["normals"] = _unit_normals(arrs["normals"])
     mask = _check_active(active, n)
     _check_distinct(arrs["positions"] if mask is None else arrs["positions"][mask])
+    _check_load(out, arrs, mask)
     out.update(positions=arrs["positions"], mass=arrs["mass"], gravity=arrs["gravity"])
     checked = {name: out[name] for name in NAMES}
     return checked if mask is None else {**checked, "active": mask}
@@ -250,6 +270,34 @@ def _check_ranges(arrs: dict) -> None:
             raise GraspValueError(
                 f"{label} = {_with_unit(format_value(flat[i]), field.name)} must be {field.rule} and finite"
             )
+
+
+def _check_friction(arrs: dict) -> None:
+    """``friction <= MAX_FRICTION`` (its ``> 0`` is a range rule of the table)."""
+    a = arrs["friction"]
+    flat = np.atleast_1d(a)
+    bad = np.flatnonzero(flat > MAX_FRICTION)
+    if bad.size:
+        label = _index_name("friction", a.ndim, int(bad[0]))
+        raise GraspValueError(
+            f"{label} = {format_value(flat[int(bad[0])])} must be at most {MAX_FRICTION:g} "
+            "(static friction coefficients of real materials stay below about 10)"
+        )
+
+
+def _check_load(out: dict, arrs: dict, mask) -> None:
+    """The weight at most :data:`MAX_LOAD_RATIO` times the active fingertips' initial
+    squeeze ``sum pi E dr^2`` (N)."""
+    on = np.ones(out["radius"].shape, bool) if mask is None else mask
+    with np.errstate(over="ignore", under="ignore"):
+        weight = float(arrs["mass"]) * float(np.linalg.norm(arrs["gravity"]))
+        squeeze = float(np.sum((np.pi * out["young_modulus"] * out["initial_deformation"] ** 2)[on]))
+    if weight > MAX_LOAD_RATIO * squeeze:
+        raise GraspValueError(
+            f"mass * |gravity| = {weight:.4g} N is more than {MAX_LOAD_RATIO:g} times the fingertips' initial "
+            f"squeeze (sum of pi * young_modulus * initial_deformation^2 = {squeeze:.4g} N): no grip holds it, "
+            "and the evaluation would be too ill-conditioned to trust"
+        )
 
 
 def _check_deformation(out: dict, arrs: dict) -> None:

@@ -72,6 +72,12 @@ class EvaluateOptions:
                     f"smooth_min_temperature must be None or a finite number > 0 (J), got {t!r}"
                 )
 
+    def __repr__(self) -> str:
+        """Only the settings that differ from their defaults (``EvaluateOptions()`` for the
+        defaults), so that ``help(jaxgrasp.evaluate)`` shows a short signature; two options
+        with the same repr are equal."""
+        return _changed_fields(self)
+
     def directions(self) -> np.ndarray:
         """``(12 + num_random_starts, 6)`` unit start directions: coefficients in the start
         frame (:func:`jaxgrasp.tolerance._starts.start_frame`) of the scaled pose space, its 12
@@ -86,3 +92,16 @@ class EvaluateOptions:
     def num_starts(self) -> int:
         """Starts per boundary problem, ``D = 12 + num_random_starts``."""
         return 12 + self.num_random_starts
+
+
+def _changed_fields(obj) -> str:
+    """``Name(field=value, ...)`` of a dataclass instance, listing only the fields that
+    differ from their defaults (a nested dataclass the same way)."""
+    parts = []
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if f.default is not dataclasses.MISSING and value == f.default and type(value) is type(f.default):
+            continue
+        text = _changed_fields(value) if dataclasses.is_dataclass(value) else repr(value)
+        parts.append(f"{f.name}={text}")
+    return f"{type(obj).__name__}({', '.join(parts)})"

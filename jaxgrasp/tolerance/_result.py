@@ -165,8 +165,6 @@ class Evaluation:
 
         Raises:
             ValueError: a batched result.
-            RuntimeError: a boundary energy lies below the equilibrium energy by more
-                than round-off (the equilibrium solve missed a lower point: a bug).
         """
         a = jax.tree_util.tree_map(np.asarray, self)
         if a.value.ndim != 0:
@@ -257,29 +255,40 @@ the equilibrium energy is round-off: the evaluator's default ``boundary_tol``.""
 
 def _energies_above_equilibrium(a) -> np.ndarray:
     """``(2, N)`` ``boundary_energy - equilibrium_energy``, J, of a NumPy-leaved unbatched
-    result: ``>= 0``, round-off below 0 set to 0, ``nan`` where a boundary is unreachable.
+    result: ``>= 0``, anything below 0 set to 0, ``nan`` where a boundary is unreachable.
+
+    Below 0 by round-off: a fingertip released at the equilibrium has an energy of
+    round-off size. Below 0 by more (:func:`_below_equilibrium`): the equilibrium the
+    solver found is a local minimum of the region and a boundary point lies lower, which
+    the verdict calls unstable (no energy is needed to reach that boundary) and
+    :meth:`Evaluation.explain` says so.
+    """
+    be = np.asarray(a.boundary_energy, dtype=np.float64)
+    finite = np.isfinite(be)
+    above = np.where(finite, be - float(a.equilibrium_energy), np.nan)
+    return np.where(finite, np.maximum(above, 0.0), np.nan)
+
+
+def _below_equilibrium(a) -> tuple[int, int, float] | None:
+    """``(kind, contact, J below)`` of the reached boundary lying lowest below the
+    equilibrium energy by more than round-off, or ``None``.
 
     The energy scale is the largest magnitude among the equilibrium energy and the
-    reachable boundary energies (a fingertip released at the equilibrium has an energy of
-    round-off size, ~1e-18 J, but its force-limit boundary does not); the tolerance is
-    :data:`_ROUND_OFF` of it, or ``1e3`` epsilons of the result's dtype where larger.
+    reachable boundary energies; round-off is :data:`_ROUND_OFF` of it, or ``1e3``
+    epsilons of the result's dtype where larger.
     """
     be = np.asarray(a.boundary_energy, dtype=np.float64)
     u0 = float(a.equilibrium_energy)
     finite = np.isfinite(be)
+    if not np.any(finite):
+        return None
     scale = max([abs(u0)] + [float(x) for x in np.abs(be[finite])])
     eps = float(np.finfo(np.asarray(a.boundary_energy).dtype).eps)
-    tol = max(_ROUND_OFF, 1e3 * eps) * scale
-    above = np.where(finite, be - u0, np.nan)
-    worst = np.nanmin(above) if np.any(finite) else 0.0
-    if worst < -tol:
-        k, j = np.unravel_index(int(np.nanargmin(above)), above.shape)
-        raise RuntimeError(
-            f"internal error: the {BoundaryKind(int(k)).label} boundary of contact {j} has energy "
-            f"{be[k, j]:.6e} J, below the equilibrium energy {u0:.6e} J by more than round-off: "
-            "the equilibrium solve missed a lower point; please report this grasp"
-        )
-    return np.where(finite, np.maximum(above, 0.0), np.nan)
+    above = np.where(finite, be - u0, np.inf)
+    k, j = np.unravel_index(int(np.argmin(above)), above.shape)
+    if above[k, j] >= -max(_ROUND_OFF, 1e3 * eps) * scale:
+        return None
+    return int(k), int(j), float(-above[k, j])
 
 
 # ----------------------------------------------------------------------------- explain
@@ -349,6 +358,21 @@ def _explain_stable(a, tol: float) -> str:
 
 
 def _explain_unstable(a, tol: float) -> str:
+    if int(a.equilibrium_status) == LaneStatus.INFEASIBLE:  # GraspStatus's "pulled out" (verdict)
+        return (
+            "unstable: the initial grasping state satisfies every constraint, but the energy "
+            "pulls the object out through a boundary of the equilibrium region harder than the "
+            "solver's largest penalty can hold (fingertips that let go, or a load beyond what "
+            "they carry): no equilibrium inside the region; value 0."
+        )
+    below = _below_equilibrium(a)
+    if below is not None:
+        k, j, drop = below
+        return (
+            f"unstable: a point of {_boundary_phrase(k, j)} lies {drop:.3g} J below the "
+            "equilibrium the solver found, a local minimum of the equilibrium region: no "
+            "energy is needed to reach that boundary; value 0."
+        )
     margins = np.asarray(a.equilibrium_margins, dtype=np.float64)
     n = margins.shape[-1]
     lost = [j for j in range(n) if margins[Constraint.CONTACT, j] <= _RELEASED]

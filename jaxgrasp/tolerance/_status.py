@@ -13,7 +13,8 @@ class GraspStatus(Coded):
     STABLE = 0, "the equilibrium lies inside the equilibrium region: value > 0"
     UNSTABLE = 1, (
         "the equilibrium lies on a boundary (a fingertip is about to slip or is at its "
-        "force limit): value 0"
+        "force limit), or the energy pulls the object out of the equilibrium region from "
+        "an initial state inside it: value 0"
     )
     INFEASIBLE = 2, "no pose satisfies every constraint (no stable equilibrium at all): value 0"
     NOT_CONVERGED = 3, "the solver did not settle a problem the value depends on: do not trust the value"

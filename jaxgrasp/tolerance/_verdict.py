@@ -44,6 +44,7 @@ __all__ = [
     "Boundaries",
     "Verdict",
     "TIE_TOL",
+    "initial_state_feasible",
     "SAME_MINIMUM",
 ]
 
@@ -204,6 +205,14 @@ def limiting_index(objective, reached, equilibrium):
     return jnp.argmax(energies <= least + tie)
 
 
+def initial_state_feasible(p: ModelParams):
+    """``()`` bool: the initial grasping state (no pose change) satisfies every constraint of
+    ``p``'s active contacts, i.e. no fingertip starts above its force limit; the equilibrium
+    region is then not empty."""
+    zero = jnp.zeros(6, p.c.dtype)
+    return jnp.min(jax.lax.stop_gradient(constraints(zero, problem_data(p)))) >= 0.0
+
+
 def grasp_status(p: ModelParams, progs: Problems, best: Boundaries, boundary_tol: float) -> Verdict:
     """Decide the grasp's status from the solver's outputs only (no derivative)."""
     eq = progs.equilibrium
@@ -229,8 +238,16 @@ def grasp_status(p: ModelParams, progs: Problems, best: Boundaries, boundary_tol
     # (its energy is only an upper estimate of the problem's minimum)
     could_limit = ~(jnp.isfinite(best.estimate) & (best.estimate - eq.objective > 1.1 * hard_scaled))
     any_unsettled = jnp.any((best.status == LaneStatus.NOT_CONVERGED) & (could_limit | ~any_reached))
+    # The region always holds the initial state unless a force limit is exceeded there
+    # (no tangential deformation, no rotation yet: contact and slip margins are positive),
+    # so an equilibrium lane that ends "infeasible" where it held is not an empty region:
+    # the energy pulled the lane through a boundary with more than the largest penalty
+    # could hold (a weight far beyond the fingertips' forces, or fingertips that let go at
+    # the apex of their friction cones). The minimum then presses on that boundary.
+    pulled_out = (eq.status == LaneStatus.INFEASIBLE) & initial_state_feasible(p)
     status = jnp.select(
         [
+            pulled_out,
             eq.status == LaneStatus.INFEASIBLE,
             stalled_on_boundary,
             eq.status != LaneStatus.CONVERGED,
@@ -238,6 +255,7 @@ def grasp_status(p: ModelParams, progs: Problems, best: Boundaries, boundary_tol
             any_unsettled | ~any_reached,
         ],
         [
+            GraspStatus.UNSTABLE,
             GraspStatus.INFEASIBLE,
             GraspStatus.UNSTABLE,
             GraspStatus.NOT_CONVERGED,

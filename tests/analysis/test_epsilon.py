@@ -531,3 +531,23 @@ def test_many_edges_full_dimensional_hull_is_not_flat():
     v32, v64 = eps(g, 32), eps(g, 64)
     assert v32 > 0.1
     assert v32 - 1e-9 <= v64 <= v32 + d_bound(g, 32) + 1e-9, (v32, v64)
+
+
+@pytest.mark.parametrize("mu", [10.0, 100.0, 1e3])
+def test_large_friction_up_to_the_bound_matches_the_closed_form(mu):
+    """Issue 40: epsilon fell from 1 to 0 at friction 1e7 (cone edges of length ``mu`` and
+    torsion ``mu^2`` swamped the unit normal forces in qhull). Friction is now bounded
+    (``MAX_FRICTION``), and up to the bound the value is the closed form's, which tends to
+    its large-friction limit 1 (the normal forces alone bound the hull along ``x``)."""
+    from jaxgrasp.model._validation import MAX_FRICTION
+
+    assert mu <= MAX_FRICTION
+    got = eps(cube_grasp(0.05, (mu, mu), (0.025, 0.025), (0.002, 0.002)))
+    exact = cube_closed_form(0.05, (mu, mu), (0.025, 0.025), (0.002, 0.002), 8)
+    assert abs(got - exact) <= 1e-9 * max(1.0, mu), (got, exact)
+    assert 1.0 - 2.0 / mu**2 <= got <= 1.0  # 1 - 1.17 / mu^2 here
+
+
+def test_friction_beyond_the_bound_is_one_line():
+    with pytest.raises(GraspValueError, match=r"^friction\[0\] = 10000000 must be at most 1000 "):
+        jaxgrasp.epsilon(cube().replace(friction=np.array([1e7, 1e7])))

@@ -159,10 +159,15 @@ def test_energy_above_equilibrium_is_never_negative(cube_eval):
     from jaxgrasp.cli._evaluate import format_summary
 
     assert "contact 0 slip     : 0.000000e+00 J" in format_summary(d, "x")
-    # far below: the equilibrium solve missed a lower point, a bug, never printed as is
+    # far below (issue 40: it raised RuntimeError in `jaxgrasp evaluate`): the equilibrium
+    # found is a local minimum and the verdict calls the grasp unstable; reported, not raised
     be[0, 0] = u0 - 1e-4
-    with pytest.raises(RuntimeError, match="below the equilibrium energy"):
-        dataclasses.replace(cube_eval, boundary_energy=be).to_dict()
+    unstable = dataclasses.replace(
+        cube_eval, boundary_energy=be, status=np.int32(jaxgrasp.GraspStatus.UNSTABLE), value=np.float64(0.0)
+    )
+    d = unstable.to_dict()
+    assert d["boundaries"][0]["energy_above_equilibrium"] == 0.0 and d["status"] == "unstable"
+    assert "slip of contact 0 lies 0.0001 J below the equilibrium" in d["explanation"], d["explanation"]
 
 
 # ----------------------------------------------------------------------------- item 9

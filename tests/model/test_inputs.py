@@ -128,6 +128,9 @@ def test_unit_normal_renormalised_only_when_needed():
         (dict(radius=-0.025), ["radius", "-0.025"]),
         (dict(friction=0.0), ["friction", "0", "positive"]),
         (dict(friction=[0.5, -0.1]), ["friction[1]", "-0.1"]),
+        (dict(friction=[0.5, 1e7]), ["friction[1] = 10000000", "at most 1000", "below about 10"]),
+        (dict(mass=1e9), ["mass * |gravity| = 9.81e+09 N", "more than 10000 times", "initial squeeze", "= 5.027 N"]),
+        (dict(mass=0.1, gravity=[0, 0, -1e12]), ["mass * |gravity| = 1e+11 N", "ill-conditioned"]),
         (dict(max_force=-15), ["max_force", "-15 N"]),
         (dict(mass=-0.1), ["mass", "-0.1 kg", ">= 0"]),
         (dict(mass=float("nan")), ["mass", "nan"]),
@@ -192,6 +195,16 @@ def test_energy_scale_below_1e_150_joule_is_rejected(young_modulus, initial_defo
 def test_energy_scale_just_above_1e_150_joule_is_accepted():
     g = Grasp.create(**base_kwargs(young_modulus=2.0, initial_deformation=1e-50))  # 2e-150 J
     assert float(np.min(np.asarray(g.young_modulus) * np.asarray(g.initial_deformation) ** 3)) >= 1e-150
+
+
+def test_friction_and_weight_at_their_bounds_are_accepted():
+    """The bounds themselves are valid input (issue 40: friction <= 1e3, weight <= 1e4
+    times the initial squeeze), so the rules above reject only what lies beyond them."""
+    from jaxgrasp.model._validation import MAX_FRICTION, MAX_LOAD_RATIO
+
+    squeeze = 2 * math.pi * 2e5 * 0.002**2  # N, base_kwargs' two fingertips
+    g = Grasp.create(**base_kwargs(friction=MAX_FRICTION, mass=0.999 * MAX_LOAD_RATIO * squeeze / 9.81))
+    assert float(np.max(np.asarray(g.friction))) == MAX_FRICTION
 
 
 def test_grasp_value_error_is_value_error():

@@ -1,0 +1,125 @@
+"""One answer per grasp (issue 40, item 5): ``evaluate`` and ``evaluate_batch`` agree.
+
+A hostile probe found them disagreeing on extreme variants of ``examples/cube.toml``
+(mass 1e6 kg, E = 1e-3 Pa, gravity 1e12 m/s^2, radius 1e-6 m and their combinations:
+unstable against infeasible, equilibria 2 mm apart) and ``evaluate`` raising on a grasp
+whose fingertips all press from +x. What changed, each checked here:
+
+* a weight beyond ``MAX_LOAD_RATIO`` times the initial squeeze, and a friction beyond
+  ``MAX_FRICTION``, are rejected by validation (and flagged by ``jaxgrasp.check``) with
+  their reason: past them the equilibrium solve ended where rounding left it;
+* an equilibrium lane that ends "infeasible" while the initial state satisfies every
+  constraint is a grasp pulled out of its region (fingertips that let go, a load beyond
+  them): unstable, whichever executable ran it, with an explanation instead of a
+  ``RuntimeError``.
+
+The variants are the single-field extremes of the cube, the pairs of the six "big" ones
+and the triples of the probe's four: 33 grasps. Statuses must be equal; where both
+equilibrium solves converged the equilibria must agree to ``EQ_TOL`` (separately compiled
+programs round differently; the solver stops at 1e-10 of the scaled problem).
+"""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import jaxgrasp
+from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.solver import LaneStatus
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+EQ_TOL = 1e-9
+"""m: equilibrium translations of one grasp from two programs agree to this."""
+
+EXTREME = {
+    "mass_big": dict(mass=1e6),
+    "young_modulus_small": dict(young_modulus=1e-3),
+    "gravity_big": dict(mass=0.1, gravity=(0.0, 0.0, -1e12)),
+    "radius_small": dict(radius=1e-6, initial_deformation=5e-7),
+    "friction_big": dict(friction=1e7),
+    "max_force_small": dict(max_force=1e-6),
+    "young_modulus_big": dict(young_modulus=1e12),
+    "mass_small": dict(mass=1e-9),
+    "friction_small": dict(friction=1e-6),
+    "max_force_big": dict(max_force=1e9),
+    "radius_big": dict(radius=10.0),
+    "deformation_small": dict(initial_deformation=1e-9),
+    "gravity_small": dict(mass=0.1, gravity=(0.0, 0.0, -1e-12)),
+}
+BIG = ["mass_big", "young_modulus_small", "gravity_big", "radius_small", "friction_big", "max_force_small"]
+
+
+def variants() -> dict[str, dict]:
+    """The 33 extreme variants' overrides of ``examples/cube.toml``, by name."""
+    out = dict(EXTREME)
+    combos = list(itertools.combinations(BIG, 2)) + list(itertools.combinations(BIG[:4], 3)) + [tuple(BIG[:4])]
+    for names in combos:
+        out["+".join(names)] = {k: v for n in names for k, v in EXTREME[n].items()}
+    return out
+
+
+def cube_fields(**over) -> dict:
+    fields = {k: np.asarray(v) for k, v in jaxgrasp.load(EXAMPLES / "cube.toml").to_numpy().items()}
+    return fields | {k: np.asarray(v, dtype=np.float64) for k, v in over.items()}
+
+
+def same_side_grasps() -> list:
+    """Fingertips that all press from +x (the probe's ``same_side.json`` has normals
+    (1,0,0), (0.9,+-0.1,0)), otherwise the cube's. Two contacts, so that they share the
+    cube's programs: spread along y the grasp slips; spread along z the equilibrium solve
+    is pulled out through the apex of the friction cones ("infeasible" before issue 40,
+    though the initial state satisfies every constraint). The probe's three-contact grasp
+    behaves the same (checked by hand with the command line); it would cost an N = 3 program here."""
+    normals = [[1.0, 0.0, 0.0], [0.9, 0.1, 0.0]]
+    spreads = ([[0.05, 0, 0], [0.05, 0.01, 0]], [[0.05, 0, 0], [0.05, 0, 0.02]])
+    return [
+        jaxgrasp.Grasp.create(p, normals, 0.002, radius=0.025, young_modulus=6e5, friction=0.5, max_force=15.0)
+        for p in spreads
+    ]
+
+
+def test_extreme_inputs_are_rejected_by_validation_and_check_alike():
+    """Validation and ``jaxgrasp.check`` reject the same variants, for the documented
+    reasons (friction or weight beyond its bound), and accept the rest."""
+    rejected, flagged = {}, {}
+    for name, over in variants().items():
+        fields = cube_fields(**over)
+        try:
+            jaxgrasp.Grasp.create(**fields)
+        except GraspValueError as exc:
+            rejected[name] = str(exc)
+        check = jaxgrasp.check(jaxgrasp.Grasp(**{k: np.asarray(v) for k, v in fields.items()}))
+        if not bool(check.valid):
+            flagged[name] = str(check.reason_names)
+    assert set(rejected) == set(flagged)
+    assert set(flagged.values()) == {"friction", "overload"}
+    assert all("friction" in name for name, why in flagged.items() if why == "friction")
+    assert len(rejected) == 20 and "mass_big" in rejected and "young_modulus_small" not in rejected
+
+
+@pytest.mark.slow  # the batch program of test_degenerate (N = 2, chunks of 4), compiled where run alone
+def test_evaluate_and_evaluate_batch_give_one_answer():
+    grasps = same_side_grasps()
+    for over in variants().values():
+        try:
+            grasps.append(jaxgrasp.Grasp.create(**cube_fields(**over)))
+        except GraspValueError:
+            continue
+    batch = jaxgrasp.evaluate_batch(grasps, chunk_size=4)
+    singles = [jaxgrasp.evaluate(g) for g in grasps]
+    for i, single in enumerate(singles):
+        assert single.status_name == batch.status_names[i], (i, single.explain(), batch[i].explain())
+        single.to_dict()  # never raises (it did on a boundary below the equilibrium)
+        if int(single.equilibrium_status) == int(batch[i].equilibrium_status) == LaneStatus.CONVERGED:
+            np.testing.assert_allclose(
+                np.asarray(single.equilibrium_translation), batch[i].equilibrium_translation, atol=EQ_TOL
+            )
+    slips, pulled = singles[:2]
+    assert slips.status_name == pulled.status_name == "unstable"
+    assert int(pulled.equilibrium_status) == LaneStatus.INFEASIBLE  # pulled out, yet not "infeasible"
+    assert "pulls the object out" in pulled.explain()
+    assert len(grasps) == 2 + 13
