@@ -60,6 +60,11 @@ both within this (scaled margins), and the lane's violation too."""
 
 _POLISH_STEPS = 8
 
+LM_FLOOR = 1e-8
+"""The polish's damping relative to its Jacobian's size (:func:`_levenberg_marquardt_step`):
+``sqrt(eps)`` of float64, so that ``mu`` is above the rounding of ``J^T J`` (``eps |J|^2``)
+and singular values below ``LM_FLOOR |J|_F`` count as null."""
+
 MAX_POLISHED = 2
 """Most boundary problems of one grasp that :func:`settle_stalled` polishes."""
 
@@ -150,8 +155,8 @@ def _polish(data: ProblemData, z0, k, j, released, o: SolverOptions):
 
 
 def _kkt_newton(fg, active, z0):
-    """:data:`_POLISH_STEPS` Newton steps on the KKT equations of ``fg`` (``z -> (f,
-    g (3N,))``) with the rows ``active`` ``(3N,)`` held at ``g = 0`` and the others at
+    """:data:`_POLISH_STEPS` damped Newton steps (:func:`_levenberg_marquardt_step`) on
+    the KKT equations of ``fg`` (``z -> (f, g (3N,))``) with the rows ``active`` ``(3N,)`` held at ``g = 0`` and the others at
     ``lam = 0``, from ``(z0, lam = 0)``. Returns ``(y, r, gz)``: ``y = (z, lam)``
     ``(6 + 3N,)``, the residual ``r`` and the constraints ``gz`` at the last point."""
     n3 = active.shape[0]
@@ -165,14 +170,35 @@ def _kkt_newton(fg, active, z0):
         return r, (r, gz)
 
     def newton(i, carry):
-        # _POLISH_STEPS Newton steps, then one more pass for the residual at the last point
+        # _POLISH_STEPS damped Newton steps, then one more pass for the residual at the last point
         y, _, _ = carry
         jac, (r, gz) = jax.jacfwd(residual, has_aux=True)(y)
-        step = jnp.where(i < _POLISH_STEPS, dense_solve(jac, r), 0.0)  # no LAPACK: see jaxgrasp.solver._dense
+        step = jnp.where(i < _POLISH_STEPS, _levenberg_marquardt_step(jac, r), 0.0)
         return y - step, r, gz
 
     y0 = jnp.concatenate([z0, jnp.zeros(n3, dtype)])
     return jax.lax.fori_loop(0, _POLISH_STEPS + 1, newton, (y0, jnp.zeros(6 + n3, dtype), jnp.zeros(n3, dtype)))
+
+
+def _levenberg_marquardt_step(jac, r):
+    """``(m,)`` the polish's step on the KKT equations, ``(J^T J + mu I)^-1 J^T r``
+    (``jac`` ``(m, m)`` their Jacobian ``J``, ``r`` ``(m,)`` their residual, scaled units),
+    with ``mu = (LM_FLOOR |J|_F)^2``: a Levenberg-Marquardt step of fixed, tiny damping.
+
+    Why not Newton's ``J^-1 r``: a grasp with a symmetry (the cube about the axis of its
+    two fingertips, here with a 10 m fingertip radius) has a whole circle of boundary
+    minima, so ``J`` is singular along it and elimination's pivot there is rounding; the
+    step along the circle was rounding divided by rounding, and whether the polish reached
+    ``tol`` depended on the stalled point's last digits, i.e. on the program that solved
+    the lane (``evaluate``, or a batch chunk of given companions: issue 40). Here a
+    direction of singular value ``s`` takes ``s / (s^2 + mu)`` of the residual, bounded
+    by ``1 / (2 sqrt(mu))``, and where ``s^2 >> mu`` the step is Newton's. (A damping
+    ``|r|^2`` as in Yamashita & Fukushima's method is too strong here: the polish starts
+    at ``lam = 0``, far from the multipliers, and would crawl.) No LAPACK: see
+    :mod:`jaxgrasp.solver._dense`."""
+    mu = (LM_FLOOR**2) * jnp.sum(jac * jac)
+    normal = jac.T @ jac + mu * jnp.eye(jac.shape[0], dtype=jac.dtype)
+    return dense_solve(normal, jac.T @ r)
 
 
 def _polish_candidates(lanes: SolverResult, found, num_starts: int):

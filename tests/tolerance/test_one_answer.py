@@ -123,3 +123,23 @@ def test_evaluate_and_evaluate_batch_give_one_answer():
     assert int(pulled.equilibrium_status) == LaneStatus.INFEASIBLE  # pulled out, yet not "infeasible"
     assert "pulls the object out" in pulled.explain()
     assert len(grasps) == 2 + 13
+
+
+@pytest.mark.slow  # the same programs as above (N = 2: evaluate, and the batch program's chunks of 4)
+def test_symmetric_boundary_settles_whatever_the_companions():
+    """The cube with a 10 m fingertip radius: each force-limit boundary has a circle of
+    minima (the grasp is symmetric about the fingertips' axis), every start of it stalls,
+    and the settling stage's polish certifies one. With a plain Newton step the polish's
+    KKT matrix was singular along the circle, so whether it reached ``tol`` depended on
+    the stalled point's last digits: ``evaluate`` said stable, a chunk of four copies of the
+    same grasp not converged. Each copy, and the single evaluation, settle both boundaries
+    at the same energies."""
+    grasp = jaxgrasp.Grasp.create(**cube_fields(**EXTREME["radius_big"]))
+    single = jaxgrasp.evaluate(grasp)
+    batch = jaxgrasp.evaluate_batch([grasp] * 4, chunk_size=4)
+    assert single.status_name == "stable"
+    assert np.all(np.asarray(single.boundary_status) == LaneStatus.CONVERGED)
+    for i in range(4):
+        assert batch.status_names[i] == "stable", batch[i].explain()
+        np.testing.assert_array_equal(batch[i].boundary_status, single.boundary_status)
+        np.testing.assert_allclose(batch[i].boundary_energy, np.asarray(single.boundary_energy), rtol=1e-9)
