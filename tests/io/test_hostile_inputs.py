@@ -278,3 +278,21 @@ def test_editing_a_named_mesh_refuses_resume(tmp_path, run_cli):
     rc, stdout, err = run_cli(["batch", path, "--out", out, "--resume"])
     assert rc == 2 and stdout == "" and err.count("\n") == 1, err
     assert err.startswith("jaxgrasp: error: --resume: ") and "was made from other input" in err, err
+
+
+def test_batch_allow_dir_reaches_the_dataset(folders, tmp_path, run_cli):
+    """``jaxgrasp batch --allow-dir``: without it the only row (a mesh outside) is invalid;
+    with it the row is read and the run goes on to the checkpoint (a stale one here, so
+    that it stops there, before compiling)."""
+    from jaxgrasp.engine._checkpoint import BatchCheckpoint
+
+    data, outside = folders
+    path = data / "away.jsonl"
+    write_jsonl(path, [grasp_dict("../outside/cube.stl")])
+    rc, _, err = run_cli(["batch", path, "--out", tmp_path / "o"])
+    assert rc == 2 and err.count("\n") == 1, err
+    assert "no valid grasp (1 invalid; first: grasp 0 (line 1): mesh path '../outside/cube.stl' is outside" in err, err
+    (tmp_path / "o" / "results.partial").mkdir(parents=True)
+    BatchCheckpoint(tmp_path / "o" / "results.partial", "other.jsonl", "0" * 64, 1, 2).start()
+    rc, _, err = run_cli(["batch", path, "--out", tmp_path / "o", "--allow-dir", outside, "--resume"])
+    assert rc == 2 and "was made from other input (other.jsonl" in err and err.count("\n") == 1, err
