@@ -1,6 +1,6 @@
 """Objects from triangle meshes: contacts snapped to the surface, the centre of mass, the frame.
 
-:func:`from_mesh` turns a mesh (a ``trimesh.Trimesh`` or a mesh file: OBJ, STL, PLY, ...)
+:func:`from_mesh` turns a mesh (a ``trimesh.Trimesh`` or a mesh file: STL, OBJ, PLY, OFF, GLB)
 and fingertip contact points given in the mesh's own frame into a :class:`MeshGrasp`:
 
 * each point is snapped to the closest point of the surface (an exact closest point over
@@ -225,7 +225,8 @@ def from_mesh(
     """A grasp of a meshed object by fingertips touching it at ``points``.
 
     Args:
-        mesh: ``trimesh.Trimesh`` or mesh file path; vertices in ``units``.
+        mesh: ``trimesh.Trimesh`` or mesh file path (STL, OBJ, PLY, OFF or GLB, read as
+            :func:`load_mesh` says); vertices in ``units``.
         points: ``(N, 3)`` fingertip contact points, m, in the mesh's frame (its origin
             and axes, after the unit conversion); each is snapped to the closest surface
             point.
@@ -249,7 +250,9 @@ def from_mesh(
 
     Raises:
         GraspValueError: one line: a point farther than ``tolerance`` from the surface
-            (naming the contact and its distance) or on a sharp edge, a mesh that is not
+            (naming the contact, its distance and, where one explains every point, the
+            unit mistake: points typed in mm or cm, or a mesh's ``units`` not those of its
+            vertices) or on a sharp edge, a mesh that is not
             watertight without ``center_of_mass`` (or with ``density``), a degenerate
             mesh, unknown units, or an invalid grasp value.
     """
@@ -326,8 +329,9 @@ def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE) -> tu
         (a tessellated curved surface), their mean normal.
 
     Raises:
-        GraspValueError: a point farther than ``tolerance`` (naming the contact and the
-            distance in mm) or on a sharp edge or corner.
+        GraspValueError: a point farther than ``tolerance`` (naming the contact, the
+            distance in mm and a unit mistake that would explain every point, if one does)
+            or on a sharp edge or corner.
     """
     keep = surface.area_faces > 0
     tri = np.asarray(surface.triangles, dtype=np.float64)[keep]
