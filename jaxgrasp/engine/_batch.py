@@ -196,7 +196,10 @@ def evaluate_dataset(
             :meth:`~jaxgrasp.engine._checkpoint.BatchCheckpoint.keeper`).
         options, chunk_size, progress, devices: as :func:`evaluate_batch`. Grasps are
             padded to the dataset's largest contact count, so a resumed run compiles what
-            the first one did.
+            the first one did. Each chunk's grasps are gathered from the dataset's
+            columns (:class:`~jaxgrasp.io._dataset.GraspColumns`) when it runs: beyond
+            the columns, memory grows with the chunk and the results, not with a copy
+            of the set.
 
     Returns:
         ``(every row, this run)``: the :class:`~jaxgrasp.BatchResult` of every row of the
