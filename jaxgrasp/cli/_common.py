@@ -88,8 +88,8 @@ def add_allow_dir(p: argparse.ArgumentParser) -> None:
     meshes it names may be in (:func:`jaxgrasp.io._inputs.confine`)."""
     p.add_argument(
         "--allow-dir", action="append", default=None, metavar="DIR", dest="allow_dir",
-        help="also read meshes the input file names from DIR (repeatable); by default only "
-             "meshes inside the input file's own folder are read",
+        help=("also read meshes the input file names from DIR (repeatable); by default only "
+              "meshes inside the input file's own folder are read"),
     )
 
 
