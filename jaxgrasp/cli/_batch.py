@@ -8,12 +8,14 @@ status ``invalid`` and its one-line error (``--strict``: exit 2 before computing
 Nothing finished is lost: each finished chunk is kept at once in ``DIR/results.partial``
 (:class:`jaxgrasp.engine._checkpoint.BatchCheckpoint`, one atomic file per chunk), so a run stopped at
 any moment (Ctrl-C, SIGTERM, ``kill -9``) is finished by ``--resume`` without
-recomputing those chunks. At the end ``results.csv``, ``results.npz`` and
+recomputing those chunks; a resumed run must read the same dataset and the same mesh files
+its rows name (:func:`resume_key`). At the end ``results.csv``, ``results.npz`` and
 ``results.png`` replace the previous ones as one set and the checkpoint is removed.
 """
 
 from __future__ import annotations
 
+import hashlib
 import time
 from pathlib import Path
 
@@ -22,6 +24,7 @@ import numpy as np
 from jaxgrasp.cli._common import (
     ChunkProgress,
     UsageError,
+    add_allow_dir,
     add_epsilon_option,
     announce_run,
     check_chunk_size,
@@ -35,7 +38,7 @@ from jaxgrasp.engine._prefetch import prefetch
 from jaxgrasp.io import _outputs as outputs
 from jaxgrasp.model._validation import counted
 
-__all__ = ["add_parser", "run", "OUTPUT_NAMES", "PARTIAL_NAME", "DEFAULT_TOP"]
+__all__ = ["add_parser", "run", "resume_key", "OUTPUT_NAMES", "PARTIAL_NAME", "DEFAULT_TOP"]
 
 OUTPUT_NAMES = ("results.csv", "results.npz", "results.png")
 """The files of one batch's output set, in ``--out``."""
@@ -75,6 +78,7 @@ def add_parser(sub) -> None:
     sp.add_argument("--strict", action="store_true", help="any invalid grasp: exit 2 before computing")
     sp.add_argument("--resume", action="store_true", help="finish an interrupted run into the same DIR")
     sp.add_argument("--no-plot", action="store_true", help="do not write results.png")
+    add_allow_dir(sp)
     add_epsilon_option(sp)
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
     sp.set_defaults(func=run)
@@ -90,7 +94,7 @@ def run(args) -> int:
     from jaxgrasp.io._dataset import load_dataset
 
     _check_numbers(args)
-    gset = load_dataset(args.file)
+    gset = load_dataset(args.file, allowed_dirs=args.allow_dir)
     if args.strict:
         gset.raise_if_invalid()
     if not gset.valid.any():
@@ -103,7 +107,7 @@ def run(args) -> int:
 
     t_start = time.perf_counter()
     with lock_out(out):
-        checkpoint = BatchCheckpoint(out / PARTIAL_NAME, args.file, gset.source_sha256, len(gset), n_contacts)
+        checkpoint = BatchCheckpoint(out / PARTIAL_NAME, args.file, resume_key(gset), len(gset), n_contacts)
         rows, results = _open_checkpoint(checkpoint, args.resume, len(gset))
         progress = ChunkProgress("evaluating", "grasp", show=not args.quiet)
         announce_run("batch", args.file, int(np.count_nonzero(np.delete(gset.valid, rows))), "grasp", args.quiet)
@@ -116,6 +120,17 @@ def run(args) -> int:
         written, replaced, removed = _write_outputs(merged, out, checkpoint, args, extra)
     print(_summary(merged, args.file, wall, result, rows.size, out, written, replaced, removed, args.top))
     return 0
+
+
+def resume_key(gset) -> str:
+    """The checkpoint's ``source_sha256``: what a resumed run must have read again. The
+    dataset's bytes' SHA-256 where its rows name no mesh; otherwise the SHA-256 of that
+    and of every mesh file read (real path and bytes' SHA-256, sorted by path), so that
+    editing a mesh the dataset names refuses ``--resume`` (its rows would change)."""
+    if not gset.mesh_sha256:
+        return gset.source_sha256
+    lines = [f"dataset {gset.source_sha256}"] + [f"mesh {sha} {path}" for path, sha in sorted(gset.mesh_sha256.items())]
+    return hashlib.sha256("\n".join(lines).encode("utf-8", "surrogateescape")).hexdigest()
 
 
 def _check_numbers(args) -> None:
@@ -177,10 +192,12 @@ def _write_outputs(result, out: Path, checkpoint, args, extra=None) -> tuple[lis
 
 def _epsilon(gset) -> dict:
     """The ``--epsilon`` columns of every input row (NaN and False for an invalid grasp)."""
-    from jaxgrasp.model._grasp import stack
+    from jaxgrasp.model._grasp import Grasp
 
-    valid = gset.valid
-    cols = epsilon_columns(stack([g for g in gset.grasps if g is not None]))
+    columns = gset.columns()
+    valid = columns.valid
+    batch = Grasp(**{k: a[valid] for k, a in columns.fields.items()}, active=columns.active[valid])
+    cols = epsilon_columns(batch)
     out = {"epsilon": np.full(len(gset), np.nan), "force_closure": np.zeros(len(gset), dtype=bool)}
     for k, v in cols.items():
         out[k][valid] = v

@@ -27,6 +27,7 @@ __all__ = [
     "check_chunk_size",
     "OVERRIDES",
     "add_grasp_source",
+    "add_allow_dir",
     "add_overrides",
     "grasp_source",
     "grasp_notes",
@@ -82,9 +83,20 @@ def check_chunk_size(value: int | None) -> None:
 
 
 def add_grasp_source(p: argparse.ArgumentParser) -> None:
-    """The grasp to use: a positional ``file`` or ``--preset NAME``."""
+    """The grasp to use: a positional ``file`` or ``--preset NAME``; ``--allow-dir``."""
     p.add_argument("file", nargs="?", help="grasp file (.toml or .json, SI units)")
     p.add_argument("--preset", choices=list(PRESETS), help="one of the paper's grasps instead of a file")
+    add_allow_dir(p)
+
+
+def add_allow_dir(p: argparse.ArgumentParser) -> None:
+    """``--allow-dir DIR`` (repeatable): a folder outside the input file's own that the
+    meshes it names may be in (:func:`jaxgrasp.io._inputs.confine`)."""
+    p.add_argument(
+        "--allow-dir", action="append", default=None, metavar="DIR", dest="allow_dir",
+        help=("also read meshes the input file names from DIR (repeatable); by default only "
+              "meshes inside the input file's own folder are read"),
+    )
 
 
 def add_overrides(p: argparse.ArgumentParser) -> None:
@@ -130,7 +142,8 @@ def load_grasp(args, overrides: bool = True, keep_mesh: bool = False):
             args.preset = args.default_preset
         else:
             raise UsageError(f"give either a grasp FILE or --preset {'|'.join(PRESETS)}")
-    loaded = load(args.file, keep_mesh=keep_mesh) if args.file is not None else PRESETS[args.preset]()
+    allowed = getattr(args, "allow_dir", None)
+    loaded = load(args.file, keep_mesh=keep_mesh, allowed_dirs=allowed) if args.file is not None else PRESETS[args.preset]()
     if not overrides:
         return loaded
     if isinstance(loaded, MeshGrasp):

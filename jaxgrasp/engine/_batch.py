@@ -39,15 +39,11 @@ def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], tuple]:
     """The fields of ``grasps`` (a sequence of :class:`Grasp`, one batched grasp, or a
     :class:`~jaxgrasp.GraspSet`), each with a leading ``B`` axis (padded to the largest
     contact count, with ``active``, where counts differ or a grasp has a mask), and each
-    grasp's error (``None``: valid). Every valid grasp is validated; an invalid one (a
-    set's ``None``) is stood in for by the first valid grasp and has no active contact."""
-    errors = None
+    grasp's error (``None``: valid). Every valid grasp is validated (a set's columns were
+    when they were made); an invalid one (a set's ``None``) is stood in for by the first
+    valid grasp and has no active contact."""
     if isinstance(grasps, GraspSet):
-        errors = tuple(grasps.errors)
-        valid = [g for g in grasps.grasps if g is not None]
-        if not valid:
-            raise GraspValueError(f"{grasps.source}: no valid grasp to evaluate (first: {errors[0]})")
-        grasps = [valid[0] if g is None else g for g in grasps.grasps]
+        return _set_fields(grasps), tuple(grasps.errors)
     if isinstance(grasps, Grasp):
         batch = grasps
     else:
@@ -64,15 +60,21 @@ def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], tuple]:
     if len(pos) != 3:
         raise GraspValueError(f"evaluate_batch needs grasps with a batch axis: positions (B, N, 3), got {pos}")
     fields = batch.to_numpy_batch()
-    errors = (None,) * pos[0] if errors is None else errors
-    check_batch_inputs(fields, skip=[i for i, e in enumerate(errors) if e is not None])
-    if "active" in fields:
-        fields["active"] = np.array(fields["active"])  # not a broadcast view: rows are set below
-    invalid = np.asarray([e is not None for e in errors])
-    if invalid.any():
-        fields.setdefault("active", np.ones(pos[:2], dtype=bool))
-        fields["active"][invalid] = False
-    return fields, errors
+    check_batch_inputs(fields)
+    return fields, (None,) * pos[0]
+
+
+def _set_fields(gset: GraspSet, rows: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The columns of a set (:meth:`~jaxgrasp.GraspSet.columns`, not copied) with
+    ``active`` where the grasps of ``rows`` (default all) differ in contact count."""
+    columns = gset.columns()
+    if not columns.valid.any():
+        raise GraspValueError(f"{gset.source}: no valid grasp to evaluate (first: {gset.errors[0]})")
+    counts = columns.counts if rows is None else columns.counts[rows]
+    fields = dict(columns.fields)
+    if np.any(counts != fields["positions"].shape[1]):
+        fields["active"] = columns.active
+    return fields
 
 
 def start_progress(progress, plan: ChunkPlan) -> None:
@@ -131,8 +133,10 @@ def evaluate_batch(
 
 
 def _evaluate_fields(fields: dict[str, np.ndarray], errors, plan: ChunkPlan, options: EvaluateOptions,
-                     progress, on_chunk) -> BatchResult:
-    """:func:`evaluate_batch` of validated fields (:func:`_batched_fields`) by ``plan``."""
+                     progress, on_chunk, rows: np.ndarray | None = None) -> BatchResult:
+    """:func:`evaluate_batch` of validated fields (:func:`_batched_fields`) by ``plan``;
+    ``rows``: the rows of ``fields`` to evaluate, in order (default all), gathered a chunk
+    at a time."""
     masked = "active" in fields
     start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
     fn, compile_seconds, settling = chunk_evaluator("batch", options, fields["positions"].shape[1], plan, masked)
@@ -144,20 +148,26 @@ def _evaluate_fields(fields: dict[str, np.ndarray], errors, plan: ChunkPlan, opt
             on_chunk(start, stop, outs)
 
     outs, run_seconds = run_chunks(
-        fn, lambda start: _chunk_of(fields, start, plan.chunk), grasp_fields(masked), plan, progress, finished,
+        fn, lambda start: _chunk_of(fields, start, plan.chunk, rows), grasp_fields(masked), plan, progress, finished,
         settling=settling,
     )
-    active = fields.get("active", np.ones(fields["positions"].shape[:2], dtype=bool))
+    shape = (plan.total, fields["positions"].shape[1])
+    active = np.ones(shape, dtype=bool) if "active" not in fields else (
+        fields["active"] if rows is None else fields["active"][rows])
     return assemble([(np.arange(plan.total), outs)], plan.total, invalid, active, errors,
                     compile_seconds=compile_seconds, run_seconds=run_seconds, devices=plan.n_devices)
 
 
-def _chunk_of(fields: Mapping[str, np.ndarray], start: int, chunk: int) -> dict[str, np.ndarray]:
-    """The fields of grasps ``start .. start + chunk - 1``, padded with the last grasp, its
-    contacts inactive where there is a mask, so that the padding solves nothing."""
-    total = fields["positions"].shape[0]
+def _chunk_of(fields: Mapping[str, np.ndarray], start: int, chunk: int, rows: np.ndarray | None = None
+              ) -> dict[str, np.ndarray]:
+    """The fields of grasps ``start .. start + chunk - 1`` (of ``rows`` of ``fields``,
+    default all), padded with the last grasp, its contacts inactive where there is a
+    mask, so that the padding solves nothing. Only the chunk is copied."""
+    total = fields["positions"].shape[0] if rows is None else len(rows)
     idx = np.arange(start, start + chunk)
-    out = {k: v[np.minimum(idx, total - 1)] for k, v in fields.items()}
+    pick = np.minimum(idx, total - 1)
+    pick = pick if rows is None else rows[pick]
+    out = {k: v[pick] for k, v in fields.items()}
     if "active" in out:
         out["active"] = out["active"] & (idx < total)[:, None]
     return out
@@ -186,7 +196,10 @@ def evaluate_dataset(
             :meth:`~jaxgrasp.engine._checkpoint.BatchCheckpoint.keeper`).
         options, chunk_size, progress, devices: as :func:`evaluate_batch`. Grasps are
             padded to the dataset's largest contact count, so a resumed run compiles what
-            the first one did.
+            the first one did. Each chunk's grasps are gathered from the dataset's
+            columns (:class:`~jaxgrasp.io._dataset.GraspColumns`) when it runs: beyond
+            the columns, memory grows with the chunk and the results, not with a copy
+            of the set.
 
     Returns:
         ``(every row, this run)``: the :class:`~jaxgrasp.BatchResult` of every row of the
@@ -194,22 +207,20 @@ def evaluate_dataset(
         that of the grasps evaluated now (``None`` when none was left).
     """
     rows, results = done if done is not None else (np.zeros(0, dtype=np.int64), {})
-    todo = np.flatnonzero(dataset.valid & ~np.isin(np.arange(len(dataset)), rows))
+    columns = dataset.columns()
+    todo = np.flatnonzero(columns.valid & ~np.isin(np.arange(len(dataset)), rows))
     parts = [(rows, results)] if rows.size else []
     run = None
     if todo.size:
-        n_contacts = int(dataset.num_contacts.max())
-        grasps = [dataset.grasps[i] for i in todo]
-        same = all(g.num_contacts == n_contacts for g in grasps)
+        check_chunk_size(chunk_size)
+        fields = _set_fields(dataset, todo)
         keep = None if on_chunk_rows is None else (
             lambda start, stop, res: on_chunk_rows(todo[start:stop], {f: a[start:stop] for f, a in res.items()})
         )
-        run = evaluate_batch(grasps if same else stack(grasps, num_contacts=n_contacts), options=options,
-                             chunk_size=chunk_size, progress=progress, on_chunk=keep, devices=devices)
-        parts.append((todo, {f: np.asarray(getattr(run, f)) for f in FIELDS}))
-    counts = dataset.num_contacts
-    active = np.arange(parts[0][1]["boundary_energy"].shape[-1]) < counts[:, None]  # own contacts first
+        run = _evaluate_fields(fields, (None,) * todo.size, plan_chunks(todo.size, chunk_size, devices), options,
+                               progress, keep, rows=todo)
+        parts.append((todo, {f: getattr(run, f) for f in FIELDS}))
     timings = {} if run is None else dict(
         compile_seconds=run.compile_seconds, run_seconds=run.run_seconds, devices=run.devices
     )
-    return assemble(parts, len(dataset), ~dataset.valid, active, dataset.errors, **timings), run
+    return assemble(parts, len(dataset), ~columns.valid, columns.active, dataset.errors, **timings), run

@@ -60,11 +60,17 @@ def assemble(parts, total: int, invalid, active: np.ndarray, errors, *, compile_
 
     ``active``: ``(B, N)`` each grasp's contacts; ``errors``: each grasp's error or
     ``None``; the timings (s) and device count are those of the evaluation that made the
-    newest part.
+    newest part. A single part holding every row in order is taken as it is (its arrays
+    become the result's, their invalid rows marked in place), so a large batch's
+    results are held once.
     """
     arrays = {}
+    whole = len(parts) == 1 and np.array_equal(parts[0][0], np.arange(total))
     for f in FIELDS:
         like = parts[0][1][f]
+        if whole:  # one part of every row in order: its arrays are the result (no second copy)
+            arrays[f] = np.asarray(like)
+            continue
         arrays[f] = np.empty((total, *np.shape(like)[1:]), dtype=np.asarray(like).dtype)
         for rows, results in parts:
             arrays[f][rows] = results[f]
@@ -135,16 +141,19 @@ class BatchResult(SummaryNames):
     def rows(self, extra: Mapping[str, Any] | None = None) -> list[list]:
         """The rows of :meth:`to_csv` (:data:`CSV_COLUMNS`, then the ``extra`` columns), in
         input order; an invalid grasp's numbers are empty strings."""
+        return list(self._rows(extra))
+
+    def _rows(self, extra: Mapping[str, Any] | None = None):
+        """The rows of :meth:`rows`, one at a time (a table of a million grasps is never
+        held as Python objects at once)."""
         value, energy = np.asarray(self.value), np.asarray(self.equilibrium_energy)
-        status, kind = self.status_names, self.limiting_kind_names
+        status, kind = self.status_names, self.limiting_kind_names  # object arrays of shared names
         contact, count = np.asarray(self.limiting_contact), np.asarray(self.num_contacts)
         extra = [np.asarray(a) for a in (extra or {}).values()]
         fmt = outputs.csv_cell
-        return [
-            [i, int(count[i]), fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i]), self.errors[i] or ""]
-            + [fmt(a[i]) for a in extra]
-            for i in range(len(self))
-        ]
+        for i in range(len(self)):
+            yield ([i, int(count[i]), fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i]),
+                    self.errors[i] or ""] + [fmt(a[i]) for a in extra])
 
     def to_csv(self, path, extra: Mapping[str, Any] | None = None) -> None:
         """Write one row per grasp, in input order (:data:`CSV_COLUMNS`): ``value_J`` and
@@ -153,7 +162,7 @@ class BatchResult(SummaryNames):
         ``error`` (empty for a valid grasp); then a column per ``extra`` entry (name ->
         ``(B,)`` array, e.g. ``epsilon``). Atomic for a path; a binary file object is
         written to directly."""
-        outputs.write_to(path, outputs.csv_content(CSV_COLUMNS + tuple(extra or ()), self.rows(extra)))
+        outputs.write_to(path, outputs.csv_content(CSV_COLUMNS + tuple(extra or ()), self._rows(extra)))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Every array of :meth:`to_npz`, by name."""

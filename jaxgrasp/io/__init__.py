@@ -4,6 +4,13 @@ Grasp files (TOML, JSON; :func:`load`, :func:`save`), datasets of many grasps (N
 JSONL; :func:`load_dataset`, :func:`save_dataset`), grasps on an object's mesh
 (:func:`from_mesh`), and :class:`OutputError` for an output that cannot be written. All
 in SI units.
+
+Inputs are treated as untrusted: every file is read only if it is a regular file under
+its kind's size cap (special files such as FIFOs and ``/dev/zero`` are refused in one
+line), and a mesh named by a grasp file or a dataset line must be a mesh format (STL,
+OBJ, PLY, OFF, GLB; no archives) inside that file's folder after symlinks, unless the
+caller allows more folders (``allowed_dirs=``, ``--allow-dir``); see
+:mod:`jaxgrasp.io._inputs`.
 """
 
 from jaxgrasp.io._dataset import GraspSet, load_dataset, save_dataset

@@ -29,14 +29,30 @@ Two formats, chosen by the file's suffix:
 ``.jsonl``
     One grasp per line, each a JSON object in the grasp-file schema
     (:func:`jaxgrasp.load`: ``fingertip``, ``object``, ``contacts``), any numbers of
-    contacts (an ``object.mesh`` path is relative to the dataset file). Blank lines are
-    skipped; UTF-8, with or without a byte-order mark.
+    contacts (an ``object.mesh`` path is relative to the dataset file). Lines end at
+    ``\n`` only (a U+2028 or U+0085 inside a JSON string is part of its line, so line
+    numbers are those of ``wc -l``). Blank lines are skipped; UTF-8, with or without a
+    byte-order mark. The file is read line by line, never whole.
+
+A mesh a ``.jsonl`` line names must lie inside the dataset's folder after symlinks, or
+inside a folder passed in ``allowed_dirs`` (``--allow-dir``): a line naming one outside
+is an invalid grasp. Only mesh formats are read (:data:`~jaxgrasp.io._inputs.MESH_SUFFIXES`).
+The dataset must be a regular file of at most :data:`~jaxgrasp.io._inputs.MAX_DATASET_BYTES`
+bytes; an ``.npz``'s arrays may declare at most as many bytes uncompressed, checked from
+the zip directory and each ``.npy`` header before anything is allocated.
+
+Grasps are held in columns (:class:`GraspColumns`: float64 NumPy arrays with a leading
+axis of ``B`` grasps, padded to the largest contact count), about 30 numbers per contact,
+so that loading a file costs memory in proportion to its numbers, not a JAX array per
+field per grasp. ``GraspSet.grasps[i]`` builds grasp ``i``'s :class:`~jaxgrasp.Grasp`
+when asked.
 
 A grasp with an invalid value does not stop the reading: :func:`load_dataset` returns
 every grasp in input order, ``None`` with a one-line error (naming the grasp, field and
 value) where one is invalid. A file that cannot be read as a whole (missing, wrong
-suffix, a missing or misshapen array, an unknown array) raises
-:class:`~jaxgrasp.GraspValueError`.
+suffix, a special file, too large, a corrupt or truncated zip, an array declaring more
+than the cap, no grasps, a missing or misshapen array, an unknown array) raises
+:class:`~jaxgrasp.GraspValueError` (one line).
 """
 
 from __future__ import annotations
@@ -45,57 +61,229 @@ import dataclasses
 import hashlib
 import io
 import json
+import math
 import os
+import zipfile
+import zlib
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, BinaryIO
 
 import numpy as np
 
 from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.io._grasp_file import _parse_json, grasp_from_dict, grasp_to_dict, read_input
+from jaxgrasp.io._grasp_file import _parse_json, checked_fields, grasp_to_dict
+from jaxgrasp.io._inputs import MAX_DATASET_BYTES, open_input
+from jaxgrasp.io._mesh import MeshReader
 from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS, FIELD, NAMES
 from jaxgrasp.model._grasp import Grasp, stack
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
 
-__all__ = ["GraspSet", "load_dataset", "save_dataset", "SUFFIXES"]
+__all__ = ["SUFFIXES", "GraspColumns", "GraspRows", "GraspSet", "load_dataset", "save_dataset"]
 
 SUFFIXES = (".npz", ".jsonl")
 """The dataset formats, by file suffix."""
 
 _OPTIONAL = {"mass": DEFAULT_MASS, "gravity": DEFAULT_GRAVITY}
 _ARRAYS = NAMES + ("active",)
+_BOM = b"\xef\xbb\xbf"
 
 
-@dataclasses.dataclass(frozen=True)
+# ----------------------------------------------------------------------------- columns
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class GraspColumns:
+    """The grasps of a set as columns: one float64 array per :class:`~jaxgrasp.Grasp` field.
+
+    Attributes:
+        fields: every grasp field by name with a leading axis of ``B`` grasps, contacts
+            padded to ``N`` (the largest count): ``positions (B, N, 3)`` m, unit
+            ``normals (B, N, 3)``, per-contact fields ``(B, N)`` (m, m, Pa, -, N),
+            ``mass (B,)`` kg, ``gravity (B, 3)`` m/s^2. A grasp's own contacts come first;
+            the padding repeats its last one (valid numbers, inactive). An invalid grasp's
+            row repeats the first valid grasp's, with no contact.
+        counts: ``(B,)`` int64, each grasp's contacts (0 for an invalid one).
+    """
+
+    fields: Mapping[str, np.ndarray]
+    counts: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        """``(B,)`` bool: which grasps are valid (have contacts)."""
+        return self.counts > 0
+
+    @property
+    def active(self) -> np.ndarray:
+        """``(B, N)`` bool: the contacts each grasp has (its first ``counts[i]``)."""
+        return np.arange(self.fields["positions"].shape[1]) < self.counts[:, None]
+
+    def grasp(self, i: int) -> Grasp | None:
+        """Grasp ``i`` with its own contacts (JAX arrays, float64), ``None`` if invalid."""
+        k = int(self.counts[i])
+        if k == 0:
+            return None
+        import jax.numpy as jnp
+
+        return Grasp(**{n: jnp.asarray(a[i, :k] if FIELD[n].per_contact else a[i]) for n, a in self.fields.items()})
+
+
+class _ColumnBuilder:
+    """Fills :class:`GraspColumns` row by row from checked fields
+    (:func:`~jaxgrasp.model._validation.check_grasp_inputs`), growing as rows and contacts
+    come (the number of grasps and contacts of a ``.jsonl`` is known only at its end)."""
+
+    def __init__(self, rows: int = 64, contacts: int = 2):
+        self._rows, self._contacts = max(rows, 1), max(contacts, 1)
+        self._arrays: dict[str, np.ndarray] = {}
+        self._counts = np.zeros(self._rows, dtype=np.int64)
+        self.size = 0
+
+    def _shape(self, name: str, rows: int, contacts: int) -> tuple[int, ...]:
+        shape = FIELD[name].shape
+        tail = (3,) if shape in ("points", "directions", "vector") else ()
+        return (rows, contacts, *tail) if FIELD[name].per_contact else (rows, *tail)
+
+    def _grow(self, rows: int, contacts: int) -> None:
+        """Make room for ``rows`` grasps of ``contacts`` contacts (doubling: amortised)."""
+        new_rows = self._rows if rows <= self._rows else max(rows, 2 * self._rows)
+        new_contacts = self._contacts if contacts <= self._contacts else max(contacts, 2 * self._contacts)
+        if (new_rows, new_contacts) == (self._rows, self._contacts) and self._arrays:
+            return
+        for name in NAMES:
+            grown = np.zeros(self._shape(name, new_rows, new_contacts))
+            old = self._arrays.get(name)
+            if old is not None and FIELD[name].per_contact:
+                grown[: self.size, : self._contacts] = old[: self.size]
+            elif old is not None:
+                grown[: self.size] = old[: self.size]
+            self._arrays[name] = grown
+        self._counts = np.concatenate([self._counts[: self.size], np.zeros(new_rows - self.size, dtype=np.int64)])
+        self._rows, self._contacts = new_rows, new_contacts
+
+    def add(self, fields: Mapping[str, np.ndarray] | None) -> None:
+        """Append one grasp's checked fields, or ``None`` for an invalid grasp."""
+        k = 0 if fields is None else len(fields["positions"])
+        self._grow(self.size + 1, k)
+        if fields is not None:
+            for name, a in fields.items():
+                if FIELD[name].per_contact:
+                    self._arrays[name][self.size, :k] = a
+                else:
+                    self._arrays[name][self.size] = a
+            self._counts[self.size] = k
+        self.size += 1
+
+    def finish(self) -> GraspColumns:
+        """The columns of the rows added: padded to the largest count (see :class:`GraspColumns`)."""
+        self._grow(self.size, 1)
+        b, counts = self.size, self._counts[: self.size]
+        n = int(counts.max(initial=0))
+        valid = np.flatnonzero(counts)
+        source = np.where(counts > 0, np.arange(b), valid[0] if valid.size else 0)  # the row each row copies
+        own = np.maximum(counts[source], 1)
+        pick = np.minimum(np.arange(n), own[:, None] - 1)  # (B, N): padding repeats the last contact
+        fields = {}
+        for name, a in self._arrays.items():
+            if FIELD[name].per_contact:
+                fields[name] = a[source[:, None], pick]
+            else:
+                fields[name] = a[source]
+        self._arrays = {}
+        return GraspColumns(fields=fields, counts=counts.copy())
+
+
+def columns_of(grasps: Sequence[Grasp | None]) -> GraspColumns:
+    """:class:`GraspColumns` of grasps in memory (``None``: an invalid one), each validated.
+
+    Raises:
+        GraspValueError: ``grasp i: ...``, the first grasp that is not valid.
+    """
+    builder = _ColumnBuilder(len(grasps))
+    for i, g in enumerate(grasps):
+        if g is None:
+            builder.add(None)
+            continue
+        if not isinstance(g, Grasp):
+            raise GraspValueError(f"grasp {i} is {type(g).__name__}, not a jaxgrasp.Grasp")
+        try:
+            builder.add(check_grasp_inputs(**g.compact().to_numpy()))
+        except GraspValueError as exc:
+            raise GraspValueError(f"grasp {i}: {exc}") from None
+    return builder.finish()
+
+
+class GraspRows(Sequence):
+    """The grasps of :class:`GraspColumns` as a read-only sequence: item ``i`` is grasp
+    ``i``'s :class:`~jaxgrasp.Grasp` (built when asked, its own contacts only), ``None``
+    where it is invalid."""
+
+    def __init__(self, columns: GraspColumns):
+        self.columns = columns
+
+    def __len__(self) -> int:
+        return len(self.columns.counts)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return tuple(self[j] for j in range(*i.indices(len(self))))
+        i = int(i)
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"grasp index {i} out of range for {len(self)} grasps")
+        return self.columns.grasp(i % len(self))
+
+    def __repr__(self) -> str:
+        return f"GraspRows({len(self)} grasps)"
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
 class GraspSet:
     """The grasps of a dataset file, in input order.
 
     Attributes:
         grasps: one :class:`~jaxgrasp.Grasp` per input grasp (float64, SI units; only its
-            active contacts), ``None`` where the grasp is invalid.
+            active contacts), ``None`` where the grasp is invalid. A set read from a file
+            holds a :class:`GraspRows` (built from its columns when indexed); a set made
+            in memory, a tuple.
         errors: ``None`` per valid grasp, the one-line reason per invalid one
             (``"grasp 3: friction = -1 must be positive"``; ``line 4`` for ``.jsonl``).
         source: the file read.
         source_sha256: SHA-256 (hex) of the file's bytes as they were parsed, ``None``
-            for a set made in memory (``jaxgrasp batch --resume`` checks it).
+            for a set made in memory.
+        mesh_sha256: the real path of every mesh file the rows named and read, to the
+            SHA-256 (hex) of its bytes (``jaxgrasp batch --resume`` checks these and
+            ``source_sha256``).
     """
 
-    grasps: tuple
+    grasps: Sequence
     errors: tuple
     source: str = "<memory>"
     source_sha256: str | None = None
+    mesh_sha256: Mapping[str, str] = dataclasses.field(default_factory=dict)
 
     def __len__(self) -> int:
-        return len(self.grasps)
+        return len(self.errors)
+
+    def columns(self) -> GraspColumns:
+        """The grasps as :class:`GraspColumns` (a file's own; built and validated for a
+        set made in memory)."""
+        if isinstance(self.grasps, GraspRows):
+            return self.grasps.columns
+        return columns_of(tuple(self.grasps))
 
     @property
     def valid(self) -> np.ndarray:
         """``(B,)`` bool: which grasps are valid."""
+        if isinstance(self.grasps, GraspRows):
+            return self.grasps.columns.valid
         return np.asarray([g is not None for g in self.grasps], dtype=bool)
 
     @property
     def num_contacts(self) -> np.ndarray:
         """``(B,)`` int: contacts of each valid grasp, 0 for an invalid one."""
+        if isinstance(self.grasps, GraspRows):
+            return self.grasps.columns.counts
         return np.asarray([0 if g is None else g.num_contacts for g in self.grasps], dtype=np.int64)
 
     def raise_if_invalid(self) -> None:
@@ -113,12 +301,18 @@ def _suffix(path: Path) -> str:
     return suffix
 
 
-def load_dataset(path: str | os.PathLike) -> GraspSet:
+def load_dataset(path: str | os.PathLike, *, allowed_dirs=None) -> GraspSet:
     """Read a dataset file (``.npz`` or ``.jsonl``, see the module doc); every grasp validated.
 
+    Args:
+        path: the dataset file: a regular file of at most
+            :data:`~jaxgrasp.io._inputs.MAX_DATASET_BYTES` bytes.
+        allowed_dirs: folders (paths) besides the dataset's own that the meshes its
+            ``.jsonl`` lines name may be in (after symlinks); default none.
+
     Returns:
-        A :class:`GraspSet`: the grasps in input order, ``None`` and a one-line error
-        where a grasp is invalid.
+        A :class:`GraspSet`: the grasps in input order (as columns), ``None`` and a
+        one-line error where a grasp is invalid (a mesh outside the allowed folders too).
 
     Raises:
         GraspValueError: the file as a whole cannot be read (one line, starting with
@@ -128,23 +322,31 @@ def load_dataset(path: str | os.PathLike) -> GraspSet:
     suffix = _suffix(path)
     if path.is_dir():
         raise GraspValueError(f"{path}: is a folder, not a dataset file (.npz or .jsonl)")
-    raw = read_input(path)
-    grasps, errors = (_read_npz if suffix == ".npz" else _read_jsonl)(raw, path)
-    return GraspSet(
-        grasps=tuple(grasps), errors=tuple(errors), source=str(path), source_sha256=hashlib.sha256(raw).hexdigest()
-    )
+    meshes = MeshReader(path.parent, allowed_dirs, owner="dataset")
+    with open_input(path, MAX_DATASET_BYTES, "dataset") as fh:
+        try:
+            if suffix == ".npz":
+                columns, errors, sha = _read_npz(fh, path)
+            else:
+                columns, errors, sha = _read_jsonl(fh, path, meshes)
+        except OSError as exc:
+            raise GraspValueError(f"{path}: cannot read file ({exc.strerror or exc})") from None
+    return GraspSet(grasps=GraspRows(columns), errors=tuple(errors), source=str(path), source_sha256=sha,
+                    mesh_sha256=dict(meshes.sha256))
 
 
 # ----------------------------------------------------------------------------- .npz
 
 
-def _npz_arrays(raw: bytes, path: Path) -> dict[str, np.ndarray]:
-    """The arrays of an ``.npz`` file, checked for names (one-line errors)."""
+def _npz_arrays(fh: BinaryIO, path: Path) -> dict[str, np.ndarray]:
+    """The arrays of an ``.npz`` file (:func:`_npz_members`), checked for names (one-line errors)."""
     try:
-        with np.load(io.BytesIO(raw), allow_pickle=False) as z:
-            arrays = {k: np.asarray(z[k]) for k in z.files}
-    except (ValueError, OSError, EOFError) as exc:  # not a zip, pickled objects, truncated
-        raise GraspValueError(f"{path}: not a readable .npz file ({exc})") from None
+        arrays = _npz_members(fh, path)
+    except GraspValueError:
+        raise
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, ValueError, OSError, EOFError,
+            NotImplementedError, KeyError) as exc:  # not a zip, truncated, a bad member, compression unknown
+        raise GraspValueError(f"{path}: not a readable .npz file ({' '.join(str(exc).split())})") from None
     unknown = sorted(set(arrays) - set(_ARRAYS))
     if unknown:
         raise GraspValueError(f"{path}: unknown array {unknown[0]!r}; arrays are named {', '.join(_ARRAYS)}")
@@ -154,12 +356,58 @@ def _npz_arrays(raw: bytes, path: Path) -> dict[str, np.ndarray]:
     return arrays
 
 
+def _size(n: float) -> str:
+    return f"{n / 2**40:.3g} TiB" if n >= 2**40 else f"{n / 2**20:.4g} MiB"
+
+
+def _npz_members(fh: BinaryIO, path: Path) -> dict[str, np.ndarray]:
+    """Every ``NAME.npy`` member of the zip ``fh`` as an array, its size checked first: the
+    sizes the zip directory declares, then each ``.npy`` header's shape times item size,
+    against :data:`~jaxgrasp.io._inputs.MAX_DATASET_BYTES`, before a byte is allocated."""
+    arrays = {}
+    with zipfile.ZipFile(fh) as zf:
+        infos = zf.infolist()
+        declared = sum(info.file_size for info in infos)
+        if declared > MAX_DATASET_BYTES:
+            raise GraspValueError(
+                f"{path}: its arrays declare {_size(declared)} uncompressed, more than the "
+                f"{_size(MAX_DATASET_BYTES)} read at most"
+            )
+        for info in infos:
+            name = info.filename.removesuffix(".npy")
+            with zf.open(info) as member:
+                arrays[name] = _npy_member(member, info.file_size, name, path)
+    return arrays
+
+
+def _npy_member(member: BinaryIO, size: int, name: str, path: Path) -> np.ndarray:
+    """One ``.npy`` member: header read and checked, then exactly its data (no pickles)."""
+    fmt = np.lib.format
+    version = fmt.read_magic(member)
+    read_header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+    shape, fortran, dtype = read_header(member)
+    if dtype.hasobject:
+        raise GraspValueError(f"{path}: array {name!r} holds Python objects, which are not read (no pickles)")
+    nbytes = math.prod(shape) * dtype.itemsize
+    if nbytes > MAX_DATASET_BYTES or nbytes > size:
+        raise GraspValueError(
+            f"{path}: array {name!r} claims shape {shape} of {dtype} ({_size(nbytes)}), more than its "
+            f"{_size(size)} in the file" + (f" and the {_size(MAX_DATASET_BYTES)} read at most" if nbytes > size else "")
+        )
+    data = member.read(nbytes)
+    if len(data) != nbytes:
+        raise GraspValueError(f"{path}: array {name!r} is truncated ({len(data)} of {nbytes} bytes)")
+    return np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")
+
+
 def _npz_shapes(arrays: dict[str, np.ndarray], path: Path) -> tuple[int, int]:
     """``(B, N)`` from ``positions``; every other array checked against them."""
     pos = arrays["positions"]
     if pos.ndim != 3 or pos.shape[2] != 3:
         raise GraspValueError(f"{path}: positions must have shape (B, N, 3), got {pos.shape}")
     b, n, _ = pos.shape
+    if b == 0:
+        raise GraspValueError(f"{path}: no grasps (positions has shape {pos.shape})")
     for name, a in arrays.items():
         allowed = _allowed_shapes(name, b, n)
         if a.shape not in allowed:
@@ -206,52 +454,72 @@ def _npz_grasp(arrays: dict[str, np.ndarray], i: int, n: int) -> dict[str, Any]:
     return kwargs
 
 
-def _read_npz(raw: bytes, path: Path) -> tuple[list, list]:
-    arrays = _npz_arrays(raw, path)
+def _read_npz(fh: BinaryIO, path: Path) -> tuple[GraspColumns, list, str]:
+    """``(columns, errors, sha256)`` of an ``.npz`` dataset."""
+    digest = hashlib.sha256()
+    for block in iter(lambda: fh.read(1 << 20), b""):  # the size was capped when it was opened
+        digest.update(block)
+    fh.seek(0)
+    arrays = _npz_arrays(fh, path)
     b, n = _npz_shapes(arrays, path)
-    grasps, errors = [], []
+    builder, errors = _ColumnBuilder(b, n), []
     for i in range(b):
         try:
-            grasps.append(Grasp.create(**_npz_grasp(arrays, i, n)))
+            builder.add(check_grasp_inputs(**_npz_grasp(arrays, i, n)))
             errors.append(None)
         except GraspValueError as exc:
-            grasps.append(None)
+            builder.add(None)
             errors.append(f"grasp {i}: {exc}")
-    return grasps, errors
+    return builder.finish(), errors, digest.hexdigest()
 
 
 # ----------------------------------------------------------------------------- .jsonl
 
 
-def _read_jsonl(raw: bytes, path: Path) -> tuple[list, list]:
+def _jsonl_row(line: bytes, where: str, meshes: MeshReader) -> dict[str, np.ndarray]:
+    """The checked fields of one ``.jsonl`` line (UTF-8 already checked); one-line errors."""
     try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise GraspValueError(f"{path}: not valid UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    grasps, errors = [], []
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        if not line.strip():
-            continue
-        where = f"grasp {len(grasps)} (line {lineno})"
+        data = _parse_json(line)
+    except ValueError as exc:
+        raise GraspValueError(f"{where}: malformed JSON: {exc}") from None
+    except RecursionError:
+        raise GraspValueError(f"{where}: malformed JSON: nested too deeply") from None
+    return checked_fields(data, where, meshes)  # a mesh path is relative to the file
+
+
+def _read_jsonl(fh: BinaryIO, path: Path, meshes: MeshReader) -> tuple[GraspColumns, list, str]:
+    """``(columns, errors, sha256)`` of a ``.jsonl`` dataset, read one line at a time.
+
+    Lines end at ``b"\\n"`` only: a binary file's lines, unlike ``str.splitlines``, which
+    also breaks at U+2028, U+0085 and others that JSON strings may hold raw."""
+    digest, total, builder, errors = hashlib.sha256(), 0, _ColumnBuilder(), []
+    for lineno in range(1, 2**63):
+        line = fh.readline(MAX_DATASET_BYTES + 1 - total)  # never more than the cap in all
+        if not line:
+            break
+        total += len(line)
+        if total > MAX_DATASET_BYTES:
+            raise GraspValueError(f"{path}: the dataset grew past the {_size(MAX_DATASET_BYTES)} read at most")
+        digest.update(line)
+        start = total - len(line)
+        if lineno == 1 and line.startswith(_BOM):
+            line, start = line[len(_BOM):], start + len(_BOM)
         try:
-            data = _parse_json(line.encode())
-        except ValueError as exc:
-            grasps.append(None)
-            errors.append(f"{where}: malformed JSON: {exc}")
+            text = line.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise GraspValueError(f"{path}: not valid UTF-8 text ({exc.reason} at byte {start + exc.start})") from None
+        if not text.strip():
             continue
-        except RecursionError:
-            grasps.append(None)
-            errors.append(f"{where}: malformed JSON: nested too deeply")
-            continue
+        where = f"grasp {builder.size} (line {lineno})"
         try:
-            grasps.append(grasp_from_dict(data, source=where, base=path.parent))  # a mesh path is relative to the file
+            builder.add(_jsonl_row(line, where, meshes))
             errors.append(None)
         except GraspValueError as exc:
-            grasps.append(None)
+            builder.add(None)
             errors.append(str(exc))
-    if not grasps:
+    if not errors:
         raise GraspValueError(f"{path}: no grasps (every line is blank)")
-    return grasps, errors
+    return builder.finish(), errors, digest.hexdigest()
 
 
 # ----------------------------------------------------------------------------- writing

@@ -12,7 +12,7 @@ Format (TOML; JSON is the same structure as one object with keys ``fingertip``,
     [object]                 # optional
     mass = 0.1               # kg, default 0
     gravity = [0, 0, -9.81]  # m/s^2, object frame, default (0, 0, -9.81)
-    # mesh = "part.stl"      # optional: the object's mesh, path relative to this file
+    # mesh = "part.stl"      # optional: the object's mesh, path relative to this file (inside its folder)
     # units = "mm"           # the mesh's length unit: m (default), cm or mm
     # density = 1200.0       # kg/m^3: mass = density x volume (instead of mass)
     # center_of_mass = [0, 0, 0.01]  # m, mesh frame (default: the watertight mesh's)
@@ -48,12 +48,13 @@ from typing import Any, Mapping
 import numpy as np
 
 from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.io._mesh import MeshGrasp, from_mesh
+from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, read_input
+from jaxgrasp.io._mesh import MeshGrasp, MeshReader, from_mesh, load_mesh
 from jaxgrasp.model._fields import FIELD, FIELDS, FINGERTIP
 from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
 
-__all__ = ["load", "save", "to_text", "grasp_from_dict", "grasp_to_dict", "to_toml"]
+__all__ = ["checked_fields", "grasp_from_dict", "grasp_to_dict", "load", "save", "to_text", "to_toml"]
 
 TOP_KEYS = ("fingertip", "object", "contacts")
 FINGERTIP_KEYS = tuple(FIELD[name].file_key for name in FINGERTIP)
@@ -216,32 +217,54 @@ def _contact_kwargs(contacts: list, defaults: dict, optional: tuple[str, ...] = 
     return values
 
 
-def grasp_from_dict(data: Mapping, source: str = "<dict>", base=None) -> Grasp:
+def grasp_from_dict(data: Mapping, source: str = "<dict>", base=None, *, allowed_dirs=None) -> Grasp:
     """Build a validated :class:`Grasp` from a parsed grasp file (TOML/JSON structure).
 
     Args:
         data: ``{"fingertip": {...}, "object": {...}, "contacts": [{...}, ...]}``, SI units.
         source: name used as the prefix of error messages (a file name).
-        base: folder a relative ``object.mesh`` path is taken from (default: the current
-            folder).
+        base: the folder of the file the data came from: a relative ``object.mesh`` path
+            is taken from it, and the mesh must lie inside it (after symlinks) or inside
+            one of ``allowed_dirs``. ``None``: a relative path is taken from the current
+            folder and not confined (data built in Python).
+        allowed_dirs: folders (paths) outside ``base`` that meshes may be in.
 
     Raises:
         GraspValueError: anything wrong with the data; message ``"<source>: <problem>"``.
     """
-    built = _build(data, source, base)
+    meshes = None if base is None else MeshReader(base, allowed_dirs, owner="grasp file")
+    built = _build(data, source, meshes)
     return built.grasp if isinstance(built, MeshGrasp) else built
 
 
-def _build(data: Mapping, source: str, base) -> Grasp | MeshGrasp:
-    """The grasp of parsed file data, a :class:`MeshGrasp` where it names a mesh."""
+def checked_fields(data: Mapping, source: str, meshes) -> dict[str, np.ndarray]:
+    """The validated fields of parsed grasp data as float64 NumPy arrays (those of
+    :func:`~jaxgrasp.model._validation.check_grasp_inputs`: per-contact fields ``(N,)``,
+    unit normals), without building a :class:`Grasp` of JAX arrays; ``meshes``: the
+    :class:`~jaxgrasp.io._mesh.MeshReader` of the data's file.
+
+    Raises:
+        GraspValueError: as :func:`grasp_from_dict`.
+    """
+    built = _build(data, source, meshes, as_fields=True)
+    if isinstance(built, dict):
+        return built
+    grasp = built.grasp  # a mesh's grasp, made by from_mesh: its fields as NumPy arrays
+    return {f.name: np.asarray(getattr(grasp, f.name), dtype=np.float64) for f in FIELDS}
+
+
+def _build(data: Mapping, source: str, meshes, as_fields: bool = False):
+    """The grasp of parsed file data: a :class:`MeshGrasp` where it names a mesh (read by
+    ``meshes``, a :class:`~jaxgrasp.io._mesh.MeshReader`, or ``None``: from the current
+    folder); else a :class:`Grasp`, or with ``as_fields`` its checked NumPy fields."""
     try:
         kwargs, mesh = _grasp_kwargs(data)
         if mesh is None:
-            return Grasp.create(**kwargs)
-        path = Path(mesh.pop("mesh"))
-        if base is not None and not path.is_absolute():
-            path = Path(base) / path
-        return from_mesh(path, kwargs.pop("positions"), normals=kwargs.pop("normals"), **mesh, **kwargs)
+            return check_grasp_inputs(**kwargs) if as_fields else Grasp.create(**kwargs)
+        name, units = mesh.pop("mesh"), mesh.pop("units")
+        surface, shown = meshes(name, units) if meshes is not None else (load_mesh(name, units), name)
+        made = from_mesh(surface, kwargs.pop("positions"), normals=kwargs.pop("normals"), **mesh, **kwargs)
+        return made.replace(source=shown)
     except GraspValueError as exc:
         raise GraspValueError(f"{source}: {exc}") from None
     except RecursionError:
@@ -302,18 +325,7 @@ def _parse_json(raw: bytes) -> Any:
     return data
 
 
-def read_input(path: Path) -> bytes:
-    """The bytes of an input file; a missing or unreadable one is a one-line
-    :class:`GraspValueError` starting with the file name."""
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise GraspValueError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise GraspValueError(f"{path}: cannot read file ({exc.strerror or exc})") from None
-
-
-def load(path: str | os.PathLike, *, keep_mesh: bool = False) -> Grasp | MeshGrasp:
+def load(path: str | os.PathLike, *, keep_mesh: bool = False, allowed_dirs=None) -> Grasp | MeshGrasp:
     """Read a grasp file (``.toml`` or ``.json``, SI units) and return a validated :class:`Grasp`.
 
     UTF-8 text, with or without a byte-order mark. A key given twice in one table is an
@@ -323,15 +335,23 @@ def load(path: str | os.PathLike, *, keep_mesh: bool = False) -> Grasp | MeshGra
     grasp, the mesh and the frame offset), for drawing. A file without a mesh gives its
     :class:`Grasp` either way.
 
+    The mesh must lie inside the grasp file's folder after symlinks, or inside one of
+    ``allowed_dirs`` (folder paths), and be a mesh format
+    (:data:`~jaxgrasp.io._inputs.MESH_SUFFIXES`). The grasp file must be a regular file
+    of at most :data:`~jaxgrasp.io._inputs.MAX_GRASP_FILE_BYTES` bytes (not a FIFO or a
+    device), checked before it is read.
+
     Raises:
-        GraspValueError: missing/unreadable file, a folder, unknown extension, malformed
-            TOML/JSON, or invalid content; the message is one line starting with the file name.
+        GraspValueError: missing/unreadable file, a folder, a special file, a file over
+            the size cap, unknown extension, malformed TOML/JSON, invalid content, or a
+            mesh outside the allowed folders; the message is one line starting with the
+            file name.
     """
     path = Path(path)
     if path.is_dir():
         raise GraspValueError(f"{path}: is a folder, not a grasp file (.toml or .json)")
     fmt = _format(path)
-    raw = read_input(path)
+    raw = read_input(path, MAX_GRASP_FILE_BYTES, "grasp file")
     try:
         if fmt == "toml":
             data = tomllib.loads(raw.decode("utf-8-sig"))  # a leading BOM is not TOML syntax
@@ -344,7 +364,7 @@ def load(path: str | os.PathLike, *, keep_mesh: bool = False) -> Grasp | MeshGra
         raise GraspValueError(f"{path}: malformed {kind}: {exc}") from None
     except RecursionError:
         raise GraspValueError(f"{path}: malformed {fmt.upper()}: nested too deeply") from None
-    built = _build(data, str(path), path.parent)
+    built = _build(data, str(path), MeshReader(path.parent, allowed_dirs, owner="grasp file"))
     return built.grasp if isinstance(built, MeshGrasp) and not keep_mesh else built
 
 

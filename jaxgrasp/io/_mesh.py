@@ -1,6 +1,6 @@
 """Objects from triangle meshes: contacts snapped to the surface, the centre of mass, the frame.
 
-:func:`from_mesh` turns a mesh (a ``trimesh.Trimesh`` or a mesh file: OBJ, STL, PLY, ...)
+:func:`from_mesh` turns a mesh (a ``trimesh.Trimesh`` or a mesh file: STL, OBJ, PLY, OFF, GLB)
 and fingertip contact points given in the mesh's own frame into a :class:`MeshGrasp`:
 
 * each point is snapped to the closest point of the surface (an exact closest point over
@@ -24,19 +24,22 @@ trimesh is imported when a mesh is used, so ``import jaxgrasp`` does not pay for
 
 from __future__ import annotations
 
+import collections
 import dataclasses
+import hashlib
+import io
 import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from jaxgrasp.io._inputs import MAX_MESH_BYTES, allowed_folders, check_mesh_suffix, confine, read_input
 from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._units import LENGTH_UNITS
 from jaxgrasp.model._validation import GraspValueError
 
-__all__ = ["MeshGrasp", "from_mesh", "load_mesh", "snap_to_surface", "closest_on_triangles", "DEFAULT_TOLERANCE", "SHARP_EDGE_DEG"]
+__all__ = ["MeshGrasp", "MeshReader", "from_mesh", "load_mesh", "read_mesh", "snap_to_surface", "closest_on_triangles", "DEFAULT_TOLERANCE", "SHARP_EDGE_DEG"]
 
 DEFAULT_TOLERANCE = 1e-3
 """Farthest a contact point may lie from the mesh surface, m."""
@@ -81,8 +84,11 @@ def load_mesh(mesh, units: str = "m"):
     """A checked ``trimesh.Trimesh`` in metres from a ``Trimesh`` or a mesh file path.
 
     Args:
-        mesh: ``trimesh.Trimesh`` or a path (any format trimesh reads; a scene of several
-            parts is joined into one mesh).
+        mesh: ``trimesh.Trimesh`` or a path to a mesh file of one of the formats of
+            :data:`~jaxgrasp.io._inputs.MESH_SUFFIXES` (STL, OBJ, PLY, OFF, GLB; a scene of
+            several parts is joined into one mesh), at most
+            :data:`~jaxgrasp.io._inputs.MAX_MESH_BYTES` bytes, a regular file. It is parsed
+            from its bytes as the format its name says, so it cannot reach other files.
         units: the length unit of the vertices: ``"m"``, ``"cm"`` or ``"mm"``.
 
     Returns:
@@ -90,33 +96,107 @@ def load_mesh(mesh, units: str = "m"):
         the mesh is watertight with its faces inward.
 
     Raises:
-        GraspValueError: unknown units, an unreadable file, or a degenerate mesh (no faces,
-            non-finite vertices, no area, a closed mesh enclosing no volume or with faces
-            not consistently oriented); one line.
+        GraspValueError: unknown units, a file that is not a mesh format, too large, not a
+            regular file or unreadable, or a degenerate mesh (no faces, non-finite
+            vertices, no area, a closed mesh enclosing no volume or with faces not
+            consistently oriented); one line.
     """
     import trimesh
 
+    _check_units(units)
+    if isinstance(mesh, (str, os.PathLike)):
+        return read_mesh(mesh, units)[0]
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise GraspValueError(f"mesh must be a trimesh.Trimesh or a file path, got {type(mesh).__name__}")
+    return _checked(mesh, "mesh", units)
+
+
+def _check_units(units: str) -> None:
     if units not in LENGTH_UNITS:
         raise GraspValueError(f"units = {units!r} is not a length unit; use one of {', '.join(LENGTH_UNITS)}")
-    if isinstance(mesh, (str, os.PathLike)):
-        where = f"mesh {str(mesh)!r}"
-        path = Path(mesh)
-        if not path.is_file():
-            raise GraspValueError(f"{where}: no such file")
-        try:
-            loaded = trimesh.load(path, force="mesh", process=True)
-        except Exception as exc:  # trimesh raises many kinds for unreadable files
-            raise GraspValueError(f"{where}: cannot read it as a mesh ({' '.join(str(exc).split()) or type(exc).__name__})") from None
-    elif isinstance(mesh, trimesh.Trimesh):
-        where, loaded = "mesh", mesh
-    else:
-        raise GraspValueError(f"mesh must be a trimesh.Trimesh or a file path, got {type(mesh).__name__}")
+
+
+def read_mesh(path: str | os.PathLike, units: str = "m", *, real: str | os.PathLike | None = None):
+    """``(mesh, sha256)``: the checked mesh (metres, :func:`load_mesh`) of the file ``path``
+    and the SHA-256 (hex) of the bytes it was parsed from.
+
+    ``real``: where to read it from, when the caller has resolved ``path`` already
+    (:func:`~jaxgrasp.io._inputs.confine`); messages name ``path``.
+    """
+    import trimesh
+
+    _check_units(units)
+    where = f"mesh {os.fspath(path)!r}"
+    fmt = check_mesh_suffix(path)
+    source = os.fspath(path if real is None else real)
+    try:
+        raw = read_input(source, MAX_MESH_BYTES, "mesh")
+    except GraspValueError as exc:  # "<source>: no such file" -> "mesh '<path>': no such file"
+        raise GraspValueError(f"{where}: {str(exc).removeprefix(source + ': ')}") from None
+    try:
+        loaded = trimesh.load(io.BytesIO(raw), file_type=fmt, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises many kinds for unreadable files
+        raise GraspValueError(f"{where}: cannot read it as a mesh ({' '.join(str(exc).split()) or type(exc).__name__})") from None
+    return _checked(loaded, where, units), hashlib.sha256(raw).hexdigest()
+
+
+def _checked(loaded, where: str, units: str):
+    """A copy of ``loaded`` in metres whose surface passed :func:`_check_surface`."""
+    import trimesh
+
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise GraspValueError(f"{where} has no faces (a degenerate mesh)")
     out = loaded.copy()
     out.apply_scale(LENGTH_UNITS[units])
     _check_surface(out, where)
     return out
+
+
+class MeshReader:
+    """Reads the meshes a grasp file or dataset names (``[object] mesh``), confined to its
+    folder (:func:`~jaxgrasp.io._inputs.confine`), and remembers what it read.
+
+    A dataset's rows often name the same mesh: the last few meshes read are kept (by real
+    path and units, their errors too), so each is parsed once while its rows follow one
+    another. :attr:`sha256` maps every mesh file read to the SHA-256 of its bytes (the key
+    of ``jaxgrasp batch --resume``); a file whose bytes change between two reads is an error.
+
+    Args:
+        base: the folder of the naming file; relative mesh paths are taken from it.
+        allowed_dirs: more folders meshes may be in (``None``: only ``base``).
+        owner: the naming file's kind, for messages (``"dataset"``, ``"grasp file"``).
+    """
+
+    KEEP = 8
+    """Meshes kept parsed at once."""
+
+    def __init__(self, base, allowed_dirs=None, owner: str = "dataset"):
+        self.base = os.fspath(base)
+        self.allowed = allowed_folders(allowed_dirs)
+        self.owner = owner
+        self.sha256: dict[str, str] = {}
+        self._kept: collections.OrderedDict = collections.OrderedDict()
+
+    def __call__(self, name: str, units: str = "m"):
+        """``(mesh in metres, the path as named from the base)`` of the mesh ``name``."""
+        real = confine(name, self.base, self.allowed, self.owner)
+        shown = os.path.join(self.base, name)
+        key = (str(real), units)
+        if key not in self._kept:
+            try:
+                mesh, sha = read_mesh(shown, units, real=real)
+                if self.sha256.setdefault(str(real), sha) != sha:
+                    raise GraspValueError(f"mesh {shown!r} changed while the {self.owner} was read")
+                self._kept[key] = mesh
+            except GraspValueError as exc:
+                self._kept[key] = exc
+            while len(self._kept) > self.KEEP:
+                self._kept.popitem(last=False)
+        self._kept.move_to_end(key)
+        got = self._kept[key]
+        if isinstance(got, GraspValueError):
+            raise GraspValueError(str(got))
+        return got, shown
 
 
 def _check_surface(mesh, where: str) -> None:
@@ -145,7 +225,8 @@ def from_mesh(
     """A grasp of a meshed object by fingertips touching it at ``points``.
 
     Args:
-        mesh: ``trimesh.Trimesh`` or mesh file path; vertices in ``units``.
+        mesh: ``trimesh.Trimesh`` or mesh file path (STL, OBJ, PLY, OFF or GLB, read as
+            :func:`load_mesh` says); vertices in ``units``.
         points: ``(N, 3)`` fingertip contact points, m, in the mesh's frame (its origin
             and axes, after the unit conversion); each is snapped to the closest surface
             point.
@@ -169,7 +250,9 @@ def from_mesh(
 
     Raises:
         GraspValueError: one line: a point farther than ``tolerance`` from the surface
-            (naming the contact and its distance) or on a sharp edge, a mesh that is not
+            (naming the contact, its distance and, where one explains every point, the
+            unit mistake: points typed in mm or cm, or a mesh's ``units`` not those of its
+            vertices) or on a sharp edge, a mesh that is not
             watertight without ``center_of_mass`` (or with ``density``), a degenerate
             mesh, unknown units, or an invalid grasp value.
     """
@@ -246,8 +329,9 @@ def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE) -> tu
         (a tessellated curved surface), their mean normal.
 
     Raises:
-        GraspValueError: a point farther than ``tolerance`` (naming the contact and the
-            distance in mm) or on a sharp edge or corner.
+        GraspValueError: a point farther than ``tolerance`` (naming the contact, the
+            distance in mm and a unit mistake that would explain every point, if one does)
+            or on a sharp edge or corner.
     """
     keep = surface.area_faces > 0
     tri = np.asarray(surface.triangles, dtype=np.float64)[keep]
@@ -261,7 +345,7 @@ def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE) -> tu
         if best > tolerance:
             raise GraspValueError(
                 f"contact {i} at {_vec_mm(p)} mm is {best * 1e3:.3g} mm from the mesh surface "
-                f"(tolerance {tolerance * 1e3:.3g} mm): is it in the mesh's frame and units?"
+                f"(tolerance {tolerance * 1e3:.3g} mm): " + _unit_hint(tri, points, tolerance)
             )
         near = dist <= best + 1e-9 * scale
         ns = face_normals[near]
@@ -275,6 +359,34 @@ def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE) -> tu
         closest.append(q[int(np.argmin(dist))])
         normals.append(n / np.linalg.norm(n))
     return np.array(closest), np.array(normals)
+
+
+_METRES = " (units sets the mesh's vertices only; positions are always in metres)"
+_UNIT_MISTAKES = (
+    (1e-3, "the contact positions lie on the surface when read as millimetres: write them in metres"
+           + _METRES),
+    (1e-2, "the contact positions lie on the surface when read as centimetres: write them in metres"
+           + _METRES),
+    (1e3, 'the contacts lie on the mesh 1000 times larger, as if its vertices were in mm: set units = "mm"'),
+    (1e2, 'the contacts lie on the mesh 100 times larger, as if its vertices were in cm: set units = "cm"'),
+)
+"""Unit mistakes :func:`snap_to_surface` recognises: ``(factor, what to say)`` where every
+contact point times ``factor`` lies on the surface (points typed in mm or cm; a mesh whose
+``units`` do not match its vertices, which scales the mesh instead)."""
+
+
+def _unit_hint(tri: np.ndarray, points, tolerance: float) -> str:
+    """What to say of contacts off the surface: the unit mistake that would put every one
+    of them on it (:data:`_UNIT_MISTAKES`), or the general question."""
+    pts = np.asarray(points, dtype=np.float64)
+    for factor, text in _UNIT_MISTAKES:
+        near = [
+            np.linalg.norm(closest_on_triangles(p * factor, tri[:, 0], tri[:, 1], tri[:, 2]) - p * factor, axis=1).min()
+            for p in pts
+        ]
+        if max(near) <= tolerance * max(factor, 1.0):
+            return text
+    return "is it in the mesh's frame and units?"
 
 
 def _vec_mm(p) -> str:

@@ -182,6 +182,25 @@ def test_errors_are_one_line(make, kwargs, message):
     assert message in text and "\n" not in text
 
 
+@pytest.mark.parametrize(
+    "size, units, points, message",
+    [
+        (100.0, "mm", POINTS * 1e3, "when read as millimetres: write them in metres"),
+        (10.0, "cm", POINTS * 1e2, "when read as centimetres: write them in metres"),
+        (100.0, "m", POINTS, 'as if its vertices were in mm: set units = "mm"'),
+        (0.1, "m", POINTS + [0.01, 0.0, 0.0], "is it in the mesh's frame and units?"),  # no unit explains it
+    ],
+    ids=["points-in-mm", "points-in-cm", "mesh-in-mm-read-as-m", "elsewhere"],
+)
+def test_off_surface_contacts_name_the_unit_mistake(size, units, points, message):
+    """Issue 35: contacts typed in mm for a mesh in mm (positions are always metres), or a
+    mesh in mm read as metres, are named as such, not as a general question."""
+    with pytest.raises(jaxgrasp.GraspValueError) as info:
+        from_mesh(box(size), points, units=units, **FINGER)
+    text = str(info.value)
+    assert "from the mesh surface" in text and message in text and "\n" not in text, text
+
+
 def test_not_watertight_with_a_center_of_mass_is_fine():
     made = from_mesh(open_box(), POINTS, center_of_mass=[0, 0, 0], mass=0.1, **FINGER)
     np.testing.assert_allclose(made.grasp.normals, [[1, 0, 0], [-1, 0, 0]], atol=1e-15)

@@ -1,0 +1,298 @@
+"""Input files built to hurt (issue 40, items 3, 4 and 6): special files, files over their
+size cap, corrupt and lying ``.npz`` files, meshes outside the naming file's folder or
+not meshes at all, ``.jsonl`` lines holding U+2028 / U+0085, and the batch resume key
+over every mesh a dataset names.
+
+Each is a one-line :class:`~jaxgrasp.GraspValueError` (a whole-file problem) or an
+invalid row (a dataset line), and on the command line one line with exit status 2. The
+loaders run in-process; the command line runs in-process too (``run_cli``), and only
+where it stops before compiling anything, so this file runs in a few seconds.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import zipfile
+
+import numpy as np
+import pytest
+import trimesh
+
+import jaxgrasp
+from jaxgrasp import GraspValueError, load_dataset
+from jaxgrasp.io import _grasp_file
+
+FINGERTIP = {"radius": 0.025, "young_modulus": 6e5, "friction": 0.5, "max_force": 15.0}
+
+
+def grasp_dict(mesh: str | None = None, deformation: float = 0.002) -> dict:
+    """The cube of the paper as grasp-file data; with ``mesh``, on that mesh (a 0.1 m box)."""
+    contacts = [
+        {"position": [0.05, 0.0, 0.0], "initial_deformation": deformation},
+        {"position": [-0.05, 0.0, 0.0], "initial_deformation": deformation},
+    ]
+    if mesh is None:
+        contacts[0]["normal"], contacts[1]["normal"] = [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]
+        return {"fingertip": FINGERTIP, "contacts": contacts}
+    return {"fingertip": FINGERTIP, "object": {"mesh": mesh}, "contacts": contacts}
+
+
+@pytest.fixture(scope="module")
+def folders(tmp_path_factory):
+    """``(data, outside)``: two sibling folders, each with ``cube.stl`` (a 0.1 m box, m)."""
+    root = tmp_path_factory.mktemp("hostile")
+    data, outside = root / "data", root / "outside"
+    for folder in (data, outside):
+        folder.mkdir()
+        trimesh.creation.box(extents=(0.1, 0.1, 0.1)).export(folder / "cube.stl")
+    return data, outside
+
+
+def one_line(exc_info) -> str:
+    text = str(exc_info.value)
+    assert "\n" not in text, text
+    return text
+
+
+def write_jsonl(path, rows) -> None:
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows), encoding="utf-8")
+
+
+# --------------------------------------------------------------------------- special files and caps
+
+
+def test_dev_zero_as_a_grasp_file_is_one_line_exit_2(tmp_path, run_cli):
+    link = tmp_path / "cube.toml"
+    link.symlink_to("/dev/zero")
+    with pytest.raises(GraspValueError) as info:
+        jaxgrasp.load(link)
+    assert "is a character device, not a regular grasp file" in one_line(info)
+    rc, out, err = run_cli(["evaluate", link])
+    assert rc == 2 and out == "" and err.count("\n") == 1, err
+    assert err.startswith(f"jaxgrasp: error: {link}: is a character device") and "Traceback" not in err
+
+
+def test_a_fifo_is_refused_without_blocking(tmp_path):
+    fifo = tmp_path / "set.jsonl"
+    os.mkfifo(fifo)  # nobody writes to it: opening it to read would wait for ever
+    with pytest.raises(GraspValueError) as info:
+        load_dataset(fifo)
+    assert "is a FIFO (named pipe), not a regular dataset" in one_line(info)
+
+
+def test_files_over_their_cap_are_refused_before_reading(tmp_path, monkeypatch):
+    path = tmp_path / "cube.json"
+    path.write_text(json.dumps(grasp_dict()))
+    assert jaxgrasp.load(path).num_contacts == 2
+    monkeypatch.setattr(_grasp_file, "MAX_GRASP_FILE_BYTES", 100)
+    with pytest.raises(GraspValueError) as info:
+        jaxgrasp.load(path)
+    assert "more than the 9.537e-05 MiB read at most" in one_line(info)
+
+
+# --------------------------------------------------------------------------- .npz
+
+
+def _cube_arrays(b: int) -> dict[str, np.ndarray]:
+    return {
+        "positions": np.tile([[0.05, 0.0, 0.0], [-0.05, 0.0, 0.0]], (b, 1, 1)),
+        "normals": np.tile([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]], (b, 1, 1)),
+        "initial_deformation": np.full(b, 0.002), "radius": 0.025, "young_modulus": 6e5,
+        "friction": 0.5, "max_force": 15.0,
+    }
+
+
+def _npy_header(shape, dtype="<f8") -> bytes:
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buf, {"descr": dtype, "fortran_order": False, "shape": shape})
+    return buf.getvalue()  # magic, length and header
+
+
+def test_npz_with_zero_grasps(tmp_path):
+    path = tmp_path / "empty.npz"
+    np.savez(path, **{**_cube_arrays(0), "initial_deformation": np.zeros(0)})
+    with pytest.raises(GraspValueError) as info:
+        load_dataset(path)
+    assert one_line(info) == f"{path}: no grasps (positions has shape (0, 2, 3))"
+
+
+def test_truncated_npz(tmp_path):
+    path = tmp_path / "cut.npz"
+    np.savez(path, **_cube_arrays(50))
+    path.write_bytes(path.read_bytes()[:-700])  # the zip's directory and part of an array gone
+    with pytest.raises(GraspValueError) as info:
+        load_dataset(path)
+    assert one_line(info).startswith(f"{path}: not a readable .npz file (")
+
+
+def test_npy_header_claiming_21_tib_is_refused_before_allocating(tmp_path):
+    """positions.npy's header says (10**12, 3) float64 (21.8 TiB) but holds 48 bytes: the
+    loader must compare before allocating (a MemoryError or a killed process otherwise)."""
+    path = tmp_path / "liar.npz"
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("positions.npy", _npy_header((10**12, 3)) + np.zeros(6).tobytes())
+    with pytest.raises(GraspValueError) as info:
+        load_dataset(path)
+    text = one_line(info)
+    assert "array 'positions' claims shape (1000000000000, 3) of float64 (21.8 TiB)" in text, text
+
+
+def test_zip_directory_declaring_more_than_the_cap(tmp_path):
+    """A member whose central-directory entry declares ~4 GiB uncompressed (a zip bomb's
+    claim): refused from the directory alone, before any member is read."""
+    path = tmp_path / "bomb.npz"
+    np.savez(path, **_cube_arrays(4))
+    raw = bytearray(path.read_bytes())
+    entry = raw.index(b"PK\x01\x02")  # the first central-directory entry
+    raw[entry + 24 : entry + 28] = (0xFFFFFFF0).to_bytes(4, "little")  # its uncompressed size
+    path.write_bytes(bytes(raw))
+    with pytest.raises(GraspValueError) as info:
+        load_dataset(path)
+    assert "its arrays declare 4096 MiB uncompressed, more than the 1024 MiB read at most" in one_line(info)
+
+
+def test_npz_with_a_pickled_array_is_refused(tmp_path):
+    path = tmp_path / "pickle.npz"
+    np.savez(path, **{**_cube_arrays(2), "mass": np.array([{"x": 1}, None], dtype=object)})
+    with pytest.raises(GraspValueError) as info:
+        load_dataset(path)
+    assert "array 'mass' holds Python objects, which are not read (no pickles)" in one_line(info)
+
+
+# --------------------------------------------------------------------------- .jsonl lines
+
+
+@pytest.mark.parametrize("char", ["\u2028", "\u0085"])
+def test_jsonl_splits_on_newline_only(tmp_path, char):
+    """A raw U+2028 or U+0085 inside a JSON string (valid JSON) is part of its line:
+    ``str.splitlines`` broke such a line in two and shifted every later line number."""
+    odd = grasp_dict()
+    odd["fingertip"] = {**FINGERTIP, f"note{char}": 1.0}  # an unknown key: the row is invalid, as one row
+    lines = [json.dumps(grasp_dict()), json.dumps(odd, ensure_ascii=False), "{broken", json.dumps(grasp_dict())]
+    path = tmp_path / "set.jsonl"
+    path.write_bytes(("\n".join(lines) + "\n").encode("utf-8"))
+    assert char.encode("utf-8") in path.read_bytes()
+    got = load_dataset(path)
+    assert len(got) == 4 and got.valid.tolist() == [True, False, False, True]
+    assert got.errors[1].startswith("grasp 1 (line 2): unknown key"), got.errors[1]
+    assert got.errors[2].startswith("grasp 2 (line 3): malformed JSON"), got.errors[2]
+
+
+def test_loading_holds_columns_not_a_jax_grasp_per_row(tmp_path):
+    path = tmp_path / "set.npz"
+    np.savez(path, **_cube_arrays(200))
+    got = load_dataset(path)
+    columns = got.columns()
+    per_grasp = sum(a.nbytes for a in columns.fields.values()) / len(got)
+    assert per_grasp <= 26 * 8  # 2 contacts: 26 float64 numbers, no JAX array per field
+    assert isinstance(got.grasps, jaxgrasp.io._dataset.GraspRows)
+    np.testing.assert_array_equal(got.grasps[199].positions, _cube_arrays(1)["positions"][0])
+
+
+# --------------------------------------------------------------------------- meshes stay in their folder
+
+
+def test_dataset_row_naming_a_mesh_outside_is_an_invalid_row(folders, tmp_path):
+    data, outside = folders
+    link = data / "linked.stl"
+    if not link.exists():
+        link.symlink_to(outside / "cube.stl")  # inside by name, outside after symlinks
+    path = data / "set.jsonl"
+    write_jsonl(path, [grasp_dict("cube.stl"), grasp_dict("../outside/cube.stl"), grasp_dict("linked.stl"),
+                       grasp_dict(str(outside / "cube.stl"))])
+    got = load_dataset(path)
+    assert got.valid.tolist() == [True, False, False, False]
+    for i in (1, 2, 3):
+        assert f"grasp {i} (line {i + 1}): mesh path " in got.errors[i]
+        assert f"is outside the dataset's folder {str(data.resolve())!r}" in got.errors[i]
+        assert got.errors[i].endswith("pass --allow-dir DIR (Python: allowed_dirs=) to allow it")
+    allowed = load_dataset(path, allowed_dirs=[outside])
+    assert allowed.valid.all(), allowed.errors
+    assert set(allowed.mesh_sha256) == {str((data / "cube.stl").resolve()), str((outside / "cube.stl").resolve())}
+
+
+@pytest.mark.parametrize(
+    "name, message",
+    [
+        ("/etc/passwd", "mesh path '/etc/passwd' is not a mesh file: the formats read are .stl, .obj, .ply"),
+        ("parts.zip", "mesh path 'parts.zip' is not a mesh file"),
+        ("scene.gltf", "mesh path 'scene.gltf' is not a mesh file"),
+    ],
+)
+def test_only_mesh_formats_are_read(folders, name, message):
+    data, _ = folders
+    with pytest.raises(GraspValueError) as info:
+        _grasp_file.grasp_from_dict(grasp_dict(name), source="g.json", base=data)
+    assert one_line(info).startswith(f"g.json: {message}")
+
+
+def test_a_fifo_named_as_a_mesh_is_an_invalid_row(folders):
+    data, _ = folders
+    fifo = data / "pipe.stl"
+    if not fifo.exists():
+        os.mkfifo(fifo)
+    path = data / "fifo.jsonl"
+    write_jsonl(path, [grasp_dict("pipe.stl"), grasp_dict("cube.stl")])
+    got = load_dataset(path)
+    assert got.valid.tolist() == [False, True]
+    assert "pipe.stl': is a FIFO (named pipe), not a regular mesh" in got.errors[0], got.errors[0]
+
+
+def test_grasp_file_naming_a_mesh_outside(folders, run_cli):
+    from jaxgrasp.cli import build_parser
+    from jaxgrasp.cli._common import load_grasp
+
+    data, outside = folders
+    path = data / "away.json"
+    path.write_text(json.dumps(grasp_dict("../outside/cube.stl")))
+    rc, out, err = run_cli(["evaluate", path])
+    assert rc == 2 and out == "" and err.count("\n") == 1, err
+    assert err.startswith(f"jaxgrasp: error: {path}: mesh path '../outside/cube.stl' is outside the grasp file's folder")
+    args = build_parser().parse_args(["evaluate", str(path), "--allow-dir", str(outside)])
+    grasp = load_grasp(args)  # the option reaches the loader (nothing evaluated here)
+    np.testing.assert_allclose(np.asarray(grasp.positions), [[0.05, 0, 0], [-0.05, 0, 0]], atol=1e-12)
+    with pytest.raises(GraspValueError, match="allowed folder .* is not a folder"):
+        jaxgrasp.load(path, allowed_dirs=[data / "missing"])
+
+
+# --------------------------------------------------------------------------- resume key
+
+
+def test_editing_a_named_mesh_refuses_resume(tmp_path, run_cli):
+    from jaxgrasp.cli._batch import PARTIAL_NAME, resume_key
+    from jaxgrasp.engine._checkpoint import BatchCheckpoint
+
+    trimesh.creation.box(extents=(0.1, 0.1, 0.1)).export(tmp_path / "cube.stl")
+    path = tmp_path / "set.jsonl"
+    write_jsonl(path, [grasp_dict("cube.stl"), grasp_dict("cube.stl", 0.003)])
+    before = load_dataset(path)
+    assert resume_key(before) != before.source_sha256  # the mesh is in the key
+    out = tmp_path / "out"
+    out.mkdir()
+    BatchCheckpoint(out / PARTIAL_NAME, str(path), resume_key(before), 2, 2).start()  # an unfinished run
+    trimesh.creation.box(extents=(0.1, 0.1, 0.12)).export(tmp_path / "cube.stl")  # same dataset bytes
+    after = load_dataset(path)
+    assert after.source_sha256 == before.source_sha256 and resume_key(after) != resume_key(before)
+    rc, stdout, err = run_cli(["batch", path, "--out", out, "--resume"])
+    assert rc == 2 and stdout == "" and err.count("\n") == 1, err
+    assert err.startswith("jaxgrasp: error: --resume: ") and "was made from other input" in err, err
+
+
+def test_batch_allow_dir_reaches_the_dataset(folders, tmp_path, run_cli):
+    """``jaxgrasp batch --allow-dir``: without it the only row (a mesh outside) is invalid;
+    with it the row is read and the run goes on to the checkpoint (a stale one here, so
+    that it stops there, before compiling)."""
+    from jaxgrasp.engine._checkpoint import BatchCheckpoint
+
+    data, outside = folders
+    path = data / "away.jsonl"
+    write_jsonl(path, [grasp_dict("../outside/cube.stl")])
+    rc, _, err = run_cli(["batch", path, "--out", tmp_path / "o"])
+    assert rc == 2 and err.count("\n") == 1, err
+    assert "no valid grasp (1 invalid; first: grasp 0 (line 1): mesh path '../outside/cube.stl' is outside" in err, err
+    (tmp_path / "o" / "results.partial").mkdir(parents=True)
+    BatchCheckpoint(tmp_path / "o" / "results.partial", "other.jsonl", "0" * 64, 1, 2).start()
+    rc, _, err = run_cli(["batch", path, "--out", tmp_path / "o", "--allow-dir", outside, "--resume"])
+    assert rc == 2 and "was made from other input (other.jsonl" in err and err.count("\n") == 1, err
