@@ -19,6 +19,7 @@ from jaxgrasp.engine._store import (
     executable_entry,
     load_executable,
     save_executable,
+    serialized_stages,
 )
 
 __all__ = ["MEMO_SIZE", "clear_compiled", "compiled", "default_device", "wait_for_saves"]
@@ -176,11 +177,15 @@ _SAVES: list[threading.Thread] = []
 
 
 def _save_in_background(entry: StoreEntry, fn) -> None:
-    """:func:`save_executable` in a thread, so that serializing the executable overlaps its
-    first run instead of delaying it. The thread is not a
-    daemon (the interpreter waits for it at exit); a process that ends with ``os._exit``
-    (the ``jaxgrasp`` command) calls :func:`wait_for_saves` first."""
-    thread = threading.Thread(target=save_executable, args=(entry, fn), name="jaxgrasp-save")
+    """Serialize ``fn`` now, before it first runs (:func:`serialized_stages` says why), and
+    write it to the store in a thread (:func:`save_executable`), so that the write overlaps
+    the first run instead of delaying it. The thread is not a daemon (the interpreter
+    waits for it at exit); a process that ends with ``os._exit`` (the ``jaxgrasp``
+    command) calls :func:`wait_for_saves` first."""
+    stages = serialized_stages(fn)
+    if stages is None:
+        return
+    thread = threading.Thread(target=save_executable, args=(entry, stages), name="jaxgrasp-save")
     _SAVES.append(thread)
     thread.start()
 

@@ -106,6 +106,7 @@ __all__ = [
     "log_lines_on_stderr",
     "remove_stale_temp_files",
     "save_executable",
+    "serialized_stages",
     "set_executable_dir",
     "source_digest",
     "stats",
@@ -591,20 +592,33 @@ def _write_atomically(path: Path, data: bytes) -> None:
         raise
 
 
-def save_executable(entry: StoreEntry, fn) -> bool:
-    """Write the compiled executable ``fn`` (``jax.stages.Compiled`` or :class:`Staged`) to
-    ``entry`` atomically, with its key and checksum; whether it was written. Never raises
-    (an executable that cannot be serialized or written is built again next time, and
-    counts in ``stats()["cache_errors"]``)."""
-    from jax.experimental import serialize_executable
+def serialized_stages(fn) -> list | None:
+    """The stages of the compiled executable ``fn`` (``jax.stages.Compiled`` or
+    :class:`Staged`) serialized, as :func:`save_executable` writes them; ``None`` where it
+    cannot be serialized (counted in ``stats()["cache_errors"]``).
+
+    Call it before ``fn`` first runs: XLA's CPU runtime may replace parts of an executable
+    while it runs (a sort's comparison by a built-in one) with parts it cannot serialize,
+    so serializing it during or after its first run fails at random."""
+    from jax.experimental import serialize_executable as jax_serialize
 
     try:
         named = fn.stages.items() if isinstance(fn, Staged) else [(None, fn)]
-        stages = [(name, *serialize_executable.serialize(f)) for name, f in named]
+        return [(name, *jax_serialize.serialize(f)) for name, f in named]
+    except Exception:  # noqa: BLE001  not serializable: built again next time
+        _STATS["cache_errors"] += 1
+        return None
+
+
+def save_executable(entry: StoreEntry, stages: list) -> bool:
+    """Write serialized ``stages`` (:func:`serialized_stages`) to ``entry`` atomically,
+    with its key and checksum; whether it was written. Never raises (an executable that
+    cannot be written is built again next time, and counts in ``stats()["cache_errors"]``)."""
+    try:
         data = _encode(entry.key, pickle.dumps(stages, protocol=pickle.HIGHEST_PROTOCOL))
         _write_atomically(entry.path, data)
         return True
-    except Exception:  # noqa: BLE001  not serializable, or no writable cache: build every time
+    except Exception:  # noqa: BLE001  no writable cache: build every time
         _STATS["cache_errors"] += 1
         return False
 

@@ -217,7 +217,7 @@ def test_links_are_never_written_through(folder, tmp_path, monkeypatch, caplog):
     # a write that fails at the rename removes its temporary file
     monkeypatch.setattr(store, "_random_suffix", lambda: "2" * 16)
     monkeypatch.setattr(store.os, "replace", lambda *a: (_ for _ in ()).throw(OSError(28, "No space left")))
-    assert store.save_executable(_entry(), built) is False
+    assert store.save_executable(_entry(), store.serialized_stages(built)) is False
     assert not (folder / f".{path.name}.{os.getpid()}.{'2' * 16}.tmp").exists()
 
 

@@ -310,7 +310,7 @@ def test_show_without_a_mesh_draws_the_contacts_hull(tmp_path, cube_value):
     [
         (["--out", "g.jpg2"], "--out 'g.jpg2': the file must end in .png or .pdf or .svg"),
         (["--glb", "g.obj"], "--glb 'g.obj': the file must end in .glb"),
-        (["--magnification", "-1"], "--magnification must be a finite number > 0"),
+        (["--magnification", "-1"], "--magnification must be a number from 0.001 to 1e+12"),
     ],
 )
 def test_show_option_errors(run_cli, argv, message):
