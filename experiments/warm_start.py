@@ -5,8 +5,8 @@ temporary folder; ``JAXGRASP_CACHE_DIR`` and ``XDG_CACHE_HOME`` removed), so tha
 only cache is the one ``import jaxgrasp`` turns on by itself, in
 ``~/.cache/jaxgrasp/xla/jaxgrasp-executables``. The first run compiles and stores the
 evaluators; the second, another process with the same home, loads them. The script is
-the README's example (evaluate the cube of ``examples/cube.toml``, then
-``evaluate_batch`` of three cubes), with logging at INFO level so that the compilation
+the README's first Python block, read from README.md (so that it cannot drift from it),
+with logging at INFO level so that the compilation
 reports show, and the cache counters printed at the end.
 
 Prints each run's wall time (process start to exit), the ratio first / second, the
@@ -30,31 +30,27 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 LOG = ROOT / "experiments" / "warm_start.log"
 
-EXAMPLE = """
-import logging, json, sys
-logging.basicConfig(level=logging.INFO, format="%(message)s")
+README = ROOT / "README.md"
 
-import jaxgrasp
 
-grasp = jaxgrasp.load("examples/cube.toml")      # SI units: m, Pa, N, kg
-result = jaxgrasp.evaluate(grasp)
-print(result.value, result.status_name)          # J, 'stable'
-
-grasps = [jaxgrasp.presets.cube(young_modulus=e, initial_deformation=0.002) for e in (2e5, 6e5, 1e6)]
-batch = jaxgrasp.evaluate_batch(grasps)          # one compiled evaluator for the whole list
-print(batch.value, batch.status_names)           # (3,) J, one status each
-
-print(json.dumps(jaxgrasp.engine._store.stats()), file=sys.stderr)
-"""
+def readme_example() -> str:
+    """The README's Python example (its first ``python`` block), as written there, with
+    logging at INFO level first (so the compilation reports show) and the cache counters
+    printed last."""
+    text = README.read_text(encoding="utf-8")
+    block = text.split("```python\n", 1)[1].split("```", 1)[0]
+    head = 'import logging, json, sys\nlogging.basicConfig(level=logging.INFO, format="%(message)s")\n'
+    tail = '\nimport jaxgrasp\nprint(json.dumps(jaxgrasp.engine._store.stats()), file=sys.stderr)\n'
+    return head + block + tail
 
 
 def run_once(home: Path) -> dict:
-    """One fresh process of :data:`EXAMPLE` with ``HOME=home``: wall seconds, load, output."""
+    """One fresh process of the README's example with ``HOME=home``: wall seconds, load, output."""
     env = {k: v for k, v in os.environ.items() if k not in ("JAXGRASP_CACHE_DIR", "XDG_CACHE_HOME")}
     env["HOME"] = str(home)
     load = os.getloadavg()[0]
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-c", EXAMPLE], cwd=ROOT, env=env, capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-c", readme_example()], cwd=ROOT, env=env, capture_output=True, text=True,
                           timeout=900, check=False)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
