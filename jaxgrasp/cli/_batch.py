@@ -212,7 +212,7 @@ def _summary(result, source, wall, run, resumed, out, written, replaced, removed
     span = f"{valid.min()}-{valid.max()}" if valid.min() != valid.max() else f"{valid.min()}"
     timing = "no chunk left to evaluate" if run is None else (
         f"compile {run.compile_seconds:.1f} s, run {run.run_seconds:.1f} s, "
-        f"{len(run) / max(run.run_seconds, 1e-9):.1f} grasps/s"
+        f"{len(run) / max(run.run_seconds, 1e-9):.1f} grasps per second"
     )
     again = f"; {resumed} resumed from the checkpoint" if resumed else ""
     lines = [
