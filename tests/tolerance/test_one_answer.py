@@ -73,7 +73,7 @@ def same_side_grasps() -> list:
     cube's programs: spread along y the grasp slips; spread along z the equilibrium solve
     is pulled out through the apex of the friction cones ("infeasible" before issue 40,
     though the initial state satisfies every constraint). The probe's three-contact grasp
-    behaves the same (checked by hand with the command line); it would cost an N = 3 program here."""
+    behaves the same (:func:`test_three_fingertips_on_one_side_give_one_answer`)."""
     normals = [[1.0, 0.0, 0.0], [0.9, 0.1, 0.0]]
     spreads = ([[0.05, 0, 0], [0.05, 0.01, 0]], [[0.05, 0, 0], [0.05, 0, 0.02]])
     return [
@@ -143,3 +143,22 @@ def test_symmetric_boundary_settles_whatever_the_companions():
         assert batch.status_names[i] == "stable", batch[i].explain()
         np.testing.assert_array_equal(batch[i].boundary_status, single.boundary_status)
         np.testing.assert_allclose(batch[i].boundary_energy, np.asarray(single.boundary_energy), rtol=1e-9)
+
+
+@pytest.mark.slow  # an N = 3 program with and without the settling stage, and a batch of 3 contacts
+def test_three_fingertips_on_one_side_give_one_answer():
+    """The probe's ``same_side.json``: three fingertips all pressing from +x (normals
+    (1,0,0), (0.9,+-0.1,0)) on the cube. ``evaluate`` raised a ``RuntimeError`` on it and
+    ``batch`` called it unstable. Fingertips on one side cannot hold the object with any
+    margin, so the value is 0 (not stable), the same status from both entry points, and
+    the result explains itself without raising."""
+    grasp = jaxgrasp.Grasp.create(
+        [[0.05, 0, 0], [0.05, 0.01, 0], [0.05, -0.01, 0]], [[1.0, 0, 0], [0.9, 0.1, 0], [0.9, -0.1, 0]], 0.002,
+        radius=0.025, young_modulus=2e5, friction=0.5, max_force=15.0,
+    )
+    single = jaxgrasp.evaluate(grasp)
+    batch = jaxgrasp.evaluate_batch([grasp, grasp], chunk_size=2)
+    assert single.status_name == batch.status_names[0] == batch.status_names[1] != "stable"
+    assert float(single.value) == 0.0 and np.all(batch.value == 0.0)
+    assert single.to_dict()["status"] == single.status_name
+    assert single.explain()
