@@ -12,8 +12,9 @@ Each grasp's ``S`` perturbed copies (:mod:`jaxgrasp.analysis._uncertainty`) are 
 into one batched grasp with those of every other grasp of the same contact count and
 evaluated by :func:`jaxgrasp.evaluate_batch`: one compiled evaluator for all samples of
 all grasps of a contact count, cut into the engine's chunks. The nominal grasps are
-evaluated by :func:`jaxgrasp.evaluate_batch` too, in a batch of their own (a single
-grasp by :func:`jaxgrasp.evaluate`, whose compiled program a process has anyway).
+evaluated by :func:`jaxgrasp.evaluate_batch` too, in a batch of their own with the
+samples' chunk (a single grasp by :func:`jaxgrasp.evaluate`, whose compiled program a
+process has anyway).
 
 The statistics of a grasp are over its samples whose evaluation settled (status
 ``stable``, ``unstable`` or ``infeasible``): ``p_stable`` is the fraction of them that
@@ -27,12 +28,14 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Callable, Sequence
 
+import jax
 import numpy as np
 
 from jaxgrasp.analysis._uncertainty import CLIP_SOURCES, Uncertainty, draw_normals, perturb
 from jaxgrasp.engine._batch import evaluate_batch
 from jaxgrasp.engine._batch_result import BatchResult, assemble
 from jaxgrasp.engine._evaluate import evaluate
+from jaxgrasp.engine._plan import plan_chunks
 from jaxgrasp.io._mesh import MeshGrasp
 from jaxgrasp.model._grasp import Grasp, stack
 from jaxgrasp.model._validation import GraspValueError
@@ -263,7 +266,7 @@ def robust_batch(grasps, uncertainty: Uncertainty, samples: int = 256, seed: int
     """
     levels = _check_call(uncertainty, samples, seed, quantiles)
     groups, nominal_input = _groups(grasps)
-    nominal = _nominal(nominal_input, options, chunk_size)
+    nominal = _nominal(nominal_input, options, chunk_size, samples)
     g = len(nominal)
     values = np.empty((g, samples))
     statuses = np.empty((g, samples), dtype=np.int64)
@@ -303,6 +306,8 @@ def _groups(grasps) -> tuple[list, Any]:
     (:meth:`~jaxgrasp.Grasp.to_numpy_batch`) and mesh projection (``None`` without a
     mesh grasp); and what :func:`jaxgrasp.evaluate_batch` takes for the nominal grasps."""
     if isinstance(grasps, Grasp) and np.ndim(grasps.positions) == 3:
+        if grasps.active is not None and bool(np.all(grasps.active)):  # every contact there: the unmasked program
+            grasps = grasps.replace(active=None)
         return [(np.arange(np.shape(grasps.positions)[0]), grasps.to_numpy_batch(), None)], grasps
     items = list(grasps) if isinstance(grasps, (list, tuple)) else None
     if not items or not all(isinstance(g, (Grasp, MeshGrasp)) for g in items):
@@ -321,15 +326,29 @@ def _groups(grasps) -> tuple[list, Any]:
     return groups, plain
 
 
-def _nominal(grasps, options: EvaluateOptions, chunk_size) -> BatchResult:
-    """The evaluation of the unperturbed grasps: :func:`jaxgrasp.evaluate_batch`, or
-    :func:`jaxgrasp.evaluate` for a single grasp of a list (as a batch of one)."""
-    if isinstance(grasps, Grasp) or len(grasps) > 1:
-        return evaluate_batch(grasps, options=options, chunk_size=chunk_size)
-    one = evaluate(grasps[0], options)
-    results = {f.name: np.array(getattr(one, f.name))[None] for f in dataclasses.fields(Evaluation)}
-    active = np.ones((1, grasps[0].num_contacts), dtype=bool)
-    return assemble([(np.arange(1), results)], 1, np.zeros(0, dtype=int), active, (None,))
+def _nominal(grasps, options: EvaluateOptions, chunk_size, samples: int) -> BatchResult:
+    """The evaluation of the unperturbed grasps: :func:`jaxgrasp.evaluate` for a single
+    grasp of a list (as a batch of one), else :func:`jaxgrasp.evaluate_batch` in the
+    chunks of the samples (fewer grasps than a chunk are padded to one with copies of the
+    last, as the engine pads), so that the nominal batch needs no program of its own."""
+    if not isinstance(grasps, Grasp) and len(grasps) == 1:
+        one = evaluate(grasps[0], options)
+        results = {f.name: np.array(getattr(one, f.name))[None] for f in dataclasses.fields(Evaluation)}
+        active = np.ones((1, grasps[0].num_contacts), dtype=bool)
+        return assemble([(np.arange(1), results)], 1, np.zeros(0, dtype=int), active, (None,))
+    g = np.shape(grasps.positions)[0] if isinstance(grasps, Grasp) else len(grasps)
+    chunk = plan_chunks(g * samples, chunk_size).chunk
+    if g >= chunk:
+        return evaluate_batch(grasps, options=options, chunk_size=chunk)
+    if isinstance(grasps, Grasp):
+        padded = jax.tree_util.tree_map(lambda a: np.concatenate([a, np.repeat(a[-1:], chunk - g, axis=0)]), grasps)
+    else:
+        padded = list(grasps) + [grasps[-1]] * (chunk - g)
+    res = evaluate_batch(padded, options=options, chunk_size=chunk)
+    return dataclasses.replace(
+        res, evaluation=jax.tree_util.tree_map(lambda a: a[:g], res.evaluation), num_contacts=res.num_contacts[:g],
+        active=res.active[:g], errors=res.errors[:g],
+    )
 
 
 def _mesh_projection(meshes: list, normals: np.ndarray) -> Callable:
