@@ -15,7 +15,7 @@
    keeping a tuned grasp only where it still keeps every rule and settles;
 5. **rank** the settled grasps by value and give the ``top`` of them, each rebuilt exactly as
    its grasp file will load (:func:`jaxgrasp.from_mesh` with its normals, centre of mass
-   and mass) and evaluated again, with its epsilon.
+   and mass) and evaluated again by :func:`jaxgrasp.evaluate`, with its epsilon.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ import numpy as np
 from jaxgrasp.analysis._epsilon import epsilon
 from jaxgrasp.analysis._tune import tune
 from jaxgrasp.engine._batch import evaluate_batch
+from jaxgrasp.engine._evaluate import evaluate
 from jaxgrasp.io._mesh import MeshGrasp, mass_properties, from_mesh, load_mesh
 from jaxgrasp.model._fields import DEFAULT_GRAVITY
 from jaxgrasp.model._grasp import Grasp
@@ -303,7 +304,9 @@ def _final(setup: _Setup, entries, top: int) -> dict:
     """The ``top`` best settled entries, rebuilt as their files load and evaluated again,
     best first, with their epsilon."""
     grasps = [_mesh_grasp(setup, p, n, d) for p, n, d, _ in entries]
-    ev = evaluate_batch([g.grasp for g in grasps])
+    # one at a time, as `jaxgrasp evaluate` of the grasp's file does: the very same numbers
+    evs = [evaluate(g.grasp) for g in grasps]
+    ev = jax.tree_util.tree_map(lambda *a: np.stack([np.asarray(x) for x in a]), *evs)
     values, statuses = np.asarray(ev.value), np.asarray(ev.status)
     order = _ranked(values, statuses)[:top]
     return dict(

@@ -151,8 +151,7 @@ class Surface:
             vertices and derivatives).
         """
         pts = jnp.asarray(points, jnp.float64)
-        flat = pts.reshape(-1, 3)
-        hit = jax.vmap(lambda p: _closest_one(self, p))(flat)
+        hit = _closest_many(self, pts.reshape(-1, 3))
         return jax.tree_util.tree_map(lambda a: a.reshape(pts.shape[:-1] + a.shape[1:]), hit)
 
     def face_distances(self, points) -> jax.Array:
@@ -161,6 +160,13 @@ class Surface:
         q = jax.vmap(lambda p: closest_on_triangles(p, self.triangles))(pts.reshape(-1, 3))
         d = jnp.linalg.norm(q - pts.reshape(-1, 1, 3), axis=-1)
         return d.reshape(pts.shape[:-1] + (self.num_faces,))
+
+
+@jax.jit
+def _closest_many(surface: Surface, points) -> SurfacePoint:
+    """:func:`_closest_one` of each of ``points (P, 3)`` (compiled once per shape when
+    called eagerly; inlined where it is traced)."""
+    return jax.vmap(lambda p: _closest_one(surface, p))(points)
 
 
 def _closest_one(surface: Surface, p) -> SurfacePoint:
