@@ -57,11 +57,8 @@ def random_grasps() -> list[jaxgrasp.Grasp]:
 
 
 def copies(grasp, u) -> list[jaxgrasp.Grasp]:
-    """The robust run's perturbed copies, as grasps."""
-    from jaxgrasp.analysis._uncertainty import draw_normals, perturb
-
-    fields = jaxgrasp.stack([grasp]).replace(active=None).to_numpy_batch()
-    out, _ = perturb(fields, u, draw_normals(u, SAMPLES, 0, 3), SAMPLES)
+    """The robust run's perturbed copies (:func:`jaxgrasp.analysis.perturbed`), as grasps."""
+    out = jaxgrasp.analysis.perturbed(grasp, u, SAMPLES, seed=0).to_numpy_batch()
     return [jaxgrasp.Grasp.create(**{k: v[i] for k, v in out.items()}) for i in range(SAMPLES)]
 
 

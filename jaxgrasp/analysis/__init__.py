@@ -3,7 +3,7 @@ the robust value under uncertainty.
 """
 
 from jaxgrasp.analysis._epsilon import EpsilonResult, epsilon
-from jaxgrasp.analysis._robust import RobustBatch, RobustResult, RobustStatus, robust, robust_batch
+from jaxgrasp.analysis._robust import RobustBatch, RobustResult, RobustStatus, perturbed, robust, robust_batch
 from jaxgrasp.analysis._sweep import PARAMETERS, SweepResult, sweep
 from jaxgrasp.analysis._tune import TuneResult, tune
 from jaxgrasp.analysis._tune_status import TuneStatus
@@ -20,6 +20,7 @@ __all__ = [
     "EpsilonResult",
     "robust",
     "robust_batch",
+    "perturbed",
     "Uncertainty",
     "parse_spec",
     "RobustResult",

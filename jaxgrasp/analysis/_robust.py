@@ -40,15 +40,20 @@ from jaxgrasp.io._mesh import MeshGrasp
 from jaxgrasp.model._grasp import Grasp, stack
 from jaxgrasp.model._validation import GraspValueError
 from jaxgrasp.solver._status import Coded
+from jaxgrasp.surface import Surface
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 
-__all__ = ["robust", "robust_batch", "RobustResult", "RobustBatch", "RobustStatus", "DEFAULT_QUANTILES",
+__all__ = ["robust", "robust_batch", "perturbed", "RobustResult", "RobustBatch", "RobustStatus", "DEFAULT_QUANTILES",
            "quantile_name"]
 
 DEFAULT_QUANTILES = (0.05, 0.5)
 """The quantile levels of the value that :func:`robust` reports by default (the 0.05 quantile and the median)."""
+
+MESH_FACES = 256
+"""A mesh's faces are padded to a power of two times this (:meth:`jaxgrasp.surface.Surface.padded`),
+so that the closest-point search of meshes of similar size is compiled once."""
 
 _SETTLED = (GraspStatus.STABLE, GraspStatus.UNSTABLE, GraspStatus.INFEASIBLE)
 
@@ -272,16 +277,39 @@ def robust_batch(grasps, uncertainty: Uncertainty, samples: int = 256, seed: int
     statuses = np.empty((g, samples), dtype=np.int64)
     clipped = {name: np.zeros(g, dtype=np.int64) for name in CLIP_SOURCES}
     for rows, fields, project in groups:
-        z = draw_normals(uncertainty, samples, seed, fields["positions"].shape[1])
-        perturbed, clips = perturb(fields, uncertainty, z, samples, project)
-        active = perturbed.pop("active", None)
-        res = evaluate_batch(Grasp(**perturbed, active=active), options=options, chunk_size=chunk_size,
-                             progress=progress)
+        batch, clips = _perturbed(fields, project, uncertainty, samples, seed)
+        res = evaluate_batch(batch, options=options, chunk_size=chunk_size, progress=progress)
         values[rows] = np.asarray(res.value).reshape(len(rows), samples)
         statuses[rows] = np.asarray(res.status).reshape(len(rows), samples)
         for name, c in clips.items():
             clipped[name][rows] = c
     return _summarise(values, statuses, levels, nominal, clipped, uncertainty, samples, seed)
+
+
+def perturbed(grasp, uncertainty: Uncertainty, samples: int = 256, seed: int = 0) -> Grasp:
+    """The perturbed copies of ``grasp`` that :func:`robust` evaluates, for a look at them.
+
+    Args:
+        grasp: a :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp` (one grasp).
+        uncertainty, samples, seed: as :func:`robust`.
+
+    Returns:
+        One batched :class:`~jaxgrasp.Grasp` of ``samples`` copies (``positions (S, N, 3)``
+        m, model frame), sample ``k`` at index ``k``.
+    """
+    _check_call(uncertainty, samples, seed, ())
+    if not (isinstance(grasp, MeshGrasp) or (isinstance(grasp, Grasp) and np.ndim(grasp.positions) == 2)):
+        raise GraspValueError("perturbed needs one jaxgrasp.Grasp or MeshGrasp")
+    _, fields, project = _groups([grasp])[0][0]
+    return _perturbed(fields, project, uncertainty, samples, seed)[0]
+
+
+def _perturbed(fields, project, uncertainty, samples, seed) -> tuple[Grasp, dict]:
+    """A group's perturbed copies as one batched grasp (grasp-major rows) and the clip counts."""
+    z = draw_normals(uncertainty, samples, seed, fields["positions"].shape[1])
+    out, clips = perturb(fields, uncertainty, z, samples, project)
+    active = out.pop("active", None)
+    return Grasp(**out, active=active), clips
 
 
 def _check_call(uncertainty, samples, seed, quantiles) -> tuple:
@@ -353,10 +381,19 @@ def _nominal(grasps, options: EvaluateOptions, chunk_size, samples: int) -> Batc
 
 def _mesh_projection(meshes: list, normals: np.ndarray) -> Callable:
     """``project(positions (G, S, N, 3)) -> (positions, normals)``: each mesh grasp's moved
-    contacts onto its mesh; needs the surface package (issue 36), not merged yet."""
+    contacts onto its mesh (the closest surface point, the face's outward normal there,
+    :class:`jaxgrasp.surface.Surface`); a plain grasp's kept, with its normals."""
 
     def project(moved: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        raise GraspValueError("position uncertainty on a MeshGrasp needs jaxgrasp.surface, which this version lacks")
+        pos = moved.copy()
+        nrm = np.broadcast_to(normals[:, None], moved.shape).copy()
+        for k, mg in enumerate(meshes):
+            if mg is None:
+                continue
+            hit = Surface.from_trimesh(mg.mesh, pad_to=MESH_FACES).closest(mg.to_mesh_frame(moved[k]))
+            pos[k] = np.asarray(hit.point) - mg.center_of_mass
+            nrm[k] = np.asarray(hit.normal)
+        return pos, nrm
 
     return project
 

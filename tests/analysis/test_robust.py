@@ -16,6 +16,7 @@ must be that of its own friction against ``mu*``.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ import pytest
 import jaxgrasp
 from jaxgrasp.analysis import RobustStatus, Uncertainty
 
+ROOT = Path(__file__).resolve().parents[2]
 CHUNK = 4  # the samples' chunk: the 2-contact batch program of chunks of 4
 MASS = 0.2306  # kg: the cube's friction threshold near 0.45, below its friction 0.5
 SPREAD = 0.2
@@ -121,3 +123,33 @@ def test_bad_calls_are_one_line_errors():
             jaxgrasp.robust(*args)
     with pytest.raises(jaxgrasp.GraspValueError, match="quantiles must be numbers in"):
         jaxgrasp.robust(_cube(), Uncertainty(), quantiles=(0.5, 1.5))
+
+
+def test_mesh_contacts_move_along_the_mesh():
+    """The block of ``examples/block.toml`` (a chamfered box mesh, 2 contacts): each moved
+    contact lies in a face of the mesh (in its plane, barycentric coordinates in [0, 1],
+    checked face by face in NumPy) and carries that face's outward normal; the robust
+    value evaluates such copies."""
+    mg = jaxgrasp.load(ROOT / "examples" / "block.toml", keep_mesh=True)
+    u = Uncertainty(position=3e-3)
+    copies = jaxgrasp.analysis.perturbed(mg, u, samples=16, seed=1)
+    pos = mg.to_mesh_frame(np.asarray(copies.positions).reshape(-1, 3))
+    tri = np.asarray(mg.mesh.triangles)  # (F, 3, 3)
+    a, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    n = np.cross(e1, e2)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    d = pos[:, None, :] - a[None]  # (P, F, 3)
+    plane = np.abs(np.einsum("pfk,fk->pf", d, n))
+    g = np.stack([np.einsum("fk,fk->f", e1, e1), np.einsum("fk,fk->f", e1, e2), np.einsum("fk,fk->f", e2, e2)])
+    b1, b2 = np.einsum("pfk,fk->pf", d, e1), np.einsum("pfk,fk->pf", d, e2)
+    det = g[0] * g[2] - g[1] ** 2
+    s, t = (g[2] * b1 - g[1] * b2) / det, (g[0] * b2 - g[1] * b1) / det
+    inside = (plane < 1e-12) & (s > -1e-9) & (t > -1e-9) & (s + t < 1 + 1e-9)
+    assert inside.any(axis=1).all()
+    normals = np.asarray(copies.normals).reshape(-1, 3)
+    for k in range(len(pos)):  # the normal of a face the point lies in
+        assert np.min(np.linalg.norm(n[inside[k]] - normals[k], axis=1)) < 1e-12, k
+    moved = np.linalg.norm(np.asarray(copies.positions) - np.asarray(mg.grasp.positions), axis=-1)
+    assert 1e-3 < np.median(moved) < 1e-2  # a 2-D move of 3 mm per coordinate: median 3.5 mm
+    r = jaxgrasp.robust(mg, u, samples=4, seed=1, chunk_size=CHUNK)
+    assert r.status == RobustStatus.ESTIMATED and r.nominal.status_name == jaxgrasp.evaluate(mg.grasp).status_name
