@@ -130,15 +130,16 @@ class _Progress:
 
 def _write(res, out: Path, args) -> tuple[list[str], list[str]]:
     """Write the set into ``out``; the names written and those that replaced previous files."""
-    from jaxgrasp.io._grasp_file import mesh_grasp_to_dict, mesh_reference, to_text
+    from jaxgrasp.io._grasp_file import dict_to_toml, mesh_grasp_to_dict, mesh_reference
 
     if not res.grasps:
         raise UsageError(f"plan {args.mesh}: {res.status.message}; nothing written")
     name, raw = mesh_reference(res.best, out, copy=True)
-    lines = "".join(json.dumps(mesh_grasp_to_dict(g, name)) + "\n" for g in res.grasps)
+    # the mesh-frame points each grasp was made from: each file loads to the grasp evaluated
+    files = [mesh_grasp_to_dict(g, name, p) for g, p in zip(res.grasps, res.mesh_positions)]
     members = {
-        out / "ranked.jsonl": lines.encode("utf-8"),
-        out / "best.toml": to_text(res.best, out / "best.toml", name).encode("utf-8"),
+        out / "ranked.jsonl": "".join(json.dumps(d) + "\n" for d in files).encode("utf-8"),
+        out / "best.toml": dict_to_toml(files[0]).encode("utf-8"),
         out / "results.csv": outputs.csv_content(RESULT_COLUMNS, ([r[c] for c in RESULT_COLUMNS] for r in res.rows())),
     }
     if raw is not None:
