@@ -61,7 +61,7 @@ def add_parser(sub) -> None:
     mass.add_argument("--mass", type=float, default=None, metavar="KG", help="object mass, kg")
     sp.add_argument("--gravity", default="0,0,-9.81", metavar="GX,GY,GZ",
                     help="gravity in the mesh's axes, m/s^2 (default 0,0,-9.81)")
-    sp.add_argument("--samples", type=int, default=500, metavar="N", help="valid candidates to evaluate (default 500)")
+    sp.add_argument("--samples", type=int, default=150, metavar="N", help="valid candidates to evaluate (default 150)")
     sp.add_argument("--top", type=int, default=10, metavar="K", help="ranked grasps to write (default 10)")
     sp.add_argument("--refine", type=int, default=3, metavar="K", help="best candidates to tune (default 3)")
     sp.add_argument("--seed", type=int, default=0, help="seed of the random draws (default 0)")

@@ -73,8 +73,8 @@ class _Setup:
 def plan(
     mesh, fingers: int = 2, *, radius: float, young_modulus: float, friction: float, max_force: float,
     mass: float | None = None, density: float | None = None, center_of_mass=None, gravity=DEFAULT_GRAVITY,
-    units: str = "m", samples: int = 500, top: int = 10, refine: int = 3, seed: int = 0,
-    rules: ContactRules = ContactRules(), sampler: str | None = None, tune_maxiter: int = 30, progress=None,
+    units: str = "m", samples: int = 150, top: int = 10, refine: int = 3, seed: int = 0,
+    rules: ContactRules | None = None, sampler: str | None = None, tune_maxiter: int = 30, progress=None,
 ) -> PlanResult:
     """Find the grasps of a meshed object by ``fingers`` fingertips that tolerate the most energy.
 
@@ -92,7 +92,8 @@ def plan(
             ``_ROUND`` draws do not find them: the result says how many).
         top: ranked grasps to return. refine: of the best, how many to tune.
         seed: seed of every random draw: equal seeds give equal plans.
-        rules: the contact rules' tolerances (:class:`~jaxgrasp.surface.ContactRules`).
+        rules: the contact rules' tolerances (:class:`~jaxgrasp.surface.ContactRules`;
+            default ``ContactRules()``).
         sampler: one of :data:`SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
         tune_maxiter: iterations of each refinement.
         progress: ``progress(stage, done, total)`` (stage ``"draw"``, ``"evaluate"``, ``"refine"``).
@@ -105,6 +106,7 @@ def plan(
     """
     t0 = time.perf_counter()
     sampler = _checked_args(fingers, samples, top, refine, seed, sampler)
+    rules = ContactRules() if rules is None else rules
     setup = _setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force)
     rng = np.random.default_rng(seed)
     pos, nrm, dr, sampled, failures = _draw_valid(setup, fingers, samples, sampler, rules, rng, progress)

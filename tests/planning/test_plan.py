@@ -17,7 +17,7 @@ from jaxgrasp.io._mesh import closest_on_triangles, load_mesh
 from jaxgrasp.planning import PlanStatus, plan
 from jaxgrasp.planning._sampling import antipodal_pairs, first_hits, surface_points
 
-MESH = Path(__file__).resolve().parent.parent / "data" / "meshes" / "pybullet_000_mm.obj"
+MESH = Path(__file__).resolve().parents[2] / "examples" / "meshes" / "pybullet_000_mm.obj"
 TIP = dict(radius=0.01, young_modulus=3e5, friction=0.8, max_force=15.0)
 SMALL = dict(units="mm", density=500.0, samples=48, top=5, refine=1, tune_maxiter=6, **TIP)
 

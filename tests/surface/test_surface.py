@@ -17,7 +17,7 @@ from jaxgrasp.io._mesh import load_mesh
 from jaxgrasp.surface import ContactRules, Surface, check_contacts, contact_radius, deformation_range
 
 HALF = np.array([0.05, 0.03, 0.02])  # m, half-extents of the test box
-MESH = Path(__file__).resolve().parent.parent / "data" / "meshes" / "pybullet_000_mm.obj"
+MESH = Path(__file__).resolve().parents[2] / "examples" / "meshes" / "pybullet_000_mm.obj"
 
 
 @pytest.fixture(scope="module")
