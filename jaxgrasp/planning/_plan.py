@@ -50,8 +50,9 @@ SAMPLERS = ("antipodal", "spread", "uniform")
 _ROUND = 512
 """Candidates drawn and checked per round."""
 
-_MAX_ROUNDS = 40
-"""Rounds drawn at most before the plan goes on with the valid candidates it has."""
+_MAX_DRAWS = 100
+"""Candidates drawn per valid one asked for, at most (and at least 40 rounds): past that the
+plan goes on with the valid candidates it has (the result counts them)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,8 +89,8 @@ def plan(
             :func:`jaxgrasp.from_mesh`.
         gravity: ``(3,)`` m/s^2 in the mesh's axes.
         units: the mesh's length unit, ``"m"``, ``"cm"`` or ``"mm"``.
-        samples: valid candidates to evaluate (fewer when ``_MAX_ROUNDS`` rounds of
-            ``_ROUND`` draws do not find them: the result says how many).
+        samples: valid candidates to evaluate (fewer when ``_MAX_DRAWS`` draws per valid one
+            asked for do not find them: the result says how many).
         top: ranked grasps to return. refine: of the best, how many to tune.
         seed: seed of every random draw: equal seeds give equal plans.
         rules: the contact rules' tolerances (:class:`~jaxgrasp.surface.ContactRules`;
@@ -224,11 +225,11 @@ def _dr_range(setup: _Setup, rules: ContactRules) -> tuple[float, float]:
 
 
 def _draw_valid(setup: _Setup, fingers, samples, sampler, rules, rng, progress):
-    """Rounds of candidates until ``samples`` keep every rule (or ``_MAX_ROUNDS`` rounds):
+    """Rounds of candidates until ``samples`` keep every rule (or ``_MAX_DRAWS`` per sample):
     ``(positions, normals, dr, drawn, failures by rule)`` of the first ``samples`` valid."""
     keep: list = []
     drawn, failures, valid = 0, dict.fromkeys(RuleCheck.RULES, 0), 0
-    for _ in range(_MAX_ROUNDS):
+    for _ in range(max(40, -(-_MAX_DRAWS * samples // _ROUND))):
         pos, nrm, dr = _draw_round(setup, fingers, sampler, rules, rng)
         if len(pos):
             chk = _check(setup, rules, pos, nrm, dr)
