@@ -61,7 +61,7 @@ def add_parser(sub) -> None:
     mass.add_argument("--mass", type=float, default=None, metavar="KG", help="object mass, kg")
     sp.add_argument("--gravity", default="0,0,-9.81", metavar="GX,GY,GZ",
                     help="gravity in the mesh's axes, m/s^2 (default 0,0,-9.81)")
-    sp.add_argument("--samples", type=int, default=500, metavar="N", help="valid candidates to evaluate (default 500)")
+    sp.add_argument("--samples", type=int, default=150, metavar="N", help="valid candidates to evaluate (default 150)")
     sp.add_argument("--top", type=int, default=10, metavar="K", help="ranked grasps to write (default 10)")
     sp.add_argument("--refine", type=int, default=3, metavar="K", help="best candidates to tune (default 3)")
     sp.add_argument("--seed", type=int, default=0, help="seed of the random draws (default 0)")
@@ -130,15 +130,16 @@ class _Progress:
 
 def _write(res, out: Path, args) -> tuple[list[str], list[str]]:
     """Write the set into ``out``; the names written and those that replaced previous files."""
-    from jaxgrasp.io._grasp_file import mesh_grasp_to_dict, mesh_reference, to_text
+    from jaxgrasp.io._grasp_file import dict_to_toml, mesh_grasp_to_dict, mesh_reference
 
     if not res.grasps:
         raise UsageError(f"plan {args.mesh}: {res.status.message}; nothing written")
     name, raw = mesh_reference(res.best, out, copy=True)
-    lines = "".join(json.dumps(mesh_grasp_to_dict(g, name)) + "\n" for g in res.grasps)
+    # the mesh-frame points each grasp was made from: each file loads to the grasp evaluated
+    files = [mesh_grasp_to_dict(g, name, p) for g, p in zip(res.grasps, res.mesh_positions)]
     members = {
-        out / "ranked.jsonl": lines.encode("utf-8"),
-        out / "best.toml": to_text(res.best, out / "best.toml", name).encode("utf-8"),
+        out / "ranked.jsonl": "".join(json.dumps(d) + "\n" for d in files).encode("utf-8"),
+        out / "best.toml": dict_to_toml(files[0]).encode("utf-8"),
         out / "results.csv": outputs.csv_content(RESULT_COLUMNS, ([r[c] for c in RESULT_COLUMNS] for r in res.rows())),
     }
     if raw is not None:

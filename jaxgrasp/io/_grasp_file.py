@@ -54,7 +54,7 @@ from jaxgrasp.model._fields import FIELD, FIELDS, FINGERTIP
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
 
-__all__ = ["checked_fields", "grasp_from_dict", "grasp_to_dict", "load", "mesh_grasp_to_dict", "mesh_reference", "save", "to_text", "to_toml"]
+__all__ = ["checked_fields", "dict_to_text", "dict_to_toml", "grasp_from_dict", "grasp_to_dict", "load", "mesh_grasp_to_dict", "mesh_reference", "save", "to_text", "to_toml"]
 
 TOP_KEYS = ("fingertip", "object", "contacts")
 FINGERTIP_KEYS = tuple(FIELD[name].file_key for name in FINGERTIP)
@@ -454,16 +454,21 @@ def _toml_lines(table: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-def mesh_grasp_to_dict(mesh_grasp: MeshGrasp, mesh_name: str) -> dict[str, Any]:
+def mesh_grasp_to_dict(mesh_grasp: MeshGrasp, mesh_name: str, mesh_positions=None) -> dict[str, Any]:
     """The file structure of a grasp of a meshed object: :func:`grasp_to_dict` with
     ``[object] mesh = mesh_name`` (the path as the file will name it), its ``units`` and
     ``center_of_mass`` (m, mesh frame), contact positions in the mesh's frame (m) and each
-    contact's normal (so that :func:`load` gives back the same normals, also on an edge)."""
+    contact's normal (so that :func:`load` gives back the same normals, also on an edge).
+
+    ``mesh_positions``: ``(N, 3)`` m, the mesh-frame positions to write, where the caller
+    has them (the points the grasp was made from: the file then loads to this very grasp);
+    default the grasp's positions moved back into the mesh's frame."""
     d = grasp_to_dict(mesh_grasp.grasp)
     com = np.asarray(mesh_grasp.center_of_mass, dtype=np.float64)
     d["object"] = {"mesh": mesh_name, "units": mesh_grasp.units, "center_of_mass": _floats(com), **d["object"]}
-    for contact in d["contacts"]:
-        contact["position"] = _floats(np.asarray(contact["position"]) + com)
+    given = None if mesh_positions is None else np.asarray(mesh_positions, dtype=np.float64)
+    for i, contact in enumerate(d["contacts"]):
+        contact["position"] = _floats(np.asarray(contact["position"]) + com if given is None else given[i])
     return d
 
 
@@ -471,7 +476,13 @@ def to_toml(grasp: Grasp | MeshGrasp, mesh_name: str | None = None) -> str:
     """TOML text of a grasp (the fixed grasp-file structure; floats written with ``repr``);
     a :class:`MeshGrasp` names its mesh as ``mesh_name`` (:func:`mesh_grasp_to_dict`)."""
     d = grasp_to_dict(grasp) if mesh_name is None else mesh_grasp_to_dict(grasp, mesh_name)
-    frame = "positions in the mesh's frame" if mesh_name is not None else "object frame at the centre of mass"
+    return dict_to_toml(d)
+
+
+def dict_to_toml(d: Mapping[str, Any]) -> str:
+    """TOML text of a grasp file's structure (:func:`grasp_to_dict`, :func:`mesh_grasp_to_dict`)."""
+    mesh = "mesh" in d["object"]
+    frame = "positions in the mesh's frame" if mesh else "object frame at the centre of mass"
     lines = [f"# Grasp file (jaxgrasp). SI units: m, Pa, N, kg, m/s^2; {frame}."]
     if "fingertip" in d:
         lines += ["", "[fingertip]"] + _toml_lines(d["fingertip"])
@@ -481,12 +492,15 @@ def to_toml(grasp: Grasp | MeshGrasp, mesh_name: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+def dict_to_text(d: Mapping[str, Any], path: str | os.PathLike) -> str:
+    """A grasp file's structure as the text of ``path``'s format (TOML or JSON by extension)."""
+    return dict_to_toml(d) if _format(Path(path)) == "toml" else json.dumps(d, indent=2) + "\n"
+
+
 def to_text(grasp: Grasp | MeshGrasp, path: str | os.PathLike, mesh_name: str | None = None) -> str:
     """The text :func:`save` writes to ``path``: TOML or JSON by its extension."""
-    if _format(Path(path)) == "toml":
-        return to_toml(grasp, mesh_name)
     d = grasp_to_dict(grasp) if mesh_name is None else mesh_grasp_to_dict(grasp, mesh_name)
-    return json.dumps(d, indent=2) + "\n"
+    return dict_to_text(d, path)
 
 
 def save(grasp: Grasp | MeshGrasp, path: str | os.PathLike, *, copy_mesh: bool = False) -> None:

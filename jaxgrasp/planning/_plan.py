@@ -50,8 +50,9 @@ SAMPLERS = ("antipodal", "spread", "uniform")
 _ROUND = 512
 """Candidates drawn and checked per round."""
 
-_MAX_ROUNDS = 40
-"""Rounds drawn at most before the plan goes on with the valid candidates it has."""
+_MAX_DRAWS = 100
+"""Candidates drawn per valid one asked for, at most (and at least 40 rounds): past that the
+plan goes on with the valid candidates it has (the result counts them)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,8 +74,8 @@ class _Setup:
 def plan(
     mesh, fingers: int = 2, *, radius: float, young_modulus: float, friction: float, max_force: float,
     mass: float | None = None, density: float | None = None, center_of_mass=None, gravity=DEFAULT_GRAVITY,
-    units: str = "m", samples: int = 500, top: int = 10, refine: int = 3, seed: int = 0,
-    rules: ContactRules = ContactRules(), sampler: str | None = None, tune_maxiter: int = 30, progress=None,
+    units: str = "m", samples: int = 150, top: int = 10, refine: int = 3, seed: int = 0,
+    rules: ContactRules | None = None, sampler: str | None = None, tune_maxiter: int = 30, progress=None,
 ) -> PlanResult:
     """Find the grasps of a meshed object by ``fingers`` fingertips that tolerate the most energy.
 
@@ -88,11 +89,12 @@ def plan(
             :func:`jaxgrasp.from_mesh`.
         gravity: ``(3,)`` m/s^2 in the mesh's axes.
         units: the mesh's length unit, ``"m"``, ``"cm"`` or ``"mm"``.
-        samples: valid candidates to evaluate (fewer when ``_MAX_ROUNDS`` rounds of
-            ``_ROUND`` draws do not find them: the result says how many).
+        samples: valid candidates to evaluate (fewer when ``_MAX_DRAWS`` draws per valid one
+            asked for do not find them: the result says how many).
         top: ranked grasps to return. refine: of the best, how many to tune.
         seed: seed of every random draw: equal seeds give equal plans.
-        rules: the contact rules' tolerances (:class:`~jaxgrasp.surface.ContactRules`).
+        rules: the contact rules' tolerances (:class:`~jaxgrasp.surface.ContactRules`;
+            default ``ContactRules()``).
         sampler: one of :data:`SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
         tune_maxiter: iterations of each refinement.
         progress: ``progress(stage, done, total)`` (stage ``"draw"``, ``"evaluate"``, ``"refine"``).
@@ -105,6 +107,7 @@ def plan(
     """
     t0 = time.perf_counter()
     sampler = _checked_args(fingers, samples, top, refine, seed, sampler)
+    rules = ContactRules() if rules is None else rules
     setup = _setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force)
     rng = np.random.default_rng(seed)
     pos, nrm, dr, sampled, failures = _draw_valid(setup, fingers, samples, sampler, rules, rng, progress)
@@ -222,11 +225,11 @@ def _dr_range(setup: _Setup, rules: ContactRules) -> tuple[float, float]:
 
 
 def _draw_valid(setup: _Setup, fingers, samples, sampler, rules, rng, progress):
-    """Rounds of candidates until ``samples`` keep every rule (or ``_MAX_ROUNDS`` rounds):
+    """Rounds of candidates until ``samples`` keep every rule (or ``_MAX_DRAWS`` per sample):
     ``(positions, normals, dr, drawn, failures by rule)`` of the first ``samples`` valid."""
     keep: list = []
     drawn, failures, valid = 0, dict.fromkeys(RuleCheck.RULES, 0), 0
-    for _ in range(_MAX_ROUNDS):
+    for _ in range(max(40, -(-_MAX_DRAWS * samples // _ROUND))):
         pos, nrm, dr = _draw_round(setup, fingers, sampler, rules, rng)
         if len(pos):
             chk = _check(setup, rules, pos, nrm, dr)

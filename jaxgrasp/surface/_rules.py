@@ -25,6 +25,7 @@ Everything here is traceable (``jit``/``vmap`` over candidates) and in the mesh'
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -107,6 +108,7 @@ def deformation_range(radius, young_modulus, max_force, dr_min):
     return jnp.broadcast_to(jnp.asarray(dr_min, jnp.float64), jnp.shape(hi)), hi
 
 
+@functools.partial(jax.jit, static_argnames=("rules",))
 def check_contacts(surface: Surface, positions, normals, dr, radius, young_modulus, max_force,
                    rules: ContactRules = ContactRules()) -> RuleCheck:
     """Check one grasp's contacts against the rules (traceable; ``vmap`` it for many).
