@@ -53,11 +53,13 @@ def friction_runs():
     return {s: jaxgrasp.robust(_cube(), u, samples=s, seed=0, chunk_size=CHUNK) for s in (32, 64)}
 
 
+@pytest.mark.slow  # evaluates (the 2-contact programs)
 def test_the_threshold_is_the_weight_over_the_squeeze(threshold):
     closed = MASS * 9.81 / (2 * math.pi * 2e5 * 2e-3**2)  # m g = 2 mu pi E dr^2 (eq. 4)
     assert threshold == pytest.approx(closed, rel=2e-3)
 
 
+@pytest.mark.slow  # evaluates (the 2-contact programs)
 def test_friction_uncertainty_gives_the_normal_probability(threshold, friction_runs):
     r = friction_runs[64]
     expected = 0.5 * math.erfc(-math.log(0.5 / threshold) / SPREAD / math.sqrt(2))  # Phi(ln(mu/mu*)/s)
@@ -72,6 +74,7 @@ def test_friction_uncertainty_gives_the_normal_probability(threshold, friction_r
     np.testing.assert_allclose(r.quantiles, np.quantile(r.values, [0.05, 0.5]), rtol=1e-12)
 
 
+@pytest.mark.slow  # evaluates (the 2-contact programs)
 def test_doubling_the_samples_shrinks_the_standard_error_by_sqrt2(friction_runs):
     a, b = friction_runs[32], friction_runs[64]
     assert np.array_equal(a.values, b.values[:32])  # the same first samples
@@ -80,6 +83,7 @@ def test_doubling_the_samples_shrinks_the_standard_error_by_sqrt2(friction_runs)
     assert a.p_stable_stderr / b.p_stable_stderr == pytest.approx(math.sqrt(2), rel=0.15)
 
 
+@pytest.mark.slow  # evaluates (the 2-contact programs)
 def test_zero_uncertainty_gives_exactly_the_nominal_evaluation():
     r = jaxgrasp.robust(_cube(), Uncertainty(), samples=4, seed=5, chunk_size=CHUNK)
     nominal = jaxgrasp.evaluate(_cube())
@@ -89,6 +93,7 @@ def test_zero_uncertainty_gives_exactly_the_nominal_evaluation():
     assert float(r.nominal.value) == float(nominal.value)
 
 
+@pytest.mark.slow  # evaluates (the 2-contact programs)
 def test_reproducible_for_a_seed_and_independent_of_the_chunking():
     """Four grasps in one call (their samples share chunks of 4: grasp 1's three samples
     start mid-chunk) give each what it gives alone; a stacked batch gives the same; the same
@@ -125,6 +130,7 @@ def test_bad_calls_are_one_line_errors():
         jaxgrasp.robust(_cube(), Uncertainty(), quantiles=(0.5, 1.5))
 
 
+@pytest.mark.slow  # evaluates (the 2-contact programs)
 def test_mesh_contacts_move_along_the_mesh():
     """The block of ``examples/block.toml`` (a chamfered box mesh, 2 contacts): each moved
     contact lies in a face of the mesh (in its plane, barycentric coordinates in [0, 1],

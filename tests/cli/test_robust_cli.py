@@ -19,6 +19,7 @@ U = Uncertainty(friction=0.2, position=1e-3)
 ROBUST = ["--robust", SPEC, "--samples", "4", "--seed", "2", "--chunk-size", "4"]
 
 
+@pytest.mark.slow  # evaluates (the 2-contact programs)
 def test_evaluate_json_carries_the_robust_fields(run_cli):
     rc, out, err = run_cli(["evaluate", "--preset", "cube", "--mass", "0.2306", "--json", *ROBUST])
     assert rc == 0, err
@@ -50,6 +51,7 @@ def test_bad_robust_options_are_one_line_errors(run_cli, argv, message):
     assert err.strip() == f"jaxgrasp: error: {message}" or message in err and err.count("\n") == 1, err
 
 
+@pytest.mark.slow  # evaluates (the 2-contact programs)
 def test_batch_writes_the_robust_columns(run_cli, tmp_path):
     grasps = [jaxgrasp.presets.cube(mass=m, young_modulus=e) for m in (0.2306, 0.1) for e in (2e5, 3e5)]  # a chunk
     dataset = tmp_path / "set.jsonl"
