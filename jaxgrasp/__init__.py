@@ -11,7 +11,7 @@ packages, each importing only from those before it in this list:
 * :mod:`jaxgrasp.tolerance`: the method (eq. 1): problems, starts, settling, verdict;
 * :mod:`jaxgrasp.engine`: :func:`evaluate` and :func:`evaluate_batch`, compiled stages,
   the executable store, checkpoints;
-* :mod:`jaxgrasp.analysis`: :func:`sweep`, :func:`tune`, :func:`epsilon`;
+* :mod:`jaxgrasp.analysis`: :func:`sweep`, :func:`tune`, :func:`epsilon`, :func:`robust`;
 * :mod:`jaxgrasp.planning`: :func:`plan`, the best grasps on a mesh;
 * :mod:`jaxgrasp.plots` and :mod:`jaxgrasp.cli` (the ``jaxgrasp`` command).
 
@@ -64,7 +64,18 @@ from jaxgrasp.engine import _store  # noqa: E402
 _store.enable_from_environment()  # the executable store, in the user's cache folder: every process starts warm
 
 from jaxgrasp import presets  # noqa: E402
-from jaxgrasp.analysis import EpsilonResult, SweepResult, TuneResult, TuneStatus, epsilon, sweep, tune  # noqa: E402
+from jaxgrasp.analysis import (  # noqa: E402
+    EpsilonResult,
+    SweepResult,
+    TuneResult,
+    TuneStatus,
+    Uncertainty,
+    epsilon,
+    robust,
+    robust_batch,
+    sweep,
+    tune,
+)
 from jaxgrasp.engine import BatchResult, enable_compilation_cache, evaluate, evaluate_batch  # noqa: E402
 from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is used)
     GraspSet,
@@ -124,6 +135,9 @@ __all__ = [
     "PlanResult",
     "epsilon",
     "EpsilonResult",
+    "robust",
+    "robust_batch",
+    "Uncertainty",
     # errors and set-up
     "GraspValueError",
     "check",

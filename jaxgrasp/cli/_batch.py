@@ -26,12 +26,14 @@ from jaxgrasp.cli._common import (
     UsageError,
     add_allow_dir,
     add_epsilon_option,
+    add_robust_options,
     announce_run,
     check_chunk_size,
     check_out,
     epsilon_columns,
     lock_out,
     replaced_text,
+    robust_uncertainty,
     say,
 )
 from jaxgrasp.engine._prefetch import prefetch
@@ -80,6 +82,7 @@ def add_parser(sub) -> None:
     sp.add_argument("--no-plot", action="store_true", help="do not write results.png")
     add_allow_dir(sp)
     add_epsilon_option(sp)
+    add_robust_options(sp)
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
     sp.set_defaults(func=run)
 
@@ -94,6 +97,7 @@ def run(args) -> int:
     from jaxgrasp.io._dataset import load_dataset
 
     _check_numbers(args)
+    uncertainty = robust_uncertainty(args)
     gset = load_dataset(args.file, allowed_dirs=args.allow_dir)
     if args.strict:
         gset.raise_if_invalid()
@@ -116,9 +120,13 @@ def run(args) -> int:
             chunk_size=args.chunk_size, progress=progress,
         )
         wall = time.perf_counter() - t_start
-        extra = _epsilon(gset) if args.epsilon else None
+        extra = _epsilon(gset) if args.epsilon else {}
+        if uncertainty is not None:
+            extra.update(_robust(gset, uncertainty, args))
         written, replaced, removed = _write_outputs(merged, out, checkpoint, args, extra)
     print(_summary(merged, args.file, wall, result, rows.size, out, written, replaced, removed, args.top))
+    if uncertainty is not None:
+        print(_robust_line(extra, uncertainty, args))
     return 0
 
 
@@ -202,6 +210,37 @@ def _epsilon(gset) -> dict:
     for k, v in cols.items():
         out[k][valid] = v
     return out
+
+
+def _robust(gset, uncertainty, args) -> dict:
+    """The ``--robust`` columns of every input row (:meth:`jaxgrasp.analysis.RobustBatch.columns`:
+    ``p_stable``, ``p_stable_stderr``, ``value_mean``, ``value_q05``, ``value_q50``), NaN
+    for an invalid grasp; every valid grasp's samples through one compiled evaluator."""
+    from jaxgrasp.analysis._robust import robust_batch
+    from jaxgrasp.model._grasp import Grasp
+
+    columns = gset.columns()
+    valid = columns.valid
+    active = columns.active[valid]
+    batch = Grasp(**{k: a[valid] for k, a in columns.fields.items()}, active=None if active.all() else active)
+    progress = ChunkProgress("evaluating robust samples:", "perturbed grasp", show=not args.quiet)
+    rb = robust_batch(batch, uncertainty, args.samples, args.seed, chunk_size=args.chunk_size, progress=progress)
+    out = {}
+    for name, col in rb.columns().items():
+        out[name] = np.full(len(gset), np.nan)
+        out[name][valid] = col
+    return out
+
+
+def _robust_line(columns: dict, uncertainty, args) -> str:
+    """The summary's line of ``--robust``: the spreads, the samples, the most robust grasp."""
+    p = columns["p_stable"]
+    best = int(np.nanargmax(np.nan_to_num(columns["value_mean"], nan=-np.inf)))
+    return (
+        f"robust: {uncertainty.to_spec()}; {args.samples} samples per grasp, seed {args.seed}; "
+        f"mean p_stable {np.nanmean(p):.4f}; best value_mean: grasp {best} ({columns['value_mean'][best]:.6e} J, "
+        f"p_stable {p[best]:.4f}); columns p_stable, value_mean, value_q05 in results.csv"
+    )
 
 
 def _summary(result, source, wall, run, resumed, out, written, replaced, removed, top) -> str:

@@ -43,6 +43,9 @@ __all__ = [
     "LONG_EVALUATION_CONTACTS",
     "announce_large_grasp",
     "announce_run",
+    "add_robust_options",
+    "robust_uncertainty",
+    "DEFAULT_ROBUST_SAMPLES",
 ]
 
 EXIT_USAGE = 2
@@ -371,3 +374,41 @@ def epsilon_columns(grasps, shape=None) -> dict:
     eps = epsilon(grasps)
     cols = {"epsilon": eps.value, "force_closure": eps.force_closure}
     return {k: v.reshape(shape) if shape is not None else v for k, v in cols.items()}
+
+
+# --------------------------------------------------------------------------- robust options
+
+DEFAULT_ROBUST_SAMPLES = 256
+"""Perturbed copies per grasp of ``--robust`` (``--samples``)."""
+
+
+def add_robust_options(p: argparse.ArgumentParser) -> None:
+    """``--robust SPEC``, ``--samples N`` and ``--seed N``: the robust value under uncertainty
+    (:func:`jaxgrasp.robust`)."""
+    p.add_argument(
+        "--robust", metavar="SPEC", default=None,
+        help=("also evaluate SAMPLES perturbed copies of each grasp; SPEC gives each source's spread "
+              "in SI units, e.g. friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3 "
+              "(also friction_per_fingertip, mass, gravity_angle; see jaxgrasp.Uncertainty)"),
+    )
+    p.add_argument("--samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
+                   help=f"perturbed copies per grasp with --robust (default {DEFAULT_ROBUST_SAMPLES})")
+    p.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the --robust draws (default 0)")
+
+
+def robust_uncertainty(args):
+    """The :class:`~jaxgrasp.Uncertainty` of ``--robust`` (``None`` without it), after
+    checking ``--samples`` and ``--seed``; a one-line :class:`UsageError` otherwise."""
+    from jaxgrasp.analysis._uncertainty import parse_spec
+    from jaxgrasp.model._validation import GraspValueError
+
+    if args.robust is None:
+        return None
+    if args.samples < 2:
+        raise UsageError(f"--samples must be >= 2, got {args.samples}")
+    if args.seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {args.seed}")
+    try:
+        return parse_spec(args.robust)
+    except GraspValueError as exc:
+        raise UsageError(f"--robust: {exc}") from None

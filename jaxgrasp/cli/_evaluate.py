@@ -7,10 +7,13 @@ import json
 from jaxgrasp.cli._common import (
     add_grasp_source,
     add_overrides,
+    add_robust_options,
     announce_large_grasp,
+    check_chunk_size,
     grasp_notes,
     grasp_source,
     load_grasp,
+    robust_uncertainty,
 )
 
 __all__ = ["add_parser", "run", "format_summary"]
@@ -22,6 +25,9 @@ def add_parser(sub) -> None:
     add_grasp_source(p)
     add_overrides(p)
     p.add_argument("--json", action="store_true", help="print a JSON object instead")
+    add_robust_options(p)
+    p.add_argument("--chunk-size", type=int, default=None, metavar="N",
+                   help="perturbed grasps per compiled batch with --robust (default 64 per CPU device, 1024 per GPU)")
     p.set_defaults(func=run)
 
 
@@ -32,7 +38,10 @@ def run(args) -> int:
 
     prefetch_qhull()  # SciPy's import overlaps the evaluation's compile or cache load
 
-    grasp = load_grasp(args)
+    check_chunk_size(args.chunk_size)
+    uncertainty = robust_uncertainty(args)  # a bad spec is reported before anything is loaded
+    loaded = load_grasp(args, keep_mesh=uncertainty is not None)  # a mesh grasp's contacts move along its mesh
+    grasp = getattr(loaded, "grasp", loaded)
     announce_large_grasp(grasp.num_contacts, grasp_source(args))
     d = evaluate(grasp).to_dict()
     eps = epsilon(grasp)  # the Ferrari-Canny metric on the same contacts, beside the value
@@ -41,11 +50,25 @@ def run(args) -> int:
     notes = grasp_notes(grasp)
     if notes:  # otherwise Evaluation.to_dict() with epsilon and force_closure
         d["notes"] = notes
+    if uncertainty is not None:
+        d.update(_robust_fields(loaded, uncertainty, args))
     if args.json:
         print(json.dumps(d, indent=2, allow_nan=False))
     else:
         print(format_summary(d, grasp_source(args)))
     return 0
+
+
+def _robust_fields(grasp, uncertainty, args) -> dict:
+    """The ``--robust`` fields: ``p_stable``, ``p_stable_stderr``, ``value_mean``, one
+    ``value_qNN`` per quantile, and ``robust`` (status, samples, seed, spreads, clip counts)."""
+    from jaxgrasp.analysis._robust import robust
+
+    r = robust(grasp, uncertainty, samples=args.samples, seed=args.seed, chunk_size=args.chunk_size).to_dict()
+    stats = ("p_stable", "p_stable_stderr", "value_mean")
+    out = {k: v for k, v in r.items() if k in stats or k.startswith("value_q")}
+    out["robust"] = {k: v for k, v in r.items() if k not in out}
+    return out
 
 
 def format_summary(d: dict, source: str) -> str:
@@ -63,6 +86,8 @@ def format_summary(d: dict, source: str) -> str:
     if "epsilon" in d:  # the command adds it; Evaluation.to_dict() alone has none
         closure = "force closure" if d["force_closure"] else "not force closure"
         lines.append(f"epsilon: {d['epsilon']:.6e}   (Ferrari-Canny, 8 cone edges, soft fingers; {closure})")
+    if "p_stable" in d:
+        lines += _robust_lines(d)
     lines.append(f"equilibrium energy: {d['equilibrium_energy']:.6e} J")
     t = ", ".join(f"{v:.3e}" for v in d["equilibrium_translation"])
     w = ", ".join(f"{v:.3e}" for v in d["equilibrium_rotation"])
@@ -75,3 +100,20 @@ def format_summary(d: dict, source: str) -> str:
             de = b["energy_above_equilibrium"]
             lines.append(f"  contact {b['contact']} {b['kind']:<9}: {de:.6e} J ({b['status']})")
     return "\n".join(lines)
+
+
+def _robust_lines(d: dict) -> list[str]:
+    """The summary's lines of the ``--robust`` fields."""
+    r = d["robust"]
+    num = lambda x, f: "n/a" if x is None else format(x, f)  # noqa: E731
+    quantiles = ", ".join(f"{k[len('value_'):]} {num(v, '.6e')} J" for k, v in d.items() if k.startswith("value_q"))
+    spec = ",".join(f"{k}={v!r}" for k, v in r["uncertainty"].items() if v) or "none"
+    clipped = sum(r["clipped"].values())
+    lines = [
+        f"robust: {spec}; {r['samples']} samples, seed {r['seed']} ({r['robust_status']}, {r['converged']} settled)",
+        f"  p_stable: {num(d['p_stable'], '.4f')} +- {num(d['p_stable_stderr'], '.4f')} (standard error)",
+        f"  value mean: {num(d['value_mean'], '.6e')} J; quantiles: {quantiles}",
+    ]
+    if clipped:
+        lines.append(f"  clipped into the valid range: {', '.join(f'{k} {v}' for k, v in r['clipped'].items() if v)}")
+    return lines

@@ -1,0 +1,422 @@
+"""Robust energy tolerance: the evaluation value of a grasp under uncertain friction,
+stiffness, squeeze, placement, mass and gravity, by Monte Carlo through the engine.
+
+::
+
+    import jaxgrasp
+    grasp = jaxgrasp.presets.cube(mass=0.2)
+    r = jaxgrasp.robust(grasp, jaxgrasp.Uncertainty(friction=0.1), samples=64, seed=0)
+    r.p_stable, r.p_stable_stderr, r.value_mean, r.quantiles   # -, -, J, (2,) J
+
+Each grasp's ``S`` perturbed copies (:mod:`jaxgrasp.analysis._uncertainty`) are stacked
+into one batched grasp with those of every other grasp of the same contact count and
+evaluated by :func:`jaxgrasp.evaluate_batch`: one compiled evaluator for all samples of
+all grasps of a contact count, cut into the engine's chunks. The nominal grasps are
+evaluated by :func:`jaxgrasp.evaluate_batch` too, in a batch of their own with the
+samples' chunk (a single grasp by :func:`jaxgrasp.evaluate`, whose compiled program a
+process has anyway).
+
+The statistics of a grasp are over its samples whose evaluation settled (status
+``stable``, ``unstable`` or ``infeasible``): ``p_stable`` is the fraction of them that
+are stable, ``p_stable_stderr`` its binomial standard error ``sqrt(p (1 - p) / n)``,
+``value_mean`` and the quantiles are over their values (J, 0 for a sample that is not
+stable, eq. 1). A ``not_converged`` sample is left out and counted (:class:`RobustStatus`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, Sequence
+
+import jax
+import numpy as np
+
+from jaxgrasp.analysis._uncertainty import CLIP_SOURCES, Uncertainty, draw_normals, perturb
+from jaxgrasp.engine._batch import evaluate_batch
+from jaxgrasp.engine._batch_result import BatchResult, assemble
+from jaxgrasp.engine._evaluate import evaluate
+from jaxgrasp.engine._plan import plan_chunks
+from jaxgrasp.io._mesh import MeshGrasp
+from jaxgrasp.model._grasp import Grasp, stack
+from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.solver._status import Coded
+from jaxgrasp.surface import Surface
+from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.tolerance._result import Evaluation
+from jaxgrasp.tolerance._status import GraspStatus
+
+__all__ = ["robust", "robust_batch", "perturbed", "RobustResult", "RobustBatch", "RobustStatus", "DEFAULT_QUANTILES",
+           "quantile_name"]
+
+DEFAULT_QUANTILES = (0.05, 0.5)
+"""The quantile levels of the value that :func:`robust` reports by default (the 0.05 quantile and the median)."""
+
+MESH_FACES = 256
+"""A mesh's faces are padded to a power of two times this (:meth:`jaxgrasp.surface.Surface.padded`),
+so that the closest-point search of meshes of similar size is compiled once."""
+
+_SETTLED = (GraspStatus.STABLE, GraspStatus.UNSTABLE, GraspStatus.INFEASIBLE)
+
+
+class RobustStatus(Coded):
+    """What :func:`jaxgrasp.robust` could estimate for a grasp."""
+
+    ESTIMATED = 0, "every sample's evaluation settled: the statistics are over all samples"
+    PARTLY_CONVERGED = 1, (
+        "some samples did not converge: the statistics are over the settled ones (see converged)"
+    )
+    NOT_CONVERGED = 2, "no sample's evaluation settled: no estimate (NaN)"
+    INVALID = 3, "the grasp's input is invalid, so it was not evaluated (NaN)"
+
+
+def quantile_name(level: float) -> str:
+    """The name of a quantile's field and column: ``value_q05`` for 0.05, ``value_q50``,
+    ``value_q2.5`` for 0.025."""
+    pct = round(float(level) * 100.0, 10)
+    return f"value_q{int(pct):02d}" if pct == int(pct) else f"value_q{pct:g}"
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class RobustResult:
+    """The robust evaluation of one grasp (:func:`jaxgrasp.robust`), SI units.
+
+    Attributes:
+        status: a :class:`RobustStatus` (:attr:`status_name` its name).
+        p_stable: fraction of the settled samples that are stable (NaN without any).
+        p_stable_stderr: its standard error ``sqrt(p (1 - p) / n)``, ``n`` settled samples.
+        value_mean: mean value of the settled samples, J (0 for a sample that is not stable).
+        quantile_levels: ``(Q,)`` the levels, default ``(0.05, 0.5)``.
+        quantiles: ``(Q,)`` J, the value's quantiles over the settled samples (NumPy's
+            linear interpolation).
+        values: ``(S,)`` J, each sample's value (eq. 1).
+        statuses: ``(S,)`` int, each sample's :class:`~jaxgrasp.GraspStatus`.
+        converged: the settled samples ``n``.
+        nominal: the :class:`~jaxgrasp.Evaluation` of the unperturbed grasp.
+        clipped: sampled numbers clipped into their valid range, by field
+            (``friction``, ``initial_deformation``, ``mass``).
+        uncertainty: the :class:`~jaxgrasp.Uncertainty` sampled.
+        samples: ``S``.
+        seed: the seed of the draws.
+    """
+
+    status: RobustStatus
+    p_stable: float
+    p_stable_stderr: float
+    value_mean: float
+    quantile_levels: tuple
+    quantiles: np.ndarray
+    values: np.ndarray
+    statuses: np.ndarray
+    converged: int
+    nominal: Evaluation
+    clipped: dict
+    uncertainty: Uncertainty
+    samples: int
+    seed: int
+
+    @property
+    def status_name(self) -> str:
+        """The name of :attr:`status` (``'estimated'``)."""
+        return self.status.label
+
+    def quantile(self, level: float) -> float:
+        """The quantile of one of :attr:`quantile_levels`, J."""
+        for q, v in zip(self.quantile_levels, self.quantiles):
+            if abs(q - float(level)) < 1e-12:
+                return float(v)
+        raise KeyError(f"level {level} is not one of {self.quantile_levels}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The statistics as plain Python (JSON: NaN as ``None``): ``robust_status``,
+        ``p_stable``, ``p_stable_stderr``, ``value_mean``, one ``value_qNN`` per level,
+        ``samples``, ``converged``, ``seed``, ``uncertainty`` and ``clipped``; the
+        per-sample arrays and the nominal evaluation are not in it."""
+        num = lambda x: None if not np.isfinite(x) else float(x)  # noqa: E731
+        out = {
+            "robust_status": self.status_name,
+            "p_stable": num(self.p_stable),
+            "p_stable_stderr": num(self.p_stable_stderr),
+            "value_mean": num(self.value_mean),
+        }
+        out.update({quantile_name(q): num(v) for q, v in zip(self.quantile_levels, self.quantiles)})
+        out.update(samples=self.samples, converged=self.converged, seed=self.seed,
+                   uncertainty=self.uncertainty.to_dict(), clipped=dict(self.clipped))
+        return out
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class RobustBatch:
+    """The robust evaluation of ``G`` grasps (:func:`jaxgrasp.robust_batch`), in input
+    order: the fields of :class:`RobustResult` with a leading ``G`` axis; ``rb[i]`` is
+    grasp ``i``'s :class:`RobustResult`.
+
+    Attributes:
+        status: ``(G,)`` :class:`RobustStatus` codes.
+        p_stable, p_stable_stderr, value_mean: ``(G,)`` (-, -, J).
+        quantile_levels: ``(Q,)``; quantiles: ``(G, Q)`` J.
+        values: ``(G, S)`` J; statuses: ``(G, S)`` :class:`~jaxgrasp.GraspStatus` codes.
+        converged: ``(G,)`` settled samples.
+        nominal: the :class:`~jaxgrasp.BatchResult` of the unperturbed grasps.
+        clipped: ``(G,)`` counts by field.
+        uncertainty, samples, seed: as :class:`RobustResult`.
+    """
+
+    status: np.ndarray
+    p_stable: np.ndarray
+    p_stable_stderr: np.ndarray
+    value_mean: np.ndarray
+    quantile_levels: tuple
+    quantiles: np.ndarray
+    values: np.ndarray
+    statuses: np.ndarray
+    converged: np.ndarray
+    nominal: BatchResult
+    clipped: dict
+    uncertainty: Uncertainty
+    samples: int
+    seed: int
+
+    def __len__(self) -> int:
+        return len(self.status)
+
+    def __getitem__(self, i: int) -> RobustResult:
+        """Grasp ``i``'s :class:`RobustResult` (its nominal evaluation's contacts numbered as in the batch)."""
+        return RobustResult(
+            status=RobustStatus(int(self.status[i])), p_stable=float(self.p_stable[i]),
+            p_stable_stderr=float(self.p_stable_stderr[i]), value_mean=float(self.value_mean[i]),
+            quantile_levels=self.quantile_levels, quantiles=self.quantiles[i], values=self.values[i],
+            statuses=self.statuses[i], converged=int(self.converged[i]), nominal=self.nominal[i],
+            clipped={k: int(v[i]) for k, v in self.clipped.items()}, uncertainty=self.uncertainty,
+            samples=self.samples, seed=self.seed,
+        )
+
+    @property
+    def status_names(self) -> np.ndarray:
+        """``(G,)`` the names of :attr:`status`."""
+        return RobustStatus.names_of(self.status)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """``(G,)`` arrays by column name: ``p_stable``, ``p_stable_stderr``, ``value_mean``,
+        one ``value_qNN`` per quantile level (the ``batch --robust`` columns)."""
+        out = {"p_stable": self.p_stable, "p_stable_stderr": self.p_stable_stderr, "value_mean": self.value_mean}
+        out.update({quantile_name(q): self.quantiles[:, j] for j, q in enumerate(self.quantile_levels)})
+        return out
+
+    def rank(self, by: str = "value_mean") -> np.ndarray:
+        """Grasp indices, best first, by a column of :meth:`columns` (highest first; ties
+        broken by ``value_mean``, then input order; NaN last), e.g. ``"p_stable"`` or
+        ``"value_q05"``."""
+        cols = self.columns()
+        if by not in cols or by == "p_stable_stderr":
+            raise GraspValueError(f"rank by must be one of {', '.join(k for k in cols if k != 'p_stable_stderr')}, got {by!r}")
+        key = np.nan_to_num(np.asarray(cols[by], dtype=np.float64), nan=-np.inf)
+        tie = np.nan_to_num(np.asarray(self.value_mean, dtype=np.float64), nan=-np.inf)
+        return np.lexsort((np.arange(len(self)), -tie, -key))
+
+    def __repr__(self) -> str:
+        return f"RobustBatch({len(self)} grasps x {self.samples} samples; {self.uncertainty.to_spec()})"
+
+
+# --------------------------------------------------------------------------- the entry points
+
+
+def robust(grasp, uncertainty: Uncertainty, samples: int = 256, seed: int = 0, *,
+           quantiles: Sequence[float] = DEFAULT_QUANTILES, options: EvaluateOptions = EvaluateOptions(),
+           chunk_size: int | None = None, progress: Callable[[int, int], Any] | None = None):
+    """The robust evaluation of a grasp: its value over ``samples`` perturbed copies.
+
+    Args:
+        grasp: a :class:`~jaxgrasp.Grasp` or a :class:`~jaxgrasp.MeshGrasp` (its contact
+            moves follow the mesh); or a list of them, or one batched grasp, which is
+            :func:`robust_batch`.
+        uncertainty: the :class:`~jaxgrasp.Uncertainty` of each source (SI units).
+        samples: perturbed copies per grasp, ``>= 2``.
+        seed: the seed of the draws (the same seed, the same samples; see
+            :mod:`jaxgrasp.analysis._uncertainty`).
+        quantiles: levels in ``[0, 1]`` of the value's quantiles (default 0.05 and 0.5).
+        options, chunk_size, progress: as :func:`jaxgrasp.evaluate_batch` (of the samples).
+
+    Returns:
+        A :class:`RobustResult` for one grasp; a :class:`RobustBatch` for a list or a
+        batched grasp.
+
+    Raises:
+        GraspValueError: a bad grasp, uncertainty, ``samples``, ``seed`` or level; one line.
+    """
+    one = isinstance(grasp, MeshGrasp) or (isinstance(grasp, Grasp) and np.ndim(grasp.positions) == 2)
+    out = robust_batch([grasp] if one else grasp, uncertainty, samples, seed, quantiles=quantiles,
+                       options=options, chunk_size=chunk_size, progress=progress)
+    return out[0] if one else out
+
+
+def robust_batch(grasps, uncertainty: Uncertainty, samples: int = 256, seed: int = 0, *,
+                 quantiles: Sequence[float] = DEFAULT_QUANTILES, options: EvaluateOptions = EvaluateOptions(),
+                 chunk_size: int | None = None, progress: Callable[[int, int], Any] | None = None) -> RobustBatch:
+    """The robust evaluation of many grasps: ``samples`` perturbed copies of each, every
+    copy of every grasp of a contact count through one compiled evaluator.
+
+    Args:
+        grasps: a sequence of :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp`
+            (any contact counts), or one batched grasp (leading axis ``G``, a mask allowed,
+            e.g. :func:`jaxgrasp.stack`).
+        uncertainty, samples, seed, quantiles, options, chunk_size, progress: as
+            :func:`robust`. Every grasp sees the same draws (common random numbers), so a
+            grasp's result does not depend on the others in the list.
+
+    Returns:
+        A :class:`RobustBatch`, grasps in input order.
+
+    Raises:
+        GraspValueError: as :func:`robust`; an invalid grasp names its index.
+    """
+    levels = _check_call(uncertainty, samples, seed, quantiles)
+    groups, nominal_input = _groups(grasps)
+    nominal = _nominal(nominal_input, options, chunk_size, samples)
+    g = len(nominal)
+    values = np.empty((g, samples))
+    statuses = np.empty((g, samples), dtype=np.int64)
+    clipped = {name: np.zeros(g, dtype=np.int64) for name in CLIP_SOURCES}
+    for rows, fields, project in groups:
+        batch, clips = _perturbed(fields, project, uncertainty, samples, seed)
+        res = evaluate_batch(batch, options=options, chunk_size=chunk_size, progress=progress)
+        values[rows] = np.asarray(res.value).reshape(len(rows), samples)
+        statuses[rows] = np.asarray(res.status).reshape(len(rows), samples)
+        for name, c in clips.items():
+            clipped[name][rows] = c
+    return _summarise(values, statuses, levels, nominal, clipped, uncertainty, samples, seed)
+
+
+def perturbed(grasp, uncertainty: Uncertainty, samples: int = 256, seed: int = 0) -> Grasp:
+    """The perturbed copies of ``grasp`` that :func:`robust` evaluates, for a look at them.
+
+    Args:
+        grasp: a :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp` (one grasp).
+        uncertainty, samples, seed: as :func:`robust`.
+
+    Returns:
+        One batched :class:`~jaxgrasp.Grasp` of ``samples`` copies (``positions (S, N, 3)``
+        m, model frame), sample ``k`` at index ``k``.
+    """
+    _check_call(uncertainty, samples, seed, ())
+    if not (isinstance(grasp, MeshGrasp) or (isinstance(grasp, Grasp) and np.ndim(grasp.positions) == 2)):
+        raise GraspValueError("perturbed needs one jaxgrasp.Grasp or MeshGrasp")
+    _, fields, project = _groups([grasp])[0][0]
+    return _perturbed(fields, project, uncertainty, samples, seed)[0]
+
+
+def _perturbed(fields, project, uncertainty, samples, seed) -> tuple[Grasp, dict]:
+    """A group's perturbed copies as one batched grasp (grasp-major rows) and the clip counts."""
+    z = draw_normals(uncertainty, samples, seed, fields["positions"].shape[1])
+    out, clips = perturb(fields, uncertainty, z, samples, project)
+    active = out.pop("active", None)
+    return Grasp(**out, active=active), clips
+
+
+def _check_call(uncertainty, samples, seed, quantiles) -> tuple:
+    """The quantile levels as a tuple, after checking every argument but the grasps."""
+    if not isinstance(uncertainty, Uncertainty):
+        raise GraspValueError(f"uncertainty must be a jaxgrasp.Uncertainty, got {type(uncertainty).__name__}")
+    for name, x, low in (("samples", samples, 2), ("seed", seed, 0)):
+        if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < low:
+            raise GraspValueError(f"{name} must be an integer >= {low}, got {x!r}")
+    try:
+        levels = tuple(float(q) for q in quantiles)
+    except (TypeError, ValueError):
+        raise GraspValueError(f"quantiles must be numbers in [0, 1], got {quantiles!r}") from None
+    if not all(0.0 <= q <= 1.0 for q in levels):
+        raise GraspValueError(f"quantiles must be numbers in [0, 1], got {quantiles!r}")
+    return levels
+
+
+def _groups(grasps) -> tuple[list, Any]:
+    """``([(rows, fields, project), ...], nominal_input)``: the grasps by contact count
+    (a batched grasp is one group, its mask kept), each group's input rows, fields
+    (:meth:`~jaxgrasp.Grasp.to_numpy_batch`) and mesh projection (``None`` without a
+    mesh grasp); and what :func:`jaxgrasp.evaluate_batch` takes for the nominal grasps."""
+    if isinstance(grasps, Grasp) and np.ndim(grasps.positions) == 3:
+        if grasps.active is not None and bool(np.all(grasps.active)):  # every contact there: the unmasked program
+            grasps = grasps.replace(active=None)
+        return [(np.arange(np.shape(grasps.positions)[0]), grasps.to_numpy_batch(), None)], grasps
+    items = list(grasps) if isinstance(grasps, (list, tuple)) else None
+    if not items or not all(isinstance(g, (Grasp, MeshGrasp)) for g in items):
+        raise GraspValueError("robust needs a jaxgrasp.Grasp, a MeshGrasp, a non-empty list of them or a batched Grasp")
+    plain = [g.grasp if isinstance(g, MeshGrasp) else g for g in items]
+    plain = [g.compact() for g in plain]
+    by_count: dict[int, list[int]] = {}
+    for i, g in enumerate(plain):
+        by_count.setdefault(g.num_contacts, []).append(i)
+    groups = []
+    for n, rows in sorted(by_count.items()):
+        fields = stack([plain[i] for i in rows]).replace(active=None).to_numpy_batch()
+        meshes = [items[i] if isinstance(items[i], MeshGrasp) else None for i in rows]
+        project = None if all(m is None for m in meshes) else _mesh_projection(meshes, fields["normals"])
+        groups.append((np.asarray(rows), fields, project))
+    return groups, plain
+
+
+def _nominal(grasps, options: EvaluateOptions, chunk_size, samples: int) -> BatchResult:
+    """The evaluation of the unperturbed grasps: :func:`jaxgrasp.evaluate` for a single
+    grasp of a list (as a batch of one), else :func:`jaxgrasp.evaluate_batch` in the
+    chunks of the samples (fewer grasps than a chunk are padded to one with copies of the
+    last, as the engine pads), so that the nominal batch needs no program of its own."""
+    if not isinstance(grasps, Grasp) and len(grasps) == 1:
+        one = evaluate(grasps[0], options)
+        results = {f.name: np.array(getattr(one, f.name))[None] for f in dataclasses.fields(Evaluation)}
+        active = np.ones((1, grasps[0].num_contacts), dtype=bool)
+        return assemble([(np.arange(1), results)], 1, np.zeros(0, dtype=int), active, (None,))
+    g = np.shape(grasps.positions)[0] if isinstance(grasps, Grasp) else len(grasps)
+    chunk = plan_chunks(g * samples, chunk_size).chunk
+    if g >= chunk:
+        return evaluate_batch(grasps, options=options, chunk_size=chunk)
+    if isinstance(grasps, Grasp):
+        padded = jax.tree_util.tree_map(lambda a: np.concatenate([a, np.repeat(a[-1:], chunk - g, axis=0)]), grasps)
+    else:
+        padded = list(grasps) + [grasps[-1]] * (chunk - g)
+    res = evaluate_batch(padded, options=options, chunk_size=chunk)
+    return dataclasses.replace(
+        res, evaluation=jax.tree_util.tree_map(lambda a: a[:g], res.evaluation), num_contacts=res.num_contacts[:g],
+        active=res.active[:g], errors=res.errors[:g],
+    )
+
+
+def _mesh_projection(meshes: list, normals: np.ndarray) -> Callable:
+    """``project(positions (G, S, N, 3)) -> (positions, normals)``: each mesh grasp's moved
+    contacts onto its mesh (the closest surface point, the face's outward normal there,
+    :class:`jaxgrasp.surface.Surface`); a plain grasp's kept, with its normals."""
+
+    def project(moved: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        pos = moved.copy()
+        nrm = np.broadcast_to(normals[:, None], moved.shape).copy()
+        for k, mg in enumerate(meshes):
+            if mg is None:
+                continue
+            hit = Surface.from_trimesh(mg.mesh, pad_to=MESH_FACES).closest(mg.to_mesh_frame(moved[k]))
+            pos[k] = np.asarray(hit.point) - mg.center_of_mass
+            nrm[k] = np.asarray(hit.normal)
+        return pos, nrm
+
+    return project
+
+
+def _summarise(values, statuses, levels, nominal, clipped, uncertainty, samples, seed) -> RobustBatch:
+    """The statistics of every grasp's samples (the module's doc), as a :class:`RobustBatch`."""
+    g = values.shape[0]
+    settled = np.isin(statuses, _SETTLED)
+    n = settled.sum(axis=1)
+    stable = ((statuses == GraspStatus.STABLE) & settled).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        p = np.where(n > 0, stable / np.maximum(n, 1), np.nan)
+        stderr = np.where(n > 0, np.sqrt(p * (1.0 - p) / np.maximum(n, 1)), np.nan)
+    mean = np.full(g, np.nan)
+    qs = np.full((g, len(levels)), np.nan)
+    for i in np.flatnonzero(n > 0):
+        v = values[i][settled[i]]
+        mean[i] = v.mean()
+        qs[i] = np.quantile(v, levels) if levels else qs[i]
+    status = np.where(n == samples, RobustStatus.ESTIMATED,
+                      np.where(n > 0, RobustStatus.PARTLY_CONVERGED, RobustStatus.NOT_CONVERGED))
+    return RobustBatch(
+        status=status.astype(np.int64), p_stable=p, p_stable_stderr=stderr, value_mean=mean,
+        quantile_levels=levels, quantiles=qs, values=values, statuses=statuses, converged=n,
+        nominal=nominal, clipped=clipped, uncertainty=uncertainty, samples=int(samples), seed=int(seed),
+    )
