@@ -7,7 +7,9 @@ before any computation, :func:`jaxgrasp.io._outputs.write_set`):
   mesh (a dataset: ``jaxgrasp batch DIR/ranked.jsonl`` evaluates it);
 * ``best.toml``: the best grasp's file (``jaxgrasp evaluate DIR/best.toml`` gives the value
   of ``results.csv``'s first row);
-* ``results.csv``: rank, value, status, limiting boundary, epsilon, whether tuning refined it;
+* ``results.csv``: rank, value, status, limiting boundary, epsilon, whether tuning refined it
+  (with ``--rank robust``: the probability of being stable, the mean value and its 5 %
+  quantile over perturbed copies, the ranking's key);
 * ``best.png``: the ``jaxgrasp show`` picture of the best grasp;
 * the mesh file itself, unless it is in ``DIR`` already, so that ``DIR`` holds all the files name.
 """
@@ -25,7 +27,13 @@ from jaxgrasp.io import _outputs as outputs
 __all__ = ["add_parser", "run", "RESULT_COLUMNS", "DEFAULTS"]
 
 RESULT_COLUMNS = ("rank", "value_J", "status", "limiting_kind", "limiting_contact", "epsilon", "refined")
-"""The columns of ``results.csv``."""
+"""The columns of ``results.csv``; with ``--rank robust`` also :data:`ROBUST_COLUMNS`."""
+
+ROBUST_COLUMNS = ("p_stable", "value_mean_J", "value_q05_J")
+"""The robust columns of ``results.csv`` (``--rank robust``)."""
+
+DEFAULT_ROBUST = "friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3"
+"""The uncertainty ``--rank robust`` assumes without ``--robust SPEC``."""
 
 DEFAULTS = dict(fingers=2, radius=0.01, young_modulus=3e5, friction=0.8, max_force=15.0, density=500.0)
 """Defaults of the command's fingertip and object options (SI units): a 10 mm silicone-like
@@ -69,6 +77,12 @@ def add_parser(sub) -> None:
                     help="candidate generator (default antipodal for 2 fingers, spread for more)")
     sp.add_argument("--flatness", type=float, default=25.0, metavar="DEG",
                     help="largest angle between the contact normal and a face under the fingertip (default 25)")
+    sp.add_argument("--rank", choices=("value", "robust"), default="value",
+                    help="rank by the value, or by the robust value (the mean over perturbed copies) (default value)")
+    sp.add_argument("--robust", default=None, metavar="SPEC",
+                    help=f"the uncertainty of --rank robust, as for evaluate --robust (default {DEFAULT_ROBUST})")
+    sp.add_argument("--robust-samples", type=int, default=64, metavar="S",
+                    help="perturbed copies per ranked grasp for --rank robust (default 64)")
     sp.add_argument("--out", default="plan", metavar="DIR", help="output folder (default ./plan)")
     sp.add_argument("--no-plot", action="store_true", help="do not write best.png")
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -83,6 +97,7 @@ def run(args) -> int:
     out = Path(args.out)
     check_out(out)
     kwargs = _object_options(args)
+    kwargs.update(_robust_options(args))
     if not args.quiet:
         say(f"jaxgrasp: plan {args.mesh}: {args.samples} valid {args.fingers}-finger candidates to find and "
             "evaluate, the best refined; compiling (or loading from the cache) first")
@@ -94,6 +109,19 @@ def run(args) -> int:
         written, replaced = _write(res, out, args)
     print(f"plan {args.mesh}: {res.summary()}; wrote {out}/{{{','.join(written)}}}" + replaced_text(replaced, ()))
     return 0
+
+
+def _robust_options(args) -> dict:
+    """``robust`` and ``robust_samples`` of :func:`jaxgrasp.plan` (empty for ``--rank value``)."""
+    from jaxgrasp.analysis._uncertainty import parse_spec
+
+    if args.rank == "value":
+        if args.robust is not None:
+            raise UsageError("--robust SPEC is for --rank robust; add --rank robust or drop it")
+        return {}
+    if args.robust_samples < 2:
+        raise UsageError(f"--robust-samples must be >= 2, got {args.robust_samples}")
+    return dict(robust=parse_spec(args.robust or DEFAULT_ROBUST), robust_samples=args.robust_samples)
 
 
 def _object_options(args) -> dict:
@@ -115,7 +143,8 @@ class _Progress:
     """``progress(stage, done, total)`` of :func:`jaxgrasp.plan`: a line on stderr when a
     stage starts, then at most one a second."""
 
-    WORDS = {"draw": "valid candidates found", "evaluate": "candidates evaluated", "refine": "best refined"}
+    WORDS = {"draw": "valid candidates found", "evaluate": "candidates evaluated", "refine": "best refined",
+             "robust": "perturbed copies evaluated"}
 
     def __init__(self, t0: float):
         self.t0, self.stage, self.last = t0, None, 0.0
@@ -135,12 +164,13 @@ def _write(res, out: Path, args) -> tuple[list[str], list[str]]:
     if not res.grasps:
         raise UsageError(f"plan {args.mesh}: {res.status.message}; nothing written")
     name, raw = mesh_reference(res.best, out, copy=True)
+    columns = RESULT_COLUMNS + (ROBUST_COLUMNS if res.robust is not None else ())
     # the mesh-frame points each grasp was made from: each file loads to the grasp evaluated
     files = [mesh_grasp_to_dict(g, name, p) for g, p in zip(res.grasps, res.mesh_positions)]
     members = {
         out / "ranked.jsonl": "".join(json.dumps(d) + "\n" for d in files).encode("utf-8"),
         out / "best.toml": dict_to_toml(files[0]).encode("utf-8"),
-        out / "results.csv": outputs.csv_content(RESULT_COLUMNS, ([r[c] for c in RESULT_COLUMNS] for r in res.rows())),
+        out / "results.csv": outputs.csv_content(columns, ([r[c] for c in columns] for r in res.rows())),
     }
     if raw is not None:
         members[out / name] = raw

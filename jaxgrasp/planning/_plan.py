@@ -29,6 +29,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.analysis._epsilon import epsilon
+from jaxgrasp.analysis._robust import robust_batch
+from jaxgrasp.analysis._uncertainty import Uncertainty
 from jaxgrasp.analysis._tune import tune
 from jaxgrasp.engine._batch import evaluate_batch
 from jaxgrasp.engine._evaluate import evaluate
@@ -75,7 +77,8 @@ def plan(
     mesh, fingers: int = 2, *, radius: float, young_modulus: float, friction: float, max_force: float,
     mass: float | None = None, density: float | None = None, center_of_mass=None, gravity=DEFAULT_GRAVITY,
     units: str = "m", samples: int = 150, top: int = 10, refine: int = 3, seed: int = 0,
-    rules: ContactRules | None = None, sampler: str | None = None, tune_maxiter: int = 30, progress=None,
+    rules: ContactRules | None = None, sampler: str | None = None, tune_maxiter: int = 30,
+    robust: Uncertainty | None = None, robust_samples: int = 64, progress=None,
 ) -> PlanResult:
     """Find the grasps of a meshed object by ``fingers`` fingertips that tolerate the most energy.
 
@@ -97,6 +100,11 @@ def plan(
             default ``ContactRules()``).
         sampler: one of :data:`SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
         tune_maxiter: iterations of each refinement.
+        robust: an :class:`~jaxgrasp.Uncertainty`: rank the ``top`` grasps by their robust
+            value instead (the mean value over ``robust_samples`` perturbed copies,
+            :func:`jaxgrasp.robust_batch`; ties in the order of their values); ``None``: by
+            the value.
+        robust_samples: perturbed copies of each ranked grasp.
         progress: ``progress(stage, done, total)`` (stage ``"draw"``, ``"evaluate"``, ``"refine"``).
 
     Returns:
@@ -119,11 +127,14 @@ def plan(
     pool = [(pos[i], nrm[i], dr[i], False) for i in order[: max(top, refine)]]
     kept = _refine(setup, pool[:refine], rules, tune_maxiter, progress)
     ranked = _final(setup, kept + pool[refine:], top)
+    if robust is not None and len(ranked["grasps"]):
+        ranked = _robust_ranked(ranked, robust, robust_samples, seed, progress)
     counts = dict(valid=len(pos), stable=int(np.sum(statuses == GraspStatus.STABLE)),
                   dropped=int(np.sum(statuses == GraspStatus.NOT_CONVERGED)))
     refine_kept = sum(1 for p in kept if p[3])
-    return _result(ranked, setup, sampled, failures, counts, min(refine, len(pool)), refine_kept, seed, t0,
-                   dict(fingers=fingers, sampler=sampler, rules=dataclasses.asdict(rules), samples=samples))
+    settings = dict(fingers=fingers, sampler=sampler, rules=dataclasses.asdict(rules), samples=samples,
+                    rank="value" if robust is None else f"robust ({robust.to_spec()}, {robust_samples} samples)")
+    return _result(ranked, setup, sampled, failures, counts, min(refine, len(pool)), refine_kept, seed, t0, settings)
 
 
 def _checked_args(fingers, samples, top, refine, seed, sampler) -> str:
@@ -319,6 +330,16 @@ def _final(setup: _Setup, entries, top: int) -> dict:
         refined=np.array([entries[i][3] for i in order], dtype=bool),
         mesh_positions=np.array([entries[i][0] for i in order]).reshape(len(order), -1, 3),
     )
+
+
+def _robust_ranked(ranked: dict, uncertainty: Uncertainty, samples: int, seed: int, progress) -> dict:
+    """``ranked`` reordered by the robust value (:func:`jaxgrasp.robust_batch`), best first,
+    with its columns (``p_stable``, ``value_mean``, quantiles) under ``"robust"``."""
+    rb = robust_batch(list(ranked["grasps"]), uncertainty, samples, seed, progress=_stage(progress, "robust"))
+    order = rb.rank("value_mean")
+    out = {k: (tuple(v[i] for i in order) if isinstance(v, tuple) else v[order]) for k, v in ranked.items()}
+    out["robust"] = {k: np.asarray(v)[order] for k, v in rb.columns().items()}
+    return out
 
 
 def _result(ranked, setup, sampled, failures, counts, tried, kept, seed, t0, settings) -> PlanResult:

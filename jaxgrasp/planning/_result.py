@@ -45,7 +45,10 @@ class PlanResult:
             of the ranking.
         refine_tried: candidates tuned; refine_kept: tuned grasps that were better and valid.
         seed: the seed of the random draws; elapsed_s: wall time, s.
-        settings: the plan's settings (fingers, fingertip, object, sampler, rules ...).
+        settings: the plan's settings (fingers, fingertip, object, sampler, rules, rank ...).
+        robust: where the plan ranked by the robust value, ``(K,)`` arrays by column name
+            (``p_stable``, ``p_stable_stderr``, ``value_mean``, ``value_q05``, ``value_q50``;
+            :meth:`jaxgrasp.analysis.RobustBatch.columns`), in rank order; else ``None``.
     """
 
     status: PlanStatus
@@ -67,6 +70,7 @@ class PlanResult:
     seed: int
     elapsed_s: float
     settings: dict = dataclasses.field(default_factory=dict)
+    robust: dict | None = None
 
     @property
     def best(self) -> Any:
@@ -89,7 +93,8 @@ class PlanResult:
 
     def rows(self) -> list[dict]:
         """One dict per ranked grasp: rank (1-based), value_J, status, limiting_kind,
-        limiting_contact, epsilon, refined."""
+        limiting_contact, epsilon, refined, and where the plan ranked by the robust value
+        p_stable, value_mean_J, value_q05_J."""
         from jaxgrasp.model._codes import BoundaryKind
         from jaxgrasp.tolerance._status import GraspStatus
 
@@ -105,4 +110,8 @@ class PlanResult:
                 "epsilon": float(self.epsilon[i]),
                 "refined": bool(self.refined[i]),
             })
+            if self.robust is not None:
+                out[-1].update(p_stable=float(self.robust["p_stable"][i]),
+                               value_mean_J=float(self.robust["value_mean"][i]),
+                               value_q05_J=float(self.robust["value_q05"][i]))
         return out

@@ -41,7 +41,7 @@ def first_hits(triangles: np.ndarray, origins: np.ndarray, directions: np.ndarra
     Returns:
         ``(t (R,) m, face (R,) int)``: ``t = inf`` and ``face = -1`` where a ray hits nothing.
     """
-    ts, faces = [], []
+    ts, faces = [np.zeros(0)], [np.zeros(0, dtype=np.int64)]  # no ray: no hit
     a, e1, e2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
     for lo in range(0, len(origins), _RAY_CHUNK):
         o, d = origins[lo : lo + _RAY_CHUNK, None, :], directions[lo : lo + _RAY_CHUNK, None, :]
