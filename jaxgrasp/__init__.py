@@ -11,6 +11,7 @@ packages, each importing only from those before it in this list:
 * :mod:`jaxgrasp.engine`: :func:`evaluate` and :func:`evaluate_batch`, compiled stages,
   the executable store, checkpoints;
 * :mod:`jaxgrasp.analysis`: :func:`sweep`, :func:`tune`, :func:`epsilon`;
+* :mod:`jaxgrasp.simulation`: :func:`simulate`, the grasp in MuJoCo (extra ``jaxgrasp[sim]``);
 * :mod:`jaxgrasp.plots` and :mod:`jaxgrasp.cli` (the ``jaxgrasp`` command).
 
 Importing jaxgrasp turns on JAX's 64-bit mode (``jax_enable_x64``) for the whole process,
@@ -76,6 +77,7 @@ from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is use
     save_dataset,
 )
 from jaxgrasp.model import BoundaryKind, Grasp, GraspValueError, check, stack  # noqa: E402
+from jaxgrasp.simulation import simulate  # noqa: E402  (mujoco is imported when it runs)
 from jaxgrasp.solver import LaneStatus, SolverOptions  # noqa: E402
 from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus  # noqa: E402
 
@@ -117,6 +119,7 @@ __all__ = [
     "TuneResult",
     "epsilon",
     "EpsilonResult",
+    "simulate",
     # errors and set-up
     "GraspValueError",
     "check",
