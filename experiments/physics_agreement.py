@@ -1,9 +1,10 @@
 """Does the value predict what MuJoCo sees? (issue 38)
 
 At least 500 grasps: the paper's presets (with and without weight), random grasps drawn as
-in tests/grasp_draws.py, and grasps on pybullet_data's random_urdfs objects (scale 0.015
-m per unit) built with jaxgrasp.from_mesh at random surface points (2 fingers: a random
-point and the far side of the object along its inward normal; 3 fingers: random points).
+in tests/grasp_draws.py, grasps on pybullet_data's random_urdfs objects (scale 0.015 m per
+unit) built with jaxgrasp.from_mesh at random surface points (2 fingers: a random point
+and the candidate most nearly opposite it; 3 fingers: random points), and the best grasps
+jaxgrasp.planning.plan finds on other random_urdfs objects (2 and 3 fingers).
 Every grasp with an equilibrium (stable, unstable, not converged) goes through
 jaxgrasp.simulate with shortened trials; infeasible grasps are counted, not simulated.
 
@@ -33,7 +34,8 @@ from jaxgrasp.simulation import simulate  # noqa: E402
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCALES = (0.25, 0.5, 0.75, 0.9, 1.1, 1.5, 2.0, 4.0)
 TRIALS = dict(hold_time_s=0.3, six_axis_time_s=0.5, kick_time_s=0.2)  # shortened (DexGraspBench: 2 s per axis)
-N_RANDOM, N_MESH = 300, 200
+N_RANDOM, N_MESH = 260, 200
+N_PLANNED_OBJECTS = 6  # x 2 and 3 fingers x the 5 best grasps of each plan
 
 
 def log(line: str) -> None:
@@ -42,6 +44,7 @@ def log(line: str) -> None:
 
 
 LOG: list[str] = []
+PLAN_FAILURES: list[str] = []
 
 
 def preset_grasps() -> list:
@@ -96,6 +99,34 @@ def mesh_grasps(count: int) -> list:
     return out
 
 
+def planned_grasps(objects: int) -> list:
+    """The 5 best grasps of jaxgrasp.planning.plan (issue 36; no refinement) on ``objects``
+    random_urdfs objects, with 2 and with 3 fingers."""
+    import pybullet_data
+    import trimesh
+
+    from jaxgrasp.planning import plan
+
+    rng = np.random.default_rng(3836)
+    root = os.path.join(pybullet_data.getDataPath(), "random_urdfs")
+    out = []
+    for k in range(objects):
+        mesh = trimesh.load(os.path.join(root, f"{500 + k:03d}", f"{500 + k:03d}.obj"), force="mesh")
+        mesh.apply_scale(0.015)
+        for fingers in (2, 3):
+            f0 = rng.uniform(1.0, 4.0)
+            try:
+                r = plan(mesh, fingers, radius=rng.uniform(0.01, 0.02), young_modulus=f0 / (math.pi * 0.002**2),
+                         friction=rng.uniform(0.4, 1.0), max_force=3.0 * f0,
+                         mass=rng.uniform(0.0, 0.3) * fingers * f0 / 9.81, samples=20, top=5, refine=0, seed=k)
+            except ValueError as exc:  # the planner's antipodal sampler on a round with no candidate (main 3ebd3f8)
+                PLAN_FAILURES.append(f"object {500 + k:03d}, {fingers} fingers: {type(exc).__name__}: {exc}")
+                continue
+            out.extend(("planned", g) for g in r.grasps)
+            print(f"  planned {500 + k:03d} with {fingers} fingers: {len(r.grasps)} grasps", file=sys.stderr, flush=True)
+    return out
+
+
 def auc(score, label) -> float:
     """ROC AUC by the Mann-Whitney statistic (ties count one half)."""
     score, label = np.asarray(score, float), np.asarray(label, bool)
@@ -108,10 +139,13 @@ def auc(score, label) -> float:
 
 def main() -> None:
     t0 = time.time()
-    items = preset_grasps() + random_grasps(N_RANDOM) + mesh_grasps(N_MESH)
+    items = preset_grasps() + random_grasps(N_RANDOM) + mesh_grasps(N_MESH) + planned_grasps(N_PLANNED_OBJECTS)
     plain = [g.grasp if isinstance(g, jaxgrasp.MeshGrasp) else g for _, g in items]
     log(f"grasps: {len(items)} ({sum(s == 'preset' for s, _ in items)} presets, {sum(s == 'random' for s, _ in items)} "
-        f"random, {sum(s == 'mesh' for s, _ in items)} on random_urdfs meshes); jaxgrasp.plan is not on main: no planned grasps")
+        f"random, {sum(s == 'mesh' for s, _ in items)} at random points of random_urdfs meshes, "
+        f"{sum(s == 'planned' for s, _ in items)} planned by jaxgrasp.planning.plan); built in {time.time() - t0:.0f} s")
+    for line in PLAN_FAILURES:
+        log(f"plan failed: {line}")
     batch = jaxgrasp.evaluate_batch(plain)
     eps = np.array([float(jaxgrasp.epsilon(g).value) for g in plain])
     log(f"evaluated in {time.time() - t0:.0f} s: {batch.counts()}")
@@ -157,7 +191,7 @@ def report(rows, seconds: float) -> None:
     log(f"six-axis success: {ok.sum()} of {len(sim)}; hold success {sum(bool(r['hold_success']) for r in sim)}")
     aucs = {"value": auc(value, ok), "epsilon": auc(eps, ok), "value_positive": auc(value > 0, ok)}
     log("ROC AUC for six-axis success: " + ", ".join(f"{k} {v:.3f}" for k, v in aucs.items()))
-    for src in ("preset", "random", "mesh"):
+    for src in ("preset", "random", "mesh", "planned"):
         sel = [r for r in sim if r["source"] == src]
         o = np.array([r["six_axis_success"] for r in sel], bool)
         log(f"  {src}: {len(sel)} simulated, six-axis success {o.mean():.3f}, AUC value "
