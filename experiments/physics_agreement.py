@@ -28,8 +28,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
 
-import jaxgrasp  # noqa: E402
-from jaxgrasp.simulation import simulate  # noqa: E402
+import jaxgrasp
+from jaxgrasp.simulation import simulate
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCALES = (0.25, 0.5, 0.75, 0.9, 1.1, 1.5, 2.0, 4.0)

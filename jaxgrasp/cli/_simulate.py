@@ -19,7 +19,7 @@ from jaxgrasp.cli._common import (
 )
 from jaxgrasp.io import _outputs as outputs
 
-__all__ = ["add_parser", "run", "RESULTS", "PLOT"]
+__all__ = ["PLOT", "RESULTS", "add_parser", "run"]
 
 RESULTS = "results.json"
 """The results file in ``--out``."""

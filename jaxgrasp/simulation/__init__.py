@@ -10,4 +10,4 @@ returns a :class:`SimulationResult` (:mod:`._result`). MuJoCo is imported only w
 from jaxgrasp.simulation._result import AXES, DIRECTIONS, SimulationResult, SimulationStatus, Trial
 from jaxgrasp.simulation._simulate import DEFAULTS, simulate
 
-__all__ = ["simulate", "SimulationResult", "SimulationStatus", "Trial", "AXES", "DIRECTIONS", "DEFAULTS"]
+__all__ = ["AXES", "DEFAULTS", "DIRECTIONS", "SimulationResult", "SimulationStatus", "Trial", "simulate"]

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Trial", "SimulationResult", "SimulationStatus", "AXES", "DIRECTIONS"]
+__all__ = ["AXES", "DIRECTIONS", "SimulationResult", "SimulationStatus", "Trial"]
 
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
 """The six disturbance axes of the six-axis test, world (= object model) frame."""
@@ -162,7 +162,7 @@ class SimulationResult:
 
     def to_dict(self) -> dict:
         """``results.json``'s content: every field, JSON-ready (``null`` for ``nan``)."""
-        num = lambda a: [float(x) if math.isfinite(float(x)) else None for x in np.asarray(a)]  # noqa: E731
+        num = lambda a: [float(x) if math.isfinite(float(x)) else None for x in np.asarray(a)]
         return {
             "status": self.status_name,
             "grasp_status": self.grasp_status,

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["load_mujoco", "Scene", "calibrate", "build_scene", "object_shape", "quaternion", "rotation_matrix"]
+__all__ = ["Scene", "build_scene", "calibrate", "load_mujoco", "object_shape", "quaternion", "rotation_matrix"]
 
 IMPEDANCE = 0.01
 """MuJoCo's constraint impedance ``d`` of every contact (``solimp = (d, d, 0.001, 0.5, 2)``)."""
@@ -94,10 +94,10 @@ class Contacts:
     gravity: Any  # (3,) m/s^2
 
     @classmethod
-    def of(cls, grasp) -> "Contacts":
+    def of(cls, grasp) -> Contacts:
         f = {k: np.asarray(v, dtype=np.float64) for k, v in grasp.compact().to_numpy().items()}
         n = f["positions"].shape[0]
-        per = lambda k: np.broadcast_to(f[k], (n,)).copy()  # noqa: E731
+        per = lambda k: np.broadcast_to(f[k], (n,)).copy()
         nv = f["normals"] / np.linalg.norm(f["normals"], axis=1, keepdims=True)
         return cls(f["positions"], nv, per("initial_deformation"), per("radius"), per("young_modulus"),
                    per("friction"), float(f["mass"]), f["gravity"])

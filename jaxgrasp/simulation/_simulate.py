@@ -26,7 +26,7 @@ from jaxgrasp.simulation._result import SimulationResult, SimulationStatus
 from jaxgrasp.simulation._scene import IMPEDANCE, build_scene, load_mujoco
 from jaxgrasp.simulation._trials import Runner, least_energy_direction
 
-__all__ = ["simulate", "DEFAULTS"]
+__all__ = ["DEFAULTS", "simulate"]
 
 DEFAULTS = {
     "hold_time_s": 1.0,
@@ -196,7 +196,7 @@ def _simulated(grasp, plain, evaluation, opts, seed, slip_threshold) -> Simulati
 
 def _parameters(opts, scene, thresholds) -> dict:
     cal, c = scene.calibration, scene.contacts
-    lst = lambda a: [float(x) for x in np.asarray(a).reshape(-1)]  # noqa: E731
+    lst = lambda a: [float(x) for x in np.asarray(a).reshape(-1)]
     return {
         **{k: v for k, v in opts.items() if k != "timestep"},
         "timestep_s": float(scene.timestep),

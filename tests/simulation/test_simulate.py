@@ -11,15 +11,14 @@ from __future__ import annotations
 import json
 import math
 
+import mujoco  # noqa: F401  (the extra jaxgrasp[sim]: CI installs it, so these tests always run there)
 import numpy as np
 import pytest
+from grasp_draws import NumpyDraw, build_grasp
 
 import jaxgrasp
-from grasp_draws import NumpyDraw, build_grasp
 from jaxgrasp.simulation import SimulationStatus, simulate
 from jaxgrasp.simulation._scene import Contacts, calibrate
-
-import mujoco  # noqa: E402,F401  (the extra jaxgrasp[sim]: CI installs it, so these tests always run there)
 
 SHORT = dict(hold_time_s=0.2, six_axis_time_s=0.01, kick_scales=(), random_kicks=0)
 PRESETS = [jaxgrasp.presets.cube(), jaxgrasp.presets.prism(mass=0.1)]
@@ -84,7 +83,7 @@ def test_random_grasps_with_mass_settle_to_the_model_force(evaluated):
     worst = []
     for g, ev in stable:
         r = simulate(g, evaluation=ev, **SHORT)
-        ok, ratio = _close(r.settled_normal_force_N, r.model_normal_force_N)
+        _, ratio = _close(r.settled_normal_force_N, r.model_normal_force_N)
         worst.append(float(np.max(np.abs(ratio - 1.0))))
     assert max(worst) <= 0.10, worst
 
@@ -123,6 +122,7 @@ def test_results_json_and_plot(run_cli, tmp_path):
                                     "--scales", "0.5,2", "--random-kicks", "1"])
     assert code == 0, stderr
     assert "running MuJoCo" in stderr
+    assert "six-axis" in stdout and "results.json" in stdout and "\n" not in stdout.strip()
     data = json.loads((out / "results.json").read_text())
     assert (out / "trials.png").read_bytes()[:4] == b"\x89PNG"
     trials = [data["hold"], *data["six_axis"], *data["kicks"]]

@@ -15,6 +15,14 @@ import jaxgrasp
 
 
 def test_without_mujoco_import_works_and_simulate_says_what_to_install(monkeypatch):
+    from jaxgrasp import _startup
+    from jaxgrasp.engine import _devices, _store
+
+    # the package's face runs again; its process-wide set-up (the session's executable
+    # store, JAX's devices, the command's interrupt handler) stays as the session made it
+    for module, name in ((_store, "enable_from_environment"), (_devices, "configure_cpu_devices"),
+                         (_startup, "install_if_command_line")):
+        monkeypatch.setattr(module, name, lambda: None)
     monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco -> ImportError
     for name in [m for m in sys.modules if m == "jaxgrasp" or m.startswith("jaxgrasp.simulation")]:
         monkeypatch.delitem(sys.modules, name)
@@ -27,7 +35,7 @@ def test_without_mujoco_import_works_and_simulate_says_what_to_install(monkeypat
 
 def test_the_command_says_what_to_install(monkeypatch, run_cli, tmp_path):
     monkeypatch.setitem(sys.modules, "mujoco", None)
-    code, out, err = run_cli(["simulate", "--preset", "cube", "--out", str(tmp_path / "sim")])
+    code, _, err = run_cli(["simulate", "--preset", "cube", "--out", str(tmp_path / "sim")])
     assert code == 2
     assert err.strip() == 'jaxgrasp: error: jaxgrasp.simulate needs MuJoCo: pip install "jaxgrasp[sim]"'
     assert not (tmp_path / "sim").exists()
