@@ -13,6 +13,7 @@ packages, each importing only from those before it in this list:
   the executable store, checkpoints;
 * :mod:`jaxgrasp.analysis`: :func:`sweep`, :func:`tune`, :func:`epsilon`, :func:`robust`;
 * :mod:`jaxgrasp.planning`: :func:`plan`, the best grasps on a mesh;
+* :mod:`jaxgrasp.simulation`: :func:`simulate`, the grasp in MuJoCo (extra ``jaxgrasp[sim]``);
 * :mod:`jaxgrasp.plots` and :mod:`jaxgrasp.cli` (the ``jaxgrasp`` command).
 
 Importing jaxgrasp turns on JAX's 64-bit mode (``jax_enable_x64``) for the whole process,
@@ -90,6 +91,7 @@ from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is use
 )
 from jaxgrasp.model import BoundaryKind, Grasp, GraspValueError, check, stack  # noqa: E402
 from jaxgrasp.planning import PlanResult, plan  # noqa: E402
+from jaxgrasp.simulation import simulate  # noqa: E402  (mujoco is imported when it runs)
 from jaxgrasp.solver import LaneStatus, SolverOptions  # noqa: E402
 from jaxgrasp.surface import Surface  # noqa: E402
 from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus  # noqa: E402
@@ -138,6 +140,7 @@ __all__ = [
     "robust",
     "robust_batch",
     "Uncertainty",
+    "simulate",
     # errors and set-up
     "GraspValueError",
     "check",

@@ -8,7 +8,7 @@ before any computation, :func:`jaxgrasp.io._outputs.write_set`):
 * ``best.toml``: the best grasp's file (``jaxgrasp evaluate DIR/best.toml`` gives the value
   of ``results.csv``'s first row);
 * ``results.csv``: rank, value, status, limiting boundary, epsilon, whether tuning refined it
-  (with ``--rank robust``: the probability of being stable, the mean value and its 5 %
+  (with ``--rank robust``: the probability of being stable, the mean value and its lower
   quantile over perturbed copies, the ranking's key);
 * ``best.png``: the ``jaxgrasp show`` picture of the best grasp;
 * the mesh file itself, unless it is in ``DIR`` already, so that ``DIR`` holds all the files name.

@@ -94,8 +94,8 @@ def plan(
         units: the mesh's length unit, ``"m"``, ``"cm"`` or ``"mm"``.
         samples: valid candidates to evaluate (fewer when ``_MAX_DRAWS`` draws per valid one
             asked for do not find them: the result says how many).
-        top: ranked grasps to return. refine: of the best, how many to tune.
-        seed: seed of every random draw: equal seeds give equal plans.
+        top: ranked grasps to return. refine: of the best, how many to tune. seed: of every
+            random draw: equal seeds give equal plans.
         rules: the contact rules' tolerances (:class:`~jaxgrasp.surface.ContactRules`;
             default ``ContactRules()``).
         sampler: one of :data:`SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
@@ -104,8 +104,8 @@ def plan(
             value instead (the mean value over ``robust_samples`` perturbed copies,
             :func:`jaxgrasp.robust_batch`; ties in the order of their values); ``None``: by
             the value.
-        robust_samples: perturbed copies of each ranked grasp.
-        progress: ``progress(stage, done, total)`` (stage ``"draw"``, ``"evaluate"``, ``"refine"``).
+        robust_samples: perturbed copies of each ranked grasp. progress: ``progress(stage,
+            done, total)`` (stage ``"draw"``, ``"evaluate"``, ``"refine"``, ``"robust"``).
 
     Returns:
         A :class:`~jaxgrasp.planning.PlanResult`.
@@ -130,11 +130,11 @@ def plan(
     if robust is not None and len(ranked["grasps"]):
         ranked = _robust_ranked(ranked, robust, robust_samples, seed, progress)
     counts = dict(valid=len(pos), stable=int(np.sum(statuses == GraspStatus.STABLE)),
-                  dropped=int(np.sum(statuses == GraspStatus.NOT_CONVERGED)))
-    refine_kept = sum(1 for p in kept if p[3])
+                  dropped=int(np.sum(statuses == GraspStatus.NOT_CONVERGED)), refine_tried=min(refine, len(pool)),
+                  refine_kept=sum(1 for p in kept if p[3]))
     settings = dict(fingers=fingers, sampler=sampler, rules=dataclasses.asdict(rules), samples=samples,
                     rank="value" if robust is None else f"robust ({robust.to_spec()}, {robust_samples} samples)")
-    return _result(ranked, setup, sampled, failures, counts, min(refine, len(pool)), refine_kept, seed, t0, settings)
+    return _result(ranked, setup, sampled, failures, counts, seed, t0, settings)
 
 
 def _checked_args(fingers, samples, top, refine, seed, sampler) -> str:
@@ -342,13 +342,13 @@ def _robust_ranked(ranked: dict, uncertainty: Uncertainty, samples: int, seed: i
     return out
 
 
-def _result(ranked, setup, sampled, failures, counts, tried, kept, seed, t0, settings) -> PlanResult:
+def _result(ranked, setup, sampled, failures, counts, seed, t0, settings) -> PlanResult:
     found = len(ranked["values"]) and ranked["statuses"][0] == GraspStatus.STABLE
     settings = {**settings, **setup.fingertip, "mass": setup.mass, "gravity": setup.gravity.tolist(),
                 "center_of_mass": setup.com.tolist(), "units": setup.units, "mesh": setup.source}
     return PlanResult(
         status=PlanStatus.FOUND if found else PlanStatus.NONE_STABLE, **ranked, sampled=sampled,
-        rule_failures=failures, **counts, refine_tried=tried, refine_kept=kept, seed=seed,
+        rule_failures=failures, **counts, seed=seed,
         elapsed_s=time.perf_counter() - t0, settings=settings,
     )
 
@@ -359,6 +359,6 @@ def _empty(status, sampled, failures, seed, t0, setup, fingers, sampler, rules) 
     ranked = dict(grasps=(), values=none, statuses=none.astype(int), limiting_kind=none.astype(int),
                   limiting_contact=none.astype(int), epsilon=none, refined=none.astype(bool),
                   mesh_positions=np.zeros((0, fingers, 3)))
-    res = _result(ranked, setup, sampled, failures, dict(valid=0, stable=0, dropped=0), 0, 0, seed, t0,
+    res = _result(ranked, setup, sampled, failures, dict(valid=0, stable=0, dropped=0, refine_tried=0, refine_kept=0), seed, t0,
                   dict(fingers=fingers, sampler=sampler, rules=dataclasses.asdict(rules)))
     return dataclasses.replace(res, status=status)

@@ -1,0 +1,178 @@
+"""The results of :func:`jaxgrasp.simulate`: one :class:`Trial` per simulated test and the
+:class:`SimulationResult` that gathers them, frozen dataclasses in SI units."""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from typing import Any
+
+import numpy as np
+
+__all__ = ["AXES", "DIRECTIONS", "SimulationResult", "SimulationStatus", "Trial"]
+
+AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+"""The six disturbance axes of the six-axis test, world (= object model) frame."""
+
+DIRECTIONS = ("least_energy", "random")
+"""The kinds of energy-kick direction."""
+
+
+class SimulationStatus(enum.IntEnum):
+    """Whether :func:`jaxgrasp.simulate` ran the simulator, and if not, why.
+
+    ``SIMULATED``: the grasp was simulated (its trials are in the result). The others name
+    the evaluation's status that kept it out of the simulator: ``UNSTABLE`` and
+    ``NOT_CONVERGED`` (simulated only with ``simulate_unstable=True``) and ``INFEASIBLE``
+    (never: there is no equilibrium pose to start from and calibrate at).
+    """
+
+    SIMULATED = 0
+    UNSTABLE = 1
+    INFEASIBLE = 2
+    NOT_CONVERGED = 3
+
+    @property
+    def label(self) -> str:
+        """The status's name, lower case (``'simulated'``, ...)."""
+        return self.name.lower()
+
+
+@dataclasses.dataclass(frozen=True)
+class Trial:
+    """One simulated test of a grasp and what the object did.
+
+    Attributes:
+        kind: ``"hold"``, ``"six_axis"`` or ``"kick"``.
+        success: hold: the object stayed within the hold tolerances; six-axis: it moved
+            less than 5 cm and turned less than 15 degrees (DexGraspBench's protocol, the
+            limits in ``SimulationResult.parameters``); kick: no fingertip slipped.
+        max_displacement_m: largest distance of the centre of mass from where the trial
+            started, m.
+        max_rotation_rad: largest rotation angle from the orientation the trial started
+            with, rad.
+        slipped_contact: the first contact (0-based) whose surface slid under its
+            fingertip by more than its slip threshold, or ``None``.
+        slip_time_s: when it did, s from the trial's start, or ``None``.
+        time_s: ``(T,)`` sample times, s.
+        displacement_m: ``(T,)`` distance of the centre of mass from its start, m.
+        rotation_rad: ``(T,)`` rotation angle from the start, rad.
+        max_sliding_m: ``(N,)`` largest sliding of each contact's surface point under its
+            fingertip (tangential displacement, or torsion angle times the contact radius), m.
+        axis: six-axis trials: ``"+x"`` ... ``"-z"``; else ``None``.
+        scale: kicks: ``s``, the kick's kinetic energy over the evaluation value; else ``None``.
+        direction: kicks: ``"least_energy"`` or ``"random"``; else ``None``.
+        kinetic_energy_J: kicks: the object's initial kinetic energy, J; else ``None``.
+        initial_velocity: kicks: ``(6,)`` the object's initial linear velocity (m/s, world
+            axes) and angular velocity (rad/s, body axes, as MuJoCo's free joint); else ``None``.
+    """
+
+    kind: str
+    success: bool
+    max_displacement_m: float
+    max_rotation_rad: float
+    slipped_contact: int | None
+    slip_time_s: float | None
+    time_s: Any
+    displacement_m: Any
+    rotation_rad: Any
+    max_sliding_m: Any
+    axis: str | None = None
+    scale: float | None = None
+    direction: str | None = None
+    kinetic_energy_J: float | None = None
+    initial_velocity: Any = None
+
+    @property
+    def label(self) -> str:
+        """A short name: ``"hold"``, ``"+x"``, ``"least_energy s=0.5"``."""
+        if self.kind == "six_axis":
+            return str(self.axis)
+        if self.kind == "kick":
+            return f"{self.direction} s={self.scale:g}"
+        return self.kind
+
+    def to_dict(self) -> dict:
+        """The trial as JSON-ready numbers (``None`` where a field does not apply)."""
+        out = {
+            "success": bool(self.success),
+            "max_displacement_m": float(self.max_displacement_m),
+            "max_rotation_rad": float(self.max_rotation_rad),
+            "slipped_contact": None if self.slipped_contact is None else int(self.slipped_contact),
+            "slip_time_s": None if self.slip_time_s is None else float(self.slip_time_s),
+            "max_sliding_m": [float(x) for x in np.asarray(self.max_sliding_m)],
+        }
+        if self.kind == "six_axis":
+            out["axis"] = self.axis
+        if self.kind == "kick":
+            out.update(scale=float(self.scale), direction=self.direction, kinetic_energy_J=float(self.kinetic_energy_J),
+                       initial_velocity=[float(x) for x in np.asarray(self.initial_velocity)])
+        out["time_s"] = [round(float(x), 9) for x in np.asarray(self.time_s)]
+        out["displacement_m"] = [float(x) for x in np.asarray(self.displacement_m)]
+        out["rotation_rad"] = [float(x) for x in np.asarray(self.rotation_rad)]
+        return out
+
+
+@dataclasses.dataclass(frozen=True)
+class SimulationResult:
+    """The grasp in MuJoCo: its calibration and the trials (:func:`jaxgrasp.simulate`).
+
+    Attributes:
+        status: a :class:`SimulationStatus` code (``status_name`` for its name).
+        grasp_status: the evaluation's status name (``'stable'``, ...).
+        value: the evaluation value, J (eq. 1).
+        reason: why the grasp was not simulated (the evaluation's explanation), or ``""``.
+        hold: the hold trial (``None`` when not simulated).
+        six_axis: the six disturbance trials, in the order of :data:`AXES`.
+        kicks: the energy kicks, for each scale: the least-energy direction, then the random ones.
+        settled_normal_force_N: ``(N,)`` each fingertip's normal force in the simulator at
+            the end of the hold (mean over its last quarter), N (``nan`` when not simulated).
+        model_normal_force_N: ``(N,)`` the model's normal force at jaxgrasp's equilibrium,
+            ``pi E d^2 / cos^2 phi`` (eq. 4, 13, 14), N (``nan`` where there is none).
+        parameters: every parameter of the simulation (timestep, calibration, damping,
+            friction, tolerances), SI units; the key ``units`` names them.
+    """
+
+    status: int
+    grasp_status: str
+    value: float
+    reason: str
+    hold: Trial | None
+    six_axis: tuple
+    kicks: tuple
+    settled_normal_force_N: Any
+    model_normal_force_N: Any
+    parameters: dict
+
+    @property
+    def status_name(self) -> str:
+        """The name of ``status``: ``'simulated'``, ``'unstable'``, ``'infeasible'`` or ``'not_converged'``."""
+        return SimulationStatus(self.status).label
+
+    @property
+    def simulated(self) -> bool:
+        """Whether the simulator ran."""
+        return self.status == SimulationStatus.SIMULATED
+
+    @property
+    def six_axis_success(self) -> bool | None:
+        """All six disturbances withstood (``None`` when not simulated)."""
+        return all(t.success for t in self.six_axis) if self.six_axis else None
+
+    def to_dict(self) -> dict:
+        """``results.json``'s content: every field, JSON-ready (``null`` for ``nan``)."""
+        num = lambda a: [float(x) if math.isfinite(float(x)) else None for x in np.asarray(a)]
+        return {
+            "status": self.status_name,
+            "grasp_status": self.grasp_status,
+            "value_J": float(self.value),
+            "reason": self.reason,
+            "hold": None if self.hold is None else self.hold.to_dict(),
+            "six_axis": [t.to_dict() for t in self.six_axis],
+            "six_axis_success": self.six_axis_success,
+            "kicks": [t.to_dict() for t in self.kicks],
+            "settled_normal_force_N": num(self.settled_normal_force_N),
+            "model_normal_force_N": num(self.model_normal_force_N),
+            "parameters": self.parameters,
+        }

@@ -1,0 +1,222 @@
+""":func:`simulate`: a grasp in MuJoCo, held, disturbed along six axes and kicked.
+
+* hold: ``hold_time_s`` under gravity from the equilibrium pose; success if the object
+  moves less than ``hold_tolerance_m`` and turns less than ``hold_tolerance_rad``; its end
+  is the settled state the other trials start from, and the mean normal forces over its
+  last quarter are the settled forces;
+* six-axis (DexGraspBench's protocol): a force ``m * disturbance_acceleration_m_s2`` along
+  each of ``+x ... -z`` for ``six_axis_time_s``, gravity on; success if the object moves
+  less than ``six_axis_tolerance_m`` (5 cm) and turns less than ``six_axis_tolerance_rad``
+  (15 degrees);
+* energy kicks: the object's initial velocity with kinetic energy ``s * value`` for each
+  ``s`` of ``kick_scales``, along the least-energy boundary's direction (from the
+  equilibrium to :attr:`~jaxgrasp.Evaluation.boundary_translation` and ``_rotation`` of
+  the limiting boundary) and ``random_kicks`` random directions; success if no contact
+  slides more than its slip threshold within ``kick_time_s`` (no kicks where the value is 0).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.simulation._result import SimulationResult, SimulationStatus
+from jaxgrasp.simulation._scene import IMPEDANCE, build_scene, load_mujoco
+from jaxgrasp.simulation._trials import Runner, least_energy_direction
+
+__all__ = ["DEFAULTS", "simulate"]
+
+DEFAULTS = {
+    "hold_time_s": 1.0,
+    "hold_tolerance_m": 1e-3,
+    "hold_tolerance_rad": math.radians(1.0),
+    "six_axis_time_s": 2.0,
+    "disturbance_acceleration_m_s2": 10.0,
+    "six_axis_tolerance_m": 0.05,
+    "six_axis_tolerance_rad": math.radians(15.0),
+    "kick_time_s": 0.3,
+    "sample_s": 0.005,
+}
+"""The default durations and tolerances of the trials (SI units)."""
+
+_UNITS = {
+    "timestep_s": "s", "stiffness_N_m": "N/m", "spring_offset_m": "m (force zero at this penetration)",
+    "damping_N_s_m": "N s/m", "friction_torsional_m": "m (mu e, eq. 10)", "slip_threshold_m": "m",
+}
+
+
+def _check(name: str, value, lo: float = 0.0, strict: bool = True) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise GraspValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(x) or (x <= lo if strict else x < lo):
+        raise GraspValueError(f"{name} = {x:g} must be finite and {'>' if strict else '>='} {lo:g}")
+    return x
+
+
+def _options(friction, nominal_mass, damping_ratio, timestep, kick_scales, random_kicks, durations) -> dict:
+    """The options, checked (one-line :class:`~jaxgrasp.GraspValueError` naming the bad one)."""
+    opts = {k: _check(k, durations.get(k, v)) for k, v in DEFAULTS.items()}
+    opts["friction"] = None if friction is None else _check("friction", friction)
+    opts["nominal_mass_kg"] = _check("nominal_mass", nominal_mass)
+    opts["damping_ratio"] = _check("damping_ratio", damping_ratio, strict=False)
+    opts["timestep"] = None if timestep is None else _check("timestep", timestep)
+    opts["kick_scales"] = [_check("kick_scales", s, strict=False) for s in kick_scales]
+    if isinstance(random_kicks, bool) or not isinstance(random_kicks, (int, np.integer)) or random_kicks < 0:
+        raise GraspValueError(f"random_kicks must be an integer >= 0, got {random_kicks!r}")
+    opts["random_kicks"] = int(random_kicks)
+    unknown = sorted(set(durations) - set(DEFAULTS))
+    if unknown:
+        raise GraspValueError(f"unknown option {unknown[0]!r}; the trial options are {', '.join(DEFAULTS)}")
+    return opts
+
+
+def simulate(
+    grasp, *, evaluation=None, friction=None, nominal_mass=0.1, damping_ratio=0.05, timestep=None,
+    kick_scales=(0.5, 0.9, 1.1, 2.0), random_kicks=2, seed=0, simulate_unstable=False, slip_threshold=None,
+    **durations,
+) -> SimulationResult:
+    """A second opinion from MuJoCo: the grasp held, disturbed and kicked in a physics engine.
+
+    The scene (:mod:`jaxgrasp.simulation._scene`): the object (its mesh, or the contacts'
+    hull) at jaxgrasp's equilibrium pose, each fingertip a sphere fixed at ``p_i + (r -
+    dr_i) n_i``, condim 4, elliptic cones, friction ``mu`` and ``mu e_i`` (eq. 9, 10), normal
+    springs through eq. 4 at ``dr`` and at the equilibrium, gravity. The trials (module
+    doc): hold, six-axis (DexGraspBench: ``m * 10 m/s^2`` along ``+x ... -z``, success below
+    5 cm and 15 degrees), and energy kicks of kinetic energy ``s * value`` along the
+    least-energy boundary's direction and random ones (success: no contact slips).
+
+    Args:
+        grasp: a :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp` (SI units).
+        evaluation: its :class:`~jaxgrasp.Evaluation` (default: :func:`jaxgrasp.evaluate`).
+        friction: the simulator's friction coefficient instead of the grasp's (a what-if).
+        nominal_mass: kg, the simulated mass of a weightless grasp (mass 0: no gravity).
+        damping_ratio: of each contact's normal spring against the object's mass (light:
+            the paper's model has no damping at all).
+        timestep: s (default: resolves the stiffest contact mode, at most ``_scene.MAX_TIMESTEP``).
+        kick_scales: the ``s`` of the energy kicks, each ``>= 0``.
+        random_kicks: random directions per scale; ``seed`` seeds them.
+        simulate_unstable: also simulate unstable and not-converged grasps (from their
+            equilibrium pose); infeasible grasps are never simulated.
+        slip_threshold: m, the sliding that counts as a slip (default per contact
+            ``mu_i d_i / 2``: the tangential deformation at which the paper's fingertip
+            starts to slip without torsion, eq. 6 and 9).
+        **durations: any of :data:`DEFAULTS` (s, m, rad, m/s^2).
+
+    Returns:
+        A :class:`~jaxgrasp.simulation.SimulationResult`; its ``parameters`` hold every
+        parameter, the timestep and the calibration.
+
+    Raises:
+        ImportError: MuJoCo is not installed (one line: ``pip install "jaxgrasp[sim]"``).
+        GraspValueError: a bad grasp or option (one line naming it).
+    """
+    load_mujoco()
+    from jaxgrasp.io._mesh import MeshGrasp
+    from jaxgrasp.model._grasp import Grasp
+
+    opts = _options(friction, nominal_mass, damping_ratio, timestep, kick_scales, random_kicks, durations)
+    if not isinstance(grasp, (Grasp, MeshGrasp)):
+        raise GraspValueError(f"simulate needs a jaxgrasp.Grasp or MeshGrasp, got {type(grasp).__name__}")
+    plain = (grasp.grasp if isinstance(grasp, MeshGrasp) else grasp).compact()
+    if np.ndim(plain.positions) != 2:
+        raise GraspValueError(f"simulate takes one grasp, got positions of shape {np.shape(plain.positions)}")
+    if evaluation is None:
+        from jaxgrasp.engine._evaluate import evaluate
+
+        evaluation = evaluate(plain)
+    skip = _skip_status(evaluation, simulate_unstable)
+    if skip is not None:
+        return _not_simulated(plain, evaluation, skip, opts)
+    return _simulated(grasp, plain, evaluation, opts, seed, slip_threshold)
+
+
+def _skip_status(evaluation, simulate_unstable: bool):
+    """The :class:`SimulationStatus` that keeps the grasp out of the simulator, or ``None``."""
+    name = evaluation.status_name
+    if name == "stable":
+        return None
+    if name == "infeasible" or int(np.asarray(evaluation.equilibrium_status)) != 0:
+        return SimulationStatus.INFEASIBLE if name == "infeasible" else SimulationStatus.NOT_CONVERGED
+    if simulate_unstable:
+        return None
+    return SimulationStatus.UNSTABLE if name == "unstable" else SimulationStatus.NOT_CONVERGED
+
+
+def _not_simulated(plain, evaluation, status, opts) -> SimulationResult:
+    n = plain.num_contacts
+    return SimulationResult(
+        status=int(status), grasp_status=evaluation.status_name, value=float(np.asarray(evaluation.value)),
+        reason=evaluation.explain(), hold=None, six_axis=(), kicks=(), settled_normal_force_N=np.full(n, np.nan),
+        model_normal_force_N=np.full(n, np.nan), parameters={k: v for k, v in opts.items()},
+    )
+
+
+def _directions(runner, state, evaluation, count: int, seed: int, scene) -> list[tuple[str, np.ndarray]]:
+    """The kick directions: the least-energy one (where there is a limiting boundary) and
+    ``count`` random ones (rotation components scaled by the radius of gyration)."""
+    out = []
+    least = least_energy_direction(state, evaluation)
+    if least is not None:
+        out.append(("least_energy", least))
+    rng = np.random.default_rng(seed)
+    gyration = math.sqrt(float(np.trace(scene.inertia)) / (3.0 * scene.sim_mass))
+    for _ in range(count):
+        z = rng.normal(size=6)
+        out.append(("random", np.concatenate([z[:3], z[3:] / gyration])))
+    return out
+
+
+def _simulated(grasp, plain, evaluation, opts, seed, slip_threshold) -> SimulationResult:
+    dp = np.asarray(evaluation.equilibrium_translation, dtype=np.float64)
+    w = np.asarray(evaluation.equilibrium_rotation, dtype=np.float64)
+    scene = build_scene(grasp, plain, dp, w, friction=opts["friction"], nominal_mass=opts["nominal_mass_kg"],
+                        damping_ratio=opts["damping_ratio"], timestep=opts["timestep"])
+    cal, c = scene.calibration, scene.contacts
+    thresholds = (0.5 * c.mu * np.clip(cal["d_eq"], 0.0, None) if slip_threshold is None
+                  else np.full(len(c.r), _check("slip_threshold", slip_threshold)))
+    runner = Runner(scene, thresholds, opts["sample_s"])
+    hold, state, settled = runner.hold(opts["hold_time_s"], opts["hold_tolerance_m"], opts["hold_tolerance_rad"])
+    six = runner.six_axis(state, opts["disturbance_acceleration_m_s2"], opts["six_axis_time_s"],
+                          opts["six_axis_tolerance_m"], opts["six_axis_tolerance_rad"])
+    value = float(np.asarray(evaluation.value))
+    kicks = []
+    for s in opts["kick_scales"] if value > 0 else ():  # no energy to scale: no kicks
+        for kind, direction in _directions(runner, state, evaluation, opts["random_kicks"], seed, scene):
+            kicks.append(runner.kick(state, direction, s * value, opts["kick_time_s"], s, kind))
+    return SimulationResult(
+        status=int(SimulationStatus.SIMULATED), grasp_status=evaluation.status_name, value=value, reason="",
+        hold=hold, six_axis=tuple(six), kicks=tuple(kicks), settled_normal_force_N=settled,
+        model_normal_force_N=cal["f_eq"], parameters=_parameters(opts, scene, thresholds),
+    )
+
+
+def _parameters(opts, scene, thresholds) -> dict:
+    cal, c = scene.calibration, scene.contacts
+    lst = lambda a: [float(x) for x in np.asarray(a).reshape(-1)]
+    return {
+        **{k: v for k, v in opts.items() if k != "timestep"},
+        "timestep_s": float(scene.timestep),
+        "simulator": f"MuJoCo {load_mujoco().__version__}",
+        "mass_kg": float(scene.sim_mass),
+        "gravity_m_s2": lst(scene.sim_gravity),
+        "inertia_kg_m2": [lst(row) for row in scene.inertia],
+        "contact_surfaces": list(scene.surfaces),
+        "condim": 4,
+        "cone": "elliptic",
+        "noslip_iterations": int(scene.model.opt.noslip_iterations),
+        "impedance": IMPEDANCE,
+        "friction_sliding": lst(cal["mu"]),
+        "friction_torsional_m": lst(cal["mu"] * cal["e"]),
+        "stiffness_N_m": lst(cal["K"]),
+        "spring_offset_m": lst(cal["x0"]),
+        "damping_N_s_m": lst(scene.damping),
+        "initial_deformation_m": lst(c.dr),
+        "initial_normal_force_N": lst(cal["f0"]),
+        "equilibrium_deformation_m": lst(cal["d_eq"]),
+        "slip_threshold_m": lst(thresholds),
+        "units": _UNITS,
+    }
