@@ -90,14 +90,12 @@ def plan(
         mass, density, center_of_mass: the object's mass (kg) or density (kg/m^3), and its
             centre of mass (m, mesh frame; default the watertight mesh's), as
             :func:`jaxgrasp.from_mesh`.
-        gravity: ``(3,)`` m/s^2 in the mesh's axes.
-        units: the mesh's length unit, ``"m"``, ``"cm"`` or ``"mm"``.
+        gravity: ``(3,)`` m/s^2 in the mesh's axes. units: the mesh's, ``"m"``, ``"cm"``, ``"mm"``.
         samples: valid candidates to evaluate (fewer when ``_MAX_DRAWS`` draws per valid one
             asked for do not find them: the result says how many).
         top: ranked grasps to return. refine: of the best, how many to tune. seed: of every
             random draw: equal seeds give equal plans.
-        rules: the contact rules' tolerances (:class:`~jaxgrasp.surface.ContactRules`;
-            default ``ContactRules()``).
+        rules: the rules' tolerances (default :class:`~jaxgrasp.surface.ContactRules`\ ``()``).
         sampler: one of :data:`SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
         tune_maxiter: iterations of each refinement.
         robust: an :class:`~jaxgrasp.Uncertainty`: rank the ``top`` grasps by their robust
