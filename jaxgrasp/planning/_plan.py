@@ -95,7 +95,7 @@ def plan(
             asked for do not find them: the result says how many).
         top: ranked grasps to return. refine: of the best, how many to tune. seed: of every
             random draw: equal seeds give equal plans.
-        rules: the rules' tolerances (default :class:`~jaxgrasp.surface.ContactRules`\ ``()``).
+        rules: the rules' tolerances (default ``ContactRules()``, :class:`~jaxgrasp.surface.ContactRules`).
         sampler: one of :data:`SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
         tune_maxiter: iterations of each refinement.
         robust: an :class:`~jaxgrasp.Uncertainty`: rank the ``top`` grasps by their robust
