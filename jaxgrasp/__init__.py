@@ -11,6 +11,7 @@ packages, each importing only from those before it in this list:
 * :mod:`jaxgrasp.engine`: :func:`evaluate` and :func:`evaluate_batch`, compiled stages,
   the executable store, checkpoints;
 * :mod:`jaxgrasp.analysis`: :func:`sweep`, :func:`tune`, :func:`epsilon`;
+* :mod:`jaxgrasp.hands`: :class:`Hand` from MJCF (the ``hands`` extra), :func:`tune_hand`;
 * :mod:`jaxgrasp.plots` and :mod:`jaxgrasp.cli` (the ``jaxgrasp`` command).
 
 Importing jaxgrasp turns on JAX's 64-bit mode (``jax_enable_x64``) for the whole process,
@@ -64,6 +65,7 @@ _store.enable_from_environment()  # the executable store, in the user's cache fo
 from jaxgrasp import presets  # noqa: E402
 from jaxgrasp.analysis import EpsilonResult, SweepResult, TuneResult, TuneStatus, epsilon, sweep, tune  # noqa: E402
 from jaxgrasp.engine import BatchResult, enable_compilation_cache, evaluate, evaluate_batch  # noqa: E402
+from jaxgrasp.hands import Hand  # noqa: E402  (mujoco is imported when a hand is read)
 from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is used)
     GraspSet,
     MeshGrasp,
@@ -117,6 +119,8 @@ __all__ = [
     "TuneResult",
     "epsilon",
     "EpsilonResult",
+    # hands
+    "Hand",
     # errors and set-up
     "GraspValueError",
     "check",
