@@ -65,7 +65,7 @@ _store.enable_from_environment()  # the executable store, in the user's cache fo
 from jaxgrasp import presets  # noqa: E402
 from jaxgrasp.analysis import EpsilonResult, SweepResult, TuneResult, TuneStatus, epsilon, sweep, tune  # noqa: E402
 from jaxgrasp.engine import BatchResult, enable_compilation_cache, evaluate, evaluate_batch  # noqa: E402
-from jaxgrasp.hands import Hand  # noqa: E402  (mujoco is imported when a hand is read)
+from jaxgrasp.hands import Hand, tune_hand  # noqa: E402  (mujoco is imported when a hand is read)
 from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is used)
     GraspSet,
     MeshGrasp,
@@ -121,6 +121,7 @@ __all__ = [
     "EpsilonResult",
     # hands
     "Hand",
+    "tune_hand",
     # errors and set-up
     "GraspValueError",
     "check",
