@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.hands._kinematics import body_frames, cap_offsets, geom_frames
+from jaxgrasp.hands._links import link_depths, link_samples
 from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER, SPHERE, KinematicTree, read_mjcf
 from jaxgrasp.model._validation import GraspValueError
 
@@ -45,6 +46,8 @@ class Hand:
         links: indices of the other geoms (spheres, capsules, cylinders, boxes: the
             links kept out of the object by :func:`~jaxgrasp.tune_hand`; meshes and planes
             are left out).
+        link_points: ``(geom (P,), points (P, 3) m, radius (P,) m)``, their samples
+            (:func:`~jaxgrasp.hands._links.link_samples`).
     """
 
     tree: KinematicTree
@@ -53,6 +56,7 @@ class Hand:
     radius: np.ndarray
     cap_offset: np.ndarray
     links: np.ndarray
+    link_points: tuple
 
     @classmethod
     def from_mjcf(cls, path: str | os.PathLike, fingertips: Sequence[str]) -> "Hand":
@@ -72,7 +76,8 @@ class Hand:
         if wrong:
             raise GraspValueError(f"fingertips: geom {wrong[0]!r} is neither a sphere nor a capsule")
         links = np.array([g for g in range(len(tree.geom_body)) if g not in idx and tree.geom_type[g] in _LINK_TYPES], dtype=int)
-        return cls(tree, idx, tuple(fingertips), tree.geom_size[idx, 0].copy(), cap_offsets(tree, idx), links)
+        return cls(tree, idx, tuple(fingertips), tree.geom_size[idx, 0].copy(), cap_offsets(tree, idx), links,
+                   link_samples(tree, links))
 
     @property
     def num_joints(self) -> int:
@@ -125,6 +130,12 @@ class Hand:
     def body_frames(self, qpos, wrist=None):
         """``(xpos (B, 3) m, xmat (B, 3, 3))``: world frames of every body."""
         return body_frames(self.tree, qpos, wrist)
+
+    def link_depths(self, qpos, wrist, object_pose, surface):
+        """``(P,)`` m: how deep each sample of the other links lies in the object
+        (negative: clear of it), the object's :class:`jaxgrasp.surface.Surface` in its mesh
+        frame placed by ``object_pose`` ``(6,)``; see :mod:`jaxgrasp.hands._links`. Traceable."""
+        return link_depths(self, qpos, wrist, object_pose, surface)
 
     def grasp(self, qpos, mesh, **kwargs):
         """The grasp this configuration makes on ``mesh``: see :func:`~jaxgrasp.hands._grasp.hand_grasp`."""

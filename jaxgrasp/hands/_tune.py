@@ -10,12 +10,9 @@ its gradient are compiled once (per hand, :class:`~jaxgrasp.EvaluateOptions` and
 size) and SciPy's L-BFGS-B runs on them in the box of the joint limits scaled to
 ``[0, 1]`` (:func:`jaxgrasp.analysis._tune_drivers.run_search`).
 
-Penetration: every other link (capsule, sphere, cylinder or box geom that is not a
-fingertip, :attr:`~jaxgrasp.Hand.links`) is sampled: a capsule or cylinder by points on
-its axis (spacing at most ``radius / 2``) with its radius, a sphere by its centre, a box
-by a grid on its faces (spacing at most 4 mm) with radius 0. A sample's depth is its
-radius minus the signed distance of its point to the object's surface
-(:attr:`jaxgrasp.surface.SurfacePoint.signed_distance`); the objective adds
+Penetration: the hand's other links are sampled (:meth:`~jaxgrasp.Hand.link_depths`,
+:mod:`jaxgrasp.hands._links`), each sample's depth in the object measured by the signed
+distance to the same surface the contacts use; the objective adds
 ``penetration_weight * sum(max(depth, 0)^2) / (1 mm)^2`` to minus the value over the
 start's value, and the best iterate is the one of highest value whose deepest sample is
 at most ``max_penetration``.
@@ -36,70 +33,20 @@ from jaxgrasp.analysis._tune_status import TuneStatus
 from jaxgrasp.engine._evaluate import evaluate_compiled
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
 from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp, _pose, contact_grasp, hand_grasp, material
-from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER
 from jaxgrasp.model._fields import DEFAULT_GRAVITY
 from jaxgrasp.model._validation import GraspValueError
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._status import GraspStatus
 
-__all__ = ["tune_hand", "HandTuneResult", "HandValue", "hand_value", "link_samples", "PENETRATION_UNIT"]
+__all__ = ["tune_hand", "HandTuneResult", "HandValue", "hand_value", "PENETRATION_UNIT"]
 
 PENETRATION_UNIT = 1e-3
 """m: the penetration penalty is ``weight * sum(depth^2) / PENETRATION_UNIT^2``."""
-
-_BOX_SPACING = 4e-3  # m, the largest spacing of the sample grid on a box's faces
-
-
-def link_samples(hand) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(geom (P,), points (P, 3) m in the geom's frame, radius (P,) m)``: the sample
-    points of the hand's other links (module notes)."""
-    tree = hand.tree
-    geoms, points, radii = [], [], []
-    for g in hand.links:
-        size = tree.geom_size[g]
-        if tree.geom_type[g] in (CAPSULE, CYLINDER):
-            k = max(2, int(math.ceil(2.0 * size[1] / (0.5 * size[0]))) + 1)
-            pts, rad = np.stack([np.zeros(k), np.zeros(k), np.linspace(-size[1], size[1], k)], 1), np.full(k, size[0])
-        elif tree.geom_type[g] == BOX:
-            pts = _box_surface(size[:3])
-            rad = np.zeros(len(pts))
-        else:  # a sphere
-            pts, rad = np.zeros((1, 3)), np.full(1, size[0])
-        geoms.append(np.full(len(pts), g))
-        points.append(pts)
-        radii.append(rad)
-    if not geoms:
-        return np.zeros(0, int), np.zeros((0, 3)), np.zeros(0)
-    return np.concatenate(geoms), np.concatenate(points), np.concatenate(radii)
-
-
-def _box_surface(half: np.ndarray) -> np.ndarray:
-    """Grid points on the faces of a box of half-sizes ``half`` (3,), m."""
-    axes = [np.linspace(-h, h, max(2, int(math.ceil(2 * h / _BOX_SPACING)) + 1)) for h in half]
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    on_face = np.any(np.isclose(np.abs(grid), half), axis=1)
-    return grid[on_face]
-
-
-def link_depths(hand, samples, qpos, wrist, object_pose, surface):
-    """``(P,)`` m: how deep each link sample lies in the object (negative: outside)."""
-    from jaxgrasp.hands._grasp import object_transform
-
-    geom, local, radius = samples
-    if len(geom) == 0:
-        return jnp.zeros(1) - 1.0
-    xpos, xmat = hand.geom_frames(qpos, wrist, np.unique(geom))
-    row = np.searchsorted(np.unique(geom), geom)
-    world = xpos[row] + jnp.einsum("pij,pj->pi", xmat[row], jnp.asarray(local))
-    rot, t = object_transform(object_pose)
-    return jnp.asarray(radius) - surface.closest((world - t) @ rot).signed_distance
-
 
 @lru_cache(maxsize=16)
 def _compiled(hand, options: EvaluateOptions, max_tilt: float):
     """``core(x, data) -> (value, dvalue_dx, penalty, dpenalty_dx, evaluation, deepest, tilt)``,
     jitted once per key; ``x = (qpos, wrist)`` ``(J + 6,)``."""
-    samples = link_samples(hand)
     j = hand.num_joints
 
     def value(x, data):
@@ -109,7 +56,7 @@ def _compiled(hand, options: EvaluateOptions, max_tilt: float):
         return v, (ev, tilt)
 
     def penalty(x, data):
-        depth = link_depths(hand, samples, x[:j], x[j:], data["object_pose"], data["surface"])
+        depth = hand.link_depths(x[:j], x[j:], data["object_pose"], data["surface"])
         return jnp.sum(jnp.maximum(depth, 0.0) ** 2) / PENETRATION_UNIT**2, jnp.max(depth)
 
     def core(x, data):
