@@ -76,9 +76,10 @@ def material(num_fingertips: int, mesh, young_modulus, friction, max_force, mass
     from jaxgrasp.io._mesh import _mass_properties
 
     com, m = _mass_properties(mesh, mass, density, center_of_mass)
-    f = num_fingertips
-    probe = check_grasp_inputs(  # the rules of every field, on a stand-in geometry
-        positions=np.eye(3)[np.arange(f) % 3], normals=np.eye(3)[np.arange(f) % 3], initial_deformation=1e-9,
+    angle = 2.0 * np.pi * np.arange(num_fingertips) / num_fingertips
+    ring = np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=1)
+    probe = check_grasp_inputs(  # the rules of every field, on a stand-in geometry (a ring of contacts)
+        positions=ring, normals=ring, initial_deformation=1e-9,
         radius=1.0, young_modulus=young_modulus, friction=friction, max_force=max_force, mass=0.0, gravity=gravity,
     )
     if not (np.isfinite(m) and m >= 0.0):

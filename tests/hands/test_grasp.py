@@ -1,6 +1,6 @@
 """The grasp a hand configuration makes, its value and gradient, and tuning (issue 37).
 
-A two-finger test hand (``two_finger.xml``: a slide, a swing and a curl per finger,
+A two-finger test hand (``examples/hands/two_finger/two_finger.xml``: a slide, a swing and a curl per finger,
 capsule fingertips of radius 10 mm) pinches a 60 mm cube of 20 g. Against references that
 share nothing with the code under test but the kinematics (checked against MuJoCo in
 ``test_kinematics.py``):
@@ -33,7 +33,7 @@ from jaxgrasp.io._mesh import closest_on_triangles
 pytest.importorskip("mujoco", reason="the hands extra: pip install 'jaxgrasp[hands]'")
 trimesh = pytest.importorskip("trimesh")
 
-TWO_FINGER = Path(__file__).with_name("two_finger.xml")
+TWO_FINGER = Path(__file__).resolve().parents[2] / "examples" / "hands" / "two_finger" / "two_finger.xml"
 FIELDS = dict(young_modulus=6e5, friction=0.8, max_force=15.0, mass=0.02)
 # Asymmetric configurations (no tie between the two fingertips' boundaries, so the value
 # is smooth there): slide m, swing rad, curl rad per finger; every contact inside a face.
@@ -127,3 +127,21 @@ def test_tune_hand_raises_the_value_within_limits(hand, cube):
     assert res.value == pytest.approx(float(jaxgrasp.evaluate(res.grasp.grasp).value), rel=1e-9)
     with pytest.raises(jaxgrasp.GraspValueError, match="value 0"):
         jaxgrasp.tune_hand(hand, cube, np.array([-0.02, 0.0, 0.0, 0.0005, 0.0, 0.0]), **FIELDS)
+
+
+PINCH = TWO_FINGER.with_name("pinch.toml")
+
+
+def test_show_hand_draws_links_object_and_failure_pose(run_cli, tmp_path):
+    out = tmp_path / "pinch.png"
+    rc, stdout, err = run_cli(["show", "--hand", PINCH, "--out", out, "--glb", tmp_path / "pinch.glb"])
+    assert rc == 0, err
+    assert "stable" in stdout and "2 fingertips in contact" in stdout and out.stat().st_size > 10_000
+    scene = trimesh.load(tmp_path / "pinch.glb")
+    names = set(scene.geometry)
+    assert {"object", "ghost", "link a_tip", "link b_tip", "link a_proximal", "fingertip 0", "fingertip 1"} <= names
+    bad = tmp_path / "bad.toml"
+    bad.write_text(PINCH.read_text().replace("[fingertip]", "[fingertip]\ncolour = 1"))
+    (tmp_path / "two_finger.xml").write_text(TWO_FINGER.read_text())
+    rc, _, err = run_cli(["show", "--hand", bad, "--out", tmp_path / "x.png"])
+    assert rc == 2 and "unknown key 'colour' in [fingertip]" in err and len(err.strip().splitlines()) == 1

@@ -22,7 +22,7 @@ from jaxgrasp.model._potential import rotation_matrix
 
 REPO = Path(__file__).resolve().parents[2]
 SHADOW = REPO / "examples" / "hands" / "shadow" / "shadow_hand.xml"
-TWO_FINGER = Path(__file__).with_name("two_finger.xml")
+TWO_FINGER = REPO / "examples" / "hands" / "two_finger" / "two_finger.xml"
 SHADOW_TIPS = [f"robot0:C_{f}distal" for f in ("ff", "mf", "rf", "lf", "th")]
 
 mujoco = pytest.importorskip("mujoco", reason="the hands extra: pip install 'jaxgrasp[hands]'")
