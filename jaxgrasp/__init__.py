@@ -5,6 +5,7 @@ packages, each importing only from those before it in this list:
 
 * :mod:`jaxgrasp.solver`: a generic augmented-Lagrangian solver and its lane queue;
 * :mod:`jaxgrasp.model`: grasp fields, :class:`Grasp`, the potential field (eq. 3-21);
+* :mod:`jaxgrasp.surface`: meshes in JAX (:class:`Surface`), the contact rules;
 * :mod:`jaxgrasp.presets`: the paper's two grasps (Sec. VII);
 * :mod:`jaxgrasp.io`: grasp files, datasets, meshes, output files;
 * :mod:`jaxgrasp.tolerance`: the method (eq. 1): problems, starts, settling, verdict;
@@ -12,6 +13,7 @@ packages, each importing only from those before it in this list:
   the executable store, checkpoints;
 * :mod:`jaxgrasp.analysis`: :func:`sweep`, :func:`tune`, :func:`epsilon`;
 * :mod:`jaxgrasp.hands`: :class:`Hand` from MJCF (the ``hands`` extra), :func:`tune_hand`;
+* :mod:`jaxgrasp.planning`: :func:`plan`, the best grasps on a mesh;
 * :mod:`jaxgrasp.plots` and :mod:`jaxgrasp.cli` (the ``jaxgrasp`` command).
 
 Importing jaxgrasp turns on JAX's 64-bit mode (``jax_enable_x64``) for the whole process,
@@ -78,7 +80,9 @@ from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is use
     save_dataset,
 )
 from jaxgrasp.model import BoundaryKind, Grasp, GraspValueError, check, stack  # noqa: E402
+from jaxgrasp.planning import PlanResult, plan  # noqa: E402
 from jaxgrasp.solver import LaneStatus, SolverOptions  # noqa: E402
+from jaxgrasp.surface import Surface  # noqa: E402
 from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus  # noqa: E402
 
 try:  # the version is defined once, in pyproject.toml; the installed metadata carries it
@@ -110,6 +114,7 @@ __all__ = [
     "load_dataset",
     "save_dataset",
     "GraspSet",
+    "Surface",
     # many grasps and analyses
     "evaluate_batch",
     "BatchResult",
@@ -117,6 +122,8 @@ __all__ = [
     "SweepResult",
     "tune",
     "TuneResult",
+    "plan",
+    "PlanResult",
     "epsilon",
     "EpsilonResult",
     # hands

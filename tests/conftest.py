@@ -44,7 +44,12 @@ import pytest
 # user's ~/.cache: the suite (and every subprocess it starts, which inherits the variable)
 # uses a folder of its own instead, so that it neither loads programs compiled elsewhere
 # (and counts no traces) nor fills the developer's or the CI's cache. Removed at the end.
-SESSION_CACHE = Path(tempfile.mkdtemp(prefix="jaxgrasp-test-cache-"))
+# Under pytest-xdist (``-n 2``) the workers share their controller's folder (named by its
+# process id, their parent's), so that a program one worker compiled the other loads; the
+# store writes atomically, so two workers may fill it at once. The controller removes it.
+XDIST_WORKER = os.environ.get("PYTEST_XDIST_WORKER") is not None
+SESSION_CACHE = Path(tempfile.gettempdir()) / f"jaxgrasp-test-cache-{os.getppid() if XDIST_WORKER else os.getpid()}"
+SESSION_CACHE.mkdir(mode=0o700, exist_ok=True)
 os.environ["JAXGRASP_CACHE_DIR"] = str(SESSION_CACHE)
 
 import jaxgrasp  # noqa: E402  turns on jax_enable_x64 by itself (tested in test_evaluate.py)
@@ -211,7 +216,8 @@ def pytest_sessionfinish(session, exitstatus):
     from jaxgrasp.engine import _compile
 
     _compile.wait_for_saves(timeout=60)  # no write into a folder being removed
-    shutil.rmtree(SESSION_CACHE, ignore_errors=True)
+    if not XDIST_WORKER:  # the controller ends last
+        shutil.rmtree(SESSION_CACHE, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

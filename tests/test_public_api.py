@@ -24,9 +24,9 @@ import pytest
 
 import jaxgrasp
 
-MAX_PUBLIC_NAMES = 33
-"""30 in issue 34, plus :func:`jaxgrasp.check` (issue 40: validation inside ``jit``), plus
-:class:`jaxgrasp.Hand` and :func:`jaxgrasp.tune_hand` (issue 37: a real hand)."""
+MAX_PUBLIC_NAMES = 40
+"""30 in issue 34, plus :func:`jaxgrasp.check` (issue 40), then one or a few per capability that
+later issues added (planning and surfaces 36, robust values 39, hands 37, the physics check 38)."""
 OFF_THE_TOP_LEVEL = ("STABLE", "STATUS_NAMES", "KINDS", "COMPILER_OPTIONS")
 """Names that left the top level in issue 34: an enum alias, tables and an internal."""
 
@@ -124,7 +124,7 @@ def packages() -> list[types.ModuleType]:
     return subpackages(jaxgrasp)
 
 
-def test_at_most_31_public_names():
+def test_at_most_40_public_names():
     assert len(jaxgrasp.__all__) <= MAX_PUBLIC_NAMES, f"{len(jaxgrasp.__all__)} names: {jaxgrasp.__all__}"
 
 

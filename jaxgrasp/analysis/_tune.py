@@ -53,9 +53,11 @@ from jaxgrasp.analysis._tune_spec import (
 from jaxgrasp.analysis._tune_status import TuneStatus
 from jaxgrasp.engine._evaluate import evaluate_compiled
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
+from jaxgrasp.io._mesh import MeshGrasp
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._units import MJ_TO_J
 from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs, counted
+from jaxgrasp.surface import PAD_FACES, Surface
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
@@ -79,8 +81,7 @@ def _apply(specs: tuple[ParamSpec, ...], u, data) -> Grasp:
         x = lo + (hi - lo) * u[off : off + k]
         off += k
         if spec.name == "positions":
-            ab = x.reshape(n, 2)
-            changes["positions"] = base.positions + jnp.einsum("nk,nkd->nd", ab, data["basis"])
+            changes.update(_moved_contacts(base, x.reshape(n, 2), data))
         elif spec.name == "mass":
             changes["mass"] = x[0]
         elif spec.shared:
@@ -89,6 +90,21 @@ def _apply(specs: tuple[ParamSpec, ...], u, data) -> Grasp:
             changes[spec.name] = x
     given = data["as_given"]
     return base.replace(**{k: jnp.where(given, getattr(base, k), v) for k, v in changes.items()})
+
+
+def _moved_contacts(base: Grasp, offsets, data) -> dict:
+    """Contact positions (and, on a mesh, normals) after in-plane ``offsets (N, 2)`` m.
+
+    Without a surface each contact moves in its tangent plane, its normal fixed. With one
+    (``data["surface"]``, a :class:`~jaxgrasp.surface.Surface` in the grasp's frame) the
+    moved point is put back on the surface at its closest point and takes the normal of the
+    face there: the contact slides along the surface, across faces, and its normal follows.
+    """
+    moved = base.positions + jnp.einsum("nk,nkd->nd", offsets, data["basis"])
+    if "surface" not in data:
+        return {"positions": moved}
+    hit = data["surface"].closest(moved)
+    return {"positions": hit.point, "normals": hit.normal}
 
 
 @lru_cache(maxsize=64)
@@ -153,6 +169,8 @@ class TuneResult:
             differed set to their mean). ``gain`` is measured from it.
         clipped: labels of the parameters whose start lay outside the bounds and was
             clipped into them (``()`` when none).
+        mesh_grasp: where a :class:`~jaxgrasp.MeshGrasp` was tuned, the tuned one (its
+            mesh and centre of mass, ``grasp``); else ``None``.
     """
 
     grasp: Grasp
@@ -172,6 +190,7 @@ class TuneResult:
     message: str
     start_value: float
     clipped: tuple = ()
+    mesh_grasp: Any = None
 
     @property
     def converged(self) -> bool:
@@ -209,18 +228,21 @@ class TuneResult:
 
 
 def tune(
-    grasp: Grasp, params: Sequence[str] | str = ("initial_deformation",), bounds: Mapping[str, Any] | None = None,
+    grasp: Grasp | MeshGrasp, params: Sequence[str] | str = ("initial_deformation",), bounds: Mapping[str, Any] | None = None,
     *, maxiter: int = 50, options: EvaluateOptions = EvaluateOptions(), method: str = "scipy_lbfgsb",
     tol: float = 1e-6, ftol: float = 1e-7, patience: int = 4, callback=None,
 ) -> TuneResult:
     """Maximise ``evaluate(grasp).value`` over the chosen parameters within bounds.
 
     Args:
-        grasp: the starting grasp (must be stable: value > 0).
+        grasp: the starting grasp (must be stable: value > 0), or a
+            :class:`~jaxgrasp.MeshGrasp`: then ``positions`` move along the mesh's surface.
         params: parameter names from :data:`~jaxgrasp.model._fields.TUNABLE` (see
             :func:`~jaxgrasp.analysis._tune_spec.parse_param`): a per-contact field, one
             value per contact or, with ``:shared``, one for every contact; ``positions``
-            (each contact moves within its face); ``mass``.
+            (each contact moves in its tangent plane, normal fixed; on a mesh grasp it
+            slides along the surface, across faces, and its normal is the outward normal
+            of the face it lies on: :class:`~jaxgrasp.surface.Surface`); ``mass``.
         bounds: by parameter name (with or without ``:shared``): ``(lo, hi)`` in SI
             units, scalars or one per contact; for ``positions`` the half-width in m (a
             number, one per contact, or ``(N, 2)``). Only ``initial_deformation`` has a
@@ -246,18 +268,33 @@ def tune(
             (value 0: unstable or infeasible), where the gradient is 0 and there is
             nothing to follow; the message names the status.
     """
-    grasp = _checked_grasp(grasp, method, maxiter)
+    mesh_grasp = grasp if isinstance(grasp, MeshGrasp) else None
+    grasp = _checked_grasp(grasp.grasp if mesh_grasp is not None else grasp, method, maxiter)
     specs = param_specs(params)
     box = ParamBox.build(specs, grasp, bounds)
+    surface = _surface_of(mesh_grasp, specs)
+    if surface is not None:  # the start is put on the surface: its normals may differ from those given
+        box = dataclasses.replace(box, moved=True)
     vg = _compiled(specs, dataclasses.replace(options, smooth_min_temperature=None))
-    data, rec, start_value = _start_search(vg, box, grasp, options.smooth_min_temperature)
+    data, rec, start_value = _start_search(vg, box, grasp, options.smooth_min_temperature, surface)
     stop = dict(maxiter=maxiter, tol=tol, ftol=ftol, patience=patience, callback=callback)
     status, iters, evals = run_search(method, vg, box.u0, data, rec, **stop)
     message = status.message.format(ftol=ftol, patience=patience, maxiter=maxiter)
-    return _result(specs, grasp, box, data, rec, status, iters, evals, method, message, start_value)
+    result = _result(specs, grasp, box, data, rec, status, iters, evals, method, message, start_value)
+    if mesh_grasp is None:
+        return result
+    return dataclasses.replace(result, mesh_grasp=mesh_grasp.replace(grasp=result.grasp))
 
 
-def _start_search(vg, box: ParamBox, grasp: Grasp, temperature):
+def _surface_of(mesh_grasp: MeshGrasp | None, specs) -> Surface | None:
+    """The mesh's surface in the grasp's centre-of-mass frame, where positions are tuned
+    on a mesh grasp; else ``None``."""
+    if mesh_grasp is None or not any(s.name == "positions" for s in specs):
+        return None
+    return Surface.from_trimesh(mesh_grasp.mesh, pad_to=PAD_FACES).translated(-np.asarray(mesh_grasp.center_of_mass))
+
+
+def _start_search(vg, box: ParamBox, grasp: Grasp, temperature, surface: Surface | None = None):
     """``(data, record, start_value)``: the objective's data (the grasp, the bounds, the
     face bases, the soft-minimum ``temperature`` in J or ``None``, the value scale: the
     start's value), the record holding the start, and the value of the grasp as given."""
@@ -270,6 +307,8 @@ def _start_search(vg, box: ParamBox, grasp: Grasp, temperature):
         "value_scale": jnp.float64(1.0),
         "as_given": jnp.asarray(False),
     }
+    if surface is not None:
+        data["surface"] = surface
     rec = SearchRecord.start(vg, box, data)
     data["value_scale"] = jnp.float64(rec.initial_value)
     start_value = _value_as_given(vg, box, data) if box.moved else rec.initial_value

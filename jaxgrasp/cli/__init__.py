@@ -1,4 +1,4 @@
-"""The ``jaxgrasp`` command line: ``jaxgrasp evaluate``, ``sweep``, ``batch``, ``tune``, ``show``.
+"""The ``jaxgrasp`` command line: ``jaxgrasp evaluate``, ``sweep``, ``batch``, ``tune``, ``plan``, ``show``.
 
 Every error in the input (bad file, bad value, bad option, an output that cannot be
 written) prints one line ``jaxgrasp: error: ...`` on stderr and exits with status 2, never
@@ -8,7 +8,7 @@ line too, with status 1; a batch's finished chunks stay in its checkpoint for
 line ``jaxgrasp: interrupted ...`` and status 130 (143), see :mod:`._interrupt`.
 
 One module per sub-command (:mod:`._evaluate`, :mod:`._sweep`, :mod:`._batch`,
-:mod:`._tune`, :mod:`._show`), each with ``add_parser(sub)`` and ``run(args)``; what they
+:mod:`._tune`, :mod:`._plan`, :mod:`._show`), each with ``add_parser(sub)`` and ``run(args)``; what they
 share is in :mod:`._common`. The commands parse, call the library, print and write.
 """
 
@@ -17,7 +17,7 @@ from __future__ import annotations
 import sys
 from importlib import metadata
 
-from jaxgrasp.cli import _batch, _evaluate, _show, _sweep, _tune
+from jaxgrasp.cli import _batch, _evaluate, _plan, _show, _sweep, _tune
 from jaxgrasp.cli._common import EXIT_USAGE, Parser, UsageError, check_names, load_grasp, parse_number
 from jaxgrasp.cli._interrupt import run_interruptibly
 from jaxgrasp.engine import _compile
@@ -36,7 +36,7 @@ __all__ = [
     "enable_compilation_cache",
 ]
 
-COMMANDS = (_evaluate, _sweep, _batch, _tune, _show)
+COMMANDS = (_evaluate, _sweep, _batch, _tune, _plan, _show)
 """The sub-command modules, in the order of ``jaxgrasp --help``."""
 
 EXIT_ENVIRONMENT = 1
@@ -96,7 +96,7 @@ def _main(argv) -> int:
     try:
         args = parser.parse_args(argv)
         if args.command is None:
-            raise UsageError("choose a command: evaluate, sweep, batch, tune or show (see 'jaxgrasp --help')")
+            raise UsageError("choose a command: evaluate, sweep, batch, tune, plan or show (see 'jaxgrasp --help')")
         check_names(args)  # a name that is not UTF-8 would fail only when printed, after the work
         with log_lines_on_stderr():  # "jaxgrasp: compiling ...", and cache warnings, one line each
             enable_compilation_cache()  # looked up here, so that tests can replace it

@@ -108,7 +108,7 @@ def add_parser(sub) -> None:
         epilog=(
             f"PARAM is one of {', '.join(TUNABLE)}; per-contact ones tune one value per "
             "contact, or one shared value with the suffix ':shared' (e.g. "
-            "initial_deformation:shared). 'positions' moves each contact within its face "
+            "initial_deformation:shared). 'positions' moves each contact in its tangent plane (along the surface for a grasp file naming a mesh) "
             "(give --bounds positions=HALF_WIDTH in m). Only initial_deformation has "
             "default bounds. Example: jaxgrasp tune --preset cube --param "
             "initial_deformation:shared --bounds initial_deformation=0.001:0.005 --out tuned.toml"
@@ -160,11 +160,11 @@ def run(args) -> int:
     bounds = parse_bounds(args.bounds)
     params = args.param or ["initial_deformation"]
     check_bounds(params, bounds)
-    grasp = load_grasp(args)  # with the overrides (--young-modulus ...)
+    grasp = load_grasp(args, keep_mesh=True)  # with the overrides (--young-modulus ...); a mesh's positions slide on it
     source = grasp_source(args)
     if not args.quiet:
         say(
-            f"jaxgrasp: tuning {', '.join(params)} of {source} ({grasp.num_contacts} contacts) by {args.method}, "
+            f"jaxgrasp: tuning {', '.join(params)} of {source} ({_contacts(grasp)} contacts) by {args.method}, "
             f"at most {counted(args.maxiter, 'iteration')}; compiling the value and its gradient first"
         )
     options = EvaluateOptions(smooth_min_temperature=args.smooth_min_temperature)
@@ -227,9 +227,15 @@ def _progress_printer(quiet: bool):
 def _write_outputs(res, out: Path, title: str | None) -> list[str]:
     """Write the tuned grasp to ``out`` and (with a ``title``) its history plot beside it,
     as one set; the names of the previous files they replaced."""
-    from jaxgrasp.io._grasp_file import to_text
+    from jaxgrasp.io._grasp_file import mesh_reference, to_text
 
-    members = {out: to_text(res.grasp, out).encode("utf-8")}
+    if res.mesh_grasp is None:
+        members = {out: to_text(res.grasp, out).encode("utf-8")}
+    else:  # the tuned file names the mesh; a copy beside it where the mesh is elsewhere
+        name, raw = mesh_reference(res.mesh_grasp, out.parent, copy=True)
+        members = {out: to_text(res.mesh_grasp, out, name).encode("utf-8")}
+        if raw is not None:
+            members[out.parent / name] = raw
     if title is not None:
         from jaxgrasp.plots import plot_history, save_figure
 
@@ -241,6 +247,11 @@ def _write_outputs(res, out: Path, title: str | None) -> list[str]:
     except OSError as exc:
         raise UsageError(f"cannot write {str(out)!r}: {exc.strerror or exc}") from None
     return [p.name for p in replaced]
+
+
+def _contacts(grasp) -> int:
+    """The number of contacts of a grasp or a mesh grasp."""
+    return getattr(grasp, "grasp", grasp).num_contacts
 
 
 def _fmt(v) -> str:

@@ -92,7 +92,7 @@ class HandValue:
 def _setup(hand, mesh, kw):
     """``(data, mesh)``: the objective's data for a mesh and the grasp fields ``kw``."""
     from jaxgrasp.io._mesh import load_mesh
-    from jaxgrasp.surface import Surface
+    from jaxgrasp.surface import PAD_FACES, Surface
 
     mesh = load_mesh(mesh, kw.pop("units", "m"))
     mat = material(len(hand.fingertips), mesh, kw.pop("young_modulus"), kw.pop("friction"), kw.pop("max_force"),
@@ -100,7 +100,7 @@ def _setup(hand, mesh, kw):
                    kw.pop("center_of_mass", None))
     if kw:
         raise GraspValueError(f"unknown argument {sorted(kw)[0]!r}")
-    data = {"surface": Surface.from_trimesh(mesh), "material": mat}
+    data = {"surface": Surface.from_trimesh(mesh, pad_to=PAD_FACES), "material": mat}
     return data, mesh
 
 

@@ -48,13 +48,13 @@ from typing import Any, Mapping
 import numpy as np
 
 from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, read_input
+from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, MAX_MESH_BYTES, read_input
 from jaxgrasp.io._mesh import MeshGrasp, MeshReader, from_mesh, load_mesh
 from jaxgrasp.model._fields import FIELD, FIELDS, FINGERTIP
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
 
-__all__ = ["checked_fields", "grasp_from_dict", "grasp_to_dict", "load", "save", "to_text", "to_toml"]
+__all__ = ["checked_fields", "dict_to_text", "dict_to_toml", "grasp_from_dict", "grasp_to_dict", "load", "mesh_grasp_to_dict", "mesh_reference", "save", "to_text", "to_toml"]
 
 TOP_KEYS = ("fingertip", "object", "contacts")
 FINGERTIP_KEYS = tuple(FIELD[name].file_key for name in FINGERTIP)
@@ -264,7 +264,7 @@ def _build(data: Mapping, source: str, meshes, as_fields: bool = False):
         name, units = mesh.pop("mesh"), mesh.pop("units")
         surface, shown = meshes(name, units) if meshes is not None else (load_mesh(name, units), name)
         made = from_mesh(surface, kwargs.pop("positions"), normals=kwargs.pop("normals"), **mesh, **kwargs)
-        return made.replace(source=shown)
+        return made.replace(source=shown, units=units)
     except GraspValueError as exc:
         raise GraspValueError(f"{source}: {exc}") from None
     except RecursionError:
@@ -438,6 +438,8 @@ def _toml_float(x: float) -> str:
 
 
 def _toml_value(value: Any) -> str:
+    if isinstance(value, str):
+        return json.dumps(value)  # a TOML basic string: JSON's escapes are TOML's
     if isinstance(value, list):
         return "[" + ", ".join(_toml_float(v) for v in value) + "]"
     return _toml_float(value)
@@ -452,10 +454,36 @@ def _toml_lines(table: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-def to_toml(grasp: Grasp) -> str:
-    """TOML text of a grasp (the fixed grasp-file structure; floats written with ``repr``)."""
-    d = grasp_to_dict(grasp)
-    lines = ["# Grasp file (jaxgrasp). SI units: m, Pa, N, kg, m/s^2; object frame at the centre of mass."]
+def mesh_grasp_to_dict(mesh_grasp: MeshGrasp, mesh_name: str, mesh_positions=None) -> dict[str, Any]:
+    """The file structure of a grasp of a meshed object: :func:`grasp_to_dict` with
+    ``[object] mesh = mesh_name`` (the path as the file will name it), its ``units`` and
+    ``center_of_mass`` (m, mesh frame), contact positions in the mesh's frame (m) and each
+    contact's normal (so that :func:`load` gives back the same normals, also on an edge).
+
+    ``mesh_positions``: ``(N, 3)`` m, the mesh-frame positions to write, where the caller
+    has them (the points the grasp was made from: the file then loads to this very grasp);
+    default the grasp's positions moved back into the mesh's frame."""
+    d = grasp_to_dict(mesh_grasp.grasp)
+    com = np.asarray(mesh_grasp.center_of_mass, dtype=np.float64)
+    d["object"] = {"mesh": mesh_name, "units": mesh_grasp.units, "center_of_mass": _floats(com), **d["object"]}
+    given = None if mesh_positions is None else np.asarray(mesh_positions, dtype=np.float64)
+    for i, contact in enumerate(d["contacts"]):
+        contact["position"] = _floats(np.asarray(contact["position"]) + com if given is None else given[i])
+    return d
+
+
+def to_toml(grasp: Grasp | MeshGrasp, mesh_name: str | None = None) -> str:
+    """TOML text of a grasp (the fixed grasp-file structure; floats written with ``repr``);
+    a :class:`MeshGrasp` names its mesh as ``mesh_name`` (:func:`mesh_grasp_to_dict`)."""
+    d = grasp_to_dict(grasp) if mesh_name is None else mesh_grasp_to_dict(grasp, mesh_name)
+    return dict_to_toml(d)
+
+
+def dict_to_toml(d: Mapping[str, Any]) -> str:
+    """TOML text of a grasp file's structure (:func:`grasp_to_dict`, :func:`mesh_grasp_to_dict`)."""
+    mesh = "mesh" in d["object"]
+    frame = "positions in the mesh's frame" if mesh else "object frame at the centre of mass"
+    lines = [f"# Grasp file (jaxgrasp). SI units: m, Pa, N, kg, m/s^2; {frame}."]
     if "fingertip" in d:
         lines += ["", "[fingertip]"] + _toml_lines(d["fingertip"])
     lines += ["", "[object]"] + _toml_lines(d["object"])
@@ -464,18 +492,63 @@ def to_toml(grasp: Grasp) -> str:
     return "\n".join(lines) + "\n"
 
 
-def to_text(grasp: Grasp, path: str | os.PathLike) -> str:
+def dict_to_text(d: Mapping[str, Any], path: str | os.PathLike) -> str:
+    """A grasp file's structure as the text of ``path``'s format (TOML or JSON by extension)."""
+    return dict_to_toml(d) if _format(Path(path)) == "toml" else json.dumps(d, indent=2) + "\n"
+
+
+def to_text(grasp: Grasp | MeshGrasp, path: str | os.PathLike, mesh_name: str | None = None) -> str:
     """The text :func:`save` writes to ``path``: TOML or JSON by its extension."""
-    if _format(Path(path)) == "toml":
-        return to_toml(grasp)
-    return json.dumps(grasp_to_dict(grasp), indent=2) + "\n"
+    d = grasp_to_dict(grasp) if mesh_name is None else mesh_grasp_to_dict(grasp, mesh_name)
+    return dict_to_text(d, path)
 
 
-def save(grasp: Grasp, path: str | os.PathLike) -> None:
+def save(grasp: Grasp | MeshGrasp, path: str | os.PathLike, *, copy_mesh: bool = False) -> None:
     """Write a single grasp to ``path`` (``.toml`` or ``.json`` by extension, SI units).
 
-    Floats are written so that :func:`load` reproduces the grasp bit for bit. The file is
+    Floats are written so that :func:`load` reproduces the grasp bit for bit (a mesh grasp:
+    to the rounding of moving its positions into the mesh's frame and back). The file is
     written atomically (a temporary file renamed into place, :mod:`jaxgrasp.io._outputs`): a
     failure leaves the previous file as it was.
+
+    A :class:`MeshGrasp` is written with ``[object] mesh`` naming its mesh file relative to
+    ``path``'s folder (:func:`load` reads meshes inside that folder, or in its
+    ``allowed_dirs``). With ``copy_mesh=True`` the mesh is copied into that folder first
+    (its file's bytes, or, for a mesh given as a ``trimesh.Trimesh``, an STL in metres)
+    unless it is there already, so the folder holds everything the file needs.
     """
+    if isinstance(grasp, MeshGrasp):
+        name, raw = mesh_reference(grasp, Path(path).parent, copy_mesh)
+        if raw is not None:
+            outputs.write_file(Path(path).parent / name, raw)
+        outputs.write_file(path, to_text(grasp, path, name).encode("utf-8"))
+        return
     outputs.write_file(path, to_text(grasp, path).encode("utf-8"))
+
+
+def mesh_reference(mesh_grasp: MeshGrasp, folder, copy: bool) -> tuple[str, bytes | None]:
+    """``(name, bytes)``: how a grasp file in ``folder`` names ``mesh_grasp``'s mesh, and
+    the bytes of a copy to write there as ``folder / name`` (``None``: nothing to write).
+
+    Without ``copy`` the name is the mesh file's path relative to ``folder``. With it, a
+    mesh already in ``folder`` (or an identical copy there) is named as it is; otherwise the
+    copy is the mesh file's bytes under its own name, or an STL in metres for a mesh given
+    as a ``trimesh.Trimesh``.
+    """
+    folder, source = Path(folder), mesh_grasp.source
+    if source == "<trimesh>":
+        if not copy:
+            raise GraspValueError("save: this grasp's mesh was given as a trimesh.Trimesh, not a file: use copy_mesh=True")
+        import trimesh.exchange.stl
+
+        name, raw = "mesh.stl", trimesh.exchange.stl.export_stl(mesh_grasp.mesh)
+    elif not copy:
+        return os.path.relpath(os.path.abspath(source), os.path.abspath(folder)), None
+    elif Path(source).resolve().parent == folder.resolve():
+        return Path(source).name, None
+    else:
+        name, raw = Path(source).name, read_input(source, MAX_MESH_BYTES, "mesh")
+    dest = folder / name
+    if dest.is_file() and dest.read_bytes() == raw:
+        return name, None
+    return name, raw

@@ -64,12 +64,15 @@ class MeshGrasp:
         center_of_mass: ``(3,)`` m, the centre of mass in the mesh's frame: a model-frame
             point ``p`` is ``p + center_of_mass`` in the mesh's frame.
         source: where the mesh came from (a path, or ``"<trimesh>"``).
+        units: the length unit of the mesh file's vertices (``"m"``, ``"cm"``, ``"mm"``);
+            :attr:`mesh` is in metres whatever it is.
     """
 
     grasp: Grasp
     mesh: Any
     center_of_mass: np.ndarray
     source: str = "<trimesh>"
+    units: str = "m"
 
     def to_mesh_frame(self, points) -> np.ndarray:
         """Model-frame points ``(..., 3)`` (m) in the mesh's frame (m)."""
@@ -259,23 +262,23 @@ def from_mesh(
     surface = load_mesh(mesh, units)
     source = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "<trimesh>"
     pts = _points(points)
-    com, mass = _mass_properties(surface, mass, density, center_of_mass)
+    com, mass = mass_properties(surface, mass, density, center_of_mass)
     snapped, normal = _contacts(surface, pts, normals, tolerance)
     grasp = Grasp.create(
         positions=snapped - com, normals=normal, initial_deformation=initial_deformation, radius=radius,
         young_modulus=young_modulus, friction=friction, max_force=max_force, mass=mass, gravity=gravity,
     )
-    return MeshGrasp(grasp=grasp, mesh=surface, center_of_mass=com, source=source)
+    return MeshGrasp(grasp=grasp, mesh=surface, center_of_mass=com, source=source, units=units)
 
 
 def _contacts(surface, pts, normals, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
     """``(positions (N, 3) m, normals (N, 3))`` of the contacts, mesh frame: ``pts`` snapped
     to the surface (:func:`snap_to_surface`), each normal the one given in ``normals``
     (``None`` or a length-``N`` sequence of ``None`` or 3-vectors) or else the surface's."""
-    snapped, found = snap_to_surface(surface, pts, tolerance)
     given = [None] * len(pts) if normals is None else list(normals)
     if len(given) != len(pts):
         raise GraspValueError(f"normals has {len(given)} entries for {len(pts)} points")
+    snapped, found = snap_to_surface(surface, pts, tolerance, need_normal=[g is None for g in given])
     normal = np.array([found[i] if g is None else np.asarray(g, dtype=np.float64) for i, g in enumerate(given)])
     return snapped, normal
 
@@ -290,7 +293,7 @@ def _points(points) -> np.ndarray:
     return pts
 
 
-def _mass_properties(surface, mass, density, center_of_mass) -> tuple[np.ndarray, float]:
+def mass_properties(surface, mass, density, center_of_mass) -> tuple[np.ndarray, float]:
     """``(centre of mass (3,) m, mass kg)`` of the object: given, or from its closed surface."""
     closed = surface.is_watertight
     if mass is not None and density is not None:
@@ -315,13 +318,15 @@ def _mass_properties(surface, mass, density, center_of_mass) -> tuple[np.ndarray
     return com, density * float(surface.volume)
 
 
-def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
+def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE, need_normal=None) -> tuple[np.ndarray, np.ndarray]:
     """The closest surface point and the outward unit normal there, for each point.
 
     Args:
         surface: ``trimesh.Trimesh`` (m).
         points: ``(N, 3)`` m, the mesh's frame.
         tolerance: farthest a point may lie from the surface, m.
+        need_normal: ``None`` (every point) or ``(N,)`` bools: the points whose normal is
+            taken from the surface; a point whose normal is given may lie on a sharp edge.
 
     Returns:
         ``(closest (N, 3) m, normals (N, 3))``: the normal of the face the closest point
@@ -350,7 +355,7 @@ def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE) -> tu
         near = dist <= best + 1e-9 * scale
         ns = face_normals[near]
         angle = np.degrees(np.arccos(np.clip(ns @ ns.T, -1.0, 1.0))).max()
-        if angle > SHARP_EDGE_DEG:
+        if angle > SHARP_EDGE_DEG and (need_normal is None or need_normal[i]):
             raise GraspValueError(
                 f"contact {i} at {_vec_mm(p)} mm lies on an edge or corner where faces meet at "
                 f"{angle:.0f} degrees, so it has no one normal: move it onto a face or give its normal"

@@ -1,0 +1,343 @@
+"""Planning: the grasps of a real object that tolerate the most energy, found from its mesh.
+
+:func:`plan` runs five stages, each a function here:
+
+1. **draw** geometric candidates (:mod:`jaxgrasp.planning._sampling`): antipodal pairs by
+   ray casting for two fingers, spread tuples from a pool of surface samples (their normals
+   nearly balancing) for three or more, or plain uniform samples (``sampler="uniform"``,
+   the baseline); each candidate gets one initial deformation drawn uniformly in rule 5's
+   range;
+2. **keep** the candidates that keep every contact rule (:func:`jaxgrasp.surface.check_contacts`),
+   drawing more rounds until ``samples`` are valid;
+3. **evaluate** them all in batches (:func:`jaxgrasp.evaluate_batch`);
+4. **refine** the best ``refine`` by gradient tuning of positions (sliding along the surface)
+   and initial deformations (:func:`jaxgrasp.tune` of a :class:`~jaxgrasp.MeshGrasp`),
+   keeping a tuned grasp only where it still keeps every rule and settles;
+5. **rank** the settled grasps by value and give the ``top`` of them, each rebuilt exactly as
+   its grasp file will load (:func:`jaxgrasp.from_mesh` with its normals, centre of mass
+   and mass) and evaluated again by :func:`jaxgrasp.evaluate`, with its epsilon.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from functools import lru_cache
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrasp.analysis._epsilon import epsilon
+from jaxgrasp.analysis._tune import tune
+from jaxgrasp.engine._batch import evaluate_batch
+from jaxgrasp.engine._evaluate import evaluate
+from jaxgrasp.io._mesh import MeshGrasp, mass_properties, from_mesh, load_mesh
+from jaxgrasp.model._fields import DEFAULT_GRAVITY
+from jaxgrasp.model._grasp import Grasp
+from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.planning._result import PlanResult, PlanStatus
+from jaxgrasp.planning._sampling import antipodal_pairs, spread_tuples, surface_points
+from jaxgrasp.surface import PAD_FACES, ContactRules, RuleCheck, Surface, check_contacts, deformation_range
+from jaxgrasp.tolerance._status import GraspStatus
+
+__all__ = ["plan", "SAMPLERS"]
+
+SAMPLERS = ("antipodal", "spread", "uniform")
+"""Candidate generators: ``antipodal`` (two fingers), ``spread`` (three or more), ``uniform``
+(independent uniform surface points: plain random sampling, the baseline)."""
+
+_ROUND = 512
+"""Candidates drawn and checked per round."""
+
+_MAX_DRAWS = 100
+"""Candidates drawn per valid one asked for, at most (and at least 40 rounds): past that the
+plan goes on with the valid candidates it has (the result counts them)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class _Setup:
+    """The object and fingertips of a plan (mesh frame, SI units)."""
+
+    mesh: object
+    surface: Surface  # padded (PAD_FACES), for compiled checks
+    triangles: np.ndarray  # (F, 3, 3) m, the mesh's own faces, for sampling
+    face_normals: np.ndarray  # (F, 3)
+    com: np.ndarray
+    mass: float
+    gravity: np.ndarray
+    fingertip: dict  # radius, young_modulus, friction, max_force: floats
+    source: str
+    units: str
+
+
+def plan(
+    mesh, fingers: int = 2, *, radius: float, young_modulus: float, friction: float, max_force: float,
+    mass: float | None = None, density: float | None = None, center_of_mass=None, gravity=DEFAULT_GRAVITY,
+    units: str = "m", samples: int = 150, top: int = 10, refine: int = 3, seed: int = 0,
+    rules: ContactRules | None = None, sampler: str | None = None, tune_maxiter: int = 30, progress=None,
+) -> PlanResult:
+    """Find the grasps of a meshed object by ``fingers`` fingertips that tolerate the most energy.
+
+    Args:
+        mesh: ``trimesh.Trimesh`` or mesh file (STL, OBJ, PLY, OFF, GLB), vertices in ``units``.
+        fingers: number of fingertips, 2 to 8.
+        radius, young_modulus, friction, max_force: every fingertip's radius (m), Young's
+            modulus (Pa), friction coefficient and force limit (N).
+        mass, density, center_of_mass: the object's mass (kg) or density (kg/m^3), and its
+            centre of mass (m, mesh frame; default the watertight mesh's), as
+            :func:`jaxgrasp.from_mesh`.
+        gravity: ``(3,)`` m/s^2 in the mesh's axes.
+        units: the mesh's length unit, ``"m"``, ``"cm"`` or ``"mm"``.
+        samples: valid candidates to evaluate (fewer when ``_MAX_DRAWS`` draws per valid one
+            asked for do not find them: the result says how many).
+        top: ranked grasps to return. refine: of the best, how many to tune.
+        seed: seed of every random draw: equal seeds give equal plans.
+        rules: the contact rules' tolerances (:class:`~jaxgrasp.surface.ContactRules`;
+            default ``ContactRules()``).
+        sampler: one of :data:`SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
+        tune_maxiter: iterations of each refinement.
+        progress: ``progress(stage, done, total)`` (stage ``"draw"``, ``"evaluate"``, ``"refine"``).
+
+    Returns:
+        A :class:`~jaxgrasp.planning.PlanResult`.
+
+    Raises:
+        GraspValueError: bad arguments or mesh (one line), before anything is computed.
+    """
+    t0 = time.perf_counter()
+    sampler = _checked_args(fingers, samples, top, refine, seed, sampler)
+    rules = ContactRules() if rules is None else rules
+    setup = _setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force)
+    rng = np.random.default_rng(seed)
+    pos, nrm, dr, sampled, failures = _draw_valid(setup, fingers, samples, sampler, rules, rng, progress)
+    if len(pos) == 0:
+        return _empty(PlanStatus.NO_VALID, sampled, failures, seed, t0, setup, fingers, sampler, rules)
+    ev = evaluate_batch(_grasps(setup, pos, nrm, dr), progress=_stage(progress, "evaluate"))
+    values, statuses = np.asarray(ev.value), np.asarray(ev.status)
+    order = _ranked(values, statuses)
+    pool = [(pos[i], nrm[i], dr[i], False) for i in order[: max(top, refine)]]
+    kept = _refine(setup, pool[:refine], rules, tune_maxiter, progress)
+    ranked = _final(setup, kept + pool[refine:], top)
+    counts = dict(valid=len(pos), stable=int(np.sum(statuses == GraspStatus.STABLE)),
+                  dropped=int(np.sum(statuses == GraspStatus.NOT_CONVERGED)))
+    refine_kept = sum(1 for p in kept if p[3])
+    return _result(ranked, setup, sampled, failures, counts, min(refine, len(pool)), refine_kept, seed, t0,
+                   dict(fingers=fingers, sampler=sampler, rules=dataclasses.asdict(rules), samples=samples))
+
+
+def _checked_args(fingers, samples, top, refine, seed, sampler) -> str:
+    """The sampler to use; one-line errors for bad counts."""
+    for name, v, lo in (("fingers", fingers, 2), ("samples", samples, 1), ("top", top, 1), ("refine", refine, 0),
+                        ("seed", seed, 0)):
+        if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo):
+            raise GraspValueError(f"plan: {name} must be an integer >= {lo}, got {v!r}")
+    if fingers > 8:
+        raise GraspValueError(f"plan: fingers = {fingers} is more than 8")
+    sampler = sampler or ("antipodal" if fingers == 2 else "spread")
+    if sampler not in SAMPLERS:
+        raise GraspValueError(f"plan: unknown sampler {sampler!r}; choose from {', '.join(SAMPLERS)}")
+    if sampler == "antipodal" and fingers != 2:
+        raise GraspValueError(f"plan: the antipodal sampler makes two-finger grasps, not {fingers}")
+    return sampler
+
+
+def _setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force) -> _Setup:
+    """The checked object and fingertips."""
+    import os
+
+    surface_mesh = load_mesh(mesh, units)
+    com, m = mass_properties(surface_mesh, mass, density, center_of_mass)
+    tip = {}
+    for name, v in (("radius", radius), ("young_modulus", young_modulus), ("friction", friction),
+                    ("max_force", max_force)):
+        if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
+            raise GraspValueError(f"plan: {name} = {v!r} must be a finite number > 0 (SI units)")
+        tip[name] = float(v)
+    g = np.asarray(gravity, dtype=np.float64)
+    if g.shape != (3,) or not np.all(np.isfinite(g)):
+        raise GraspValueError(f"plan: gravity must be 3 finite numbers, m/s^2; got {gravity!r}")
+    source = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "<trimesh>"
+    bare = Surface.from_trimesh(surface_mesh)
+    tri, fn = np.asarray(bare.triangles), np.asarray(bare.normals)
+    return _Setup(surface_mesh, bare.padded(PAD_FACES), tri, fn, com, float(m), g, tip, source, units)
+
+
+def _stage(progress, name: str):
+    """``progress(done, total)`` of one stage, or ``None``."""
+    return None if progress is None else (lambda done, total: progress(name, done, total))
+
+
+# ------------------------------------------------------------------------------ draw, keep
+
+
+@lru_cache(maxsize=8)
+def _checker(rules: ContactRules):
+    """``check(surface, positions (B, N, 3), normals, dr (B, N), radius, E, f_max) -> RuleCheck``."""
+    one = lambda s, p, n, d, r, e, f: check_contacts(s, p, n, d, r, e, f, rules)  # noqa: E731
+    return jax.jit(jax.vmap(one, in_axes=(None, 0, 0, 0, None, None, None)))
+
+
+def _check(setup: _Setup, rules: ContactRules, pos, nrm, dr) -> RuleCheck:
+    """The rule check of ``B <= _ROUND`` candidates (padded to ``_ROUND``: one compilation)."""
+    b = len(pos)
+    pad = lambda a: np.concatenate([a, np.repeat(a[:1], _ROUND - b, axis=0)])  # noqa: E731
+    tip = setup.fingertip
+    out = _checker(rules)(setup.surface, pad(pos), pad(nrm), pad(dr), tip["radius"], tip["young_modulus"],
+                          tip["max_force"])
+    return jax.tree_util.tree_map(lambda a: np.asarray(a)[:b], out)
+
+
+def _draw_round(setup: _Setup, fingers: int, sampler: str, rules: ContactRules, rng):
+    """One round of candidates: ``(positions (K, N, 3), normals (K, N, 3), dr (K, N))``, mesh
+    frame, each position put exactly on the surface."""
+    lo, hi = _dr_range(setup, rules)
+    tri, fn = setup.triangles, setup.face_normals
+    if sampler == "uniform":
+        p, n = surface_points(tri, fn, _ROUND * fingers, rng)
+        pos, nrm = p.reshape(_ROUND, fingers, 3), n.reshape(_ROUND, fingers, 3)
+    else:  # from a pool of single contacts that keep the rules at the smallest deformation
+        p, n = surface_points(tri, fn, _ROUND, rng)
+        one = _check(setup, rules, p[:, None], n[:, None], np.full((_ROUND, 1), lo))
+        ok = one.flat[:, 0] & one.alone[:, 0]
+        if sampler == "antipodal":
+            pos, nrm = antipodal_pairs(tri, fn, p[ok], n[ok], setup.fingertip["friction"])
+        elif ok.sum() >= fingers:
+            pos, nrm = spread_tuples(p[ok], n[ok], fingers, _ROUND, rng)
+        else:
+            pos, nrm = np.zeros((0, fingers, 3)), np.zeros((0, fingers, 3))
+    if len(pos):
+        pos = np.asarray(setup.surface.closest(pos).point)  # rays and sums leave round-off off the surface
+    dr = np.repeat(rng.uniform(lo, hi, size=(len(pos), 1)), fingers, axis=1)
+    return pos, nrm, dr
+
+
+def _dr_range(setup: _Setup, rules: ContactRules) -> tuple[float, float]:
+    """Rule 5's range of the initial deformation, m; one line where it is empty."""
+    tip = setup.fingertip
+    lo, hi = (float(x) for x in deformation_range(tip["radius"], tip["young_modulus"], tip["max_force"], rules.dr_min))
+    if hi < lo:
+        raise GraspValueError(
+            f"plan: no initial deformation keeps rule 5: dr_min = {lo:g} m is above "
+            f"min(0.9 radius, sqrt(max_force / (pi young_modulus))) = {hi:g} m"
+        )
+    return lo, hi
+
+
+def _draw_valid(setup: _Setup, fingers, samples, sampler, rules, rng, progress):
+    """Rounds of candidates until ``samples`` keep every rule (or ``_MAX_DRAWS`` per sample):
+    ``(positions, normals, dr, drawn, failures by rule)`` of the first ``samples`` valid."""
+    keep: list = []
+    drawn, failures, valid = 0, dict.fromkeys(RuleCheck.RULES, 0), 0
+    for _ in range(max(40, -(-_MAX_DRAWS * samples // _ROUND))):
+        pos, nrm, dr = _draw_round(setup, fingers, sampler, rules, rng)
+        if len(pos):
+            chk = _check(setup, rules, pos, nrm, dr)
+            for rule in RuleCheck.RULES:
+                failures[rule] += int(np.sum(~np.all(getattr(chk, rule), axis=-1)))
+            keep.append((pos[chk.valid], nrm[chk.valid], dr[chk.valid]))
+            valid += int(chk.valid.sum())
+        drawn += len(pos)
+        if progress is not None:
+            progress("draw", min(valid, samples), samples)
+        if valid >= samples:
+            break
+    if not keep:
+        return np.zeros((0, fingers, 3)), np.zeros((0, fingers, 3)), np.zeros((0, fingers)), drawn, failures
+    pos, nrm, dr = (np.concatenate(a)[:samples] for a in zip(*keep))
+    return pos, nrm, dr, drawn, failures
+
+
+# ---------------------------------------------------------------------- evaluate, refine, rank
+
+
+def _grasps(setup: _Setup, pos, nrm, dr) -> Grasp:
+    """The batched grasp ``(B, N, ...)`` of candidates, in the centre-of-mass frame."""
+    b, n = dr.shape
+    full = lambda v: jnp.full((b, n), v, jnp.float64)  # noqa: E731
+    tip = setup.fingertip
+    return Grasp(
+        positions=jnp.asarray(pos - setup.com), normals=jnp.asarray(nrm), initial_deformation=jnp.asarray(dr),
+        radius=full(tip["radius"]), young_modulus=full(tip["young_modulus"]), friction=full(tip["friction"]),
+        max_force=full(tip["max_force"]), mass=jnp.full((b,), setup.mass, jnp.float64),
+        gravity=jnp.broadcast_to(jnp.asarray(setup.gravity), (b, 3)), active=None,
+    )
+
+
+def _ranked(values, statuses) -> np.ndarray:
+    """Indices of the settled grasps, best value first (ties in input order)."""
+    settled = np.flatnonzero(statuses != GraspStatus.NOT_CONVERGED)
+    return settled[np.argsort(-values[settled], kind="stable")]
+
+
+def _mesh_grasp(setup: _Setup, pos, nrm, dr) -> MeshGrasp:
+    """One candidate as its grasp file loads: :func:`jaxgrasp.from_mesh` with its normals,
+    the centre of mass and the mass given."""
+    made = from_mesh(setup.mesh, pos, normals=list(nrm), initial_deformation=dr, center_of_mass=setup.com,
+                     mass=setup.mass, gravity=setup.gravity, **setup.fingertip)
+    return made.replace(source=setup.source, units=setup.units)
+
+
+def _refine(setup: _Setup, entries, rules, maxiter, progress) -> list:
+    """Each entry ``(pos, nrm, dr, refined)`` replaced by its tuned grasp where tuning
+    (positions along the surface, initial deformations in rule 5's range) raised the value
+    and the tuned grasp keeps every rule and is stable."""
+    lo, hi = _dr_range(setup, rules)
+    out = []
+    for i, (pos, nrm, dr, _) in enumerate(entries):
+        out.append((pos, nrm, dr, False))
+        mg = _mesh_grasp(setup, pos, nrm, dr)
+        try:
+            res = tune(mg, ["positions", "initial_deformation"], {"positions": setup.fingertip["radius"],
+                       "initial_deformation": (lo, hi)}, maxiter=maxiter)
+        except GraspValueError:  # an unstable start: nothing to follow
+            continue
+        finally:
+            if progress is not None:
+                progress("refine", i + 1, len(entries))
+        g = res.mesh_grasp.grasp
+        new = (np.asarray(g.positions) + setup.com, np.asarray(g.normals), np.asarray(g.initial_deformation))
+        chk = _check(setup, rules, new[0][None], new[1][None], new[2][None])
+        if bool(chk.valid[0]) and int(res.evaluation.status) == GraspStatus.STABLE and res.value > res.start_value:
+            out[-1] = (*new, True)
+    return out
+
+
+def _final(setup: _Setup, entries, top: int) -> dict:
+    """The ``top`` best settled entries, rebuilt as their files load and evaluated again,
+    best first, with their epsilon."""
+    grasps = [_mesh_grasp(setup, p, n, d) for p, n, d, _ in entries]
+    # one at a time, as `jaxgrasp evaluate` of the grasp's file does: the very same numbers
+    evs = [evaluate(g.grasp) for g in grasps]
+    ev = jax.tree_util.tree_map(lambda *a: np.stack([np.asarray(x) for x in a]), *evs)
+    values, statuses = np.asarray(ev.value), np.asarray(ev.status)
+    order = _ranked(values, statuses)[:top]
+    return dict(
+        grasps=tuple(grasps[i] for i in order), values=values[order], statuses=statuses[order],
+        limiting_kind=np.asarray(ev.limiting_kind)[order], limiting_contact=np.asarray(ev.limiting_contact)[order],
+        epsilon=np.array([epsilon(grasps[i].grasp).value for i in order]),
+        refined=np.array([entries[i][3] for i in order], dtype=bool),
+        mesh_positions=np.array([entries[i][0] for i in order]).reshape(len(order), -1, 3),
+    )
+
+
+def _result(ranked, setup, sampled, failures, counts, tried, kept, seed, t0, settings) -> PlanResult:
+    found = len(ranked["values"]) and ranked["statuses"][0] == GraspStatus.STABLE
+    settings = {**settings, **setup.fingertip, "mass": setup.mass, "gravity": setup.gravity.tolist(),
+                "center_of_mass": setup.com.tolist(), "units": setup.units, "mesh": setup.source}
+    return PlanResult(
+        status=PlanStatus.FOUND if found else PlanStatus.NONE_STABLE, **ranked, sampled=sampled,
+        rule_failures=failures, **counts, refine_tried=tried, refine_kept=kept, seed=seed,
+        elapsed_s=time.perf_counter() - t0, settings=settings,
+    )
+
+
+def _empty(status, sampled, failures, seed, t0, setup, fingers, sampler, rules) -> PlanResult:
+    """The result of a plan that evaluated nothing."""
+    none = np.zeros(0)
+    ranked = dict(grasps=(), values=none, statuses=none.astype(int), limiting_kind=none.astype(int),
+                  limiting_contact=none.astype(int), epsilon=none, refined=none.astype(bool),
+                  mesh_positions=np.zeros((0, fingers, 3)))
+    res = _result(ranked, setup, sampled, failures, dict(valid=0, stable=0, dropped=0), 0, 0, seed, t0,
+                  dict(fingers=fingers, sampler=sampler, rules=dataclasses.asdict(rules)))
+    return dataclasses.replace(res, status=status)

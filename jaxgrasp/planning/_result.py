@@ -1,0 +1,108 @@
+"""What :func:`jaxgrasp.plan` returns: ranked grasps on a mesh, their values, and how they were found."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from jaxgrasp.solver._status import Coded
+
+__all__ = ["PlanResult", "PlanStatus"]
+
+
+class PlanStatus(Coded):
+    """What a plan found."""
+
+    FOUND = 0, "at least one valid candidate is stable: the ranked grasps start with the best"
+    NONE_STABLE = 1, "valid candidates were evaluated, but none is stable (every value is 0)"
+    NO_VALID = 2, "no candidate keeps the contact rules: nothing was evaluated (try more samples or a larger flatness)"
+
+
+@dataclasses.dataclass(frozen=True)
+class PlanResult:
+    """The ranked grasps of a plan (SI units), best first.
+
+    Attributes:
+        status: a :class:`PlanStatus`.
+        grasps: ``K`` :class:`~jaxgrasp.MeshGrasp` ranked by value, best first: each one's
+            ``grasp`` in the centre-of-mass frame, ``to_mesh_frame`` for the mesh's frame.
+            Only settled grasps (status stable, unstable or infeasible) are ranked.
+        values: ``(K,)`` J, their evaluation values.
+        statuses: ``(K,)`` int :class:`~jaxgrasp.GraspStatus` codes.
+        limiting_kind: ``(K,)`` int :class:`~jaxgrasp.BoundaryKind` of the limiting boundary
+            (-1 none); limiting_contact: ``(K,)`` its contact (-1 none).
+        epsilon: ``(K,)`` the Ferrari-Canny epsilon of each (:func:`jaxgrasp.epsilon`).
+        refined: ``(K,)`` bool, the grasp came out of surface-constrained tuning.
+        mesh_positions: ``(K, N, 3)`` m, the contacts in the mesh's frame.
+        sampled: geometric candidates drawn; valid: of them, those that kept every rule
+            (:mod:`jaxgrasp.surface`), all of which were evaluated.
+        rule_failures: candidates that broke each rule, by rule name (one candidate may
+            break several).
+        stable: valid candidates that were stable.
+        dropped: candidates whose evaluation did not settle (``not_converged``): left out
+            of the ranking.
+        refine_tried: candidates tuned; refine_kept: tuned grasps that were better and valid.
+        seed: the seed of the random draws; elapsed_s: wall time, s.
+        settings: the plan's settings (fingers, fingertip, object, sampler, rules ...).
+    """
+
+    status: PlanStatus
+    grasps: tuple
+    values: np.ndarray
+    statuses: np.ndarray
+    limiting_kind: np.ndarray
+    limiting_contact: np.ndarray
+    epsilon: np.ndarray
+    refined: np.ndarray
+    mesh_positions: np.ndarray
+    sampled: int
+    valid: int
+    rule_failures: dict
+    stable: int
+    dropped: int
+    refine_tried: int
+    refine_kept: int
+    seed: int
+    elapsed_s: float
+    settings: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def best(self) -> Any:
+        """The best :class:`~jaxgrasp.MeshGrasp`, or ``None`` when nothing was ranked."""
+        return self.grasps[0] if self.grasps else None
+
+    @property
+    def best_value(self) -> float:
+        """The best value, J (0 when nothing was ranked)."""
+        return float(self.values[0]) if len(self.values) else 0.0
+
+    def summary(self) -> str:
+        """One line: what was found, from how many candidates, in what time."""
+        dropped = f", {self.dropped} not settled and left out" if self.dropped else ""
+        return (
+            f"{self.status.label}: best value {self.best_value:.6e} J; {self.valid} valid of {self.sampled} candidates "
+            f"evaluated, {self.stable} stable{dropped}; {self.refine_kept} of {self.refine_tried} refined by tuning "
+            f"improved; {self.elapsed_s:.1f} s"
+        )
+
+    def rows(self) -> list[dict]:
+        """One dict per ranked grasp: rank (1-based), value_J, status, limiting_kind,
+        limiting_contact, epsilon, refined."""
+        from jaxgrasp.model._codes import BoundaryKind
+        from jaxgrasp.tolerance._status import GraspStatus
+
+        out = []
+        for i in range(len(self.grasps)):
+            kind = int(self.limiting_kind[i])
+            out.append({
+                "rank": i + 1,
+                "value_J": float(self.values[i]),
+                "status": GraspStatus(int(self.statuses[i])).label,
+                "limiting_kind": str(BoundaryKind.names_of(kind)),
+                "limiting_contact": int(self.limiting_contact[i]),
+                "epsilon": float(self.epsilon[i]),
+                "refined": bool(self.refined[i]),
+            })
+        return out

@@ -1,0 +1,100 @@
+"""Geometric candidates on a mesh: surface samples, ray casts, antipodal pairs, spread tuples.
+
+Everything here is NumPy on the mesh's triangles (m, mesh frame) and draws from a
+``numpy.random.Generator`` it is given, so that a plan is reproducible from its seed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["surface_points", "first_hits", "antipodal_pairs", "spread_tuples"]
+
+_RAY_CHUNK = 256
+"""Rays tested against every face at once (bounds the ``(rays, faces)`` work arrays)."""
+
+
+def surface_points(triangles: np.ndarray, normals: np.ndarray, count: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` points drawn uniformly by area on the surface, and their faces' normals.
+
+    Args:
+        triangles: ``(F, 3, 3)`` m; normals: ``(F, 3)`` outward unit normals.
+
+    Returns:
+        ``(points (count, 3) m, normals (count, 3))``.
+    """
+    area = 0.5 * np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1)
+    face = rng.choice(len(triangles), size=count, p=area / area.sum())
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1.0  # fold the unit square onto the triangle: uniform barycentric coordinates
+    u, v = np.where(flip, 1.0 - u, u), np.where(flip, 1.0 - v, v)
+    t = triangles[face]
+    points = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
+    return points, normals[face]
+
+
+def first_hits(triangles: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The first face each ray ``origins + t directions`` (``t > 0``) crosses.
+
+    Möller and Trumbore's ray-triangle test (J. Graphics Tools 2(1), 1997), every face.
+
+    Returns:
+        ``(t (R,) m, face (R,) int)``: ``t = inf`` and ``face = -1`` where a ray hits nothing.
+    """
+    ts, faces = [], []
+    a, e1, e2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
+    for lo in range(0, len(origins), _RAY_CHUNK):
+        o, d = origins[lo : lo + _RAY_CHUNK, None, :], directions[lo : lo + _RAY_CHUNK, None, :]
+        p = np.cross(d, e2)
+        det = np.einsum("rfd,fd->rf", p, e1)
+        inv = 1.0 / np.where(np.abs(det) < 1e-300, np.inf, det)
+        s = o - a
+        u = np.einsum("rfd,rfd->rf", s, p) * inv
+        q = np.cross(s, e1)
+        v = np.einsum("rfd,rfd->rf", d * np.ones_like(q), q) * inv
+        t = np.einsum("rfd,fd->rf", q, e2) * inv
+        hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & np.isfinite(inv)
+        t = np.where(hit, t, np.inf)
+        best = np.argmin(t, axis=1)
+        ts.append(t[np.arange(len(best)), best])
+        faces.append(np.where(np.isfinite(ts[-1]), best, -1))
+    return np.concatenate(ts), np.concatenate(faces)
+
+
+def antipodal_pairs(triangles, normals, p1, n1, friction: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two-finger candidates: from surface points ``p1 (K, 3)`` of normals ``n1 (K, 3)``, rays
+    into the object along ``-n1``.
+
+    A ray from ``p1`` into the object leaves it at ``p2`` on a face of normal ``n2``. The pair
+    is antipodal when the line ``p1 p2`` (along ``n1``) lies inside the friction cone at
+    ``p2``: ``angle(n2, -n1) <= atan(friction)`` (at ``p1`` it lies on the cone's axis).
+    Points whose ray leaves through no face, or through one facing inward (the ray met an
+    inner cavity's wall), are dropped.
+
+    Returns:
+        ``(positions (K', 2, 3) m, normals (K', 2, 3))``, ``K' <= K`` pairs.
+    """
+    scale = float(np.ptp(triangles.reshape(-1, 3), axis=0).max())
+    t, face = first_hits(triangles, p1 - 1e-9 * scale * n1, -n1)
+    ok = face >= 0
+    n2 = normals[np.where(ok, face, 0)]
+    ok &= np.einsum("kd,kd->k", n2, -n1) >= np.cos(np.arctan(friction))
+    p2 = p1 - np.where(np.isfinite(t), t, 0.0)[:, None] * n1
+    return np.stack([p1, p2], axis=1)[ok], np.stack([n1, n2], axis=1)[ok]
+
+
+def spread_tuples(points, normals, fingers: int, count: int, rng, draws: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """Candidates of ``fingers >= 3`` contacts drawn from a pool of surface samples, favouring
+    force closure: of ``draws x count`` random tuples the ``count`` whose unit normals sum
+    closest to zero are kept (pushing along the normals alone then nearly balances).
+
+    Args:
+        points: ``(P, 3)`` m; normals: ``(P, 3)`` unit, the pool.
+
+    Returns:
+        ``(positions (count, fingers, 3) m, normals (count, fingers, 3))``.
+    """
+    idx = np.stack([rng.choice(len(points), size=fingers, replace=False) for _ in range(draws * count)])
+    net = np.linalg.norm(normals[idx].sum(axis=1), axis=-1)
+    keep = idx[np.argsort(net, kind="stable")[:count]]
+    return points[keep], normals[keep]

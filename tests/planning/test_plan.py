@@ -1,0 +1,106 @@
+"""The planner on a real object (pybullet's generated object 000, in mm): every ranked grasp keeps
+the contact rules (checked here in NumPy, apart from the JAX rules), ranking and reproducibility,
+the antipodal sampler's closed form on a box, and ``jaxgrasp plan``'s files."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+import jaxgrasp
+from jaxgrasp.io._mesh import closest_on_triangles, load_mesh
+from jaxgrasp.planning import PlanStatus, plan
+from jaxgrasp.planning._sampling import antipodal_pairs, first_hits, surface_points
+
+MESH = Path(__file__).resolve().parents[2] / "examples" / "meshes" / "pybullet_000_mm.obj"
+TIP = dict(radius=0.01, young_modulus=3e5, friction=0.8, max_force=15.0)
+SMALL = dict(units="mm", density=500.0, samples=48, top=5, refine=1, tune_maxiter=6, **TIP)
+
+
+@pytest.fixture(scope="module")
+def planned():
+    return plan(MESH, 2, seed=3, **SMALL)
+
+
+def _numpy_rules(mesh, pos, nrm, dr, r=0.01, flatness_deg=25.0):
+    """The five rules of :mod:`jaxgrasp.surface`, brute force in NumPy over every face."""
+    tri, fn = np.asarray(mesh.triangles), np.asarray(mesh.face_normals)
+    ok = True
+    c = pos + (r - dr)[:, None] * nrm
+    for i, p in enumerate(pos):
+        d = np.linalg.norm(closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2]) - p, axis=1)
+        on = d.min() < 1e-6 and np.any(fn[d < 1e-6] @ nrm[i] > np.cos(np.radians(2.0)))
+        a = np.sqrt(r**2 - (r - dr[i]) ** 2)
+        flat = np.all(fn[d <= a] @ nrm[i] >= np.cos(np.radians(flatness_deg)))
+        dc = np.linalg.norm(closest_on_triangles(c[i], tri[:, 0], tri[:, 1], tri[:, 2]) - c[i], axis=1).min()
+        alone = dc >= r - dr[i] - 1e-6
+        apart = all(np.linalg.norm(c[i] - c[j]) >= 2 * r for j in range(len(pos)) if j != i)
+        in_range = 5e-4 <= dr[i] <= min(0.9 * r, np.sqrt(15.0 / (np.pi * 3e5)))
+        ok = ok and on and flat and alone and apart and in_range
+    return ok
+
+
+def test_ranked_grasps_keep_every_rule_and_are_sorted(planned):
+    res = planned
+    assert res.status == PlanStatus.FOUND and res.valid == 48 and res.sampled >= 48
+    assert len(res.grasps) == 5 and np.all(np.diff(res.values) <= 0) and res.values[0] > 0
+    assert set(res.statuses.tolist()) <= {0, 1, 2}  # settled only
+    mesh = load_mesh(MESH, "mm")
+    for g, mp in zip(res.grasps, res.mesh_positions):
+        np.testing.assert_allclose(g.to_mesh_frame(g.grasp.positions), mp, atol=1e-15)
+        assert _numpy_rules(mesh, mp, np.asarray(g.grasp.normals), np.asarray(g.grasp.initial_deformation))
+    # the values are those of the grasps as their files load
+    assert jaxgrasp.evaluate(res.best.grasp).value == res.values[0]
+    assert res.epsilon[0] == pytest.approx(jaxgrasp.epsilon(res.best.grasp).value, rel=1e-12)
+
+
+def test_same_seed_same_plan_other_seed_other_candidates(planned):
+    again = plan(MESH, 2, seed=3, **SMALL)
+    np.testing.assert_array_equal(again.values, planned.values)
+    np.testing.assert_array_equal(again.mesh_positions, planned.mesh_positions)
+    other = plan(MESH, 2, seed=4, **{**SMALL, "refine": 0})
+    assert not np.array_equal(other.mesh_positions[0], planned.mesh_positions[0])
+
+
+def test_antipodal_pairs_on_a_box_are_opposite_face_points():
+    box = trimesh.creation.box(extents=[0.1, 0.06, 0.04])
+    tri, fn = np.asarray(box.triangles), np.asarray(box.face_normals)
+    rng = np.random.default_rng(0)
+    p, n = surface_points(tri, fn, 200, rng)
+    pos, nrm = antipodal_pairs(tri, fn, p, n, friction=0.5)
+    assert len(pos) == 200  # every ray through a box leaves through the opposite face
+    np.testing.assert_allclose(nrm[:, 1], -nrm[:, 0], atol=1e-15)
+    np.testing.assert_allclose(pos[:, 1] - pos[:, 0], -nrm[:, 0] * np.abs(np.einsum("kd,kd->k", pos[:, 1] - pos[:, 0], nrm[:, 0]))[:, None], atol=1e-12)
+    t, face = first_hits(tri, np.array([[0.0, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]]))
+    assert t[0] == pytest.approx(0.05) and fn[face[0]] @ [1, 0, 0] == pytest.approx(1.0)
+
+
+def test_plan_rejects_bad_arguments_in_one_line():
+    with pytest.raises(jaxgrasp.GraspValueError, match="fingers must be an integer >= 2"):
+        plan(MESH, 1, **SMALL)
+    with pytest.raises(jaxgrasp.GraspValueError, match="antipodal sampler makes two-finger grasps"):
+        plan(MESH, 3, sampler="antipodal", **SMALL)
+    with pytest.raises(jaxgrasp.GraspValueError, match="no initial deformation keeps rule 5"):
+        plan(MESH, 2, **{**SMALL, "max_force": 0.01})
+
+
+def test_cli_plan_writes_the_ranked_set(tmp_path, run_cli):
+    out = tmp_path / "plan"
+    rc, stdout, err = run_cli(["plan", MESH, "--units", "mm", "--fingers", "2", "--samples", "48", "--top", "4",
+                               "--refine", "0", "--seed", "3", "--out", out])
+    assert rc == 0, err
+    assert {p.name for p in out.iterdir()} >= {"ranked.jsonl", "best.toml", "results.csv", "best.png",
+                                               MESH.name}
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert [r["rank"] for r in rows] == ["1", "2", "3", "4"]
+    assert "found: best value" in stdout and "jaxgrasp: plan:" in err
+    rc, js, err = run_cli(["evaluate", out / "best.toml", "--json"])
+    assert rc == 0, err
+    assert json.loads(js)["value"] == float(rows[0]["value_J"])  # the very same number
+    lines = (out / "ranked.jsonl").read_text().splitlines()
+    assert len(lines) == 4 and all(json.loads(x)["object"]["mesh"] == MESH.name for x in lines)
