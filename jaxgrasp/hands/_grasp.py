@@ -73,9 +73,9 @@ def material(num_fingertips: int, mesh, young_modulus, friction, max_force, mass
     """A checked :class:`Material` (scalars broadcast to every fingertip); the centre of
     mass and mass from the mesh as :func:`jaxgrasp.from_mesh` has them (``mass`` or
     ``density``, kg or kg/m^3; neither: 0)."""
-    from jaxgrasp.io._mesh import _mass_properties
+    from jaxgrasp.io._mesh import mass_properties
 
-    com, m = _mass_properties(mesh, mass, density, center_of_mass)
+    com, m = mass_properties(mesh, mass, density, center_of_mass)
     angle = 2.0 * np.pi * np.arange(num_fingertips) / num_fingertips
     ring = np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=1)
     probe = check_grasp_inputs(  # the rules of every field, on a stand-in geometry (a ring of contacts)
