@@ -56,6 +56,7 @@ OBJECTS = {  # name: (file under pybullet_data, largest extent m)
     "r009": ("random_urdfs/009/009.obj", 0.045),
     "r033": ("random_urdfs/033/033.obj", 0.045),
     "r104": ("random_urdfs/104/104.obj", 0.050),
+    "r023": ("random_urdfs/023/023.obj", 0.045),
     "duck": ("duck_vhacd.obj", 0.040),
 }
 FIELDS = dict(young_modulus=3e5, friction=0.8, max_force=10.0, density=300.0)
@@ -208,6 +209,7 @@ def run(name: str, maxiter: int, log) -> None:
         f"{res.start_deepest * 1e3:+.3f} -> {res.deepest * 1e3:+.3f} mm; {res.grasp.num_active} fingertips in contact, "
         f"tilt {np.round(np.degrees(np.asarray(res.grasp.tilt))).astype(int).tolist()} deg; start search {t_start:.1f} s, "
         f"tuning {t_tune:.1f} s ({res.iterations} iterations, {res.evaluations} evaluations)")
+    log(f"{name}: tuned qpos {np.round(res.qpos, 6).tolist()}; object pose {np.round(pose, 6).tolist()}")
     start_grasp = hand.grasp(q0, mesh, object_pose=pose, **FIELDS)
     for tag, hg in (("start", start_grasp), ("tuned", res.grasp)):
         ev = jaxgrasp.evaluate(hg.grasp.compact())

@@ -14,8 +14,7 @@ def run_hand(args, targets) -> int:
     set (``targets``, checked by ``show``); one summary line."""
     from jaxgrasp.engine._evaluate import evaluate
     from jaxgrasp.hands._file import load_hand_grasp
-    from jaxgrasp.plots._hand import hand_scene
-    from jaxgrasp.plots._hand import plot_hand_grasp
+    from jaxgrasp.plots._hand import hand_scene, plot_hand_grasp
     from jaxgrasp.plots._plots import save_figure
 
     if args.file is not None or args.preset is not None:

@@ -8,8 +8,8 @@ maximises the value over the joint angles with the other links kept out of the o
 
 from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp
 from jaxgrasp.hands._hand import Hand
-from jaxgrasp.hands._mjcf import INSTALL_HINT, KinematicTree
 from jaxgrasp.hands._links import link_samples
+from jaxgrasp.hands._mjcf import INSTALL_HINT, KinematicTree
 from jaxgrasp.hands._tune import HandTuneResult, HandValue, hand_value, tune_hand
 
 __all__ = [

@@ -41,7 +41,7 @@ def _geom_mesh(kind: int, size: np.ndarray):
 
 def link_meshes(hand_grasp, reach: float | None = None) -> list:
     """``[(name, mesh)]``: the hand's geoms as meshes in the object's mesh frame (m), those
-    whose centre lies within ``reach`` (m; default: twice the object's size plus 50 mm) of
+    whose centre lies within ``reach`` (m; default: the object's size plus 40 mm) of
     the object's centre of mass."""
     hand = hand_grasp.hand
     tree = hand.tree
@@ -50,7 +50,7 @@ def link_meshes(hand_grasp, reach: float | None = None) -> list:
     rot_m = hand_grasp.to_mesh_frame(np.zeros(3))  # the world's origin in the mesh frame
     com = np.asarray(hand_grasp.center_of_mass)
     size = float(np.ptp(hand_grasp.mesh.vertices, axis=0).max())
-    reach = 2.0 * size + 0.05 if reach is None else reach
+    reach = size + 0.04 if reach is None else reach
     out = []
     for g in range(len(tree.geom_body)):
         mesh = _geom_mesh(int(tree.geom_type[g]), tree.geom_size[g])
