@@ -13,6 +13,7 @@ packages, each importing only from those before it in this list:
   the executable store, checkpoints;
 * :mod:`jaxgrasp.analysis`: :func:`sweep`, :func:`tune`, :func:`epsilon`, :func:`robust`;
 * :mod:`jaxgrasp.planning`: :func:`plan`, the best grasps on a mesh;
+* :mod:`jaxgrasp.hands`: :class:`Hand` from MJCF (the ``hands`` extra), :func:`tune_hand`;
 * :mod:`jaxgrasp.simulation`: :func:`simulate`, the grasp in MuJoCo (extra ``jaxgrasp[sim]``);
 * :mod:`jaxgrasp.plots` and :mod:`jaxgrasp.cli` (the ``jaxgrasp`` command).
 
@@ -78,6 +79,7 @@ from jaxgrasp.analysis import (  # noqa: E402
     tune,
 )
 from jaxgrasp.engine import BatchResult, enable_compilation_cache, evaluate, evaluate_batch  # noqa: E402
+from jaxgrasp.hands import Hand, tune_hand  # noqa: E402  (mujoco is imported when a hand is read)
 from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is used)
     GraspSet,
     MeshGrasp,
@@ -141,6 +143,9 @@ __all__ = [
     "robust_batch",
     "Uncertainty",
     "simulate",
+    # hands
+    "Hand",
+    "tune_hand",
     # errors and set-up
     "GraspValueError",
     "check",

@@ -47,6 +47,7 @@ def add_parser(sub) -> None:
     p.add_argument("--magnification", type=float, metavar="X",
                    help=(f"factor the ghost's motion is magnified by, {MAGNIFICATION_RANGE[0]:g} to "
                          f"{MAGNIFICATION_RANGE[1]:g} (default: a round one that makes it visible)"))
+    p.add_argument("--hand", metavar="FILE", help="draw a hand's grasp instead: a hand grasp file (.toml, see docs/guide/hands.md)")
     p.set_defaults(func=run)
 
 
@@ -58,6 +59,10 @@ def run(args) -> int:
     from jaxgrasp.plots._scene import grasp_scene
 
     targets = _check_outputs(args)
+    if getattr(args, "hand", None) is not None:
+        from jaxgrasp.cli._show_hand import run_hand
+
+        return run_hand(args, targets)
     grasp = load_grasp(args, keep_mesh=True)
     plain = grasp.grasp if isinstance(grasp, MeshGrasp) else grasp
     announce_large_grasp(plain.num_contacts, grasp_source(args))

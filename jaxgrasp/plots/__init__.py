@@ -1,8 +1,10 @@
 """Pictures (matplotlib, Agg backend): sweep and ranking plots, the 3-D scene of a grasp
-and the way it fails, the value over the iterations of a tuning.
+and the way it fails (with a hand's links: :func:`plot_hand_grasp`), the value over the
+iterations of a tuning.
 """
 
 from jaxgrasp.plots._plots import draw_scene, plot_grasp, plot_max, plot_max_over, plot_ranking, plot_sweep, save_figure
+from jaxgrasp.plots._hand import hand_scene, plot_hand_grasp
 from jaxgrasp.plots._scene import grasp_scene
 from jaxgrasp.plots._tune_plot import plot_history
 
@@ -15,5 +17,7 @@ __all__ = [
     "draw_scene",
     "save_figure",
     "grasp_scene",
+    "plot_hand_grasp",
+    "hand_scene",
     "plot_history",
 ]

@@ -1,0 +1,26 @@
+"""Hands from MJCF: kinematics in JAX, the grasp a configuration makes, tuning its joints.
+
+:class:`Hand` (read by MuJoCo: the optional extra ``jaxgrasp[hands]``), the grasp a
+configuration makes on a mesh (:meth:`Hand.grasp` -> :class:`HandGrasp`), its value and
+gradient with respect to the joints (:func:`hand_value`), and :func:`tune_hand`, which
+maximises the value over the joint angles with the other links kept out of the object.
+"""
+
+from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp
+from jaxgrasp.hands._hand import Hand
+from jaxgrasp.hands._links import link_samples
+from jaxgrasp.hands._mjcf import INSTALL_HINT, KinematicTree
+from jaxgrasp.hands._tune import HandTuneResult, HandValue, hand_value, tune_hand
+
+__all__ = [
+    "Hand",
+    "HandGrasp",
+    "hand_value",
+    "HandValue",
+    "tune_hand",
+    "HandTuneResult",
+    "link_samples",
+    "KinematicTree",
+    "INSTALL_HINT",
+    "DEFAULT_MAX_TILT",
+]

@@ -1,0 +1,127 @@
+"""Hand grasp files: a hand, its configuration and the object, in TOML (SI units).
+
+::
+
+    [hand]
+    mjcf = "shadow/shadow_hand.xml"          # relative to this file
+    fingertips = ["robot0:C_ffdistal", "robot0:C_thdistal"]
+    qpos = [0.0, ...]                        # (J,) rad (m for slides)
+    wrist = [0, 0, 0, 0, 0, 0]               # optional: translation m, rotation vector rad
+
+    [object]
+    mesh = "duck.obj"                        # relative to this file
+    units = "m"                              # optional
+    pose = [0, 0, 0, 0, 0, 0]                # optional: the mesh frame in the world
+    mass = 0.05                              # kg (or density, kg/m^3)
+
+    [fingertip]
+    young_modulus = 6e5                      # Pa
+    friction = 1.0
+    max_force = 15.0                         # N
+
+The MJCF and the mesh must lie inside the file's folder after symlinks, or in one of the
+allowed folders (``--allow-dir``), as for grasp files. :func:`load_hand_grasp` gives the
+:class:`~jaxgrasp.hands.HandGrasp`; :func:`save_hand_grasp` writes one (atomically).
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, allowed_folders, confine, read_input
+from jaxgrasp.model._validation import GraspValueError
+
+__all__ = ["load_hand_grasp", "save_hand_grasp", "hand_grasp_toml"]
+
+_TABLES = {"hand": ("mjcf", "fingertips", "qpos", "wrist"), "object": ("mesh", "units", "pose", "mass", "density"),
+           "fingertip": ("young_modulus", "friction", "max_force")}
+
+
+def _confined_mjcf(name: str, base: Path, allowed: tuple, where: str) -> Path:
+    """The real path of the MJCF ``name`` (relative to ``base``), inside the allowed folders."""
+    real = os.path.realpath(os.path.join(base, name))
+    folders = (os.path.realpath(base), *allowed)
+    if not any(os.path.commonpath([real, f]) == f for f in folders):
+        raise GraspValueError(f"{where}: mjcf {name!r} is outside the file's folder; pass --allow-dir DIR to allow it")
+    return Path(real)
+
+
+def _tables(path: Path) -> dict:
+    """The file's tables, checked for unknown tables and keys (one-line errors)."""
+    raw = read_input(path, MAX_GRASP_FILE_BYTES, "hand grasp file")
+    try:
+        data = tomllib.loads(raw.decode("utf-8-sig"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise GraspValueError(f"{path}: malformed TOML: {' '.join(str(exc).split())}") from None
+    for table, value in data.items():
+        if table not in _TABLES or not isinstance(value, dict):
+            raise GraspValueError(f"{path}: unknown table [{table}]; a hand grasp file has [hand], [object] and [fingertip]")
+        unknown = sorted(set(value) - set(_TABLES[table]))
+        if unknown:
+            raise GraspValueError(f"{path}: unknown key {unknown[0]!r} in [{table}]; its keys: {', '.join(_TABLES[table])}")
+    for table, key in (("hand", "mjcf"), ("hand", "fingertips"), ("hand", "qpos"), ("object", "mesh")):
+        if key not in data.get(table, {}):
+            raise GraspValueError(f"{path}: [{table}] {key} is missing")
+    return data
+
+
+def load_hand_grasp(path: str | os.PathLike, allowed_dirs=None):
+    """The :class:`~jaxgrasp.hands.HandGrasp` a hand grasp file describes (module notes).
+
+    Raises:
+        GraspValueError: an unreadable or malformed file, a missing or unknown key, a path
+            outside the allowed folders, or invalid values; one line naming the file.
+    """
+    from jaxgrasp.hands._hand import Hand
+
+    path = Path(path)
+    data = _tables(path)
+    allowed = allowed_folders(allowed_dirs)
+    hand_t, obj, tip = data["hand"], data["object"], data.get("fingertip", {})
+    hand = Hand.from_mjcf(_confined_mjcf(str(hand_t["mjcf"]), path.parent, allowed, str(path)), hand_t["fingertips"])
+    mesh = confine(str(obj["mesh"]), path.parent, allowed, "hand grasp file")
+    missing = [k for k in _TABLES["fingertip"] if k not in tip]
+    if missing:
+        raise GraspValueError(f"{path}: [fingertip] {missing[0]} is missing")
+    return hand.grasp(
+        hand_t["qpos"], str(mesh), wrist=hand_t.get("wrist"), object_pose=obj.get("pose"), units=obj.get("units", "m"),
+        mass=obj.get("mass"), density=obj.get("density"), **{k: tip[k] for k in _TABLES["fingertip"]},
+    )
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_toml_value(x) for x in (v.tolist() if isinstance(v, np.ndarray) else v)) + "]"
+    return repr(float(v))
+
+
+def hand_grasp_toml(tables: dict) -> str:
+    """TOML text of ``tables`` (``{"hand": {...}, "object": {...}, "fingertip": {...}}``)."""
+    lines = []
+    for table in _TABLES:
+        lines.append(f"[{table}]")
+        for key, value in tables.get(table, {}).items():
+            if value is not None:
+                lines.append(f"{key} = {_toml_value(value)}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def save_hand_grasp(path: str | os.PathLike, *, mjcf: str, fingertips, qpos, mesh: str, young_modulus, friction,
+                    max_force, wrist=None, pose=None, mass=None, density=None, units: str = "m") -> None:
+    """Write a hand grasp file (atomically); ``mjcf`` and ``mesh`` as they should be
+    written (relative to the file's folder)."""
+    from jaxgrasp.io import _outputs
+
+    text = hand_grasp_toml({
+        "hand": {"mjcf": mjcf, "fingertips": list(fingertips), "qpos": np.asarray(qpos, float), "wrist": wrist},
+        "object": {"mesh": mesh, "units": units, "pose": pose, "mass": mass, "density": density},
+        "fingertip": {"young_modulus": young_modulus, "friction": friction, "max_force": max_force},
+    })
+    _outputs.write_file(Path(path), text.encode("utf-8"))

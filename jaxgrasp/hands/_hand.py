@@ -1,0 +1,144 @@
+"""A hand: its kinematic tree, its fingertips, and where they are at a configuration.
+
+:class:`Hand` is built from an MJCF file by :meth:`Hand.from_mjcf`. A fingertip is the
+hemispherical end of a sphere or capsule geom: a sphere's centre, or the centre of a
+capsule's end cap (MuJoCo's capsules run along their local ``z``), with
+the geom's radius as the fingertip's radius ``r`` (the paper's hemisphere, Sec. III). The
+cap is the one at the capsule's end farther from its body's origin (the finger's last
+joint), the fingertip's axis the geom's ``z`` axis turned towards that end: the
+direction the hemisphere points.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import Sequence
+
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrasp.hands._kinematics import body_frames, cap_offsets, geom_frames
+from jaxgrasp.hands._links import link_depths, link_samples
+from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER, SPHERE, KinematicTree, read_mjcf
+from jaxgrasp.model._validation import GraspValueError
+
+__all__ = ["Hand"]
+
+_LINK_TYPES = (SPHERE, CAPSULE, CYLINDER, BOX)  # geoms whose penetration tune_hand keeps out of the object
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Hand:
+    """A hand model read from MJCF: kinematics in JAX, fingertips as hemispheres (SI units).
+
+    Build it with :meth:`from_mjcf`. Not a pytree: its arrays are constants of the JAX
+    functions that use it (compiled once per hand).
+
+    Attributes:
+        tree: the :class:`~jaxgrasp.hands._mjcf.KinematicTree`.
+        fingertips: ``(F,)`` geom indices of the fingertips.
+        fingertip_names: ``(F,)`` their geom names.
+        radius: ``(F,)`` fingertip radius, m (the geom's radius).
+        cap_offset: ``(F,)`` m from the geom centre to the end-cap centre along the
+            geom's ``z`` (a capsule's half-length, negative where the cap is at ``-z``;
+            0 for a sphere).
+        links: indices of the other geoms (spheres, capsules, cylinders, boxes: the
+            links kept out of the object by :func:`~jaxgrasp.tune_hand`; meshes and planes
+            are left out).
+        link_points: ``(geom (P,), points (P, 3) m, radius (P,) m)``, their samples
+            (:func:`~jaxgrasp.hands._links.link_samples`).
+    """
+
+    tree: KinematicTree
+    fingertips: np.ndarray
+    fingertip_names: tuple
+    radius: np.ndarray
+    cap_offset: np.ndarray
+    links: np.ndarray
+    link_points: tuple
+
+    @classmethod
+    def from_mjcf(cls, path: str | os.PathLike, fingertips: Sequence[str]) -> "Hand":
+        """Read the hand in the MJCF file ``path`` (parsed by MuJoCo), with the geoms named
+        ``fingertips`` (at least 2, each a sphere or a capsule) as its fingertips.
+
+        Raises:
+            GraspValueError: MuJoCo missing (``pip install "jaxgrasp[hands]"``), a file
+                MuJoCo cannot compile, a free or ball joint, an unknown geom name, or a
+                fingertip geom that is not a sphere or capsule; one line.
+        """
+        tree, _ = read_mjcf(path)
+        if isinstance(fingertips, str) or len(fingertips) < 2:
+            raise GraspValueError(f"fingertips must name at least 2 geoms, got {fingertips!r}")
+        idx = np.array([tree.geom_index(n) for n in fingertips], dtype=int)
+        wrong = [n for n, g in zip(fingertips, idx) if tree.geom_type[g] not in (SPHERE, CAPSULE)]
+        if wrong:
+            raise GraspValueError(f"fingertips: geom {wrong[0]!r} is neither a sphere nor a capsule")
+        links = np.array([g for g in range(len(tree.geom_body)) if g not in idx and tree.geom_type[g] in _LINK_TYPES], dtype=int)
+        return cls(tree, idx, tuple(fingertips), tree.geom_size[idx, 0].copy(), cap_offsets(tree, idx), links,
+                   link_samples(tree, links))
+
+    @property
+    def num_joints(self) -> int:
+        """Number of joints ``J``: the length of ``qpos``."""
+        return self.tree.num_joints
+
+    @property
+    def joint_names(self) -> tuple:
+        """``(J,)`` joint names, in ``qpos`` order."""
+        return self.tree.jnt_names
+
+    @property
+    def lower(self) -> np.ndarray:
+        """``(J,)`` lower joint limits, rad (hinge) or m (slide); ``-inf`` if unlimited."""
+        return self.tree.jnt_range[:, 0]
+
+    @property
+    def upper(self) -> np.ndarray:
+        """``(J,)`` upper joint limits, rad or m; ``inf`` if unlimited."""
+        return self.tree.jnt_range[:, 1]
+
+    def check_qpos(self, qpos, name: str = "qpos") -> np.ndarray:
+        """A concrete ``qpos`` as a ``(J,)`` float64 array; a one-line error otherwise."""
+        q = np.asarray(qpos, dtype=np.float64)
+        if q.shape != (self.num_joints,) or not np.all(np.isfinite(q)):
+            raise GraspValueError(f"{name} must be {self.num_joints} finite joint positions, got shape {q.shape}")
+        return q
+
+    def fingertip_frames(self, qpos, wrist=None):
+        """``(centers (F, 3) m, axes (F, 3))`` in the world frame: each fingertip's
+        end-cap centre and its unit axis (the geom's ``z`` towards the cap: the way it points), at
+        joint positions ``qpos`` ``(J,)`` and the wrist pose ``(6,)`` (translation m,
+        rotation vector rad; ``None``: the model's world frame). Traceable."""
+        xpos, xmat = geom_frames(self.tree, qpos, wrist, self.fingertips)
+        z = xmat[:, :, 2]
+        axes = z * jnp.asarray(np.where(self.cap_offset < 0.0, -1.0, 1.0))[:, None]
+        return xpos + z * jnp.asarray(self.cap_offset)[:, None], axes
+
+    def fingertip_centers(self, qpos, wrist=None):
+        """``(F, 3)`` fingertip centres (end-cap centres), m, world frame, at ``qpos``
+        ``(J,)`` and ``wrist`` ``(6,)`` (see :meth:`fingertip_frames`). Traceable and
+        differentiable."""
+        return self.fingertip_frames(qpos, wrist)[0]
+
+    def geom_frames(self, qpos, wrist=None, geoms=None):
+        """``(xpos (G, 3) m, xmat (G, 3, 3))``: world frames of the geoms ``geoms`` (indices;
+        ``None``: all) at ``qpos`` and ``wrist``."""
+        return geom_frames(self.tree, qpos, wrist, geoms)
+
+    def body_frames(self, qpos, wrist=None):
+        """``(xpos (B, 3) m, xmat (B, 3, 3))``: world frames of every body."""
+        return body_frames(self.tree, qpos, wrist)
+
+    def link_depths(self, qpos, wrist, object_pose, surface):
+        """``(P,)`` m: how deep each sample of the other links lies in the object
+        (negative: clear of it), the object's :class:`jaxgrasp.surface.Surface` in its mesh
+        frame placed by ``object_pose`` ``(6,)``; see :mod:`jaxgrasp.hands._links`. Traceable."""
+        return link_depths(self, qpos, wrist, object_pose, surface)
+
+    def grasp(self, qpos, mesh, **kwargs):
+        """The grasp this configuration makes on ``mesh``: see :func:`~jaxgrasp.hands._grasp.hand_grasp`."""
+        from jaxgrasp.hands._grasp import hand_grasp
+
+        return hand_grasp(self, qpos, mesh, **kwargs)

@@ -1,0 +1,283 @@
+"""Tuning a hand's grasp: maximise the evaluation value over its joint angles (and wrist).
+
+:func:`tune_hand` maximises ``evaluate(hand.grasp(qpos, mesh, ...).grasp).value`` over the
+joint positions within their limits (optionally the wrist pose within a box around its
+start), keeping the hand's other links out of the object. The value's gradient with
+respect to ``qpos`` is the envelope theorem's gradient with respect to the grasp's fields
+(:func:`jaxgrasp.evaluate`) chained through the contact (the closest surface point moves
+within its face) and the hand's kinematics. As :func:`jaxgrasp.tune` does, the value and
+its gradient are compiled once (per hand, :class:`~jaxgrasp.EvaluateOptions` and mesh
+size) and SciPy's L-BFGS-B runs on them in the box of the joint limits scaled to
+``[0, 1]`` (:func:`jaxgrasp.analysis._tune_drivers.run_search`).
+
+Penetration: the hand's other links are sampled (:meth:`~jaxgrasp.Hand.link_depths`,
+:mod:`jaxgrasp.hands._links`), each sample's depth in the object measured by the signed
+distance to the same surface the contacts use; the objective adds
+``penetration_weight * sum(max(depth, 0)^2) / (1 mm)^2`` to minus the value over the
+start's value, and the best iterate is the one of highest value whose deepest sample is
+at most ``max_penetration``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from functools import lru_cache
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrasp.analysis._tune_drivers import run_search
+from jaxgrasp.analysis._tune_status import TuneStatus
+from jaxgrasp.engine._evaluate import evaluate_compiled
+from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
+from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp, _pose, contact_grasp, hand_grasp, material
+from jaxgrasp.model._fields import DEFAULT_GRAVITY
+from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.tolerance._status import GraspStatus
+
+__all__ = ["tune_hand", "HandTuneResult", "HandValue", "hand_value", "PENETRATION_UNIT"]
+
+PENETRATION_UNIT = 1e-3
+"""m: the penetration penalty is ``weight * sum(depth^2) / PENETRATION_UNIT^2``."""
+
+@lru_cache(maxsize=16)
+def _compiled(hand, options: EvaluateOptions, max_tilt: float):
+    """``core(x, data) -> (value, dvalue_dx, penalty, dpenalty_dx, evaluation, deepest, tilt)``,
+    jitted once per key; ``x = (qpos, wrist)`` ``(J + 6,)``."""
+    j = hand.num_joints
+
+    def value(x, data):
+        grasp, tilt, _ = contact_grasp(hand, x[:j], x[j:], data["object_pose"], data["surface"], data["material"], max_tilt)
+        ev = evaluate_compiled(grasp, jnp.float64(0.0), options)
+        v = jnp.where(jnp.isfinite(ev.value) & (jnp.sum(grasp.active) >= 2), ev.value, 0.0)
+        return v, (ev, tilt)
+
+    def penalty(x, data):
+        depth = hand.link_depths(x[:j], x[j:], data["object_pose"], data["surface"])
+        return jnp.sum(jnp.maximum(depth, 0.0) ** 2) / PENETRATION_UNIT**2, jnp.max(depth)
+
+    def core(x, data):
+        (v, (ev, tilt)), gv = jax.value_and_grad(value, has_aux=True)(x, data)
+        (p, deepest), gp = jax.value_and_grad(penalty, has_aux=True)(x, data)
+        finite = lambda g: jnp.where(jnp.isfinite(g), g, 0.0)  # noqa: E731
+        return v, finite(gv), p, finite(gp), ev, deepest, tilt
+
+    return jax.jit(core, compiler_options=COMPILER_OPTIONS)
+
+
+@dataclasses.dataclass(frozen=True)
+class HandValue:
+    """The value of a hand's grasp and its gradient (SI units; :func:`hand_value`).
+
+    Attributes:
+        value: J, the evaluation value (0 with fewer than 2 fingertips in contact).
+        grad_qpos: ``(J,)`` J/rad (J/m for slides), its gradient with respect to ``qpos``.
+        grad_wrist: ``(6,)`` its gradient with respect to the wrist pose.
+        evaluation: the :class:`~jaxgrasp.Evaluation`.
+        deepest: m, the deepest penetration of the hand's other links (negative: clear).
+        tilt: ``(F,)`` rad, each fingertip's tilt.
+    """
+
+    value: float
+    grad_qpos: np.ndarray
+    grad_wrist: np.ndarray
+    evaluation: object
+    deepest: float
+    tilt: np.ndarray
+
+
+def _setup(hand, mesh, kw):
+    """``(data, mesh)``: the objective's data for a mesh and the grasp fields ``kw``."""
+    from jaxgrasp.io._mesh import load_mesh
+    from jaxgrasp.surface import PAD_FACES, Surface
+
+    mesh = load_mesh(mesh, kw.pop("units", "m"))
+    mat = material(len(hand.fingertips), mesh, kw.pop("young_modulus"), kw.pop("friction"), kw.pop("max_force"),
+                   kw.pop("mass", None), kw.pop("density", None), kw.pop("gravity", DEFAULT_GRAVITY),
+                   kw.pop("center_of_mass", None))
+    if kw:
+        raise GraspValueError(f"unknown argument {sorted(kw)[0]!r}")
+    data = {"surface": Surface.from_trimesh(mesh, pad_to=PAD_FACES), "material": mat}
+    return data, mesh
+
+
+def hand_value(hand, qpos, mesh, *, wrist=None, object_pose=None, options: EvaluateOptions = EvaluateOptions(),
+               max_tilt: float = DEFAULT_MAX_TILT, **fields) -> HandValue:
+    """The value of the grasp ``hand.grasp(qpos, mesh, ...)`` and its gradient with respect
+    to ``qpos`` and the wrist, from the function :func:`tune_hand` compiles (so the two
+    share one compilation). ``fields``: ``young_modulus``, ``friction``, ``max_force``,
+    ``mass`` or ``density``, ``gravity``, ``center_of_mass``, ``units``, as for
+    :meth:`~jaxgrasp.Hand.grasp`."""
+    data, _ = _setup(hand, mesh, dict(fields))
+    data["object_pose"] = _pose(object_pose, "object_pose")
+    x = jnp.concatenate([jnp.asarray(hand.check_qpos(qpos)), _pose(wrist, "wrist")])
+    v, gv, _, _, ev, deepest, tilt = _compiled(hand, options, float(max_tilt))(x, data)
+    j = hand.num_joints
+    gv = np.asarray(gv)
+    return HandValue(float(v), gv[:j], gv[j:], jax.tree_util.tree_map(np.asarray, ev), float(deepest), np.asarray(tilt))
+
+
+class _Record:
+    """Every iterate's value, deepest penetration and status; the best admissible one
+    (highest value with its deepest link sample at most ``max_penetration``)."""
+
+    def __init__(self, x0, aux, max_penetration: float):
+        self.limit = max_penetration
+        self.history, self.depths, self.statuses = [], [], []
+        self.best = None
+        self.add(x0, aux)
+
+    def add(self, x, aux) -> float:
+        v, ev, deepest = aux
+        status = int(ev.status)
+        self.history.append(float(v))
+        self.depths.append(float(deepest))
+        self.statuses.append(status)
+        ok = status in (GraspStatus.STABLE, GraspStatus.NOT_CONVERGED) and float(deepest) <= self.limit
+        if ok and (self.best is None or float(v) > self.best[0]):
+            self.best = (float(v), np.array(x), ev)
+        return float(v)
+
+
+@dataclasses.dataclass(frozen=True)
+class HandTuneResult:
+    """Outcome of :func:`tune_hand` (SI units).
+
+    Attributes:
+        qpos: ``(J,)`` the tuned joint positions (the best admissible iterate).
+        wrist: ``(6,)`` the tuned wrist pose (the start's unless ``tune_wrist``).
+        grasp: the :class:`~jaxgrasp.hands.HandGrasp` there.
+        value: its evaluation value, J. start_value: the start's, J.
+        deepest: m, the deepest penetration of the other links there (negative: clear).
+        start_deepest: m, the same at the start.
+        history: ``(iterations + 1,)`` value at the start and after each iteration, J.
+        depth_history: ``(iterations + 1,)`` deepest link penetration there, m.
+        status: a :class:`~jaxgrasp.TuneStatus` (how L-BFGS-B stopped).
+        iterations, evaluations: optimiser iterations, value-and-gradient evaluations.
+        message: one line: the status's explanation.
+    """
+
+    qpos: np.ndarray
+    wrist: np.ndarray
+    grasp: HandGrasp
+    value: float
+    start_value: float
+    deepest: float
+    start_deepest: float
+    history: np.ndarray
+    depth_history: np.ndarray
+    status: TuneStatus
+    iterations: int
+    evaluations: int
+    message: str
+
+    @property
+    def gain(self) -> float:
+        """``value / start_value``."""
+        return self.value / self.start_value if self.start_value > 0 else math.inf
+
+    def summary(self) -> str:
+        """One line: value before -> after, the gain, the deepest link penetration, the status."""
+        return (f"hand tuned: {self.start_value:.6e} J -> {self.value:.6e} J (x{self.gain:.4f}), deepest link "
+                f"penetration {self.deepest * 1e3:.3f} mm, {self.iterations} iterations, {self.status}: {self.message}")
+
+
+def _bounds(hand, q0, w0, tune_wrist: bool, wrist_bounds):
+    """``(lo, hi)`` ``(J + 6,)`` of ``x = (qpos, wrist)``: the joint limits (the start
+    where a joint is unlimited), the wrist within ``wrist_bounds = (m, rad)`` of its start
+    when tuned, fixed otherwise."""
+    lo = np.where(np.isfinite(hand.lower), hand.lower, q0)
+    hi = np.where(np.isfinite(hand.upper), hand.upper, q0)
+    if np.any(q0 < lo - 1e-12) or np.any(q0 > hi + 1e-12):
+        k = int(np.argmax((q0 < lo - 1e-12) | (q0 > hi + 1e-12)))
+        raise GraspValueError(f"qpos0[{k}] = {q0[k]:g} ({hand.joint_names[k]}) lies outside its limits [{lo[k]:g}, {hi[k]:g}]")
+    span = np.repeat(np.asarray(wrist_bounds, dtype=np.float64), 3) if tune_wrist else np.zeros(6)
+    return np.concatenate([lo, w0 - span]), np.concatenate([hi, w0 + span])
+
+
+def tune_hand(hand, mesh, qpos0, wrist0=None, *, object_pose=None, tune_wrist: bool = False,
+              wrist_bounds=(0.01, 0.1), penetration_weight: float = 10.0, max_penetration: float = 1e-3,
+              maxiter: int = 50, ftol: float = 1e-7, tol: float = 1e-6, options: EvaluateOptions = EvaluateOptions(),
+              max_tilt: float = DEFAULT_MAX_TILT, callback=None, **fields) -> HandTuneResult:
+    """Maximise the evaluation value of ``hand``'s grasp on ``mesh`` over its joint angles.
+
+    Args:
+        hand: a :class:`~jaxgrasp.Hand`. mesh: the object (as for :meth:`~jaxgrasp.Hand.grasp`).
+        qpos0: ``(J,)`` the start, within the joint limits; its grasp must be stable.
+        wrist0: ``(6,)`` the wrist pose (translation m, rotation vector rad; ``None``: 0).
+        object_pose: ``(6,)`` the object's mesh frame in the world.
+        tune_wrist: also move the wrist, within ``wrist_bounds = (m, rad)`` of ``wrist0``.
+        penetration_weight: weight of the links' penetration penalty (module notes).
+        max_penetration: m, the deepest link penetration an accepted iterate may have.
+        maxiter, ftol, tol: L-BFGS-B's iteration limit and stopping tolerances (on minus
+            the value over the start's value, variables scaled to ``[0, 1]``).
+        options: :class:`~jaxgrasp.EvaluateOptions` of every evaluation.
+        max_tilt: rad, see :meth:`~jaxgrasp.Hand.grasp`.
+        callback: ``callback(iteration, value_J, x)`` after each iteration.
+        fields: ``young_modulus``, ``friction``, ``max_force``, ``mass`` or ``density``,
+            ``gravity``, ``center_of_mass``, ``units`` as for :meth:`~jaxgrasp.Hand.grasp`.
+
+    Returns:
+        A :class:`~jaxgrasp.hands.HandTuneResult`: the configuration, its grasp, the
+        history and a :class:`~jaxgrasp.TuneStatus`.
+
+    Raises:
+        GraspValueError: a start outside the limits, with value 0 (not stable: nothing
+            to follow) or whose links penetrate deeper than ``max_penetration``; one line.
+    """
+    data, mesh = _setup(hand, mesh, dict(fields))
+    data["object_pose"] = _pose(object_pose, "object_pose")
+    q0, w0 = hand.check_qpos(qpos0, "qpos0"), np.asarray(_pose(wrist0, "wrist0"))
+    lo, hi = _bounds(hand, q0, w0, tune_wrist, wrist_bounds)
+    core = _compiled(hand, options, float(max_tilt))
+    x0 = np.concatenate([q0, w0])
+    v0, _, _, _, ev0, deep0, _ = core(jnp.asarray(x0), data)
+    _check_start(float(v0), ev0, float(deep0), max_penetration)
+    scale = {"value": float(v0)}
+    vg = _objective(core, lo, hi, scale, penetration_weight)
+    u0 = np.where(hi > lo, (x0 - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0)
+    rec = _Record(u0, (float(v0), ev0, float(deep0)), max_penetration)
+    status, iters, evals = run_search("scipy_lbfgsb", vg, u0, data, rec, maxiter=maxiter, tol=tol, ftol=ftol,
+                                      patience=4, callback=callback)
+    v_best, u_best, _ = rec.best
+    x = lo + (hi - lo) * u_best
+    hg = hand_grasp(hand, x[: hand.num_joints], mesh, wrist=x[hand.num_joints:], object_pose=object_pose, max_tilt=max_tilt,
+                    young_modulus=data["material"].young_modulus, friction=data["material"].friction,
+                    max_force=data["material"].max_force, mass=float(data["material"].mass),
+                    gravity=np.asarray(data["material"].gravity), center_of_mass=np.asarray(data["material"].center_of_mass))
+    best = rec.history.index(v_best) if v_best in rec.history else 0
+    message = status.message.format(ftol=ftol, patience=4, maxiter=maxiter)
+    return HandTuneResult(x[: hand.num_joints], x[hand.num_joints:], hg, v_best, float(v0), rec.depths[best], float(deep0),
+                          np.asarray(rec.history), np.asarray(rec.depths), status, iters, int(evals) + 1, message)
+
+
+def _check_start(v0: float, ev0, deep0: float, max_penetration: float) -> None:
+    """A start with value 0 or links too deep in the object is an error (one line)."""
+    if not (v0 > 0.0 and math.isfinite(v0)):
+        raise GraspValueError(
+            f"tune_hand: the start has value {v0:g} J (status {GraspStatus(int(ev0.status)).label}): its gradient is 0, "
+            "so there is nothing to follow; start from a stable grasp (at least 2 fingertips pressed into the object)"
+        )
+    if deep0 > max_penetration:
+        raise GraspValueError(
+            f"tune_hand: at the start a link lies {deep0 * 1e3:.3g} mm deep in the object "
+            f"(max_penetration {max_penetration * 1e3:.3g} mm): start from a configuration whose links are clear"
+        )
+
+
+def _objective(core, lo, hi, scale, weight: float):
+    """``vg(u, data) -> ((f, (value, evaluation, deepest)), grad)`` on ``[0, 1]^(J + 6)``:
+    ``f = -value / start value + weight * penalty``, for :func:`run_search`."""
+    span = jnp.asarray(hi - lo)
+
+    def vg(u, data):
+        x = jnp.asarray(lo) + span * jnp.asarray(u)
+        v, gv, p, gp, ev, deepest, _ = core(x, data)
+        f = -float(v) / scale["value"] + weight * float(p)
+        g = (-np.asarray(gv) / scale["value"] + weight * np.asarray(gp)) * np.asarray(span)
+        return (jnp.float64(f), (float(v), ev, float(deepest))), jnp.asarray(g)
+
+    return vg
