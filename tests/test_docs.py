@@ -42,7 +42,7 @@ RUN = {"python": "python", "bash": "shell", "shell": "shell"}
 INERT = {"text", "toml", "json"}
 """Fence languages that are shown, not run: output, citations, file contents."""
 SKIP_MARKER = "<!-- docs-test: skip"
-MAX_SKIPS = 10
+MAX_SKIPS = 12  # 10, plus the install lines of the sim and hands extras (issues 37, 38)
 README_MAX_BYTES = 12 * 1024
 
 
