@@ -52,6 +52,9 @@ SAMPLERS = ("antipodal", "spread", "uniform")
 _ROUND = 512
 """Candidates drawn and checked per round."""
 
+_CHUNK = 64
+"""Candidates per compiled evaluation call."""
+
 _MAX_DRAWS = 100
 """Candidates drawn per valid one asked for, at most (and at least 40 rounds): past that the
 plan goes on with the valid candidates it has (the result counts them)."""
@@ -119,8 +122,7 @@ def plan(
     pos, nrm, dr, sampled, failures = _draw_valid(setup, fingers, samples, sampler, rules, rng, progress)
     if len(pos) == 0:
         return _empty(PlanStatus.NO_VALID, sampled, failures, seed, t0, setup, fingers, sampler, rules)
-    ev = evaluate_batch(_grasps(setup, pos, nrm, dr), progress=_stage(progress, "evaluate"))
-    values, statuses = np.asarray(ev.value), np.asarray(ev.status)
+    values, statuses = _evaluate(setup, pos, nrm, dr, progress)
     order = _ranked(values, statuses)
     pool = [(pos[i], nrm[i], dr[i], False) for i in order[: max(top, refine)]]
     kept = _refine(setup, pool[:refine], rules, tune_maxiter, progress)
@@ -271,6 +273,17 @@ def _grasps(setup: _Setup, pos, nrm, dr) -> Grasp:
         max_force=full(tip["max_force"]), mass=jnp.full((b,), setup.mass, jnp.float64),
         gravity=jnp.broadcast_to(jnp.asarray(setup.gravity), (b, 3)), active=None,
     )
+
+
+def _evaluate(setup: _Setup, pos, nrm, dr, progress) -> tuple[np.ndarray, np.ndarray]:
+    """``(values (B,) J, statuses (B,))`` of the candidates, in chunks of :data:`_CHUNK` (the
+    last one filled with copies of the first candidate), so that every plan of a finger
+    count runs one compiled evaluator, whatever its number of samples."""
+    b = len(pos)
+    pad = lambda a: np.concatenate([a, np.repeat(a[:1], -b % _CHUNK, axis=0)])  # noqa: E731
+    ev = evaluate_batch(_grasps(setup, pad(pos), pad(nrm), pad(dr)), chunk_size=_CHUNK,
+                        progress=_stage(progress, "evaluate"))
+    return np.asarray(ev.value)[:b], np.asarray(ev.status)[:b]
 
 
 def _ranked(values, statuses) -> np.ndarray:
