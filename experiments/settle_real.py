@@ -52,15 +52,23 @@ REL = 1e-6
 
 def parse_args():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--per-object", type=int, default=99, help="valid candidates per object, split over 2, 3, 4 fingers")
+    p.add_argument("--per-object", type=int, default=102, help="valid candidates per object, split over 2, 3, 4 fingers")
     p.add_argument("--objects", type=int, default=100, help="random_urdfs objects 000 .. (default 100)")
     p.add_argument("--ipopt", type=int, default=40, help="random grasps checked against Ipopt besides the unsettled")
     p.add_argument("--n-starts", type=int, default=24, help="Ipopt starts per problem")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", type=Path, default=ROOT / "experiments" / "settle_real.json")
     p.add_argument("--unsettled", type=Path, default=ROOT / "experiments" / "settle_real_unsettled.npz")
-    p.add_argument("--candidates", type=Path, default=None,
-                   help="an .npz of the candidates: read if it exists (the draw skipped), else written")
+    p.add_argument("--reference", type=Path, default=None,
+                   help="the --json of an earlier run on the same candidates: its Ipopt values are reused")
+    p.add_argument("--include", type=Path, default=None,
+                   help="a --unsettled file of an earlier run: its grasps join the Ipopt sample")
+    p.add_argument("--candidates", type=Path, nargs="*", default=(),
+                   help=".npz files of candidates: read (joined) if they all exist (the draw skipped), else the "
+                        "draw written to the first")
+    p.add_argument("--part", default="0/1", help="K/P: draw only the objects k with k %% P == K")
+    p.add_argument("--no-ipopt", action="store_true", help="count only: no Ipopt comparison")
+    p.add_argument("--draw-only", action="store_true", help="draw, write --candidates and stop")
     return p.parse_args()
 
 
@@ -105,11 +113,18 @@ def draw(args):
     out = {n: collections.defaultdict(list) for n in (2, 3, 4)}
     rng = np.random.default_rng(args.seed)
     shares = {2: args.per_object - 2 * (args.per_object // 3), 3: args.per_object // 3, 4: args.per_object // 3}
-    for name, mesh in meshes(args.objects):
+    part, parts = (int(x) for x in args.part.split("/"))
+    for k, (name, mesh) in enumerate(meshes(args.objects)):
+        if k % parts != part:
+            continue
         setup = _plan._setup(mesh, "mm", *mass_and_com(mesh), (0.0, 0.0, -9.81), **FINGERTIP)
         for n, want in shares.items():
             sampler = "antipodal" if n == 2 else "spread"
-            pos, nrm, dr, _, _ = _plan._draw_valid(setup, n, want, sampler, rules, rng, None)
+            try:
+                pos, nrm, dr, _, _ = _plan._draw_valid(setup, n, want, sampler, rules, rng, None)
+            except ValueError as exc:  # the planner's antipodal sampler on an empty pool of single contacts
+                log(f"{name}, {n} fingers: the planner's draw failed ({exc}); none drawn")
+                continue
             g = _plan._grasps(setup, pos, nrm, dr)
             d = out[n]
             d["pos"].append(np.asarray(g.positions))
@@ -123,14 +138,15 @@ def draw(args):
 
 
 def cached_draw(args):
-    """:func:`draw`, or its candidates as ``--candidates`` saved them."""
-    path = args.candidates
-    if path is not None and path.exists():
-        z = np.load(path)
-        return {n: {k: z[f"n{n}_{k}"] for k in ("pos", "nrm", "dr", "mass", "gravity", "object")} for n in (2, 3, 4)}
+    """:func:`draw`, or its candidates as ``--candidates`` saved them (several files joined)."""
+    keys = ("pos", "nrm", "dr", "mass", "gravity", "object")
+    paths = list(args.candidates)
+    if paths and all(p.exists() for p in paths):
+        zs = [np.load(p) for p in paths]
+        return {n: {k: np.concatenate([z[f"n{n}_{k}"] for z in zs]) for k in keys} for n in (2, 3, 4)}
     cands = draw(args)
-    if path is not None:
-        np.savez_compressed(path, **{f"n{n}_{k}": v for n, d in cands.items() for k, v in d.items()})
+    if paths:
+        np.savez_compressed(paths[0], **{f"n{n}_{k}": v for n, d in cands.items() for k, v in d.items()})
     return cands
 
 
@@ -204,36 +220,85 @@ def save_unsettled(path: Path, cands, res):
     return {n: [int(i) for i in idx] for n, idx in rows.items()}
 
 
-def ipopt_sample(args, cands, unsettled):
-    """Every unsettled grasp and ``args.ipopt`` random others: ``[(n, i)]``."""
-    rng = np.random.default_rng(args.seed + 1)
+def ipopt_sample(args, cands, unsettled, include=True):
+    """The grasps checked against Ipopt, ``[(n, i)]``: every grasp of ``unsettled``
+    (``{n: [i]}``), those listed in ``--include`` (a ``--unsettled`` file of an earlier
+    run: the grasps that did not settle before a fix), and ``args.ipopt`` random others."""
     picked = {(n, i) for n, idx in unsettled.items() for i in idx}
-    pool = [(n, i) for n, d in cands.items() for i in range(len(d["dr"])) if (n, i) not in picked]
+    if include and args.include is not None:
+        while not args.include.exists():  # an earlier run evaluating meanwhile
+            time.sleep(10)
+        z = np.load(args.include)
+        picked |= {(n, int(i)) for n in (2, 3, 4) if f"n{n}_index" in z for i in z[f"n{n}_index"]}
+    rng = np.random.default_rng(args.seed + 1)
+    pool = [(n, i) for n, d in cands.items() for i in range(len(d["dr"]))]
     extra = rng.choice(len(pool), size=min(args.ipopt, len(pool)), replace=False)
-    return sorted(picked) + [pool[k] for k in sorted(extra)]
+    return sorted(picked | {pool[k] for k in extra})
 
 
-def compare(args, cands, res, sample) -> list:
-    """Each sampled grasp's jaxgrasp and Ipopt status and value (Ipopt in 2 worker processes)."""
+def stored_references(args) -> dict:
+    """``{(n, i): reference}`` from the JSON of an earlier run on the same candidates
+    (``--reference``): its Ipopt statuses and values, not computed again."""
+    if args.reference is None:
+        return {}
+    rows = json.loads(args.reference.read_text(encoding="utf-8"))["ipopt"]["rows"]
+    return {(r["n"], r["index"]): dict(status=r["ipopt_status"], value=r["ipopt_value"]) for r in rows}
+
+
+def submit_ipopt(args, cands, sample, pool, futures):
+    """Start the Ipopt reference of each grasp of ``sample`` not yet in ``futures`` (a
+    stored one, :func:`stored_references`, is taken as it is)."""
     import ipopt_reference
 
-    ctx = multiprocessing.get_context("spawn")
+    stored = stored_references(args)
+    for n, i in sample:
+        if (n, i) in stored and (n, i) not in futures:
+            futures[(n, i)] = concurrent.futures.Future()
+            futures[(n, i)].set_result(stored[(n, i)])
+        if (n, i) not in futures:
+            futures[(n, i)] = pool.submit(ipopt_reference.reference_evaluate, grasp_of(cands[n], i).to_numpy(),
+                                          n_starts=args.n_starts, seed=0)
+
+
+def compare(cands, res, futures) -> list:
+    """Each sampled grasp's jaxgrasp and Ipopt status and value."""
     rows = []
-    with concurrent.futures.ProcessPoolExecutor(max_workers=2, mp_context=ctx) as pool:
-        futs = [pool.submit(ipopt_reference.reference_evaluate, grasp_of(cands[n], i).to_numpy(),
-                            n_starts=args.n_starts, seed=0) for n, i in sample]
-        for k, ((n, i), f) in enumerate(zip(sample, futs)):
-            ref = f.result()
-            js, jv = STATUS[int(res[n].status[i])], float(res[n].value[i])
-            rs, rv = ref["status"], float(ref["value"])
-            rel = (jv - rv) / rv if js == rs == "stable" and rv > 0 else float("nan")
-            rows.append(dict(n=n, index=i, object=str(cands[n]["object"][i]), jax_status=js, jax_value=jv,
-                             ipopt_status=rs, ipopt_value=rv, rel=rel,
-                             mismatch=js != rs, above=bool(js == rs == "stable" and jv > rv * (1 + REL)),
-                             below=bool(js == rs == "stable" and jv < rv * (1 - REL))))
-            if (k + 1) % 10 == 0:
-                log(f"Ipopt: {k + 1}/{len(sample)}")
+    for k, ((n, i), f) in enumerate(sorted(futures.items())):
+        ref = f.result()
+        js, jv = STATUS[int(res[n].status[i])], float(res[n].value[i])
+        rs, rv = ref["status"], float(ref["value"])
+        rel = (jv - rv) / rv if js == rs == "stable" and rv > 0 else float("nan")
+        rows.append(dict(n=n, index=i, object=str(cands[n]["object"][i]), jax_status=js, jax_value=jv,
+                         ipopt_status=rs, ipopt_value=rv, rel=rel,
+                         mismatch=js != rs, above=bool(js == rs == "stable" and jv > rv * (1 + REL)),
+                         below=bool(js == rs == "stable" and jv < rv * (1 - REL))))
+        if (k + 1) % 10 == 0:
+            log(f"Ipopt: {k + 1}/{len(futures)}")
     return rows
+
+
+def evaluate_and_compare(args, cands):
+    """``(results, counts, unsettled, comparisons, evaluate seconds)``; Ipopt runs in two
+    worker processes while JAX evaluates."""
+    ctx = multiprocessing.get_context("spawn")
+    futures: dict = {}
+    with concurrent.futures.ProcessPoolExecutor(max_workers=2, mp_context=ctx) as pool:
+        if not args.no_ipopt:  # the random sample, while JAX evaluates
+            submit_ipopt(args, cands, ipopt_sample(args, cands, {}, include=False), pool, futures)
+        t0 = time.perf_counter()
+        res = evaluate(cands)
+        t_eval = time.perf_counter() - t0
+        table = counts(cands, res)
+        unsettled = save_unsettled(args.unsettled, cands, res)
+        for n, c in table.items():
+            log(f"N={n}: {c['status']}; unsettled programs: equilibrium {c['equilibrium']['not_converged']}, "
+                f"slip {c['slip']['not_converged']}, force limit {c['force_limit']['not_converged']} "
+                f"of {c['programs']}")
+        if not args.no_ipopt:  # the --include file is read now: an earlier run may write it meanwhile
+            submit_ipopt(args, cands, ipopt_sample(args, cands, unsettled), pool, futures)
+        log(f"Ipopt on {len(futures)} grasps ({sum(map(len, unsettled.values()))} with an unsettled program now)")
+        comps = compare(cands, res, futures)
+    return res, table, unsettled, comps, t_eval
 
 
 def main() -> int:
@@ -242,16 +307,9 @@ def main() -> int:
     cands = cached_draw(args)
     t_draw = time.perf_counter() - t0
     log(f"drawn {sum(len(d['dr']) for d in cands.values())} valid candidates in {t_draw:.0f} s")
-    res = evaluate(cands)
-    t_eval = time.perf_counter() - t0 - t_draw
-    table = counts(cands, res)
-    unsettled = save_unsettled(args.unsettled, cands, res)
-    for n, c in table.items():
-        log(f"N={n}: {c['status']}; unsettled programs: equilibrium {c['equilibrium']['not_converged']}, "
-            f"slip {c['slip']['not_converged']}, force limit {c['force_limit']['not_converged']} of {c['programs']}")
-    sample = ipopt_sample(args, cands, unsettled)
-    log(f"Ipopt on {len(sample)} grasps ({sum(map(len, unsettled.values()))} with an unsettled program)")
-    comps = compare(args, cands, res, sample) if sample else []
+    if args.draw_only:
+        return 0
+    res, table, unsettled, comps, t_eval = evaluate_and_compare(args, cands)
     rels = [c["rel"] for c in comps if math.isfinite(c["rel"])]
     summary = dict(
         args={k: str(v) for k, v in vars(args).items()}, grasps=sum(c["grasps"] for c in table.values()),
