@@ -102,7 +102,8 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
     inline = SETTLE_INLINE["evaluate"]
     fn, _ = compiled_executable(grasp, options, settle=inline)
     out = fn(temperature, *leaves)
-    if not inline and needs_settling(out[RESULT_FIELDS.index("boundary_status")]):
+    if not inline and needs_settling(out[RESULT_FIELDS.index("boundary_status")],
+                                     out[RESULT_FIELDS.index("equilibrium_status")]):
         fn, _ = compiled_executable(grasp, options, settle=True)
         out = fn(temperature, *leaves)
     return Evaluation(**dict(zip(RESULT_FIELDS, out)))

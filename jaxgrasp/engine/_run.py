@@ -38,7 +38,7 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
     outs: dict[str, np.ndarray] = {}  # host-side, filled chunk by chunk
     deal, undeal = _dealt(plan.chunk, plan.n_devices)
     sharding = plan.sharding
-    want = tuple(dict.fromkeys((*keep, "boundary_status"))) if settling else keep
+    want = tuple(dict.fromkeys((*keep, "boundary_status", "equilibrium_status"))) if settling else keep
     run_seconds = 0.0
     for start in range(0, plan.total, plan.chunk):
         stop = min(start + plan.chunk, plan.total)
@@ -66,7 +66,7 @@ def _settled(res: dict, fields, names, count: int, settling, sharding) -> dict:
     """A chunk's results ``res``, those of its first ``count`` grasps that need the
     settling stage replaced by ``settling``'s evaluator's (``size`` at a time, padded by
     repeats)."""
-    rows = np.flatnonzero(needs_settling(res["boundary_status"])[:count])
+    rows = np.flatnonzero(needs_settling(res["boundary_status"], res["equilibrium_status"])[:count])
     if not len(rows):
         return res
     get, size = settling

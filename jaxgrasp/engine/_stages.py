@@ -31,8 +31,8 @@ from jaxgrasp.solver._solver import SolverResult
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._problems import batch_data, problems_treedef
 from jaxgrasp.tolerance._result import Evaluation
-from jaxgrasp.tolerance._stages import finish_problems, solve_stage, unsolved
-from jaxgrasp.tolerance._starts import LaneStarts, boundary_starts, equilibrium_of, equilibrium_starts
+from jaxgrasp.tolerance._stages import finish_problems, settled_equilibrium, solve_stage, unsolved
+from jaxgrasp.tolerance._starts import LaneStarts, boundary_starts, equilibrium_starts
 from jaxgrasp.tolerance._verdict import evaluations_of, split_temperature
 
 __all__ = [
@@ -109,9 +109,10 @@ def stage_functions(options: EvaluateOptions, settle: bool = True, temperature=N
     """Each stage of :data:`PIPELINE` as a function of the values its step names (the
     pipeline's inputs, :func:`inputs_of`, and earlier steps' outputs; leading axis ``B``).
 
-    ``settle`` (static): whether the finish stage certifies stalled boundary lanes
-    (:func:`~jaxgrasp.tolerance._settle.settle_stalled`); without it the stage is smaller,
-    and equal wherever no boundary problem ends unsettled. ``temperature``: the
+    ``settle`` (static): whether the starts and finish stages certify a stalled
+    equilibrium (:func:`~jaxgrasp.tolerance._settle.settle_equilibrium`) and the finish
+    stage stalled boundary lanes (:func:`~jaxgrasp.tolerance._settle.settle_stalled`);
+    without it the stages are smaller, and equal wherever no problem ends unsettled. ``temperature``: the
     soft-minimum temperature (mJ, ``0`` for the hard minimum; traced or not); default the
     options' own.
     """
@@ -120,9 +121,9 @@ def stage_functions(options: EvaluateOptions, settle: bool = True, temperature=N
     return {
         "equilibrium": lambda data: equilibrium_starts(data, options),
         SOLVE: lambda data, starts: solve_stage(data, starts, options),
-        "starts": lambda data, eq: boundary_starts(data, equilibrium_of(eq), options),
+        "starts": lambda data, eq: boundary_starts(data, settled_equilibrium(data, eq, options, settle), options),
         "finish": lambda data, eq, lanes, starts: finish_problems(
-            data, equilibrium_of(eq), lanes, starts, options, settle
+            data, settled_equilibrium(data, eq, options, settle), lanes, starts, options, settle
         ),
         "evaluation": lambda params, problems: evaluations_of(params, problems, temperature, options),
     }

@@ -20,7 +20,7 @@ from jaxgrasp.solver._solver import SolverOptions, SolverResult, kkt_tol
 from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.tolerance._problems import ProblemData, constraints, objective, to_pose
 
-__all__ = ["settle_stalled", "needs_settling", "RELEASED_TOL", "MAX_POLISHED"]
+__all__ = ["settle_stalled", "settle_equilibrium", "needs_settling", "RELEASED_TOL", "MAX_POLISHED"]
 
 
 def _at_equilibrium(eq: SolverResult, lanes: SolverResult, at_eq, g_eq, lane_k) -> SolverResult:
@@ -274,6 +274,59 @@ def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_st
     return _write_back(lanes, pick, ok & wanted, new)
 
 
+NO_EQUALITY = -1
+"""The equality row of the equilibrium problem for :func:`_polish`: none."""
+
+
+def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) -> SolverResult:
+    """Certify equilibria that stalled at a feasible point: each grasp's equilibrium lane of
+    a batch (leading axis ``B`` on ``data`` and ``eq``) that ended ``NOT_CONVERGED`` with
+    its violation within :data:`RELEASED_TOL` is polished as :func:`settle_stalled`
+    polishes a boundary lane (:func:`_settle_equilibrium_lane`), in gathered blocks of
+    :data:`SETTLE_BLOCK` grasps; every other equilibrium is returned as it is.
+
+    Why: on grasps of real objects the equilibrium often lets go of a fingertip (the
+    weight pulls the object off it, e.g. two fingertips on a tilted face of a mesh): the
+    minimum is then at that contact's apex, ``d_j = 0`` and ``dt_j = 0``, where the slip
+    margin ``mu^2 d^2 / cos^4 phi - 4 dt^2 - ...`` is quadratic with a zero gradient.
+    LICQ fails there, the multipliers of the contact and slip rows have no bounded limit,
+    and the augmented Lagrangian crawls at its largest penalty with a violation of
+    1e-8..2e-8 until its step budget runs out (issue 42). The pyramid relaxation of the
+    released contact is regular at that apex and certifies it exactly where the cone
+    does (:func:`_pyramid_basis`)."""
+    need = (eq.status == LaneStatus.NOT_CONVERGED) & (eq.feasibility <= RELEASED_TOL)
+
+    def update(rows, valid, eq):
+        pick = lambda t: jax.tree_util.tree_map(lambda a: a[rows], t)
+        settled = jax.vmap(lambda d, l: _settle_equilibrium_lane(d, l, o))(pick(data), pick(eq))
+        return jax.tree_util.tree_map(lambda a, s: put_rows(a, rows, valid, s), eq, settled)
+
+    return over_rows(need, SETTLE_BLOCK, update, eq)
+
+
+def _settle_equilibrium_lane(data: ProblemData, eq: SolverResult, o: SolverOptions) -> SolverResult:
+    """One grasp's stalled equilibrium lane ``eq`` polished (:func:`_polish`, no equality;
+    the relaxation at its first released contact, if any): ``CONVERGED`` at the polished
+    point where that is a KKT point within tol and feasible, else ``eq`` unchanged."""
+    k = jnp.full((1,), NO_EQUALITY, jnp.int32)
+    one = jax.tree_util.tree_map(lambda a: a[None], eq)
+    j, released = _released_contacts(data, one, k)
+    z, lam_rel, ok, (stat, feas, comp) = _polish(data, eq.x, k[0], j[0], released[0], o)
+    lam, _ = _original_multipliers(data, z[None], lam_rel[None], k, j, released)
+    new = SolverResult(
+        x=z,
+        lam=lam[0],
+        nu=jnp.zeros_like(eq.nu),
+        objective=objective(z, data),
+        status=jnp.asarray(LaneStatus.CONVERGED, eq.status.dtype),
+        stationarity=stat,
+        feasibility=feas,
+        complementarity=comp,
+        steps=eq.steps + _POLISH_STEPS,
+    )
+    return jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a.astype(b.dtype), b), new, eq)
+
+
 def _released_contacts(data: ProblemData, lanes: SolverResult, lane_k):
     """``(j, released_any)``, each ``(L,)``: the first contact released at each lane's
     point (contact and slip margins within :data:`RELEASED_TOL`, active, its force row
@@ -329,8 +382,13 @@ def _write_back(lanes: SolverResult, pick, ok, new: SolverResult) -> SolverResul
     return jax.tree_util.tree_map(lambda a, u: a.at[pick].set(u.astype(a.dtype)), lanes, upd)
 
 
-def needs_settling(boundary_status) -> np.ndarray:
+def needs_settling(boundary_status, equilibrium_status=None) -> np.ndarray:
     """``(...)`` bool: whether an evaluation with this ``boundary_status`` ``(..., 2, N)``
-    (an :class:`~jaxgrasp.Evaluation` field, host-side) has a boundary problem that no
-    start settled, the only case in which :func:`settle_stalled` can change anything."""
-    return np.any(np.asarray(boundary_status) == LaneStatus.NOT_CONVERGED, axis=(-2, -1))
+    and ``equilibrium_status`` ``(...)`` (:class:`~jaxgrasp.Evaluation` fields, host-side)
+    has a boundary problem that no start settled or an equilibrium that did not settle,
+    the only cases in which :func:`settle_stalled` and :func:`settle_equilibrium` can
+    change anything."""
+    out = np.any(np.asarray(boundary_status) == LaneStatus.NOT_CONVERGED, axis=(-2, -1))
+    if equilibrium_status is not None:
+        out = out | (np.asarray(equilibrium_status) == LaneStatus.NOT_CONVERGED)
+    return out

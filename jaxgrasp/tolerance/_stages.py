@@ -17,12 +17,23 @@ from jaxgrasp.tolerance._problems import (
     _num_lanes,
     lane_problem,
 )
-from jaxgrasp.tolerance._settle import _at_equilibrium, _settle_where_stalled
+from jaxgrasp.tolerance._settle import _at_equilibrium, _settle_where_stalled, settle_equilibrium
 from jaxgrasp.tolerance._starts import (
     LaneStarts,
+    equilibrium_of,
 )
 
-__all__ = ["solve_stage", "unsolved", "finish_problems"]
+__all__ = ["solve_stage", "unsolved", "finish_problems", "settled_equilibrium"]
+
+
+def settled_equilibrium(data: ProblemData, eq_lanes: SolverResult, options: EvaluateOptions,
+                        settle: bool = True) -> SolverResult:
+    """Each grasp's equilibrium (leading axis ``B``) from the lanes of the equilibrium stage
+    (:func:`equilibrium_of`), with ``settle`` (static) certified where it stalled
+    (:func:`~jaxgrasp.tolerance._settle.settle_equilibrium`). The starts stage and the
+    finish stage both read it, so the boundary problems start from the settled equilibrium."""
+    eq = equilibrium_of(eq_lanes)
+    return settle_equilibrium(data, eq, options.solver) if settle else eq
 
 
 def solve_stage(data: ProblemData, starts: LaneStarts, options: EvaluateOptions) -> SolverResult:
