@@ -124,7 +124,7 @@ def test_readme_is_small_and_tells_no_history():
     first = next(b for b in BLOCKS["README.md"] if b.language in RUN)
     assert re.search(r"pip install .* && jaxgrasp sweep$", first.code.strip())
     ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
-    assert "python -m pytest -q tests\n" in ci and "python -m pytest -q tests" in text
+    assert "python -m pytest -q -n 2 tests\n" in ci and "python -m pytest -q -n 2 tests" in text
 
 
 @pytest.mark.parametrize("name", ["README.md", "docs/guide/statuses.md"])
