@@ -4,9 +4,9 @@
 
 1. **draw** geometric candidates (:mod:`jaxgrasp.planning._sampling`): antipodal pairs by
    ray casting for two fingers, spread tuples from a pool of surface samples (their normals
-   nearly balancing) for three or more, or plain uniform samples (``sampler="uniform"``,
-   the baseline); each candidate gets one initial deformation drawn uniformly in rule 5's
-   range;
+   nearly balancing, or adding up to a push that carries the weight) for three or more, or
+   plain uniform samples (``sampler="uniform"``, the baseline); each candidate gets one
+   initial deformation drawn uniformly in rule 5's range;
 2. **keep** the candidates that keep every contact rule (:func:`jaxgrasp.surface.check_contacts`),
    drawing more rounds until ``samples`` are valid;
 3. **evaluate** them all in batches (:func:`jaxgrasp.evaluate_batch`);
@@ -214,7 +214,9 @@ def _draw_round(setup: _Setup, fingers: int, sampler: str, rules: ContactRules, 
         if sampler == "antipodal":
             pos, nrm = antipodal_pairs(tri, fn, p[ok], n[ok], setup.fingertip["friction"])
         elif ok.sum() >= fingers:
-            pos, nrm = spread_tuples(p[ok], n[ok], fingers, _ROUND, rng)
+            g = np.linalg.norm(setup.gravity) * setup.mass
+            down = setup.gravity / np.linalg.norm(setup.gravity) if g > 0 else None
+            pos, nrm = spread_tuples(p[ok], n[ok], fingers, _ROUND, rng, down)
         else:
             pos, nrm = np.zeros((0, fingers, 3)), np.zeros((0, fingers, 3))
     if len(pos):

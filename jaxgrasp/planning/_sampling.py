@@ -83,18 +83,25 @@ def antipodal_pairs(triangles, normals, p1, n1, friction: float) -> tuple[np.nda
     return np.stack([p1, p2], axis=1)[ok], np.stack([n1, n2], axis=1)[ok]
 
 
-def spread_tuples(points, normals, fingers: int, count: int, rng, draws: int = 20) -> tuple[np.ndarray, np.ndarray]:
+def spread_tuples(points, normals, fingers: int, count: int, rng, down=None, draws: int = 20) -> tuple[np.ndarray, np.ndarray]:
     """Candidates of ``fingers >= 3`` contacts drawn from a pool of surface samples, favouring
-    force closure: of ``draws x count`` random tuples the ``count`` whose unit normals sum
-    closest to zero are kept (pushing along the normals alone then nearly balances).
+    force closure against the load: of ``draws x count`` random tuples the ``count`` whose
+    unit normals sum closest to ``c down`` with ``0 <= c <= 1`` are kept. A fingertip pushes
+    along ``-n_i``; pushes that nearly balance (normals summing to zero), or that add up to
+    at most one fingertip's upward push carrying the weight, are what a grasp under gravity
+    needs before friction does the rest (all fingertips below the object hold nothing in).
 
     Args:
         points: ``(P, 3)`` m; normals: ``(P, 3)`` unit, the pool.
+        down: ``(3,)`` unit vector along gravity, or ``None`` (no load: normals summing to zero).
 
     Returns:
         ``(positions (count, fingers, 3) m, normals (count, fingers, 3))``.
     """
-    idx = np.stack([rng.choice(len(points), size=fingers, replace=False) for _ in range(draws * count)])
-    net = np.linalg.norm(normals[idx].sum(axis=1), axis=-1)
-    keep = idx[np.argsort(net, kind="stable")[:count]]
+    keys = rng.random((draws * count, len(points)))
+    idx = np.argpartition(keys, fingers, axis=1)[:, :fingers]  # ``fingers`` distinct pool points per tuple
+    net = normals[idx].sum(axis=1)
+    if down is not None:  # up to one fingertip's push may carry the weight, the rest must pinch
+        net = net - np.clip(net @ down, 0.0, 1.0)[:, None] * down
+    keep = idx[np.argsort(np.linalg.norm(net, axis=-1), kind="stable")[:count]]
     return points[keep], normals[keep]

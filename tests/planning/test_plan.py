@@ -15,7 +15,7 @@ import trimesh
 import jaxgrasp
 from jaxgrasp.io._mesh import closest_on_triangles, load_mesh
 from jaxgrasp.planning import PlanStatus, plan
-from jaxgrasp.planning._sampling import antipodal_pairs, first_hits, surface_points
+from jaxgrasp.planning._sampling import antipodal_pairs, first_hits, spread_tuples, surface_points
 
 MESH = Path(__file__).resolve().parents[2] / "examples" / "meshes" / "pybullet_000_mm.obj"
 TIP = dict(radius=0.01, young_modulus=3e5, friction=0.8, max_force=15.0)
@@ -78,6 +78,18 @@ def test_antipodal_pairs_on_a_box_are_opposite_face_points():
     np.testing.assert_allclose(pos[:, 1] - pos[:, 0], -nrm[:, 0] * np.abs(np.einsum("kd,kd->k", pos[:, 1] - pos[:, 0], nrm[:, 0]))[:, None], atol=1e-12)
     t, face = first_hits(tri, np.array([[0.0, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]]))
     assert t[0] == pytest.approx(0.05) and fn[face[0]] @ [1, 0, 0] == pytest.approx(1.0)
+
+
+def test_spread_tuples_on_a_box_carry_the_weight_from_below():
+    # on a box no three face normals sum to zero; under gravity -z the best tuples push up
+    # from the bottom face (normal -z) and pinch two opposite sides: normals summing to -z
+    box = trimesh.creation.box(extents=[0.1, 0.06, 0.04])
+    tri, fn = np.asarray(box.triangles), np.asarray(box.face_normals)
+    p, n = surface_points(tri, fn, 300, np.random.default_rng(1))
+    pos, nrm = spread_tuples(p, n, 3, 40, np.random.default_rng(2), down=np.array([0.0, 0.0, -1.0]))
+    np.testing.assert_allclose(nrm.sum(axis=1), np.tile([0.0, 0.0, -1.0], (40, 1)), atol=1e-12)
+    _, flat = spread_tuples(p, n, 3, 40, np.random.default_rng(2))  # without a load: any two opposite
+    assert np.all(np.linalg.norm(flat.sum(axis=1), axis=1) == pytest.approx(1.0))
 
 
 def test_plan_rejects_bad_arguments_in_one_line():
