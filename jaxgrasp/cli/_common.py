@@ -35,6 +35,7 @@ __all__ = [
     "check_out",
     "lock_out",
     "replaced_text",
+    "write_picture",
     "ChunkProgress",
     "say",
     "add_epsilon_option",
@@ -259,6 +260,22 @@ def lock_out(out: Path) -> outputs.FolderLock:
         raise UsageError(f"--out: {exc}") from None
     except OSError as exc:
         raise UsageError(f"cannot create --out folder {str(out)!r}: {exc.strerror or exc}") from None
+
+
+def write_picture(targets, fig, scene) -> list:
+    """Write the picture ``fig`` to ``targets[0]`` (PNG, SVG or PDF by its suffix) and, where
+    given, ``scene``'s GLB to ``targets[1]``, as one set; the previous files replaced."""
+    from jaxgrasp.plots._plots import save_figure
+
+    members = {targets[0]: lambda fh: save_figure(fig, fh, format=targets[0].suffix[1:].lower())}
+    if len(targets) > 1:
+        members[targets[1]] = scene.to_trimesh().export(file_type="glb")
+    try:
+        for t in targets:
+            t.parent.mkdir(parents=True, exist_ok=True)
+        return outputs.write_set(members)
+    except OSError as exc:
+        raise UsageError(f"cannot write {', '.join(map(str, targets))}: {exc.strerror or exc}") from None
 
 
 def replaced_text(replaced, removed) -> str:

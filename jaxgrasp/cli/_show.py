@@ -12,6 +12,7 @@ from jaxgrasp.cli._common import (
     announce_large_grasp,
     grasp_source,
     load_grasp,
+    write_picture,
 )
 from jaxgrasp.io import _outputs as outputs
 
@@ -55,7 +56,7 @@ def run(args) -> int:
     """Evaluate the grasp, write the picture (and the GLB) as one set; one summary line."""
     from jaxgrasp.engine._evaluate import evaluate
     from jaxgrasp.io._mesh import MeshGrasp
-    from jaxgrasp.plots._plots import draw_scene, save_figure
+    from jaxgrasp.plots._plots import draw_scene
     from jaxgrasp.plots._scene import grasp_scene
 
     targets = _check_outputs(args)
@@ -68,16 +69,7 @@ def run(args) -> int:
     announce_large_grasp(plain.num_contacts, grasp_source(args))
     result = evaluate(plain)
     scene = grasp_scene(grasp, result, magnification=args.magnification)
-    fig = draw_scene(scene)
-    members = {targets[0]: lambda fh: save_figure(fig, fh, format=targets[0].suffix[1:].lower())}
-    if len(targets) > 1:
-        members[targets[1]] = scene.to_trimesh().export(file_type="glb")
-    try:
-        for t in targets:
-            t.parent.mkdir(parents=True, exist_ok=True)
-        replaced = outputs.write_set(members)
-    except OSError as exc:
-        raise UsageError(f"cannot write {', '.join(map(str, targets))}: {exc.strerror or exc}") from None
+    replaced = write_picture(targets, draw_scene(scene), scene)
     limit = (f", limited by {scene.limiting_kind} of contact {scene.limiting_contact} (ghost motion "
              f"x{scene.magnification:g})" if scene.limiting_kind else "")
     print(

@@ -3,8 +3,7 @@ way it fails), from a hand grasp file (:mod:`jaxgrasp.hands._file`)."""
 
 from __future__ import annotations
 
-from jaxgrasp.cli._common import UsageError
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.cli._common import UsageError, write_picture
 
 __all__ = ["run_hand"]
 
@@ -15,7 +14,6 @@ def run_hand(args, targets) -> int:
     from jaxgrasp.engine._evaluate import evaluate
     from jaxgrasp.hands._file import load_hand_grasp
     from jaxgrasp.plots._hand import hand_scene, plot_hand_grasp
-    from jaxgrasp.plots._plots import save_figure
 
     if args.file is not None or args.preset is not None:
         raise UsageError("give either a grasp FILE, --preset or --hand FILE, not more than one")
@@ -24,16 +22,8 @@ def run_hand(args, targets) -> int:
         raise UsageError(f"{args.hand}: {hg.num_active} fingertip(s) touch the object; a grasp needs at least 2")
     result = evaluate(hg.grasp.compact())
     fig = plot_hand_grasp(hg, result=result, magnification=args.magnification)
-    members = {targets[0]: lambda fh: save_figure(fig, fh, format=targets[0].suffix[1:].lower())}
     scene = hand_scene(hg, result, magnification=args.magnification)
-    if len(targets) > 1:
-        members[targets[1]] = scene.to_trimesh().export(file_type="glb")
-    try:
-        for t in targets:
-            t.parent.mkdir(parents=True, exist_ok=True)
-        replaced = outputs.write_set(members)
-    except OSError as exc:
-        raise UsageError(f"cannot write {', '.join(map(str, targets))}: {exc.strerror or exc}") from None
+    replaced = write_picture(targets, fig, scene)
     limit = f", limited by {scene.limiting_kind} of contact {scene.limiting_contact}" if scene.limiting_kind else ""
     print(f"show --hand {args.hand}: {scene.status}, value {scene.value:.6e} J{limit}, {hg.num_active} fingertips "
           f"in contact; wrote " + ", ".join(map(str, targets))
