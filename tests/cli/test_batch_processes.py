@@ -101,6 +101,7 @@ def test_two_processes_write_what_one_does(tmp_path, evaluate_many):
     one = subprocess.run(_batch(data, "--out", "one", "--quiet"), env=_env(), cwd=tmp_path,
                          capture_output=True, text=True, timeout=300)
     assert one.returncode == 0, one.stderr[-3000:]
+    assert "jaxgrasp: compiling" not in one.stderr, one.stderr  # process 0's stored program: the same one
     assert (tmp_path / "two" / "results.csv").read_bytes() == (tmp_path / "one" / "results.csv").read_bytes()
     a, b = np.load(tmp_path / "one" / "results.npz"), np.load(tmp_path / "two" / "results.npz")
     for k in set(a.files) - {"compile_seconds", "run_seconds", "devices"}:
