@@ -9,7 +9,8 @@ share of the dataset, the grasps ``i, i + P, i + 2P, ...``
 (:func:`~jaxgrasp.engine._batch.evaluate_dataset`). The processes meet twice
 (:func:`~jaxgrasp.engine._hosts.exchange`): once every share is read (the dataset's
 largest contact count, which every share is padded to, so that every process runs the
-program one process would; the file's SHA-256, which must be the same everywhere; and
+program one process would, but where a share of a mixed dataset holds only grasps of the
+largest count: that one runs without a contact mask, equal to round-off; the file's SHA-256, which must be the same everywhere; and
 whether any process failed), and once the shares are evaluated (their results, to
 process 0). Process 0 alone writes ``--out`` (its files as one set, in input order, as
 one process would); the others write nothing there.
