@@ -72,9 +72,33 @@ def _stdout_on_stderr():
         os.close(saved)
 
 
+BARRIER_TIMEOUT_MS = 7 * 24 * 3600 * 1000
+"""How long a process waits for the others at a meeting (ms): a week, as a share may take
+hours longer than another's."""
+
+_MEETINGS = [0]  # meetings so far in this process: each barrier's name
+
+
+def _wait_for_the_others() -> None:
+    """Wait until every process has come to this meeting, at a barrier of JAX's
+    coordination service (which also notices a process that died), so that the
+    collective that follows starts with every process there: XLA's CPU collectives give
+    up after a time limit of their own, shorter than a long share may take. Where JAX's
+    client lacks the barrier (a private entry point), the collective waits alone."""
+    _MEETINGS[0] += 1
+    try:
+        from jax._src import distributed
+
+        wait = distributed.global_state.client.wait_at_barrier
+    except (ImportError, AttributeError):  # pragma: no cover - another JAX
+        return
+    wait(f"jaxgrasp-meeting-{_MEETINGS[0]}", BARRIER_TIMEOUT_MS)
+
+
 def exchange(blob: bytes) -> list[bytes]:
     """Every process's ``blob``, by process index (each process gets all of them). A
     collective: every process of the run must call it, the same number of times."""
+    _wait_for_the_others()
     with _stdout_on_stderr():
         return _exchange(blob)
 
