@@ -42,7 +42,7 @@ RUN = {"python": "python", "bash": "shell", "shell": "shell"}
 INERT = {"text", "toml", "json"}
 """Fence languages that are shown, not run: output, citations, file contents."""
 SKIP_MARKER = "<!-- docs-test: skip"
-MAX_SKIPS = 12  # 10, plus the install lines of the sim and hands extras (issues 37, 38)
+MAX_SKIPS = 13  # 10, plus the install lines of the sim and hands extras (issues 37, 38) and the two-host batch launch (issue 41)
 README_MAX_BYTES = 12 * 1024
 
 

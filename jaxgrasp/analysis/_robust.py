@@ -251,7 +251,8 @@ def robust(grasp, uncertainty: Uncertainty, samples: int = 256, seed: int = 0, *
 
 def robust_batch(grasps, uncertainty: Uncertainty, samples: int = 256, seed: int = 0, *,
                  quantiles: Sequence[float] = DEFAULT_QUANTILES, options: EvaluateOptions = EvaluateOptions(),
-                 chunk_size: int | None = None, progress: Callable[[int, int], Any] | None = None) -> RobustBatch:
+                 chunk_size: int | None = None, progress: Callable[[int, int], Any] | None = None,
+                 devices=None) -> RobustBatch:
     """The robust evaluation of many grasps: ``samples`` perturbed copies of each, every
     copy of every grasp of a contact count through one compiled evaluator.
 
@@ -262,6 +263,8 @@ def robust_batch(grasps, uncertainty: Uncertainty, samples: int = 256, seed: int
         uncertainty, samples, seed, quantiles, options, chunk_size, progress: as
             :func:`robust`. Every grasp sees the same draws (common random numbers), so a
             grasp's result does not depend on the others in the list.
+        devices: as :func:`jaxgrasp.evaluate_batch` (default ``jax.devices()``, every
+            host's after ``jax.distributed.initialize()``).
 
     Returns:
         A :class:`RobustBatch`, grasps in input order.
@@ -271,14 +274,14 @@ def robust_batch(grasps, uncertainty: Uncertainty, samples: int = 256, seed: int
     """
     levels = _check_call(uncertainty, samples, seed, quantiles)
     groups, nominal_input = _groups(grasps)
-    nominal = _nominal(nominal_input, options, chunk_size, samples)
+    nominal = _nominal(nominal_input, options, chunk_size, samples, devices)
     g = len(nominal)
     values = np.empty((g, samples))
     statuses = np.empty((g, samples), dtype=np.int64)
     clipped = {name: np.zeros(g, dtype=np.int64) for name in CLIP_SOURCES}
     for rows, fields, project in groups:
         batch, clips = _perturbed(fields, project, uncertainty, samples, seed)
-        res = evaluate_batch(batch, options=options, chunk_size=chunk_size, progress=progress)
+        res = evaluate_batch(batch, options=options, chunk_size=chunk_size, progress=progress, devices=devices)
         values[rows] = np.asarray(res.value).reshape(len(rows), samples)
         statuses[rows] = np.asarray(res.status).reshape(len(rows), samples)
         for name, c in clips.items():
@@ -354,7 +357,7 @@ def _groups(grasps) -> tuple[list, Any]:
     return groups, plain
 
 
-def _nominal(grasps, options: EvaluateOptions, chunk_size, samples: int) -> BatchResult:
+def _nominal(grasps, options: EvaluateOptions, chunk_size, samples: int, devices=None) -> BatchResult:
     """The evaluation of the unperturbed grasps: :func:`jaxgrasp.evaluate` for a single
     grasp of a list (as a batch of one), else :func:`jaxgrasp.evaluate_batch` in the
     chunks of the samples (fewer grasps than a chunk are padded to one with copies of the
@@ -365,14 +368,14 @@ def _nominal(grasps, options: EvaluateOptions, chunk_size, samples: int) -> Batc
         active = np.ones((1, grasps[0].num_contacts), dtype=bool)
         return assemble([(np.arange(1), results)], 1, np.zeros(0, dtype=int), active, (None,))
     g = np.shape(grasps.positions)[0] if isinstance(grasps, Grasp) else len(grasps)
-    chunk = plan_chunks(g * samples, chunk_size).chunk
+    chunk = plan_chunks(g * samples, chunk_size, devices).chunk
     if g >= chunk:
-        return evaluate_batch(grasps, options=options, chunk_size=chunk)
+        return evaluate_batch(grasps, options=options, chunk_size=chunk, devices=devices)
     if isinstance(grasps, Grasp):
         padded = jax.tree_util.tree_map(lambda a: np.concatenate([a, np.repeat(a[-1:], chunk - g, axis=0)]), grasps)
     else:
         padded = list(grasps) + [grasps[-1]] * (chunk - g)
-    res = evaluate_batch(padded, options=options, chunk_size=chunk)
+    res = evaluate_batch(padded, options=options, chunk_size=chunk, devices=devices)
     return dataclasses.replace(
         res, evaluation=jax.tree_util.tree_map(lambda a: a[:g], res.evaluation), num_contacts=res.num_contacts[:g],
         active=res.active[:g], errors=res.errors[:g],

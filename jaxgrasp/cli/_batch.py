@@ -15,12 +15,15 @@ its rows name (:func:`resume_key`). At the end ``results.csv``, ``results.npz`` 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import time
 from pathlib import Path
 
+import jax
 import numpy as np
 
+from jaxgrasp.cli import _batch_processes as processes
 from jaxgrasp.cli._common import (
     ChunkProgress,
     UsageError,
@@ -84,6 +87,7 @@ def add_parser(sub) -> None:
     add_epsilon_option(sp)
     add_robust_options(sp)
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    processes.add_process_options(sp)
     sp.set_defaults(func=run)
 
 
@@ -98,6 +102,8 @@ def run(args) -> int:
 
     _check_numbers(args)
     uncertainty = robust_uncertainty(args)
+    if processes.check_process_options(args):
+        return run_processes(args, uncertainty)
     gset = load_dataset(args.file, allowed_dirs=args.allow_dir)
     if args.strict:
         gset.raise_if_invalid()
@@ -124,10 +130,66 @@ def run(args) -> int:
         if uncertainty is not None:
             extra.update(_robust(gset, uncertainty, args))
         written, replaced, removed = _write_outputs(merged, out, checkpoint, args, extra)
-    print(_summary(merged, args.file, wall, result, rows.size, out, written, replaced, removed, args.top))
+    print(_summary(merged, args.file, wall, _timing(result, rows.size), out, written, replaced, removed, args.top))
     if uncertainty is not None:
         print(_robust_line(extra, uncertainty, args))
     return 0
+
+
+def run_processes(args, uncertainty) -> int:
+    """The command as process ``--process-id`` of ``--num-processes`` (see
+    :mod:`._batch_processes`): join the others, evaluate this process's share of the
+    dataset on this host's devices, meet the others; process 0 writes the files in input
+    order and prints the summary, the others one line."""
+    from jaxgrasp.engine._hosts import join, leave
+
+    out, me = Path(args.out), args.process_id
+    if not args.no_plot and me == 0:
+        prefetch("jaxgrasp.plots._plots")
+    t_start = time.perf_counter()
+    join(args.coordinator, args.num_processes, me)
+    try:
+        with contextlib.ExitStack() as held:
+            opened, failure = processes.attempt(lambda: processes.open_share(args, out, out / PARTIAL_NAME, held))
+            n_contacts = processes.agree_on_inputs(opened, failure)
+            blob, failure = processes.attempt(lambda: _evaluate_share(opened[0], n_contacts, uncertainty, args))
+            merged, extra, timing = processes.gather_results(blob, failure, opened[1], n_contacts, jax.device_count())
+            if me != 0:
+                print(f"batch {args.file}: process {me} of {args.num_processes} ({jax.local_device_count()} of "
+                      f"{merged.devices} devices): evaluated {counted(int(opened[0].valid.sum()), 'grasp')} "
+                      f"of its share; process 0 writes {out}")
+                return 0
+            wall = time.perf_counter() - t_start
+            written, replaced, removed = _write_outputs(merged, out, None, args, extra)
+    finally:
+        leave()
+    timing = (f"{timing['processes']} processes, {merged.devices} devices: longest compile "
+              f"{merged.compile_seconds:.1f} s, longest run {merged.run_seconds:.1f} s, "
+              f"{timing['evaluated'] / max(merged.run_seconds, 1e-9):.1f} grasps per second in all")
+    print(_summary(merged, args.file, wall, timing, out, written, replaced, removed, args.top))
+    if uncertainty is not None:
+        print(_robust_line(extra, uncertainty, args))
+    return 0
+
+
+def _evaluate_share(share, n_contacts: int, uncertainty, args) -> bytes:
+    """This process's share evaluated on its own devices, padded to the dataset's
+    ``n_contacts``, with its ``--epsilon`` and ``--robust`` columns: what it sends
+    process 0 (:func:`._batch_processes.share_blob`)."""
+    from jaxgrasp.engine._batch import evaluate_dataset
+    from jaxgrasp.io._dataset import padded_set
+
+    if not share.valid.any():
+        return processes.share_blob(share, None, None, {})
+    share, local = padded_set(share, n_contacts), jax.local_devices()
+    progress = ChunkProgress("evaluating", "grasp", show=not args.quiet)
+    announce_run("batch", f"{args.file} (share {args.process_id} of {args.num_processes})",
+                 int(share.valid.sum()), "grasp", args.quiet)
+    merged, run = evaluate_dataset(share, chunk_size=args.chunk_size, progress=progress, devices=local)
+    extra = _epsilon(share) if args.epsilon else {}
+    if uncertainty is not None:
+        extra.update(_robust(share, uncertainty, args, devices=local))
+    return processes.share_blob(share, merged, run, extra)
 
 
 def resume_key(gset) -> str:
@@ -172,7 +234,8 @@ def _open_checkpoint(checkpoint, resume: bool, total: int) -> tuple[np.ndarray, 
 
 def _write_outputs(result, out: Path, checkpoint, args, extra=None) -> tuple[list[str], list[str], list[str]]:
     """Write ``results.csv``, ``results.npz`` and (unless ``--no-plot``) ``results.png``
-    as one set, removing the checkpoint in the same step; ``extra``: more columns (``--epsilon``)."""
+    as one set, removing the checkpoint (``None``: none was kept) in the same step;
+    ``extra``: more columns (``--epsilon``)."""
     members = {
         out / "results.csv": lambda fh: result.to_csv(fh, extra),
         out / "results.npz": lambda fh: result.to_npz(fh, extra),
@@ -186,13 +249,14 @@ def _write_outputs(result, out: Path, checkpoint, args, extra=None) -> tuple[lis
     try:
         replaced = outputs.write_set(
             members,
-            remove=stale + checkpoint.files(),
+            remove=stale + (checkpoint.files() if checkpoint is not None else []),
             on_publish=lambda: outputs.set_note("batch", f"the results are in {out}"),
         )
     except OSError as exc:
         raise UsageError(f"cannot write to --out {str(out)!r}: {exc.strerror or exc}") from None
     try:
-        checkpoint.folder.rmdir()
+        if checkpoint is not None:
+            checkpoint.folder.rmdir()
     except OSError:
         pass  # something else was put there: leave it
     return [p.name for p in members], [p.name for p in replaced], [p.name for p in stale]
@@ -212,10 +276,11 @@ def _epsilon(gset) -> dict:
     return out
 
 
-def _robust(gset, uncertainty, args) -> dict:
+def _robust(gset, uncertainty, args, devices=None) -> dict:
     """The ``--robust`` columns of every input row (:meth:`jaxgrasp.analysis.RobustBatch.columns`:
     ``p_stable``, ``p_stable_stderr``, ``value_mean``, ``value_q05``, ``value_q50``), NaN
-    for an invalid grasp; every valid grasp's samples through one compiled evaluator."""
+    for an invalid grasp; every valid grasp's samples through one compiled evaluator,
+    on ``devices`` (default every device)."""
     from jaxgrasp.analysis._robust import robust_batch
     from jaxgrasp.model._grasp import Grasp
 
@@ -224,7 +289,8 @@ def _robust(gset, uncertainty, args) -> dict:
     active = columns.active[valid]
     batch = Grasp(**{k: a[valid] for k, a in columns.fields.items()}, active=None if active.all() else active)
     progress = ChunkProgress("evaluating robust samples:", "perturbed grasp", show=not args.quiet)
-    rb = robust_batch(batch, uncertainty, args.samples, args.seed, chunk_size=args.chunk_size, progress=progress)
+    rb = robust_batch(batch, uncertainty, args.samples, args.seed, chunk_size=args.chunk_size, progress=progress,
+                      devices=devices)
     out = {}
     for name, col in rb.columns().items():
         out[name] = np.full(len(gset), np.nan)
@@ -243,20 +309,27 @@ def _robust_line(columns: dict, uncertainty, args) -> str:
     )
 
 
-def _summary(result, source, wall, run, resumed, out, written, replaced, removed, top) -> str:
-    """The summary: counts, timings, files, then the ``top`` best grasps, one per line."""
-    c = result.counts()
-    counts = ", ".join(f"{k} {v}" for k, v in c.items() if v or k != "invalid")
-    valid = result.num_contacts[result.num_contacts > 0]
-    span = f"{valid.min()}-{valid.max()}" if valid.min() != valid.max() else f"{valid.min()}"
+def _timing(run, resumed: int) -> str:
+    """The summary's timings of this run's evaluation (``run``: its
+    :class:`~jaxgrasp.BatchResult`, ``None`` where nothing was left), with the rows
+    ``resumed`` from a checkpoint."""
     timing = "no chunk left to evaluate" if run is None else (
         f"compile {run.compile_seconds:.1f} s, run {run.run_seconds:.1f} s, "
         f"{len(run) / max(run.run_seconds, 1e-9):.1f} grasps per second"
     )
-    again = f"; {resumed} resumed from the checkpoint" if resumed else ""
+    return timing + (f"; {resumed} resumed from the checkpoint" if resumed else "")
+
+
+def _summary(result, source, wall, timing, out, written, replaced, removed, top) -> str:
+    """The summary: counts, ``timing`` (:func:`_timing`), files, then the ``top`` best
+    grasps, one per line."""
+    c = result.counts()
+    counts = ", ".join(f"{k} {v}" for k, v in c.items() if v or k != "invalid")
+    valid = result.num_contacts[result.num_contacts > 0]
+    span = f"{valid.min()}-{valid.max()}" if valid.min() != valid.max() else f"{valid.min()}"
     lines = [
         f"batch {source}: {counted(len(result), 'grasp')} ({span} contacts); {counts}; "
-        f"wall {wall:.1f} s ({timing}{again}); wrote {out}/{{{','.join(written)}}}"
+        f"wall {wall:.1f} s ({timing}); wrote {out}/{{{','.join(written)}}}"
         + replaced_text(replaced, removed)
     ]
     lines += _top_lines(result, top)

@@ -133,7 +133,7 @@ def compiled(
         _MEMO[key] = hit  # now the most recently used
         return hit, 0.0
     t0 = time.perf_counter()
-    entry = None if store_key is None else executable_entry(name, (store_key, len(devices or ())), spec)
+    entry = None if store_key is None else executable_entry(name, (store_key, len(devices or ()), *_process()), spec)
     built = build()
     fn, why = None, "the executable store is off"
     if entry is not None:
@@ -215,6 +215,15 @@ def _no_xla_cache_write():
         return jax_config.persistent_cache_min_compile_time_secs(float("inf"))
     except (ImportError, AttributeError, TypeError):
         return contextlib.nullcontext()
+
+
+def _process() -> tuple:
+    """What a stored executable's key adds in process 1, 2, ... of several
+    (``jax.distributed``): its process index, as a stored executable names its devices by
+    id and those ids differ from process to process (one stored by process 1 does not
+    load in process 0 or in a process of its own, nor the other way round). Nothing in
+    process 0, whose device ids are those of a process of its own: they share."""
+    return ("process", jax.process_index()) if jax.process_index() > 0 else ()
 
 
 def default_device():

@@ -79,7 +79,8 @@ from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS, FIELD, NAMES
 from jaxgrasp.model._grasp import Grasp, stack
 from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
 
-__all__ = ["SUFFIXES", "GraspColumns", "GraspRows", "GraspSet", "load_dataset", "save_dataset"]
+__all__ = ["SUFFIXES", "GraspColumns", "GraspRows", "GraspSet", "load_dataset", "load_share", "share_rows", "padded_set",
+           "save_dataset"]
 
 SUFFIXES = (".npz", ".jsonl")
 """The dataset formats, by file suffix."""
@@ -318,21 +319,63 @@ def load_dataset(path: str | os.PathLike, *, allowed_dirs=None) -> GraspSet:
         GraspValueError: the file as a whole cannot be read (one line, starting with
             the file name).
     """
+    return load_share(path, 0, 1, allowed_dirs=allowed_dirs)[0]
+
+
+def share_rows(total: int, index: int, count: int) -> np.ndarray:
+    """The input rows of share ``index`` of ``count`` of a dataset of ``total`` grasps:
+    every ``count``-th grasp from grasp ``index`` (strided, so that neighbouring grasps,
+    often alike, are spread over the shares), in input order; ``(rows,)`` int64."""
+    return np.arange(index, total, count, dtype=np.int64)
+
+
+def load_share(path: str | os.PathLike, index: int, count: int, *, allowed_dirs=None) -> tuple[GraspSet, int]:
+    """Read and validate share ``index`` of ``count`` of a dataset file: the grasps
+    :func:`share_rows` names (of one process of several, ``jaxgrasp batch
+    --num-processes``); ``(its set, the file's number of grasps)``.
+
+    Every line of a ``.jsonl`` is still read (to number the grasps and hash the bytes),
+    but only the share's lines are parsed and validated and only the meshes they name are
+    read; an ``.npz``'s arrays are read whole and the share's rows validated. Errors name
+    each grasp by its input index and line, as :func:`load_dataset` does (which is share
+    0 of 1). ``source_sha256`` is the whole file's.
+
+    Raises:
+        GraspValueError: the file as a whole cannot be read, as :func:`load_dataset`.
+    """
     path = Path(path)
     suffix = _suffix(path)
     if path.is_dir():
         raise GraspValueError(f"{path}: is a folder, not a dataset file (.npz or .jsonl)")
     meshes = MeshReader(path.parent, allowed_dirs, owner="dataset")
+    keep = (int(index), int(count))
     with open_input(path, MAX_DATASET_BYTES, "dataset") as fh:
         try:
             if suffix == ".npz":
-                columns, errors, sha = _read_npz(fh, path)
+                columns, errors, sha, total = _read_npz(fh, path, keep)
             else:
-                columns, errors, sha = _read_jsonl(fh, path, meshes)
+                columns, errors, sha, total = _read_jsonl(fh, path, meshes, keep)
         except OSError as exc:
             raise GraspValueError(f"{path}: cannot read file ({exc.strerror or exc})") from None
-    return GraspSet(grasps=GraspRows(columns), errors=tuple(errors), source=str(path), source_sha256=sha,
+    gset = GraspSet(grasps=GraspRows(columns), errors=tuple(errors), source=str(path), source_sha256=sha,
                     mesh_sha256=dict(meshes.sha256))
+    return gset, total
+
+
+def padded_set(gset: GraspSet, n_contacts: int) -> GraspSet:
+    """``gset`` (read from a file) with its columns padded to ``n_contacts`` contacts (at
+    least its own), the padding repeating each grasp's last contact, as a file whose
+    largest grasp has ``n_contacts`` contacts is read: so that the shares of one dataset
+    are evaluated at one contact count. A set without a valid grasp (no contact to
+    repeat) is padded with zeros, which are never evaluated."""
+    columns = gset.columns()
+    n = columns.fields["positions"].shape[1]
+    if n_contacts <= n:
+        return gset
+    pick = np.minimum(np.arange(n_contacts), max(n - 1, 0))
+    fields = {k: (a[:, pick] if n else np.zeros((a.shape[0], n_contacts, *a.shape[2:]))) if FIELD[k].per_contact
+              else a for k, a in columns.fields.items()}
+    return dataclasses.replace(gset, grasps=GraspRows(GraspColumns(fields=fields, counts=columns.counts)))
 
 
 # ----------------------------------------------------------------------------- .npz
@@ -454,23 +497,24 @@ def _npz_grasp(arrays: dict[str, np.ndarray], i: int, n: int) -> dict[str, Any]:
     return kwargs
 
 
-def _read_npz(fh: BinaryIO, path: Path) -> tuple[GraspColumns, list, str]:
-    """``(columns, errors, sha256)`` of an ``.npz`` dataset."""
+def _read_npz(fh: BinaryIO, path: Path, keep: tuple[int, int] = (0, 1)) -> tuple[GraspColumns, list, str, int]:
+    """``(columns, errors, sha256, B)`` of the rows of an ``.npz`` dataset that share
+    ``keep = (index, count)`` names (:func:`share_rows`)."""
     digest = hashlib.sha256()
     for block in iter(lambda: fh.read(1 << 20), b""):  # the size was capped when it was opened
         digest.update(block)
     fh.seek(0)
     arrays = _npz_arrays(fh, path)
     b, n = _npz_shapes(arrays, path)
-    builder, errors = _ColumnBuilder(b, n), []
-    for i in range(b):
+    builder, errors = _ColumnBuilder(-(-b // keep[1]), n), []
+    for i in share_rows(b, *keep).tolist():
         try:
             builder.add(check_grasp_inputs(**_npz_grasp(arrays, i, n)))
             errors.append(None)
         except GraspValueError as exc:
             builder.add(None)
             errors.append(f"grasp {i}: {exc}")
-    return builder.finish(), errors, digest.hexdigest()
+    return builder.finish(), errors, digest.hexdigest(), b
 
 
 # ----------------------------------------------------------------------------- .jsonl
@@ -487,12 +531,15 @@ def _jsonl_row(line: bytes, where: str, meshes: MeshReader) -> dict[str, np.ndar
     return checked_fields(data, where, meshes)  # a mesh path is relative to the file
 
 
-def _read_jsonl(fh: BinaryIO, path: Path, meshes: MeshReader) -> tuple[GraspColumns, list, str]:
-    """``(columns, errors, sha256)`` of a ``.jsonl`` dataset, read one line at a time.
+def _read_jsonl(fh: BinaryIO, path: Path, meshes: MeshReader, keep: tuple[int, int] = (0, 1)
+                ) -> tuple[GraspColumns, list, str, int]:
+    """``(columns, errors, sha256, B)`` of the grasps of a ``.jsonl`` dataset that share
+    ``keep = (index, count)`` names (:func:`share_rows`; the others' lines are counted,
+    not parsed), read one line at a time.
 
     Lines end at ``b"\\n"`` only: a binary file's lines, unlike ``str.splitlines``, which
     also breaks at U+2028, U+0085 and others that JSON strings may hold raw."""
-    digest, total, builder, errors = hashlib.sha256(), 0, _ColumnBuilder(), []
+    digest, total, builder, errors, grasps = hashlib.sha256(), 0, _ColumnBuilder(), [], 0
     for lineno in range(1, 2**63):
         line = fh.readline(MAX_DATASET_BYTES + 1 - total)  # never more than the cap in all
         if not line:
@@ -510,16 +557,19 @@ def _read_jsonl(fh: BinaryIO, path: Path, meshes: MeshReader) -> tuple[GraspColu
             raise GraspValueError(f"{path}: not valid UTF-8 text ({exc.reason} at byte {start + exc.start})") from None
         if not text.strip():
             continue
-        where = f"grasp {builder.size} (line {lineno})"
+        grasps += 1
+        if (grasps - 1) % keep[1] != keep[0]:
+            continue
+        where = f"grasp {grasps - 1} (line {lineno})"
         try:
             builder.add(_jsonl_row(line, where, meshes))
             errors.append(None)
         except GraspValueError as exc:
             builder.add(None)
             errors.append(str(exc))
-    if not errors:
+    if not grasps:
         raise GraspValueError(f"{path}: no grasps (every line is blank)")
-    return builder.finish(), errors, digest.hexdigest()
+    return builder.finish(), errors, digest.hexdigest(), grasps
 
 
 # ----------------------------------------------------------------------------- writing
