@@ -71,6 +71,7 @@ STATUS = ("stable", "unstable", "infeasible", "not_converged")  # GraspStatus la
 SAME_REL = 1e-12  # padded vs per-count: values and energies equal to this, relative
 OVER_REL = 1e-6  # jaxgrasp above Ipopt by more than this, relative: stability overstated
 TARGET_RATE = 50.0  # grasps/s, steady, padded, on the 2-core CPU
+ISSUE41_RATE, ISSUE41_RATIO = 120.0, 300.0  # issue 41's done-when: grasps/s and ratio to Ipopt, same run
 
 
 def load() -> list[float]:
@@ -128,12 +129,60 @@ def machine() -> dict:
 
 
 def timed_batch(grasps):
-    """``evaluate_batch(grasps)`` and its wall seconds (host-side stacking included)."""
+    """``evaluate_batch(grasps)`` and its wall seconds (host-side stacking included); the
+    process's CPU seconds of the call (every thread: both devices' work, counted whatever
+    else shares the cores) go to ``CPU_S``."""
     import jaxgrasp
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     res = jaxgrasp.evaluate_batch(grasps)
+    CPU_S.append(time.process_time() - c0)
     return res, time.perf_counter() - t0
+
+
+CPU_S: list = []  # CPU seconds of each timed_batch call of this process
+
+
+def counting_lanes():
+    """Wrap the engine's chunk evaluators so that each solve stage's lanes are counted:
+    returns ``(counts, undo)``; ``counts`` maps ``eq`` / ``boundary`` to, per
+    :class:`jaxgrasp.LaneStatus` name, ``[lanes, lane-steps]`` summed over calls (the
+    stage's results are read back once each call, after the stage ran)."""
+    from jaxgrasp.engine import _evaluator
+
+    real = _evaluator.compiled_evaluator
+    counts = {k: {n: [0, 0] for n in LANE_STATUS} for k in ("eq", "boundary")}
+    calls = [0]
+
+    def counted(*a, **k):
+        fn, seconds = real(*a, **k)
+        if "lanes" in fn.stages and not getattr(fn.stages["lanes"], "counted", False):
+            stage = fn.stages["lanes"]
+
+            def lanes(*xs):
+                out = stage(*xs)  # SolverResult leaves: status 4th, steps 8th
+                status, steps = np.asarray(out[4]).ravel(), np.asarray(out[8]).ravel()
+                kind = ("eq", "boundary")[calls[0] % 2]
+                calls[0] += 1
+                for code, name in enumerate(LANE_STATUS):
+                    sel = status == code
+                    counts[kind][name][0] += int(sel.sum())
+                    counts[kind][name][1] += int(steps[sel].sum())
+                return out
+
+            lanes.counted = True
+            fn.stages["lanes"] = lanes
+        return fn, seconds
+
+    _evaluator.compiled_evaluator = counted
+
+    def undo():
+        _evaluator.compiled_evaluator = real
+
+    return counts, undo
+
+
+LANE_STATUS = ("converged", "infeasible", "not_converged", "no_start")  # LaneStatus labels, by code
 
 
 def phase_padded(grasps, repeats: int) -> dict:
@@ -153,7 +202,14 @@ def phase_padded(grasps, repeats: int) -> dict:
         runs.append(res.run_seconds)
         walls.append(wall)
         same &= all(np.array_equal(getattr(res, f), getattr(first, f), equal_nan=True) for f in FIELDS)
+    steady_cpu = statistics.median(CPU_S[-repeats:])
+    counts, undo = counting_lanes()
+    try:
+        timed_batch(grasps)  # once more, its lanes counted (not timed)
+    finally:
+        undo()
     out.update(steady_run_s=statistics.median(runs), steady_runs_s=runs, steady_wall_s=statistics.median(walls),
+               steady_cpu_s=steady_cpu, lanes=counts,
                deterministic=bool(same), compilations_total=compilations() - c0,
                num_contacts=np.asarray(first.num_contacts).tolist(),
                results={f: np.asarray(getattr(first, f)).tolist() for f in FIELDS})
@@ -179,7 +235,8 @@ def phase_per_count(grasps, repeats: int) -> dict:
         runs = [timed_batch(group)[0].run_seconds for _ in range(repeats)]
         groups.append({"contacts": n, "grasps": len(idx), "compilations": compilations() - c1,
                        "compile_s": first.compile_seconds, "first_run_s": first.run_seconds,
-                       "steady_run_s": statistics.median(runs), "peak_mib": peak_mib()})
+                       "steady_run_s": statistics.median(runs), "steady_cpu_s": statistics.median(CPU_S[-repeats:]),
+                       "peak_mib": peak_mib()})
         for f in FIELDS:
             for i, v in zip(idx, np.asarray(getattr(first, f)).tolist()):
                 results[f][i] = v
@@ -187,7 +244,62 @@ def phase_per_count(grasps, repeats: int) -> dict:
             f"steady {groups[-1]['steady_run_s']:.2f} s")
     return {"compilations": compilations() - c0, "compile_s": sum(g["compile_s"] for g in groups),
             "first_run_s": sum(g["first_run_s"] for g in groups),
-            "steady_run_s": sum(g["steady_run_s"] for g in groups), "groups": groups, "results": results}
+            "steady_run_s": sum(g["steady_run_s"] for g in groups),
+            "steady_cpu_s": sum(g["steady_cpu_s"] for g in groups), "groups": groups, "results": results}
+
+
+def carried_segments(counts: list[int], chunk: int) -> list[tuple[int, list[int]]]:
+    """Grasp indices by contact count, ascending, each count's leftover beyond whole
+    ``chunk``s carried into the next larger count's segment (padded to it): ``(count,
+    indices)`` per segment. Every chunk is then full but the last one, and a grasp is
+    padded at most to the next count that has a chunk of its own."""
+    by_n = collections.defaultdict(list)
+    for i, n in enumerate(counts):
+        by_n[n].append(i)
+    ns, carry, segments = sorted(by_n), [], []
+    for n in ns:
+        pool = carry + by_n[n]
+        whole = len(pool) if n == ns[-1] else len(pool) // chunk * chunk
+        if whole:
+            segments.append((n, pool[:whole]))
+        carry = pool[whole:]
+    return segments
+
+
+def phase_bucketed(grasps, repeats: int) -> dict:
+    """Bucketed by contact count inside one run, as an engine would do it: the
+    :func:`carried_segments` of the set, each segment one ``evaluate_batch`` (padded to
+    its own largest count), results put back in input order; the steady seconds are those
+    of the whole set, segments one after the other."""
+    from jaxgrasp.engine import _compile
+    from jaxgrasp.engine._plan import default_chunk_size
+
+    chunk = default_chunk_size()
+    segments = carried_segments([g.num_contacts for g in grasps], chunk)
+    _compile.clear_compiled()
+    c0 = compilations()
+
+    def run_all():
+        out = {f: [None] * len(grasps) for f in FIELDS}
+        compile_s = run_s = cpu = 0.0
+        for _, idx in segments:
+            res, _ = timed_batch([grasps[i] for i in idx])
+            compile_s, run_s, cpu = compile_s + res.compile_seconds, run_s + res.run_seconds, cpu + CPU_S[-1]
+            for f in FIELDS:
+                for i, v in zip(idx, np.asarray(getattr(res, f)).tolist()):
+                    out[f][i] = v
+        return out, compile_s, run_s, cpu
+
+    results, compile_s, first_s, _ = run_all()
+    log(f"bucketed: {len(segments)} segments ({', '.join(f'N<={n}: {len(i)}' for n, i in segments)}), "
+        f"compile {compile_s:.1f} s, first run {first_s:.2f} s")
+    steady = [run_all()[2:] for _ in range(repeats)]
+    out = {"compilations": compilations() - c0, "compile_s": compile_s, "first_run_s": first_s,
+           "steady_run_s": statistics.median(r for r, _ in steady),
+           "steady_cpu_s": statistics.median(c for _, c in steady), "chunk": chunk,
+           "segments": [{"contacts": n, "grasps": len(i)} for n, i in segments], "results": results}
+    log(f"bucketed: steady {out['steady_run_s']:.2f} s ({len(grasps) / out['steady_run_s']:.1f} grasps/s)")
+    return out
 
 
 def own_programs(progs, s: int, npad: int, n: int):
@@ -242,6 +354,8 @@ def run_phase_here(args) -> None:
     out = {"phase": args.phase, "load_start": la, "build_s": time.perf_counter() - t0, "machine": machine()}
     if args.phase == "padded":
         out.update(phase_padded(grasps, args.repeats))
+    elif args.phase == "bucketed":
+        out.update(phase_bucketed(grasps, args.repeats))
     elif args.phase == "per-count":
         out.update(phase_per_count(grasps, args.repeats))
     else:
@@ -315,9 +429,10 @@ def ipopt_agreement(padded: dict, ipopt: dict) -> dict:
             "overstated": over, "understated": under}
 
 
-def summarize(padded: dict, per_count: dict, ipopt: dict, count: int) -> dict:
+def summarize(padded: dict, per_count: dict, ipopt: dict, count: int, bucketed: dict | None = None) -> dict:
     """Rates (grasps/s), per-grasp seconds and the ratios of the report."""
     pr = count / padded["steady_run_s"]
+    br = count / bucketed["steady_run_s"] if bucketed else float("nan")
     cr = count / per_count["steady_run_s"]
     k = len(ipopt["grasps"])
     ir = k / ipopt["solver_s"] if k else float("nan")  # grasps per solver second
@@ -326,7 +441,23 @@ def summarize(padded: dict, per_count: dict, ipopt: dict, count: int) -> dict:
             "ipopt_setup_s_per_grasp": ipopt["setup_s"] / k if k else float("nan"),
             "compile_ratio_per_count_over_padded": per_count["compile_s"] / padded["compile_s"],
             "rate_ratio_padded_over_per_count": pr / cr, "rate_ratio_jaxgrasp_over_ipopt": pr / ir,
-            "target_met": padded["compilations"] == 1 and pr >= TARGET_RATE}
+            "target_met": padded["compilations"] == 1 and pr >= TARGET_RATE,
+            "bucketed_rate": br, "rate_ratio_bucketed_over_ipopt": br / ir,
+            "cpu_ms_per_grasp": {k: 1e3 * d["steady_cpu_s"] / count for k, d in
+                                 (("padded", padded), ("bucketed", bucketed or {}), ("per_count", per_count))
+                                 if "steady_cpu_s" in d},
+            "issue41_met": max(pr, br) >= ISSUE41_RATE and max(pr, br) / ir >= ISSUE41_RATIO}
+
+
+def lane_lines(lanes: dict) -> list[str]:
+    """The solve stages' lanes by status: count, lane-steps, steps per lane, share."""
+    total = sum(v[1] for k in lanes.values() for v in k.values())
+    out = []
+    for kind, by in lanes.items():
+        out.append(f"{kind} lanes: " + "; ".join(
+            f"{name} {n} lanes, {st} lane-steps ({st / max(n, 1):.1f} per lane, {100 * st / max(total, 1):.0f} %)"
+            for name, (n, st) in by.items() if n and name != "no_start"))
+    return out
 
 
 def status_table(results: dict) -> list[str]:
@@ -351,6 +482,9 @@ def report(res: dict) -> str:
          "|---|---:|---:|---:|---:|---:|---:|",
          f"| padded (one program) | {p['compilations']} | {p['compile_s']:.1f} | {p['first_run_s']:.2f} "
          f"| {p['steady_run_s']:.2f} | {s['padded_rate']:.1f} | {p['peak_mib']:.0f} |",
+         f"| bucketed by count, leftovers carried up (one run) | {res['bucketed']['compilations']} "
+         f"| {res['bucketed']['compile_s']:.1f} | {res['bucketed']['first_run_s']:.2f} "
+         f"| {res['bucketed']['steady_run_s']:.2f} | {s['bucketed_rate']:.1f} | {res['bucketed']['peak_mib']:.0f} |",
          f"| per contact count | {c['compilations']} | {c['compile_s']:.1f} | {c['first_run_s']:.2f} "
          f"| {c['steady_run_s']:.2f} | {s['per_count_rate']:.1f} | {c['peak_mib']:.0f} |",
          f"| Ipopt, serial ({len(i['grasps'])} sampled) | - | - | - | {i['solver_s']:.2f} "
@@ -358,11 +492,19 @@ def report(res: dict) -> str:
          f"ratios: per-count compile / padded compile = {s['compile_ratio_per_count_over_padded']:.2f}; "
          f"padded rate / per-count rate = {s['rate_ratio_padded_over_per_count']:.2f}; "
          f"jaxgrasp rate / Ipopt rate = {s['rate_ratio_jaxgrasp_over_ipopt']:.1f}",
+         f"bucketed rate / Ipopt rate = {s['rate_ratio_bucketed_over_ipopt']:.1f}; CPU ms per grasp (steady, all "
+         "threads): " + ", ".join(f"{k} {v:.1f}" for k, v in s["cpu_ms_per_grasp"].items()),
+         f"issue 41 (>= {ISSUE41_RATE:.0f} grasps/s and >= {ISSUE41_RATIO:.0f}x Ipopt in one run): "
+         f"{'met' if s['issue41_met'] else 'not met'}",
          f"target (one compilation, >= {TARGET_RATE:.0f} grasps/s): {'met' if s['target_met'] else 'not met'} "
          f"(measured {p['compilations']} compilation(s), {s['padded_rate']:.1f} grasps/s)", "",
+         "bucketed segments (chunk " + str(res["bucketed"]["chunk"]) + "): " + ", ".join(
+             f"padded to {g['contacts']}: {g['grasps']} grasps" for g in res["bucketed"]["segments"]),
+         *lane_lines(p["lanes"]),
          "per contact count: " + "; ".join(
              f"N={g['contacts']}: {g['grasps']} grasps, compile {g['compile_s']:.1f} s, "
-             f"{g['grasps'] / g['steady_run_s']:.1f} grasps/s" for g in c["groups"]),
+             f"{g['grasps'] / g['steady_run_s']:.1f} grasps/s, CPU {1e3 * g['steady_cpu_s'] / g['grasps']:.1f} ms/grasp"
+             for g in c["groups"]),
          f"padded: steady wall incl. host-side stacking {p['steady_wall_s']:.2f} s, repeat runs "
          f"{', '.join(format(x, '.2f') for x in p['steady_runs_s'])} s, "
          f"deterministic {p['deterministic']}, compilations incl. repeats {p['compilations_total']}",
@@ -374,6 +516,11 @@ def report(res: dict) -> str:
          f"value max diff / equilibrium energy {a['value_max_diff_over_equilibrium_energy']:.1e}; "
          f"worst value: grasp {a['value_worst']['index']}, {a['value_worst']['padded_J']!r} J padded, "
          f"{a['value_worst']['per_count_J']!r} J per count",
+         f"padded vs bucketed: statuses {res['bucketed_agreement']['status_mismatches']} differ, limiting kind "
+         f"{res['bucketed_agreement']['limiting_kind_mismatches']}, limiting contact "
+         f"{res['bucketed_agreement']['limiting_contact_mismatches']}; value max rel diff "
+         f"{res['bucketed_agreement']['value_max_rel_diff']:.1e}; value max diff / equilibrium energy "
+         f"{res['bucketed_agreement']['value_max_diff_over_equilibrium_energy']:.1e}",
          f"Ipopt (same starts): per grasp {s['ipopt_s_per_grasp']:.3f} s solver, "
          f"{s['ipopt_setup_s_per_grasp']:.3f} s NLP setup (apart); jaxgrasp {s['jaxgrasp_s_per_grasp'] * 1e3:.1f} ms "
          f"per grasp (steady padded); starts from one padded solve_problems call, {i['programs_s']:.1f} s",
@@ -382,12 +529,19 @@ def report(res: dict) -> str:
          f"({ia['both_stable']} both stable), jaxgrasp above Ipopt by > {OVER_REL:g} rel: {len(ia['overstated'])}"
          f", below: {len(ia['understated'])}"
          + (f"; status mismatches {ia['status_mismatches']}" if ia["status_mismatches"] else ""),
+         f"Ipopt agreement of the bucketed run: status {res['bucketed_ipopt_agreement']['status_agree']}/"
+         f"{res['bucketed_ipopt_agreement']['grasps']}, above Ipopt by > {OVER_REL:g} rel: "
+         f"{len(res['bucketed_ipopt_agreement']['overstated'])}",
          "", "statuses of the set (padded):", *status_table(res["statuses"]), "",
          f"peak MiB by stage: padded after first call {p['peak_mib_after_first']:.0f}, at end {p['peak_mib']:.0f}; "
          "per count after each N: " + ", ".join(f"{g['peak_mib']:.0f}" for g in c["groups"]),
          "load average (1, 5, 15 min) at start / end of each phase: " + "; ".join(
-             f"{k} {res[k]['load_start']} / {res[k]['load_end']}" for k in ("padded", "per_count", "ipopt") if "load_start" in res[k]),
-         f"load average at end: {res['load_end']}; total {res['total_s']:.0f} s"]
+             f"{k} {res[k]['load_start']} / {res[k]['load_end']}" for k in ("padded", "bucketed", "per_count", "ipopt")
+            if "load_start" in res[k]),
+         f"load average at end: {res['load_end']}; total {res['total_s']:.0f} s"
+         + ("; LOAD ABOVE 3 during the run (other processes shared the 2 cores): wall rates are low, compare the "
+            "CPU ms per grasp" if max(res["load_start"][0], res["load_end"][0], *(res[k]["load_end"][0] for k in
+            ("padded", "bucketed", "per_count", "ipopt") if "load_end" in res[k])) > 3 else "")]
     return "\n".join(L)
 
 
@@ -399,7 +553,7 @@ def parse_args():
     p.add_argument("--repeats", type=int, default=None, help="steady runs, median taken (default 2; quick 3)")
     p.add_argument("--ipopt", type=int, default=None, help="grasps solved with Ipopt (default 30)")
     p.add_argument("--json", type=Path, default=None, help="also write every number to this JSON file")
-    p.add_argument("--phase", choices=("padded", "per-count", "ipopt"), default=None, help=argparse.SUPPRESS)
+    p.add_argument("--phase", choices=("padded", "bucketed", "per-count", "ipopt"), default=None, help=argparse.SUPPRESS)
     p.add_argument("--out", type=Path, default=None, help=argparse.SUPPRESS)
     args = p.parse_args()
     quick = {"count": 60, "repeats": 3, "ipopt": 6} if args.quick else {"count": 1000, "repeats": 2, "ipopt": 30}
@@ -419,12 +573,15 @@ def main() -> None:
     log(f"{args.count} grasps, {args.ipopt} with Ipopt, {args.repeats} steady repeats")
     with tempfile.TemporaryDirectory() as tmp:
         res["padded"] = run_phase("padded", args, Path(tmp))
+        res["bucketed"] = run_phase("bucketed", args, Path(tmp))
         res["per_count"] = run_phase("per-count", args, Path(tmp))
         res["ipopt"] = (run_phase("ipopt", args, Path(tmp)) if args.ipopt > 0 else
                         {"grasps": [], "solver_s": 0.0, "setup_s": 0.0, "programs_s": 0.0, "peak_mib": 0.0})
     res["agreement"] = agreement(res["padded"], res["per_count"])
+    res["bucketed_agreement"] = agreement(res["padded"], res["bucketed"])
+    res["bucketed_ipopt_agreement"] = ipopt_agreement(res["bucketed"], res["ipopt"])
     res["ipopt_agreement"] = ipopt_agreement(res["padded"], res["ipopt"])
-    res["summary"] = summarize(res["padded"], res["per_count"], res["ipopt"], args.count)
+    res["summary"] = summarize(res["padded"], res["per_count"], res["ipopt"], args.count, res["bucketed"])
     res["statuses"] = {"num_contacts": res["padded"]["num_contacts"], "status": res["padded"]["results"]["status"]}
     res["load_end"] = load()
     res["total_s"] = time.perf_counter() - t0
