@@ -167,11 +167,11 @@ def _polish_released(data: ProblemData, z0, k, released, o: SolverOptions):
     Relaxing all of them pins each at its apex, so it is tried second: where one
     relaxation certified a lane before, it still does, at the same point."""
     first = jax.nn.one_hot(jnp.argmax(released), released.shape[0], dtype=bool) & released
-    one = _polish(data, z0, k, first, o)
-    every = _polish(data, z0, k, released, o)
-    use_one = one[2] | ~jnp.any(released & ~first)
-    pick = lambda a, b: jax.tree_util.tree_map(lambda x, y: jnp.where(use_one, x, y), a, b)  # noqa: E731
-    return pick(one, every) + (jnp.where(use_one, first, released),)
+    masks = jnp.stack([first, released])
+    # one traced polish over both masks: the settling stage is in every compiled evaluation
+    both = jax.vmap(lambda m: _polish(data, z0, k, m, o))(masks)
+    use = jnp.where(both[2][0] | ~jnp.any(released & ~first), 0, 1)
+    return jax.tree_util.tree_map(lambda a: a[use], both) + (masks[use],)
 
 
 def _kkt_newton(fg, active, z0):
