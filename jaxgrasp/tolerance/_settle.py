@@ -66,7 +66,8 @@ LM_FLOOR = 1e-8
 and singular values below ``LM_FLOOR |J|_F`` count as null."""
 
 MAX_POLISHED = 2
-"""Most boundary problems of one grasp that :func:`settle_stalled` polishes."""
+"""Boundary problems of one grasp that :func:`settle_stalled` polishes per round: a grasp
+with more stalled problems takes further rounds (:func:`_lanes_to_polish`)."""
 
 SETTLE_BLOCK = 4
 """Grasps per block of the settling stage in a batch (:func:`_settle_where_stalled`)."""
@@ -98,28 +99,29 @@ def _pyramid_basis(z0, data: ProblemData, j):
     return jnp.cos(angles)[:, None] * e1 + jnp.sin(angles)[:, None] * e2
 
 
-def _relaxed_problem(z, data: ProblemData, j, v, relaxed_rows):
-    """``(f, g)`` of the problem at scaled pose ``z`` with contact ``j``'s rows replaced,
-    where ``relaxed_rows`` ``(3N,)``, by its pyramid rows ``P_k = (mu_j d_j / (2 cos^2
-    phi_j) + v_k . u_j) / dr_j`` (``v``: the ``(3, 3)`` face directions; row ``k * N + j``
-    holds ``P_k``). One evaluation of the contact kinematics serves every row, so that
-    the polish's derivatives are taken once."""
+def _relaxed_problem(z, data: ProblemData, v, relaxed_rows):
+    """``(f, g)`` of the problem at scaled pose ``z`` with the rows ``relaxed_rows``
+    ``(3N,)`` (every row of each released contact) replaced by that contact's pyramid rows
+    ``P_kj = (mu_j d_j / (2 cos^2 phi_j) + v_jk . u_j) / dr_j`` (``v``: the ``(N, 3, 3)``
+    face directions of each contact; row ``k * N + j`` holds ``P_kj``). One evaluation of
+    the contact kinematics serves every row, so that the polish's derivatives are taken
+    once."""
     p = data.params
-    n = p.c.shape[0]
     x = to_pose(z, data.lever)
     kinematics = contact_kinematics(x, p)
     f = energy_of(x, kinematics, p) / data.scale
     g = margins_of(kinematics, p).reshape(-1)
-    d, cphi = kinematics[0][j], kinematics[1][j]
-    u, _ = _tangential(z, data, j)
-    pyramid = (p.mu[j] * d / (2.0 * cphi**2) + v @ u) / jax.lax.stop_gradient(p.dr[j])
-    return f, jnp.where(relaxed_rows, pyramid[jnp.arange(3 * n) // n], g)
+    d, cphi = kinematics[0], kinematics[1]  # (N,)
+    u = jax.vmap(lambda j: _tangential(z, data, j)[0])(jnp.arange(p.c.shape[0]))  # (N, 3)
+    slope = p.mu * d / (2.0 * cphi**2)
+    pyramid = (slope[:, None] + jnp.einsum("jkc,jc->jk", v, u)) / jax.lax.stop_gradient(p.dr)[:, None]
+    return f, jnp.where(relaxed_rows, pyramid.T.reshape(-1), g)
 
 
-def _polish(data: ProblemData, z0, k, j, released, o: SolverOptions):
+def _polish(data: ProblemData, z0, k, released, o: SolverOptions):
     """Newton's method on the KKT equations of boundary problem ``k`` (equality row), with
-    the active set fixed at the stalled point ``z0``: on the relaxation at contact ``j``
-    where ``released``, else on the problem itself.
+    the active set fixed at the stalled point ``z0``: on the relaxation at every contact
+    ``released`` ``(N,)`` (none: the problem itself).
 
     Returns ``(z, lam_rel, ok, (stat, feas, comp))``: ``lam_rel`` ``(3N,)`` multipliers
     of the (relaxed) problem (the equality's included, free in sign); ``ok`` whether ``z``
@@ -127,11 +129,12 @@ def _polish(data: ProblemData, z0, k, j, released, o: SolverOptions):
     n = data.params.c.shape[0]
     tol = kkt_tol(z0.dtype, o)
     rows = jnp.arange(3 * n)
-    j_rows = (rows % n == j) & released
-    has_eq = ~released | (k != n + j)  # j's own slip equality is relaxed away
+    j_rows = released[rows % n]
+    # a released contact's own slip equality is relaxed away
+    has_eq = ~((k >= n) & (k < 2 * n) & released[jnp.clip(k - n, 0, n - 1)])
     is_eq = (rows == k) & has_eq
-    v = _pyramid_basis(z0, data, j)
-    fg = lambda z: _relaxed_problem(z, data, j, v, j_rows)
+    v = jax.vmap(lambda j: _pyramid_basis(z0, data, j))(jnp.arange(n))  # (N, 3, 3)
+    fg = lambda z: _relaxed_problem(z, data, v, j_rows)
     active = j_rows | is_eq | (constraints(z0, data) <= RELEASED_TOL)
     y, r, gz = _kkt_newton(fg, active, z0)
     z, lam = y[:6], y[6:]
@@ -144,14 +147,31 @@ def _polish(data: ProblemData, z0, k, j, released, o: SolverOptions):
     # rows' common zero: their multipliers are then free in sign.
     p = data.params
     _, cphi, _, theta = contact_kinematics(to_pose(z, data.lever), p)
-    gap = (225.0 / 32.0) * p.r[j] * theta[j] ** 2 * cphi[j] ** 4 / p.mu[j] ** 4
-    free = is_eq | (j_rows & (gap >= RELEASED_TOL * p.dr[j]))
+    gap = (225.0 / 32.0) * p.r * theta**2 * cphi**4 / p.mu**4  # (N,)
+    free = is_eq | (j_rows & (gap >= RELEASED_TOL * p.dr)[rows % n])
     dual = jnp.all(free | (lam >= -tol))  # rows held at lam = 0 end at +-1e-30
     lam = jnp.where(free, lam, jnp.maximum(lam, 0.0))
     g_orig = constraints(z, data)
     orig_feas = jnp.max(jnp.where(rows == k, jnp.abs(g_orig), jnp.maximum(-g_orig, 0.0)))
     ok = (stat <= tol) & (feas <= tol) & (comp <= tol) & dual & (orig_feas <= tol) & jnp.all(jnp.isfinite(y))
     return z, lam, ok, (stat, jnp.maximum(feas, orig_feas), comp)
+
+
+def _polish_released(data: ProblemData, z0, k, released, o: SolverOptions):
+    """:func:`_polish` relaxing the first contact ``released`` ``(N,)``, and where that
+    gives no certificate, every released contact. Returns :func:`_polish`'s tuple and the
+    ``(N,)`` contacts relaxed in the answer.
+
+    Several fingertips can let go at once (a four-finger grasp hanging on two of them):
+    relaxing only one leaves the other's apex degenerate, and that polish fails there.
+    Relaxing all of them pins each at its apex, so it is tried second: where one
+    relaxation certified a lane before, it still does, at the same point."""
+    first = jax.nn.one_hot(jnp.argmax(released), released.shape[0], dtype=bool) & released
+    masks = jnp.stack([first, released])
+    # one traced polish over both masks: the settling stage is in every compiled evaluation
+    both = jax.vmap(lambda m: _polish(data, z0, k, m, o))(masks)
+    use = jnp.where(both[2][0] | ~jnp.any(released & ~first), 0, 1)
+    return jax.tree_util.tree_map(lambda a: a[use], both) + (masks[use],)
 
 
 def _kkt_newton(fg, active, z0):
@@ -234,11 +254,12 @@ def _settle_where_stalled(data: ProblemData, lanes: SolverResult, lane_k, found,
 def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
     """Certify boundary lanes that stalled at a feasible point (a post-solve stage).
 
-    For each boundary problem that no start settled (at most :data:`MAX_POLISHED` per
-    grasp, :func:`_lanes_to_polish`), the lowest-energy lane that ended ``NOT_CONVERGED``
+    For each boundary problem that no start settled (:data:`MAX_POLISHED` per round, as
+    many rounds as there are such problems, :func:`_lanes_to_polish`), the
+    lowest-energy lane that ended ``NOT_CONVERGED``
     with its violation within :data:`RELEASED_TOL` is polished by Newton's method on the
     KKT equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
-    fixed: on the relaxation above where some contact ``j`` is released
+    fixed: on the relaxation above at the contacts released there
     (:func:`_released_contacts`), else on the problem itself (bounded multipliers, but an
     inner solve that stalled, e.g. at the largest penalty). Where that gives a KKT point
     within ``tol`` (inequality multipliers ``>= 0``) that is feasible for the original
@@ -254,24 +275,31 @@ def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_st
         num_starts: ``D``.
         o: the :class:`~jaxgrasp.solver._solver.SolverOptions` the lanes were solved with.
     """
-    j, released_any = _released_contacts(data, lanes, lane_k)
-    pick, wanted = _lanes_to_polish(lanes, found, num_starts)
-    z, lam_rel, ok, (stat, feas, comp) = jax.vmap(
-        lambda l: _polish(data, lanes.x[l], lane_k[l], j[l], released_any[l], o)
-    )(pick)
-    lam, nu = _original_multipliers(data, z, lam_rel, lane_k[pick], j[pick], released_any[pick])
-    new = SolverResult(
-        x=z,
-        lam=lam,
-        nu=nu,
-        objective=jax.vmap(lambda z: objective(z, data))(z),
-        status=jnp.full(pick.shape, LaneStatus.CONVERGED, jnp.int32),
-        stationarity=stat,
-        feasibility=feas,
-        complementarity=comp,
-        steps=lanes.steps[pick] + _POLISH_STEPS,
-    )
-    return _write_back(lanes, pick, ok & wanted, new)
+    released = _released_contacts(data, lanes, lane_k)  # (2N * D, N)
+    pick_all, wanted_all, rounds = _lanes_to_polish(lanes, found, num_starts)
+
+    def polish_round(r, out):
+        # a later round's problems are other problems: the lanes it reads are unchanged
+        pick = jax.lax.dynamic_slice_in_dim(pick_all, r * MAX_POLISHED, MAX_POLISHED)
+        wanted = jax.lax.dynamic_slice_in_dim(wanted_all, r * MAX_POLISHED, MAX_POLISHED)
+        z, lam_rel, ok, (stat, feas, comp), relaxed = jax.vmap(
+            lambda l: _polish_released(data, lanes.x[l], lane_k[l], released[l], o)
+        )(pick)
+        lam, nu = _original_multipliers(data, z, lam_rel, lane_k[pick], relaxed)
+        new = SolverResult(
+            x=z,
+            lam=lam,
+            nu=nu,
+            objective=jax.vmap(lambda z: objective(z, data))(z),
+            status=jnp.full(pick.shape, LaneStatus.CONVERGED, jnp.int32),
+            stationarity=stat,
+            feasibility=feas,
+            complementarity=comp,
+            steps=lanes.steps[pick] + _POLISH_STEPS,
+        )
+        return _write_back(out, pick, ok & wanted, new)
+
+    return jax.lax.fori_loop(0, rounds, polish_round, lanes)
 
 
 NO_EQUALITY = -1
@@ -306,13 +334,13 @@ def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) ->
 
 def _settle_equilibrium_lane(data: ProblemData, eq: SolverResult, o: SolverOptions) -> SolverResult:
     """One grasp's stalled equilibrium lane ``eq`` polished (:func:`_polish`, no equality;
-    the relaxation at its first released contact, if any): ``CONVERGED`` at the polished
+    the relaxation at its released contacts, if any): ``CONVERGED`` at the polished
     point where that is a KKT point within tol and feasible, else ``eq`` unchanged."""
     k = jnp.full((1,), NO_EQUALITY, jnp.int32)
     one = jax.tree_util.tree_map(lambda a: a[None], eq)
-    j, released = _released_contacts(data, one, k)
-    z, lam_rel, ok, (stat, feas, comp) = _polish(data, eq.x, k[0], j[0], released[0], o)
-    lam, _ = _original_multipliers(data, z[None], lam_rel[None], k, j, released)
+    released = _released_contacts(data, one, k)
+    z, lam_rel, ok, (stat, feas, comp), relaxed = _polish_released(data, eq.x, k[0], released[0], o)
+    lam, _ = _original_multipliers(data, z[None], lam_rel[None], k, relaxed[None])
     new = SolverResult(
         x=z,
         lam=lam[0],
@@ -328,48 +356,55 @@ def _settle_equilibrium_lane(data: ProblemData, eq: SolverResult, o: SolverOptio
 
 
 def _released_contacts(data: ProblemData, lanes: SolverResult, lane_k):
-    """``(j, released_any)``, each ``(L,)``: the first contact released at each lane's
-    point (contact and slip margins within :data:`RELEASED_TOL`, active, its force row
-    not the lane's equality), and whether there is one."""
+    """``(L, N)`` bool: the contacts released at each lane's point (contact and slip
+    margins within :data:`RELEASED_TOL`, active, their force row not the lane's
+    equality)."""
     n = data.params.c.shape[0]
     g = jax.vmap(lambda z: constraints(z, data))(lanes.x).reshape(-1, 3, n)  # (L, 3, N)
     released = (g[:, 0] <= RELEASED_TOL) & (g[:, 1] <= RELEASED_TOL) & data.params.on  # (L, N)
-    released = released & (lane_k[:, None] != 2 * n + jnp.arange(n))
-    return jnp.argmax(released, axis=1), jnp.any(released, axis=1)
+    return released & (lane_k[:, None] != 2 * n + jnp.arange(n))
 
 
 def _lanes_to_polish(lanes: SolverResult, found, num_starts: int):
-    """``(pick, wanted)``, each ``(min(MAX_POLISHED, 2N),)``: the lane polished for each
-    chosen boundary problem (its lowest-energy candidate, :func:`_polish_candidates`) and
-    whether the problem has a candidate at all. Problems with a candidate come first:
-    under ``vmap`` every grasp polishes as many as the one that needs most, and stalls
-    are rare, so a grasp polishes at most :data:`MAX_POLISHED`, not all ``2N``."""
+    """``(pick, wanted, rounds)``: the lane polished for each boundary problem (its
+    lowest-energy candidate, :func:`_polish_candidates`), problems with a candidate first,
+    padded to a whole number of rounds of :data:`MAX_POLISHED` (each ``(R *
+    MAX_POLISHED,)``); whether the problem has a candidate at all; and ``rounds`` ``()``,
+    how many rounds hold one. Under ``vmap`` every grasp polishes as many as the one that
+    needs most, and stalls are rare, so a round polishes :data:`MAX_POLISHED`, not all
+    ``2N``, and only a grasp with more stalled problems takes further rounds: with four
+    fingertips a released contact can stall three or four force-limit problems at once,
+    and a single round left the others ``NOT_CONVERGED`` (issue 42)."""
     candidate = _polish_candidates(lanes, found, num_starts)  # (2N, D)
     two_n = candidate.shape[0]
     pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
     pick = jnp.arange(two_n) * num_starts + pick  # (2N,) one lane per boundary problem
     has_candidate = jnp.any(candidate, axis=1)
-    chosen = jnp.argsort(~has_candidate, stable=True)[: min(MAX_POLISHED, two_n)]
-    return pick[chosen], has_candidate[chosen]
+    chosen = jnp.argsort(~has_candidate, stable=True)
+    pad = -two_n % MAX_POLISHED
+    pick = jnp.concatenate([pick[chosen], jnp.full((pad,), pick[0])])
+    wanted = jnp.concatenate([has_candidate[chosen], jnp.zeros((pad,), bool)])
+    rounds = (jnp.sum(has_candidate) + MAX_POLISHED - 1) // MAX_POLISHED
+    return pick, wanted, rounds
 
 
-def _original_multipliers(data: ProblemData, z, lam_rel, k, j, released):
+def _original_multipliers(data: ProblemData, z, lam_rel, k, released):
     """``(lam (P, 3N), nu (P,))``: the polish's multipliers ``lam_rel`` ``(P, 3N)`` at
     ``z`` ``(P, 6)`` in the original problem's rows (``k`` ``(P,)`` the equality row,
-    ``j`` the released contact where ``released``). The equality's goes to ``nu``; the
-    pyramid rows' ``d_j`` part to ``j``'s contact row, ``d P_k / d d_j = mu_j / (2 cos^2
-    phi_j)`` per ``dr_j``, clipped at 0 (the tangential part has no row of the original
-    problem, so the envelope derivative of such a boundary misses it)."""
+    ``released`` ``(P, N)`` the relaxed contacts). The equality's goes to ``nu``; each
+    released contact ``j``'s pyramid rows' ``d_j`` part to its contact row, ``d P_k /
+    d d_j = mu_j / (2 cos^2 phi_j)`` per ``dr_j``, clipped at 0 (the tangential part has
+    no row of the original problem, so the envelope derivative of such a boundary misses
+    it)."""
     n = data.params.c.shape[0]
     rows = jnp.arange(3 * n)
     is_eq = rows[None, :] == k[:, None]
-    j_rows = (rows[None, :] % n == j[:, None]) & released[:, None]
+    j_rows = released[:, rows % n]  # (P, 3N)
     cphi = jax.vmap(lambda z: contact_kinematics(to_pose(z, data.lever), data.params)[1])(z)  # (P, N)
-    slope = data.params.mu[j] / (2.0 * jnp.take_along_axis(cphi, j[:, None], axis=1)[:, 0] ** 2)
-    lam_d = jnp.maximum(slope * jnp.sum(jnp.where(j_rows, lam_rel, 0.0), axis=1), 0.0)
-    lam = jnp.where(is_eq | j_rows, 0.0, lam_rel) + jnp.where(
-        released[:, None], jax.nn.one_hot(j, 3 * n, dtype=lam_rel.dtype) * lam_d[:, None], 0.0
-    )
+    slope = data.params.mu[None, :] / (2.0 * cphi**2)
+    per_contact = jnp.sum(jnp.where(j_rows, lam_rel, 0.0).reshape(-1, 3, n), axis=1)  # (P, N)
+    lam_d = jnp.where(released, jnp.maximum(slope * per_contact, 0.0), 0.0)
+    lam = jnp.where(is_eq | j_rows, 0.0, lam_rel).at[:, :n].add(lam_d)
     return lam, -jnp.sum(jnp.where(is_eq, lam_rel, 0.0), axis=1)
 
 

@@ -116,3 +116,18 @@ def test_cli_plan_writes_the_ranked_set(tmp_path, run_cli):
     assert json.loads(js)["value"] == float(rows[0]["value_J"])  # the very same number
     lines = (out / "ranked.jsonl").read_text().splitlines()
     assert len(lines) == 4 and all(json.loads(x)["object"]["mesh"] == MESH.name for x in lines)
+
+
+def test_no_single_contact_keeps_the_rules_gives_no_valid_not_an_error():
+    """An object too small for the fingertip (no point of it is flat over the contact's
+    radius) gives the antipodal sampler an empty pool of single contacts every round: the
+    plan then says ``no_valid`` (``random_urdfs`` 037 and 086 once raised in the ray cast)."""
+    empty = np.zeros((0, 3))
+    box = trimesh.creation.box(extents=[0.1, 0.06, 0.04])
+    pos, nrm = antipodal_pairs(np.asarray(box.triangles), np.asarray(box.face_normals), empty, empty, friction=0.5)
+    assert pos.shape == (0, 2, 3) and nrm.shape == (0, 2, 3)
+    tiny = trimesh.creation.icosahedron()
+    tiny.apply_scale(0.002)  # m: 2 mm across, under a 10 mm fingertip
+    res = plan(tiny, 2, units="m", density=500.0, samples=4, top=2, refine=0, **TIP)
+    assert res.status == PlanStatus.NO_VALID
+    assert len(res.grasps) == 0 and "contact rules" in res.status.message

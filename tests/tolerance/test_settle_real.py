@@ -5,8 +5,9 @@ planner's own code (``experiments/settle_real.py``) on which, before issue 42's 
 equilibrium problem stalled: the weight pulls the object off one fingertip, whose contact
 then sits at the apex of its friction cone (``d = 0``, ``dt = 0``), where the slip
 margin's gradient vanishes and the augmented Lagrangian crawls at its largest penalty
-(status ``not_converged``, or ``unstable`` only through the stalled-equilibrium rule).
-Beside each is the status and value of the independent CasADi/Ipopt multi-start
+(status ``not_converged``, or ``unstable`` only through the stalled-equilibrium rule);
+and four-finger grasps whose boundary problems stalled after that fix (three force-limit
+problems at once, or two fingertips released at their cone apexes). Beside each is the status and value of the independent CasADi/Ipopt multi-start
 reference (``tests/ipopt_reference.py``, 24 starts; 7-20 s a grasp, so stored, with the
 note of how: ``experiments/settle_hard_data.py``).
 """
