@@ -67,7 +67,11 @@ def first_run(dataset, tmp_path_factory, cache_dir):
     return out, rc, o.getvalue(), e.getvalue()
 
 
-def test_writes_the_table_in_input_order(first_run, evaluate_many):
+def test_writes_the_table_in_input_order(first_run):
+    """Each row is its grasp's: the engine's own result for the same grasps in input order
+    (``evaluate_batch`` with the same chunk: the program the command ran, loaded, not
+    compiled again; that it equals ``evaluate`` grasp by grasp is
+    ``tests/engine/test_batch.py``'s and ``tests/engine/test_padding.py``'s)."""
     out, rc, stdout, stderr = first_run
     assert rc == 0, stderr
     assert sorted(p.name for p in out.iterdir()) == ["results.csv", "results.npz", "results.png"]  # no checkpoint
@@ -75,7 +79,8 @@ def test_writes_the_table_in_input_order(first_run, evaluate_many):
         rows = list(csv.DictReader(fh))
     assert list(rows[0]) == ["index", "num_contacts", "value_J", "status", "limiting_kind",
                              "limiting_contact", "equilibrium_energy_J", "error"]
-    refs = evaluate_many(_grasps())
+    res = jaxgrasp.evaluate_batch(_grasps(), chunk_size=2)
+    refs = [res[i] for i in range(len(res))]
     valid_rows = [r for r in rows if r["status"] != "invalid"]
     assert [int(r["index"]) for r in rows] == [0, 1, 2, 3, 4]
     assert [int(r["num_contacts"]) for r in rows] == [2, 3, 0, 4, 2]
