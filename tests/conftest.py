@@ -355,6 +355,20 @@ SLOW_FIXTURES = frozenset({"evaluate_many", "ipopt_reference", "warm_cache"})
 process, or fill a cache folder in a cold process: a test that uses one is slow."""
 
 
+LONG_MODULES = (
+    "tests/tolerance/test_gradients.py",
+    "tests/tolerance/test_degenerate.py",
+    "tests/test_docs.py",
+    "tests/simulation/test_simulate.py",
+    "tests/planning/test_plan.py",
+    "tests/engine/test_padding.py",
+    "tests/solver/test_dense.py",
+    "tests/cli/test_batch_processes.py",
+    "tests/cli/test_interrupts.py",
+)
+"""The test modules that take longest (each pays its own compilations), collected first."""
+
+
 @pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects
 def pytest_collection_modifyitems(config, items):
     """Mark ``slow`` every test that uses one of :data:`SLOW_FIXTURES`, directly or through
@@ -362,3 +376,7 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if SLOW_FIXTURES.intersection(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.slow)
+    # Longest modules first (xdist's loadfile hands whole modules to whichever worker is
+    # free, in this order): a long module collected last would run alone at the end.
+    first = {name: k for k, name in enumerate(LONG_MODULES)}
+    items.sort(key=lambda it: first.get(it.nodeid.split("::")[0], len(first)))
