@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jax.experimental.compilation_cache import compilation_cache
 
 from jaxgrasp.engine import _compile
 from jaxgrasp.engine import _store as store
@@ -63,13 +64,19 @@ def _assert_replaced(want: np.ndarray) -> None:
 
 @pytest.fixture
 def folder(tmp_path):
-    """A store folder turned on for the test (restored after it), empty."""
-    saved = store.executable_dir()
+    """A store folder turned on for the test (restored after it), empty, with XLA's
+    persistent cache off: an executable that cache serves is never stored, so a clean
+    build here must be compiled, whatever an earlier test in this process turned on."""
+    saved, cache_on = store.executable_dir(), jax.config.jax_enable_compilation_cache
+    jax.config.update("jax_enable_compilation_cache", False)
+    compilation_cache.reset_cache()
     path = tmp_path / "cache" / store.EXECUTABLE_SUBDIR
     assert store.set_executable_dir(path) == path
     yield path
     store.set_executable_dir(saved)
     _compile.clear_compiled()
+    jax.config.update("jax_enable_compilation_cache", cache_on)
+    compilation_cache.reset_cache()
 
 
 @pytest.fixture
