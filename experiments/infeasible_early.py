@@ -15,9 +15,13 @@ Three checks, each printed with the load average:
 3. CasADi + Ipopt (``experiments/benchmark.py``'s multi-start, from jaxgrasp's starts) on
    ``--ipopt`` grasps of the set (``batch_benchmark.ipopt_sample``): statuses equal, values
    within 1e-6 relative, none above Ipopt's, for both options; the number of infeasible
-   boundary lanes of each sampled grasp is printed.
+   boundary lanes of each sampled grasp is printed;
+4. (``--cpu-repeats``) process CPU seconds of :func:`jaxgrasp.evaluate_batch` on the
+   first ``--cpu-grasps`` grasps of the set, both options compiled first, then run
+   alternately, so that both see the same load.
 
     nice python experiments/infeasible_early.py [--count 1000] [--ipopt 30] [--lane-grasps 8]
+    nice python experiments/infeasible_early.py --count 0 --ipopt 0 --lane-grasps 0 --cpu-repeats 4
 """
 
 from __future__ import annotations
@@ -150,21 +154,46 @@ def ipopt_check(grasps, sample, res) -> None:
         f"({sum(r[4] for r in rows)} lanes)")
 
 
+def cpu_alternating(grasps, repeats: int) -> None:
+    """Check 4: CPU seconds per grasp of both options, run alternately."""
+    import jaxgrasp
+
+    pair = options_pair()
+    for opts in pair.values():
+        jaxgrasp.evaluate_batch(grasps, options=opts)  # compile (or load)
+    cpu = {name: [] for name in pair}
+    for _ in range(repeats):
+        for name, opts in pair.items():
+            c0 = time.process_time()
+            jaxgrasp.evaluate_batch(grasps, options=opts)
+            cpu[name].append(time.process_time() - c0)
+    for name, c in cpu.items():
+        ms = 1e3 * np.asarray(c) / len(grasps)
+        say(f"CPU per grasp, {len(grasps)} grasps, {name}: " + ", ".join(f"{v:.2f}" for v in ms)
+            + f" ms (median {np.median(ms):.2f}, min {ms.min():.2f})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--count", type=int, default=1000)
     ap.add_argument("--ipopt", type=int, default=30)
     ap.add_argument("--lane-grasps", type=int, default=8)
+    ap.add_argument("--cpu-grasps", type=int, default=256)
+    ap.add_argument("--cpu-repeats", type=int, default=0)
     a = ap.parse_args()
     import jaxgrasp  # noqa: F401  (64-bit mode)
 
-    say(f"python experiments/infeasible_early.py --count {a.count} --ipopt {a.ipopt} --lane-grasps {a.lane_grasps}")
+    say(f"python experiments/infeasible_early.py --count {a.count} --ipopt {a.ipopt} --lane-grasps {a.lane_grasps}"
+        + (f" --cpu-grasps {a.cpu_grasps} --cpu-repeats {a.cpu_repeats}" if a.cpu_repeats else ""))
     if a.lane_grasps:
         lanes_side_by_side(7, a.lane_grasps)
-    grasps = make_grasps(a.count, 0)
-    res = batch_side_by_side(grasps)
-    if a.ipopt:
-        ipopt_check(grasps, ipopt_sample([g.num_contacts for g in grasps], a.ipopt, 0), res)
+    if a.count:
+        grasps = make_grasps(a.count, 0)
+        res = batch_side_by_side(grasps)
+        if a.ipopt:
+            ipopt_check(grasps, ipopt_sample([g.num_contacts for g in grasps], a.ipopt, 0), res)
+    if a.cpu_repeats:
+        cpu_alternating(make_grasps(a.cpu_grasps, 0), a.cpu_repeats)
 
 
 if __name__ == "__main__":

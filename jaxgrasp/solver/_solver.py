@@ -18,7 +18,10 @@ ladder of step lengths; then ``lam <- max(0, lam - rho g)``, ``nu <- nu + rho h`
 ``rho`` grows when the violation does not fall fast enough (on a lane with an equality:
 after an inner solve that finished, i.e. reached its tolerance or no step could lower
 phi, or while the violation is still above :data:`FAR_VIOLATION`, or once the lane has
-taken ``grow_penalty_after`` steps). The inner and outer loops are
+taken ``grow_penalty_after`` steps), by ``rho_growth``, or at once to where the
+infeasibility test is expected to pass where the violation stalls far from feasibility at
+a nearly stationary point of the violation measure (:func:`_penalty_growth`). The inner
+and outer loops are
 flattened into one ``lax.while_loop`` whose body does a multiplier update where the inner
 solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
 need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
@@ -94,7 +97,8 @@ class SolverOptions:
         inner_tol_factor: inner solves stop at stationarity
             ``max(tol, inner_tol_factor * min(violation, 1))``.
         rho0: initial penalty.
-        rho_growth: factor by which the penalty grows when the violation stalls.
+        rho_growth: factor by which the penalty grows when the violation stalls (more
+            where ``stall_growth_max`` allows, below).
         rho_max: largest penalty.
         infeasible_tol: a lane whose violation stays above this, where the violation is
             stationary or at ``rho_max``, is infeasible.
