@@ -18,7 +18,11 @@ Three checks, each printed with the load average:
    boundary lanes of each sampled grasp is printed;
 4. (``--cpu-repeats``) process CPU seconds of :func:`jaxgrasp.evaluate_batch` on the
    first ``--cpu-grasps`` grasps of the set, both options compiled first, then run
-   alternately, so that both see the same load.
+   alternately, so that both see the same load;
+5. (``--pipeline-contacts N``) the solve stage's lanes of :func:`jaxgrasp.evaluate_batch`
+   on the first ``--cpu-grasps`` grasps with ``N`` contacts (own width), both options,
+   lane by lane: every lane whose status or step count differs, unless it ends
+   infeasible with both; grasp values and statuses.
 
     nice python experiments/infeasible_early.py [--count 1000] [--ipopt 30] [--lane-grasps 8]
     nice python experiments/infeasible_early.py --count 0 --ipopt 0 --lane-grasps 0 --cpu-repeats 4
@@ -173,6 +177,44 @@ def cpu_alternating(grasps, repeats: int) -> None:
             + f" ms (median {np.median(ms):.2f}, min {ms.min():.2f})")
 
 
+def pipeline_lanes(grasps) -> None:
+    """Check 5: the solve stage's lanes inside evaluate_batch, both options, lane by lane."""
+    import jax
+
+    import jaxgrasp
+    from jaxgrasp.engine import _evaluator
+
+    real, got = _evaluator.compiled_evaluator, []
+
+    def hooked(*a, **k):
+        fn, s = real(*a, **k)
+        if not getattr(fn, "_hooked", False):
+            stage = fn.stages["lanes"]
+            fn.stages["lanes"] = lambda *xs: got.append(jax.block_until_ready(stage(*xs))) or got[-1]
+            fn._hooked = True
+        return fn, s
+
+    _evaluator.compiled_evaluator = hooked
+    res = {}
+    try:
+        for name, opts in options_pair().items():
+            got.clear()
+            r = jaxgrasp.evaluate_batch(grasps, options=opts)
+            # every chunk calls the lanes stage twice: the equilibrium, then the boundary lanes
+            res[name] = ([[np.asarray(out[i]) for i in (3, 4, 8)] for out in got[1::2]], np.asarray(r.value), np.asarray(r.status))
+    finally:
+        _evaluator.compiled_evaluator = real
+    moved = 0
+    for (fo, so, po), (fn, sn, pn) in zip(res["old"][0], res["new"][0]):
+        for idx in zip(*np.nonzero(((so != sn) | (po != pn)) & ~((so == 1) & (sn == 1)))):
+            moved += 1
+            say(f"   lane {tuple(int(i) for i in idx)}: old {LANE_STATUS[so[idx]]} {po[idx]} steps f {fo[idx]!r}, "
+                f"new {LANE_STATUS[sn[idx]]} {pn[idx]} steps f {fn[idx]!r}")
+    say(f"pipeline lanes, {len(grasps)} grasps of {grasps[0].num_contacts} contacts: {moved} lanes not ending "
+        f"infeasible in both took another path; grasp statuses differ on {np.sum(res['old'][2] != res['new'][2])}, "
+        f"values max rel diff {rel_diff(res['old'][1], res['new'][1]).max():.1e}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--count", type=int, default=1000)
@@ -180,11 +222,12 @@ def main() -> None:
     ap.add_argument("--lane-grasps", type=int, default=8)
     ap.add_argument("--cpu-grasps", type=int, default=256)
     ap.add_argument("--cpu-repeats", type=int, default=0)
+    ap.add_argument("--pipeline-contacts", type=int, default=0)
     a = ap.parse_args()
     import jaxgrasp  # noqa: F401  (64-bit mode)
 
     say(f"python experiments/infeasible_early.py --count {a.count} --ipopt {a.ipopt} --lane-grasps {a.lane_grasps}"
-        + (f" --cpu-grasps {a.cpu_grasps} --cpu-repeats {a.cpu_repeats}" if a.cpu_repeats else ""))
+        + f" --cpu-grasps {a.cpu_grasps} --cpu-repeats {a.cpu_repeats} --pipeline-contacts {a.pipeline_contacts}")
     if a.lane_grasps:
         lanes_side_by_side(7, a.lane_grasps)
     if a.count:
@@ -194,6 +237,9 @@ def main() -> None:
             ipopt_check(grasps, ipopt_sample([g.num_contacts for g in grasps], a.ipopt, 0), res)
     if a.cpu_repeats:
         cpu_alternating(make_grasps(a.cpu_grasps, 0), a.cpu_repeats)
+    if a.pipeline_contacts:
+        own = [g for g in make_grasps(1000, 0) if g.num_contacts == a.pipeline_contacts][: a.cpu_grasps]
+        pipeline_lanes(own)
 
 
 if __name__ == "__main__":
