@@ -44,7 +44,7 @@ for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
     if str(_p) not in sys.path:
         sys.path.insert(0, str(_p))
 
-from batch_benchmark import OVER_REL, STATUS, ipopt_sample, make_grasps, own_programs, rel_diff  # noqa: E402
+from batch_benchmark import OVER_REL, STATUS, ipopt_sample, make_grasps, own_programs, rel_diff
 
 LANE_STATUS = ("converged", "infeasible", "not_converged", "no_start")
 
@@ -79,11 +79,11 @@ def lanes_side_by_side(n_contacts: int, n_grasps: int) -> None:
     data = inputs_of(batch)["data"]
     b, L = starts.x0.shape[:2]
     theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a[:, None], (b, L) + a.shape[1:]).reshape((b * L,) + a.shape[1:]), data)
-    flat = lambda a: a.reshape((b * L,) + a.shape[2:])  # noqa: E731
+    flat = lambda a: a.reshape((b * L,) + a.shape[2:])
     out = {}
     for name, opts in pair.items():
         o = opts.solver
-        solve = jax.jit(jax.vmap(lambda x, m, nu, a, t: S.solve(lane_problem(t), x, m, nu, o, a)))
+        solve = jax.jit(jax.vmap(lambda x, m, nu, a, t, o=o: S.solve(lane_problem(t), x, m, nu, o, a)))
         r = solve(flat(starts.x0), flat(starts.eq_mask), flat(starts.nu0), flat(starts.active), theta)
         out[name] = tuple(np.asarray(a) for a in (r.status, r.steps, r.objective))
         st, sp, _ = out[name]
