@@ -2,7 +2,7 @@
 lane kind, for chunks of the batch benchmark's mixed set padded to 7 contacts and for
 chunks of one contact count.
 
-    python experiments/profile_batch.py [--grasps 128] [--counts 2,7] [--mixed]
+    python experiments/profile_batch.py [--grasps 128] [--counts 2,7] [--mixed] [--stall-growth-max 10]
 
 Each stage of the compiled chunk evaluator is timed (``block_until_ready`` after each
 call, so the pipeline's own overlap is lost: per-stage seconds, not the run's); each
@@ -105,6 +105,8 @@ def main():
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=None)
     ap.add_argument("--slots", type=int, default=128)
+    ap.add_argument("--stall-growth-max", type=float, default=None,
+                    help="SolverOptions.stall_growth_max (10 = rho_growth: the fixed tenfold growth of before issue 41 item 2)")
     a = ap.parse_args()
     import jaxgrasp  # noqa: F401
 
@@ -112,6 +114,8 @@ def main():
     import dataclasses
     opts = jaxgrasp.EvaluateOptions()
     opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, max_slots=a.slots))
+    if a.stall_growth_max is not None:
+        opts = dataclasses.replace(opts, solver=dataclasses.replace(opts.solver, stall_growth_max=a.stall_growth_max))
     if a.mixed:
         show(profile(allg[: a.grasps], f"mixed (padded to 7), chunk {a.chunk}, slots {a.slots}", a.repeats, options=opts, chunk_size=a.chunk))
     for n in [int(c) for c in a.counts.split(",") if c]:

@@ -18,7 +18,10 @@ ladder of step lengths; then ``lam <- max(0, lam - rho g)``, ``nu <- nu + rho h`
 ``rho`` grows when the violation does not fall fast enough (on a lane with an equality:
 after an inner solve that finished, i.e. reached its tolerance or no step could lower
 phi, or while the violation is still above :data:`FAR_VIOLATION`, or once the lane has
-taken ``grow_penalty_after`` steps). The inner and outer loops are
+taken ``grow_penalty_after`` steps), by ``rho_growth``, or at once to where the
+infeasibility test is expected to pass where the violation stalls far from feasibility at
+a nearly stationary point of the violation measure (:func:`_penalty_growth`). The inner
+and outer loops are
 flattened into one ``lax.while_loop`` whose body does a multiplier update where the inner
 solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
 need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
@@ -94,7 +97,8 @@ class SolverOptions:
         inner_tol_factor: inner solves stop at stationarity
             ``max(tol, inner_tol_factor * min(violation, 1))``.
         rho0: initial penalty.
-        rho_growth: factor by which the penalty grows when the violation stalls.
+        rho_growth: factor by which the penalty grows when the violation stalls (more
+            where ``stall_growth_max`` allows, below).
         rho_max: largest penalty.
         infeasible_tol: a lane whose violation stays above this, where the violation is
             stationary or at ``rho_max``, is infeasible.
@@ -113,6 +117,13 @@ class SolverOptions:
             :data:`FAR_VIOLATION`; see :func:`_multiplier_update`). A lane still running
             then is crawling: with the growth it ends converged, or infeasible at
             ``rho_max``, instead of unsettled at ``max_steps``.
+        stall_growth_max: largest factor by which the penalty grows at one update where
+            the violation stalls above :data:`FAR_VIOLATION` at a point where the
+            violation measure is already nearly stationary (its gradient at most
+            :data:`NEAR_STATIONARY` times the violation): there the factor is the one
+            after which the ``infeasible_stationarity`` test is expected to pass
+            (:func:`_penalty_growth`), at least ``rho_growth``. ``rho_growth`` itself
+            restores the fixed growth.
     """
 
     tol: float = 1e-10
@@ -129,6 +140,7 @@ class SolverOptions:
     slot_fraction: float = 0.0625
     max_slots: int = 128
     grow_penalty_after: int = 100
+    stall_growth_max: float = 1e6
 
 
 @jax.tree_util.register_dataclass
@@ -312,6 +324,17 @@ equality grows whenever the violation stalls, even after an inner solve cut shor
 ``max_inner`` Newton steps (:func:`_multiplier_update`)."""
 
 
+NEAR_STATIONARY = 1e-2
+"""A lane whose violation stalls above :data:`FAR_VIOLATION` where the violation
+measure's gradient (inf-norm) is at most this times the violation grows its penalty by
+more than ``rho_growth`` (:func:`_penalty_growth`). Lanes that end converged stall far
+from feasibility only where that gradient is of the order of the violation."""
+
+PREDICT_MARGIN = 0.1
+""":func:`_penalty_growth` aims the violation measure's gradient at this fraction of the
+``infeasible_stationarity`` bound."""
+
+
 def kkt_tol(dtype, o: SolverOptions) -> float:
     """The KKT tolerance a lane of ``dtype`` converges to: ``o.tol``, raised to ``1e3 *
     eps`` of the dtype (float32: ~1.2e-4)."""
@@ -396,9 +419,7 @@ def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, floor, o: Solv
     # violation measure v = |h|^2/2 + sum min(g_i, 0)^2/2 is stationary (a local
     # minimiser of the violation, which no penalty can push further), or it stalls at
     # the largest penalty. grad v = J^T r, r the violated part of g.
-    r = jnp.where(s.eq_mask > 0, d.gx, jnp.minimum(d.gx, 0.0))
-    grad_v = d.jac.T @ r
-    stationary_violation = jnp.max(jnp.abs(grad_v)) <= o.infeasible_stationarity * viol
+    stationary_violation = _violation_slope(s, d) <= o.infeasible_stationarity * viol
     infeasible = (viol > infeasible_tol) & (
         stationary_violation | (at_max & (viol >= 0.5 * s.prev_viol))
     )
@@ -407,6 +428,33 @@ def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, floor, o: Solv
         LaneStatus.CONVERGED,
         jnp.where(infeasible, LaneStatus.INFEASIBLE, LaneStatus.NOT_CONVERGED),
     )
+
+
+def _violation_slope(s: SolverState, d: FirstOrder):
+    """``()`` ``|grad v|_inf`` at ``s.x`` (``d``: the problem there), ``v = |h|^2/2 + sum
+    min(g_i, 0)^2/2`` the violation measure: ``grad v = J^T r``, ``r`` the violated part of
+    ``g``."""
+    r = jnp.where(s.eq_mask > 0, d.gx, jnp.minimum(d.gx, 0.0))
+    return jnp.max(jnp.abs(d.jac.T @ r))
+
+
+def _penalty_growth(s: SolverState, d: FirstOrder, viol, o: SolverOptions):
+    """``()`` the factor by which a stalled lane's penalty grows at this update: ``rho_growth``,
+    or more where the violation ``viol`` stalls above :data:`FAR_VIOLATION` at a nearly
+    stationary point of the violation measure (``d``: the problem at ``s.x``).
+
+    WHY: on an infeasible problem the inner minimiser of phi sits at ``grad v ~ -grad f /
+    rho`` from a stationary point of ``v``, so ``|grad v| / viol`` falls in proportion to
+    ``1 / rho`` once the violation has stalled; the ``infeasible_stationarity`` test then
+    passes only after several tenfold growths, one inner solve each. Growing at once by
+    the factor that takes the ratio to :data:`PREDICT_MARGIN` times the bound (at most
+    ``stall_growth_max``) skips those solves. The gate (far, stalled, and a ratio already
+    small) keeps lanes that end converged on their usual path: where they stall far from
+    feasibility the ratio is of order one."""
+    ratio = _violation_slope(s, d) / jnp.maximum(viol, 1e-300)
+    predicted = ratio / (PREDICT_MARGIN * o.infeasible_stationarity)
+    near = (viol > FAR_VIOLATION) & (ratio <= NEAR_STATIONARY)
+    return jnp.where(near, jnp.clip(predicted, o.rho_growth, max(o.stall_growth_max, o.rho_growth)), o.rho_growth)
 
 
 def _multiplier_update(s: SolverState, d: FirstOrder, gphi, floor, o: SolverOptions) -> SolverState:
@@ -438,7 +486,7 @@ def _multiplier_update(s: SolverState, d: FirstOrder, gphi, floor, o: SolverOpti
     late = s.steps >= o.grow_penalty_after
     finished = (stat <= _inner_tol(s, floor, o)) | (s.inner > o.max_inner) | ~jnp.any(is_eq) | late
     stalled = (viol > 0.25 * s.prev_viol) & (finished | (viol > FAR_VIOLATION))
-    rho = jnp.where(stalled, jnp.minimum(s.rho * o.rho_growth, o.rho_max), s.rho)
+    rho = jnp.where(stalled, jnp.minimum(s.rho * _penalty_growth(s, d, viol, o), o.rho_max), s.rho)
     return dataclasses.replace(
         s,
         lam=lam,
