@@ -324,7 +324,7 @@ def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) ->
     released contact is regular at that apex and certifies it exactly where the cone
     does (:func:`_pyramid_basis`). Where the polish gives no certificate, the lane is
     solved again from its point with first-order multipliers and moderate penalties
-    (:func:`_restarted_equilibrium`): a lane can also stall strictly inside slip
+    (:func:`_restart`): a lane can also stall strictly inside slip
     boundaries with every multiplier 0."""
     need = (eq.status == LaneStatus.NOT_CONVERGED) & (eq.feasibility <= RELEASED_TOL)
 
@@ -338,15 +338,30 @@ def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) ->
 
 def _settle_equilibrium_lane(data: ProblemData, eq: SolverResult, o: SolverOptions) -> SolverResult:
     """One grasp's stalled equilibrium lane ``eq`` settled: polished where it stalled
-    (:func:`_polished_equilibrium`); where that gives no certificate, solved again from
-    there (:func:`_restarted_equilibrium`). ``eq`` unchanged where neither certifies it.
+    (:func:`_polished_equilibrium`); where that gives no certificate, the lowest-energy
+    certified answer of the restarts from there (:func:`_restart`, at :data:`RESTARTS`
+    penalties: a restart that converged as it is, else polished at its end point);
+    ``eq`` unchanged where none certifies it.
 
-    The polish comes first and its answer is kept wherever it certifies the lane, so a
-    lane it settled before the restarts existed settles at the same point."""
-    polished, ok = _polished_equilibrium(data, eq, o)
-    restarted, ok_restart = _restarted_equilibrium(data, eq, ~ok, o)
-    pick = lambda c, a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(c, u.astype(v.dtype), v), a, b)  # noqa: E731
-    return pick(ok, polished, pick(ok_restart, restarted, eq))
+    The polish of the stalled point is preferred, so a lane it settled before the
+    restarts existed settles at the same point. The stalled point and the restarts'
+    end points are polished in one ``vmap``: one traced polish, not two."""
+    rhos = o.rho0 * o.rho_growth ** jnp.arange(1, RESTARTS + 1, dtype=eq.x.dtype)
+    runs = jax.vmap(lambda rho: _restart(data, eq.x, rho, o))(rhos)
+    points = jax.tree_util.tree_map(lambda a, r: jnp.concatenate([a[None].astype(r.dtype), r]), eq, runs)
+    polished, ok = jax.vmap(lambda r: _polished_equilibrium(data, r, o))(points)  # (1 + RESTARTS,)
+    converged = runs.status == LaneStatus.CONVERGED
+    cands = jax.tree_util.tree_map(
+        lambda r, q: jnp.where(converged.reshape((-1,) + (1,) * (r.ndim - 1)), r, q[1:].astype(r.dtype)),
+        runs, polished,
+    )
+    ok_restart = converged | ok[1:]
+    best = jnp.argmin(jnp.where(ok_restart, cands.objective, jnp.inf))
+    restarted = jax.tree_util.tree_map(lambda a: a[best], cands)
+    restarted = dataclasses.replace(restarted, steps=eq.steps + restarted.steps)
+    pick = lambda c, a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(c, u.astype(v.dtype), v), a, b)
+    first = jax.tree_util.tree_map(lambda a: a[0], polished)
+    return pick(ok[0], first, pick(jnp.any(ok_restart), restarted, eq))
 
 
 def _polished_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions):
@@ -379,7 +394,7 @@ active for the restarts' multiplier estimate (:func:`_multiplier_estimate`): the
 of issue 42 sat 1e-8..3e-5 inside slip boundaries whose multipliers were still 0."""
 
 RESTARTS = 4
-"""Restarts of a stalled equilibrium (:func:`_restarted_equilibrium`), at the penalties
+"""Restarts of a stalled equilibrium (:func:`_settle_equilibrium_lane`), at the penalties
 ``rho0 rho_growth^k``, ``k = 1 .. RESTARTS``."""
 
 
@@ -399,25 +414,10 @@ def _multiplier_estimate(data: ProblemData, z):
     return jnp.where(near & jnp.isfinite(lam), jnp.maximum(lam, 0.0), 0.0)
 
 
-def _restart(data: ProblemData, z0, rho, start, o: SolverOptions) -> SolverResult:
+def _restart(data: ProblemData, z0, rho, o: SolverOptions) -> SolverResult:
     """The equilibrium problem solved by the augmented Lagrangian from the scaled pose
     ``z0`` ``(6,)`` with the multipliers :func:`_multiplier_estimate` there and the
-    penalty ``rho`` ``()``, within the options' step budget; ``start`` ``()`` bool: where
-    false the lane is not run (``NO_START``)."""
-    problem = lane_problem(data)
-    lam0 = _multiplier_estimate(data, z0)
-    s = init(z0, jnp.zeros_like(lam0), 0.0, start, o)
-    s = dataclasses.replace(s, lam=lam0, rho=jnp.asarray(rho, z0.dtype))
-    s = jax.lax.while_loop(lambda s: running(s, o), lambda s: step(problem, s, o), s)
-    return to_result(problem, s)
-
-
-def _restarted_equilibrium(data: ProblemData, eq: SolverResult, start, o: SolverOptions):
-    """``(new, ok)``: the stalled equilibrium ``eq`` solved again from its point
-    (:func:`_restart`, ``start`` ``()`` bool: whether at all) at :data:`RESTARTS`
-    penalties, each restart that ends unconverged polished at its end point
-    (:func:`_polished_equilibrium`); ``new`` is the lowest-energy certified answer and
-    ``ok`` ``()`` whether there is one.
+    penalty ``rho`` ``()``, within the options' step budget.
 
     Why: the augmented Lagrangian can stall strictly inside slip boundaries (violation
     0, every multiplier 0, stationarity of order 1): at its largest penalty a Newton step
@@ -426,19 +426,13 @@ def _restarted_equilibrium(data: ProblemData, eq: SolverResult, start, o: Solver
     crawls along the boundary until its budget runs out, possibly far from the minimum
     (issue 42: three 3-finger equilibria). A restart with first-order multipliers and a
     moderate penalty sees those boundaries; which penalty suits a lane varies, so
-    several run side by side."""
-    rhos = o.rho0 * o.rho_growth ** jnp.arange(1, RESTARTS + 1, dtype=eq.x.dtype)
-    runs = jax.vmap(lambda rho: _restart(data, eq.x, rho, start, o))(rhos)
-    polished, ok_polished = jax.vmap(lambda r: _polished_equilibrium(data, r, o))(runs)
-    converged = runs.status == LaneStatus.CONVERGED
-    cands = jax.tree_util.tree_map(
-        lambda a, b: jnp.where(converged.reshape((-1,) + (1,) * (a.ndim - 1)), a, b.astype(a.dtype)),
-        runs, polished,
-    )
-    ok = start & (converged | ok_polished)
-    best = jnp.argmin(jnp.where(ok, cands.objective, jnp.inf))
-    new = jax.tree_util.tree_map(lambda a: a[best], cands)
-    return dataclasses.replace(new, steps=eq.steps + new.steps), jnp.any(ok)
+    several run side by side (:func:`_settle_equilibrium_lane`)."""
+    problem = lane_problem(data)
+    lam0 = _multiplier_estimate(data, z0)
+    s = init(z0, jnp.zeros_like(lam0), 0.0, True, o)
+    s = dataclasses.replace(s, lam=lam0, rho=jnp.asarray(rho, z0.dtype))
+    s = jax.lax.while_loop(lambda s: running(s, o), lambda s: step(problem, s, o), s)
+    return to_result(problem, s)
 
 
 def _released_contacts(data: ProblemData, lanes: SolverResult, lane_k):

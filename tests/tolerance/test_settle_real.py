@@ -34,7 +34,7 @@ def _cases():
     """``[(grasp, row)]``; every grasp with a contact mask (all active where the file has
     none), so that the padded ones batch with the others of their contact count."""
     rows = json.loads(DATA.read_text(encoding="utf-8"))["grasps"]
-    masked = lambda g: {**g, "active": g.get("active", [True] * len(g["positions"]))}  # noqa: E731
+    masked = lambda g: {**g, "active": g.get("active", [True] * len(g["positions"]))}
     return [(jaxgrasp.Grasp.create(**masked(row["grasp"])), row) for row in rows]
 
 
