@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import jax
@@ -17,9 +16,9 @@ from jaxgrasp.model._potential import (
 )
 from jaxgrasp.solver._dense import solve as dense_solve
 from jaxgrasp.solver._rows import over_rows, put_rows
-from jaxgrasp.solver._solver import SolverOptions, SolverResult, init, kkt_tol, running, step, to_result
+from jaxgrasp.solver._solver import SolverOptions, SolverResult, kkt_tol
 from jaxgrasp.solver._status import LaneStatus
-from jaxgrasp.tolerance._problems import ProblemData, constraints, lane_problem, objective, to_pose
+from jaxgrasp.tolerance._problems import ProblemData, constraints, objective, to_pose
 
 __all__ = ["settle_stalled", "settle_equilibrium", "needs_settling", "RELEASED_TOL", "MAX_POLISHED"]
 
@@ -322,10 +321,7 @@ def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) ->
     and the augmented Lagrangian crawls at its largest penalty with a violation of
     1e-8..2e-8 until its step budget runs out (issue 42). The pyramid relaxation of the
     released contact is regular at that apex and certifies it exactly where the cone
-    does (:func:`_pyramid_basis`). Where the polish gives no certificate, the lane is
-    solved again from its point with first-order multipliers and moderate penalties
-    (:func:`_restart`): a lane can also stall strictly inside slip
-    boundaries with every multiplier 0."""
+    does (:func:`_pyramid_basis`)."""
     need = (eq.status == LaneStatus.NOT_CONVERGED) & (eq.feasibility <= RELEASED_TOL)
 
     def update(rows, valid, eq):
@@ -337,38 +333,9 @@ def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) ->
 
 
 def _settle_equilibrium_lane(data: ProblemData, eq: SolverResult, o: SolverOptions) -> SolverResult:
-    """One grasp's stalled equilibrium lane ``eq`` settled: polished where it stalled
-    (:func:`_polished_equilibrium`); where that gives no certificate, the lowest-energy
-    certified answer of the restarts from there (:func:`_restart`, at :data:`RESTARTS`
-    penalties: a restart that converged as it is, else polished at its end point);
-    ``eq`` unchanged where none certifies it.
-
-    The polish of the stalled point is preferred, so a lane it settled before the
-    restarts existed settles at the same point. The stalled point and the restarts'
-    end points are polished in one ``vmap``: one traced polish, not two."""
-    rhos = o.rho0 * o.rho_growth ** jnp.arange(1, RESTARTS + 1, dtype=eq.x.dtype)
-    runs = jax.vmap(lambda rho: _restart(data, eq.x, rho, o))(rhos)
-    points = jax.tree_util.tree_map(lambda a, r: jnp.concatenate([a[None].astype(r.dtype), r]), eq, runs)
-    polished, ok = jax.vmap(lambda r: _polished_equilibrium(data, r, o))(points)  # (1 + RESTARTS,)
-    converged = runs.status == LaneStatus.CONVERGED
-    cands = jax.tree_util.tree_map(
-        lambda r, q: jnp.where(converged.reshape((-1,) + (1,) * (r.ndim - 1)), r, q[1:].astype(r.dtype)),
-        runs, polished,
-    )
-    ok_restart = converged | ok[1:]
-    best = jnp.argmin(jnp.where(ok_restart, cands.objective, jnp.inf))
-    restarted = jax.tree_util.tree_map(lambda a: a[best], cands)
-    restarted = dataclasses.replace(restarted, steps=eq.steps + restarted.steps)
-    pick = lambda c, a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(c, u.astype(v.dtype), v), a, b)
-    first = jax.tree_util.tree_map(lambda a: a[0], polished)
-    return pick(ok[0], first, pick(jnp.any(ok_restart), restarted, eq))
-
-
-def _polished_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions):
-    """``(new, ok)``: the equilibrium lane ``eq`` polished at its point (:func:`_polish`,
-    no equality; the relaxation at its released contacts, if any), ``CONVERGED`` there,
-    and ``ok`` ``()`` whether that is a KKT point within tol, feasible for the original
-    problem with inequality multipliers ``>= 0``."""
+    """One grasp's stalled equilibrium lane ``eq`` polished (:func:`_polish`, no equality;
+    the relaxation at its released contacts, if any): ``CONVERGED`` at the polished
+    point where that is a KKT point within tol and feasible, else ``eq`` unchanged."""
     k = jnp.full((1,), NO_EQUALITY, jnp.int32)
     one = jax.tree_util.tree_map(lambda a: a[None], eq)
     released = _released_contacts(data, one, k)
@@ -385,54 +352,7 @@ def _polished_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions)
         complementarity=comp,
         steps=eq.steps + _POLISH_STEPS,
     )
-    return new, ok
-
-
-NEAR_ACTIVE = 1e-4
-"""Scaled margin within which a constraint of a stalled equilibrium counts as nearly
-active for the restarts' multiplier estimate (:func:`_multiplier_estimate`): the stalls
-of issue 42 sat 1e-8..3e-5 inside slip boundaries whose multipliers were still 0."""
-
-RESTARTS = 4
-"""Restarts of a stalled equilibrium (:func:`_settle_equilibrium_lane`), at the penalties
-``rho0 rho_growth^k``, ``k = 1 .. RESTARTS``."""
-
-
-def _multiplier_estimate(data: ProblemData, z):
-    """``(3N,)`` least-squares multipliers of the equilibrium problem at the scaled pose
-    ``z`` ``(6,)``: ``lam`` minimising ``|grad f - sum_i lam_i grad g_i|`` over the rows
-    within :data:`NEAR_ACTIVE` of their boundary (0 elsewhere), negative ones dropped.
-    Solved by damped normal equations (:func:`jaxgrasp.solver._dense.solve`): rows at a
-    cone's apex can be dependent."""
-    g = constraints(z, data)
-    jac = jax.jacfwd(lambda z: constraints(z, data))(z)  # (3N, 6)
-    grad_f = jax.grad(lambda z: objective(z, data))(z)
-    near = g <= NEAR_ACTIVE
-    a = jnp.where(near[:, None], jac, 0.0)
-    mu = (LM_FLOOR**2) * jnp.maximum(jnp.sum(a * a), 1.0)
-    lam = dense_solve(a @ a.T + mu * jnp.eye(g.shape[0], dtype=z.dtype), a @ grad_f)
-    return jnp.where(near & jnp.isfinite(lam), jnp.maximum(lam, 0.0), 0.0)
-
-
-def _restart(data: ProblemData, z0, rho, o: SolverOptions) -> SolverResult:
-    """The equilibrium problem solved by the augmented Lagrangian from the scaled pose
-    ``z0`` ``(6,)`` with the multipliers :func:`_multiplier_estimate` there and the
-    penalty ``rho`` ``()``, within the options' step budget.
-
-    Why: the augmented Lagrangian can stall strictly inside slip boundaries (violation
-    0, every multiplier 0, stationarity of order 1): at its largest penalty a Newton step
-    on phi, blind to a boundary it has not crossed, crosses it by far, the line search
-    backs off to a point still inside, and no multiplier becomes positive, so the lane
-    crawls along the boundary until its budget runs out, possibly far from the minimum
-    (issue 42: three 3-finger equilibria). A restart with first-order multipliers and a
-    moderate penalty sees those boundaries; which penalty suits a lane varies, so
-    several run side by side (:func:`_settle_equilibrium_lane`)."""
-    problem = lane_problem(data)
-    lam0 = _multiplier_estimate(data, z0)
-    s = init(z0, jnp.zeros_like(lam0), 0.0, True, o)
-    s = dataclasses.replace(s, lam=lam0, rho=jnp.asarray(rho, z0.dtype))
-    s = jax.lax.while_loop(lambda s: running(s, o), lambda s: step(problem, s, o), s)
-    return to_result(problem, s)
+    return jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a.astype(b.dtype), b), new, eq)
 
 
 def _released_contacts(data: ProblemData, lanes: SolverResult, lane_k):

@@ -7,10 +7,7 @@ then sits at the apex of its friction cone (``d = 0``, ``dt = 0``), where the sl
 margin's gradient vanishes and the augmented Lagrangian crawls at its largest penalty
 (status ``not_converged``, or ``unstable`` only through the stalled-equilibrium rule);
 and four-finger grasps whose boundary problems stalled after that fix (three force-limit
-problems at once, or two fingertips released at their cone apexes); and three-finger
-grasps whose equilibrium stalled strictly inside slip boundaries with every multiplier 0
-after those fixes (stored padded to four contacts, one inactive, so that they share the
-four-finger grasps' compiled evaluation). Beside each is the status and value of the independent CasADi/Ipopt multi-start
+problems at once, or two fingertips released at their cone apexes). Beside each is the status and value of the independent CasADi/Ipopt multi-start
 reference (``tests/ipopt_reference.py``, 24 starts; 7-20 s a grasp, so stored, with the
 note of how: ``experiments/settle_hard_data.py``).
 """
@@ -31,11 +28,8 @@ REL = 1e-6
 
 
 def _cases():
-    """``[(grasp, row)]``; every grasp with a contact mask (all active where the file has
-    none), so that the padded ones batch with the others of their contact count."""
     rows = json.loads(DATA.read_text(encoding="utf-8"))["grasps"]
-    masked = lambda g: {**g, "active": g.get("active", [True] * len(g["positions"]))}
-    return [(jaxgrasp.Grasp.create(**masked(row["grasp"])), row) for row in rows]
+    return [(jaxgrasp.Grasp.create(**row["grasp"]), row) for row in rows]
 
 
 @pytest.fixture(scope="module")
