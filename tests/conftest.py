@@ -239,40 +239,22 @@ def without_compile_reports(err: str) -> str:
     return COMPILE_REPORT.sub("", err)
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _jax_cache_settings_restored():
-    """XLA's persistent compilation cache as it was before the module, after it.
-
-    ``jaxgrasp.cli.main`` and :func:`jaxgrasp.enable_compilation_cache` turn the cache on
-    process-wide, and JAX keeps the cache it opened even when its settings change back:
-    without this, a module run in-process by the same xdist worker after one that ran the
-    command would compile through the session's cache (an executable XLA's cache served
-    is never stored, which the store's tests check).
-    """
-    from jax.experimental.compilation_cache import compilation_cache
-
-    options = ("jax_enable_compilation_cache", *_CACHE_OPTIONS)
-    saved = {k: getattr(jax.config, k) for k in options}
-    yield
-    if any(getattr(jax.config, k) != v for k, v in saved.items()):
-        for k, v in saved.items():
-            jax.config.update(k, v)
-        compilation_cache.reset_cache()
-
-
 @pytest.fixture(scope="module")
 def cache_dir(store_dir):
     """The session's cache folder (:func:`store_dir`) for ``jaxgrasp.cli.main`` (and its
     subprocesses).
 
-    ``main`` turns on JAX's persistent compilation cache (restored after the module by
-    :func:`_jax_cache_settings_restored`) and jaxgrasp's executable store (restored here),
-    so the rest of the session is unaffected.
+    ``main`` turns on JAX's persistent compilation cache and jaxgrasp's executable store
+    (process-wide settings); both are restored after the module so the rest of the
+    session is unaffected.
     """
     from jaxgrasp.engine import _store as cache
 
+    saved = {k: getattr(jax.config, k) for k in _CACHE_OPTIONS}
     saved_programs = cache.executable_dir()
     yield store_dir
+    for k, v in saved.items():
+        jax.config.update(k, v)
     cache.set_executable_dir(saved_programs)
 
 

@@ -12,6 +12,7 @@ compiled here.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import pickle
@@ -21,7 +22,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from jax.experimental.compilation_cache import compilation_cache
 
 from jaxgrasp.engine import _compile
 from jaxgrasp.engine import _store as store
@@ -62,21 +62,33 @@ def _assert_replaced(want: np.ndarray) -> None:
     np.testing.assert_array_equal(_result(fn), want)
 
 
+@contextlib.contextmanager
+def _xla_cache_off():
+    """XLA's persistent cache off inside, and exactly as it was after (test-only: JAX keeps
+    the cache it opened in its module state, which its settings no longer reach, so an
+    earlier in-process command's cache would serve the tiny executable here; an executable
+    that cache serves is never stored, rightly, and these tests need one built)."""
+    from jax._src import compilation_cache as xla_cache
+
+    state = (xla_cache._cache, xla_cache._cache_checked, xla_cache._cache_used)
+    xla_cache._cache, xla_cache._cache_checked, xla_cache._cache_used = None, True, False
+    try:
+        yield
+    finally:
+        xla_cache._cache, xla_cache._cache_checked, xla_cache._cache_used = state
+
+
 @pytest.fixture
 def folder(tmp_path):
     """A store folder turned on for the test (restored after it), empty, with XLA's
-    persistent cache off: an executable that cache serves is never stored, so a clean
-    build here must be compiled, whatever an earlier test in this process turned on."""
-    saved, cache_on = store.executable_dir(), jax.config.jax_enable_compilation_cache
-    jax.config.update("jax_enable_compilation_cache", False)
-    compilation_cache.reset_cache()
+    persistent cache off (:func:`_xla_cache_off`)."""
+    saved = store.executable_dir()
     path = tmp_path / "cache" / store.EXECUTABLE_SUBDIR
-    assert store.set_executable_dir(path) == path
-    yield path
-    store.set_executable_dir(saved)
-    _compile.clear_compiled()
-    jax.config.update("jax_enable_compilation_cache", cache_on)
-    compilation_cache.reset_cache()
+    with _xla_cache_off():
+        assert store.set_executable_dir(path) == path
+        yield path
+        store.set_executable_dir(saved)
+        _compile.clear_compiled()
 
 
 @pytest.fixture
