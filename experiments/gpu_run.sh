@@ -11,7 +11,9 @@ set -uo pipefail
 OUT=${OUT:-gpu-out}
 mkdir -p "$OUT"
 DEADLINE=${1:-570}
-export PYTHONUNBUFFERED=1 MUJOCO_GL=egl JAXGRASP_CACHE_DIR=/tmp/jaxgrasp-cache
+# MUJOCO_GL stays unset: =egl needs the EGL loader, which such a machine lacks (every
+# MuJoCo test module failed to import there, 2026-11-26).
+export PYTHONUNBUFFERED=1 JAXGRASP_CACHE_DIR=/tmp/jaxgrasp-cache
 if ls .whl/*.whl >/dev/null 2>&1; then
     python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
     export PYTHONPATH=/tmp/site:$PWD
@@ -22,7 +24,7 @@ python3 -m pip install -q --no-index --no-deps --no-build-isolation -e . >"$OUT/
     mkdir -p /tmp/bin && printf '#!/usr/bin/env python3\nimport sys\nfrom jaxgrasp.cli import main\nsys.exit(main())\n' >/tmp/bin/jaxgrasp
     chmod +x /tmp/bin/jaxgrasp && export PATH=/tmp/bin:$PATH; }
 { date -u; nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv; nproc; uptime
-  python3 -c "import sys, jax, jaxlib, jaxopt, numpy, scipy, trimesh; print(sys.version); print('jax', jax.__version__, 'jaxlib', jaxlib.__version__, 'jaxopt', jaxopt.__version__, 'numpy', numpy.__version__, 'scipy', scipy.__version__, 'trimesh', trimesh.__version__); print(jax.devices())"
+  python3 -c "import sys, jax; from importlib.metadata import version as v; print(sys.version); print(*(p + ' ' + v(p) for p in ('jax', 'jaxlib', 'jaxopt', 'numpy', 'scipy', 'trimesh', 'mujoco'))); print(jax.devices())"
   git log -1 --format='commit %h %s' 2>/dev/null; } >>"$OUT/env.txt" 2>&1
 cat "$OUT/env.txt"
 

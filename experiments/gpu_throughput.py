@@ -102,6 +102,8 @@ def main() -> None:
     log("CPU devices: the set")
     rows = {"cpu": measure(base, cpu, None)}
     rows["cpu"]["chunk"] = default_chunk_size(cpu)
+    log(f"CPU devices: compile {rows['cpu']['compile_s']:.1f} s, run {rows['cpu']['run_s']:.2f} s, "
+        f"{rows['cpu']['rate']:.0f} grasps/s")  # each row as it comes: a run cut short keeps the ones done
     for chunk in [int(c) for c in args.chunks.split(",")] if acc else []:
         reps = -(-max(args.count, 2 * chunk * len(acc)) // args.count)
         grasps = (base * reps)[:max(args.count, 2 * chunk * len(acc))]
@@ -115,7 +117,9 @@ def main() -> None:
         r["peak_gib"] = peak_gib(acc[0])
         r["agreement_with_cpu"] = agreement(r, rows["cpu"], args.count)
         rows[f"acc{chunk}"] = r
-        log(f"chunk {chunk}: {r['rate']:.0f} grasps/s")
+        log(f"chunk {chunk}: compile {r['compile_s']:.1f} s, run {r['run_s']:.2f} s, {r['rate']:.0f} grasps/s, "
+            f"peak {r['peak_gib']:.1f} GiB; statuses differing from the CPU's: "
+            f"{r['agreement_with_cpu']['status_mismatches']}")
     lines = [head, "", "| where | chunk | grasps | compile s | run s | grasps/s | peak GiB | statuses differ | value max rel diff |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in rows.items():

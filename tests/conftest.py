@@ -67,6 +67,38 @@ GRASP_FIELDS = jaxgrasp.model._fields.NAMES
 CHUNK = 16
 
 
+ACCELERATOR_RTOL, ACCELERATOR_ATOL = 1e-9, 1e-15
+"""How far two compilations of one program may differ on an accelerator (relative, and
+absolute for numbers that are zero on one side). On a CPU they agree to the last digit.
+On a GPU, XLA autotunes its kernels at each compilation and may pick kernels that round
+differently: on an H100, a stored program and a fresh compilation of it gave a zero
+translation as 0.0 and -5.4e-82 m."""
+
+
+def assert_same_numbers(actual, desired, where: str = "") -> None:
+    """``actual`` equals ``desired`` (numbers, arrays, and dicts and lists of them, as
+    ``json.loads`` gives): to the last digit on a CPU, NaN equal to NaN; on an accelerator,
+    to :data:`ACCELERATOR_RTOL` (:data:`ACCELERATOR_ATOL` absolute)."""
+    if isinstance(desired, dict):
+        assert isinstance(actual, dict) and actual.keys() == desired.keys(), (where, actual, desired)
+        for k in desired:
+            assert_same_numbers(actual[k], desired[k], f"{where}.{k}")
+        return
+    if isinstance(desired, (list, tuple)) and not all(isinstance(v, (int, float)) for v in desired):
+        assert isinstance(actual, (list, tuple)) and len(actual) == len(desired), (where, actual, desired)
+        for i, (a, d) in enumerate(zip(actual, desired)):
+            assert_same_numbers(a, d, f"{where}[{i}]")
+        return
+    if isinstance(desired, (str, bool)) or desired is None:
+        assert actual == desired, (where, actual, desired)
+        return
+    a, d = np.asarray(actual), np.asarray(desired)
+    if jax.default_backend() == "cpu" or not np.issubdtype(d.dtype, np.floating):
+        np.testing.assert_array_equal(a, d, err_msg=where)
+    else:
+        np.testing.assert_allclose(a, d, rtol=ACCELERATOR_RTOL, atol=ACCELERATOR_ATOL, err_msg=where)
+
+
 def grasp_key(grasp) -> tuple:
     """A hashable, exact key of a grasp's field values."""
     out = []

@@ -189,7 +189,8 @@ def enable_compilation_cache(path=None) -> Path | None:
     created leaves every setting as it was (every run compiles). A folder of the user's
     that exists but cannot be written is still read (a pre-filled cache works) and new
     compilations are not saved, quietly: JAX's own warning for every entry it fails to
-    write (two lines on stderr per compilation, every run) is silenced.
+    write (two lines on stderr per compilation, every run) is silenced, and XLA's own
+    caches (on a GPU, its autotuning results) are not pointed into it.
 
     Returns:
         The folder, or ``None`` where no cache was turned on.
@@ -203,6 +204,9 @@ def enable_compilation_cache(path=None) -> Path | None:
         return None
     if not _writable(folder):
         warnings.filterwarnings("ignore", message=_JAX_WRITE_ERROR, category=UserWarning)
+        # JAX would also point XLA's own caches (a GPU's autotuning results) into the
+        # folder, and XLA logs every write it is refused on stderr.
+        jax.config.update("jax_persistent_cache_enable_xla_caches", "none")
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)

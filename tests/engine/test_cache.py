@@ -15,7 +15,7 @@ import stat
 
 import numpy as np
 import pytest
-from conftest import WarmCache
+from conftest import WarmCache, assert_same_numbers
 
 import jaxgrasp
 from jaxgrasp.engine._store import EXECUTABLE_SUBDIR
@@ -23,10 +23,11 @@ from jaxgrasp.tolerance._result import FIELDS
 
 
 def _assert_same_fields(a: dict, b) -> None:
-    """``a``: fields as a process printed them; ``b``: an Evaluation. Bit for bit."""
+    """``a``: fields as a process printed them; ``b``: an Evaluation. Bit for bit on a CPU
+    (:func:`conftest.assert_same_numbers`)."""
     for f in FIELDS:
         mine = np.asarray(getattr(b, f))
-        np.testing.assert_array_equal(np.asarray(a["fields"][f], dtype=mine.dtype), mine, err_msg=f)
+        assert_same_numbers(np.asarray(a["fields"][f], dtype=mine.dtype), mine, f)
 
 
 def test_import_turns_the_store_on(warm_cache):

@@ -326,10 +326,12 @@ def test_read_only_cache_folder_is_quiet(tmp_path):
         from jaxgrasp import enable_compilation_cache
         print(enable_compilation_cache())
         print(float(jax.jit(lambda x: jnp.sin(x) * 3.0 + 1.0)(jnp.float64(0.5))))
+        print(jax.config.jax_persistent_cache_enable_xla_caches)
         """
     )
     env = dict(os.environ, JAXGRASP_CACHE_DIR=str(folder), PYTHONPATH=str(ROOT))
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.splitlines()[0] == str(folder)  # still read: a shared, pre-filled cache works
+    assert r.stdout.splitlines()[2] == "none"  # XLA's own caches (a GPU's autotuning) not pointed there
     assert r.stderr == "", r.stderr

@@ -63,12 +63,13 @@ def test_eigh_under_vmap_is_one_lapack_call_per_matrix():
     calls LAPACK on one 6 x 6 matrix at a time, however large the batch."""
     rng = np.random.default_rng(3)
     a = rng.standard_normal((300, 6, 6))
-    a = a + np.swapaxes(a, 1, 2)
+    # on a CPU device: the LAPACK kernels are the CPU's (a GPU lowers eigh to cuSOLVER)
+    a = jax.device_put(a + np.swapaxes(a, 1, 2), jax.devices("cpu")[0])
     w, v = jax.jit(jax.vmap(eigh))(a)
     w_ref, v_ref = jax.jit(jax.vmap(jnp.linalg.eigh))(a)
     assert np.array_equal(np.asarray(w), np.asarray(w_ref)) and np.array_equal(np.asarray(v), np.asarray(v_ref))
     assert np.allclose(np.asarray(w), np.linalg.eigvalsh(a), rtol=0, atol=1e-12)
-    calls = _lapack_calls(jax.jit(jax.vmap(eigh)).lower(a).as_text())
+    calls = _lapack_calls(jax.jit(jax.vmap(eigh)).trace(a).lower(lowering_platforms=("cpu",)).as_text())
     assert calls == [("lapack_dsyevd_ffi", "tensor<6x6xf64>")], calls
     w_one, _ = eigh(a[7])  # unbatched: plain eigh
     assert np.array_equal(np.asarray(w_one), np.asarray(w_ref[7]))
@@ -79,11 +80,12 @@ def test_batched_program_calls_no_lapack_but_small_eigh():
     """The batch engine's programs (every stage), with and without the settling stage,
     for 128 grasps per device: every LAPACK custom call is the symmetric eigensolver (``syevd``) on at
     most ``EIGH_BLOCK`` matrices, never on one per grasp of the chunk."""
-    sharding = _plan.batch_sharding()
+    cpus = jax.devices("cpu")  # the hang is the CPU's thread pool; a GPU lowers eigh to cuSOLVER
+    sharding = _plan.batch_sharding(cpus)
     assert EIGH_BLOCK <= 64
     for settle in (False, True):
         pipeline = _evaluator._staged(EvaluateOptions(), sharding, masked=True, settle=settle)
-        spec = _evaluator._chunk_spec(3, 128 * len(jax.devices()), sharding, masked=True)
+        spec = _evaluator._chunk_spec(3, 128 * len(cpus), sharding, masked=True)
         lowered = _pipeline.lower_stages(pipeline, spec)
         assert tuple(lowered) == batch_stages.STAGES  # every stage lowered, each once
         text = "".join(low.as_text() for low in lowered.values())

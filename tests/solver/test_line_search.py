@@ -70,7 +70,11 @@ def test_batched_ladder_equals_each_lanes_walk(size):
     x_new, improve = np.asarray(x_new), np.asarray(improve)
     for k in np.flatnonzero(needs):
         assert improve[k] == ref_imp[k], k
-        np.testing.assert_array_equal(x_new[k], ref_x[k])
+        if jax.default_backend() == "cpu":
+            np.testing.assert_array_equal(x_new[k], ref_x[k])
+        else:  # a GPU may fuse x + t p into one multiply-add, one rounding fewer than NumPy's
+            bound = 2 * np.finfo(np.float64).eps * (np.abs(x[k]) + np.abs(ref_x[k] - x[k]))
+            assert np.all(np.abs(x_new[k] - ref_x[k]) <= bound), (k, x_new[k] - ref_x[k])
     # the kinds above all occur when there are lanes enough
     if size > 8:
         assert improve[needs].any() and (~improve[needs]).any()
