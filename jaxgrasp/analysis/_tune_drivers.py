@@ -103,19 +103,24 @@ def _run_jaxopt(solver, u0, data, rec: SearchRecord, *, maxiter, tol, ftol, pati
 
 @lru_cache(maxsize=32)
 def _jaxopt_solver(vg, method: str):
-    """A jaxopt solver of ``vg``. jaxopt compiles its own ``update`` around the objective,
-    and a ``jit`` inside another may not carry compiler options, so the solver gets the
-    function ``vg`` compiles (``__wrapped__``), not the compiled one."""
+    """A jaxopt solver of ``vg``.
+
+    ``ProjectedGradient`` runs its steps in Python (``jit=False``) around the compiled
+    ``vg``: its steps are a few array operations around each call of ``vg``, and compiled
+    by jaxopt its ``init_state`` and ``update`` would each compile the evaluation's
+    gradient again, per process, never reaching the executable store. ``LBFGSB`` stays
+    compiled by jaxopt: run in Python, two of its steps on the cube took three times as
+    long as compiling it. A ``jit`` inside another may not carry compiler options, so it
+    gets the function ``vg`` compiles (``__wrapped__``)."""
     import jaxopt
 
-    vg = getattr(vg, "__wrapped__", vg)
-
     if method == "jaxopt_lbfgsb":
-        return jaxopt.LBFGSB(fun=vg, value_and_grad=True, has_aux=True, maxiter=10**6, tol=0.0)
+        fun = getattr(vg, "__wrapped__", vg)
+        return jaxopt.LBFGSB(fun=fun, value_and_grad=True, has_aux=True, maxiter=10**6, tol=0.0)
     from jaxopt.projection import projection_box
 
     return jaxopt.ProjectedGradient(
-        fun=vg, projection=projection_box, value_and_grad=True, has_aux=True, maxiter=10**6, tol=0.0
+        fun=vg, projection=projection_box, value_and_grad=True, has_aux=True, maxiter=10**6, tol=0.0, jit=False
     )
 
 
