@@ -2,8 +2,13 @@
 
 Each lane tries ``alpha = 1, 1/2, 1/4, ...`` (``line_search_steps`` lengths) along its
 direction and takes the first that passes Armijo's test (backtracking, Nocedal & Wright
-Alg. 3.1), or, where none does, the one with the lowest merit; where no length lowers the
-merit at all it stays put.
+Alg. 3.1), or, where none does, the one with the lowest merit. Where no length lowers the
+merit at all, it tries a deeper ladder of as many lengths again, ``2^-steps, ...``, with
+the same rule, and where none of those lowers it either, it stays put. A lane needs the
+deeper ladder where its Newton direction ignores constraints that are nearly active but
+not yet penalised (an object sliding towards two slip boundaries at once): the full step
+crosses them, and only a step far below the first ladder lowers the merit. Without it
+such a lane stays where it is until its step budget runs out.
 
 Almost every Newton step takes the full length, but in a batch of a hundred lanes some
 lane nearly always walks the whole ladder (a converged lane whose merit cannot fall
@@ -41,7 +46,7 @@ def _armijo(t, alpha, phi0, slope, slack):
     return t <= phi0 + 1e-4 * alpha * slope + slack
 
 
-def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: float):
+def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: float, deeper=None):
     """Backtracking line search of a batch of ``B`` lanes with ``n`` variables.
 
     Args:
@@ -53,23 +58,29 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
         slope: ``(B,)`` directional derivative of the merit along ``p`` (negative).
         needs_step: ``(B,)`` bool; lanes where it is false try no length past the first
             (their result is not used).
-        steps: number of lengths on the ladder ``1, 1/2, ..., 2^(1 - steps)``.
+        steps: number of lengths on the ladder ``1, 1/2, ..., 2^(1 - steps)``, and on the
+            deeper one ``2^-steps, ..., 2^(1 - 2 steps)``.
         rounding: relative slack of Armijo's test (``slack = rounding (|phi0| + 1)``):
             near a minimiser at a large penalty the decrease a Newton step promises is
             below phi's rounding error, and a strict test would reject the very steps
             that converge.
+        deeper: ``(B,)`` bool, the lanes that may walk the deeper ladder (default: every
+            lane).
 
     Returns:
         ``(x_new, improve)``: ``x_new`` ``(B, n)`` is ``x + alpha p`` for the first
         ``alpha`` that passes Armijo (``merit <= phi0 + 1e-4 alpha slope + slack``), else
-        for the one with the lowest merit; ``x`` itself where no ``alpha`` lowers the
-        merit (``improve`` ``(B,)`` bool is then false).
+        for the one with the lowest merit; where no ``alpha`` of the ladder lowers the
+        merit, the same on the deeper ladder; ``x`` itself where none of either does
+        (``improve`` ``(B,)`` bool is then false).
     """
     size = x.shape[0]
-    alphas = 0.5 ** jnp.arange(steps, dtype=x.dtype)
+    alphas = 0.5 ** jnp.arange(2 * steps, dtype=x.dtype)  # the ladder, then the deeper one
     slack = rounding * (jnp.abs(phi0) + 1.0)
+    deeper = jnp.ones(size, bool) if deeper is None else deeper
     if size <= LADDER_BLOCK:  # one block: each lane walks its own ladder (a smaller executable)
-        return jax.vmap(partial(_walk, merit, alphas))(x, p, phi0, slope, slack, needs_step, jnp.arange(size, dtype=jnp.uint32))
+        walk = partial(_walk, merit, alphas, steps)
+        return jax.vmap(walk)(x, p, phi0, slope, slack, needs_step, deeper, jnp.arange(size, dtype=jnp.uint32))
 
     values = lambda xs, lanes: _finite(jax.vmap(merit)(xs, lanes))
     t0 = values(x + p, jnp.arange(size, dtype=jnp.uint32))
@@ -77,17 +88,22 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
     idx = jnp.zeros(size, jnp.int32)
     improve = ok0 | (t0 < phi0)
     if steps > 1:
-        idx, improve = _rest_of_ladder(values, x, p, phi0, slope, slack, t0, needs_step & ~ok0, alphas, idx, improve)
+        idx, improve = _rest_of_ladder(values, x, p, phi0, slope, slack, t0, needs_step & ~ok0, alphas[:steps],
+                                       idx, improve)
+    idx, improve = _deeper_ladder(values, x, p, phi0, slope, slack, needs_step & deeper & ~improve, alphas[steps:],
+                                  idx, improve, steps)
     return jnp.where(improve[:, None], x + alphas[idx][:, None] * p, x), improve
 
 
-def _walk(merit, alphas, x, p, phi0, slope, slack, needs_step, lane):
-    """One lane's ladder walked lazily (a while loop that stops at the first length passing
-    Armijo's test): ``(x_new, improve)`` as :func:`line_search` gives them."""
+def _walk(merit, alphas, steps, x, p, phi0, slope, slack, needs_step, deeper, lane):
+    """One lane's ladder, then (where ``deeper``) its deeper one, walked lazily (a while
+    loop that stops at the first length passing Armijo's test, or at the end of the first
+    ladder where a length lowered the merit): ``(x_new, improve)`` as :func:`line_search`
+    gives them. ``alphas`` holds both ladders, ``steps`` lengths each."""
 
     def cond(c):
-        k, found = c[0], c[1]
-        return (k < alphas.shape[0]) & ~found
+        k, found, best_val = c[0], c[1], c[4]
+        return (k < alphas.shape[0]) & ~found & ~((k == steps) & ((best_val < phi0) | ~deeper))
 
     def body(c):
         k, found, first, best, best_val = c
@@ -128,3 +144,24 @@ def _rest_of_ladder(values, x, p, phi0, slope, slack, t0, rest, alphas, idx, imp
         return put_rows(idx, rows, valid, k.astype(idx.dtype)), put_rows(improve, rows, valid, better)
 
     return over_rows(rest, LADDER_BLOCK, update, (idx, improve))
+
+
+def _deeper_ladder(values, x, p, phi0, slope, slack, deep, deeper, idx, improve, offset: int):
+    """``(idx, improve)`` ``(B,)`` with the lanes where ``deep`` is true (no length of the
+    first ladder lowered their merit) decided on the lengths ``deeper``: the first that
+    passes Armijo's test, else the lowest merit below ``phi0``; ``idx`` counts from the
+    start of the first ladder (``offset`` lengths). Gathered in blocks of
+    :data:`LADDER_BLOCK` lanes, none where no lane needs it."""
+
+    def update(rows, valid, c):
+        idx, improve = c
+        xs = x[rows][:, None, :] + deeper[:, None] * p[rows][:, None, :]  # (block, steps, n)
+        lanes = jnp.broadcast_to(rows[:, None], xs.shape[:2])
+        ts = values(xs.reshape(-1, xs.shape[-1]), lanes.reshape(-1)).reshape(xs.shape[:2])
+        ok = _armijo(ts, deeper, phi0[rows][:, None], slope[rows][:, None], slack[rows][:, None])
+        armijo = jnp.any(ok, axis=1)
+        k = offset + jnp.where(armijo, jnp.argmax(ok, axis=1), jnp.argmin(ts, axis=1))
+        better = armijo | (jnp.min(ts, axis=1) < phi0[rows])
+        return put_rows(idx, rows, valid, k.astype(idx.dtype)), put_rows(improve, rows, valid, better)
+
+    return over_rows(deep, LADDER_BLOCK, update, (idx, improve))

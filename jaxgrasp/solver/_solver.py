@@ -105,7 +105,9 @@ class SolverOptions:
         infeasible_stationarity: the violation measure counts as stationary where its
             gradient (inf-norm) is below this times the violation.
         max_step: largest Newton step (inf-norm, scaled variables).
-        line_search_steps: number of step lengths ``1, 1/2, 1/4, ...`` tried per Newton step.
+        line_search_steps: number of step lengths ``1, 1/2, 1/4, ...`` tried per Newton step;
+            a feasible lane that none of them lets lower its merit tries as many again,
+            ``2^-line_search_steps, ...`` (:mod:`jaxgrasp.solver._line_search`).
         slot_fraction: :func:`jaxgrasp.solver.solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
             flight (finished lanes hand their slot to the next), at most ``max_slots``.
         max_slots: upper bound on those slots. A loop step over a few hundred lanes keeps
@@ -400,10 +402,15 @@ def merit(problem, s: SolverState, x):
 def line_search(merit_of, trials: Trial, o: SolverOptions):
     """``(x_new, improve)`` ``(B, n)``, ``(B,)``: the backtracking line search
     (:func:`jaxgrasp.solver._line_search.line_search`) of a batch of ``B`` lanes' trials (leading
-    axis ``B``); ``merit_of(x, lane)`` is lane ``lane``'s :func:`merit` at ``x``."""
-    _, _, rounding = _tolerances(trials.p.dtype, o)
+    axis ``B``); ``merit_of(x, lane)`` is lane ``lane``'s :func:`merit` at ``x``.
+
+    Only lanes feasible at their last multiplier update may walk the deeper ladder: a
+    feasible lane whose Newton direction crosses nearly active boundaries it does not yet
+    penalise lowers its merit only by a very short step, while a lane far from
+    feasibility that cannot lower its merit is left to the infeasibility test."""
+    tol, _, rounding = _tolerances(trials.p.dtype, o)
     return ladder_search(merit_of, trials.state.x, trials.p, trials.phi0, trials.slope, trials.newton,
-                         o.line_search_steps, rounding)
+                         o.line_search_steps, rounding, deeper=trials.state.feasibility <= tol)
 
 
 def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, floor, o: SolverOptions):

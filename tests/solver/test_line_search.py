@@ -23,7 +23,7 @@ def merit_of(centres, curv):
     return merit
 
 
-def reference(merit, x, p, phi0, slope, needs_step):
+def reference(merit, x, p, phi0, slope, needs_step, deeper):
     out, imp = [], []
     for k in range(x.shape[0]):
         if not needs_step[k]:
@@ -31,17 +31,21 @@ def reference(merit, x, p, phi0, slope, needs_step):
             imp.append(None)
             continue
         slack = ROUNDING * (abs(phi0[k]) + 1.0)
-        best, best_val, chosen = 0, np.inf, None
-        for i in range(STEPS):
-            a = 0.5 ** i
-            t = float(merit(jnp.asarray(x[k] + a * p[k]), k))
-            t = t if np.isfinite(t) else np.inf
-            if t <= phi0[k] + 1e-4 * a * slope[k] + slack:
-                chosen = i
+        ladders = (range(STEPS), range(STEPS, 2 * STEPS)) if deeper[k] else (range(STEPS),)
+        for ladder in ladders:  # the deeper one where the first lowers nothing
+            best, best_val, chosen = 0, np.inf, None
+            for i in ladder:
+                a = 0.5 ** i
+                t = float(merit(jnp.asarray(x[k] + a * p[k]), k))
+                t = t if np.isfinite(t) else np.inf
+                if t <= phi0[k] + 1e-4 * a * slope[k] + slack:
+                    chosen = i
+                    break
+                if t < best_val:
+                    best, best_val = i, t
+            improve = chosen is not None or best_val < phi0[k]
+            if improve:
                 break
-            if t < best_val:
-                best, best_val = i, t
-        improve = chosen is not None or best_val < phi0[k]
         i = chosen if chosen is not None else best
         out.append(x[k] + 0.5 ** i * p[k] if improve else x[k])
         imp.append(improve)
@@ -58,15 +62,17 @@ def test_batched_ladder_equals_each_lanes_walk(size):
     x = rng.normal(size=(size, n))
     grad = np.asarray(jax.vmap(jax.grad(merit))(jnp.asarray(x), jnp.arange(size)))
     # directions of every kind: exact-ish Newton (full step), far too long (many halvings),
-    # ascent (no length helps), zero (no length lowers phi)
-    scale = rng.choice([0.3, 1.0, 50.0, 1e4, -1.0, 0.0], size=size)
+    # so long that only the deeper ladder lowers phi, ascent (no length helps), zero (no
+    # length lowers phi)
+    scale = rng.choice([0.3, 1.0, 50.0, 1e4, 1e7, -1.0, 0.0], size=size)
     p = -grad * scale[:, None]
     phi0 = np.asarray(jax.vmap(merit)(jnp.asarray(x), jnp.arange(size)))
     slope = np.einsum("bi,bi->b", grad, p)
     needs = rng.uniform(size=size) < 0.85
-    x_new, improve = jax.jit(lambda *a: line_search(merit, *a, STEPS, ROUNDING))(
-        jnp.asarray(x), jnp.asarray(p), jnp.asarray(phi0), jnp.asarray(slope), jnp.asarray(needs))
-    ref_x, ref_imp = reference(merit, x, p, phi0, slope, needs)
+    deeper = rng.uniform(size=size) < 0.7
+    x_new, improve = jax.jit(lambda *a: line_search(merit, *a[:5], STEPS, ROUNDING, deeper=a[5]))(
+        jnp.asarray(x), jnp.asarray(p), jnp.asarray(phi0), jnp.asarray(slope), jnp.asarray(needs), jnp.asarray(deeper))
+    ref_x, ref_imp = reference(merit, x, p, phi0, slope, needs, deeper)
     x_new, improve = np.asarray(x_new), np.asarray(improve)
     for k in np.flatnonzero(needs):
         assert improve[k] == ref_imp[k], k
@@ -78,3 +84,7 @@ def test_batched_ladder_equals_each_lanes_walk(size):
     # the kinds above all occur when there are lanes enough
     if size > 8:
         assert improve[needs].any() and (~improve[needs]).any()
+        moved = np.linalg.norm(x_new - x, axis=1) / np.maximum(np.linalg.norm(p, axis=1), 1e-300)
+        deep = needs & improve & (moved > 0) & (moved < 0.5 ** (STEPS - 0.5))  # a deeper ladder's length
+        assert np.any(deep) and not np.any(deep & ~deeper), (moved, deeper)
+        assert np.any(needs & ~deeper & ~improve & (scale >= 1e7))  # the deeper ladder refused
