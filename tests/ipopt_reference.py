@@ -8,7 +8,8 @@ Model (internal units mm, N, N/mm^2, mJ), unknown ``x = (dp [mm], w [rad])``:
 
 * ``dR = Rodrigues(w)``, ``u_i = (dR - I) c_i + dp``, ``cphi_i = n_i . dR n_i``
 * ``d_i = r_i - ((r_i - dr_i) n_i - u_i) . dR n_i``
-* ``dt2_i = |u_i|^2 - (n_i . u_i)^2``, ``theta_i = w . n_i``
+* ``dt2_i = |u_i|^2 - (n_i . u_i)^2``, ``theta_i = w . n_i`` (``|w| < pi``: the principal
+  rotation vector; a solution beyond it is rejected)
 * ``U = sum_i pi E_i (d^3/(3 cphi^2) + d dt2 + d^2 (r - d/3) theta^2) - m g . dp``
 
 Constraints, all ``>= 0`` (scaled by positive constants here):
@@ -226,6 +227,12 @@ class _Model:
         if not np.isfinite(U) or self.violation(g, lbg, ubg) > FEAS_TOL:
             return None
         if np.any(cphi <= 0.0):
+            return None
+        if np.linalg.norm(xs[3:]) >= np.pi:
+            # theta_i = w . n_i is the twist about n_i only for the principal rotation
+            # vector: beyond |w| = pi the same rotation has a shorter w, and the model's
+            # torsion is an artefact (seen: a slip boundary reached at |w| = 6.28 rad, a
+            # full turn, which made a grasp's value 26 % too low; random_urdfs 078)
             return None
         return U, xs
 

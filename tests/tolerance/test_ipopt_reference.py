@@ -153,3 +153,34 @@ def test_cube_too_heavy_is_unstable():
     assert res["status"] == "unstable"
     assert res["value"] == 0.0 and res["limiting"] is None
     assert np.min(res["equilibrium_margins"]["slip"]) < 1e-9
+
+
+# random_urdfs 078 (mm mesh scaled by 15, density 500 kg/m^3), two fingertips drawn by
+# experiments/settle_real.py (part 0/2, two-finger candidate 1304): without the
+# reference's |w| < pi rule, Ipopt reached contact 0's slip boundary at |w| = 6.28 rad
+# (a full turn, whose torsion w . n is an artefact) and gave a value of 1.847e-3 J.
+GRASP_078 = {
+    "positions": np.array([[0.0011919498886308244, -0.005654839139072439, -0.015263397982208967],
+                           [-0.002449276448282287, -0.0038687466328001666, 0.015773816016580552]]),
+    "normals": np.array([[0.11632911381573946, -0.05706169854735303, -0.991570219317692],
+                         [-0.09077959821073214, -0.06329945572926872, 0.9938572550688939]]),
+    "initial_deformation": np.full(2, 0.0033337698869064015),
+    "radius": np.full(2, 0.01),
+    "young_modulus": np.full(2, 3e5),
+    "friction": np.full(2, 0.8),
+    "max_force": np.full(2, 15.0),
+    "mass": 0.038359128808497456,
+    "gravity": np.array([0.0, 0.0, -9.81]),
+}
+
+
+def test_rotations_stay_principal():
+    """Every pose the reference keeps has a principal rotation vector (``|w| < pi``), and
+    on the grasp where Ipopt found a full-turn image its value is jaxgrasp's (2.4841e-3 J,
+    ``jaxgrasp.evaluate`` on commit 3c24a8c: force limit of contact 0)."""
+    ref = reference_evaluate(GRASP_078, n_starts=24, seed=0)
+    poses = np.asarray(ref["boundary_pose"]).reshape(-1, 6)
+    finite = np.all(np.isfinite(poses), axis=1)
+    assert finite.any() and np.all(np.linalg.norm(poses[finite, 3:], axis=1) < np.pi), poses
+    assert ref["status"] == "stable" and ref["limiting"] == ("max_force", 0), ref["limiting"]
+    assert abs(ref["value"] - 2.4840955081887e-3) <= 1e-6 * 2.4840955081887e-3, ref["value"]
