@@ -4,7 +4,8 @@ Each lane tries ``alpha = 1, 1/2, 1/4, ...`` (``line_search_steps`` lengths) alo
 direction and takes the first that passes Armijo's test (backtracking, Nocedal & Wright
 Alg. 3.1), or, where none does, the one with the lowest merit. Where no length lowers the
 merit at all, it tries a deeper ladder of as many lengths again, ``2^-steps, ...``, with
-the same rule, and where none of those lowers it either, it stays put. A lane needs the
+the same rule made strict by the slack instead of loose (a length there must lower the
+merit by more than its rounding), and where none of those does, it stays put. A lane needs the
 deeper ladder where its Newton direction ignores constraints that are nearly active but
 not yet penalised (an object sliding towards two slip boundaries at once): the full step
 crosses them, and only a step far below the first ladder lowers the merit. Without it
@@ -71,7 +72,8 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
         ``(x_new, improve)``: ``x_new`` ``(B, n)`` is ``x + alpha p`` for the first
         ``alpha`` that passes Armijo (``merit <= phi0 + 1e-4 alpha slope + slack``), else
         for the one with the lowest merit; where no ``alpha`` of the ladder lowers the
-        merit, the same on the deeper ladder; ``x`` itself where none of either does
+        merit, the same on the deeper ladder with ``-slack`` for ``slack`` and
+        ``phi0 - slack`` as the merit to lower; ``x`` itself where none of either does
         (``improve`` ``(B,)`` bool is then false).
     """
     size = x.shape[0]
@@ -109,7 +111,7 @@ def _walk(merit, alphas, steps, x, p, phi0, slope, slack, needs_step, deeper, la
         k, found, first, best, best_val = c
         a = alphas[k]
         t = _finite(merit(x + a * p, lane))
-        ok = _armijo(t, a, phi0, slope, slack)
+        ok = _armijo(t, a, phi0, slope, jnp.where(k < steps, slack, -slack))
         first = jnp.where(ok, k, first)
         better = t < best_val
         best = jnp.where(better, k, best)
@@ -121,7 +123,7 @@ def _walk(merit, alphas, steps, x, p, phi0, slope, slack, needs_step, deeper, la
         cond, body, (zero, ~needs_step, zero, zero, jnp.asarray(jnp.inf, x.dtype))
     )
     idx = jnp.where(armijo, first, best)
-    improve = armijo | (best_val < phi0)
+    improve = armijo | (best_val < jnp.where(best < steps, phi0, phi0 - slack))
     return jnp.where(improve, x + alphas[idx] * p, x), improve
 
 
@@ -149,19 +151,21 @@ def _rest_of_ladder(values, x, p, phi0, slope, slack, t0, rest, alphas, idx, imp
 def _deeper_ladder(values, x, p, phi0, slope, slack, deep, deeper, idx, improve, offset: int):
     """``(idx, improve)`` ``(B,)`` with the lanes where ``deep`` is true (no length of the
     first ladder lowered their merit) decided on the lengths ``deeper``: the first that
-    passes Armijo's test, else the lowest merit below ``phi0``; ``idx`` counts from the
-    start of the first ladder (``offset`` lengths). Gathered in blocks of
-    :data:`LADDER_BLOCK` lanes, none where no lane needs it."""
+    passes Armijo's test with ``-slack``, else the lowest merit below ``phi0 - slack``:
+    so short a step must lower the merit by more than its rounding, or a lane at its
+    rounding floor would wander by rounding noise. ``idx`` counts from the start of the
+    first ladder (``offset`` lengths). Gathered in blocks of :data:`LADDER_BLOCK` lanes,
+    none where no lane needs it."""
 
     def update(rows, valid, c):
         idx, improve = c
         xs = x[rows][:, None, :] + deeper[:, None] * p[rows][:, None, :]  # (block, steps, n)
         lanes = jnp.broadcast_to(rows[:, None], xs.shape[:2])
         ts = values(xs.reshape(-1, xs.shape[-1]), lanes.reshape(-1)).reshape(xs.shape[:2])
-        ok = _armijo(ts, deeper, phi0[rows][:, None], slope[rows][:, None], slack[rows][:, None])
+        ok = _armijo(ts, deeper, phi0[rows][:, None], slope[rows][:, None], -slack[rows][:, None])
         armijo = jnp.any(ok, axis=1)
         k = offset + jnp.where(armijo, jnp.argmax(ok, axis=1), jnp.argmin(ts, axis=1))
-        better = armijo | (jnp.min(ts, axis=1) < phi0[rows])
+        better = armijo | (jnp.min(ts, axis=1) < phi0[rows] - slack[rows])
         return put_rows(idx, rows, valid, k.astype(idx.dtype)), put_rows(improve, rows, valid, better)
 
     return over_rows(deep, LADDER_BLOCK, update, (idx, improve))

@@ -32,18 +32,19 @@ def reference(merit, x, p, phi0, slope, needs_step, deeper):
             continue
         slack = ROUNDING * (abs(phi0[k]) + 1.0)
         ladders = (range(STEPS), range(STEPS, 2 * STEPS)) if deeper[k] else (range(STEPS),)
-        for ladder in ladders:  # the deeper one where the first lowers nothing
+        for ladder, sign in zip(ladders, (1.0, -1.0)):  # the deeper one where the first lowers nothing
             best, best_val, chosen = 0, np.inf, None
             for i in ladder:
                 a = 0.5 ** i
                 t = float(merit(jnp.asarray(x[k] + a * p[k]), k))
                 t = t if np.isfinite(t) else np.inf
-                if t <= phi0[k] + 1e-4 * a * slope[k] + slack:
+                if t <= phi0[k] + 1e-4 * a * slope[k] + sign * slack:
                     chosen = i
                     break
                 if t < best_val:
                     best, best_val = i, t
-            improve = chosen is not None or best_val < phi0[k]
+            # the deeper ladder must lower phi by more than its rounding
+            improve = chosen is not None or best_val < phi0[k] - (sign < 0) * slack
             if improve:
                 break
         i = chosen if chosen is not None else best
