@@ -127,6 +127,14 @@ def _walk(merit, alphas, steps, x, p, phi0, slope, slack, needs_step, deeper, la
     return jnp.where(improve, x + alphas[idx] * p, x), improve
 
 
+def _block_values(values, x, p, rows, lengths):
+    """``(block, L)`` merits of the lanes ``rows`` at ``x + alpha p`` for each of the ``L``
+    ``lengths``, in one batched call of ``values``."""
+    xs = x[rows][:, None, :] + lengths[:, None] * p[rows][:, None, :]  # (block, L, n)
+    lanes = jnp.broadcast_to(rows[:, None], xs.shape[:2])
+    return values(xs.reshape(-1, xs.shape[-1]), lanes.reshape(-1)).reshape(xs.shape[:2])
+
+
 def _rest_of_ladder(values, x, p, phi0, slope, slack, t0, rest, alphas, idx, improve):
     """``(idx, improve)`` ``(B,)`` with the lanes where ``rest`` is true decided on the
     whole ladder: every length past the first, evaluated in gathered blocks of
@@ -135,9 +143,7 @@ def _rest_of_ladder(values, x, p, phi0, slope, slack, t0, rest, alphas, idx, imp
 
     def update(rows, valid, c):
         idx, improve = c
-        xs = x[rows][:, None, :] + more[:, None] * p[rows][:, None, :]  # (block, steps - 1, n)
-        lanes = jnp.broadcast_to(rows[:, None], xs.shape[:2])
-        ts = values(xs.reshape(-1, xs.shape[-1]), lanes.reshape(-1)).reshape(xs.shape[:2])
+        ts = _block_values(values, x, p, rows, more)  # (block, steps - 1)
         ok = _armijo(ts, more, phi0[rows][:, None], slope[rows][:, None], slack[rows][:, None])
         every = jnp.concatenate([t0[rows][:, None], ts], axis=1)  # (block, steps)
         armijo = jnp.any(ok, axis=1)
@@ -159,9 +165,7 @@ def _deeper_ladder(values, x, p, phi0, slope, slack, deep, deeper, idx, improve,
 
     def update(rows, valid, c):
         idx, improve = c
-        xs = x[rows][:, None, :] + deeper[:, None] * p[rows][:, None, :]  # (block, steps, n)
-        lanes = jnp.broadcast_to(rows[:, None], xs.shape[:2])
-        ts = values(xs.reshape(-1, xs.shape[-1]), lanes.reshape(-1)).reshape(xs.shape[:2])
+        ts = _block_values(values, x, p, rows, deeper)  # (block, steps)
         ok = _armijo(ts, deeper, phi0[rows][:, None], slope[rows][:, None], -slack[rows][:, None])
         armijo = jnp.any(ok, axis=1)
         k = offset + jnp.where(armijo, jnp.argmax(ok, axis=1), jnp.argmin(ts, axis=1))
