@@ -10,9 +10,10 @@ and four-finger grasps whose boundary problems stalled after that fix (three for
 problems at once, or two fingertips released at their cone apexes); and two-finger
 candidates of ``jaxgrasp.plan(sampler="uniform")`` on ``random_urdfs`` 000 whose
 equilibrium stalled beside two slip boundaries its Newton steps crossed, until a feasible
-lane could walk the deeper step ladder (:mod:`jaxgrasp.solver._line_search`). Beside each is the status and value of the independent CasADi/Ipopt multi-start
-reference (``tests/ipopt_reference.py``, 24 starts; 7-20 s a grasp, so stored, with the
-note of how: ``experiments/settle_hard_data.py``).
+lane could walk the deeper step ladder (:mod:`jaxgrasp.solver._line_search`). Beside each
+is the status and value of the independent CasADi/Ipopt multi-start reference
+(``tests/ipopt_reference.py``, 24 starts; 7-20 s a grasp, so stored, with the note of how:
+``experiments/settle_hard_data.py``).
 """
 
 from __future__ import annotations
