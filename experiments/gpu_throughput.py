@@ -44,15 +44,9 @@ for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
 import jax  # noqa: E402
 
 import jaxgrasp  # noqa: E402
-from batch_benchmark import make_grasps  # noqa: E402
+from batch_benchmark import STATUS, log, make_grasps  # noqa: E402
 
 from jaxgrasp.engine._plan import default_chunk_size  # noqa: E402
-
-STATUS = ("stable", "unstable", "infeasible", "not_converged")
-
-
-def log(msg: str) -> None:
-    print(f"[{time.strftime('%H:%M:%S')} load {os.getloadavg()[0]:.2f}] {msg}", file=sys.stderr, flush=True)
 
 
 def peak_gib(device) -> float:
