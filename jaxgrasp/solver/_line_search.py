@@ -47,7 +47,7 @@ def _armijo(t, alpha, phi0, slope, slack):
     return t <= phi0 + 1e-4 * alpha * slope + slack
 
 
-def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: float, deeper=None):
+def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: float, deeper):
     """Backtracking line search of a batch of ``B`` lanes with ``n`` variables.
 
     Args:
@@ -65,8 +65,7 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
             near a minimiser at a large penalty the decrease a Newton step promises is
             below phi's rounding error, and a strict test would reject the very steps
             that converge.
-        deeper: ``(B,)`` bool, the lanes that may walk the deeper ladder (default: every
-            lane).
+        deeper: ``(B,)`` bool, the lanes that may walk the deeper ladder.
 
     Returns:
         ``(x_new, improve)``: ``x_new`` ``(B, n)`` is ``x + alpha p`` for the first
@@ -79,7 +78,6 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
     size = x.shape[0]
     alphas = 0.5 ** jnp.arange(2 * steps, dtype=x.dtype)  # the ladder, then the deeper one
     slack = rounding * (jnp.abs(phi0) + 1.0)
-    deeper = jnp.ones(size, bool) if deeper is None else deeper
     if size <= LADDER_BLOCK:  # one block: each lane walks its own ladder (a smaller executable)
         walk = partial(_walk, merit, alphas, steps)
         return jax.vmap(walk)(x, p, phi0, slope, slack, needs_step, deeper, jnp.arange(size, dtype=jnp.uint32))
