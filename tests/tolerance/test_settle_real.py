@@ -87,3 +87,67 @@ def test_uniform_plan_candidates_settle_in_the_engine():
         assert int(res.equilibrium_status[k]) == LaneStatus.CONVERGED, row["object"]
         assert jaxgrasp.GraspStatus.labels()[int(res.status[k])] == row["ipopt_status"], row["object"]
         assert abs(float(res.value[k]) - row["ipopt_value"]) <= REL * abs(row["ipopt_value"]) + 1e-15
+
+
+STALLED = Path(__file__).resolve().parent.parent / "data" / "settle_stalled_points.json"
+
+
+def _stalled_equilibria():
+    """``[(row, ProblemData, SolverResult)]``: each stored stalled equilibrium lane, rebuilt."""
+    import jax.numpy as jnp
+
+    from jaxgrasp.model._potential import model_params
+    from jaxgrasp.solver._solver import SolverResult
+    from jaxgrasp.tolerance._problems import constraints, objective, problem_data
+
+    out = []
+    for row in json.loads(STALLED.read_text(encoding="utf-8"))["points"]:
+        data = problem_data(model_params(jaxgrasp.Grasp.create(**row["grasp"])))
+        z = jnp.asarray(row["z"])
+        n3 = 3 * row["fingers"]
+        eq = SolverResult(
+            x=z, lam=jnp.zeros(n3), nu=jnp.zeros(()), objective=objective(z, data),
+            status=jnp.asarray(LaneStatus.NOT_CONVERGED, jnp.int32),
+            stationarity=jnp.asarray(row["stationarity"]),
+            feasibility=jnp.max(jnp.maximum(-constraints(z, data), 0.0)),
+            complementarity=jnp.zeros(()), steps=jnp.asarray(300, jnp.int32),
+        )
+        out.append((row, data, eq))
+    return out
+
+
+def test_a_stalled_equilibrium_far_from_its_multipliers_is_certified_on_its_boundary():
+    """``random_urdfs`` 073 (3 fingers): the augmented Lagrangian stalled beside the slip
+    boundaries of contacts 1 and 2 with one slip multiplier at 9.4e3 (the minimum's are
+    2e-2 and 4). From multipliers 0 the settling stage's Newton polish wandered off towards
+    contact 2's apex; from the active rows' least-squares multipliers it reaches the minimum
+    on both slip boundaries, with positive multipliers: the equilibrium lies on the edge of
+    the region, so the grasp is unstable, as Ipopt says (value 0)."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxgrasp.solver._solver import SolverOptions, kkt_tol
+    from jaxgrasp.tolerance import _settle
+    from jaxgrasp.tolerance._problems import constraints
+
+    o = SolverOptions()
+    tol = kkt_tol(jnp.float64, o)
+    for row, data, eq in _stalled_equilibria():
+        n = row["fingers"]
+        none = jnp.zeros(n, bool)
+        cold = _settle._polish(data, eq.x, _settle.NO_EQUALITY, none, jnp.asarray(False), o)
+        assert not bool(cold[2]), row["object"]  # the polish from 0 alone: no certificate
+        batch = lambda t: jax.tree_util.tree_map(lambda a: a[None], t)  # noqa: E731
+        settled = jax.tree_util.tree_map(lambda a: a[0], _settle.settle_equilibrium(batch(data), batch(eq), o))
+        assert int(settled.status) == LaneStatus.CONVERGED, row["object"]
+        assert max(float(settled.stationarity), float(settled.feasibility), float(settled.complementarity)) <= tol
+        g = np.asarray(constraints(settled.x, data)).reshape(3, n)
+        lam = np.asarray(settled.lam).reshape(3, n)
+        assert np.all(g >= -tol)
+        on = np.abs(g[1]) <= tol  # the slip rows held: contacts 1 and 2
+        assert on.tolist() == [False, True, True], (row["object"], g)
+        assert np.all(lam[1, on] > 0.0)  # friction at its limit: the energy presses on both
+        assert np.all(np.abs(lam[0]) <= tol) and np.all(np.abs(lam[2]) <= tol) and abs(lam[1, 0]) <= tol
+        # lower than where it stalled: the polish went down to the minimum, not up
+        assert float(settled.objective) < float(eq.objective)
+        assert row["ipopt_status"] == "unstable" and row["ipopt_value"] == 0.0
