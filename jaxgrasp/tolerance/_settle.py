@@ -138,8 +138,7 @@ def _polish(data: ProblemData, z0, k, released, warm, o: SolverOptions):
     v = jax.vmap(lambda j: _pyramid_basis(z0, data, j))(jnp.arange(n))  # (N, 3, 3)
     fg = lambda z: _relaxed_problem(z, data, v, j_rows)
     active = j_rows | is_eq | (constraints(z0, data) <= RELEASED_TOL)
-    lam0 = jnp.where(warm, _least_squares_multipliers(fg, active, z0), 0.0)
-    y, r, gz = _kkt_newton(fg, active, z0, lam0)
+    y, r, gz = _kkt_newton(fg, active, z0, warm)
     z, lam = y[:6], y[6:]
     stat = jnp.max(jnp.abs(r[:6]))
     feas = jnp.max(jnp.where(is_eq, jnp.abs(gz), jnp.maximum(-gz, 0.0)))
@@ -188,21 +187,13 @@ def _polish_released(data: ProblemData, z0, k, released, o: SolverOptions):
     return jax.tree_util.tree_map(lambda a: a[use], tries) + (masks[use],)
 
 
-def _least_squares_multipliers(fg, active, z0):
-    """``(3N,)`` the multipliers of the rows ``active`` ``(3N,)`` that best explain the
-    objective's gradient at ``z0`` (``min |grad f - J_A^T lam|``, every other row's 0), by
-    the same damped normal equations as :func:`_levenberg_marquardt_step` (dependent
-    active rows share their part)."""
-    grad_f = jax.grad(lambda z: fg(z)[0])(z0)
-    jac = jnp.where(active[:, None], jax.jacfwd(lambda z: fg(z)[1])(z0), 0.0)  # (3N, 6)
-    lam = _levenberg_marquardt_step(jac.T, grad_f)
-    return jnp.where(active, lam, 0.0)
-
-
-def _kkt_newton(fg, active, z0, lam0):
+def _kkt_newton(fg, active, z0, warm):
     """:data:`_POLISH_STEPS` damped Newton steps (:func:`_levenberg_marquardt_step`) on
     the KKT equations of ``fg`` (``z -> (f, g (3N,))``) with the rows ``active`` ``(3N,)``
-    held at ``g = 0`` and the others at ``lam = 0``, from ``(z0, lam0)``. Returns ``(y, r,
+    held at ``g = 0`` and the others at ``lam = 0``, from ``(z0, lam = 0)``, or where
+    ``warm`` ``()`` from ``(z0, lam_A)``: the least-squares multipliers of the active rows,
+    ``min |grad f - J_A^T lam_A|``, read off the KKT Jacobian at ``(z0, 0)`` (its block
+    ``d grad_L / d lam = -J^T``), by the same damped normal equations. Returns ``(y, r,
     gz)``: ``y = (z, lam)`` ``(6 + 3N,)``, the residual ``r`` and the constraints ``gz``
     at the last point."""
     n3 = active.shape[0]
@@ -216,14 +207,20 @@ def _kkt_newton(fg, active, z0, lam0):
         return r, (r, gz)
 
     def newton(i, carry):
-        # _POLISH_STEPS damped Newton steps, then one more pass for the residual at the last point
+        # pass 0 of a warm polish only sets the multipliers; then _POLISH_STEPS damped
+        # Newton steps, and passes for the residual at the last point
         y, _, _ = carry
         jac, (r, gz) = jax.jacfwd(residual, has_aux=True)(y)
-        step = jnp.where(i < _POLISH_STEPS, _levenberg_marquardt_step(jac, r), 0.0)
-        return y - step, r, gz
+        first = warm & (i == 0)
+        steps = jnp.where(warm, (i >= 1) & (i <= _POLISH_STEPS), i < _POLISH_STEPS)
+        step = jnp.where(steps, _levenberg_marquardt_step(jac, r), 0.0)
+        transposed = jnp.where(active[None, :], -jac[:6, 6:], 0.0)  # (6, 3N) J_A^T
+        lam_a = jnp.where(active, _levenberg_marquardt_step(transposed, r[:6]), 0.0)
+        return jnp.where(first, jnp.concatenate([y[:6], lam_a]), y - step), r, gz
 
-    y0 = jnp.concatenate([z0, lam0.astype(dtype)])
-    return jax.lax.fori_loop(0, _POLISH_STEPS + 1, newton, (y0, jnp.zeros(6 + n3, dtype), jnp.zeros(n3, dtype)))
+    y0 = jnp.concatenate([z0, jnp.zeros(n3, dtype)])
+    carry = (y0, jnp.zeros(6 + n3, dtype), jnp.zeros(n3, dtype))
+    return jax.lax.fori_loop(0, _POLISH_STEPS + 2, newton, carry)
 
 
 def _levenberg_marquardt_step(jac, r):
