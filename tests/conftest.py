@@ -125,14 +125,25 @@ def unstack(tree, i):
     return jax.tree_util.tree_map(lambda a: a[i], tree)
 
 
+def _latency_options() -> dict:
+    """XLA options for the session's evaluators: :data:`jaxgrasp.engine._xla_options.LATENCY_CPU_OPTIONS`
+    on the CPU, :data:`jaxgrasp.engine.COMPILER_OPTIONS` elsewhere (as ``jaxgrasp.evaluate``)."""
+    from jaxgrasp.engine._xla_options import LATENCY_CPU_OPTIONS
+
+    return LATENCY_CPU_OPTIONS if jax.default_backend() == "cpu" else jaxgrasp.engine.COMPILER_OPTIONS
+
+
 class BatchEvaluator:
     """``jax.jit(jax.vmap(jaxgrasp.evaluate))`` with one executable per contact count."""
 
     def __init__(self, chunk: int = CHUNK):
         self.chunk = chunk
         self._chunk_n: dict[int, int] = {}  # batch size used for each N (fixed at first use)
-        # evaluate() skips input validation when traced, so the lambda is vmappable.
-        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)), compiler_options=jaxgrasp.engine.COMPILER_OPTIONS)
+        # evaluate() skips input validation when traced, so the lambda is vmappable. A
+        # session compiles one per contact count in each worker and runs each a few times:
+        # the options jaxgrasp.evaluate itself compiles a concrete grasp with (LLVM's
+        # optimisation skipped on the CPU) halve the compile and cost little run time.
+        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)), compiler_options=_latency_options())
         self._cache: dict = {}
         self.calls = 0
 
