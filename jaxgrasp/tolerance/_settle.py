@@ -123,7 +123,7 @@ def _polish(data: ProblemData, z0, k, released, warm, o: SolverOptions):
     the active set fixed at the stalled point ``z0``: on the relaxation at every contact
     ``released`` ``(N,)`` (none: the problem itself), from the multipliers 0, or where
     ``warm`` ``()`` from the active rows' least-squares multipliers at ``z0``
-    (:func:`_least_squares_multipliers`).
+    (:func:`_kkt_newton`).
 
     Returns ``(z, lam_rel, ok, (stat, feas, comp))``: ``lam_rel`` ``(3N,)`` multipliers
     of the (relaxed) problem (the equality's included, free in sign); ``ok`` whether ``z``
