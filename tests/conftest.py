@@ -125,7 +125,7 @@ def unstack(tree, i):
     return jax.tree_util.tree_map(lambda a: a[i], tree)
 
 
-def _latency_options() -> dict:
+def latency_options() -> dict:
     """XLA options for the session's evaluators: :data:`jaxgrasp.engine._xla_options.LATENCY_CPU_OPTIONS`
     on the CPU, :data:`jaxgrasp.engine.COMPILER_OPTIONS` elsewhere (as ``jaxgrasp.evaluate``)."""
     from jaxgrasp.engine._xla_options import LATENCY_CPU_OPTIONS
@@ -143,7 +143,7 @@ class BatchEvaluator:
         # session compiles one per contact count in each worker and runs each a few times:
         # the options jaxgrasp.evaluate itself compiles a concrete grasp with (LLVM's
         # optimisation skipped on the CPU) halve the compile and cost little run time.
-        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)), compiler_options=_latency_options())
+        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)), compiler_options=latency_options())
         self._cache: dict = {}
         self.calls = 0
 
