@@ -129,7 +129,7 @@ def _host_callback(vg):
     function jaxopt's compiled steps call back on the host (:func:`jax.pure_callback`):
     traced inline, the evaluation and its gradient were compiled into ``init_state`` and
     again into ``update`` (its line search), per process, none of it from the executable
-    store; the cube's two-step run spent 130-160 s compiling."""
+    store."""
     inline = getattr(vg, "__wrapped__", vg)
 
     def fun(u, data):

@@ -212,11 +212,16 @@ def _kkt_newton(fg, active, z0, warm):
         y, _, _ = carry
         jac, (r, gz) = jax.jacfwd(residual, has_aux=True)(y)
         first = warm & (i == 0)
+        # Pass 0 of a warm polish solves the least-squares problem with the same step
+        # function, one solve per pass: zero columns for z (so no step in z), the active
+        # rows' block -J_A^T against grad f = r[:6], and the inactive multipliers held at 0
+        lam_rows = jnp.where(active[None, :], jac[:6, 6:], 0.0)
+        held = jnp.diag(jnp.where(active, 0.0, 1.0).astype(dtype))
+        jac0 = jnp.zeros_like(jac).at[:6, 6:].set(lam_rows).at[6:, 6:].set(held)
+        r0 = jnp.zeros_like(r).at[:6].set(r[:6])
         steps = jnp.where(warm, (i >= 1) & (i <= _POLISH_STEPS), i < _POLISH_STEPS)
-        step = jnp.where(steps, _levenberg_marquardt_step(jac, r), 0.0)
-        transposed = jnp.where(active[None, :], -jac[:6, 6:], 0.0)  # (6, 3N) J_A^T
-        lam_a = jnp.where(active, _levenberg_marquardt_step(transposed, r[:6]), 0.0)
-        return jnp.where(first, jnp.concatenate([y[:6], lam_a]), y - step), r, gz
+        step = _levenberg_marquardt_step(jnp.where(first, jac0, jac), jnp.where(first, r0, r))
+        return y - jnp.where(first | steps, step, 0.0), r, gz
 
     y0 = jnp.concatenate([z0, jnp.zeros(n3, dtype)])
     carry = (y0, jnp.zeros(6 + n3, dtype), jnp.zeros(n3, dtype))
