@@ -207,14 +207,14 @@ def _kkt_newton(fg, active, z0, warm):
         return r, (r, gz)
 
     def newton(i, carry):
-        # pass 0 of a warm polish only sets the multipliers; then _POLISH_STEPS damped
-        # Newton steps, and passes for the residual at the last point
+        # Pass 0 of a warm polish only sets the multipliers, then _POLISH_STEPS damped Newton
+        # steps, then passes for the residual at the last point. Pass 0's least squares go
+        # through the same step function, so that a pass has one solve: zero columns for z
+        # (no step in z), the active rows' block -J_A^T against grad f = r[:6], and the
+        # inactive multipliers held at 0.
         y, _, _ = carry
         jac, (r, gz) = jax.jacfwd(residual, has_aux=True)(y)
         first = warm & (i == 0)
-        # Pass 0 of a warm polish solves the least-squares problem with the same step
-        # function, one solve per pass: zero columns for z (so no step in z), the active
-        # rows' block -J_A^T against grad f = r[:6], and the inactive multipliers held at 0
         lam_rows = jnp.where(active[None, :], jac[:6, 6:], 0.0)
         held = jnp.diag(jnp.where(active, 0.0, 1.0).astype(dtype))
         jac0 = jnp.zeros_like(jac).at[:6, 6:].set(lam_rows).at[6:, 6:].set(held)
@@ -229,9 +229,8 @@ def _kkt_newton(fg, active, z0, warm):
 
 
 def _levenberg_marquardt_step(jac, r):
-    """``(n,)`` the polish's step on the KKT equations, ``(J^T J + mu I)^-1 J^T r``
-    (``jac`` ``(m, n)`` their Jacobian ``J``, square there; ``r`` ``(m,)`` their residual,
-    scaled units),
+    """``(m,)`` the polish's step on the KKT equations, ``(J^T J + mu I)^-1 J^T r``
+    (``jac`` ``(m, m)`` their Jacobian ``J``, ``r`` ``(m,)`` their residual, scaled units),
     with ``mu = (LM_FLOOR |J|_F)^2``: a Levenberg-Marquardt step of fixed, tiny damping.
 
     Why not Newton's ``J^-1 r``: a grasp with a symmetry (the cube about the axis of its
@@ -246,7 +245,7 @@ def _levenberg_marquardt_step(jac, r):
     at ``lam = 0``, far from the multipliers, and would crawl.) No LAPACK: see
     :mod:`jaxgrasp.solver._dense`."""
     mu = (LM_FLOOR**2) * jnp.sum(jac * jac)
-    normal = jac.T @ jac + mu * jnp.eye(jac.shape[1], dtype=jac.dtype)
+    normal = jac.T @ jac + mu * jnp.eye(jac.shape[0], dtype=jac.dtype)
     return dense_solve(normal, jac.T @ r)
 
 
