@@ -53,6 +53,7 @@ SESSION_CACHE.mkdir(mode=0o700, exist_ok=True)
 os.environ["JAXGRASP_CACHE_DIR"] = str(SESSION_CACHE)
 
 import jaxgrasp  # noqa: E402  turns on jax_enable_x64 by itself (tested in test_evaluate.py)
+from jaxgrasp.engine._xla_options import latency_options  # noqa: E402
 
 TESTS_DIR = Path(__file__).resolve().parent
 if str(TESTS_DIR) not in sys.path:  # so that the Ipopt worker can import the reference
@@ -125,14 +126,6 @@ def unstack(tree, i):
     return jax.tree_util.tree_map(lambda a: a[i], tree)
 
 
-def latency_options() -> dict:
-    """XLA options for the session's evaluators: :data:`jaxgrasp.engine._xla_options.LATENCY_CPU_OPTIONS`
-    on the CPU, :data:`jaxgrasp.engine.COMPILER_OPTIONS` elsewhere (as ``jaxgrasp.evaluate``)."""
-    from jaxgrasp.engine._xla_options import LATENCY_CPU_OPTIONS
-
-    return LATENCY_CPU_OPTIONS if jax.default_backend() == "cpu" else jaxgrasp.engine.COMPILER_OPTIONS
-
-
 class BatchEvaluator:
     """``jax.jit(jax.vmap(jaxgrasp.evaluate))`` with one executable per contact count."""
 
@@ -143,7 +136,7 @@ class BatchEvaluator:
         # session compiles one per contact count in each worker and runs each a few times:
         # the options jaxgrasp.evaluate itself compiles a concrete grasp with (LLVM's
         # optimisation skipped on the CPU) halve the compile and cost little run time.
-        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)), compiler_options=latency_options())
+        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)), compiler_options=latency_options(jax.default_backend()))
         self._cache: dict = {}
         self.calls = 0
 

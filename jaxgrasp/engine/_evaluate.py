@@ -43,7 +43,7 @@ import numpy as np
 from jaxgrasp.engine import _compile
 from jaxgrasp.engine._evaluator import SETTLE_INLINE
 from jaxgrasp.engine._stages import run_inline, stage_functions
-from jaxgrasp.engine._xla_options import COMPILER_OPTIONS, LATENCY_CPU_OPTIONS
+from jaxgrasp.engine._xla_options import latency_options
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._problems import Problems
@@ -165,8 +165,7 @@ def compiled_executable(grasp: Grasp, options: EvaluateOptions, settle: bool = T
             r = evaluate_compiled(jax.tree_util.tree_unflatten(treedef, leaves), temperature, options, settle)
             return tuple(getattr(r, f) for f in RESULT_FIELDS)
 
-        cpu = _compile.default_device().platform == "cpu"
-        return jax.jit(evaluate_fields, compiler_options=LATENCY_CPU_OPTIONS if cpu else COMPILER_OPTIONS)
+        return jax.jit(evaluate_fields, compiler_options=latency_options(_compile.default_device().platform))
 
     masked = grasp.active is not None
     return _compile.compiled(

@@ -13,7 +13,7 @@ from jax.sharding import PartitionSpec as P
 from jaxgrasp.engine import _compile, _pipeline
 from jaxgrasp.engine import _stages as stages
 from jaxgrasp.engine._plan import ChunkPlan, batch_sharding
-from jaxgrasp.engine._xla_options import COMPILER_OPTIONS, LATENCY_CPU_OPTIONS
+from jaxgrasp.engine._xla_options import COMPILER_OPTIONS, latency_options
 from jaxgrasp.model._fields import NAMES
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
@@ -59,8 +59,7 @@ def _staged(options: EvaluateOptions, sharding, masked: bool, settle: bool) -> _
     :func:`~jaxgrasp.engine._stages.run_staged`. The evaluation stage runs once per chunk
     and briefly, so on a CPU it is compiled for latency."""
     functions = stages.flat_stages(options, grasp_fields(masked), settle)
-    cpu = sharding.mesh.devices.flat[0].platform == "cpu"
-    latency = LATENCY_CPU_OPTIONS if cpu else COMPILER_OPTIONS
+    latency = latency_options(sharding.mesh.devices.flat[0].platform)
     return _pipeline.Pipeline(
         stages={name: over_devices(f, sharding, latency if name == "evaluation" else COMPILER_OPTIONS)
                 for name, f in functions.items()},

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["COMPILER_OPTIONS", "LATENCY_CPU_OPTIONS"]
+__all__ = ["COMPILER_OPTIONS", "LATENCY_CPU_OPTIONS", "latency_options"]
 
 
 def _jaxlib_version() -> tuple[int, ...]:
@@ -49,3 +49,10 @@ once the compile dominates. The executables that run the solver over many grasps
 engine's solver stages, tuning) keep :data:`COMPILER_OPTIONS`: there the calls dominate,
 and a lower optimisation level would cost throughput. Other backends use
 :data:`COMPILER_OPTIONS` for both."""
+
+
+def latency_options(platform: str) -> dict:
+    """The XLA options of an executable whose first result matters more than its time per
+    call, on a device of ``platform`` (``"cpu"``, ``"gpu"``, ...): :data:`LATENCY_CPU_OPTIONS`
+    on the CPU, :data:`COMPILER_OPTIONS` elsewhere."""
+    return LATENCY_CPU_OPTIONS if platform == "cpu" else COMPILER_OPTIONS

@@ -30,11 +30,12 @@ import pytest
 import jaxgrasp
 from jaxgrasp import presets
 from jaxgrasp.analysis._tune import tune
+from jaxgrasp.engine._xla_options import latency_options
 from jaxgrasp.tolerance._verdict import TIE_TOL
 from jaxgrasp.tolerance import soft_minimum
 from jaxgrasp.tolerance._result import INFEASIBLE, STABLE, UNSTABLE
 
-from conftest import GRASP_FIELDS, latency_options, stack, unstack
+from conftest import GRASP_FIELDS, stack, unstack
 
 OPTS = jaxgrasp.EvaluateOptions(num_random_starts=0)
 CHUNK = 30  # lanes per compiled call (one executable for every call)
@@ -227,7 +228,7 @@ def test_grad_matches_central_differences(fd, field):
 def test_jacfwd_matches_grad_under_vmap(fd):
     centers = [r for r in fd["grasps"]] + fd["special"]
     # run on one chunk only: compiled as jaxgrasp.evaluate compiles a concrete grasp
-    jf = jax.jit(jax.vmap(jax.jacfwd(lambda g: jaxgrasp.evaluate(g, OPTS).value)), compiler_options=latency_options())
+    jf = jax.jit(jax.vmap(jax.jacfwd(lambda g: jaxgrasp.evaluate(g, OPTS).value)), compiler_options=latency_options(jax.default_backend()))
     jac = run_batched(jf, centers)
     for (_, grad), j in zip(fd["centers"], jac):
         for f in GRASP_FIELDS:
