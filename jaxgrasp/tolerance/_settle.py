@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrasp.model._codes import Constraint
 from jaxgrasp.model._potential import (
     contact_kinematics,
     energy_of,
@@ -99,31 +100,57 @@ def _pyramid_basis(z0, data: ProblemData, j):
     return jnp.cos(angles)[:, None] * e1 + jnp.sin(angles)[:, None] * e2
 
 
-def _relaxed_problem(z, data: ProblemData, v, relaxed_rows):
+def _relaxed_problem(z, data: ProblemData, v, relaxed_rows, cone):
     """``(f, g)`` of the problem at scaled pose ``z`` with the rows ``relaxed_rows``
     ``(3N,)`` (every row of each released contact) replaced by that contact's pyramid rows
     ``P_kj = (mu_j d_j / (2 cos^2 phi_j) + v_jk . u_j) / dr_j`` (``v``: the ``(N, 3, 3)``
-    face directions of each contact; row ``k * N + j`` holds ``P_kj``). One evaluation of
+    face directions of each contact; row ``k * N + j`` holds ``P_kj``), and where ``cone``
+    ``()`` every other slip row in its cone form (:func:`_cone_margins`). One evaluation of
     the contact kinematics serves every row, so that the polish's derivatives are taken
     once."""
     p = data.params
+    n = p.c.shape[0]
     x = to_pose(z, data.lever)
     kinematics = contact_kinematics(x, p)
     f = energy_of(x, kinematics, p) / data.scale
-    g = margins_of(kinematics, p).reshape(-1)
+    g = margins_of(kinematics, p)  # (3, N)
     d, cphi = kinematics[0], kinematics[1]  # (N,)
-    u = jax.vmap(lambda j: _tangential(z, data, j)[0])(jnp.arange(p.c.shape[0]))  # (N, 3)
+    u = jax.vmap(lambda j: _tangential(z, data, j)[0])(jnp.arange(n))  # (N, 3)
     slope = p.mu * d / (2.0 * cphi**2)
     pyramid = (slope[:, None] + jnp.einsum("jkc,jc->jk", v, u)) / jax.lax.stop_gradient(p.dr)[:, None]
-    return f, jnp.where(relaxed_rows, pyramid.T.reshape(-1), g)
+    g = g.at[Constraint.SLIP].set(jnp.where(cone & p.on, _cone_margins(kinematics, u, p), g[Constraint.SLIP]))
+    return f, jnp.where(relaxed_rows, pyramid.T.reshape(-1), g.reshape(-1))
 
 
-def _polish(data: ProblemData, z0, k, released, warm, o: SolverOptions):
+def _cone_margins(kinematics, u, p):
+    """``(N,)`` the slip margins in cone form, ``(mu d / cos^2 phi - sqrt(4 |t|^2 + K d
+    theta^2)) / dr`` (``t = u - (u . n) n`` the tangential displacement, mm; ``K d theta^2``
+    the torsion term of :func:`~jaxgrasp.model._potential.margins_of`): where ``d >= 0`` the
+    same region as the squared margin ``(mu^2 d^2 / cos^4 phi - 4 dt^2 - K d theta^2) /
+    (mu dr)^2``, but with a gradient of order 1 up to the cone's apex, where the squared
+    margin's vanishes with ``d``. A fingertip held on its cone a few tenths of a micrometre
+    from its apex (``random_urdfs`` 015, issue 42) gives the squared row a multiplier of
+    4e3 and a KKT system that Newton's method cannot solve to ``tol``; in cone form the
+    multiplier is 2 and it converges. ``t`` is the vector itself, not ``|u|^2 - (u .
+    n)^2``, whose cancellation leaves ``|t|`` a relative error of 1e-8 there and the
+    stationarity a floor of 1e-8."""
+    d, cphi, _, theta = kinematics
+    t = u - jnp.sum(u * p.n, axis=-1, keepdims=True) * p.n
+    torsion = (225.0 / 16.0) * d * (p.r - d / 3.0) ** 2 * theta**2 / (p.mu**2 * (2.0 * p.r - d))
+    q = 4.0 * jnp.sum(t * t, axis=-1) + torsion
+    safe = q > 0.0  # the square root's derivative is infinite at 0: where-guarded
+    b = jnp.where(safe, jnp.sqrt(jnp.where(safe, q, 1.0)), 0.0)
+    return (p.mu * d / cphi**2 - b) / jax.lax.stop_gradient(p.dr)
+
+
+def _polish(data: ProblemData, z0, k, released, warm, cone, o: SolverOptions):
     """Newton's method on the KKT equations of boundary problem ``k`` (equality row), with
     the active set fixed at the stalled point ``z0``: on the relaxation at every contact
     ``released`` ``(N,)`` (none: the problem itself), from the multipliers 0, or where
     ``warm`` ``()`` from the active rows' least-squares multipliers at ``z0``
-    (:func:`_kkt_newton`).
+    (:func:`_kkt_newton`); where ``cone`` ``()``, with the other slip rows in cone form
+    (:func:`_cone_margins`), and a contact held on its cone not held at ``d = 0`` as well
+    (the cone holds ``d >= 0``; holding both pins the apex).
 
     Returns ``(z, lam_rel, ok, (stat, feas, comp))``: ``lam_rel`` ``(3N,)`` multipliers
     of the (relaxed) problem (the equality's included, free in sign); ``ok`` whether ``z``
@@ -136,8 +163,10 @@ def _polish(data: ProblemData, z0, k, released, warm, o: SolverOptions):
     has_eq = ~((k >= n) & (k < 2 * n) & released[jnp.clip(k - n, 0, n - 1)])
     is_eq = (rows == k) & has_eq
     v = jax.vmap(lambda j: _pyramid_basis(z0, data, j))(jnp.arange(n))  # (N, 3, 3)
-    fg = lambda z: _relaxed_problem(z, data, v, j_rows)
-    active = j_rows | is_eq | (constraints(z0, data) <= RELEASED_TOL)
+    fg = lambda z: _relaxed_problem(z, data, v, j_rows, cone)
+    near = constraints(z0, data) <= RELEASED_TOL
+    on_cone = cone & near[n + rows % n] & (rows < n)  # a contact row whose slip row is held
+    active = j_rows | is_eq | (near & ~(on_cone & ~j_rows))
     y, r, gz = _kkt_newton(fg, active, z0, warm)
     z, lam = y[:6], y[6:]
     stat = jnp.max(jnp.abs(r[:6]))
@@ -162,8 +191,10 @@ def _polish(data: ProblemData, z0, k, released, warm, o: SolverOptions):
 def _polish_released(data: ProblemData, z0, k, released, o: SolverOptions):
     """:func:`_polish` relaxing the first contact ``released`` ``(N,)``, and where that
     gives no certificate, every released contact; each from the multipliers 0 and, where
-    neither of those certifies, from least-squares multipliers. Returns :func:`_polish`'s
-    tuple and the ``(N,)`` contacts relaxed in the answer.
+    neither of those certifies, from least-squares multipliers; where none of those
+    certifies, from least-squares multipliers with the slip rows in cone form, relaxing
+    the first released contact, then the others. Returns :func:`_polish`'s tuple, the
+    ``(N,)`` contacts relaxed in the answer and whether it is in cone form.
 
     Several fingertips can let go at once (a four-finger grasp hanging on two of them):
     relaxing only one leaves the other's apex degenerate, and that polish fails there.
@@ -172,19 +203,20 @@ def _polish_released(data: ProblemData, z0, k, released, o: SolverOptions):
     penalty holds one slip multiplier at 9e3 where the minimum's is 2e-2): from 0 Newton's
     method then wanders off towards another fingertip's apex and creeps (3-finger
     equilibria of ``random_urdfs`` 073, issue 42), while from the least-squares
-    multipliers it converges in three steps. The warm starts are tried last, so that a
-    lane certified before is certified at the same point."""
+    multipliers it converges in three steps. Two released fingertips need not both be at
+    their apexes at the minimum: a four-finger grasp of ``random_urdfs`` 015 (issue 42)
+    stalls with two released, and its minimum has one at its apex and the other on its
+    cone 3e-4 mm deep, which only the cone form certifies (relaxing the other one). The
+    attempts are tried in this order, so that a lane certified before is certified at
+    the same point."""
     first = jax.nn.one_hot(jnp.argmax(released), released.shape[0], dtype=bool) & released
-    masks = jnp.stack([first, released, first, released])
-    warm = jnp.asarray([False, False, True, True])
+    masks = jnp.stack([first, released, first, released, first, released & ~first])
+    warm = jnp.asarray([False, False, True, True, True, True])
+    cone = jnp.asarray([False, False, False, False, True, True])
     # one traced polish over every attempt: the settling stage is in every compiled evaluation
-    tries = jax.vmap(lambda m, w: _polish(data, z0, k, m, w, o))(masks, warm)
-    ok = tries[2]
-    more = jnp.any(released & ~first)  # a second mask differs from the first
-    cold = jnp.where(ok[0] | ~more, 0, 1)
-    hot = jnp.where(ok[2] | ~more, 2, 3)
-    use = jnp.where(ok[cold] | ~ok[hot], cold, hot)
-    return jax.tree_util.tree_map(lambda a: a[use], tries) + (masks[use],)
+    tries = jax.vmap(lambda m, w, c: _polish(data, z0, k, m, w, c, o))(masks, warm, cone)
+    use = jnp.argmax(tries[2])  # the first attempt that certifies (where none does: unused)
+    return jax.tree_util.tree_map(lambda a: a[use], tries) + (masks[use], cone[use])
 
 
 def _kkt_newton(fg, active, z0, warm):
@@ -310,10 +342,10 @@ def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_st
         # a later round's problems are other problems: the lanes it reads are unchanged
         pick = jax.lax.dynamic_slice_in_dim(pick_all, r * MAX_POLISHED, MAX_POLISHED)
         wanted = jax.lax.dynamic_slice_in_dim(wanted_all, r * MAX_POLISHED, MAX_POLISHED)
-        z, lam_rel, ok, (stat, feas, comp), relaxed = jax.vmap(
+        z, lam_rel, ok, (stat, feas, comp), relaxed, cone = jax.vmap(
             lambda l: _polish_released(data, lanes.x[l], lane_k[l], released[l], o)
         )(pick)
-        lam, nu = _original_multipliers(data, z, lam_rel, lane_k[pick], relaxed)
+        lam, nu = _original_multipliers(data, z, lam_rel, lane_k[pick], relaxed, cone)
         new = SolverResult(
             x=z,
             lam=lam,
@@ -367,8 +399,8 @@ def _settle_equilibrium_lane(data: ProblemData, eq: SolverResult, o: SolverOptio
     k = jnp.full((1,), NO_EQUALITY, jnp.int32)
     one = jax.tree_util.tree_map(lambda a: a[None], eq)
     released = _released_contacts(data, one, k)
-    z, lam_rel, ok, (stat, feas, comp), relaxed = _polish_released(data, eq.x, k[0], released[0], o)
-    lam, _ = _original_multipliers(data, z[None], lam_rel[None], k, relaxed[None])
+    z, lam_rel, ok, (stat, feas, comp), relaxed, cone = _polish_released(data, eq.x, k[0], released[0], o)
+    lam, _ = _original_multipliers(data, z[None], lam_rel[None], k, relaxed[None], cone[None])
     new = SolverResult(
         x=z,
         lam=lam[0],
@@ -416,22 +448,32 @@ def _lanes_to_polish(lanes: SolverResult, found, num_starts: int):
     return pick, wanted, rounds
 
 
-def _original_multipliers(data: ProblemData, z, lam_rel, k, released):
+def _original_multipliers(data: ProblemData, z, lam_rel, k, released, cone):
     """``(lam (P, 3N), nu (P,))``: the polish's multipliers ``lam_rel`` ``(P, 3N)`` at
     ``z`` ``(P, 6)`` in the original problem's rows (``k`` ``(P,)`` the equality row,
-    ``released`` ``(P, N)`` the relaxed contacts). The equality's goes to ``nu``; each
+    ``released`` ``(P, N)`` the relaxed contacts, ``cone`` ``(P,)`` whether the other slip
+    rows were in cone form). The equality's goes to ``nu``; each
     released contact ``j``'s pyramid rows' ``d_j`` part to its contact row, ``d P_k /
     d d_j = mu_j / (2 cos^2 phi_j)`` per ``dr_j``, clipped at 0 (the tangential part has
     no row of the original problem, so the envelope derivative of such a boundary misses
-    it)."""
-    n = data.params.c.shape[0]
+    it). A cone-form slip row's multiplier is scaled to the squared row's: on the cone
+    (``a = b``, ``a = mu d / cos^2 phi``) the squared margin's gradient is ``2 a / (mu^2
+    dr)`` times the cone margin's, so ``lam = lam_cone mu^2 dr / (2 a)``."""
+    p = data.params
+    n = p.c.shape[0]
     rows = jnp.arange(3 * n)
     is_eq = rows[None, :] == k[:, None]
     j_rows = released[:, rows % n]  # (P, 3N)
-    cphi = jax.vmap(lambda z: contact_kinematics(to_pose(z, data.lever), data.params)[1])(z)  # (P, N)
-    slope = data.params.mu[None, :] / (2.0 * cphi**2)
+    kin = jax.vmap(lambda z: contact_kinematics(to_pose(z, data.lever), p))(z)
+    d, cphi = kin[0], kin[1]  # (P, N)
+    slope = p.mu[None, :] / (2.0 * cphi**2)
     per_contact = jnp.sum(jnp.where(j_rows, lam_rel, 0.0).reshape(-1, 3, n), axis=1)  # (P, N)
     lam_d = jnp.where(released, jnp.maximum(slope * per_contact, 0.0), 0.0)
+    a = p.mu[None, :] * d / cphi**2
+    lam_slip = lam_rel[:, n : 2 * n]
+    held = cone[:, None] & (lam_slip != 0.0) & (a > 0.0)
+    to_squared = jnp.where(held, p.mu**2 * jax.lax.stop_gradient(p.dr) / (2.0 * jnp.where(held, a, 1.0)), 1.0)
+    lam_rel = lam_rel.at[:, n : 2 * n].set(lam_slip * to_squared)
     lam = jnp.where(is_eq | j_rows, 0.0, lam_rel).at[:, :n].add(lam_d)
     return lam, -jnp.sum(jnp.where(is_eq, lam_rel, 0.0), axis=1)
 

@@ -102,6 +102,8 @@ def _stalled_equilibria():
 
     out = []
     for row in json.loads(STALLED.read_text(encoding="utf-8"))["points"]:
+        if "equality_row" in row:  # a boundary problem's lane
+            continue
         data = problem_data(model_params(jaxgrasp.Grasp.create(**row["grasp"])))
         z = jnp.asarray(row["z"])
         n3 = 3 * row["fingers"]
@@ -135,7 +137,7 @@ def test_a_stalled_equilibrium_far_from_its_multipliers_is_certified_on_its_boun
     for row, data, eq in _stalled_equilibria():
         n = row["fingers"]
         none = jnp.zeros(n, bool)
-        cold = _settle._polish(data, eq.x, _settle.NO_EQUALITY, none, jnp.asarray(False), o)
+        cold = _settle._polish(data, eq.x, _settle.NO_EQUALITY, none, jnp.asarray(False), jnp.asarray(False), o)
         assert not bool(cold[2]), row["object"]  # the polish from 0 alone: no certificate
         batch = lambda t: jax.tree_util.tree_map(lambda a: a[None], t)  # noqa: E731
         settled = jax.tree_util.tree_map(lambda a: a[0], _settle.settle_equilibrium(batch(data), batch(eq), o))
@@ -151,3 +153,67 @@ def test_a_stalled_equilibrium_far_from_its_multipliers_is_certified_on_its_boun
         # lower than where it stalled: the polish went down to the minimum, not up
         assert float(settled.objective) < float(eq.objective)
         assert row["ipopt_status"] == "unstable" and row["ipopt_value"] == 0.0
+
+
+def test_a_fingertip_on_its_cone_beside_one_at_its_apex_is_certified_in_cone_form():
+    """``random_urdfs`` 015 (4 fingers): the force-limit problem of contact 0 stalled with
+    contacts 1 and 3 both released (``d = 0``, squared slip margins -1.6e-8 and -1.3e-8,
+    slip multipliers 5e3). Its minimum, Ipopt's, has contact 3 at its apex and contact 1 on
+    its cone a few tenths of a micrometre deep, where the squared slip margin's gradient is
+    of the order of ``d``: the polish in the squared form does not reach ``tol`` from any of
+    its starts, nor pinned at both apexes. With the slip rows in cone form (and contact 3
+    relaxed) it certifies the point: on contact 1's cone with a positive multiplier, contact
+    3 at its apex, on the force limit, at Ipopt's energy."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxgrasp.model._potential import contact_kinematics, model_params
+    from jaxgrasp.solver._solver import SolverOptions, SolverResult, kkt_tol
+    from jaxgrasp.tolerance import _settle
+    from jaxgrasp.tolerance._problems import constraints, objective, problem_data, to_pose
+
+    row = next(r for r in json.loads(STALLED.read_text(encoding="utf-8"))["points"] if r["object"] == "015")
+    n, k = row["fingers"], row["equality_row"]
+    data = problem_data(model_params(jaxgrasp.Grasp.create(**row["grasp"])))
+    z0 = jnp.asarray(row["z"])
+    o = SolverOptions()
+    tol = kkt_tol(jnp.float64, o)
+    lane = SolverResult(
+        x=z0[None], lam=jnp.zeros((1, 3 * n)), nu=jnp.zeros(1), objective=objective(z0, data)[None],
+        status=jnp.full(1, LaneStatus.NOT_CONVERGED, jnp.int32), stationarity=jnp.zeros(1),
+        feasibility=jnp.zeros(1), complementarity=jnp.zeros(1), steps=jnp.zeros(1, jnp.int32),
+    )
+    released = _settle._released_contacts(data, lane, jnp.asarray([k]))[0]
+    assert np.asarray(released).tolist() == [False, True, False, True]
+    first = jnp.asarray([False, True, False, False])
+    for mask in (first, released):  # the squared form: no certificate, cold or warm
+        for warm in (False, True):
+            squared = _settle._polish(data, z0, k, mask, jnp.asarray(warm), jnp.asarray(False), o)
+            assert not bool(squared[2]), (np.asarray(mask), warm)
+
+    z, lam_rel, ok, (stat, feas, comp), relaxed, cone = _settle._polish_released(data, z0, k, released, o)
+    assert bool(ok) and bool(cone)
+    assert np.asarray(relaxed).tolist() == [False, False, False, True]  # contact 3 pinned at its apex
+    assert max(float(stat), float(feas), float(comp)) <= tol
+    g = np.asarray(constraints(z, data)).reshape(3, n)
+    assert np.all(g >= -tol) and abs(g[2, 0]) <= tol  # feasible, on contact 0's force limit
+    assert abs(g[1, 1]) <= tol and g[0, 1] > 1e-5  # contact 1 on its cone, pressed (d > 0)
+    assert abs(g[0, 3]) <= tol and abs(g[1, 3]) <= tol  # contact 3 at its apex
+    lam, nu = _settle._original_multipliers(data, z[None], lam_rel[None], jnp.asarray([k]), relaxed[None], cone[None])
+    lam = np.asarray(lam[0]).reshape(3, n)
+    assert lam[1, 1] > 0.0 and float(nu[0]) != 0.0
+
+    # the cone row's multiplier mapped to the squared row's: the same force on the pose
+    def cone_row(z):  # contact 1's slip row in cone form
+        u = jax.vmap(lambda j: _settle._tangential(z, data, j)[0])(jnp.arange(n))
+        return _settle._cone_margins(contact_kinematics(to_pose(z, data.lever), data.params), u, data.params)[1]
+
+    def squared_row(z):
+        return constraints(z, data)[n + 1]
+
+    force_cone = float(lam_rel[n + 1]) * np.asarray(jax.grad(cone_row)(z))
+    force_squared = lam[1, 1] * np.asarray(jax.grad(squared_row)(z))
+    np.testing.assert_allclose(force_squared, force_cone, rtol=1e-6, atol=1e-9 * np.max(np.abs(force_cone)))
+    energy = float(objective(z, data)) * float(data.scale) * 1e-3  # J
+    assert abs(energy - row["ipopt_boundary_energy"]) <= 1e-6 * row["ipopt_boundary_energy"]
+    assert objective(z, data) > objective(z0, data)  # the stalled point was outside the cones
