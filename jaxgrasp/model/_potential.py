@@ -38,6 +38,7 @@ __all__ = [
     "elastic_energies",
     "energy_of",
     "margins_of",
+    "slip_torsion",
     "contact_gradients",
     "contact_hessians",
     "kinematics_jacobian",
@@ -260,13 +261,16 @@ def margins_of(kinematics, p: ModelParams):
     dr = jax.lax.stop_gradient(p.dr)
     mu_dr2 = jax.lax.stop_gradient((p.mu * p.dr) ** 2)
     contact = d / dr
-    slip = (
-        p.mu**2 * d**2 / cphi**4
-        - 4.0 * dt2
-        - (225.0 / 16.0) * d * (p.r - d / 3.0) ** 2 * theta**2 / (p.mu**2 * (2.0 * p.r - d))
-    ) / mu_dr2
+    slip = (p.mu**2 * d**2 / cphi**4 - 4.0 * dt2 - slip_torsion(d, theta, p)) / mu_dr2
     force = (jnp.sqrt(p.fmax / (jnp.pi * p.E)) * cphi - d) / dr
     return jnp.where(p.on, jnp.stack([contact, slip, force]), 1.0)
+
+
+def slip_torsion(d, theta, p: ModelParams):
+    """``(N,)`` mm^2, the torsion term of the slip margin (:func:`margins_of`, eq. 9),
+    ``(225/16) d (r - d/3)^2 theta^2 / (mu^2 (2r - d))`` for deformation ``d`` (mm) and
+    torsion angle ``theta`` (rad)."""
+    return (225.0 / 16.0) * d * (p.r - d / 3.0) ** 2 * theta**2 / (p.mu**2 * (2.0 * p.r - d))
 
 
 def _contact_terms(kinematics, p: ModelParams):

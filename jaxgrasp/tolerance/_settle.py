@@ -14,6 +14,7 @@ from jaxgrasp.model._potential import (
     energy_of,
     margins_of,
     rotation_matrix,
+    slip_torsion,
 )
 from jaxgrasp.solver._dense import solve as dense_solve
 from jaxgrasp.solver._rows import over_rows, put_rows
@@ -125,7 +126,7 @@ def _relaxed_problem(z, data: ProblemData, v, relaxed_rows, cone):
 def _cone_margins(kinematics, u, p):
     """``(N,)`` the slip margins in cone form, ``(mu d / cos^2 phi - sqrt(4 |t|^2 + K d
     theta^2)) / dr`` (``t = u - (u . n) n`` the tangential displacement, mm; ``K d theta^2``
-    the torsion term of :func:`~jaxgrasp.model._potential.margins_of`): where ``d >= 0`` the
+    the torsion term, :func:`~jaxgrasp.model._potential.slip_torsion`): where ``d >= 0`` the
     same region as the squared margin ``(mu^2 d^2 / cos^4 phi - 4 dt^2 - K d theta^2) /
     (mu dr)^2``, but with a gradient of order 1 up to the cone's apex, where the squared
     margin's vanishes with ``d``. A fingertip held on its cone a few tenths of a micrometre
@@ -136,8 +137,7 @@ def _cone_margins(kinematics, u, p):
     stationarity a floor of 1e-8."""
     d, cphi, _, theta = kinematics
     t = u - jnp.sum(u * p.n, axis=-1, keepdims=True) * p.n
-    torsion = (225.0 / 16.0) * d * (p.r - d / 3.0) ** 2 * theta**2 / (p.mu**2 * (2.0 * p.r - d))
-    q = 4.0 * jnp.sum(t * t, axis=-1) + torsion
+    q = 4.0 * jnp.sum(t * t, axis=-1) + slip_torsion(d, theta, p)
     safe = q > 0.0  # the square root's derivative is infinite at 0: where-guarded
     b = jnp.where(safe, jnp.sqrt(jnp.where(safe, q, 1.0)), 0.0)
     return (p.mu * d / cphi**2 - b) / jax.lax.stop_gradient(p.dr)
