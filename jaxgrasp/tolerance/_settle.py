@@ -166,7 +166,7 @@ def _polish(data: ProblemData, z0, k, released, warm, cone, o: SolverOptions):
     fg = lambda z: _relaxed_problem(z, data, v, j_rows, cone)
     near = constraints(z0, data) <= RELEASED_TOL
     on_cone = cone & near[n + rows % n] & (rows < n)  # a contact row whose slip row is held
-    active = j_rows | is_eq | (near & ~(on_cone & ~j_rows))
+    active = j_rows | is_eq | (near & ~on_cone)
     y, r, gz = _kkt_newton(fg, active, z0, warm)
     z, lam = y[:6], y[6:]
     stat = jnp.max(jnp.abs(r[:6]))
