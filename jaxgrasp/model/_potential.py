@@ -24,6 +24,7 @@ import jax.numpy as jnp
 from jaxgrasp.model._codes import BoundaryKind
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._units import M_TO_MM, PA_TO_MPA
+from jaxgrasp.solver._contract import contract
 
 __all__ = [
     "ModelParams",
@@ -102,14 +103,14 @@ def rotation_matrix(w):
     ``t^2 < 1e-6`` with the double-``where`` trick, so that value, gradient and Hessian
     are finite and exact at ``w = 0``.
     """
-    a, b = _rotation_coefficients(jnp.dot(w, w), derivatives=False)
+    a, b = _rotation_coefficients(contract("a,a->", w, w), derivatives=False)
     k = _skew(w)
-    return jnp.eye(3, dtype=w.dtype) + a * k + b * (k @ k)
+    return jnp.eye(3, dtype=w.dtype) + a * k + b * contract("ab,bc->ac", k, k)
 
 
 def _skew(w):
     """``(3, 3)`` ``skew(w)`` (``skew(w) v = w x v``), exactly: one product per entry."""
-    return -jnp.asarray(_LEVI_CIVITA, w.dtype) @ w
+    return -contract("ijk,k->ij", jnp.asarray(_LEVI_CIVITA, w.dtype), w)
 
 
 def _rotation_coefficients(t2, derivatives: bool = True):
@@ -150,9 +151,9 @@ def rotation_jacobian(w):
     dozen operations where forward-mode autodiff of the matrix takes hundreds."""
     eps = jnp.asarray(_LEVI_CIVITA, w.dtype)
     eye = jnp.eye(3, dtype=w.dtype)
-    a, b, a1, b1, _, _ = _rotation_coefficients(jnp.dot(w, w))
+    a, b, a1, b1, _, _ = _rotation_coefficients(contract("a,a->", w, w))
     k = _skew(w)
-    inner = a1 * k + b1 * (k @ k)
+    inner = a1 * k + b1 * contract("ab,bc->ac", k, k)
     sym = eye[:, None, :] * w[None, :, None] + w[:, None, None] * eye[None, :, :] - 2.0 * eye[:, :, None] * w
     return 2.0 * inner[:, :, None] * w - a * eps + b * sym
 
@@ -165,18 +166,18 @@ def rotation_hessian_along(w, m):
     + b (m + m^T - 2 tr(m) I)``."""
     eps = jnp.asarray(_LEVI_CIVITA, w.dtype)
     eye = jnp.eye(3, dtype=w.dtype)
-    t2 = jnp.dot(w, w)
+    t2 = contract("a,a->", w, w)
     _, b, a1, b1, a2, b2 = _rotation_coefficients(t2)
-    mu = -jnp.einsum("ijk,ij->k", eps, m)
+    mu = -contract("ijk,ij->k", eps, m)
     sym = m + m.T
     tr = jnp.trace(m)
-    p = jnp.dot(w, mu)
-    q = w @ m @ w - t2 * tr
-    v = a1 * mu + b1 * (sym @ w - 2.0 * tr * w)
+    p = contract("a,a->", w, mu)
+    q = contract("a,ab,b->", w, m, w) - t2 * tr
+    v = a1 * mu + b1 * (contract("ab,b->a", sym, w) - 2.0 * tr * w)
     return (
         2.0 * (a1 * p + b1 * q) * eye
-        + 4.0 * (a2 * p + b2 * q) * jnp.outer(w, w)
-        + 2.0 * (jnp.outer(w, v) + jnp.outer(v, w))
+        + 4.0 * (a2 * p + b2 * q) * contract("a,b->ab", w, w)
+        + 2.0 * (contract("a,b->ab", w, v) + contract("a,b->ab", v, w))
         + b * (sym - 2.0 * tr * eye)
     )
 
@@ -192,13 +193,13 @@ def contact_kinematics(x, p: ModelParams):
     """
     dp, w = x[:3], x[3:]
     rot = rotation_matrix(w)
-    u = p.c @ (rot - jnp.eye(3, dtype=x.dtype)).T + dp  # (N, 3) contact displacement
-    rn = p.n @ rot.T  # (N, 3) rotated normals
+    u = contract("nb,ab->na", p.c, rot - jnp.eye(3, dtype=x.dtype)) + dp  # (N, 3) contact displacement
+    rn = contract("nb,ab->na", p.n, rot)  # (N, 3) rotated normals
     cphi = jnp.sum(p.n * rn, axis=-1)
     d = p.r - jnp.sum(((p.r - p.dr)[:, None] * p.n - u) * rn, axis=-1)
     un = jnp.sum(p.n * u, axis=-1)
     dt2 = jnp.sum(u * u, axis=-1) - un * un
-    theta = p.n @ w
+    theta = contract("na,a->n", p.n, w)
     return d, cphi, dt2, theta
 
 
@@ -218,7 +219,7 @@ def potential_energy(x, p: ModelParams):
 def energy_of(x, kinematics, p: ModelParams):
     """:func:`potential_energy` ``()`` mJ at ``x`` from the contact kinematics there
     ``(d, cos phi, dt^2, theta)`` (:func:`contact_kinematics`)."""
-    return jnp.sum(elastic_energies(kinematics, p)) - jnp.dot(p.weight, x[:3])
+    return jnp.sum(elastic_energies(kinematics, p)) - contract("a,a->", p.weight, x[:3])
 
 
 def elastic_energies(kinematics, p: ModelParams):
@@ -391,26 +392,26 @@ def kinematics_jacobian(x, p: ModelParams):
     d_rot = rotation_jacobian(w)  # (3, 3, k)
     c, n = p.c, p.n
     num = c.shape[0]
-    u = c @ (rot - jnp.eye(3, dtype=dtype)).T + dp  # (N, 3)
-    rn = n @ rot.T  # (N, 3): R n
-    a_c = jnp.einsum("abk,nb->nka", d_rot, c)  # (N, k, 3): dR/dw_k c
-    a_n = jnp.einsum("abk,nb->nka", d_rot, n)  # dR/dw_k n
+    u = contract("nb,ab->na", c, rot - jnp.eye(3, dtype=dtype)) + dp  # (N, 3)
+    rn = contract("nb,ab->na", n, rot)  # (N, 3): R n
+    a_c = contract("abk,nb->nka", d_rot, c)  # (N, k, 3): dR/dw_k c
+    a_n = contract("abk,nb->nka", d_rot, n)  # dR/dw_k n
     arm = (p.r - p.dr)[:, None]  # (N, 1)
 
     cphi = jnp.sum(n * rn, axis=-1)
     d = p.r - jnp.sum((arm * n - u) * rn, axis=-1)
     un = jnp.sum(n * u, axis=-1)
     dt2 = jnp.sum(u * u, axis=-1) - un * un
-    theta = n @ w
+    theta = contract("na,a->n", n, w)
 
     zeros3 = jnp.zeros((num, 3), dtype)
     # rows of dq, (N, 6) each: [d/d dp | d/d w]
-    n_a_n = jnp.einsum("na,nka->nk", n, a_n)
+    n_a_n = contract("na,nka->nk", n, a_n)
     dcphi = jnp.concatenate([zeros3, n_a_n], axis=-1)
-    dd_w = -arm * n_a_n + jnp.einsum("nka,na->nk", a_c, rn) + jnp.einsum("na,nka->nk", u, a_n)
+    dd_w = -arm * n_a_n + contract("nka,na->nk", a_c, rn) + contract("na,nka->nk", u, a_n)
     dd = jnp.concatenate([rn, dd_w], axis=-1)
     pu = u - un[:, None] * n  # (N, 3): the tangential part of u
-    ddt2 = 2.0 * jnp.concatenate([pu, jnp.einsum("nka,na->nk", a_c, pu)], axis=-1)
+    ddt2 = 2.0 * jnp.concatenate([pu, contract("nka,na->nk", a_c, pu)], axis=-1)
     dtheta = jnp.concatenate([zeros3, n], axis=-1)
     dq = jnp.stack([dd, dcphi, ddt2, dtheta], axis=1)  # (N, 4, 6)
     q = jnp.stack([d, cphi, dt2, theta], axis=-1)
@@ -433,17 +434,17 @@ def kinematics_curvature(x, p: ModelParams, geometry, weights):
     c, n = p.c, p.n
     arm = p.r - p.dr
     gd, gc, gt = weights[:, 0], weights[:, 1], weights[:, 2]
-    outer = lambda s, a, b: jnp.einsum("n,na,nb->ab", s, a, b)
+    outer = lambda s, a, b: contract("n,na,nb->ab", s, a, b)
     # every B_kl term: d (-arm n.Bn + Bc.Rn + u.Bn), cos phi (n.Bn), dt^2 (2 Pu.Bc)
     m = outer(gd, rn, c) + outer(gd, u, n) + outer(gc - gd * arm, n, n) + outer(2.0 * gt, pu, c)
     b_part = rotation_hessian_along(x[3:], m)
     # d: (A_k c).(A_l n) + (A_l c).(A_k n), and the dp-w cross term A_k n
-    a_cn = jnp.einsum("n,nka,nla->kl", gd, a_c, a_n)
+    a_cn = contract("n,nka,nla->kl", gd, a_c, a_n)
     ww = b_part + a_cn + a_cn.T
-    pw = jnp.einsum("n,nka->ak", gd, a_n)
+    pw = contract("n,nka->ak", gd, a_n)
     # dt^2 = |P u|^2: 2 (du)^T P (du), du = [I | A_k c]
-    s_c = jnp.einsum("na,nka->nk", n, a_c)  # n . A_k c
-    ww = ww + 2.0 * (jnp.einsum("n,nka,nla->kl", gt, a_c, a_c) - jnp.einsum("n,nk,nl->kl", gt, s_c, s_c))
-    pw = pw + 2.0 * (jnp.einsum("n,nka->ak", gt, a_c) - jnp.einsum("n,na,nk->ak", gt, n, s_c))
+    s_c = contract("na,nka->nk", n, a_c)  # n . A_k c
+    ww = ww + 2.0 * (contract("n,nka,nla->kl", gt, a_c, a_c) - contract("n,nk,nl->kl", gt, s_c, s_c))
+    pw = pw + 2.0 * (contract("n,nka->ak", gt, a_c) - contract("n,na,nk->ak", gt, n, s_c))
     pp = 2.0 * (jnp.sum(gt) * jnp.eye(3, dtype=dtype) - outer(gt, n, n))
     return jnp.block([[pp, pw], [pw.T, ww]])

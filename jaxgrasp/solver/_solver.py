@@ -55,6 +55,7 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
+from jaxgrasp.solver._contract import contract
 from jaxgrasp.solver._direction import newton_direction
 from jaxgrasp.solver._line_search import line_search as ladder_search
 from jaxgrasp.solver._status import LaneStatus
@@ -294,7 +295,7 @@ def _lagrangian_hessian(problem: Problem, d: FirstOrder, x, weights):
 
     def lagrangian(x):
         fx, gx = problem.fg(x)
-        return fx + jnp.dot(weights, gx)
+        return fx + contract("m,m->", weights, gx)
 
     return jax.hessian(lagrangian)(x)
 
@@ -359,7 +360,7 @@ def _phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
     traced graph and less work: ``J`` is already at hand."""
     _, shifted, weights = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
     quadratic = ((s.eq_mask > 0) | (shifted > 0)).astype(d.jac.dtype)
-    return _lagrangian_hessian(problem, d, s.x, weights) + s.rho * (d.jac.T * quadratic) @ d.jac
+    return _lagrangian_hessian(problem, d, s.x, weights) + s.rho * contract("mi,m,mj->ij", d.jac, quadratic, d.jac)
 
 
 def _newton_direction(hmat, gphi, needed, o: SolverOptions):
@@ -442,7 +443,7 @@ def _violation_slope(s: SolverState, d: FirstOrder):
     min(g_i, 0)^2/2`` the violation measure: ``grad v = J^T r``, ``r`` the violated part of
     ``g``."""
     r = jnp.where(s.eq_mask > 0, d.gx, jnp.minimum(d.gx, 0.0))
-    return jnp.max(jnp.abs(d.jac.T @ r))
+    return jnp.max(jnp.abs(contract("mi,m->i", d.jac, r)))
 
 
 def _penalty_growth(s: SolverState, d: FirstOrder, viol, o: SolverOptions):
@@ -513,7 +514,7 @@ def _inner_done(s: SolverState, d: FirstOrder, floor, o: SolverOptions):
     ``floor``: :func:`_rounding_floor`) and whether the inner solve is done (``()`` bool:
     stationary enough, or ``max_inner`` Newton steps taken)."""
     _, _, weights = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
-    gphi = d.grad_f + d.jac.T @ weights
+    gphi = d.grad_f + contract("mi,m->i", d.jac, weights)
     return gphi, (jnp.max(jnp.abs(gphi)) <= _inner_tol(s, floor, o)) | (s.inner >= o.max_inner)
 
 
@@ -556,7 +557,7 @@ def _rounding_floor(s: SolverState, d: FirstOrder):
     quadratic = (s.eq_mask > 0) | (shifted > 0)
     a = jnp.abs(d.jac)
     u = ROUNDING_ULPS * float(jnp.finfo(s.x.dtype).eps) * jnp.abs(s.x)
-    return jnp.max(a.T @ jnp.where(quadratic, a @ u, 0.0))
+    return jnp.max(contract("mi,m->i", a, jnp.where(quadratic, contract("mi,i->m", a, u), 0.0)))
 
 
 def _stationarity_tol(s: SolverState, floor, o: SolverOptions):
@@ -572,8 +573,8 @@ def _initial_multiplier(s: SolverState, d: FirstOrder) -> SolverState:
     """``s`` with a ``NaN`` equality multiplier before the first step (``nu0`` NaN in
     :func:`init`) replaced by its least-squares estimate at ``s.x``: the ``nu`` that best
     solves ``grad f + nu grad h = 0`` (``d``: the problem there; 0 without an equality)."""
-    grad_h = s.eq_mask @ d.jac
-    estimate = -jnp.dot(d.grad_f, grad_h) / jnp.maximum(jnp.dot(grad_h, grad_h), 1e-300)
+    grad_h = contract("m,mi->i", s.eq_mask, d.jac)
+    estimate = -contract("i,i->", d.grad_f, grad_h) / jnp.maximum(contract("i,i->", grad_h, grad_h), 1e-300)
     return dataclasses.replace(s, nu=jnp.where(jnp.isnan(s.nu) & (s.steps == 0), estimate, s.nu))
 
 
@@ -608,7 +609,7 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
     newton = is_running & running(s1, o) & ~inner_done1
     p = _newton_direction(_phi_hessian(problem, s1, d), gphi1, newton, o)
     phi0 = _phi_of(d.fx, d.gx, s1.lam, s1.nu, s1.rho, s1.eq_mask)
-    return Trial(state=s1, newton=newton, p=p, phi0=phi0, slope=jnp.dot(gphi1, p))
+    return Trial(state=s1, newton=newton, p=p, phi0=phi0, slope=contract("i,i->", gphi1, p))
 
 
 def accept(t: Trial, x_new, improve, o: SolverOptions) -> SolverState:

@@ -42,6 +42,7 @@ from jaxgrasp.model._potential import (
     margins_of,
     potential_energy,
 )
+from jaxgrasp.solver._contract import contract
 from jaxgrasp.solver._solver import FirstOrder, Problem, SolverResult
 from jaxgrasp.tolerance._options import EvaluateOptions
 
@@ -124,7 +125,7 @@ def _first_order(z, data: ProblemData) -> FirstOrder:
     de, dm = contact_gradients(tuple(q.T), p)  # (N, 4), (3, N, 4)
     scale = _pose_scale(data, z.dtype)
     gravity = jnp.concatenate([p.weight, jnp.zeros(3, z.dtype)])
-    grad_f = (jnp.einsum("nk,nkj->j", de, dq) - gravity) * scale / data.scale
+    grad_f = (contract("nk,nkj->j", de, dq) - gravity) * scale / data.scale
     # (3, N, 6) products over the 4 kinematic coordinates, written as a product and a sum
     # that XLA fuses into one loop with its neighbours: as an einsum each would be a dot of
     # 4-long rows per contact, which XLA's CPU runtime runs one small matrix at a time (the
@@ -144,10 +145,10 @@ def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProblemData):
     q, dq, geometry, de, dm = d.aux
     w = weights.reshape(3, -1)
     he, hm = contact_hessians(tuple(q.T), p)
-    gq = de / data.scale + jnp.einsum("rn,rnk->nk", w, dm)  # (N, 4): d psi_i / dq_i
-    hq = he / data.scale + jnp.einsum("rn,rnkl->nkl", w, hm)  # (N, 4, 4)
+    gq = de / data.scale + contract("rn,rnk->nk", w, dm)  # (N, 4): d psi_i / dq_i
+    hq = he / data.scale + contract("rn,rnkl->nkl", w, hm)  # (N, 4, 4)
     hd = jnp.sum(hq[:, :, :, None] * dq[:, None, :, :], axis=2)  # (N, 4, 6): H_i dq_i, fused (see _first_order)
-    hx = jnp.einsum("njm,njl->ml", dq, hd) + kinematics_curvature(to_pose(z, data.lever), p, geometry, gq)
+    hx = contract("njm,njl->ml", dq, hd) + kinematics_curvature(to_pose(z, data.lever), p, geometry, gq)
     scale = _pose_scale(data, z.dtype)
     return hx * scale[:, None] * scale[None, :]
 
