@@ -23,11 +23,14 @@ def over_rows(use, block: int, update, carry):
     size = use.shape[0]
     block = min(block, size)
     num_blocks = -(-size // block)
-    # the rows in use first; unsigned, so that indexing with them adds no wrap-around of
-    # negative indices
-    order = jnp.argsort(~use, stable=True).astype(jnp.uint32)
-    order = jnp.concatenate([order, jnp.broadcast_to(order[-1:], (num_blocks * block - size,))])
-    count = jnp.sum(use.astype(jnp.int32))
+    # the rows in use, in increasing order, then row 0 as padding: each row in use is
+    # scattered to its rank among them (a cumulative sum, where a sort would order the
+    # whole batch); unsigned, so that indexing with them adds no wrap-around of negative
+    # indices
+    rank = jnp.cumsum(use.astype(jnp.int32)) - 1
+    slot = jnp.where(use, rank, num_blocks * block)
+    order = jnp.zeros(num_blocks * block, jnp.uint32).at[slot].set(jnp.arange(size, dtype=jnp.uint32), mode="drop")
+    count = rank[-1] + 1
 
     def body(c):
         i, carry = c
