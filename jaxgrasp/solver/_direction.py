@@ -32,7 +32,7 @@ from jaxgrasp.solver._rows import over_rows, put_rows
 __all__ = ["newton_direction", "eigen_direction", "ldl_direction", "EIGH_BLOCK", "CONDITION_BOUND"]
 
 #: lanes per block of the gathered ``eigh`` under ``vmap``
-EIGH_BLOCK = 16
+EIGH_BLOCK = 8
 #: largest ``tr(H) tr(H^-1)`` for which the factorisation's step is taken
 CONDITION_BOUND = 1e10
 #: the eigenvalue floor, relative to the largest ``|e|``
