@@ -126,10 +126,8 @@ def _first_order(z, data: ProblemData) -> FirstOrder:
     scale = _pose_scale(data, z.dtype)
     gravity = jnp.concatenate([p.weight, jnp.zeros(3, z.dtype)])
     grad_f = (contract("nk,nkj->j", de, dq) - gravity) * scale / data.scale
-    # (3, N, 6) products over the 4 kinematic coordinates, written as a product and a sum
-    # that XLA fuses into one loop with its neighbours: as an einsum each would be a dot of
-    # 4-long rows per contact, which XLA's CPU runtime runs one small matrix at a time (the
-    # Hessian's H_i dq_i likewise)
+    # (3, N, 6) products over the 4 kinematic coordinates, a product and a sum as
+    # jaxgrasp.solver._contract.contract writes them (the Hessian's H_i dq_i likewise)
     jac = jnp.sum(dm[:, :, :, None] * dq[None], axis=2).reshape(-1, 6) * scale
     fx = energy_of(x, tuple(q.T), p) / data.scale
     return FirstOrder(fx, margins_of(tuple(q.T), p).reshape(-1), grad_f, jac, aux=(q, dq, geometry, de, dm))
@@ -147,7 +145,7 @@ def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProblemData):
     he, hm = contact_hessians(tuple(q.T), p)
     gq = de / data.scale + contract("rn,rnk->nk", w, dm)  # (N, 4): d psi_i / dq_i
     hq = he / data.scale + contract("rn,rnkl->nkl", w, hm)  # (N, 4, 4)
-    hd = jnp.sum(hq[:, :, :, None] * dq[:, None, :, :], axis=2)  # (N, 4, 6): H_i dq_i, fused (see _first_order)
+    hd = jnp.sum(hq[:, :, :, None] * dq[:, None, :, :], axis=2)  # (N, 4, 6): H_i dq_i (see _first_order)
     hx = contract("njm,njl->ml", dq, hd) + kinematics_curvature(to_pose(z, data.lever), p, geometry, gq)
     scale = _pose_scale(data, z.dtype)
     return hx * scale[:, None] * scale[None, :]
