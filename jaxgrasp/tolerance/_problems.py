@@ -126,9 +126,7 @@ def _first_order(z, data: ProblemData) -> FirstOrder:
     scale = _pose_scale(data, z.dtype)
     gravity = jnp.concatenate([p.weight, jnp.zeros(3, z.dtype)])
     grad_f = (contract("nk,nkj->j", de, dq) - gravity) * scale / data.scale
-    # (3, N, 6) products over the 4 kinematic coordinates, a product and a sum as
-    # jaxgrasp.solver._contract.contract writes them (the Hessian's H_i dq_i likewise)
-    jac = jnp.sum(dm[:, :, :, None] * dq[None], axis=2).reshape(-1, 6) * scale
+    jac = contract("rnk,nkj->rnj", dm, dq).reshape(-1, 6) * scale  # (3N, 6)
     fx = energy_of(x, tuple(q.T), p) / data.scale
     return FirstOrder(fx, margins_of(tuple(q.T), p).reshape(-1), grad_f, jac, aux=(q, dq, geometry, de, dm))
 
@@ -145,7 +143,7 @@ def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProblemData):
     he, hm = contact_hessians(tuple(q.T), p)
     gq = de / data.scale + contract("rn,rnk->nk", w, dm)  # (N, 4): d psi_i / dq_i
     hq = he / data.scale + contract("rn,rnkl->nkl", w, hm)  # (N, 4, 4)
-    hd = jnp.sum(hq[:, :, :, None] * dq[:, None, :, :], axis=2)  # (N, 4, 6): H_i dq_i (see _first_order)
+    hd = contract("nkl,nlj->nkj", hq, dq)  # (N, 4, 6): H_i dq_i
     hx = contract("njm,njl->ml", dq, hd) + kinematics_curvature(to_pose(z, data.lever), p, geometry, gq)
     scale = _pose_scale(data, z.dtype)
     return hx * scale[:, None] * scale[None, :]
