@@ -31,7 +31,7 @@ from jaxgrasp.solver._solver import SolverResult
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._problems import batch_data, problems_treedef
 from jaxgrasp.tolerance._result import Evaluation
-from jaxgrasp.tolerance._stages import finish_problems, settled_equilibrium, solve_stage, unsolved
+from jaxgrasp.tolerance._stages import depend_on, finish_problems, settled_equilibrium, solve_stage, unsolved
 from jaxgrasp.tolerance._starts import LaneStarts, boundary_starts, equilibrium_starts
 from jaxgrasp.tolerance._verdict import evaluations_of, split_temperature
 
@@ -182,7 +182,7 @@ def _solved_rounds(rounds, carried: set[str], functions: Mapping[str, Callable],
     lanes = unsolved(first)
     carry = {name: value for s, v in rounds for name, value in ((s.output, first), (v.output, lanes))}
     carry = {name: value for name, value in carry.items() if name in carried}
-    carry = _per_grasp(jax.tree_util.tree_map(jnp.zeros_like, carry), env["data"])
+    carry = depend_on(jax.tree_util.tree_map(jnp.zeros_like, carry), env["data"])
 
     def body(k, carry):
         starts = jax.lax.switch(k, [lambda c, s=s: _call(functions, s, {**env, **c}) for s, _ in rounds], carry)
@@ -199,17 +199,6 @@ def _solved_rounds(rounds, carried: set[str], functions: Mapping[str, Callable],
         return out
 
     return jax.lax.fori_loop(0, len(rounds), body, carry)
-
-
-def _per_grasp(tree, data):
-    """``tree``'s arrays made to depend on every array of the batch's ``data`` (the same values):
-    under a caller's ``vmap``, whichever fields it maps, the loop's carry is then batched
-    from the start. A carry that is not would be batched only after the first round, and
-    JAX's loop batching would trace the body (the whole solver) once more to find out."""
-    leaves = jax.tree_util.tree_leaves(data)
-    dtype = jnp.result_type(float)
-    flag = jnp.isnan(sum(jnp.sum(jnp.asarray(a, dtype)) for a in leaves))
-    return jax.tree_util.tree_map(lambda a: jnp.where(flag, a, a), tree)
 
 
 def flat_stages(options: EvaluateOptions, names: tuple[str, ...], settle: bool = True) -> dict[str, Callable]:

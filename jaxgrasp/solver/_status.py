@@ -67,4 +67,4 @@ class LaneStatus(Coded):
     CONVERGED = 0, "KKT conditions hold within tolerance"
     INFEASIBLE = 1, "the constraint violation stagnated above infeasible_tol: no feasible point"
     NOT_CONVERGED = 2, "the step budget ran out before the lane converged or proved infeasible"
-    NO_START = 3, "the lane was not run (no starting point was found, or it was inactive)"
+    NO_START = 3, "the lane was not run (no starting point was found, it was inactive, or its problem's first wave of starts settled it)"

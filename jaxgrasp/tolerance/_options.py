@@ -33,6 +33,17 @@ class EvaluateOptions:
             scale) above ``U0``, means the equilibrium is on a boundary: status unstable.
             Also the feasibility a stalled lane must reach for its energy to count as an
             estimate.
+        first_wave: how many starts of each boundary problem run first (its starts
+            ``0 .. first_wave - 1``: the first half-axes of the start frame); the others
+            run only where those leave the problem open
+            (:func:`jaxgrasp.tolerance._stages.rest_needed`): every other start runs too
+            unless at least two of the first converged to one minimum and none ended
+            otherwise, or at least two proved the boundary infeasible and none ended
+            otherwise, and in any case where the problem's first minimum is within
+            ``VALUE_MARGIN`` (30) times the grasp's least (the boundaries that could set
+            the value). Lanes left out carry ``LaneStatus.NO_START``. ``None`` runs
+            every start at once. Measured on the benchmark's mixed set in
+            ``experiments/first_wave.py``.
         smooth_min_temperature: ``None`` (default) for the paper's hard minimum over
             boundaries. A temperature ``T > 0`` in J replaces it by the soft minimum
 
@@ -58,9 +69,13 @@ class EvaluateOptions:
     ray_points: int = 48
     crossing_steps: int = 12
     boundary_tol: float = 1e-8
+    first_wave: int | None = 6
     smooth_min_temperature: float | None = None
 
     def __post_init__(self):
+        w = self.first_wave
+        if w is not None and (isinstance(w, bool) or not isinstance(w, (int, np.integer)) or w < 2):
+            raise ValueError(f"first_wave must be None or an int >= 2 (starts per boundary problem), got {w!r}")
         t = self.smooth_min_temperature
         if t is not None:
             try:

@@ -180,7 +180,9 @@ class Problems:
             ``b = kind * N + contact``.
         start: ``(2N * D, 6)`` starting points of the boundary lanes.
         found: ``(2N * D,)`` whether the start search crossed the boundary (lanes where it
-            did not carry status :attr:`jaxgrasp.LaneStatus.NO_START`).
+            did not carry status :attr:`jaxgrasp.LaneStatus.NO_START`, as do found lanes
+            of a problem that its first wave of starts settled:
+            ``EvaluateOptions.first_wave``).
         constraint_index: ``(2N * D,)`` index ``k`` of the equality in the flattened
             ``(3N,)`` constraint vector (``N + b``).
         lever: ``()`` mm, the length that scales rotations.

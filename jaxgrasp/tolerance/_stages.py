@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrasp.solver._lanes import solve_lane_batches
 from jaxgrasp.solver._solver import SolverResult
+from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._problems import (
     ProblemData,
@@ -23,7 +25,7 @@ from jaxgrasp.tolerance._starts import (
     equilibrium_of,
 )
 
-__all__ = ["solve_stage", "unsolved", "finish_problems", "settled_equilibrium"]
+__all__ = ["solve_stage", "unsolved", "finish_problems", "settled_equilibrium", "first_wave_lanes", "rest_needed", "SAME_POINT", "VALUE_MARGIN", "depend_on"]
 
 
 def settled_equilibrium(data: ProblemData, eq_lanes: SolverResult, options: EvaluateOptions,
@@ -45,13 +47,116 @@ def solve_stage(data: ProblemData, starts: LaneStarts, options: EvaluateOptions)
     the lanes of all grasps (and, under a caller's vmap, of all batches) together. The
     queue starts the force-limit lanes first: they take more steps than the slip lanes
     (most of them prove their boundary infeasible), so started last they would run on
-    with the other slots idle. The equilibrium stage has one lane per grasp."""
+    with the other slots idle. The equilibrium stage has one lane per grasp.
+
+    With ``options.first_wave`` the lanes run in two waves through the same queue: each
+    boundary problem's first starts (:func:`first_wave_lanes`), then the other starts of
+    the problems those leave open (:func:`rest_needed`); a lane of a problem the first
+    wave settled ends ``NO_START``."""
     b, n = data.params.c.shape[:2]
     num_lanes = _num_lanes(data, options)
     theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a[:, None], (b, num_lanes) + a.shape[1:]), data)
     rank = jnp.where(_lane_equalities(n, options.num_starts) >= 2 * n, 0, 1)
-    return solve_lane_batches(lane_problem, theta, starts.x0, starts.eq_mask, starts.nu0, starts.active,
-                              options.solver, rank=rank)
+
+    def solve(active):
+        return solve_lane_batches(lane_problem, theta, starts.x0, starts.eq_mask, starts.nu0, active,
+                                  options.solver, rank=rank)
+
+    first = first_wave_lanes(n, options)
+    if first is None:
+        return solve(starts.active)
+
+    # Two waves, one copy of the queue in the executable: the wave is the loop's counter, so
+    # the queue is traced once (a fori_loop: under a caller's vmap its batching traces the
+    # body once, a while_loop's twice). Wave 0 writes every lane (those it does not run
+    # end NO_START), wave 1 only the lanes it runs.
+    def wave(k, lanes):
+        rest = rest_needed(lanes, first, options.num_starts, starts.u0)
+        active = starts.active & jnp.where(k == 0, first, ~first & rest)
+        out = solve(active)
+        keep = (k == 0) | active
+        return jax.tree_util.tree_map(
+            lambda new, old: jnp.where(keep.reshape(keep.shape + (1,) * (new.ndim - keep.ndim)), new, old), out, lanes
+        )
+
+    return jax.lax.fori_loop(0, 2, wave, depend_on(unsolved(starts), data, starts))
+
+
+def depend_on(tree, *others):
+    """``tree``'s arrays made to depend on every array of ``others`` (the same values):
+    under a caller's ``vmap``, whichever fields it maps, a loop carry made of them is then
+    batched from the start. A carry that is not would be batched only after the first
+    iteration, and JAX's loop batching would trace the body (the whole solver) once more
+    to find out."""
+    leaves = jax.tree_util.tree_leaves(others)
+    dtype = jnp.result_type(float)
+    flag = jnp.isnan(sum(jnp.sum(jnp.asarray(a, dtype)) for a in leaves))
+    return jax.tree_util.tree_map(lambda a: jnp.where(flag, a, a), tree)
+
+
+VALUE_MARGIN = 30.0
+"""A boundary problem whose first-wave minimum (above ``U0``) is at most this many times
+the grasp's least runs every start whatever its first wave found (:func:`rest_needed`):
+a start the first wave left out could change the value only through a minimum more than
+this many times below one that its first wave found from two directions. The widest
+such gap seen on the benchmark's set was 21x (in an unstable grasp, where it could not
+matter)."""
+
+SAME_POINT = 1e-9
+"""Converged lanes of the first wave whose energies (scaled) lie within this fraction of
+the lowest one's magnitude (at least 1) reached one minimum (the solver settles each to
+1e-10; lanes at one minimum end some 3e-10 apart): :func:`rest_needed`."""
+
+
+def first_wave_lanes(n: int, options: EvaluateOptions):
+    """``(2N * D,)`` bool, static: the lanes of the first wave (starts ``0 .. first_wave -
+    1`` of every boundary problem, lane ``b * D + s``), or ``None`` where every start runs
+    at once (``first_wave`` ``None`` or at least ``num_starts``)."""
+    k, d = options.first_wave, options.num_starts
+    if k is None or k >= d:
+        return None
+    return jnp.asarray(np.tile(np.arange(d) < k, 2 * n))
+
+
+def rest_needed(lanes: SolverResult, first, num_starts: int, u0):
+    """``(..., 2N * D)`` bool: the lanes of the boundary problems that the first wave
+    (``first``, :func:`first_wave_lanes`) of ``lanes`` leaves open; ``u0`` ``(...)`` the
+    equilibrium's energy.
+
+    A problem is settled by its first wave where every lane of it that ran ended alike:
+    at least two converged and every converged energy is within :data:`SAME_POINT` of
+    the lowest (one minimum, found from two directions), or at least two proved the
+    boundary infeasible; a lane that stalled (``NOT_CONVERGED``), converged and infeasible
+    lanes together, or two minima leave it open, and so does a first wave of fewer than
+    two lanes. And a problem whose first-wave minimum could set the value is never
+    settled by it: one at most :data:`VALUE_MARGIN` times the grasp's least first-wave
+    minimum above ``u0`` runs every start, so the value and the boundaries near it are
+    those of every start at once.
+
+    Why two: on the benchmark's mixed set every boundary minimum that some start reached
+    was reached by at least four of the twenty, and in its stable grasps no problem that
+    the first wave settled had a lower minimum or a feasible point among its other starts
+    (``experiments/first_wave.py``). In its unstable grasps (value 0, where no boundary
+    but one at ``u0`` can set it) 11 of some 3700 settled problems had."""
+    shape = lanes.status.shape[:-1] + (-1, num_starts)
+    status = lanes.status.reshape(shape)
+    energy = lanes.objective.reshape(shape)
+    ran = first.reshape(-1, num_starts)[0]
+    conv = ran & (status == LaneStatus.CONVERGED)
+    infeasible = ran & (status == LaneStatus.INFEASIBLE)
+    stalled = ran & (status == LaneStatus.NOT_CONVERGED)
+    low = jnp.min(jnp.where(conv, energy, jnp.inf), axis=-1)
+    high = jnp.max(jnp.where(conv, energy, -jnp.inf), axis=-1)
+    one_minimum = high - low <= SAME_POINT * jnp.maximum(jnp.abs(low), 1.0)
+    count = lambda m: jnp.sum(m, axis=-1)  # noqa: E731
+    agree = ~jnp.any(stalled, axis=-1) & (
+        ((count(conv) >= 2) & (count(infeasible) == 0) & one_minimum)
+        | ((count(infeasible) >= 2) & (count(conv) == 0))
+    )
+    above = low - jnp.asarray(u0)[..., None]
+    value = jnp.maximum(jnp.min(above, axis=-1, keepdims=True), 0.0)
+    near_value = jnp.isfinite(low) & (above <= VALUE_MARGIN * value)
+    return jnp.repeat(~(agree & ~near_value), num_starts, axis=-1)
 
 
 def finish_problems(data: ProblemData, eq: SolverResult, lanes: SolverResult, starts: LaneStarts,

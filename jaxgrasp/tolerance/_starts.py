@@ -302,6 +302,9 @@ class LaneStarts:
         at_eq: ``(B, L)`` bool, boundary lanes whose problem the equilibrium already
             solves (:func:`_at_equilibrium`; not ``active``).
         g_eq: ``(B, L)`` each lane's equality margin at the equilibrium.
+        u0: ``(B,)`` the equilibrium's energy (scaled; 0 in the equilibrium stage): the
+            first wave of starts measures boundary energies above it
+            (:func:`jaxgrasp.tolerance._stages.rest_needed`).
     """
 
     x0: Any
@@ -310,6 +313,7 @@ class LaneStarts:
     active: Any
     at_eq: Any
     g_eq: Any
+    u0: Any
 
 
 def equilibrium_starts(data: ProblemData, options: EvaluateOptions) -> LaneStarts:
@@ -319,7 +323,8 @@ def equilibrium_starts(data: ProblemData, options: EvaluateOptions) -> LaneStart
     num_lanes = _num_lanes(data, options)
     z0, masks, nu0, active = jax.vmap(lambda d: _equilibrium_lanes(d, num_lanes))(data)
     no = jnp.zeros(active.shape, bool)
-    return LaneStarts(z0, masks, nu0, active, no, jnp.zeros(active.shape, z0.dtype))
+    zero = jnp.zeros(active.shape, z0.dtype)
+    return LaneStarts(z0, masks, nu0, active, no, zero, zero[:, 0])
 
 
 def equilibrium_of(lanes: SolverResult) -> SolverResult:
@@ -353,4 +358,5 @@ def boundary_starts(data: ProblemData, eq: SolverResult, options: EvaluateOption
     contact_on = jnp.take_along_axis(data.params.on, (lane_k - n) % n, axis=1)
     found = found & (eq.status == LaneStatus.CONVERGED)[:, None] & contact_on
     at_eq = found & (jnp.abs(g_eq) <= tol)
-    return LaneStarts(z0s, jax.nn.one_hot(lane_k, 3 * n, dtype=dtype), nu0s, found & ~at_eq, at_eq, g_eq)
+    return LaneStarts(z0s, jax.nn.one_hot(lane_k, 3 * n, dtype=dtype), nu0s, found & ~at_eq, at_eq, g_eq,
+                      eq.objective.astype(dtype))

@@ -308,7 +308,10 @@ def cube_grid():
         lo, hi = (mid, hi) if ev(mid)[1] == 0 else (lo, mid)
     (v_lo, k_lo), (v_hi, k_hi) = ev(lo), ev(hi)
     assert (k_lo, k_hi) == (0, 1)  # slip below the kink, force limit above it
-    assert v_hi == pytest.approx(v_lo, rel=1e-8)  # continuous at the kink
+    # continuous at the kink, to the precision of the two boundaries' energies: each is
+    # settled to 1e-10 of the scaled energy, about 4e-9 of this value (its scaled value is
+    # 0.026), and its starts at one minimum end up to 3.3e-9 of the value apart (measured)
+    assert v_hi == pytest.approx(v_lo, rel=2e-8)
     best = max(v_lo, v_hi)
     assert max(ev(d)[0] for d in np.linspace(1e-3, 5e-3, 9)) < best
     assert ev(lo - 1e-6)[0] < best and ev(hi + 1e-6)[0] < best

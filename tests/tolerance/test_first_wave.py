@@ -1,0 +1,169 @@
+"""The first wave of starts (``EvaluateOptions.first_wave``): which boundary problems it
+settles, and that what it leaves out would not have changed their answers.
+
+``rest_needed``'s rule is checked on hand-made lanes, one rule per problem. On real lanes
+(``solve_problems`` with every start at once, ``first_wave=None``: lanes are solved
+independently, so the first wave's lanes are those of the full run) every problem that
+the rule settles from its first six starts must have its lowest energy, and its
+infeasibility, among them. The default evaluation (first wave on) must give the full
+run's statuses and values.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxgrasp
+from grasp_draws import NumpyDraw, build_grasp
+from jaxgrasp.engine._evaluate import solve_problems
+from jaxgrasp.solver._solver import SolverResult
+from jaxgrasp.solver._status import LaneStatus
+from jaxgrasp.tolerance._stages import SAME_POINT, VALUE_MARGIN, first_wave_lanes, rest_needed
+
+D = jaxgrasp.EvaluateOptions().num_starts
+C, I, S, X = (int(LaneStatus.CONVERGED), int(LaneStatus.INFEASIBLE), int(LaneStatus.NOT_CONVERGED),
+              int(LaneStatus.NO_START))
+
+
+def _lanes(rows):
+    """A ``(1, len(rows) * D)`` :class:`SolverResult` whose problem ``b`` has the first-wave
+    lanes ``rows[b]`` (``(status, energy)`` each, starts 0, 1, ...) and every other lane
+    ``NO_START``."""
+    status = np.full((len(rows), D), X, np.int32)
+    energy = np.zeros((len(rows), D))
+    for b, row in enumerate(rows):
+        for s, (st, e) in enumerate(row):
+            status[b, s], energy[b, s] = st, e
+    z = jnp.zeros((1, len(rows) * D))
+    fields = {f.name: z for f in dataclasses.fields(SolverResult)}
+    fields.update(status=jnp.asarray(status.reshape(1, -1)), objective=jnp.asarray(energy.reshape(1, -1)))
+    return SolverResult(**fields)
+
+
+# one problem per rule; N = 5 contacts make 10 problems. With U0 = 0.9 the least
+# first-wave minimum above U0 is 0.1 (problem 0): it, and every problem within
+# VALUE_MARGIN times it, runs all its starts.
+U0 = 0.9
+NEAR = U0 + 0.5 * VALUE_MARGIN * 0.1
+FAR = U0 + 2.0 * VALUE_MARGIN * 0.1
+RULES = [
+    ("the least minimum", [(C, 1.0), (C, 1.0)], True),
+    ("a minimum near the value", [(C, NEAR), (C, NEAR), (X, 0.0)], True),
+    ("two at one minimum", [(C, FAR), (C, FAR * (1 + 1e-10)), (X, 0.0)], False),
+    ("six at one minimum", [(C, FAR)] * 6, False),
+    ("two minima", [(C, FAR), (C, FAR * 1.001)], True),
+    ("one converged", [(C, FAR), (X, 0.0), (X, 0.0)], True),
+    ("converged and infeasible", [(C, FAR), (C, FAR), (I, 3.0)], True),
+    ("a stalled lane", [(C, FAR), (C, FAR), (S, 0.9)], True),
+    ("three infeasible", [(I, 5.0), (I, 7.0), (I, 6.0), (X, 0.0)], False),
+    ("one infeasible", [(I, 5.0)], True),
+]
+
+
+def test_rest_needed_rules():
+    """Each problem's other starts run unless its first wave agrees, from two lanes, on a
+    minimum far above the value."""
+    need = np.asarray(rest_needed(_lanes([r for _, r, _ in RULES]), _first(len(RULES)), D, jnp.asarray([U0])))
+    need = need.reshape(len(RULES), D)
+    for b, (name, _, expected) in enumerate(RULES):
+        assert np.all(need[b] == expected), name
+
+
+def test_same_point_is_relative_to_the_energy():
+    """Energies of one minimum agree to ``SAME_POINT`` of their size (at least 1). Each
+    case: the least minimum, at ``U0`` (value 0: it runs all its starts, and no other
+    problem is near it), then two lanes at one point, then two ``2 SAME_POINT`` apart."""
+    near, far = 0.5 * SAME_POINT, 2.0 * SAME_POINT
+    for e in (1e3, 1e-3):
+        rows = [[(C, 0.0), (C, 0.0)], [(C, e), (C, e + max(e, 1.0) * near)], [(C, e), (C, e + max(e, 1.0) * far)]]
+        need = np.asarray(rest_needed(_lanes(rows), _first(len(rows)), D, jnp.asarray([0.0])))
+        assert need.reshape(len(rows), D)[:, 0].tolist() == [True, False, True], e
+
+
+def _first(problems: int):
+    """The first-wave lanes of ``problems`` boundary problems (default options)."""
+    return jnp.asarray(np.tile(np.arange(D) < jaxgrasp.EvaluateOptions().first_wave, problems))
+
+
+def test_first_wave_lanes():
+    """The first ``first_wave`` starts of every problem; ``None`` where all run at once."""
+    o = jaxgrasp.EvaluateOptions()
+    first = np.asarray(first_wave_lanes(3, o)).reshape(6, D)
+    assert np.all(first[:, : o.first_wave]) and not np.any(first[:, o.first_wave :])
+    assert first_wave_lanes(3, dataclasses.replace(o, first_wave=None)) is None
+    assert first_wave_lanes(3, dataclasses.replace(o, first_wave=D)) is None
+
+
+@pytest.mark.parametrize("bad", [0, 1, -3, 2.5, True, "6"])
+def test_first_wave_rejects(bad):
+    with pytest.raises(ValueError, match="first_wave"):
+        jaxgrasp.EvaluateOptions(first_wave=bad)
+
+
+# ------------------------------------------------------------------ on real lanes
+GRASPS = 16  # two-contact grasps of the property tests' generator (the suite's N = 2 executables)
+
+
+@pytest.fixture(scope="module")
+def grasps():
+    rng = np.random.default_rng(41)
+    return [build_grasp(NumpyDraw(rng), n=2) for _ in range(GRASPS)]
+
+
+@pytest.fixture(scope="module")
+def every_start(grasps):
+    """Each grasp's problems with every start run (numpy leaves)."""
+    o = dataclasses.replace(jaxgrasp.EvaluateOptions(), first_wave=None)
+    out = []
+    for g in grasps:
+        p = solve_problems(g, o)
+        out.append({"status": np.where(np.asarray(p.found), np.asarray(p.boundary.status), X),
+                    "energy": np.asarray(p.boundary.objective), "u0": float(p.equilibrium.objective),
+                    "to_joule": float(p.scale) * 1e-3})
+    return out
+
+
+@pytest.mark.slow
+def test_settled_problems_lose_nothing(every_start):
+    """Where the first six starts settle a problem, the other fourteen reach no lower
+    energy (beyond ``SAME_POINT``) and no feasible point where those proved none."""
+    o = jaxgrasp.EvaluateOptions()
+    settled_total = 0
+    for k, p in enumerate(every_start):
+        n_prog = p["status"].size // D
+        first = first_wave_lanes(n_prog // 2, o)
+        wave = SolverResult(**{f.name: jnp.zeros((1, p["status"].size)) for f in dataclasses.fields(SolverResult)})
+        wave = dataclasses.replace(wave, status=jnp.asarray(np.where(np.asarray(first), p["status"], X))[None],
+                                   objective=jnp.asarray(p["energy"])[None])
+        settled = ~np.asarray(rest_needed(wave, first, D, jnp.asarray([p["u0"]]))).reshape(n_prog, D)[:, 0]
+        st, e = p["status"].reshape(n_prog, D), p["energy"].reshape(n_prog, D)
+        w = o.first_wave
+        for b in np.flatnonzero(settled):
+            settled_total += 1
+            low_wave = np.min(np.where(st[b, :w] == C, e[b, :w], np.inf))
+            low_all = np.min(np.where(st[b] == C, e[b], np.inf))
+            if np.isfinite(low_wave):
+                assert low_all >= low_wave - SAME_POINT * max(abs(low_wave), 1.0), (k, b, low_wave, low_all)
+            else:
+                assert not np.any(st[b] == C), (k, b, st[b])
+    assert settled_total >= GRASPS  # the rule settles problems on these grasps: it was exercised
+
+
+@pytest.mark.slow
+def test_default_evaluation_matches_every_start(grasps, every_start, evaluate_many):
+    """``evaluate`` (first wave on) gives the status and the value of every start at once:
+    the value is the lowest problem's least converged energy above ``U0``."""
+    for g, p, r in zip(grasps, every_start, evaluate_many(grasps)):
+        st = p["status"].reshape(-1, D)
+        low = np.min(np.where(st == C, p["energy"].reshape(-1, D), np.inf))
+        status = jaxgrasp.GraspStatus.labels()[int(r.status)]
+        if status == "stable":
+            value = (low - p["u0"]) * p["to_joule"]
+            # starts at one minimum end up to SAME_POINT of the energy apart
+            assert float(r.value) == pytest.approx(value, rel=1e-6, abs=SAME_POINT * abs(p["u0"]) * p["to_joule"])
+        else:
+            assert status in ("unstable", "infeasible"), status
