@@ -71,7 +71,7 @@ def solve_stage(data: ProblemData, starts: LaneStarts, options: EvaluateOptions)
     # body once, a while_loop's twice). Wave 0 writes every lane (those it does not run
     # end NO_START), wave 1 only the lanes it runs.
     def wave(k, lanes):
-        rest = rest_needed(lanes, first, options.num_starts, starts.u0)
+        rest = rest_needed(lanes, first, options.num_starts, starts.u0, starts.at_eq)
         active = starts.active & jnp.where(k == 0, first, ~first & rest)
         out = solve(active)
         keep = (k == 0) | active
@@ -118,10 +118,11 @@ def first_wave_lanes(n: int, options: EvaluateOptions):
     return jnp.asarray(np.tile(np.arange(d) < k, 2 * n))
 
 
-def rest_needed(lanes: SolverResult, first, num_starts: int, u0):
+def rest_needed(lanes: SolverResult, first, num_starts: int, u0, at_eq=None):
     """``(..., 2N * D)`` bool: the lanes of the boundary problems that the first wave
     (``first``, :func:`first_wave_lanes`) of ``lanes`` leaves open; ``u0`` ``(...)`` the
-    equilibrium's energy.
+    equilibrium's energy, ``at_eq`` ``(..., 2N * D)`` (default none) the lanes of
+    problems the equilibrium solves (not run: their minimum is ``u0``, the value 0).
 
     A problem is settled by its first wave where every lane of it that ran ended alike:
     at least two converged and every converged energy is within :data:`SAME_POINT` of
@@ -154,7 +155,11 @@ def rest_needed(lanes: SolverResult, first, num_starts: int, u0):
         | ((count(infeasible) >= 2) & (count(conv) == 0))
     )
     above = low - jnp.asarray(u0)[..., None]
-    value = jnp.maximum(jnp.min(above, axis=-1, keepdims=True), 0.0)
+    if at_eq is not None:
+        above_value = jnp.where(jnp.any(jnp.asarray(at_eq).reshape(shape), axis=-1), 0.0, above)
+    else:
+        above_value = above
+    value = jnp.maximum(jnp.min(above_value, axis=-1, keepdims=True), 0.0)
     near_value = jnp.isfinite(low) & (above <= VALUE_MARGIN * value)
     return jnp.repeat(~(agree & ~near_value), num_starts, axis=-1)
 

@@ -167,3 +167,16 @@ def test_default_evaluation_matches_every_start(grasps, every_start, evaluate_ma
             assert float(r.value) == pytest.approx(value, rel=1e-6, abs=SAME_POINT * abs(p["u0"]) * p["to_joule"])
         else:
             assert status in ("unstable", "infeasible"), status
+
+
+def test_a_boundary_through_the_equilibrium_sets_the_value():
+    """A problem the equilibrium solves (its lanes ``at_eq``, not run) has its minimum at
+    ``U0``: the value is 0, so a problem whose first wave agrees far above ``U0`` is
+    settled; without it that problem would be the least and run every start."""
+    rows = [[], [(C, 1.0), (C, 1.0)]]
+    at_eq = np.zeros((1, 2 * D), bool)
+    at_eq[0, :3] = True
+    u0 = jnp.asarray([0.9])
+    with_eq = np.asarray(rest_needed(_lanes(rows), _first(2), D, u0, jnp.asarray(at_eq))).reshape(2, D)
+    without = np.asarray(rest_needed(_lanes(rows), _first(2), D, u0)).reshape(2, D)
+    assert not np.any(with_eq[1]) and np.all(without[1])
