@@ -1,4 +1,5 @@
-"""Shared helpers of the figure scripts: options, output folder, progress, timing, findings.
+"""Shared helpers of the figure scripts (options, output folder, progress, timing, findings)
+and of the benchmark scripts (:func:`say`).
 
 Every script writes into ``experiments/figures/`` (``--quick``: a small grid, into
 ``experiments/figures/quick/`` so the full-size outputs are not overwritten).
@@ -9,6 +10,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -16,6 +18,11 @@ from pathlib import Path
 import numpy as np
 
 FIGURES = Path(__file__).resolve().parent / "figures"
+
+
+def say(msg: str) -> None:
+    """One log line with the time and the 1-minute load average (timings are read against it)."""
+    print(f"[{time.strftime('%H:%M:%S')} load {os.getloadavg()[0]:.2f}] {msg}", flush=True)
 
 
 def parse_args(description: str) -> argparse.Namespace:

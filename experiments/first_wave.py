@@ -35,13 +35,10 @@ for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
     if str(_p) not in sys.path:
         sys.path.insert(0, str(_p))
 
+from _common import say  # noqa: E402
 from batch_benchmark import make_grasps  # noqa: E402
 
 STATUS = ("converged", "infeasible", "not_converged", "no_start")
-
-
-def say(msg: str) -> None:
-    print(f"[{time.strftime('%H:%M:%S')} load {os.getloadavg()[0]:.2f}] {msg}", flush=True)
 
 
 def options_pair():
@@ -70,7 +67,6 @@ def lanes_of(grasps, options, chunk: int = 100):
 
 def lane_check(grasps) -> dict:
     """Check 1; returns the counts."""
-    import jaxgrasp
     from jaxgrasp.tolerance._stages import SAME_POINT
 
     pair = options_pair()
@@ -232,8 +228,9 @@ def main():
         args.json.parent.mkdir(parents=True, exist_ok=True)
         if not os.access(args.json.parent, os.W_OK):
             raise SystemExit(f"cannot write {args.json}")
-    import jaxgrasp  # noqa: F401  (first: it gives JAX one CPU device per core)
     import jax
+
+    import jaxgrasp  # noqa: F401  (before JAX starts its backend: one CPU device per core)
 
     say(f"first wave vs every start: {args.count} grasps, jax {jax.__version__} ({jax.default_backend()}, "
         f"{jax.device_count()} device(s)), {os.cpu_count()} CPUs, load average {os.getloadavg()}")

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import sys
 import time
 from pathlib import Path
@@ -44,13 +43,10 @@ for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
     if str(_p) not in sys.path:
         sys.path.insert(0, str(_p))
 
+from _common import say
 from batch_benchmark import OVER_REL, STATUS, ipopt_sample, make_grasps, own_programs, rel_diff
 
 LANE_STATUS = ("converged", "infeasible", "not_converged", "no_start")
-
-
-def say(msg: str) -> None:
-    print(f"[{time.strftime('%H:%M:%S')} load {os.getloadavg()[0]:.2f}] {msg}", flush=True)
 
 
 def options_pair():
