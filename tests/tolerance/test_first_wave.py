@@ -16,9 +16,9 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from grasp_draws import NumpyDraw, build_grasp
 
 import jaxgrasp
-from grasp_draws import NumpyDraw, build_grasp
 from jaxgrasp.engine._evaluate import solve_problems
 from jaxgrasp.solver._solver import SolverResult
 from jaxgrasp.solver._status import LaneStatus
