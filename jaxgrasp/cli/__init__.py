@@ -111,7 +111,15 @@ def _main(argv) -> int:
 
 
 def _report(exc: Exception) -> int:
-    """Print the one line of an error that ended a command (:func:`_error_line`); its exit status."""
+    """Print the one line of an error that ended a command (:func:`_error_line`); its exit status.
+
+    A write abandoned by an interrupt prints nothing: the command's thread reaches it
+    while the main thread ends the process with the interrupt's one line, which must be
+    the only line after the progress lines."""
+    from jaxgrasp.io._outputs import Abandoned
+
+    if isinstance(exc, Abandoned):
+        return 130
     status, line = _error_line(exc)
     print(f"jaxgrasp: error: {line}", file=sys.stderr)
     return status

@@ -46,6 +46,7 @@ __all__ = [
     "OutputError",
     "FolderBusy",
     "DiskFull",
+    "Abandoned",
     "NO_SPACE",
     "TEMP_SUFFIX",
     "LOCK_NAME",
@@ -111,6 +112,12 @@ class FolderBusy(OutputError):
     def __init__(self, message: str, pid: int | None):
         super().__init__(message)
         self.pid = pid
+
+
+class Abandoned(OutputError):
+    """A write the command tried after an interrupt abandoned output writing
+    (:func:`abandon`): the interrupt's own handler says what was kept, in the process's
+    last line, so the command ends without a line of its own."""
 
 
 class DiskFull(OutputError):
@@ -199,7 +206,7 @@ def _create_temp(dest: Path) -> tuple[int, Path]:
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
     with _REGISTRY:
         if _ABANDONED:
-            raise OutputError("output writing was abandoned (interrupted)")
+            raise Abandoned("output writing was abandoned (interrupted)")
         for _ in range(_TEMP_TRIES):
             tmp = dest.with_name(f"{dest.name}.{os.getpid()}-{secrets.token_hex(4)}{TEMP_SUFFIX}")
             try:

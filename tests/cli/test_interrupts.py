@@ -600,3 +600,16 @@ def test_machine_failures_are_one_line_exit_1(error, line, monkeypatch, capsys):
     assert capsys.readouterr().err == f"jaxgrasp: error: {line}\n"
     help_text = " ".join(cli.build_parser().format_help().split())
     assert "1 the machine failed (e.g. no space left on the device" in help_text and "2 bad input" in help_text
+
+
+def test_a_write_abandoned_by_the_interrupt_prints_no_line(capsys):
+    """The command's thread can reach a write after the main thread abandoned output
+    writing (the interrupt's handler, which prints the last line): it ends with the
+    interrupt's status and no ``error`` line of its own, whatever it was writing."""
+    from jaxgrasp.io import _outputs as outputs
+
+    assert issubclass(outputs.Abandoned, outputs.OutputError)
+    assert cli._report(outputs.Abandoned("output writing was abandoned (interrupted)")) == 130
+    assert capsys.readouterr().err == ""
+    assert cli._report(outputs.OutputError("cannot write")) == 2  # any other output error: its line
+    assert capsys.readouterr().err == "jaxgrasp: error: cannot write\n"

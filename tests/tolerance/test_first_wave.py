@@ -1,12 +1,11 @@
 """The first wave of starts (``EvaluateOptions.first_wave``): which boundary problems it
 settles, and that what it leaves out would not have changed their answers.
 
-``rest_needed``'s rule is checked on hand-made lanes, one rule per problem. On real lanes
-(``solve_problems`` with every start at once, ``first_wave=None``: lanes are solved
-independently, so the first wave's lanes are those of the full run) every problem that
-the rule settles from its first six starts must have its lowest energy, and its
-infeasibility, among them. The default evaluation (first wave on) must give the full
-run's statuses and values.
+``rest_needed``'s rule is checked here on hand-made lanes, one rule per problem. On real
+lanes, ``tests/tolerance/test_starts.py`` (which solves every start once, with the
+compilation it needs anyway): every problem the rule settles from its first six starts
+has its lowest energy, and its infeasibility, among them, and the default evaluation
+gives the full run's values.
 """
 
 from __future__ import annotations
@@ -16,10 +15,8 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from grasp_draws import NumpyDraw, build_grasp
 
 import jaxgrasp
-from jaxgrasp.engine._evaluate import solve_problems
 from jaxgrasp.solver._solver import SolverResult
 from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.tolerance._stages import SAME_POINT, VALUE_MARGIN, first_wave_lanes, rest_needed
@@ -102,71 +99,6 @@ def test_first_wave_lanes():
 def test_first_wave_rejects(bad):
     with pytest.raises(ValueError, match="first_wave"):
         jaxgrasp.EvaluateOptions(first_wave=bad)
-
-
-# ------------------------------------------------------------------ on real lanes
-GRASPS = 16  # two-contact grasps of the property tests' generator (the suite's N = 2 executables)
-
-
-@pytest.fixture(scope="module")
-def grasps():
-    rng = np.random.default_rng(41)
-    return [build_grasp(NumpyDraw(rng), n=2) for _ in range(GRASPS)]
-
-
-@pytest.fixture(scope="module")
-def every_start(grasps):
-    """Each grasp's problems with every start run (numpy leaves)."""
-    o = dataclasses.replace(jaxgrasp.EvaluateOptions(), first_wave=None)
-    out = []
-    for g in grasps:
-        p = solve_problems(g, o)
-        out.append({"status": np.where(np.asarray(p.found), np.asarray(p.boundary.status), X),
-                    "energy": np.asarray(p.boundary.objective), "u0": float(p.equilibrium.objective),
-                    "to_joule": float(p.scale) * 1e-3})
-    return out
-
-
-@pytest.mark.slow
-def test_settled_problems_lose_nothing(every_start):
-    """Where the first six starts settle a problem, the other fourteen reach no lower
-    energy (beyond ``SAME_POINT``) and no feasible point where those proved none."""
-    o = jaxgrasp.EvaluateOptions()
-    settled_total = 0
-    for k, p in enumerate(every_start):
-        n_prog = p["status"].size // D
-        first = first_wave_lanes(n_prog // 2, o)
-        wave = SolverResult(**{f.name: jnp.zeros((1, p["status"].size)) for f in dataclasses.fields(SolverResult)})
-        wave = dataclasses.replace(wave, status=jnp.asarray(np.where(np.asarray(first), p["status"], X))[None],
-                                   objective=jnp.asarray(p["energy"])[None])
-        settled = ~np.asarray(rest_needed(wave, first, D, jnp.asarray([p["u0"]]))).reshape(n_prog, D)[:, 0]
-        st, e = p["status"].reshape(n_prog, D), p["energy"].reshape(n_prog, D)
-        w = o.first_wave
-        for b in np.flatnonzero(settled):
-            settled_total += 1
-            low_wave = np.min(np.where(st[b, :w] == C, e[b, :w], np.inf))
-            low_all = np.min(np.where(st[b] == C, e[b], np.inf))
-            if np.isfinite(low_wave):
-                assert low_all >= low_wave - SAME_POINT * max(abs(low_wave), 1.0), (k, b, low_wave, low_all)
-            else:
-                assert not np.any(st[b] == C), (k, b, st[b])
-    assert settled_total >= GRASPS  # the rule settles problems on these grasps: it was exercised
-
-
-@pytest.mark.slow
-def test_default_evaluation_matches_every_start(grasps, every_start, evaluate_many):
-    """``evaluate`` (first wave on) gives the status and the value of every start at once:
-    the value is the lowest problem's least converged energy above ``U0``."""
-    for g, p, r in zip(grasps, every_start, evaluate_many(grasps)):
-        st = p["status"].reshape(-1, D)
-        low = np.min(np.where(st == C, p["energy"].reshape(-1, D), np.inf))
-        status = jaxgrasp.GraspStatus.labels()[int(r.status)]
-        if status == "stable":
-            value = (low - p["u0"]) * p["to_joule"]
-            # starts at one minimum end up to SAME_POINT of the energy apart
-            assert float(r.value) == pytest.approx(value, rel=1e-6, abs=SAME_POINT * abs(p["u0"]) * p["to_joule"])
-        else:
-            assert status in ("unstable", "infeasible"), status
 
 
 def test_a_boundary_through_the_equilibrium_sets_the_value():

@@ -42,12 +42,26 @@ that ``test_evaluate.py`` already uses); ``solve_problems`` compiles once for 2 
 
 from __future__ import annotations
 
+import dataclasses
+
+import jax.numpy as jnp
 import numpy as np
 import pytest
+from grasp_draws import NumpyDraw, build_grasp
 
 import jaxgrasp
 from jaxgrasp.engine._evaluate import solve_problems
+from jaxgrasp.solver._solver import SolverResult
 from jaxgrasp.solver._status import LaneStatus
+from jaxgrasp.tolerance._stages import SAME_POINT, first_wave_lanes, rest_needed
+
+D = jaxgrasp.EvaluateOptions().num_starts
+C, X = int(LaneStatus.CONVERGED), int(LaneStatus.NO_START)
+
+EVERY_START = jaxgrasp.EvaluateOptions(first_wave=None)
+"""Every start of every problem solved once (no first wave): lanes are solved
+independently, so the value of a subset of the starts is the minimum over its lanes.
+``tests/tolerance/test_first_wave.py`` solves with the same options (one compilation)."""
 
 CASES = {
     # experiments/start_search.py --offset 0.1, N = 2: generation 9 #15
@@ -129,7 +143,7 @@ def subset_values(grasp) -> dict:
     Per boundary problem the lowest converged lane among the subset (as
     ``jaxgrasp.tolerance._verdict.best_starts``), then the lowest problem minus ``U0``."""
     d = jaxgrasp.EvaluateOptions().num_starts
-    progs = solve_problems(grasp)
+    progs = solve_problems(grasp, EVERY_START)
     status = np.where(np.asarray(progs.found), np.asarray(progs.boundary.status), int(LaneStatus.NO_START))
     obj = np.where(status == int(LaneStatus.CONVERGED), np.asarray(progs.boundary.objective), np.inf)
     obj = obj.reshape(-1, d)
@@ -168,3 +182,68 @@ def test_axis_starts_suffice(results, refs, case):
     assert v[jaxgrasp.EvaluateOptions().num_starts] == pytest.approx(float(res.value), rel=1e-9), v
     for k in (12, 6):
         assert abs(v[k] - iv) <= 1e-6 * iv, (case, v, iv)
+
+
+# ------------------------------------------------------- the first wave on real lanes
+GRASPS = 12  # two-contact grasps of the property tests' generator (the suite's N = 2 executables)
+
+
+@pytest.fixture(scope="module")
+def grasps():
+    rng = np.random.default_rng(41)
+    return [build_grasp(NumpyDraw(rng), n=2) for _ in range(GRASPS)]
+
+
+@pytest.fixture(scope="module")
+def every_start(grasps):
+    """Each grasp's problems with every start run (numpy leaves)."""
+    out = []
+    for g in list(CASES.values()) + grasps:
+        p = solve_problems(g, EVERY_START)
+        out.append({"status": np.where(np.asarray(p.found), np.asarray(p.boundary.status), X),
+                    "energy": np.asarray(p.boundary.objective), "u0": float(p.equilibrium.objective),
+                    "to_joule": float(p.scale) * 1e-3})
+    return out
+
+
+@pytest.mark.slow
+def test_settled_problems_lose_nothing(every_start):
+    """Where the first six starts settle a problem, the other fourteen reach no lower
+    energy (beyond ``SAME_POINT``) and no feasible point where those proved none."""
+    o = jaxgrasp.EvaluateOptions()
+    settled_total = 0
+    for k, p in enumerate(every_start):
+        n_prog = p["status"].size // D
+        first = first_wave_lanes(n_prog // 2, o)
+        wave = SolverResult(**{f.name: jnp.zeros((1, p["status"].size)) for f in dataclasses.fields(SolverResult)})
+        wave = dataclasses.replace(wave, status=jnp.asarray(np.where(np.asarray(first), p["status"], X))[None],
+                                   objective=jnp.asarray(p["energy"])[None])
+        settled = ~np.asarray(rest_needed(wave, first, D, jnp.asarray([p["u0"]]))).reshape(n_prog, D)[:, 0]
+        st, e = p["status"].reshape(n_prog, D), p["energy"].reshape(n_prog, D)
+        w = o.first_wave
+        for b in np.flatnonzero(settled):
+            settled_total += 1
+            low_wave = np.min(np.where(st[b, :w] == C, e[b, :w], np.inf))
+            low_all = np.min(np.where(st[b] == C, e[b], np.inf))
+            if np.isfinite(low_wave):
+                assert low_all >= low_wave - SAME_POINT * max(abs(low_wave), 1.0), (k, b, low_wave, low_all)
+            else:
+                assert not np.any(st[b] == C), (k, b, st[b])
+    assert settled_total >= GRASPS  # the rule settles problems on these grasps: it was exercised
+
+
+@pytest.mark.slow
+def test_default_evaluation_matches_every_start(grasps, every_start, evaluate_many):
+    """``evaluate`` (first wave on) gives the status and the value of every start at once:
+    the value is the lowest problem's least converged energy above ``U0``."""
+    every = list(CASES.values()) + grasps
+    for g, p, r in zip(every, every_start, evaluate_many(every), strict=True):
+        st = p["status"].reshape(-1, D)
+        low = np.min(np.where(st == C, p["energy"].reshape(-1, D), np.inf))
+        status = jaxgrasp.GraspStatus.labels()[int(r.status)]
+        if status == "stable":
+            value = (low - p["u0"]) * p["to_joule"]
+            # starts at one minimum end up to SAME_POINT of the energy apart
+            assert float(r.value) == pytest.approx(value, rel=1e-6, abs=SAME_POINT * abs(p["u0"]) * p["to_joule"])
+        else:
+            assert status in ("unstable", "infeasible"), status
