@@ -33,8 +33,11 @@ in, and these cases were chosen where it does not.
 ``test_default_starts_agree_with_ipopt`` checks the default evaluation against the
 independent CasADi/Ipopt reference to 1e-6.
 ``test_axis_starts_suffice`` solves every start lane of every boundary problem once
-(``jaxgrasp.tolerance._stages.solve_problems``, default options); lanes are independent, so the
-value a subset of the starts would give is the minimum over those lanes.
+(``jaxgrasp.tolerance._stages.solve_problems``, :data:`EVERY_START`); lanes are independent, so the
+value a subset of the starts would give is the minimum over those lanes. The first wave
+of starts (``EvaluateOptions.first_wave``) is checked on the same lanes and on random
+two-contact grasps: what it leaves out changes no problem it settles, and the default
+evaluation gives every start's value.
 
 The grasps go through the session's ``evaluate_many`` (the compiled 2-contact evaluator
 that ``test_evaluate.py`` already uses); ``solve_problems`` compiles once for 2 contacts.
@@ -61,7 +64,7 @@ C, X = int(LaneStatus.CONVERGED), int(LaneStatus.NO_START)
 EVERY_START = jaxgrasp.EvaluateOptions(first_wave=None)
 """Every start of every problem solved once (no first wave): lanes are solved
 independently, so the value of a subset of the starts is the minimum over its lanes.
-``tests/tolerance/test_first_wave.py`` solves with the same options (one compilation)."""
+The first wave's checks at the end of this module read the same lanes."""
 
 CASES = {
     # experiments/start_search.py --offset 0.1, N = 2: generation 9 #15
