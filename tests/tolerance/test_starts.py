@@ -125,12 +125,18 @@ CASES = {
 
 
 @pytest.fixture(scope="module")
-def results(evaluate_many, ipopt_reference):
+def case_lanes():
+    """``{case: every start's lanes}`` (:func:`lanes_of`), solved once for the module."""
+    return {k: lanes_of(g) for k, g in CASES.items()}
+
+
+@pytest.fixture(scope="module")
+def results(evaluate_many, ipopt_reference, case_lanes):
     """``{case: (Evaluation, subset values)}``; Ipopt runs in its worker meanwhile."""
     if ipopt_reference is not None:
         ipopt_reference.submit(list(CASES.values()))
     evals = evaluate_many(list(CASES.values()))
-    return {k: (e, subset_values(g)) for (k, g), e in zip(CASES.items(), evals)}
+    return {k: (e, subset_values(case_lanes[k])) for k, e in zip(CASES, evals)}
 
 
 @pytest.fixture(scope="module")
@@ -140,19 +146,24 @@ def refs(results, ipopt_reference):
     return {k: ipopt_reference.get(g) for k, g in CASES.items()}
 
 
-def subset_values(grasp) -> dict:
-    """Value (J) from the first 20 (all), 12 (half-axes) and 6 (positive axes) starts.
+def lanes_of(grasp) -> dict:
+    """Every start's lanes of ``grasp`` (:data:`EVERY_START`), numpy: ``status`` (``NO_START``
+    where no start was found) and ``energy`` ``(2N * D,)`` (scaled), ``u0`` and
+    ``to_joule`` (scaled energy -> J)."""
+    p = solve_problems(grasp, EVERY_START)
+    return {"status": np.where(np.asarray(p.found), np.asarray(p.boundary.status), X),
+            "energy": np.asarray(p.boundary.objective), "u0": float(p.equilibrium.objective),
+            "to_joule": float(p.scale) * 1e-3}
+
+
+def subset_values(lanes: dict) -> dict:
+    """Value (J) from the first 20 (all), 12 (half-axes) and 6 (positive axes) starts of
+    ``lanes`` (:func:`lanes_of`).
 
     Per boundary problem the lowest converged lane among the subset (as
     ``jaxgrasp.tolerance._verdict.best_starts``), then the lowest problem minus ``U0``."""
-    d = jaxgrasp.EvaluateOptions().num_starts
-    progs = solve_problems(grasp, EVERY_START)
-    status = np.where(np.asarray(progs.found), np.asarray(progs.boundary.status), int(LaneStatus.NO_START))
-    obj = np.where(status == int(LaneStatus.CONVERGED), np.asarray(progs.boundary.objective), np.inf)
-    obj = obj.reshape(-1, d)
-    u0 = float(progs.equilibrium.objective)
-    to_joule = float(progs.scale) * 1e-3  # scaled energy -> mJ -> J
-    return {k: (float(np.min(obj[:, :k])) - u0) * to_joule for k in (d, 12, 6)}
+    obj = np.where(lanes["status"] == C, lanes["energy"], np.inf).reshape(-1, D)
+    return {k: (float(np.min(obj[:, :k])) - lanes["u0"]) * lanes["to_joule"] for k in (D, 12, 6)}
 
 
 def _ctx(case, res, ref) -> str:
@@ -198,15 +209,9 @@ def grasps():
 
 
 @pytest.fixture(scope="module")
-def every_start(grasps):
-    """Each grasp's problems with every start run (numpy leaves)."""
-    out = []
-    for g in list(CASES.values()) + grasps:
-        p = solve_problems(g, EVERY_START)
-        out.append({"status": np.where(np.asarray(p.found), np.asarray(p.boundary.status), X),
-                    "energy": np.asarray(p.boundary.objective), "u0": float(p.equilibrium.objective),
-                    "to_joule": float(p.scale) * 1e-3})
-    return out
+def every_start(case_lanes, grasps):
+    """Every start's lanes (:func:`lanes_of`) of the cases, then of ``grasps``."""
+    return list(case_lanes.values()) + [lanes_of(g) for g in grasps]
 
 
 @pytest.mark.slow
