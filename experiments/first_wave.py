@@ -130,7 +130,6 @@ def simulate_waves(p, d: int, sizes=(2, 4, 6, 8, 10, 12)) -> dict:
     import jax.numpy as jnp
 
     import jaxgrasp
-    from jaxgrasp.solver._solver import SolverResult
     from jaxgrasp.tolerance._stages import SAME_POINT, first_wave_lanes, rest_needed
 
     found, st, e, sp = p.found, p.boundary.status, p.boundary.objective, p.boundary.steps
@@ -142,10 +141,7 @@ def simulate_waves(p, d: int, sizes=(2, 4, 6, 8, 10, 12)) -> dict:
     out = {}
     for k in sizes:
         first = np.asarray(first_wave_lanes(n, jaxgrasp.EvaluateOptions(first_wave=k)))
-        zero = jnp.zeros((b, lanes))
-        wave = SolverResult(**{f.name: zero for f in dataclasses.fields(SolverResult)})
-        wave = dataclasses.replace(wave, status=jnp.asarray(np.where(first, st, 3)), objective=jnp.asarray(e))
-        need = np.asarray(rest_needed(wave, jnp.asarray(first), d, u0))
+        need = np.asarray(rest_needed(jnp.asarray(np.where(first, st, 3)), jnp.asarray(e), jnp.asarray(first), d, u0))
         ran = (st != 3) & (first | need)
         settled = ~need.reshape(b, -1, d)[..., 0] & np.any((st != 3).reshape(b, -1, d), -1)
         s3, e3, f3 = st.reshape(b, -1, d), e.reshape(b, -1, d), first.reshape(-1, d)[0]

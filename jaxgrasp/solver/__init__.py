@@ -6,7 +6,7 @@ work queue. Its statuses are :class:`LaneStatus`; :class:`Coded` is the base of 
 named integer code of jaxgrasp.
 """
 
-from jaxgrasp.solver._lanes import solve_lane_batches, solve_lanes
+from jaxgrasp.solver._lanes import Held, solve_lane_batches, solve_lanes
 from jaxgrasp.solver._solver import FirstOrder, Problem, SolverOptions, SolverResult, solve
 from jaxgrasp.solver._status import Coded, LaneStatus
 
@@ -18,6 +18,7 @@ __all__ = [
     "solve",
     "solve_lanes",
     "solve_lane_batches",
+    "Held",
     "Coded",
     "LaneStatus",
 ]

@@ -19,6 +19,7 @@ started (active lanes only). One ``while_loop`` with static shapes, so it compos
 
 from __future__ import annotations
 
+import dataclasses
 from functools import partial
 from typing import Any, Callable, NamedTuple
 
@@ -27,8 +28,26 @@ import jax.numpy as jnp
 
 from jaxgrasp.solver import _solver as solver
 from jaxgrasp.solver._solver import SolverOptions, SolverResult
+from jaxgrasp.solver._status import LaneStatus
 
-__all__ = ["solve_lanes", "solve_lane_batches"]
+__all__ = ["solve_lanes", "solve_lane_batches", "Held"]
+
+
+class Held(NamedTuple):
+    """Lanes a queue holds back until its ``release`` frees them (:func:`solve_lanes`),
+    each field with leading axis ``L``.
+
+    Attributes:
+        lanes: ``(L,)`` bool, the active lanes held back.
+        group: ``(L,)`` int in ``[0, L)``: ``release`` is asked about a group's lanes once
+            every lane of the group that was not held has finished.
+        aux: pytree, what ``release`` reads besides the lanes' results (e.g. per-group
+            data broadcast to its lanes).
+    """
+
+    lanes: Any
+    group: Any
+    aux: Any = ()
 
 
 def solve_lanes(
@@ -40,6 +59,8 @@ def solve_lanes(
     active,
     options: SolverOptions = SolverOptions(),
     rank=None,
+    held: Held | None = None,
+    release: Callable | None = None,
 ) -> SolverResult:
     """Solve a batch of lanes with early exit of finished lanes (leading axis ``L``).
 
@@ -65,38 +86,56 @@ def solve_lanes(
             computation is its own); the time does: lanes expected to take many steps
             ranked first finish while others still fill the slots, instead of running
             alone at the end of the queue with the other slots idle.
+        held: :class:`Held` lanes (default none), run only where ``release`` frees them:
+            a second wave that shares the queue with the first, so that the slots the
+            first wave's last lanes leave idle take the second's.
+        release: ``release(status, objective, complete, aux) -> (L,) bool`` (static),
+            called once before the first step and then at most every
+            :data:`RELEASE_EVERY` loop steps while some group has completed since the
+            last call (at once where no lane waits): ``status`` ``(L,)`` and
+            ``objective`` ``(L,)`` are every lane's as far as it ran (final for finished
+            lanes; ``objective`` meaningful for converged ones), ``complete`` ``(L,)``
+            whether the lane's group has completed (its unheld lanes all finished),
+            ``aux`` is ``held.aux``. Of the lanes it returns, the held ones of complete
+            groups run (before the unheld lanes still waiting, in ``rank`` order among
+            those freed at one call); a held lane never freed ends ``NO_START``.
 
     Returns:
         :class:`~jaxgrasp.solver._solver.SolverResult` with leading axis ``L``.
     """
     rank = jnp.zeros(jnp.shape(active), jnp.int32) if rank is None else jnp.asarray(rank, jnp.int32)
-    run = _queue_over_lanes(problem, options)
-    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active), rank)
+    if held is None:
+        held = Held(jnp.zeros(jnp.shape(active), bool), jnp.zeros(jnp.shape(active), jnp.int32))
+    held = Held(jnp.asarray(held.lanes, bool), jnp.asarray(held.group, jnp.int32), held.aux)
+    run = _queue_over_lanes(problem, options, release)
+    return run(theta, jnp.asarray(x0), jnp.asarray(eq_mask), jnp.asarray(nu0), jnp.asarray(active), rank, held)
 
 
-def _queue_over_lanes(problem: Callable, options: SolverOptions):
-    """``run(theta, x0, eq_mask, nu0, active, rank) -> SolverResult``: :func:`_solve_lanes`
-    as a ``custom_vmap`` whose batching rule folds the batch axis into the lane axis.
+def _queue_over_lanes(problem: Callable, options: SolverOptions, release: Callable | None = None):
+    """``run(theta, x0, eq_mask, nu0, active, rank, held) -> SolverResult``:
+    :func:`_solve_lanes` as a ``custom_vmap`` whose batching rule folds the batch axis
+    into the lane axis.
 
     Under ``jax.vmap`` (e.g. one call per grasp, vmapped over grasps) all ``B * L`` lanes
     then share one queue of ``min(ceil(slot_fraction * B * L), max_slots)`` slots, instead
     of ``B`` queues advancing in lockstep until the slowest of them is empty. Results are
-    the same lane by lane.
+    the same lane by lane (each batch's groups stay its own).
     """
 
     @jax.custom_batching.custom_vmap
-    def run(theta, x0, eq_mask, nu0, active, rank):
-        return _solve_lanes(problem, theta, x0, eq_mask, nu0, active, rank, options)
+    def run(theta, x0, eq_mask, nu0, active, rank, held):
+        return _solve_lanes(problem, theta, x0, eq_mask, nu0, active, rank, held, release, options)
 
     @run.def_vmap
-    def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active, rank):
+    def _fold_batch_into_lanes(axis_size, in_batched, theta, x0, eq_mask, nu0, active, rank, held):
         def batched(a, is_batched):
             a = jnp.asarray(a)
             return a if is_batched else jnp.broadcast_to(a, (axis_size,) + a.shape)
 
-        args = jax.tree_util.tree_map(batched, (theta, x0, eq_mask, nu0, active, rank), tuple(in_batched))
-        *args, rank = args
-        out = solve_lane_batches(problem, *args, options, rank=rank)  # a nested vmap folds into it in turn
+        args = jax.tree_util.tree_map(batched, (theta, x0, eq_mask, nu0, active, rank, held), tuple(in_batched))
+        *args, rank, held = args
+        # a nested vmap folds into it in turn
+        out = solve_lane_batches(problem, *args, options, rank=rank, held=held, release=release)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return run
@@ -111,10 +150,13 @@ def solve_lane_batches(
     active,
     options: SolverOptions = SolverOptions(),
     rank=None,
+    held: Held | None = None,
+    release: Callable | None = None,
 ) -> SolverResult:
     """:func:`solve_lanes` of ``B`` batches of ``L`` lanes (every argument with leading
     axes ``(B, L)``), all ``B * L`` lanes in one queue; the result has leading axes
-    ``(B, L)``.
+    ``(B, L)``. Each batch's ``held.group`` ids are its own (``release`` sees them
+    flattened, batch after batch).
 
     This is what :func:`solve_lanes` does under ``jax.vmap`` (its batching rule calls it),
     called directly: a caller that holds a batch, such as
@@ -124,10 +166,15 @@ def solve_lane_batches(
     """
     x0 = jnp.asarray(x0)
     b, num_lanes = x0.shape[:2]
-    flat = lambda a: jnp.asarray(a).reshape((b * num_lanes,) + jnp.shape(a)[2:])
-    rank = None if rank is None else flat(jnp.broadcast_to(jnp.asarray(rank), x0.shape[:2]))
+    flat = lambda a: jnp.asarray(a).reshape((b * num_lanes,) + jnp.shape(a)[2:])  # noqa: E731
+    lanes_of = lambda a: jnp.broadcast_to(jnp.asarray(a), x0.shape[:2])  # noqa: E731
+    rank = None if rank is None else flat(lanes_of(rank))
+    if held is not None:
+        # group ids made unique across the batches: batch k's ids are offset by k * L
+        group = lanes_of(held.group) + num_lanes * jnp.arange(b, dtype=jnp.int32)[:, None]
+        held = Held(flat(lanes_of(held.lanes)), flat(group), jax.tree_util.tree_map(flat, held.aux))
     out = solve_lanes(problem, jax.tree_util.tree_map(flat, theta), flat(x0), flat(eq_mask), flat(nu0),
-                      flat(active), options, rank=rank)
+                      flat(active), options, rank=rank, held=held, release=release)
     return jax.tree_util.tree_map(lambda a: a.reshape((b, num_lanes) + a.shape[1:]), out)
 
 
@@ -138,6 +185,20 @@ class _Queue(NamedTuple):
     slots: Any  # SolverState, leading axis W: the lanes in flight
     idx: Any  # (W,) int: the lane each slot holds
     ptr: Any  # () int: how many lanes of the queue order have been loaded into a slot
+    objective: Any  # (L,) f at each lane's point when it last stepped
+    left: Any  # (L,) int: per group, its unheld active lanes not yet finished
+    freed: Any  # (L,) bool: held lanes released (queued)
+    later: Any  # (L,) int: the freed lanes in the order they load, first num_later valid
+    num_later: Any  # () int
+    later_ptr: Any  # () int: how many of them have been loaded
+    pending: Any  # () bool: a group has completed since release was last asked
+    tick: Any  # () int: loop steps taken
+
+
+RELEASE_EVERY = 8
+"""Loop steps between two calls of a queue's ``release`` at most, while lanes wait to be
+loaded (each call reads every lane; a group freed a few steps late costs nothing while
+the slots are busy)."""
 
 
 def _take(tree, idx):
@@ -164,36 +225,87 @@ def _running_slots(slots, o: SolverOptions):
     return jax.vmap(lambda s: solver.running(s, o))(slots)
 
 
-def _advance(problem, theta, order, num_active, o: SolverOptions, q: _Queue) -> _Queue:
-    """One loop step: every slot steps and is written back; finished slots are refilled.
+class _Lanes(NamedTuple):
+    """What the loop reads and never changes."""
 
-    ``order`` is the ``(L,)`` queue order of the lanes, its first ``num_active`` entries the
-    active lanes.
-    """
-    th = _take(theta, q.idx)
+    theta: Any
+    order: Any  # (L,) the unheld active lanes by rank, then the rest
+    num_first: Any  # () int: how many of order are loaded
+    by_rank: Any  # (L,) every lane by rank (the order freed lanes load in)
+    held: Held
+    nu0: Any  # (L,) the multipliers a freed lane starts with
+
+
+def _free(release, lanes: _Lanes, q: _Queue) -> _Queue:
+    """Ask ``release`` about the complete groups: their held lanes it frees are queued
+    (``later``, in ``by_rank`` order) and made runnable."""
+    num_lanes = q.freed.shape[0]
+    complete = q.left[lanes.held.group] == 0
+    new = lanes.held.lanes & ~q.freed & complete & release(q.states.status, q.objective, complete, lanes.held.aux)
+    in_order = new[lanes.by_rank]
+    pos = jnp.where(in_order, q.num_later + jnp.cumsum(in_order) - 1, num_lanes)
+    later = q.later.at[pos].set(lanes.by_rank.astype(q.later.dtype), mode="drop")
+    states = dataclasses.replace(
+        q.states,
+        status=jnp.where(new, LaneStatus.NOT_CONVERGED, q.states.status).astype(jnp.int32),
+        nu=jnp.where(new, lanes.nu0, q.states.nu),
+    )
+    return q._replace(states=states, freed=q.freed | new, later=later, num_later=q.num_later + jnp.sum(new),
+                      pending=jnp.asarray(False))
+
+
+def _refill(lanes: _Lanes, q: _Queue, done) -> _Queue:
+    """Finished slots ``done`` ``(W,)`` take the next lanes: freed ones first, then the
+    unheld ones in order; a slot left without one holds its finished lane."""
+    num_lanes = lanes.order.shape[0]
+    avail = q.num_later - q.later_ptr
+    k = jnp.cumsum(done) - 1  # the k-th finished slot takes the k-th lane waiting
+    from_later = k < avail
+    cand = q.ptr + k - avail
+    refill = done & (from_later | (cand < lanes.num_first))
+    pick = jnp.where(from_later, q.later[jnp.minimum(q.later_ptr + k, num_lanes - 1)],
+                     lanes.order[jnp.clip(cand, 0, num_lanes - 1)])
+    new_idx = jnp.where(refill, pick, q.idx)
+    slots = jax.tree_util.tree_map(
+        lambda a, b: jnp.where(refill.reshape((-1,) + (1,) * (a.ndim - 1)), b, a),
+        q.slots,
+        _take(q.states, new_idx),
+    )
+    return q._replace(slots=slots, idx=new_idx, ptr=q.ptr + jnp.sum(refill & ~from_later),
+                      later_ptr=q.later_ptr + jnp.sum(done & from_later))
+
+
+def _advance(problem, release, lanes: _Lanes, o: SolverOptions, q: _Queue) -> _Queue:
+    """One loop step: every slot steps, running ones are written back; finished slots
+    are refilled (after ``release`` frees the held lanes of groups that just completed)."""
+    num_lanes = q.freed.shape[0]
+    th = _take(lanes.theta, q.idx)
+    was = _running_slots(q.slots, o)
     # solver.step of every slot, with one line search over all of them (only the slots
     # that need more than the full step walk the rest of the ladder)
     trials = jax.vmap(lambda s, t: solver.propose(problem(t), s, o))(q.slots, th)
-    merit_of = lambda x, k: solver.merit(problem(_take(th, k)), _take(trials.state, k), x)
+    merit_of = lambda x, k: solver.merit(problem(_take(th, k)), _take(trials.state, k), x)  # noqa: E731
     x_new, improve = solver.line_search(merit_of, trials, o)
     slots = jax.vmap(lambda t, x, i: solver.accept(t, x, i, o))(trials, x_new, improve)
-    at = q.idx.astype(jnp.uint32)  # in range: no wrap-around of negative indices
-    states = jax.tree_util.tree_map(lambda a, b: a.at[at].set(b), q.states, slots)
+    # only running slots write back: an idle slot's copy may be stale (a held lane since freed)
+    at = jnp.where(was, q.idx, num_lanes).astype(jnp.uint32)
+    states = jax.tree_util.tree_map(lambda a, b: a.at[at].set(b, mode="drop"), q.states, slots)
+    objective = q.objective.at[at].set(trials.fx, mode="drop")
     done = ~_running_slots(slots, o)
-    # the k-th finished slot takes order[ptr + k], while lanes remain
-    rank = jnp.cumsum(done) - 1
-    cand = q.ptr + rank
-    refill = done & (cand < num_active)
-    new_idx = jnp.where(refill, order[jnp.minimum(cand, order.shape[0] - 1)], q.idx)
-    slots = jax.tree_util.tree_map(
-        lambda a, b: jnp.where(refill.reshape((-1,) + (1,) * (a.ndim - 1)), b, a),
-        slots,
-        _take(states, new_idx),
-    )
-    return _Queue(states, slots, new_idx, q.ptr + jnp.sum(refill))
+    q = q._replace(states=states, slots=slots, objective=objective, tick=q.tick + 1)
+    if release is not None:
+        ended = was & done & ~lanes.held.lanes[q.idx]
+        group = lanes.held.group[q.idx]
+        left = q.left.at[jnp.where(ended, group, num_lanes)].add(-1, mode="drop")
+        pending = q.pending | jnp.any(ended & (left[group] == 0))
+        waiting = lanes.num_first - q.ptr + q.num_later - q.later_ptr
+        fire = pending & ((q.tick % RELEASE_EVERY == 0) | (waiting < jnp.sum(done)))
+        q = q._replace(left=left, pending=pending)
+        q = jax.lax.cond(fire, partial(_free, release, lanes), lambda q: q, q)
+    return _refill(lanes, q, done)
 
 
-def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, rank, o: SolverOptions) -> SolverResult:
+def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, rank, held: Held, release, o: SolverOptions) -> SolverResult:
     """:func:`solve_lanes` on one flat batch of ``L`` lanes: the queue loop.
 
     One loop of ``W`` slots to the end. A second, narrower loop for the last long lanes
@@ -201,17 +313,45 @@ def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, rank, o: SolverOption
     for the same results lane by lane."""
     num_lanes = x0.shape[0]
     width = _num_slots(num_lanes, o)
-    states = jax.vmap(lambda x, m, nu, a: solver.init(x, m, nu, a, o))(x0, eq_mask, nu0, active)
-    order = _queue_order(active, rank)
-    num_active = jnp.sum(jnp.asarray(active, jnp.int32))
-    advance = partial(_advance, problem, theta, order, num_active, o)
+    active = jnp.asarray(active, bool)
+    hold = held.lanes & active
+    if release is None:  # nothing is ever freed: held lanes are inactive
+        active, hold = active & ~hold, jnp.zeros_like(hold)
+    first = active & ~hold
+    states = jax.vmap(lambda x, m, nu, a: solver.init(x, m, nu, a, o))(x0, eq_mask, nu0, first)
+    lanes = _Lanes(
+        theta=theta,
+        order=_queue_order(first, rank),
+        num_first=jnp.sum(first.astype(jnp.int32)),
+        by_rank=_queue_order(jnp.ones_like(first), rank),
+        held=Held(hold, held.group, held.aux),
+        nu0=jax.vmap(lambda x, m, nu: solver.init(x, m, nu, True, o).nu)(x0, eq_mask, nu0),
+    )
+    left = jnp.zeros(num_lanes, jnp.int32).at[held.group].add(first.astype(jnp.int32), mode="drop")
+    q = _Queue(
+        states=states,
+        slots=_take(states, jnp.zeros(width, jnp.int32)),
+        idx=jnp.zeros(width, jnp.int32),
+        ptr=jnp.asarray(0, jnp.int32),
+        objective=jnp.zeros(num_lanes, x0.dtype),
+        left=left,
+        freed=jnp.zeros(num_lanes, bool),
+        later=jnp.zeros(num_lanes, jnp.int32),
+        num_later=jnp.asarray(0, jnp.int32),
+        later_ptr=jnp.asarray(0, jnp.int32),
+        pending=jnp.asarray(False),
+        tick=jnp.asarray(0, jnp.int32),
+    )
+    if release is not None:  # groups with no unheld lane are complete from the start
+        q = _free(release, lanes, q)
+    # every slot takes a lane; one left without holds lane 0's state, marked finished
+    q = q._replace(slots=dataclasses.replace(q.slots, status=jnp.full(width, LaneStatus.NO_START, jnp.int32)))
+    q = _refill(lanes, q, jnp.ones(width, bool))
 
     def cond(q: _Queue):
         return jnp.any(_running_slots(q.slots, o))
 
-    idx0 = order[:width]
-    ptr0 = jnp.minimum(jnp.asarray(width), num_active)
-    q = jax.lax.while_loop(cond, advance, _Queue(states, _take(states, idx0), idx0, ptr0))
+    q = jax.lax.while_loop(cond, partial(_advance, problem, release, lanes, o), q)
     # theta taken by lane index, as the slots take it: fg then compiles as in the loop (given
     # theta itself, XLA simplifies across its broadcasts and rounds f(x) differently).
     th = _take(theta, jnp.arange(num_lanes))

@@ -385,6 +385,8 @@ class Trial:
         p: ``(n,)`` the Newton direction (capped at ``max_step``).
         phi0: ``()`` phi at ``state.x``.
         slope: ``()`` phi's directional derivative along ``p``.
+        fx: ``()`` ``f`` at ``state.x``: a lane that ends at this step (its multiplier
+            update converged it) does not move, so this is its final objective.
     """
 
     state: SolverState
@@ -392,6 +394,7 @@ class Trial:
     p: Any
     phi0: Any
     slope: Any
+    fx: Any
 
 
 def merit(problem, s: SolverState, x):
@@ -609,7 +612,7 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
     newton = is_running & running(s1, o) & ~inner_done1
     p = _newton_direction(_phi_hessian(problem, s1, d), gphi1, newton, o)
     phi0 = _phi_of(d.fx, d.gx, s1.lam, s1.nu, s1.rho, s1.eq_mask)
-    return Trial(state=s1, newton=newton, p=p, phi0=phi0, slope=contract("i,i->", gphi1, p))
+    return Trial(state=s1, newton=newton, p=p, phi0=phi0, slope=contract("i,i->", gphi1, p), fx=d.fx)
 
 
 def accept(t: Trial, x_new, improve, o: SolverOptions) -> SolverState:

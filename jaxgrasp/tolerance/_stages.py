@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.solver._lanes import solve_lane_batches
+from jaxgrasp.solver._lanes import Held, solve_lane_batches
 from jaxgrasp.solver._solver import SolverResult
 from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.tolerance._options import EvaluateOptions
@@ -32,6 +32,7 @@ __all__ = [
     "settled_equilibrium",
     "first_wave_lanes",
     "rest_needed",
+    "first_wave_verdict",
     "SAME_POINT",
     "VALUE_MARGIN",
     "depend_on",
@@ -60,36 +61,41 @@ def solve_stage(data: ProblemData, starts: LaneStarts, options: EvaluateOptions)
     with the other slots idle. The equilibrium stage has one lane per grasp.
 
     With ``options.first_wave`` the lanes run in two waves through the same queue: each
-    boundary problem's first starts (:func:`first_wave_lanes`), then the other starts of
-    the problems those leave open (:func:`rest_needed`); a lane of a problem the first
-    wave settled ends ``NO_START``."""
+    boundary problem's first starts (:func:`first_wave_lanes`) are loaded at once, the
+    other starts are held (:class:`~jaxgrasp.solver.Held`, one group per grasp) and those
+    of the problems the first wave leaves open (:func:`rest_needed`) are freed in the
+    loop step where the grasp's first wave ends; a lane of a problem the first wave
+    settled ends ``NO_START``."""
     b, n = data.params.c.shape[:2]
     num_lanes = _num_lanes(data, options)
     theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a[:, None], (b, num_lanes) + a.shape[1:]), data)
     rank = jnp.where(_lane_equalities(n, options.num_starts) >= 2 * n, 0, 1)
 
-    def solve(active):
-        return solve_lane_batches(lane_problem, theta, starts.x0, starts.eq_mask, starts.nu0, active,
-                                  options.solver, rank=rank)
-
     first = first_wave_lanes(n, options)
     if first is None:
-        return solve(starts.active)
+        return solve_lane_batches(lane_problem, theta, starts.x0, starts.eq_mask, starts.nu0, starts.active,
+                                  options.solver, rank=rank)
 
-    # Two waves, one copy of the queue in the executable: the wave is the loop's counter, so
-    # the queue is traced once (a fori_loop: under a caller's vmap its batching traces the
-    # body once, a while_loop's twice). Wave 0 writes every lane (those it does not run
-    # end NO_START), wave 1 only the lanes it runs.
-    def wave(k, lanes):
-        rest = rest_needed(lanes, first, options.num_starts, starts.u0, starts.at_eq)
-        active = starts.active & jnp.where(k == 0, first, ~first & rest)
-        out = solve(active)
-        keep = (k == 0) | active
-        return jax.tree_util.tree_map(
-            lambda new, old: jnp.where(keep.reshape(keep.shape + (1,) * (new.ndim - keep.ndim)), new, old), out, lanes
-        )
+    # One queue for both waves. Each problem is a group: the other starts of a problem
+    # whose first wave disagrees are freed as soon as its own first lanes end, and those
+    # of a problem near the value once the grasp's first wave has ended (the margin reads
+    # the grasp's least minimum), so they fill the slots as the first wave drains.
+    def release(status, objective, complete, aux):
+        u0, at_eq = aux
+        shape = (-1, num_lanes)
+        agree, near = first_wave_verdict(status.reshape(shape), objective.reshape(shape), first,
+                                         options.num_starts, u0.reshape(shape)[:, 0], at_eq.reshape(shape))
+        done = complete.reshape(agree.shape + (options.num_starts,))[..., 0]
+        free = done & (~agree | (jnp.all(done, axis=-1, keepdims=True) & near))
+        return jnp.repeat(free, options.num_starts, axis=-1).reshape(-1)
 
-    return jax.lax.fori_loop(0, 2, wave, depend_on(unsolved(starts), data, starts))
+    held = Held(
+        lanes=jnp.broadcast_to(~first, (b, num_lanes)),
+        group=jnp.broadcast_to(jnp.arange(num_lanes, dtype=jnp.int32) // options.num_starts, (b, num_lanes)),
+        aux=(jnp.broadcast_to(jnp.asarray(starts.u0)[:, None], (b, num_lanes)), starts.at_eq),
+    )
+    return solve_lane_batches(lane_problem, theta, starts.x0, starts.eq_mask, starts.nu0, starts.active,
+                              options.solver, rank=rank, held=held, release=release)
 
 
 def depend_on(tree, *others):
@@ -125,12 +131,13 @@ def first_wave_lanes(n: int, options: EvaluateOptions):
     k, d = options.first_wave, options.num_starts
     if k is None or k >= d:
         return None
-    return jnp.asarray(np.tile(np.arange(d) < k, 2 * n))
+    return np.tile(np.arange(d) < k, 2 * n)  # NumPy: a constant wherever it is used (not a tracer)
 
 
-def rest_needed(lanes: SolverResult, first, num_starts: int, u0, at_eq=None):
+def rest_needed(status, objective, first, num_starts: int, u0, at_eq=None):
     """``(..., 2N * D)`` bool: the lanes of the boundary problems that the first wave
-    (``first``, :func:`first_wave_lanes`) of ``lanes`` leaves open; ``u0`` ``(...)`` the
+    (``first``, :func:`first_wave_lanes`) leaves open, from the lanes' ``status`` and
+    ``objective`` ``(..., 2N * D)`` (those of the first wave final); ``u0`` ``(...)`` the
     equilibrium's energy, ``at_eq`` ``(..., 2N * D)`` (default none) the lanes of
     problems the equilibrium solves (not run: their minimum is ``u0``, the value 0).
 
@@ -149,9 +156,19 @@ def rest_needed(lanes: SolverResult, first, num_starts: int, u0, at_eq=None):
     the first wave settled had a lower minimum or a feasible point among its other starts
     (``experiments/first_wave.py``). In its unstable grasps (value 0, where no boundary
     but one at ``u0`` can set it) 11 of the 2821 settled problems had."""
-    shape = lanes.status.shape[:-1] + (-1, num_starts)
-    status = lanes.status.reshape(shape)
-    energy = lanes.objective.reshape(shape)
+    agree, near = first_wave_verdict(status, objective, first, num_starts, u0, at_eq)
+    return jnp.repeat(~(agree & ~near), num_starts, axis=-1)
+
+
+def first_wave_verdict(status, objective, first, num_starts: int, u0, at_eq=None):
+    """``(agree, near)``, each ``(..., 2N)`` bool, per boundary problem (arguments as
+    :func:`rest_needed`, which is ``~(agree & ~near)`` per lane): whether its first-wave
+    lanes agree (one minimum from two, or two proofs of infeasibility, nothing else), and
+    whether its first-wave minimum lies within :data:`VALUE_MARGIN` times the grasp's least
+    (``near`` reads every problem of the grasp; ``agree`` only the problem's own lanes)."""
+    shape = status.shape[:-1] + (-1, num_starts)
+    status = status.reshape(shape)
+    energy = objective.reshape(shape)
     ran = first.reshape(-1, num_starts)[0]
     conv = ran & (status == LaneStatus.CONVERGED)
     infeasible = ran & (status == LaneStatus.INFEASIBLE)
@@ -170,8 +187,8 @@ def rest_needed(lanes: SolverResult, first, num_starts: int, u0, at_eq=None):
     else:
         above_value = above
     value = jnp.maximum(jnp.min(above_value, axis=-1, keepdims=True), 0.0)
-    near_value = jnp.isfinite(low) & (above <= VALUE_MARGIN * value)
-    return jnp.repeat(~(agree & ~near_value), num_starts, axis=-1)
+    near = jnp.isfinite(low) & (above <= VALUE_MARGIN * value)
+    return agree, near
 
 
 def finish_problems(data: ProblemData, eq: SolverResult, lanes: SolverResult, starts: LaneStarts,

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrasp.solver._lanes import solve_lanes  # importing jaxgrasp turns on float64
+from jaxgrasp.solver._lanes import Held, solve_lanes  # importing jaxgrasp turns on float64
 from jaxgrasp.solver._solver import SolverOptions, SolverResult, solve
 from jaxgrasp.solver._status import LaneStatus
 
@@ -289,6 +289,89 @@ def test_solve_lanes_under_outer_vmap():
         want = _solve_batch(QUEUE_CASES, t, x, eq_mask, nu, a, QUEUE_OPTIONS)
         _queue_is_exercised(want)
         _assert_same_lanes(jax.tree_util.tree_map(lambda a: a[b], got), want)
+
+
+# --- held lanes: a second wave freed by a rule on the first wave's results, in one queue
+
+GROUP = 8  # lanes per group; the first FIRST of each group run at once, the others are held
+FIRST = 3
+
+
+def _release_rule(status, objective, complete, aux):
+    """A group's held lanes run where one of its first lanes did not converge, or where
+    its least converged objective lies below the group's bar (``aux``, per lane)."""
+    status, objective, bar = (jnp.reshape(a, (-1, GROUP)) for a in (status, objective, aux))
+    first = jnp.arange(GROUP) < FIRST
+    conv = first & (status == LaneStatus.CONVERGED)
+    low = jnp.min(jnp.where(conv, objective, jnp.inf), axis=-1)
+    free = jnp.any(first & (status != LaneStatus.CONVERGED) & (status != LaneStatus.NO_START), axis=-1) | (
+        low < bar[:, 0]
+    )
+    return jnp.repeat(free, GROUP)
+
+
+def _held(seed: int):
+    """``Held`` lanes of :func:`_lane_batch`'s size: all but the first ``FIRST`` of each
+    group of ``GROUP``, with a bar per group drawn at random."""
+    lane = np.arange(NUM_LANES)
+    bar = np.repeat(np.random.default_rng(seed + 100).uniform(-1.0, 3.0, NUM_LANES // GROUP), GROUP)
+    return Held(jnp.asarray(lane % GROUP >= FIRST), jnp.asarray(lane // GROUP), jnp.asarray(bar))
+
+
+def _freed(want: SolverResult, held: Held, active) -> np.ndarray:
+    """``(L,)`` the held lanes the rule frees, applied to the first lanes' final results
+    (every held lane ``NO_START``, as the queue shows them)."""
+    first = ~np.asarray(held.lanes)
+    status = np.where(first, np.asarray(want.status), LaneStatus.NO_START)
+    complete = jnp.ones(status.shape, bool)
+    return np.asarray(_release_rule(jnp.asarray(status), want.objective, complete, held.aux)) & ~first & np.asarray(active)
+
+
+def _released_queue(theta, x0, eq_mask, nu0, active, held):
+    fg = _lane_functions(QUEUE_CASES)
+    return solve_lanes(lambda t: lambda x: fg(x, t), theta, x0, eq_mask, nu0, active, QUEUE_OPTIONS,
+                       held=held, release=_release_rule)
+
+
+def _check_release(got: SolverResult, want: SolverResult, theta, x0, eq_mask, nu0, active, held):
+    """``got`` is ``want`` (every lane solved) where a lane ran, and an inactive lane's
+    result (``solve`` with ``active`` false) for each held lane the rule did not free."""
+    free = _freed(want, held, active)
+    idle = np.asarray(held.lanes) & ~free
+    unrun = _solve_batch(QUEUE_CASES, theta, x0, eq_mask, nu0, jnp.zeros(x0.shape[0], bool), QUEUE_OPTIONS)
+    expected = jax.tree_util.tree_map(
+        lambda u, w: np.where(idle.reshape((-1,) + (1,) * (np.ndim(w) - 1)), np.asarray(u), np.asarray(w)), unrun, want
+    )
+    _assert_same_lanes(got, expected)
+    # the batch exercises the rule: groups freed and groups not, more lanes than slots
+    groups = free.reshape(-1, GROUP).any(axis=1)
+    assert groups.any() and not groups.all()
+    assert np.sum(free) + np.sum(~np.asarray(held.lanes) & np.asarray(active)) > QUEUE_OPTIONS.max_slots
+
+
+@pytest.mark.slow  # compiles solve_lanes batches
+def test_held_lanes_run_where_released():
+    """Held lanes run only where ``release``, shown every first lane's final result,
+    frees them; each lane that runs is what ``solve`` gives it, the others never start."""
+    lanes = _lane_batch(0)
+    held = _held(0)
+    want = _solve_batch(QUEUE_CASES, *lanes, QUEUE_OPTIONS)
+    got = jax.jit(_released_queue)(*lanes, held)
+    _check_release(got, want, *lanes, held)
+
+
+@pytest.mark.slow  # compiles solve_lanes batches
+def test_held_lanes_under_outer_vmap():
+    """Folded into one queue by an outer ``vmap``, each batch's groups are still its own:
+    a group of one batch is freed by its own first lanes only."""
+    batches = [_lane_batch(seed) for seed in (1, 2, 3)]
+    helds = [_held(seed) for seed in (1, 2, 3)]
+    stacked = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *batches)
+    held = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *helds)
+    got = jax.jit(jax.vmap(_released_queue))(*stacked, held)
+    for b, (lanes, h) in enumerate(zip(batches, helds)):
+        want = _solve_batch(QUEUE_CASES, *lanes, QUEUE_OPTIONS)
+        _check_release(jax.tree_util.tree_map(lambda a: a[b], got), want, *lanes, h)
 
 
 def test_solve_lanes_rank_orders_the_queue_not_the_results():

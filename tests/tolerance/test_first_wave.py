@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 
 import jaxgrasp
-from jaxgrasp.solver._solver import SolverResult
 from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.tolerance._stages import SAME_POINT, VALUE_MARGIN, first_wave_lanes, rest_needed
 
@@ -27,7 +26,7 @@ C, I, S, X = (int(LaneStatus.CONVERGED), int(LaneStatus.INFEASIBLE), int(LaneSta
 
 
 def _lanes(rows):
-    """A ``(1, len(rows) * D)`` :class:`SolverResult` whose problem ``b`` has the first-wave
+    """``(status, energy)``, each ``(1, len(rows) * D)``: problem ``b`` has the first-wave
     lanes ``rows[b]`` (``(status, energy)`` each, starts 0, 1, ...) and every other lane
     ``NO_START``."""
     status = np.full((len(rows), D), X, np.int32)
@@ -35,10 +34,7 @@ def _lanes(rows):
     for b, row in enumerate(rows):
         for s, (st, e) in enumerate(row):
             status[b, s], energy[b, s] = st, e
-    z = jnp.zeros((1, len(rows) * D))
-    fields = {f.name: z for f in dataclasses.fields(SolverResult)}
-    fields.update(status=jnp.asarray(status.reshape(1, -1)), objective=jnp.asarray(energy.reshape(1, -1)))
-    return SolverResult(**fields)
+    return jnp.asarray(status.reshape(1, -1)), jnp.asarray(energy.reshape(1, -1))
 
 
 # one problem per rule; N = 5 contacts make 10 problems. With U0 = 0.9 the least
@@ -64,7 +60,7 @@ RULES = [
 def test_rest_needed_rules():
     """Each problem's other starts run unless its first wave agrees, from two lanes, on a
     minimum far above the value."""
-    need = np.asarray(rest_needed(_lanes([r for _, r, _ in RULES]), _first(len(RULES)), D, jnp.asarray([U0])))
+    need = np.asarray(rest_needed(*_lanes([r for _, r, _ in RULES]), _first(len(RULES)), D, jnp.asarray([U0])))
     need = need.reshape(len(RULES), D)
     for b, (name, _, expected) in enumerate(RULES):
         assert np.all(need[b] == expected), name
@@ -77,7 +73,7 @@ def test_same_point_is_relative_to_the_energy():
     near, far = 0.5 * SAME_POINT, 2.0 * SAME_POINT
     for e in (1e3, 1e-3):
         rows = [[(C, 0.0), (C, 0.0)], [(C, e), (C, e + max(e, 1.0) * near)], [(C, e), (C, e + max(e, 1.0) * far)]]
-        need = np.asarray(rest_needed(_lanes(rows), _first(len(rows)), D, jnp.asarray([0.0])))
+        need = np.asarray(rest_needed(*_lanes(rows), _first(len(rows)), D, jnp.asarray([0.0])))
         assert need.reshape(len(rows), D)[:, 0].tolist() == [True, False, True], e
 
 
@@ -109,6 +105,6 @@ def test_a_boundary_through_the_equilibrium_sets_the_value():
     at_eq = np.zeros((1, 2 * D), bool)
     at_eq[0, :3] = True
     u0 = jnp.asarray([0.9])
-    with_eq = np.asarray(rest_needed(_lanes(rows), _first(2), D, u0, jnp.asarray(at_eq))).reshape(2, D)
-    without = np.asarray(rest_needed(_lanes(rows), _first(2), D, u0)).reshape(2, D)
+    with_eq = np.asarray(rest_needed(*_lanes(rows), _first(2), D, u0, jnp.asarray(at_eq))).reshape(2, D)
+    without = np.asarray(rest_needed(*_lanes(rows), _first(2), D, u0)).reshape(2, D)
     assert not np.any(with_eq[1]) and np.all(without[1])

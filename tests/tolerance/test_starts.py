@@ -45,7 +45,6 @@ that ``test_evaluate.py`` already uses); ``solve_problems`` compiles once for 2 
 
 from __future__ import annotations
 
-import dataclasses
 
 import jax.numpy as jnp
 import numpy as np
@@ -54,7 +53,6 @@ from grasp_draws import NumpyDraw, build_grasp
 
 import jaxgrasp
 from jaxgrasp.engine._evaluate import solve_problems
-from jaxgrasp.solver._solver import SolverResult
 from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.tolerance._stages import SAME_POINT, first_wave_lanes, rest_needed
 
@@ -223,10 +221,9 @@ def test_settled_problems_lose_nothing(every_start):
     for k, p in enumerate(every_start):
         n_prog = p["status"].size // D
         first = first_wave_lanes(n_prog // 2, o)
-        wave = SolverResult(**{f.name: jnp.zeros((1, p["status"].size)) for f in dataclasses.fields(SolverResult)})
-        wave = dataclasses.replace(wave, status=jnp.asarray(np.where(np.asarray(first), p["status"], X))[None],
-                                   objective=jnp.asarray(p["energy"])[None])
-        settled = ~np.asarray(rest_needed(wave, first, D, jnp.asarray([p["u0"]]))).reshape(n_prog, D)[:, 0]
+        status = jnp.asarray(np.where(np.asarray(first), p["status"], X))[None]
+        settled = ~np.asarray(rest_needed(status, jnp.asarray(p["energy"])[None], first, D,
+                                          jnp.asarray([p["u0"]]))).reshape(n_prog, D)[:, 0]
         st, e = p["status"].reshape(n_prog, D), p["energy"].reshape(n_prog, D)
         w = o.first_wave
         for b in np.flatnonzero(settled):
