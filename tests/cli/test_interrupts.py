@@ -116,9 +116,19 @@ class Run:
     """A command in a subprocess whose stderr is read line by line."""
 
     def __init__(self, cmd, env, cwd=ROOT, kill_after=300.0):
-        self.proc = subprocess.Popen(
-            cmd, env=env, cwd=str(cwd), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-        )
+        # The command starts with Ctrl-C's default disposition, as from a terminal. A
+        # suite started as a shell's background job has SIGINT ignored, which the command
+        # would inherit until its own handler is installed (a signal before then is lost).
+        ignored = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+        if ignored:  # a Python handler is reset to the default in the child at exec
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            self.proc = subprocess.Popen(
+                cmd, env=env, cwd=str(cwd), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            )
+        finally:
+            if ignored:
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
         self.before: list[str] = []  # stderr lines before the signal
         self._timer = threading.Timer(kill_after, self.proc.kill)  # never hang the suite
         self._timer.start()

@@ -36,7 +36,9 @@ minima, up to rounding (the frame's ties and open signs are settled by the world
 coordinate axes, e.g. in symmetric grasps). A transformed grasp landing on a different (lower or
 higher) local minimum would be a real finding about the start heuristic, not noise: the
 tolerances are tight (relative ``1e-6`` on values and on every boundary energy) and are
-not to be loosened to hide one.
+not to be loosened to hide one. One exception is the first wave's, stated in
+:func:`assert_same`: a boundary far above the value may be reachable on one side only
+(its first six starts all infeasible on the other), which a rotation turned up in CI.
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ from hypothesis import HealthCheck, Phase, event, given, settings
 from hypothesis import strategies as st
 
 import jaxgrasp
+from jaxgrasp.tolerance._stages import VALUE_MARGIN
 
 from grasp_draws import HypothesisDraw, grasps, literal, permute, random_rotation, random_unit, reflection, scaled, seeded_grasps, transform
 
@@ -119,10 +122,18 @@ def assert_same(a, b, ga, gb, what: str, perm=None, factor: float = 1.0) -> None
     be_b = np.asarray(b.boundary_energy, dtype=float)
     if perm is not None:
         be_a = be_a[:, np.asarray(perm)]
-    # every boundary: same reachability, same minimum energy above the equilibrium
+    # every boundary: same reachability, same minimum energy above the equilibrium; but a
+    # boundary that cannot set the value (more than VALUE_MARGIN times it above U0) may be
+    # reachable on one side only: its first six starts settle it (the first wave), and
+    # where all six are infeasible it is unreachable, though one of the others might
+    # reach it (4 of 2887 such problems on the benchmark's set; whether a chaotic start
+    # of the six converges can turn with rounding). Rotated, one such problem ran all 20.
     fa, fb = np.isfinite(be_a), np.isfinite(be_b)
-    assert np.array_equal(fa, fb), msg
-    da, db = be_a[fa] - u0a, be_b[fb] - u0b
+    one_side = fa != fb
+    far = np.where(fa, be_a - u0a, be_b - u0b) > VALUE_MARGIN * factor * va + tiny
+    assert np.all(far[one_side]), msg
+    both = fa & fb
+    da, db = be_a[both] - u0a, be_b[both] - u0b
     np.testing.assert_allclose(db, da, rtol=REL, atol=REL * factor * va + tiny, err_msg=msg)
     # the limiting boundary maps to the transformed one, unless another one ties with it
     if int(a.status) == jaxgrasp.GraspStatus.STABLE:
