@@ -1,0 +1,89 @@
+"""Loop steps and idle slots of the solver's work queue on the batch benchmark's mixed
+set (issue 41): a count that does not depend on the machine's speed or load.
+
+    python experiments/queue_steps.py [--count 1000] [--seed 0]
+
+Every ``while_loop`` of :mod:`jaxgrasp.solver._lanes` is wrapped (in this process only)
+so that it also counts its loop steps and, in each, the slots not running a lane; the
+counts of every queue run come back through ``jax.debug.callback``. The set is
+evaluated once with ``evaluate_batch`` (the executable store is off, so the wrapped
+queue is what runs). Prints, per queue run, (loop steps, slots, idle slot-steps), then
+the totals. Load average printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import types
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
+    if str(_p) not in sys.path:
+        sys.path.insert(0, str(_p))
+
+from _common import say  # noqa: E402
+
+
+def counting_queue(runs: list):
+    """Put a counting ``while_loop`` into the queue's module; ``runs`` receives one
+    ``(loop steps, slots, idle slot-steps)`` per queue run."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxgrasp.solver import _lanes
+    from jaxgrasp.solver._status import LaneStatus
+
+    max_steps = 300
+
+    def record(steps, slots, idle):
+        runs.append((int(steps), int(slots), int(idle)))
+
+    def while_loop(cond, body, init):
+        def step(carry):
+            q, k, idle = carry
+            running = (q.slots.status == LaneStatus.NOT_CONVERGED) & (q.slots.steps < max_steps)
+            return body(q), k + 1, idle + jnp.sum(~running).astype(jnp.int32)
+
+        zero = jnp.asarray(0, jnp.int32)
+        q, k, idle = jax.lax.while_loop(lambda c: cond(c[0]), step, (init, zero, zero))
+        jax.debug.callback(record, k, jnp.asarray(q.idx.shape[0]), idle)
+        return q
+
+    lax = types.SimpleNamespace(**{k: getattr(jax.lax, k) for k in dir(jax.lax) if not k.startswith("__")})
+    lax.while_loop = while_loop
+    wrapped = types.SimpleNamespace(**{k: getattr(jax, k) for k in dir(jax) if not k.startswith("__")})
+    wrapped.lax = lax
+    _lanes.jax = wrapped
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--count", type=int, default=1000)
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args()
+    import jaxgrasp
+    from jaxgrasp.engine import _store
+
+    from batch_benchmark import make_grasps
+
+    _store.set_executable_dir(None)
+    say(f"$ python experiments/queue_steps.py --count {args.count} --seed {args.seed}    "
+        f"[load {', '.join(f'{x:.2f}' for x in os.getloadavg())}]")
+    runs: list = []
+    counting_queue(runs)
+    res = jaxgrasp.evaluate_batch(make_grasps(args.count, args.seed))
+    for r in runs:
+        say(f"   queue run: {r[0]} loop steps x {r[1]} slots, idle slot-steps {r[2]} ({r[2] / max(r[0] * r[1], 1):.3f})")
+    steps = sum(r[0] for r in runs)
+    slots = sum(r[0] * r[1] for r in runs)
+    idle = sum(r[2] for r in runs)
+    status = {name: int((res.status_names == name).sum()) for name in sorted(set(res.status_names))}
+    say(f"{len(runs)} queue runs: {steps} loop steps, {slots} slot-steps, idle {idle} ({idle / slots:.3f}); "
+        f"statuses {status}")
+
+
+if __name__ == "__main__":
+    main()
