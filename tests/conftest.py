@@ -3,11 +3,10 @@
 jaxgrasp's ``evaluate`` costs tens of seconds to compile per number of contacts ``N``
 and about a second per grasp to run, so:
 
-* :func:`evaluate_many` evaluates lists of grasps through the engine's compiled chunk
-  evaluator, ONE per ``N``, in chunks of :data:`CHUNK` (padded by repeating the last
-  grasp), so every call with the same ``N`` reuses the same executable, and both xdist
-  workers share it through the session's executable store. Results are cached per grasp
-  for the whole session.
+* :func:`evaluate_many` evaluates lists of grasps through ONE ``jax.jit(jax.vmap(...))``
+  per ``N``. Batches are cut into chunks of one size per ``N`` (padded by repeating the
+  last grasp), so every call with the same ``N`` reuses the same executable. Results are
+  cached per grasp for the whole session.
 * :func:`ipopt_reference` runs the independent CasADi/Ipopt reference
   (``tests/ipopt_reference.py``) in a separate worker process, so that Ipopt runs while
   JAX compiles. Submit early (``ipopt_reference.submit``), collect late
@@ -54,6 +53,7 @@ SESSION_CACHE.mkdir(mode=0o700, exist_ok=True)
 os.environ["JAXGRASP_CACHE_DIR"] = str(SESSION_CACHE)
 
 import jaxgrasp  # noqa: E402  turns on jax_enable_x64 by itself (tested in test_evaluate.py)
+from jaxgrasp.engine._xla_options import latency_options  # noqa: E402
 
 TESTS_DIR = Path(__file__).resolve().parent
 if str(TESTS_DIR) not in sys.path:  # so that the Ipopt worker can import the reference
@@ -61,9 +61,10 @@ if str(TESTS_DIR) not in sys.path:  # so that the Ipopt worker can import the re
 
 GRASP_FIELDS = jaxgrasp.model._fields.NAMES
 
-# Grasps per compiled call of evaluate_many, for every N: one executable per N for the
-# session and both workers. Padding costs a grasp evaluation per unused slot, far less
-# than a compilation.
+# Largest batch per compiled call. The batch size for each N is fixed by the first call
+# with that N (its grasps in balanced chunks of at most CHUNK), so every N compiles once.
+# Padding costs about one grasp evaluation per unused slot: pass all grasps of an N in
+# the first call.
 CHUNK = 16
 
 
@@ -126,41 +127,37 @@ def unstack(tree, i):
 
 
 class BatchEvaluator:
-    """Grasps evaluated by the engine's compiled chunk evaluator
-    (:func:`~jaxgrasp.engine._evaluator.compiled_evaluator`, every result equal to
-    ``jaxgrasp.evaluate``'s), one executable per contact count (and contact mask).
-
-    Every chunk has :data:`CHUNK` grasps (the last padded by repeating a grasp) on one
-    device, whatever the call: so an executable is the same for every module and both
-    xdist workers, which share it through the session's executable store (one compiles,
-    the other loads it), and a grasp's numbers do not depend on which module asked first.
-    """
+    """``jax.jit(jax.vmap(jaxgrasp.evaluate))`` with one executable per contact count."""
 
     def __init__(self, chunk: int = CHUNK):
         self.chunk = chunk
+        self._chunk_n: dict[int, int] = {}  # batch size used for each N (fixed at first use)
+        # evaluate() skips input validation when traced, so the lambda is vmappable. A
+        # session compiles one per contact count in each worker and runs each a few times:
+        # the options jaxgrasp.evaluate itself compiles a concrete grasp with (LLVM's
+        # optimisation skipped on the CPU) halve the compile and cost little run time.
+        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)), compiler_options=latency_options(jax.default_backend()))
         self._cache: dict = {}
         self.calls = 0
 
     def __call__(self, grasps):
-        from jaxgrasp.engine._evaluator import compiled_evaluator, grasp_fields
-        from jaxgrasp.tolerance._result import FIELDS
-
         grasps = list(grasps)
-        todo: dict[tuple, dict] = {}  # (N, masked) -> {key: grasp}, insertion-ordered
+        todo: dict[int, dict] = {}  # N -> {key: grasp}, insertion-ordered
         for g in grasps:
             k = grasp_key(g)
             if k not in self._cache:
-                todo.setdefault((g.num_contacts, g.active is not None), {}).setdefault(k, g)
-        device = [jax.devices()[0]]
-        for (n, masked), by_key in sorted(todo.items()):
-            fn, _ = compiled_evaluator(jaxgrasp.EvaluateOptions(), n, self.chunk, device, masked=masked)
+                todo.setdefault(g.num_contacts, {}).setdefault(k, g)
+        for n, by_key in sorted(todo.items()):
             items = list(by_key.items())
-            for start in range(0, len(items), self.chunk):
-                part = items[start : start + self.chunk]
+            if n not in self._chunk_n:  # balanced chunks of at most self.chunk grasps
+                parts = -(-len(items) // self.chunk)
+                self._chunk_n[n] = -(-len(items) // parts)
+            chunk = self._chunk_n[n]
+            for start in range(0, len(items), chunk):
+                part = items[start : start + chunk]
                 gs = [g for _, g in part]
-                fields = stack(gs + [gs[-1]] * (self.chunk - len(gs))).to_numpy_batch()
-                out = fn(*(fields[f] for f in grasp_fields(masked)))
-                res = jaxgrasp.Evaluation(**{f: np.asarray(a) for f, a in zip(FIELDS, out)})
+                gs = gs + [gs[-1]] * (chunk - len(gs))
+                res = jax.tree_util.tree_map(np.asarray, self._fn(stack(gs)))
                 self.calls += 1
                 for i, (k, _) in enumerate(part):
                     self._cache[k] = unstack(res, i)
