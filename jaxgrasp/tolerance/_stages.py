@@ -62,10 +62,11 @@ def solve_stage(data: ProblemData, starts: LaneStarts, options: EvaluateOptions)
 
     With ``options.first_wave`` the lanes run in two waves through the same queue: each
     boundary problem's first starts (:func:`first_wave_lanes`) are loaded at once, the
-    other starts are held (:class:`~jaxgrasp.solver.Held`, one group per grasp) and those
-    of the problems the first wave leaves open (:func:`rest_needed`) are freed in the
-    loop step where the grasp's first wave ends; a lane of a problem the first wave
-    settled ends ``NO_START``."""
+    other starts are held (:class:`~jaxgrasp.solver.Held`, one group per problem) and
+    those of the problems the first wave leaves open (:func:`rest_needed`) are freed as
+    the queue runs: a problem whose first starts disagree as soon as they have ended, one
+    near the value once the grasp's whole first wave has; a lane of a problem the first
+    wave settled ends ``NO_START``."""
     b, n = data.params.c.shape[:2]
     num_lanes = _num_lanes(data, options)
     theta = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a[:, None], (b, num_lanes) + a.shape[1:]), data)
