@@ -185,14 +185,14 @@ class _Queue(NamedTuple):
     slots: Any  # SolverState, leading axis W: the lanes in flight
     idx: Any  # (W,) int: the lane each slot holds
     ptr: Any  # () int: how many lanes of the queue order have been loaded into a slot
-    objective: Any  # (L,) f at each lane's point when it last stepped
+    objective: Any  # (L,) f at each lane's point when it last stepped (kept for a release rule only)
     left: Any  # (L,) int: per group, its unheld active lanes not yet finished
     freed: Any  # (L,) bool: held lanes released (queued)
     later: Any  # (L,) int: the freed lanes in the order they load, first num_later valid
     num_later: Any  # () int
     later_ptr: Any  # () int: how many of them have been loaded
     pending: Any  # () bool: a group has completed since release was last asked
-    tick: Any  # () int: loop steps taken
+    tick: Any  # () int: loop steps taken (counted for a release rule only)
 
 
 RELEASE_EVERY = 8
@@ -290,10 +290,10 @@ def _advance(problem, release, lanes: _Lanes, o: SolverOptions, q: _Queue) -> _Q
     # only running slots write back: an idle slot's copy may be stale (a held lane since freed)
     at = jnp.where(was, q.idx, num_lanes).astype(jnp.uint32)
     states = jax.tree_util.tree_map(lambda a, b: a.at[at].set(b, mode="drop"), q.states, slots)
-    objective = q.objective.at[at].set(trials.fx, mode="drop")
     done = ~_running_slots(slots, o)
-    q = q._replace(states=states, slots=slots, objective=objective, tick=q.tick + 1)
-    if release is not None:
+    q = q._replace(states=states, slots=slots)
+    if release is not None:  # what only the release rule reads
+        q = q._replace(objective=q.objective.at[at].set(trials.fx, mode="drop"), tick=q.tick + 1)
         ended = was & done & ~lanes.held.lanes[q.idx]
         group = lanes.held.group[q.idx]
         left = q.left.at[jnp.where(ended, group, num_lanes)].add(-1, mode="drop")
