@@ -45,12 +45,14 @@ Quick start::
     result.value, result.status_name   # J, 'stable'
 """
 
-import os as _os
-from importlib import metadata as _metadata
-
 from jaxgrasp import _startup
 
-_startup.install_if_command_line()  # Ctrl-C while JAX loads: one line, exit 130 (the command only)
+# First of all: a Ctrl-C from here on, while JAX loads, is one line and exit 130 (in the
+# command only). Every import above this line widens the window of Python's traceback.
+_startup.install_if_command_line()
+
+import os as _os  # noqa: E402
+from importlib import metadata as _metadata  # noqa: E402
 
 import jax as _jax  # noqa: E402
 
