@@ -269,17 +269,20 @@ def _first_line_seconds(argv, env, wait: float) -> tuple[float, str]:
 def test_tune_and_batch_print_a_first_line_within_a_second(tmp_path):
     """``tune`` and a one-chunk ``batch`` say what they do before compiling (which takes
     tens of seconds on a fresh cache): within 1 s of starting, or, on a machine so busy
-    that importing JAX alone takes longer, within 0.3 s after that import."""
+    that importing JAX alone takes longer, within 0.6 s after that import, measured just
+    before each command. Under the suite's own load (load average 3-4 on 2 cores) the
+    work after the import once took 0.37 s; on an idle machine the line comes sooner than
+    a separate process's import ends (1.4-1.6 s against 1.7-1.8 s)."""
     dataset = tmp_path / "set.jsonl"
     jaxgrasp.save_dataset(dataset, [PRESETS["cube"](), PRESETS["prism"]()])
     env = dict(os.environ, JAXGRASP_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT))
-    t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import jaxgrasp.cli"], cwd=ROOT, env=env, check=True)
-    budget = max(1.0, time.perf_counter() - t0 + 0.3)
     for argv, start in [
         (["tune", "--preset", "cube", "--out", str(tmp_path / "t.toml")], "jaxgrasp: tuning initial_deformation of preset cube"),
         (["batch", str(dataset), "--out", str(tmp_path / "o")], f"jaxgrasp: batch {dataset}: 2 grasps to go;"),
     ]:
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "import jaxgrasp.cli"], cwd=ROOT, env=env, check=True)
+        budget = max(1.0, time.perf_counter() - t0 + 0.6)
         seconds, line = _first_line_seconds(argv, env, wait=budget + 5)
         assert line.startswith(start), line
         assert seconds < budget, (argv[0], seconds, budget)
