@@ -79,15 +79,18 @@ SOLVE = "lanes"
 PIPELINE: tuple[Step, ...] = (
     Step("equilibrium", ("data",), "eq_starts", lambda: _tree(LaneStarts)),
     Step(SOLVE, ("data", "eq_starts"), "eq_lanes", lambda: _tree(SolverResult)),
-    Step("starts", ("data", "eq_lanes"), "lane_starts", lambda: _tree(LaneStarts)),
+    Step("settle", ("data", "eq_lanes"), "eq", lambda: _tree(SolverResult)),
+    Step("starts", ("data", "eq"), "lane_starts", lambda: _tree(LaneStarts)),
     Step(SOLVE, ("data", "lane_starts"), "solved", lambda: _tree(SolverResult)),
-    Step("finish", ("data", "eq_lanes", "solved", "lane_starts"), "problems", problems_treedef),
+    Step("finish", ("data", "eq", "solved", "lane_starts"), "problems", problems_treedef),
     Step("evaluation", ("params", "problems"), "evaluation", lambda: _tree(Evaluation)),
 )
 """The evaluation of a batch of grasps, step by step: the equilibrium problem's lanes,
-solved; the boundary problems' lanes from starts around that equilibrium, solved; the
-solved :class:`~jaxgrasp.tolerance.Problems` (settled where asked); every
-:class:`~jaxgrasp.Evaluation` field (the verdict, steps 2-6 of the method)."""
+solved; each grasp's equilibrium (settled where asked); the boundary problems' lanes from
+starts around that equilibrium, solved; the solved :class:`~jaxgrasp.tolerance.Problems`
+(settled where asked); every :class:`~jaxgrasp.Evaluation` field (the verdict, steps 2-6
+of the method). The equilibrium is its own step because two later steps read it: made
+once, it is traced and compiled once."""
 
 STAGES = tuple(dict.fromkeys(s.stage for s in PIPELINE))
 """The stages' names, in the order the pipeline first calls them."""
@@ -109,9 +112,9 @@ def stage_functions(options: EvaluateOptions, settle: bool = True, temperature=N
     """Each stage of :data:`PIPELINE` as a function of the values its step names (the
     pipeline's inputs, :func:`inputs_of`, and earlier steps' outputs; leading axis ``B``).
 
-    ``settle`` (static): whether the starts and finish stages certify a stalled
-    equilibrium (:func:`~jaxgrasp.tolerance._settle.settle_equilibrium`) and the finish
-    stage stalled boundary lanes (:func:`~jaxgrasp.tolerance._settle.settle_stalled`);
+    ``settle`` (static): whether the settle stage certifies a stalled equilibrium
+    (:func:`~jaxgrasp.tolerance._settle.settle_equilibrium`) and the finish stage stalled
+    boundary lanes (:func:`~jaxgrasp.tolerance._settle.settle_stalled`);
     without it the stages are smaller, and equal wherever no problem ends unsettled. ``temperature``: the
     soft-minimum temperature (mJ, ``0`` for the hard minimum; traced or not); default the
     options' own.
@@ -121,10 +124,9 @@ def stage_functions(options: EvaluateOptions, settle: bool = True, temperature=N
     return {
         "equilibrium": lambda data: equilibrium_starts(data, options),
         SOLVE: lambda data, starts: solve_stage(data, starts, options),
-        "starts": lambda data, eq: boundary_starts(data, settled_equilibrium(data, eq, options, settle), options),
-        "finish": lambda data, eq, lanes, starts: finish_problems(
-            data, settled_equilibrium(data, eq, options, settle), lanes, starts, options, settle
-        ),
+        "settle": lambda data, eq_lanes: settled_equilibrium(data, eq_lanes, options, settle),
+        "starts": lambda data, eq: boundary_starts(data, eq, options),
+        "finish": lambda data, eq, lanes, starts: finish_problems(data, eq, lanes, starts, options, settle),
         "evaluation": lambda params, problems: evaluations_of(params, problems, temperature, options),
     }
 
@@ -146,15 +148,17 @@ def run_inline(grasps: Grasp, functions: Mapping[str, Callable], until: str = "e
     value ``until``, which it returns (leading axis ``B``); ``functions`` from
     :func:`stage_functions`.
 
-    The solve stage occurs once per round (a round: a stage that makes lanes' starts,
-    then :data:`SOLVE`); the rounds are the iterations of one loop (:func:`_solved_rounds`),
-    so the solver's loop is traced and compiled once rather than once per round.
+    The solve stage occurs once per round (a round: the steps after the previous solve,
+    the last of which makes lanes' starts, then :data:`SOLVE`); the rounds are the
+    iterations of one loop (:func:`_solved_rounds`), so the solver's loop is traced and
+    compiled once rather than once per round.
     """
     steps = _through(until)
     solves = [i for i, s in enumerate(steps) if s.stage == SOLVE]
     env: dict[str, Any] = inputs_of(grasps)
     if solves:
-        rounds, steps = [(steps[i - 1], steps[i]) for i in solves], steps[solves[-1] + 1 :]
+        rounds = [(steps[a:i], steps[i]) for a, i in zip([0] + [i + 1 for i in solves[:-1]], solves)]
+        steps = steps[solves[-1] + 1 :]
         env.update(_solved_rounds(rounds, _read_later(rounds, steps, until), functions, env))
     for step in steps:
         env[step.output] = _call(functions, step, env)
@@ -162,40 +166,57 @@ def run_inline(grasps: Grasp, functions: Mapping[str, Callable], until: str = "e
 
 
 def _read_later(rounds, after, until: str) -> set[str]:
-    """The values the ``rounds`` make that a later round's starts, a step ``after`` them,
-    or the caller (``until``) reads: what the loop carries."""
-    made = [(k, name) for k, (s, v) in enumerate(rounds) for name in (s.output, v.output)]
+    """The values the ``rounds`` (each ``(steps before the solve, solve step)``) make that
+    a later round's steps, a step ``after`` them, or the caller (``until``) reads: what
+    the loop carries."""
+    made = [(k, name) for k, (pre, v) in enumerate(rounds) for name in (*(s.output for s in pre), v.output)]
     later = {until} | {n for step in after for n in step.inputs}
-    return {name for k, name in made if name in later or any(name in s.inputs for s, _ in rounds[k + 1 :])}
+    read = lambda k: {n for pre, v in rounds[k + 1 :] for step in (*pre, v) for n in step.inputs}  # noqa: E731
+    return {name for k, name in made if name in later or name in read(k)}
 
 
 def _solved_rounds(rounds, carried: set[str], functions: Mapping[str, Callable], env: Mapping[str, Any]):
-    """The values ``carried`` of those the ``rounds`` make (each ``(starts step, solve
-    step)``), the solve stage traced once: round ``k`` is iteration ``k`` of a
-    ``fori_loop``, whose body picks the round's starts stage with ``lax.switch`` on ``k``.
-    The counter is not batched data, so under a caller's ``vmap`` the switch stays a branch
-    and the solver's queue runs once per round on every lane of the batch."""
-    for starts, solve in rounds:
-        if solve.inputs[-1] != starts.output or any(n not in INPUTS for n in solve.inputs[:-1]):
+    """The values ``carried`` of those the ``rounds`` make (each ``(steps before the
+    solve, solve step)``, the last of those steps making the solve's starts), the solve
+    stage traced once: round ``k`` is iteration ``k`` of a ``fori_loop``, whose body runs
+    the round's steps in the branch ``k`` of a ``lax.switch``. The counter is not batched
+    data, so under a caller's ``vmap`` the switch stays a branch and the solver's queue
+    runs once per round on every lane of the batch.
+
+    The loop's carry starts as zeros shaped as each value (``jax.eval_shape``); the steps
+    are jitted, so that the branch reuses the trace their shapes were read from."""
+    for pre, solve in rounds:
+        if not pre or solve.inputs[-1] != pre[-1].output or any(n not in INPUTS for n in solve.inputs[:-1]):
             raise ValueError(f"the pipeline's {solve.output!r} must solve the starts made just before it")
-    first = _call(functions, rounds[0][0], env)  # every round's starts are shaped alike
-    lanes = unsolved(first)
-    carry = {name: value for s, v in rounds for name, value in ((s.output, first), (v.output, lanes))}
-    carry = {name: value for name, value in carry.items() if name in carried}
-    carry = depend_on(jax.tree_util.tree_map(jnp.zeros_like, carry), env["data"])
+    jitted = {s.stage: jax.jit(functions[s.stage]) for pre, _ in rounds for s in pre}
+    shapes = dict(env)
+    for pre, solve in rounds:
+        for s in pre:
+            shapes[s.output] = jax.eval_shape(jitted[s.stage], *(shapes[n] for n in s.inputs))
+        shapes[solve.output] = jax.eval_shape(unsolved, shapes[pre[-1].output])
+    carry = {n: jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes[n]) for n in sorted(carried)}
+    carry = depend_on(carry, env["data"])
+
+    def branch(pre):
+        def run(carry):
+            values = {**env, **carry}
+            for s in pre:
+                values[s.output] = jitted[s.stage](*(values[n] for n in s.inputs))
+            return {n: values[n] for n in carry}, values[pre[-1].output]
+
+        return run
 
     def body(k, carry):
-        starts = jax.lax.switch(k, [lambda c, s=s: _call(functions, s, {**env, **c}) for s, _ in rounds], carry)
+        carry, starts = jax.lax.switch(k, [branch(pre) for pre, _ in rounds], carry)
         solved = functions[SOLVE](*(env[n] for n in rounds[0][1].inputs[:-1]), starts)
-        out = {}
-        for i, (s, v) in enumerate(rounds):
-            for name, value in ((s.output, starts), (v.output, solved)):
-                if name not in carried:
-                    continue
-                if i == len(rounds) - 1:  # written every round: the last round's is what stays
-                    out[name] = value
-                else:
-                    out[name] = jax.lax.cond(k == i, lambda x=value: x, lambda n=name: carry[n])
+        out = dict(carry)
+        for i, (_, v) in enumerate(rounds):
+            if v.output not in carried:
+                continue
+            if i == len(rounds) - 1:  # written every round: the last round's is what stays
+                out[v.output] = solved
+            else:
+                out[v.output] = jax.lax.cond(k == i, lambda x=solved: x, lambda n=v.output: carry[n])
         return out
 
     return jax.lax.fori_loop(0, len(rounds), body, carry)

@@ -27,16 +27,18 @@ def test_every_step_reads_values_made_before_it():
 
 
 def test_the_data_flow_is_the_methods():
-    """Eq. 1: the boundary problems start around the *solved* equilibrium, and the
-    verdict reads every solved problem and the differentiable parameters (its envelope
-    derivatives go through them; the solver's data carries no gradient)."""
+    """Eq. 1: the boundary problems start around the *solved* (and settled) equilibrium,
+    the finish stage reads that same equilibrium, and the verdict reads every solved
+    problem and the differentiable parameters (its envelope derivatives go through them;
+    the solver's data carries no gradient)."""
     flow = {s.output: (s.stage, s.inputs) for s in _stages.PIPELINE}
     assert flow == {
         "eq_starts": ("equilibrium", ("data",)),
         "eq_lanes": ("lanes", ("data", "eq_starts")),
-        "lane_starts": ("starts", ("data", "eq_lanes")),
+        "eq": ("settle", ("data", "eq_lanes")),
+        "lane_starts": ("starts", ("data", "eq")),
         "solved": ("lanes", ("data", "lane_starts")),
-        "problems": ("finish", ("data", "eq_lanes", "solved", "lane_starts")),
+        "problems": ("finish", ("data", "eq", "solved", "lane_starts")),
         "evaluation": ("evaluation", ("params", "problems")),
     }
 
@@ -44,7 +46,7 @@ def test_the_data_flow_is_the_methods():
 def test_stage_names_and_functions_agree():
     functions = _stages.stage_functions(jaxgrasp.EvaluateOptions())
     assert set(functions) == set(_stages.STAGES)
-    assert _stages.STAGES == ("equilibrium", "lanes", "starts", "finish", "evaluation")
+    assert _stages.STAGES == ("equilibrium", "lanes", "settle", "starts", "finish", "evaluation")
     assert [s.stage for s in _stages.PIPELINE].count(_stages.SOLVE) == 2  # one per round
 
 
@@ -66,7 +68,7 @@ def test_run_staged_calls_the_declared_steps_in_order():
     assert [c[0] for c in calls] == [s.stage for s in _stages.PIPELINE]
     assert out == tuple(("evaluation", i) for i in range(sizes["evaluation"]))
     # the second solve reads the boundary starts, not the equilibrium's
-    assert calls[3][1][2:] == tuple(("lane_starts", i) for i in range(sizes["lane_starts"]))
+    assert calls[4][1][2:] == tuple(("lane_starts", i) for i in range(sizes["lane_starts"]))
 
 
 def test_evaluation_leaves_are_the_result_fields_in_order():
@@ -78,11 +80,13 @@ def test_evaluation_leaves_are_the_result_fields_in_order():
 
 
 def test_the_inline_loop_carries_what_later_steps_read():
-    """The equilibrium's starts feed only its own solve: the loop carries the rest."""
+    """The equilibrium's starts feed only its own solve, and its lanes only the settle
+    step of the next round: the loop carries the rest."""
     steps = _stages.PIPELINE
-    rounds = [(steps[0], steps[1]), (steps[2], steps[3])]
-    assert _stages._read_later(rounds, steps[4:], "evaluation") == {"eq_lanes", "lane_starts", "solved"}
+    rounds = [(steps[0:1], steps[1]), (steps[2:4], steps[4])]
+    assert _stages._read_later(rounds, steps[5:], "evaluation") == {"eq_lanes", "eq", "lane_starts", "solved"}
     assert _stages._read_later(rounds, (), "eq_starts") == {"eq_starts", "eq_lanes"}
+    assert _stages._read_later(rounds, (), "solved") == {"eq_lanes", "solved"}
 
 
 def test_run_inline_names_a_value_that_exists():
