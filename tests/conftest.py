@@ -4,9 +4,10 @@ jaxgrasp's ``evaluate`` costs tens of seconds to compile per number of contacts 
 and about a second per grasp to run, so:
 
 * :func:`evaluate_many` evaluates lists of grasps through ONE ``jax.jit(jax.vmap(...))``
-  per ``N``. Batches are cut into chunks of one size per ``N`` (padded by repeating the
-  last grasp), so every call with the same ``N`` reuses the same executable. Results are
-  cached per grasp for the whole session.
+  per ``N``, in chunks of :data:`CHUNK` grasps (padded by repeating the last grasp), kept
+  in the session's executable store: the first worker that needs an ``N`` compiles it
+  (the other waits for it, then loads it without tracing), every later call reuses it.
+  Results are cached per grasp for the whole session.
 * :func:`ipopt_reference` runs the independent CasADi/Ipopt reference
   (``tests/ipopt_reference.py``) in a separate worker process, so that Ipopt runs while
   JAX compiles. Submit early (``ipopt_reference.submit``), collect late
@@ -60,11 +61,12 @@ if str(TESTS_DIR) not in sys.path:  # so that the Ipopt worker can import the re
     sys.path.insert(0, str(TESTS_DIR))
 
 GRASP_FIELDS = jaxgrasp.model._fields.NAMES
+EVALUATION_TREE = jax.tree_util.tree_structure(jaxgrasp.Evaluation(*(0,) * len(jaxgrasp.tolerance._result.FIELDS)))
 
-# Largest batch per compiled call. The batch size for each N is fixed by the first call
-# with that N (its grasps in balanced chunks of at most CHUNK), so every N compiles once.
-# Padding costs about one grasp evaluation per unused slot: pass all grasps of an N in
-# the first call.
+# Grasps per compiled call of evaluate_many, for every N: one size, so that the executable
+# of an N is the same in every module and worker (and a grasp's result does not depend on
+# which module asked first). Padding costs about one grasp evaluation per unused slot, far
+# less than a compilation (~50 s on 2 cores).
 CHUNK = 16
 
 
@@ -127,37 +129,65 @@ def unstack(tree, i):
 
 
 class BatchEvaluator:
-    """``jax.jit(jax.vmap(jaxgrasp.evaluate))`` with one executable per contact count."""
+    """``jax.jit(jax.vmap(jaxgrasp.evaluate))`` with one executable per contact count (and
+    contact mask or none), stored in the session's folder and shared by the workers."""
 
     def __init__(self, chunk: int = CHUNK):
         self.chunk = chunk
-        self._chunk_n: dict[int, int] = {}  # batch size used for each N (fixed at first use)
-        # evaluate() skips input validation when traced, so the lambda is vmappable. A
-        # session compiles one per contact count in each worker and runs each a few times:
-        # the options jaxgrasp.evaluate itself compiles a concrete grasp with (LLVM's
-        # optimisation skipped on the CPU) halve the compile and cost little run time.
-        self._fn = jax.jit(jax.vmap(lambda g: jaxgrasp.evaluate(g)), compiler_options=latency_options(jax.default_backend()))
+        self._fns: dict[tuple, object] = {}
         self._cache: dict = {}
         self.calls = 0
 
+    def _executable(self, n: int, masked: bool, arrays: list):
+        """The compiled flat program for ``arrays`` (the stacked fields, then the mask):
+        from this process, else from the store, else compiled here under a lock on the
+        session folder, so that two workers never compile the same one at once."""
+        import fcntl
+
+        from jaxgrasp.engine import _compile
+
+        key = (n, masked)
+        if key not in self._fns:
+            names = GRASP_FIELDS
+
+            def flat(*a):
+                grasps = jaxgrasp.Grasp(**dict(zip(names, a)), active=a[len(names)] if masked else None)
+                return tuple(jax.tree_util.tree_leaves(jax.vmap(lambda g: jaxgrasp.evaluate(g))(grasps)))
+
+            # evaluate() skips input validation when traced, so it is vmappable. The options
+            # jaxgrasp.evaluate compiles a concrete grasp with (LLVM's optimisation skipped
+            # on the CPU) halve the compile and cost little run time: each runs a few times.
+            build = lambda: jax.jit(flat, compiler_options=latency_options(jax.default_backend()))  # noqa: E731
+            spec = [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in arrays]
+            with open(SESSION_CACHE / f"evaluate-many-{n}-{int(masked)}.lock", "w") as lock:
+                fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+                fn, _ = _compile.compiled(("tests.evaluate_many", key, self.chunk), build, spec, name="test-evaluate-many",
+                                          store_key=("tests.evaluate_many", key, self.chunk))
+                _compile.wait_for_saves()  # on disk before the other worker may look
+            self._fns[key] = fn
+        return self._fns[key]
+
+    def _run(self, gs):
+        n, masked = gs[0].num_contacts, gs[0].active is not None
+        arrays = [np.stack([np.asarray(getattr(g, name), np.float64) for g in gs]) for name in GRASP_FIELDS]
+        if masked:
+            arrays.append(np.stack([np.asarray(g.active, bool) for g in gs]))
+        out = self._executable(n, masked, arrays)(*arrays)
+        return jax.tree_util.tree_unflatten(EVALUATION_TREE, [np.asarray(a) for a in out])
+
     def __call__(self, grasps):
         grasps = list(grasps)
-        todo: dict[int, dict] = {}  # N -> {key: grasp}, insertion-ordered
+        todo: dict[tuple, dict] = {}  # (N, masked) -> {key: grasp}, insertion-ordered
         for g in grasps:
             k = grasp_key(g)
             if k not in self._cache:
-                todo.setdefault(g.num_contacts, {}).setdefault(k, g)
-        for n, by_key in sorted(todo.items()):
+                todo.setdefault((g.num_contacts, g.active is not None), {}).setdefault(k, g)
+        for _, by_key in sorted(todo.items()):
             items = list(by_key.items())
-            if n not in self._chunk_n:  # balanced chunks of at most self.chunk grasps
-                parts = -(-len(items) // self.chunk)
-                self._chunk_n[n] = -(-len(items) // parts)
-            chunk = self._chunk_n[n]
-            for start in range(0, len(items), chunk):
-                part = items[start : start + chunk]
+            for start in range(0, len(items), self.chunk):
+                part = items[start : start + self.chunk]
                 gs = [g for _, g in part]
-                gs = gs + [gs[-1]] * (chunk - len(gs))
-                res = jax.tree_util.tree_map(np.asarray, self._fn(stack(gs)))
+                res = self._run(gs + [gs[-1]] * (self.chunk - len(gs)))
                 self.calls += 1
                 for i, (k, _) in enumerate(part):
                     self._cache[k] = unstack(res, i)

@@ -3,9 +3,10 @@
 Padding a grasp with inactive contacts must change nothing: same value, status, limiting
 boundary (renumbered), equilibrium energy and pose to 1e-12, with the padding contacts
 placed first, last or in between, holding copies of a real contact or unrelated valid
-values. Every padded grasp here has N = 5 and they run as one ``jit(vmap(evaluate))``
-batch (one compilation); the references are the unpadded grasps through the session's
-``evaluate_many`` (compiled for N = 2, 3, 4 by other modules).
+values. Every padded grasp here has N = 5 and a contact mask: they run through the
+session's ``evaluate_many`` (``jit(vmap(evaluate))``, its masked N = 5 executable: one
+compilation), as do the references, the unpadded grasps (its N = 2, 3, 4 executables,
+shared with other modules).
 """
 
 from __future__ import annotations
@@ -78,8 +79,9 @@ def padded_results(evaluate_many):
     # stack() pads to num_contacts: the same shapes, one compilation
     assert stacked.positions.shape == (4, N_PAD, 3)
     both = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), batch, stacked)
-    res = jax.jit(jax.vmap(jaxgrasp.evaluate))(both)
-    res = jax.tree_util.tree_map(np.asarray, res)
+    # evaluate_many is jax.jit(jax.vmap(jaxgrasp.evaluate)), one executable per N and mask
+    res = evaluate_many([jax.tree_util.tree_map(lambda a, i=i: a[i], both) for i in range(len(cases) + 4)])
+    res = jax.tree_util.tree_map(lambda *a: np.stack(a), *res)
     refs = dict(zip(bases, evaluate_many(list(bases.values()))))
     return cases, res, refs, stacked
 
