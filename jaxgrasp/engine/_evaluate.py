@@ -4,7 +4,7 @@
 which follows the paper's steps, one named function each:
 
 1. solve the equilibrium problem and every boundary problem from its starts (the
-   ``equilibrium``, ``lanes``, ``starts`` and ``finish`` stages);
+   ``equilibrium``, ``lanes``, ``settle``, ``starts`` and ``finish`` stages);
 2. keep the lowest converged start of each boundary problem
    (:func:`~jaxgrasp.tolerance._verdict.best_starts`);
 3. decide the grasp's status from the solver's outputs

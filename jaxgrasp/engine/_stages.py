@@ -39,6 +39,7 @@ __all__ = [
     "Step",
     "PIPELINE",
     "STAGES",
+    "EXECUTABLES",
     "SOLVE",
     "INPUTS",
     "inputs_of",
@@ -65,12 +66,16 @@ class Step:
         output: the name of the value it makes.
         tree: the pytree structure of that value (to pass it between compiled stages
             as flat arrays).
+        compiled_with: where the pipeline runs one compiled stage at a time
+            (:func:`run_staged`), the stage of a later step whose executable runs this
+            step first (``None``: its own executable).
     """
 
     stage: str
     inputs: tuple[str, ...]
     output: str
     tree: Callable[[], jax.tree_util.PyTreeDef]
+    compiled_with: str | None = None
 
 
 SOLVE = "lanes"
@@ -79,7 +84,7 @@ SOLVE = "lanes"
 PIPELINE: tuple[Step, ...] = (
     Step("equilibrium", ("data",), "eq_starts", lambda: _tree(LaneStarts)),
     Step(SOLVE, ("data", "eq_starts"), "eq_lanes", lambda: _tree(SolverResult)),
-    Step("settle", ("data", "eq_lanes"), "eq", lambda: _tree(SolverResult)),
+    Step("settle", ("data", "eq_lanes"), "eq", lambda: _tree(SolverResult), compiled_with="starts"),
     Step("starts", ("data", "eq"), "lane_starts", lambda: _tree(LaneStarts)),
     Step(SOLVE, ("data", "lane_starts"), "solved", lambda: _tree(SolverResult)),
     Step("finish", ("data", "eq", "solved", "lane_starts"), "problems", problems_treedef),
@@ -90,10 +95,40 @@ solved; each grasp's equilibrium (settled where asked); the boundary problems' l
 starts around that equilibrium, solved; the solved :class:`~jaxgrasp.tolerance.Problems`
 (settled where asked); every :class:`~jaxgrasp.Evaluation` field (the verdict, steps 2-6
 of the method). The equilibrium is its own step because two later steps read it: made
-once, it is traced and compiled once."""
+once, it is traced and compiled once. Run one compiled stage at a time, it shares the
+starts stage's executable (without settling it is a mere selection, not worth a call)."""
 
 STAGES = tuple(dict.fromkeys(s.stage for s in PIPELINE))
 """The stages' names, in the order the pipeline first calls them."""
+
+
+def _calls() -> tuple[tuple[str, tuple[Step, ...]], ...]:
+    """:data:`PIPELINE` as :func:`run_staged` calls it: ``(executable, steps)`` pairs, a
+    step that is ``compiled_with`` a later stage run by that stage's next executable."""
+    calls, waiting = [], []
+    for step in PIPELINE:
+        if step.compiled_with is not None:
+            waiting.append(step)
+            continue
+        calls.append((step.stage, (*(w for w in waiting if w.compiled_with == step.stage), step)))
+        waiting = [w for w in waiting if w.compiled_with != step.stage]
+    if waiting:
+        raise ValueError(f"no later step of the pipeline has the stage {waiting[0].compiled_with!r}")
+    return tuple(calls)
+
+
+CALLS = _calls()
+"""``(executable, steps)``: the calls of :func:`run_staged`, in order."""
+
+EXECUTABLES = tuple(dict.fromkeys(name for name, _ in CALLS))
+"""The names of the executables :func:`flat_stages` makes, in the order they are first
+called: the stages, less those ``compiled_with`` another."""
+
+
+def _outer_inputs(steps: tuple[Step, ...]) -> tuple[str, ...]:
+    """The values ``steps`` (run in order) read and do not make themselves, in order."""
+    made = {s.output for s in steps}
+    return tuple(dict.fromkeys(n for s in steps for n in s.inputs if n not in made))
 
 INPUTS = ("params", "data")
 """The pipeline's inputs, both derived from the batch of grasps by :func:`inputs_of`."""
@@ -223,40 +258,49 @@ def _solved_rounds(rounds, carried: set[str], functions: Mapping[str, Callable],
 
 
 def flat_stages(options: EvaluateOptions, names: tuple[str, ...], settle: bool = True) -> dict[str, Callable]:
-    """The stages of :func:`stage_functions` as functions of flat arrays, for compiling
-    one at a time (the executable store keeps flat executables): each takes the batch's
+    """The executables of :data:`EXECUTABLES` as functions of flat arrays, for compiling
+    one at a time (the executable store keeps flat executables): each runs its steps
+    (:data:`CALLS`; the stages of :func:`stage_functions`), takes the batch's
     :class:`~jaxgrasp.Grasp` fields ``names`` (from which it derives the pipeline's inputs,
-    :func:`inputs_of`), then the leaves of each earlier value its step names, and returns
-    its value's leaves as a tuple."""
+    :func:`inputs_of`), then the leaves of each earlier value its steps read, and returns
+    the leaves of every value its steps make, as one tuple."""
     functions = stage_functions(options, settle)
     trees = {s.output: s.tree() for s in PIPELINE}
 
-    def flat(step: Step) -> Callable:
+    def flat(steps: tuple[Step, ...]) -> Callable:
         def run(*arrays):
-            inputs, rest = inputs_of(Grasp(**dict(zip(names, arrays)))), arrays[len(names) :]
-            args = []
-            for name in step.inputs:
+            env, rest = inputs_of(Grasp(**dict(zip(names, arrays)))), arrays[len(names) :]
+            for name in _outer_inputs(steps):
                 if name in INPUTS:
-                    args.append(inputs[name])
                     continue
                 n = trees[name].num_leaves
-                args.append(jax.tree_util.tree_unflatten(trees[name], rest[:n]))
+                env[name] = jax.tree_util.tree_unflatten(trees[name], rest[:n])
                 rest = rest[n:]
-            return tuple(jax.tree_util.tree_leaves(functions[step.stage](*args)))
+            out = []
+            for step in steps:
+                env[step.output] = _call(functions, step, env)
+                out += jax.tree_util.tree_leaves(env[step.output])
+            return tuple(out)
 
         return run
 
-    return {stage: flat(next(s for s in PIPELINE if s.stage == stage)) for stage in STAGES}
+    first = {}
+    for name, steps in CALLS:
+        first.setdefault(name, steps)  # the solve is called twice, with values shaped alike
+    return {name: flat(steps) for name, steps in first.items()}
 
 
 def run_staged(call: Callable, *fields) -> tuple:
-    """Run :data:`PIPELINE` by ``call(stage, *arrays)`` (a tuple of arrays back; the
-    stages of :func:`flat_stages`, compiled) on the batch's :class:`~jaxgrasp.Grasp`
-    fields: every :class:`~jaxgrasp.Evaluation` field, in
+    """Run :data:`PIPELINE` by ``call(executable, *arrays)`` (a tuple of arrays back; the
+    executables of :func:`flat_stages`, compiled, in the order of :data:`CALLS`) on the
+    batch's :class:`~jaxgrasp.Grasp` fields: every :class:`~jaxgrasp.Evaluation` field, in
     :data:`jaxgrasp.tolerance._result.FIELDS` order. A
     :class:`~jaxgrasp.engine._pipeline.Pipeline`'s driver: it only passes arrays on."""
     env: dict[str, tuple] = {}
-    for step in PIPELINE:
-        values = (a for name in step.inputs if name not in INPUTS for a in env[name])
-        env[step.output] = call(step.stage, *fields, *values)
+    for name, steps in CALLS:
+        values = (a for n in _outer_inputs(steps) if n not in INPUTS for a in env[n])
+        out = call(name, *fields, *values)
+        for step in steps:
+            k = step.tree().num_leaves
+            env[step.output], out = tuple(out[:k]), out[k:]
     return env[PIPELINE[-1].output]

@@ -43,8 +43,9 @@ def settled_equilibrium(data: ProblemData, eq_lanes: SolverResult, options: Eval
                         settle: bool = True) -> SolverResult:
     """Each grasp's equilibrium (leading axis ``B``) from the lanes of the equilibrium stage
     (:func:`equilibrium_of`), with ``settle`` (static) certified where it stalled
-    (:func:`~jaxgrasp.tolerance._settle.settle_equilibrium`). The starts stage and the
-    finish stage both read it, so the boundary problems start from the settled equilibrium."""
+    (:func:`~jaxgrasp.tolerance._settle.settle_equilibrium`): the pipeline's settle stage.
+    The starts stage and the finish stage both read its result, so the boundary problems
+    start from the settled equilibrium, which is computed (traced, compiled) once."""
     eq = equilibrium_of(eq_lanes)
     return settle_equilibrium(data, eq, options.solver) if settle else eq
 

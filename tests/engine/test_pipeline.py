@@ -48,27 +48,38 @@ def test_stage_names_and_functions_agree():
     assert set(functions) == set(_stages.STAGES)
     assert _stages.STAGES == ("equilibrium", "lanes", "settle", "starts", "finish", "evaluation")
     assert [s.stage for s in _stages.PIPELINE].count(_stages.SOLVE) == 2  # one per round
+    # run one executable at a time, the settle step runs in the starts stage's
+    assert _stages.EXECUTABLES == ("equilibrium", "lanes", "starts", "finish", "evaluation")
+    assert set(_stages.flat_stages(jaxgrasp.EvaluateOptions(), ("positions",))) == set(_stages.EXECUTABLES)
 
 
 def test_run_staged_calls_the_declared_steps_in_order():
-    """A recording ``call``: each stage gets the grasp fields, then the leaves of the
-    earlier values its step names, and returns its own value's leaves."""
+    """A recording ``call``: each executable gets the grasp fields, then the leaves of the
+    earlier values its steps read, and returns its own values' leaves; the settle step's
+    equilibrium comes out of the starts call, and the finish call reads it."""
     calls = []
     sizes = {s.output: s.tree().num_leaves for s in _stages.PIPELINE}
+    steps = [s for s in _stages.PIPELINE if s.stage != "settle"]
+    settle = next(s for s in _stages.PIPELINE if s.stage == "settle")
 
     def call(stage, *arrays):
-        step = _stages.PIPELINE[len(calls)]
+        step = steps[len(calls)]
         calls.append((stage, arrays))
         assert stage == step.stage
-        expect = 2 + sum(sizes[n] for n in step.inputs if n not in _stages.INPUTS)
+        reads = ("data", "eq_lanes") if stage == "starts" else step.inputs
+        expect = 2 + sum(sizes[n] for n in reads if n not in _stages.INPUTS)
         assert len(arrays) == expect, (stage, len(arrays), expect)
-        return tuple((step.output, i) for i in range(sizes[step.output]))
+        made = (settle, step) if stage == "starts" else (step,)
+        return tuple((s.output, i) for s in made for i in range(sizes[s.output]))
 
     out = _stages.run_staged(call, "f0", "f1")
-    assert [c[0] for c in calls] == [s.stage for s in _stages.PIPELINE]
+    assert [c[0] for c in calls] == ["equilibrium", "lanes", "starts", "lanes", "finish", "evaluation"]
     assert out == tuple(("evaluation", i) for i in range(sizes["evaluation"]))
-    # the second solve reads the boundary starts, not the equilibrium's
-    assert calls[4][1][2:] == tuple(("lane_starts", i) for i in range(sizes["lane_starts"]))
+    # the starts stage reads the equilibrium's lanes; the second solve the boundary
+    # starts, not the equilibrium's; the finish stage the settled equilibrium
+    assert calls[2][1][2:] == tuple(("eq_lanes", i) for i in range(sizes["eq_lanes"]))
+    assert calls[3][1][2:] == tuple(("lane_starts", i) for i in range(sizes["lane_starts"]))
+    assert calls[4][1][2 : 2 + sizes["eq"]] == tuple(("eq", i) for i in range(sizes["eq"]))
 
 
 def test_evaluation_leaves_are_the_result_fields_in_order():

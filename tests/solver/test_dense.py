@@ -87,7 +87,7 @@ def test_batched_program_calls_no_lapack_but_small_eigh():
         pipeline = _evaluator._staged(EvaluateOptions(), sharding, masked=True, settle=settle)
         spec = _evaluator._chunk_spec(3, 128 * len(cpus), sharding, masked=True)
         lowered = _pipeline.lower_stages(pipeline, spec)
-        assert tuple(lowered) == batch_stages.STAGES  # every stage lowered, each once
+        assert tuple(lowered) == batch_stages.EXECUTABLES  # every executable lowered, each once
         text = "".join(low.as_text() for low in lowered.values())
         calls = _lapack_calls(text)
         assert calls and all("syevd" in target for target, _ in calls), (settle, calls)
