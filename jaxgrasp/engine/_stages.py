@@ -130,6 +130,7 @@ def _outer_inputs(steps: tuple[Step, ...]) -> tuple[str, ...]:
     made = {s.output for s in steps}
     return tuple(dict.fromkeys(n for s in steps for n in s.inputs if n not in made))
 
+
 INPUTS = ("params", "data")
 """The pipeline's inputs, both derived from the batch of grasps by :func:`inputs_of`."""
 
