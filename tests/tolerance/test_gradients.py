@@ -365,9 +365,11 @@ def test_tune_cube_reaches_grid_best(cube_grid):
 def test_jaxopt_methods_raise_the_value(method):
     """Both jaxopt drivers run and raise the cube's value from a stable start. (jaxopt
     compiles its own update around the objective; the objective it got was a ``jit`` with
-    compiler options, which JAX refuses inside another ``jit``.)"""
-    g = presets.cube(young_modulus=6e5, initial_deformation=0.002)
-    res = tune(g, ["initial_deformation"], method=method, maxiter=2)
+    compiler options, which JAX refuses inside another ``jit``.) The parameter and the
+    options are those of :func:`test_tune_cube_reaches_grid_best`, so that ``tune``'s
+    compiled objective (kept per parameters and options) serves both."""
+    g = presets.cube(young_modulus=E_TUNE, initial_deformation=0.002)
+    res = tune(g, ["initial_deformation:shared"], method=method, maxiter=2)
     assert res.iterations >= 1 and res.value > res.initial_value > 0, res
 
 
