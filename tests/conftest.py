@@ -41,6 +41,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX
+    fcntl = None
+
 # ``import jaxgrasp`` turns on its executable store in JAXGRASP_CACHE_DIR, else in the
 # user's ~/.cache: the suite (and every subprocess it starts, which inherits the variable)
 # uses a folder of its own instead, so that it neither loads programs compiled elsewhere
@@ -142,8 +147,6 @@ class BatchEvaluator:
         """The compiled flat program for ``arrays`` (the stacked fields, then the mask):
         from this process, else from the store, else compiled here under a lock on the
         session folder, so that two workers never compile the same one at once."""
-        import fcntl
-
         from jaxgrasp.engine import _compile
 
         key = (n, masked)
@@ -160,7 +163,8 @@ class BatchEvaluator:
             build = lambda: jax.jit(flat, compiler_options=latency_options(jax.default_backend()))  # noqa: E731
             spec = [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in arrays]
             with open(SESSION_CACHE / f"evaluate-many-{n}-{int(masked)}.lock", "w") as lock:
-                fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+                if fcntl is not None:  # without it (Windows) both workers may compile it
+                    fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
                 fn, _ = _compile.compiled(("tests.evaluate_many", key, self.chunk), build, spec, name="test-evaluate-many",
                                           store_key=("tests.evaluate_many", key, self.chunk))
                 _compile.wait_for_saves()  # on disk before the other worker may look
