@@ -1,7 +1,7 @@
 """Loop steps and idle slots of the solver's work queue on the batch benchmark's mixed
 set (issue 41): a count that does not depend on the machine's speed or load.
 
-    python experiments/queue_steps.py [--count 1000] [--seed 0]
+    python experiments/queue_steps.py [--count 1000] [--seed 0] [--max-steps 300]
 
 Every ``while_loop`` of :mod:`jaxgrasp.solver._lanes` is wrapped (in this process only)
 so that it also counts its loop steps and, in each, the slots not running a lane; the
@@ -27,16 +27,15 @@ for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
 from _common import say  # noqa: E402
 
 
-def counting_queue(runs: list):
+def counting_queue(runs: list, max_steps: int):
     """Put a counting ``while_loop`` into the queue's module; ``runs`` receives one
-    ``(loop steps, slots, idle slot-steps)`` per queue run."""
+    ``(loop steps, slots, idle slot-steps)`` per queue run (a slot is idle where its lane
+    has ended or has taken the solver's ``max_steps``)."""
     import jax
     import jax.numpy as jnp
 
     from jaxgrasp.solver import _lanes
     from jaxgrasp.solver._status import LaneStatus
-
-    max_steps = 300
 
     def record(steps, slots, idle):
         runs.append((int(steps), int(slots), int(idle)))
@@ -63,18 +62,23 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--count", type=int, default=1000)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-steps", type=int, default=None,
+                   help="the solver's step budget per lane (default: SolverOptions' own)")
     args = p.parse_args()
     import jaxgrasp
     from jaxgrasp.engine import _store
 
+    solver = jaxgrasp.SolverOptions() if args.max_steps is None else jaxgrasp.SolverOptions(max_steps=args.max_steps)
+
     from batch_benchmark import make_grasps
 
     _store.set_executable_dir(None)
-    say(f"$ python experiments/queue_steps.py --count {args.count} --seed {args.seed}    "
-        f"[load {', '.join(f'{x:.2f}' for x in os.getloadavg())}]")
+    say(f"$ python experiments/queue_steps.py --count {args.count} --seed {args.seed} "
+        f"--max-steps {solver.max_steps}    [load {', '.join(f'{x:.2f}' for x in os.getloadavg())}]")
     runs: list = []
-    counting_queue(runs)
-    res = jaxgrasp.evaluate_batch(make_grasps(args.count, args.seed))
+    counting_queue(runs, solver.max_steps)
+    res = jaxgrasp.evaluate_batch(make_grasps(args.count, args.seed),
+                                  options=jaxgrasp.EvaluateOptions(solver=solver))
     for r in runs:
         say(f"   queue run: {r[0]} loop steps x {r[1]} slots, idle slot-steps {r[2]} ({r[2] / max(r[0] * r[1], 1):.3f})")
     steps = sum(r[0] for r in runs)
