@@ -115,11 +115,14 @@ def violation_certificate(problem, x, eq_mask, o: SolverOptions, steps: int = CE
     return (viol > infeasible_tol) & stationary & jnp.all(jnp.isfinite(y))
 
 
-def run(n_contacts: int, n_grasps: int, steps: int, check: float) -> str:
+def benchmark_lanes(n_contacts: int, n_grasps: int):
+    """``(states, theta, options)``: every boundary and equilibrium lane (all starts) of the
+    first ``n_grasps`` grasps with ``n_contacts`` contacts of the batch benchmark's mixed
+    set, as initial solver states with their problem data (leading axis: lanes), and the
+    default :class:`~jaxgrasp.SolverOptions`."""
     from batch_benchmark import make_grasps
     from jaxgrasp.engine._stages import inputs_of, run_inline, stage_functions
     from jaxgrasp.solver import _solver as S
-    from jaxgrasp.tolerance._problems import lane_problem
 
     opts = jaxgrasp.EvaluateOptions()
     o = opts.solver
@@ -133,10 +136,18 @@ def run(n_contacts: int, n_grasps: int, steps: int, check: float) -> str:
     flat = lambda a: a.reshape((B * L,) + a.shape[2:])  # noqa: E731
     st = jax.vmap(lambda x, m, nu, a: S.init(x, m, nu, a, o))(
         flat(starts.x0), flat(starts.eq_mask), flat(starts.nu0), flat(starts.active))
+    return st, theta, o
+
+
+def run(n_contacts: int, n_grasps: int, steps: int, check: float) -> str:
+    from jaxgrasp.solver import _solver as S
+    from jaxgrasp.tolerance._problems import lane_problem
+
+    st, theta, o = benchmark_lanes(n_contacts, n_grasps)
     step = jax.jit(jax.vmap(lambda s, t: S.step(lane_problem(t), s, o)))
     cert = jax.jit(jax.vmap(lambda x, m, t: violation_certificate(lane_problem(t), x, m, o, steps)))
-    flag = np.full(B * L, -1)
-    checks = np.zeros(B * L, int)
+    flag = np.full(st.x.shape[0], -1)
+    checks = np.zeros(st.x.shape[0], int)
     for _ in range(o.max_steps):
         new = step(st, theta)
         pv0, pv1 = np.asarray(st.prev_viol), np.asarray(new.prev_viol)
