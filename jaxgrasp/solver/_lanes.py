@@ -195,10 +195,12 @@ class _Queue(NamedTuple):
     tick: Any  # () int: loop steps taken (counted for a release rule only)
 
 
-RELEASE_EVERY = 8
+RELEASE_EVERY = 64
 """Loop steps between two calls of a queue's ``release`` at most, while lanes wait to be
-loaded (each call reads every lane; a group freed a few steps late costs nothing while
-the slots are busy)."""
+loaded. Each call reads every lane of the queue (tens of thousands in a batch's chunk),
+where a loop step works on its ``W`` slots only, so a call costs a sizeable part of a
+step; a group freed some steps late costs nothing while the slots are busy. Once no lane
+waits, ``release`` is asked at every step where some group has completed."""
 
 
 def _take(tree, idx):
