@@ -6,7 +6,10 @@ queue, the time and count of XLA's thunks: the ``K`` most expensive with the sha
 produce (from the optimised HLO, dumped alongside), and the totals by opcode. Times are
 inflated by the profiler's own cost per event, so compare within one run.
 
-    python experiments/profile_thunks.py [--grasps 32] [--top 30]
+    python experiments/profile_thunks.py [--grasps 32] [--top 30] [--chunk N] [--release-every K]
+
+``--chunk`` sets ``evaluate_batch``'s ``chunk_size`` (default: the engine's);
+``--release-every`` replaces the queue's ``RELEASE_EVERY`` in this process (to compare).
 """
 
 from __future__ import annotations
@@ -32,6 +35,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--grasps", type=int, default=32)
     ap.add_argument("--top", type=int, default=30)
+    ap.add_argument("--chunk", type=int, default=None)
+    ap.add_argument("--release-every", type=int, default=None)
     a = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="jaxgrasp-thunks-"))
     # set before jax starts: the optimised HLO names the thunks the trace times
@@ -44,6 +49,10 @@ def main():
     import jaxgrasp
     from batch_benchmark import make_grasps
     from jaxgrasp.engine import _evaluator
+    from jaxgrasp.solver import _lanes
+
+    if a.release_every is not None:
+        _lanes.RELEASE_EVERY = a.release_every
 
     real = _evaluator.compiled_evaluator
     tracing = {"on": False}
@@ -65,9 +74,9 @@ def main():
 
     _evaluator.compiled_evaluator = traced
     grasps = make_grasps(1000, 0)[: a.grasps]
-    jaxgrasp.evaluate_batch(grasps)  # compile
+    jaxgrasp.evaluate_batch(grasps, chunk_size=a.chunk)  # compile
     tracing["on"] = True
-    jaxgrasp.evaluate_batch(grasps)
+    jaxgrasp.evaluate_batch(grasps, chunk_size=a.chunk)
 
     events = json.load(gzip.open(sorted(glob.glob(str(work / "trace" / "**" / "*.trace.json.gz"), recursive=True))[-1]))
     events = [e for e in events["traceEvents"] if e.get("ph") == "X"]
@@ -87,6 +96,8 @@ def main():
     shape, opcode = {}, {}
     for m in re.finditer(r"^\s*%?([\w.\-]+) = (\S+) ([\w-]+)\(", hlo, re.M):
         shape[m.group(1)], opcode[m.group(1)] = m.group(2), m.group(3)
+    print(f"$ python experiments/profile_thunks.py --grasps {a.grasps} --chunk {a.chunk} "
+          f"--release-every {_lanes.RELEASE_EVERY}")
     print(f"{a.grasps} grasps; {steps} loop steps traced on one device; per loop step: "
           f"{sum(dur.values()) / steps:.0f} us in {sum(cnt.values()) / steps:.0f} thunks (profiled)")
     print(f"{'us/step':>8} {'n/step':>6}  thunk  [shape]")
