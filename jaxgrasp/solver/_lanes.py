@@ -199,8 +199,9 @@ RELEASE_EVERY = 64
 """Loop steps between two calls of a queue's ``release`` at most, while lanes wait to be
 loaded. Each call reads every lane of the queue (tens of thousands in a batch's chunk),
 where a loop step works on its ``W`` slots only, so a call costs a sizeable part of a
-step; a group freed some steps late costs nothing while the slots are busy. Once no lane
-waits, ``release`` is asked at every step where some group has completed."""
+step; a group freed some steps late costs nothing while the slots are busy. Once fewer
+lanes wait than slots have just finished, ``release`` is asked at once (where some group
+has completed since the last call)."""
 
 
 def _take(tree, idx):
