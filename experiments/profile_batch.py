@@ -83,8 +83,8 @@ def profile(grasps, label: str, repeats: int = 2, options=None, chunk_size=None)
         k = kinds.setdefault(f"{which}:lanes_total", [0, 0, 0])
         k[0] += st.size
     out["lanes"] = kinds
-    out["status"] = res.status
-    out["value"] = res.value
+    for f in ("status", "value", "limiting_kind", "limiting_contact", "equilibrium_energy"):
+        out[f] = getattr(res, f)
     return out
 
 

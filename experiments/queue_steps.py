@@ -1,7 +1,7 @@
 """Loop steps and idle slots of the solver's work queue on the batch benchmark's mixed
 set (issue 41): a count that does not depend on the machine's speed or load.
 
-    python experiments/queue_steps.py [--count 1000] [--seed 0] [--max-steps 300]
+    python experiments/queue_steps.py [--count 1000] [--seed 0] [--max-steps 300] [--rho0 1]
 
 Every ``while_loop`` of :mod:`jaxgrasp.solver._lanes` is wrapped (in this process only)
 so that it also counts its loop steps and, in each, the slots not running a lane; the
@@ -64,17 +64,20 @@ def main():
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-steps", type=int, default=None,
                    help="the solver's step budget per lane (default: SolverOptions' own)")
+    p.add_argument("--rho0", type=float, default=None,
+                   help="the solver's initial penalty (default: SolverOptions' own)")
     args = p.parse_args()
     import jaxgrasp
     from jaxgrasp.engine import _store
 
-    solver = jaxgrasp.SolverOptions() if args.max_steps is None else jaxgrasp.SolverOptions(max_steps=args.max_steps)
+    given = {k: v for k, v in (("max_steps", args.max_steps), ("rho0", args.rho0)) if v is not None}
+    solver = jaxgrasp.SolverOptions(**given)
 
     from batch_benchmark import make_grasps
 
     _store.set_executable_dir(None)
     say(f"$ python experiments/queue_steps.py --count {args.count} --seed {args.seed} "
-        f"--max-steps {solver.max_steps}    [load {', '.join(f'{x:.2f}' for x in os.getloadavg())}]")
+        f"--max-steps {solver.max_steps} --rho0 {solver.rho0:g}    [load {', '.join(f'{x:.2f}' for x in os.getloadavg())}]")
     runs: list = []
     counting_queue(runs, solver.max_steps)
     res = jaxgrasp.evaluate_batch(make_grasps(args.count, args.seed),

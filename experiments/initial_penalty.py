@@ -1,0 +1,181 @@
+"""Issue 41, item 2: the augmented Lagrangian's initial penalty (``SolverOptions.rho0``).
+
+An infeasible boundary lane's violation falls at every multiplier update while the
+penalty grows tenfold from ``rho0`` = 10 (``infeasible_trace.py``: 6.3e-2 at 10, 2.6e-2 at
+1e4, its floor), so it reaches the floor only after four updates. Started at a higher
+penalty, it would reach the floor sooner; a converging lane's inner solves get stiffer.
+
+For each ``--rho0`` value, against the default, on the benchmark's seeded mixed set
+(``batch_benchmark.make_grasps``, padded chunks as :func:`jaxgrasp.evaluate_batch` runs
+them, ``profile_batch.profile``): lane-steps per lane kind, CPU seconds of the stages,
+grasp statuses and values against the default; then (``--ipopt``) CasADi + Ipopt's
+multi-start from jaxgrasp's starts on the benchmark's stratified sample, against every
+option (statuses equal, values within 1e-6 relative, none above); (``--sweeps``) the
+paper's cube and prism grids against the default; (``--cpu-repeats``) process CPU per
+grasp of the 1000 grasps, the options run alternately.
+
+    nice python experiments/initial_penalty.py --rho0 100,1000 [--count 1000] [--ipopt 30]
+    nice python experiments/initial_penalty.py --rho0 1 --count 0 --sweeps --cpu-repeats 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
+    if str(_p) not in sys.path:
+        sys.path.insert(0, str(_p))
+
+from _common import say
+from batch_benchmark import OVER_REL, STATUS, ipopt_sample, make_grasps, own_programs, rel_diff
+
+
+def options_for(rho0: float):
+    import jaxgrasp
+
+    o = jaxgrasp.EvaluateOptions()
+    return dataclasses.replace(o, solver=dataclasses.replace(o.solver, rho0=rho0))
+
+
+def run_option(grasps, rho0: float) -> dict:
+    """Lane-steps per kind, CPU of the stages, statuses and values of one option."""
+    from profile_batch import profile
+
+    p = profile(grasps, f"rho0={rho0:g}", repeats=1, options=options_for(rho0))
+    cpu = sum(v for k, v in p["stage_s"].items() if k.endswith(" cpu"))
+    say(f"rho0 {rho0:g}: {len(grasps)} grasps, CPU of the stages {cpu:.2f} s = {1e3 * cpu / len(grasps):.2f} ms "
+        f"per grasp; wall {p['wall_s']:.1f} s")
+    total = 0
+    for k, (n, s, m) in sorted(p["lanes"].items()):
+        if n and not k.endswith("lanes_total") and not k.endswith("no_start"):
+            total += s
+            say(f"   {k:26s} lanes {n:7d} steps {s:8d} mean {s / n:6.1f} max {m}")
+    say(f"   all lanes: {total} lane-steps")
+    out = {f: np.asarray(p[f]) for f in ("status", "value", "limiting_kind", "limiting_contact", "equilibrium_energy")}
+    return {**out, "lanes": p["lanes"]}
+
+
+def compare(ref: dict, new: dict, rho0: float) -> None:
+    d = rel_diff(ref["value"], new["value"])
+    diff = np.flatnonzero(ref["status"] != new["status"])
+    changed = ", ".join(f"{i}: {STATUS[ref['status'][i]]}->{STATUS[new['status'][i]]}" for i in diff[:12])
+    say(f"rho0 {rho0:g} against the default: statuses differ on {diff.size} grasps "
+        + (f"({changed}) " if diff.size else "")
+        + f"values max rel diff {d.max():.1e}, above 1e-9: {np.sum(d > 1e-9)}, above 1e-6: {np.sum(d > 1e-6)}, "
+        f"higher than the default by > 1e-6 rel: {np.sum(new['value'] > ref['value'] * (1 + 1e-6) + 1e-300)}; "
+        f"limiting kind differs on {np.sum(ref['limiting_kind'] != new['limiting_kind'])}, contact on "
+        f"{np.sum(ref['limiting_contact'] != new['limiting_contact'])}; value max diff / equilibrium energy "
+        f"{np.max(np.abs(new['value'] - ref['value']) / np.abs(ref['equilibrium_energy'])):.1e}")
+
+
+def ipopt_check(grasps, sample, results: dict) -> None:
+    """Ipopt's multi-start from jaxgrasp's (default) starts on the sample, against every option."""
+    import jax
+
+    import jaxgrasp
+    from experiments import benchmark as bm
+    from jaxgrasp.engine._evaluate import solve_problems
+
+    npad = max(g.num_contacts for g in grasps)
+    batch = jaxgrasp.stack([grasps[i] for i in sample], num_contacts=npad)
+    progs = jax.block_until_ready(jax.jit(jax.vmap(lambda g: solve_problems(g, jaxgrasp.EvaluateOptions())))(batch))
+    progs = jax.tree_util.tree_map(np.asarray, progs)
+    rows = []
+    for s, i in enumerate(sample):
+        n = grasps[i].num_contacts
+        model, _ = bm.ipopt_setup(grasps[i])
+        status, value = bm.ipopt_value(bm.ipopt_grasp(model, own_programs(progs, s, npad, n), 0, n), n)
+        rows.append((i, status, value))
+        say(f"ipopt {s + 1}/{len(sample)}: grasp {i} (N={n}) {status} {value:.9g} J; "
+            + ", ".join(f"{name} {STATUS[r['status'][i]]} {r['value'][i]:.9g}" for name, r in results.items()))
+    for name, r in results.items():
+        st, val = r["status"], r["value"]
+        agree = sum(STATUS[st[i]] == s for i, s, _ in rows)
+        stable = [(i, v) for i, s, v in rows if s == "stable" and STATUS[st[i]] == "stable"]
+        rels = [float(rel_diff(val[i], v)) for i, v in stable]
+        over = [i for i, v in stable if val[i] > v * (1 + OVER_REL)]
+        say(f"Ipopt vs {name}: statuses {agree}/{len(rows)}, both stable {len(stable)}, value max rel diff "
+            f"{max(rels) if rels else float('nan'):.1e}, above Ipopt by > {OVER_REL:g} rel: {over}")
+
+
+def sweeps_check(rhos) -> None:
+    """The paper's cube and prism grids (``jaxgrasp sweep``'s default axes: Young's modulus
+    2e5-1e6 Pa, 9 points; initial deformation 1-5 mm, 41 points), every option against the
+    default: statuses, limiting boundaries, values."""
+    import jaxgrasp
+
+    axes = {"young_modulus": np.linspace(2e5, 1e6, 9), "initial_deformation": np.linspace(1e-3, 5e-3, 41)}
+    default = jaxgrasp.EvaluateOptions().solver.rho0
+    for name in ("cube", "prism"):
+        grasp = getattr(jaxgrasp.presets, name)()
+        out = {r: jaxgrasp.sweep(grasp, options=options_for(r), **axes) for r in (default, *rhos)}
+        ref = out[default]
+        for r in rhos:
+            new = out[r]
+            d = rel_diff(np.asarray(ref.value), np.asarray(new.value))
+            say(f"{name} grid ({ref.value.size} points), rho0 {r:g} against {default:g}: statuses differ on "
+                f"{np.sum(np.asarray(ref.status) != np.asarray(new.status))}, limiting kind on "
+                f"{np.sum(np.asarray(ref.limiting_kind) != np.asarray(new.limiting_kind))}, contact on "
+                f"{np.sum(np.asarray(ref.limiting_contact) != np.asarray(new.limiting_contact))}; values max rel diff "
+                f"{d.max():.1e}, above 1e-9: {np.sum(d > 1e-9)}; "
+                f"run {ref.run_seconds:.2f} s against {new.run_seconds:.2f} s")
+
+
+def cpu_alternating(grasps, rhos, repeats: int) -> None:
+    """Process CPU seconds per grasp of :func:`jaxgrasp.evaluate_batch`, every option
+    compiled first, then run alternately so that all see the same load."""
+    import time
+
+    import jaxgrasp
+
+    default = jaxgrasp.EvaluateOptions().solver.rho0
+    order = (default, *rhos)
+    for r in order:
+        jaxgrasp.evaluate_batch(grasps, options=options_for(r))  # compile (or load)
+    cpu = {r: [] for r in order}
+    for _ in range(repeats):
+        for r in order:
+            c0 = time.process_time()
+            jaxgrasp.evaluate_batch(grasps, options=options_for(r))
+            cpu[r].append(time.process_time() - c0)
+    for r, c in cpu.items():
+        ms = 1e3 * np.asarray(c) / len(grasps)
+        say(f"CPU per grasp, {len(grasps)} grasps, rho0 {r:g}: " + ", ".join(f"{v:.2f}" for v in ms)
+            + f" ms (median {np.median(ms):.2f})")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rho0", default="100,1000", help="comma-separated initial penalties to try beside the default")
+    ap.add_argument("--count", type=int, default=1000)
+    ap.add_argument("--ipopt", type=int, default=30)
+    ap.add_argument("--sweeps", action="store_true", help="also compare the cube and prism grids")
+    ap.add_argument("--cpu-repeats", type=int, default=0, help="alternating CPU runs of the whole set")
+    a = ap.parse_args()
+    import jaxgrasp
+
+    default = jaxgrasp.EvaluateOptions().solver.rho0
+    rhos = tuple(float(v) for v in a.rho0.split(","))
+    grasps = make_grasps(a.count, 0)
+    if a.count:
+        results = {f"rho0={default:g}": run_option(grasps, default)}
+        ref = results[f"rho0={default:g}"]
+        for r in rhos:
+            results[f"rho0={r:g}"] = new = run_option(grasps, r)
+            compare(ref, new, r)
+        if a.ipopt:
+            ipopt_check(grasps, ipopt_sample([g.num_contacts for g in grasps], a.ipopt, 0), results)
+    if a.sweeps:
+        sweeps_check(rhos)
+    if a.cpu_repeats:
+        cpu_alternating(make_grasps(1000, 0), rhos, a.cpu_repeats)
+
+
+if __name__ == "__main__":
+    main()
