@@ -99,9 +99,9 @@ class SolverOptions:
             ``max(tol, inner_tol_factor * min(violation, 1))``.
         rho0: initial penalty. At 1 rather than 10 the first wave of a boundary
             problem's starts settles more problems and converging lanes take fewer steps;
-            infeasible lanes take a few more, one more tenfold growth to the violation's
-            floor (``experiments/initial_penalty.py``, the benchmark's mixed set). Larger
-            values stiffen phi and lengthen every lane.
+            infeasible lanes take a few more, started a decade further from the penalty
+            that shows the violation's floor (``experiments/initial_penalty.py``, the
+            benchmark's mixed set). Larger values stiffen phi and lengthen every lane.
         rho_growth: factor by which the penalty grows when the violation stalls (more
             where ``stall_growth_max`` allows, below).
         rho_max: largest penalty.
