@@ -37,7 +37,7 @@ for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
         sys.path.insert(0, str(_p))
 
 from _common import say
-from batch_benchmark import OVER_REL, STATUS, ipopt_sample, make_grasps, own_programs, rel_diff
+from batch_benchmark import OVER_REL, STATUS, ipopt_sample, make_grasps, rel_diff
 
 
 FIELD = "rho0"  # the SolverOptions field compared (--field)
@@ -82,25 +82,11 @@ def compare(ref: dict, new: dict, rho0: float) -> None:
 
 
 def ipopt_check(grasps, sample, results: dict) -> None:
-    """Ipopt's multi-start from jaxgrasp's (default) starts on the sample, against every option."""
-    import jax
+    """Ipopt's multi-start from jaxgrasp's (default) starts on the sample
+    (``batch_benchmark.phase_ipopt``), against every option."""
+    from batch_benchmark import phase_ipopt
 
-    import jaxgrasp
-    from experiments import benchmark as bm
-    from jaxgrasp.engine._evaluate import solve_problems
-
-    npad = max(g.num_contacts for g in grasps)
-    batch = jaxgrasp.stack([grasps[i] for i in sample], num_contacts=npad)
-    progs = jax.block_until_ready(jax.jit(jax.vmap(lambda g: solve_problems(g, jaxgrasp.EvaluateOptions())))(batch))
-    progs = jax.tree_util.tree_map(np.asarray, progs)
-    rows = []
-    for s, i in enumerate(sample):
-        n = grasps[i].num_contacts
-        model, _ = bm.ipopt_setup(grasps[i])
-        status, value = bm.ipopt_value(bm.ipopt_grasp(model, own_programs(progs, s, npad, n), 0, n), n)
-        rows.append((i, status, value))
-        say(f"ipopt {s + 1}/{len(sample)}: grasp {i} (N={n}) {status} {value:.9g} J; "
-            + ", ".join(f"{name} {STATUS[r['status'][i]]} {r['value'][i]:.9g}" for name, r in results.items()))
+    rows = [(r["index"], r["status"], r["value"]) for r in phase_ipopt(grasps, sample)["grasps"]]
     for name, r in results.items():
         st, val = r["status"], r["value"]
         agree = sum(STATUS[st[i]] == s for i, s, _ in rows)
