@@ -157,7 +157,8 @@ def main() -> None:
     import jaxgrasp
 
     default = getattr(jaxgrasp.EvaluateOptions().solver, FIELD)
-    rhos = tuple(float(v) for v in a.rho0.split(","))
+    kind = type(default)  # an int field (max_inner, ...) takes ints
+    rhos = tuple(kind(float(v)) for v in a.rho0.split(","))
     grasps = make_grasps(a.count, 0)
     if a.count:
         results = {f"{FIELD}={default:g}": run_option(grasps, default)}
