@@ -92,23 +92,29 @@ def lanes_side_by_side(n_contacts: int, n_grasps: int) -> None:
         f"max rel diff {rel_diff(fo[conv], fn[conv]).max():.1e}, bit-identical {np.sum(fo[conv] == fn[conv])} of {conv.sum()}")
 
 
-def batch_side_by_side(grasps) -> dict:
-    """Check 2: the mixed set, both options; returns each option's statuses and values."""
+def profiled(grasps, name: str, opts) -> dict:
+    """``profile_batch.profile`` of one option on ``grasps`` (one steady run), its CPU of
+    the stages and lane-steps per lane kind printed; returns the profile."""
     from profile_batch import profile
 
+    p = profile(grasps, name, repeats=1, options=opts)
+    cpu = sum(v for k, v in p["stage_s"].items() if k.endswith(" cpu"))
+    say(f"{len(grasps)} grasps, {name}: CPU of the stages {cpu:.2f} s = {1e3 * cpu / len(grasps):.2f} ms per grasp "
+        f"(lanes stage {p['stage_s'].get('lanes cpu', 0.0):.2f} s); wall {p['wall_s']:.1f} s")
+    total = 0
+    for k, (n, s, m) in sorted(p["lanes"].items()):
+        if n and not k.endswith("lanes_total") and not k.endswith("no_start"):
+            total += s
+            say(f"   {k:26s} lanes {n:7d} steps {s:8d} mean {s / n:6.1f} max {m}")
+    say(f"   all lanes: {total} lane-steps")
+    return p
+
+
+def batch_side_by_side(grasps) -> dict:
+    """Check 2: the mixed set, both options; returns each option's statuses and values."""
     res = {}
     for name, opts in options_pair().items():
-        p = profile(grasps, name, repeats=1, options=opts)
-        lanes = p["lanes"]
-        cpu = sum(v for k, v in p["stage_s"].items() if k.endswith(" cpu"))
-        say(f"{len(grasps)} grasps, {name}: CPU of the stages {cpu:.2f} s = {1e3 * cpu / len(grasps):.2f} ms per grasp "
-            f"(lanes stage {p['stage_s'].get('lanes cpu', 0.0):.2f} s); wall {p['wall_s']:.1f} s")
-        total = 0
-        for k, (n, s, m) in sorted(lanes.items()):
-            if n and not k.endswith("lanes_total") and not k.endswith("no_start"):
-                total += s
-                say(f"   {k:26s} lanes {n:7d} steps {s:8d} mean {s / n:6.1f} max {m}")
-        say(f"   all lanes: {total} lane-steps")
+        p = profiled(grasps, name, opts)
         res[name] = {"status": np.asarray(p["status"]), "value": np.asarray(p["value"])}
     o, n = res["old"], res["new"]
     d = rel_diff(o["value"], n["value"])
@@ -154,11 +160,12 @@ def ipopt_check(grasps, sample, res) -> None:
         f"({sum(r[4] for r in rows)} lanes)")
 
 
-def cpu_alternating(grasps, repeats: int) -> None:
-    """Check 4: CPU seconds per grasp of both options, run alternately."""
+def cpu_alternating(grasps, repeats: int, pair: dict | None = None) -> None:
+    """Check 4: CPU seconds per grasp of both options (or of every ``name: options`` of
+    ``pair``), each compiled first, then run alternately so that all see the same load."""
     import jaxgrasp
 
-    pair = options_pair()
+    pair = pair or options_pair()
     for opts in pair.values():
         jaxgrasp.evaluate_batch(grasps, options=opts)  # compile (or load)
     cpu = {name: [] for name in pair}

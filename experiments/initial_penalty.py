@@ -38,6 +38,7 @@ for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
 
 from _common import say
 from batch_benchmark import OVER_REL, STATUS, ipopt_sample, make_grasps, rel_diff
+from infeasible_early import cpu_alternating, profiled
 
 
 FIELD = "rho0"  # the SolverOptions field compared (--field)
@@ -51,19 +52,8 @@ def options_for(rho0: float):
 
 
 def run_option(grasps, rho0: float) -> dict:
-    """Lane-steps per kind, CPU of the stages, statuses and values of one option."""
-    from profile_batch import profile
-
-    p = profile(grasps, f"{FIELD}={rho0:g}", repeats=1, options=options_for(rho0))
-    cpu = sum(v for k, v in p["stage_s"].items() if k.endswith(" cpu"))
-    say(f"{FIELD} {rho0:g}: {len(grasps)} grasps, CPU of the stages {cpu:.2f} s = {1e3 * cpu / len(grasps):.2f} ms "
-        f"per grasp; wall {p['wall_s']:.1f} s")
-    total = 0
-    for k, (n, s, m) in sorted(p["lanes"].items()):
-        if n and not k.endswith("lanes_total") and not k.endswith("no_start"):
-            total += s
-            say(f"   {k:26s} lanes {n:7d} steps {s:8d} mean {s / n:6.1f} max {m}")
-    say(f"   all lanes: {total} lane-steps")
+    """Lane-steps per kind, CPU of the stages (printed), statuses and values of one option."""
+    p = profiled(grasps, f"{FIELD}={rho0:g}", options_for(rho0))
     out = {f: np.asarray(p[f]) for f in ("status", "value", "limiting_kind", "limiting_contact", "equilibrium_energy")}
     return {**out, "lanes": p["lanes"]}
 
@@ -83,18 +73,15 @@ def compare(ref: dict, new: dict, rho0: float) -> None:
 
 def ipopt_check(grasps, sample, results: dict) -> None:
     """Ipopt's multi-start from jaxgrasp's (default) starts on the sample
-    (``batch_benchmark.phase_ipopt``), against every option."""
-    from batch_benchmark import phase_ipopt
+    (``batch_benchmark.phase_ipopt``), against every option (``ipopt_agreement``)."""
+    from batch_benchmark import ipopt_agreement, phase_ipopt
 
-    rows = [(r["index"], r["status"], r["value"]) for r in phase_ipopt(grasps, sample)["grasps"]]
+    ipopt = phase_ipopt(grasps, sample)
     for name, r in results.items():
-        st, val = r["status"], r["value"]
-        agree = sum(STATUS[st[i]] == s for i, s, _ in rows)
-        stable = [(i, v) for i, s, v in rows if s == "stable" and STATUS[st[i]] == "stable"]
-        rels = [float(rel_diff(val[i], v)) for i, v in stable]
-        over = [i for i, v in stable if val[i] > v * (1 + OVER_REL)]
-        say(f"Ipopt vs {name}: statuses {agree}/{len(rows)}, both stable {len(stable)}, value max rel diff "
-            f"{max(rels) if rels else float('nan'):.1e}, above Ipopt by > {OVER_REL:g} rel: {over}")
+        a = ipopt_agreement({"results": r}, ipopt)
+        rel = a["value_max_rel_diff"]
+        say(f"Ipopt vs {name}: statuses {a['status_agree']}/{a['grasps']}, both stable {a['both_stable']}, value max "
+            f"rel diff {float('nan') if rel is None else rel:.1e}, above Ipopt by > {OVER_REL:g} rel: {a['overstated']}")
 
 
 def sweeps_check(rhos) -> None:
@@ -118,29 +105,6 @@ def sweeps_check(rhos) -> None:
                 f"{np.sum(np.asarray(ref.limiting_contact) != np.asarray(new.limiting_contact))}; values max rel diff "
                 f"{d.max():.1e}, above 1e-9: {np.sum(d > 1e-9)}; "
                 f"run {ref.run_seconds:.2f} s against {new.run_seconds:.2f} s")
-
-
-def cpu_alternating(grasps, rhos, repeats: int) -> None:
-    """Process CPU seconds per grasp of :func:`jaxgrasp.evaluate_batch`, every option
-    compiled first, then run alternately so that all see the same load."""
-    import time
-
-    import jaxgrasp
-
-    default = getattr(jaxgrasp.EvaluateOptions().solver, FIELD)
-    order = (default, *rhos)
-    for r in order:
-        jaxgrasp.evaluate_batch(grasps, options=options_for(r))  # compile (or load)
-    cpu = {r: [] for r in order}
-    for _ in range(repeats):
-        for r in order:
-            c0 = time.process_time()
-            jaxgrasp.evaluate_batch(grasps, options=options_for(r))
-            cpu[r].append(time.process_time() - c0)
-    for r, c in cpu.items():
-        ms = 1e3 * np.asarray(c) / len(grasps)
-        say(f"CPU per grasp, {len(grasps)} grasps, {FIELD} {r:g}: " + ", ".join(f"{v:.2f}" for v in ms)
-            + f" ms (median {np.median(ms):.2f})")
 
 
 def main() -> None:
@@ -171,7 +135,8 @@ def main() -> None:
     if a.sweeps:
         sweeps_check(rhos)
     if a.cpu_repeats:
-        cpu_alternating(make_grasps(1000, 0), rhos, a.cpu_repeats)
+        pair = {f"{FIELD} {r:g}": options_for(r) for r in (default, *rhos)}
+        cpu_alternating(make_grasps(1000, 0), a.cpu_repeats, pair)
 
 
 if __name__ == "__main__":
