@@ -19,7 +19,7 @@ default; ``method="jaxopt_lbfgsb"`` uses ``jaxopt.LBFGSB``, ``method="projected_
 :func:`tune`, the objective and :class:`TuneResult`. The value and its gradient are
 compiled once per parameter selection, number of contacts and
 :class:`~jaxgrasp.EvaluateOptions`, and reused by later calls (other grasps, bounds,
-starts, temperatures).
+starts, temperatures) and, through the executable store, by later processes.
 
 The value is a minimum over boundaries, so it has kinks where the limiting boundary
 switches, and its maximum often lies on one (e.g. the cube's best deformation is where
@@ -59,6 +59,7 @@ from jaxgrasp.model._units import MJ_TO_J
 from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs, counted
 from jaxgrasp.surface import PAD_FACES, Surface
 from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 
@@ -108,9 +109,10 @@ def _moved_contacts(base: Grasp, offsets, data) -> dict:
 
 
 @lru_cache(maxsize=64)
-def _compiled(specs: tuple[ParamSpec, ...], options: EvaluateOptions):
-    """``vg(u, data) -> ((objective, Evaluation), grad)``, jitted once per key: the
-    objective is minus the value (J) over ``data["value_scale"]``, 0 where not finite."""
+def _compiled(specs: tuple[ParamSpec, ...], options: EvaluateOptions) -> "_Objective":
+    """``vg(u, data) -> ((objective, Evaluation), grad)``, one per key: the objective is
+    minus the value (J) over ``data["value_scale"]``, 0 where not finite
+    (:class:`_Objective`, compiled once per shape of ``data``)."""
 
     def objective(u, data):
         ev = evaluate_compiled(_apply(specs, u, data), data["temperature"], options)
@@ -124,7 +126,49 @@ def _compiled(specs: tuple[ParamSpec, ...], options: EvaluateOptions):
         g = jnp.where(jnp.isfinite(g), g, 0.0)
         return (f, ev), g
 
-    return jax.jit(safe_vg, compiler_options=COMPILER_OPTIONS)
+    return _Objective(specs, options, safe_vg)
+
+
+class _Objective:
+    """The compiled value and gradient of :func:`_compiled`: ``self(u, data)`` runs the
+    executable for the shapes of ``u`` (``(k,)``) and ``data`` (the grasp, bounds, face
+    bases and, on a mesh, the surface), which comes from
+    :func:`jaxgrasp.engine._compile.compiled` as the evaluators' executables do: memoised
+    in the process and, where the executable store is on, loaded from it. So a second
+    process tuning the same parameters of a grasp with as many contacts neither traces
+    nor compiles the evaluation and its gradient again. ``__wrapped__`` is the function
+    itself, traceable (for a caller that needs its output shapes or traces it inline).
+    """
+
+    def __init__(self, specs: tuple[ParamSpec, ...], options: EvaluateOptions, fun):
+        self.specs, self.options, self.__wrapped__ = specs, options, fun
+
+    def _executable(self, leaves, treedef):
+        from jaxgrasp.engine import _compile
+
+        avals = tuple((np.shape(x), np.dtype(jax.dtypes.canonicalize_dtype(np.result_type(x))).name) for x in leaves)
+        spec = [jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in avals]
+        # A treedef's text names every node and key in order, so it tells two data layouts
+        # (with and without a surface) apart in every process.
+        key = (self.specs, self.options, str(treedef), avals, jax.config.jax_enable_x64)
+
+        def build():
+            def flat(*leaves):  # arrays in, arrays out: the store keeps flat executables
+                u, data = jax.tree_util.tree_unflatten(treedef, leaves)
+                (f, ev), g = self.__wrapped__(u, data)
+                return (f, *(getattr(ev, name) for name in RESULT_FIELDS), g)
+
+            return jax.jit(flat, compiler_options=COMPILER_OPTIONS)
+
+        fn, _ = _compile.compiled(("tune",) + key + (jax.config.jax_default_device,), build, spec, name="tune",
+                                  what="tune's value and gradient of " + ", ".join(s.label for s in self.specs),
+                                  store_key=key, n_outputs=len(RESULT_FIELDS) + 2)
+        return fn
+
+    def __call__(self, u, data):
+        leaves, treedef = jax.tree_util.tree_flatten((u, data))
+        out = self._executable(leaves, treedef)(*leaves)
+        return (out[0], Evaluation(**dict(zip(RESULT_FIELDS, out[1:-1])))), out[-1]
 
 
 # ----------------------------------------------------------------------------- result

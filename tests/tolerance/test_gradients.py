@@ -373,6 +373,41 @@ def test_jaxopt_methods_raise_the_value(method):
     assert res.iterations >= 1 and res.value > res.initial_value > 0, res
 
 
+_TUNE_IN_A_NEW_PROCESS = """
+import json
+import jaxgrasp
+from jaxgrasp.engine import _store
+res = jaxgrasp.tune(jaxgrasp.presets.cube(young_modulus={E}, initial_deformation=0.002),
+                    ["initial_deformation:shared"], maxiter=2)
+print(json.dumps({{"stats": _store.stats(), "history": [float(v) for v in res.history],
+                  "d": float(res.params["initial_deformation:shared"])}}))
+"""
+
+
+@pytest.mark.slow  # compiles tune's objective where run alone, then a second process
+def test_second_process_loads_tunes_objective_from_the_store():
+    """``tune``'s value and gradient come from the executable store, as the evaluators'
+    executables do: a new process (the suite's store, ``JAXGRASP_CACHE_DIR``) tuning the
+    same parameter of a grasp with as many contacts traces and compiles nothing, and
+    its iterates are this process's, bit for bit."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from jaxgrasp.engine import _compile
+
+    res = tune(presets.cube(young_modulus=E_TUNE, initial_deformation=0.002), ["initial_deformation:shared"],
+               maxiter=2)
+    _compile.wait_for_saves()
+    proc = subprocess.run([sys.executable, "-c", _TUNE_IN_A_NEW_PROCESS.format(E=E_TUNE)], capture_output=True,
+                          text=True, env=os.environ, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    other = json.loads(proc.stdout)
+    assert other["stats"]["traced"] == 0 and other["stats"]["deserialized"] == 1, other["stats"]
+    assert other["history"] == [float(v) for v in res.history]
+    assert other["d"] == float(res.params["initial_deformation:shared"])
+
 def test_tune_rejects_a_zero_start():
     g = presets.cube(6e5, 2e-3).replace(max_force=jnp.full(2, 0.5))
     with pytest.raises(jaxgrasp.GraspValueError, match="infeasible"):
