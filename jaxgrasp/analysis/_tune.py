@@ -51,6 +51,7 @@ from jaxgrasp.analysis._tune_spec import (
     param_specs,
 )
 from jaxgrasp.analysis._tune_status import TuneStatus
+from jaxgrasp.engine._compile import StoredFunction
 from jaxgrasp.engine._evaluate import evaluate_compiled
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
 from jaxgrasp.io._mesh import MeshGrasp
@@ -59,7 +60,7 @@ from jaxgrasp.model._units import MJ_TO_J
 from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs, counted
 from jaxgrasp.surface import PAD_FACES, Surface
 from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
+from jaxgrasp.tolerance._result import FIELDS as EVALUATION_FIELDS
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 
@@ -109,10 +110,12 @@ def _moved_contacts(base: Grasp, offsets, data) -> dict:
 
 
 @lru_cache(maxsize=64)
-def _compiled(specs: tuple[ParamSpec, ...], options: EvaluateOptions) -> "_Objective":
+def _compiled(specs: tuple[ParamSpec, ...], options: EvaluateOptions) -> StoredFunction:
     """``vg(u, data) -> ((objective, Evaluation), grad)``, one per key: the objective is
-    minus the value (J) over ``data["value_scale"]``, 0 where not finite
-    (:class:`_Objective`, compiled once per shape of ``data``)."""
+    minus the value (J) over ``data["value_scale"]``, 0 where not finite. Compiled once
+    per shape of ``data`` (the grasp, bounds, face bases and, on a mesh, the surface) and
+    kept in the executable store (:class:`~jaxgrasp.engine._compile.StoredFunction`): a
+    second process tuning the same parameters of a grasp with as many contacts loads it."""
 
     def objective(u, data):
         ev = evaluate_compiled(_apply(specs, u, data), data["temperature"], options)
@@ -126,49 +129,9 @@ def _compiled(specs: tuple[ParamSpec, ...], options: EvaluateOptions) -> "_Objec
         g = jnp.where(jnp.isfinite(g), g, 0.0)
         return (f, ev), g
 
-    return _Objective(specs, options, safe_vg)
-
-
-class _Objective:
-    """The compiled value and gradient of :func:`_compiled`: ``self(u, data)`` runs the
-    executable for the shapes of ``u`` (``(k,)``) and ``data`` (the grasp, bounds, face
-    bases and, on a mesh, the surface), which comes from
-    :func:`jaxgrasp.engine._compile.compiled` as the evaluators' executables do: memoised
-    in the process and, where the executable store is on, loaded from it. So a second
-    process tuning the same parameters of a grasp with as many contacts neither traces
-    nor compiles the evaluation and its gradient again. ``__wrapped__`` is the function
-    itself, traceable (for a caller that needs its output shapes or traces it inline).
-    """
-
-    def __init__(self, specs: tuple[ParamSpec, ...], options: EvaluateOptions, fun):
-        self.specs, self.options, self.__wrapped__ = specs, options, fun
-
-    def _executable(self, leaves, treedef):
-        from jaxgrasp.engine import _compile
-
-        avals = tuple((np.shape(x), np.dtype(jax.dtypes.canonicalize_dtype(np.result_type(x))).name) for x in leaves)
-        spec = [jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in avals]
-        # A treedef's text names every node and key in order, so it tells two data layouts
-        # (with and without a surface) apart in every process.
-        key = (self.specs, self.options, str(treedef), avals, jax.config.jax_enable_x64)
-
-        def build():
-            def flat(*leaves):  # arrays in, arrays out: the store keeps flat executables
-                u, data = jax.tree_util.tree_unflatten(treedef, leaves)
-                (f, ev), g = self.__wrapped__(u, data)
-                return (f, *(getattr(ev, name) for name in RESULT_FIELDS), g)
-
-            return jax.jit(flat, compiler_options=COMPILER_OPTIONS)
-
-        fn, _ = _compile.compiled(("tune",) + key + (jax.config.jax_default_device,), build, spec, name="tune",
-                                  what="tune's value and gradient of " + ", ".join(s.label for s in self.specs),
-                                  store_key=key, n_outputs=len(RESULT_FIELDS) + 2)
-        return fn
-
-    def __call__(self, u, data):
-        leaves, treedef = jax.tree_util.tree_flatten((u, data))
-        out = self._executable(leaves, treedef)(*leaves)
-        return (out[0], Evaluation(**dict(zip(RESULT_FIELDS, out[1:-1])))), out[-1]
+    out_tree = jax.tree_util.tree_structure(((0.0, Evaluation(*(0.0,) * len(EVALUATION_FIELDS))), 0.0))
+    return StoredFunction(safe_vg, (specs, options), out_tree, name="tune", compiler_options=COMPILER_OPTIONS,
+                          what="tune's value and gradient of " + ", ".join(s.label for s in specs))
 
 
 # ----------------------------------------------------------------------------- result

@@ -8,6 +8,8 @@ import time
 from collections.abc import Callable, Hashable, Sequence
 from typing import Any
 
+import numpy as np
+
 import jax
 
 from jaxgrasp.engine._pipeline import Pipeline, Staged, lower_stages
@@ -22,7 +24,7 @@ from jaxgrasp.engine._store import (
     serialized_stages,
 )
 
-__all__ = ["MEMO_SIZE", "clear_compiled", "compiled", "default_device", "wait_for_saves"]
+__all__ = ["MEMO_SIZE", "StoredFunction", "clear_compiled", "compiled", "default_device", "wait_for_saves"]
 
 
 MEMO_SIZE = 16
@@ -149,6 +151,58 @@ def compiled(
         _MEMO.pop(next(iter(_MEMO)))
     _MEMO[key] = fn
     return fn, seconds
+
+
+class StoredFunction:
+    """``fun`` (traceable: pytrees of arrays in, a pytree of arrays out) compiled once per
+    shape of its arguments through :func:`compiled`: memoised in the process and, where
+    the executable store is on, loaded from it, so that a later process calling it on
+    arguments of the same shapes neither traces nor compiles it. This is how the
+    gradient-based tuners' value and gradient reach the store (the evaluators build
+    their flat executables themselves).
+
+    Args:
+        fun: the function; ``self(*args)`` returns ``fun(*args)`` (the same computation).
+        key: what makes it unique across processes besides its arguments' shapes and
+            tree (its ``repr`` holds every option: a stored file is found by that text).
+        out_tree: the tree of ``fun``'s output, which must not depend on the arguments'
+            values: a loaded executable returns flat arrays and is not traced.
+        name: prefix of its stored file; what: what it is, in words (its compile report).
+        compiler_options: XLA's options for ``jax.jit``.
+
+    ``__wrapped__`` is ``fun`` itself (for a caller that needs its output shapes, or
+    traces it inside its own ``jit``).
+    """
+
+    def __init__(self, fun: Callable, key: Hashable, out_tree, *, name: str, what: str,
+                 compiler_options: dict | None = None):
+        self.__wrapped__, self.key, self.out_tree = fun, key, out_tree
+        self.name, self.what, self.compiler_options = name, what, compiler_options
+
+    def _executable(self, leaves: list, treedef):
+        avals = tuple((np.shape(x), np.dtype(jax.dtypes.canonicalize_dtype(np.result_type(x))).name) for x in leaves)
+        spec = [jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in avals]
+        # A treedef's text names every node and key in order: two layouts of the
+        # arguments (a dict with or without an entry) differ in every process.
+        store_key = (self.key, str(treedef), avals, jax.config.jax_enable_x64)
+
+        def build():
+            def flat(*leaves):  # arrays in, arrays out: the store keeps flat executables
+                out = self.__wrapped__(*jax.tree_util.tree_unflatten(treedef, leaves))
+                out_leaves, tree = jax.tree_util.tree_flatten(out)
+                if tree != self.out_tree:
+                    raise TypeError(f"{self.what}: returned {tree}, not the declared {self.out_tree}")
+                return tuple(out_leaves)
+
+            return jax.jit(flat, compiler_options=self.compiler_options)
+
+        fn, _ = compiled((self.name, store_key, jax.config.jax_default_device), build, spec, name=self.name,
+                         what=self.what, store_key=store_key, n_outputs=self.out_tree.num_leaves)
+        return fn
+
+    def __call__(self, *args):
+        leaves, treedef = jax.tree_util.tree_flatten(args)
+        return jax.tree_util.tree_unflatten(self.out_tree, self._executable(leaves, treedef)(*leaves))
 
 
 def _build(built, spec, entry: StoreEntry | None, what: str, why: str):

@@ -13,8 +13,10 @@ Three layers, each skipping more of the work of building an evaluator:
   written there as well (a second copy of the same machine code, written for nothing).
 
 The executables of :func:`jaxgrasp.evaluate` on a concrete grasp, of
-:func:`jaxgrasp.evaluate_batch`, of :func:`jaxgrasp.sweep` and :func:`jaxgrasp.tune`'s
-value and gradient all come from :func:`~jaxgrasp.engine._compile.compiled`. A traced grasp (inside the caller's ``jit``,
+:func:`jaxgrasp.evaluate_batch`, of :func:`jaxgrasp.sweep` and the value and gradient of
+:func:`jaxgrasp.tune` and :func:`jaxgrasp.tune_hand`
+(:class:`~jaxgrasp.engine._compile.StoredFunction`) all come from
+:func:`~jaxgrasp.engine._compile.compiled`. A traced grasp (inside the caller's ``jit``,
 ``vmap`` or ``grad``) is traced with the caller's function and uses none of these.
 
 Which caches are on:

@@ -12,6 +12,7 @@ direction the hemisphere points.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import os
 from typing import Sequence
 
@@ -79,6 +80,15 @@ class Hand:
         return cls(tree, idx, tuple(fingertips), tree.geom_size[idx, 0].copy(), cap_offsets(tree, idx), links,
                    link_samples(tree, links))
 
+    def digest(self) -> str:
+        """SHA-256 (hex) of the hand's content: every array, name and number of its
+        kinematic tree, fingertips and link samples, but not the file it was read from,
+        so that hands read from equal files have one digest wherever the files lie (the
+        key of :func:`~jaxgrasp.tune_hand`'s stored executable)."""
+        h = hashlib.sha256()
+        _digest_into(h, self)
+        return h.hexdigest()
+
     @property
     def num_joints(self) -> int:
         """Number of joints ``J``: the length of ``qpos``."""
@@ -142,3 +152,29 @@ class Hand:
         from jaxgrasp.hands._grasp import hand_grasp
 
         return hand_grasp(self, qpos, mesh, **kwargs)
+
+
+def _digest_into(h, obj) -> None:
+    """Feed ``obj`` (dataclasses, arrays, tuples, lists, names and numbers, nested) to the
+    hash ``h``, each value tagged with its kind and size, so that no two contents feed
+    the same bytes; a ``source`` field (a file name) is left out."""
+    if dataclasses.is_dataclass(obj):
+        h.update(f"<{type(obj).__name__}>".encode())
+        for f in dataclasses.fields(obj):
+            if f.name != "source":
+                h.update(f"{f.name}=".encode())
+                _digest_into(h, getattr(obj, f.name))
+    elif isinstance(obj, np.ndarray):
+        a = np.ascontiguousarray(obj)
+        h.update(f"a{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes())
+    elif isinstance(obj, (tuple, list)):
+        h.update(f"t{len(obj)}(".encode())
+        for x in obj:
+            _digest_into(h, x)
+        h.update(b")")
+    elif obj is None or isinstance(obj, (str, bool, int, float, np.generic)):
+        text = repr(obj.item() if isinstance(obj, np.generic) else obj)
+        h.update(f"s{len(text)}:{text}".encode())
+    else:
+        raise TypeError(f"Hand.digest: cannot hash a {type(obj).__name__}")

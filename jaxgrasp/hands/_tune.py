@@ -7,7 +7,7 @@ respect to ``qpos`` is the envelope theorem's gradient with respect to the grasp
 (:func:`jaxgrasp.evaluate`) chained through the contact (the closest surface point moves
 within its face) and the hand's kinematics. As :func:`jaxgrasp.tune` does, the value and
 its gradient are compiled once (per hand, :class:`~jaxgrasp.EvaluateOptions` and mesh
-size) and SciPy's L-BFGS-B runs on them in the box of the joint limits scaled to
+size; kept in the executable store, so later processes load it) and SciPy's L-BFGS-B runs on them in the box of the joint limits scaled to
 ``[0, 1]`` (:func:`jaxgrasp.analysis._tune_drivers.run_search`).
 
 Penetration: the hand's other links are sampled (:meth:`~jaxgrasp.Hand.link_depths`,
@@ -30,12 +30,15 @@ import numpy as np
 
 from jaxgrasp.analysis._tune_drivers import run_search
 from jaxgrasp.analysis._tune_status import TuneStatus
+from jaxgrasp.engine._compile import StoredFunction
 from jaxgrasp.engine._evaluate import evaluate_compiled
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
 from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp, _pose, contact_grasp, hand_grasp, material
 from jaxgrasp.model._fields import DEFAULT_GRAVITY
 from jaxgrasp.model._validation import GraspValueError
 from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.tolerance._result import FIELDS as EVALUATION_FIELDS
+from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 
 __all__ = ["tune_hand", "HandTuneResult", "HandValue", "hand_value", "PENETRATION_UNIT"]
@@ -46,7 +49,9 @@ PENETRATION_UNIT = 1e-3
 @lru_cache(maxsize=16)
 def _compiled(hand, options: EvaluateOptions, max_tilt: float):
     """``core(x, data) -> (value, dvalue_dx, penalty, dpenalty_dx, evaluation, deepest, tilt)``,
-    jitted once per key; ``x = (qpos, wrist)`` ``(J + 6,)``."""
+    one per key; ``x = (qpos, wrist)`` ``(J + 6,)``. Compiled once per mesh size and kept in
+    the executable store (:class:`~jaxgrasp.engine._compile.StoredFunction`), keyed by the
+    hand's content (:meth:`~jaxgrasp.Hand.digest`)."""
     j = hand.num_joints
 
     def value(x, data):
@@ -65,7 +70,11 @@ def _compiled(hand, options: EvaluateOptions, max_tilt: float):
         finite = lambda g: jnp.where(jnp.isfinite(g), g, 0.0)  # noqa: E731
         return v, finite(gv), p, finite(gp), ev, deepest, tilt
 
-    return jax.jit(core, compiler_options=COMPILER_OPTIONS)
+    out_tree = jax.tree_util.tree_structure((0.0,) * 4 + (Evaluation(*(0.0,) * len(EVALUATION_FIELDS)), 0.0, 0.0))
+    # The hand's arrays are constants of the program: its digest stands for them.
+    return StoredFunction(core, (hand.digest(), options, max_tilt), out_tree, name="tune-hand",
+                          compiler_options=COMPILER_OPTIONS,
+                          what=f"tune_hand's value and gradient ({hand.num_joints} joints)")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -129,6 +129,60 @@ def test_tune_hand_raises_the_value_within_limits(hand, cube):
         jaxgrasp.tune_hand(hand, cube, np.array([-0.02, 0.0, 0.0, 0.0005, 0.0, 0.0]), **FIELDS)
 
 
+
+def test_hand_digest_follows_the_content_not_the_path(hand, tmp_path):
+    """Equal files in two folders give one digest (the stored executable's key); a
+    fingertip 1 mm thicker gives another."""
+    copy = tmp_path / "copy" / TWO_FINGER.name
+    copy.parent.mkdir()
+    copy.write_text(TWO_FINGER.read_text())
+    same = jaxgrasp.Hand.from_mjcf(copy, fingertips=["a_tip", "b_tip"])
+    assert same.tree.source != hand.tree.source and same.digest() == hand.digest()
+    thicker = tmp_path / "thicker" / TWO_FINGER.name
+    thicker.parent.mkdir()
+    text = TWO_FINGER.read_text()
+    assert text.count('fromto="0 0 0 0.03 0 0" size="0.01"') >= 1
+    thicker.write_text(text.replace('fromto="0 0 0 0.03 0 0" size="0.01"', 'fromto="0 0 0 0.03 0 0" size="0.011"', 1))
+    other = jaxgrasp.Hand.from_mjcf(thicker, fingertips=["a_tip", "b_tip"])
+    assert other.digest() != hand.digest() and len(hand.digest()) == 64
+
+
+_TUNE_HAND_IN_A_NEW_PROCESS = """
+import json, sys
+import numpy as np, trimesh
+import jaxgrasp
+from jaxgrasp.engine import _store
+hand = jaxgrasp.Hand.from_mjcf(sys.argv[1], fingertips=["a_tip", "b_tip"])
+res = jaxgrasp.tune_hand(hand, trimesh.creation.box((0.06, 0.06, 0.06)), np.array(json.loads(sys.argv[2])), maxiter=2,
+                         **json.loads(sys.argv[3]))
+print(json.dumps({"stats": _store.stats(), "history": [float(v) for v in res.history], "qpos": res.qpos.tolist()}))
+"""
+
+
+def test_second_process_loads_tune_hands_objective(hand, cube, tmp_path):
+    """``tune_hand``'s value and gradient come from the executable store: a new process
+    (the suite's store, ``JAXGRASP_CACHE_DIR``), with the hand read from a copy of its
+    file elsewhere, compiles no program and iterates as this process does, bit for bit."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from jaxgrasp.engine import _compile
+
+    res = jaxgrasp.tune_hand(hand, cube, CONFIGS[0], maxiter=2, **FIELDS)
+    _compile.wait_for_saves()
+    copy = tmp_path / TWO_FINGER.name
+    copy.write_text(TWO_FINGER.read_text())
+    argv = [str(copy), json.dumps(CONFIGS[0].tolist()), json.dumps(FIELDS)]
+    proc = subprocess.run([sys.executable, "-c", _TUNE_HAND_IN_A_NEW_PROCESS, *argv], capture_output=True, text=True,
+                          env=os.environ, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    other = json.loads(proc.stdout)
+    assert other["stats"]["traced"] == 0 and other["stats"]["deserialized"] >= 1, other["stats"]
+    assert other["history"] == [float(v) for v in res.history]
+    assert other["qpos"] == res.qpos.tolist()
+
 PINCH = TWO_FINGER.with_name("pinch.toml")
 
 
