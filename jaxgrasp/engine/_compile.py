@@ -8,9 +8,8 @@ import time
 from collections.abc import Callable, Hashable, Sequence
 from typing import Any
 
-import numpy as np
-
 import jax
+import numpy as np
 
 from jaxgrasp.engine._pipeline import Pipeline, Staged, lower_stages
 from jaxgrasp.engine._store import (

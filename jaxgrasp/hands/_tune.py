@@ -7,8 +7,9 @@ respect to ``qpos`` is the envelope theorem's gradient with respect to the grasp
 (:func:`jaxgrasp.evaluate`) chained through the contact (the closest surface point moves
 within its face) and the hand's kinematics. As :func:`jaxgrasp.tune` does, the value and
 its gradient are compiled once (per hand, :class:`~jaxgrasp.EvaluateOptions` and mesh
-size; kept in the executable store, so later processes load it) and SciPy's L-BFGS-B runs on them in the box of the joint limits scaled to
-``[0, 1]`` (:func:`jaxgrasp.analysis._tune_drivers.run_search`).
+size; kept in the executable store, so later processes load them) and SciPy's L-BFGS-B
+runs on them in the box of the joint limits scaled to ``[0, 1]``
+(:func:`jaxgrasp.analysis._tune_drivers.run_search`).
 
 Penetration: the hand's other links are sampled (:meth:`~jaxgrasp.Hand.link_depths`,
 :mod:`jaxgrasp.hands._links`), each sample's depth in the object measured by the signed
