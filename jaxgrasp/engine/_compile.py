@@ -23,7 +23,8 @@ from jaxgrasp.engine._store import (
     serialized_stages,
 )
 
-__all__ = ["MEMO_SIZE", "StoredFunction", "clear_compiled", "compiled", "default_device", "wait_for_saves"]
+__all__ = ["MEMO_SIZE", "StoredFunction", "canonical_dtype", "clear_compiled", "compiled", "default_device",
+           "wait_for_saves"]
 
 
 MEMO_SIZE = 16
@@ -152,6 +153,11 @@ def compiled(
     return fn, seconds
 
 
+def canonical_dtype(x) -> np.dtype:
+    """The dtype JAX gives ``x`` as an argument (float64 becomes float32 without x64)."""
+    return np.dtype(jax.dtypes.canonicalize_dtype(x.dtype if hasattr(x, "dtype") else np.result_type(x)))
+
+
 class StoredFunction:
     """``fun`` (traceable: pytrees of arrays in, a pytree of arrays out) compiled once per
     shape of its arguments through :func:`compiled`: memoised in the process and, where
@@ -179,7 +185,7 @@ class StoredFunction:
         self.name, self.what, self.compiler_options = name, what, compiler_options
 
     def _executable(self, leaves: list, treedef):
-        avals = tuple((np.shape(x), np.dtype(jax.dtypes.canonicalize_dtype(np.result_type(x))).name) for x in leaves)
+        avals = tuple((np.shape(x), canonical_dtype(x).name) for x in leaves)
         spec = [jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in avals]
         # A treedef's text names every node and key in order: two layouts of the
         # arguments (a dict with or without an entry) differ in every process.

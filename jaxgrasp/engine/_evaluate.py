@@ -155,9 +155,9 @@ def compiled_executable(grasp: Grasp, options: EvaluateOptions, settle: bool = T
     :func:`evaluate_compiled` bit for bit (the same computation).
     """
     leaves, treedef = jax.tree_util.tree_flatten(grasp)
-    avals = tuple((np.shape(x), _canonical_dtype(x).name) for x in leaves)
+    avals = tuple((np.shape(x), _compile.canonical_dtype(x).name) for x in leaves)
     x64 = jax.config.jax_enable_x64
-    spec = [jax.ShapeDtypeStruct((), _canonical_dtype(np.float64(0.0)))]
+    spec = [jax.ShapeDtypeStruct((), _compile.canonical_dtype(np.float64(0.0)))]
     spec += [jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in avals]
 
     def build():
@@ -177,11 +177,6 @@ def compiled_executable(grasp: Grasp, options: EvaluateOptions, settle: bool = T
         store_key=(options, settle, masked, avals, x64),
         n_outputs=len(RESULT_FIELDS),
     )
-
-
-def _canonical_dtype(x) -> np.dtype:
-    """The dtype JAX gives ``x`` as an argument (float64 becomes float32 without x64)."""
-    return np.dtype(jax.dtypes.canonicalize_dtype(x.dtype if hasattr(x, "dtype") else np.result_type(x)))
 
 
 def _one(grasp: Grasp) -> Grasp:
