@@ -107,6 +107,16 @@ def assert_same_numbers(actual, desired, where: str = "") -> None:
         np.testing.assert_allclose(a, d, rtol=ACCELERATOR_RTOL, atol=ACCELERATOR_ATOL, err_msg=where)
 
 
+def json_from_new_process(code: str, *argv: str) -> dict:
+    """Run ``code`` in a new Python process with ``argv`` and this session's environment
+    (its executable store, ``JAXGRASP_CACHE_DIR``); the JSON it printed. A non-zero exit
+    fails the test with the end of its stderr."""
+    proc = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, env=os.environ,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(proc.stdout)
+
+
 def grasp_key(grasp) -> tuple:
     """A hashable, exact key of a grasp's field values."""
     out = []

@@ -30,6 +30,8 @@ import jaxgrasp
 from jaxgrasp.hands import hand_value
 from jaxgrasp.io._mesh import closest_on_triangles
 
+from conftest import json_from_new_process
+
 pytest.importorskip("mujoco", reason="the hands extra: pip install 'jaxgrasp[hands]'")
 trimesh = pytest.importorskip("trimesh")
 
@@ -129,7 +131,6 @@ def test_tune_hand_raises_the_value_within_limits(hand, cube):
         jaxgrasp.tune_hand(hand, cube, np.array([-0.02, 0.0, 0.0, 0.0005, 0.0, 0.0]), **FIELDS)
 
 
-
 def test_hand_digest_follows_the_content_not_the_path(hand, tmp_path):
     """Equal files in two folders give one digest (the stored executable's key); a
     fingertip 1 mm thicker gives another."""
@@ -159,14 +160,12 @@ print(json.dumps({"stats": _store.stats(), "history": [float(v) for v in res.his
 """
 
 
+@pytest.mark.slow  # compiles tune_hand's objective where run alone, then a second process
 def test_second_process_loads_tune_hands_objective(hand, cube, tmp_path):
     """``tune_hand``'s value and gradient come from the executable store: a new process
     (the suite's store, ``JAXGRASP_CACHE_DIR``), with the hand read from a copy of its
     file elsewhere, compiles no program and iterates as this process does, bit for bit."""
     import json
-    import os
-    import subprocess
-    import sys
 
     from jaxgrasp.engine import _compile
 
@@ -174,14 +173,12 @@ def test_second_process_loads_tune_hands_objective(hand, cube, tmp_path):
     _compile.wait_for_saves()
     copy = tmp_path / TWO_FINGER.name
     copy.write_text(TWO_FINGER.read_text())
-    argv = [str(copy), json.dumps(CONFIGS[0].tolist()), json.dumps(FIELDS)]
-    proc = subprocess.run([sys.executable, "-c", _TUNE_HAND_IN_A_NEW_PROCESS, *argv], capture_output=True, text=True,
-                          env=os.environ, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    other = json.loads(proc.stdout)
+    other = json_from_new_process(_TUNE_HAND_IN_A_NEW_PROCESS, str(copy), json.dumps(CONFIGS[0].tolist()),
+                                  json.dumps(FIELDS))
     assert other["stats"]["traced"] == 0 and other["stats"]["deserialized"] >= 1, other["stats"]
     assert other["history"] == [float(v) for v in res.history]
     assert other["qpos"] == res.qpos.tolist()
+
 
 PINCH = TWO_FINGER.with_name("pinch.toml")
 

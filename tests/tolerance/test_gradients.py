@@ -35,7 +35,7 @@ from jaxgrasp.tolerance._verdict import TIE_TOL
 from jaxgrasp.tolerance import soft_minimum
 from jaxgrasp.tolerance._result import INFEASIBLE, STABLE, UNSTABLE
 
-from conftest import GRASP_FIELDS, stack, unstack
+from conftest import GRASP_FIELDS, json_from_new_process, stack, unstack
 
 OPTS = jaxgrasp.EvaluateOptions(num_random_starts=0)
 CHUNK = 30  # lanes per compiled call (one executable for every call)
@@ -374,13 +374,13 @@ def test_jaxopt_methods_raise_the_value(method):
 
 
 _TUNE_IN_A_NEW_PROCESS = """
-import json
+import json, sys
 import jaxgrasp
 from jaxgrasp.engine import _store
-res = jaxgrasp.tune(jaxgrasp.presets.cube(young_modulus={E}, initial_deformation=0.002),
+res = jaxgrasp.tune(jaxgrasp.presets.cube(young_modulus=float(sys.argv[1]), initial_deformation=0.002),
                     ["initial_deformation:shared"], maxiter=2)
-print(json.dumps({{"stats": _store.stats(), "history": [float(v) for v in res.history],
-                  "d": float(res.params["initial_deformation:shared"])}}))
+print(json.dumps({"stats": _store.stats(), "history": [float(v) for v in res.history],
+                  "d": float(res.params["initial_deformation:shared"])}))
 """
 
 
@@ -390,23 +390,16 @@ def test_second_process_loads_tunes_objective_from_the_store():
     executables do: a new process (the suite's store, ``JAXGRASP_CACHE_DIR``) tuning the
     same parameter of a grasp with as many contacts traces and compiles nothing, and
     its iterates are this process's, bit for bit."""
-    import json
-    import os
-    import subprocess
-    import sys
-
     from jaxgrasp.engine import _compile
 
     res = tune(presets.cube(young_modulus=E_TUNE, initial_deformation=0.002), ["initial_deformation:shared"],
                maxiter=2)
     _compile.wait_for_saves()
-    proc = subprocess.run([sys.executable, "-c", _TUNE_IN_A_NEW_PROCESS.format(E=E_TUNE)], capture_output=True,
-                          text=True, env=os.environ, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    other = json.loads(proc.stdout)
+    other = json_from_new_process(_TUNE_IN_A_NEW_PROCESS, repr(E_TUNE))
     assert other["stats"]["traced"] == 0 and other["stats"]["deserialized"] == 1, other["stats"]
     assert other["history"] == [float(v) for v in res.history]
     assert other["d"] == float(res.params["initial_deformation:shared"])
+
 
 def test_tune_rejects_a_zero_start():
     g = presets.cube(6e5, 2e-3).replace(max_force=jnp.full(2, 0.5))
