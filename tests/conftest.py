@@ -66,7 +66,7 @@ if str(TESTS_DIR) not in sys.path:  # so that the Ipopt worker can import the re
     sys.path.insert(0, str(TESTS_DIR))
 
 GRASP_FIELDS = jaxgrasp.model._fields.NAMES
-EVALUATION_TREE = jax.tree_util.tree_structure(jaxgrasp.Evaluation(*(0,) * len(jaxgrasp.tolerance._result.FIELDS)))
+EVALUATION_TREE = jaxgrasp.tolerance._result.EVALUATION_TREE
 
 # Grasps per compiled call of evaluate_many, for every N: one size, so that the executable
 # of an N is the same in every module and worker (and a grasp's result does not depend on

@@ -60,8 +60,7 @@ from jaxgrasp.model._units import MJ_TO_J
 from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs, counted
 from jaxgrasp.surface import PAD_FACES, Surface
 from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._result import FIELDS as EVALUATION_FIELDS
-from jaxgrasp.tolerance._result import Evaluation
+from jaxgrasp.tolerance._result import EVALUATION_TREE, Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 
 __all__ = ["tune", "TuneResult"]
@@ -129,7 +128,8 @@ def _compiled(specs: tuple[ParamSpec, ...], options: EvaluateOptions) -> StoredF
         g = jnp.where(jnp.isfinite(g), g, 0.0)
         return (f, ev), g
 
-    out_tree = jax.tree_util.tree_structure(((0.0, Evaluation(*(0.0,) * len(EVALUATION_FIELDS))), 0.0))
+    leaf = jax.tree_util.tree_structure(0.0)
+    out_tree = jax.tree_util.treedef_tuple((jax.tree_util.treedef_tuple((leaf, EVALUATION_TREE)), leaf))
     return StoredFunction(safe_vg, (specs, options), out_tree, name="tune", compiler_options=COMPILER_OPTIONS,
                           what="tune's value and gradient of " + ", ".join(s.label for s in specs))
 

@@ -38,8 +38,7 @@ from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp, _pose, contact_gr
 from jaxgrasp.model._fields import DEFAULT_GRAVITY
 from jaxgrasp.model._validation import GraspValueError
 from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._result import FIELDS as EVALUATION_FIELDS
-from jaxgrasp.tolerance._result import Evaluation
+from jaxgrasp.tolerance._result import EVALUATION_TREE
 from jaxgrasp.tolerance._status import GraspStatus
 
 __all__ = ["tune_hand", "HandTuneResult", "HandValue", "hand_value", "PENETRATION_UNIT"]
@@ -71,7 +70,8 @@ def _compiled(hand, options: EvaluateOptions, max_tilt: float):
         finite = lambda g: jnp.where(jnp.isfinite(g), g, 0.0)  # noqa: E731
         return v, finite(gv), p, finite(gp), ev, deepest, tilt
 
-    out_tree = jax.tree_util.tree_structure((0.0,) * 4 + (Evaluation(*(0.0,) * len(EVALUATION_FIELDS)), 0.0, 0.0))
+    leaf = jax.tree_util.tree_structure(0.0)
+    out_tree = jax.tree_util.treedef_tuple((leaf,) * 4 + (EVALUATION_TREE, leaf, leaf))
     # The hand's arrays are constants of the program: its digest stands for them.
     return StoredFunction(core, (hand.digest(), options, max_tilt), out_tree, name="tune-hand",
                           compiler_options=COMPILER_OPTIONS,

@@ -18,6 +18,7 @@ __all__ = [
     "SummaryNames",
     "SUMMARY_FIELDS",
     "FIELDS",
+    "EVALUATION_TREE",
     "STATUS_NAMES",
     "STABLE",
     "UNSTABLE",
@@ -211,6 +212,10 @@ class Evaluation:
 
 FIELDS = tuple(f.name for f in dataclasses.fields(Evaluation))
 """Every array of an :class:`Evaluation`, in field order."""
+
+EVALUATION_TREE = jax.tree_util.tree_structure(Evaluation(*(0,) * len(FIELDS)))
+"""The pytree structure of an :class:`Evaluation` (it depends on no shape): to rebuild one
+from its leaves, or to declare a compiled function's output tree."""
 
 SUMMARY_FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
 """The five numbers that summarise a grasp's evaluation (the columns of sweep and batch
