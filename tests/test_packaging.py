@@ -8,6 +8,7 @@ These tests check what those read: ``pyproject.toml``, ``MANIFEST.in``, ``LICENS
 
 from __future__ import annotations
 
+import fnmatch
 import os
 import re
 import subprocess
@@ -154,3 +155,21 @@ def test_release_carries_types_examples_docs_and_licence():
     manifest = (ROOT / "MANIFEST.in").read_text(encoding="utf-8")
     for line in ("include LICENSE", "recursive-include examples", "recursive-include docs"):
         assert line in manifest
+
+
+def test_source_distribution_carries_every_example_doc_and_test_file():
+    # The sdist takes from these folders only what MANIFEST.in's patterns name: a hand's
+    # MJCF, a mesh or a licence notice left out would break the docs' commands from it.
+    patterns = {}
+    for line in (ROOT / "MANIFEST.in").read_text(encoding="utf-8").splitlines():
+        words = line.split()
+        if words[:1] == ["recursive-include"]:
+            patterns[words[1]] = words[2:]
+    missed = [
+        str(f.relative_to(ROOT))
+        for folder in ("examples", "docs", "tests")
+        for f in sorted((ROOT / folder).rglob("*"))
+        if f.is_file() and "__pycache__" not in f.parts and f.suffix != ".pyc"
+        and not any(fnmatch.fnmatch(f.name, pat) for pat in patterns.get(folder, ()))
+    ]
+    assert not missed, f"MANIFEST.in leaves out {missed}"
