@@ -449,3 +449,14 @@ def test_layers_cover_the_planned_packages():
     # check (38) packages; a change here is a change of the architecture
     assert LAYERS == ["_startup", "solver", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "planning", "hands", "simulation", "plots", "cli"]
     assert [layer_of(n) for n in ("jaxgrasp", "jaxgrasp.__main__", "jaxgrasp.solver._lanes", "jaxgrasp.cli")] == [TOP, TOP, 1, 13]
+
+
+def test_package_docstring_and_developers_guide_list_the_layers_in_order():
+    # Both are where a reader learns the layout; a package added to LAYERS but not to them
+    # (or listed out of order) leaves the reader a wrong map.
+    guide = (ROOT.parent / "docs" / "development.md").read_text(encoding="utf-8")
+    layout = guide.split("## Layout", 1)[1].split("\n## ", 1)[0]
+    face = (ROOT / "__init__.py").read_text(encoding="utf-8").split('"""', 2)[1]
+    for text in (layout, face):
+        listed = re.findall(r"^[-*] (?::mod:)?`jaxgrasp\.(\w+)`", text, flags=re.MULTILINE)
+        assert listed == [layer for layer in LAYERS[1:] if layer != "cli"], listed
