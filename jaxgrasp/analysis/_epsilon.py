@@ -1,6 +1,6 @@
 """The Ferrari-Canny epsilon metric (Q1) on a grasp's contacts, beside the energy tolerance.
 
-Convention (the README states it too). For each active contact ``i`` with position
+Convention (``docs/guide/epsilon.md`` states it too). For each active contact ``i`` with position
 ``p_i`` (m, centre-of-mass frame), unit outward normal ``n_i`` and friction ``mu_i``:
 
 * the fingertip pushes along ``-n_i`` with unit normal force; its friction cone is
@@ -24,7 +24,7 @@ Convention (the README states it too). For each active contact ``i`` with positi
 
 The metric depends on the contacts' geometry and friction only (and, with torsion, on
 the fingertip radius and initial deformation), not on Young's modulus, the squeeze force,
-the mass or gravity: that is where it and the energy tolerance part (README).
+the mass or gravity: that is where it and the energy tolerance part (``docs/guide/epsilon.md``).
 Friction is at most :data:`~jaxgrasp.model._validation.MAX_FRICTION` (1e3, validation):
 the wrenches' tangential parts grow as ``mu`` and the torsion as ``mu^2``, and at
 ``mu = 1e7`` they swamp the unit normal forces that bound the hull, so that qhull's float64

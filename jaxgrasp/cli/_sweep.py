@@ -184,8 +184,8 @@ def add_parser(sub) -> None:
         default=None,
         metavar="N",
         help=(
-            "grid points per compiled batch (default: about a tenth of the grid, "
-            "at most 64 per CPU device, 1024 per GPU)"
+            "grid points per compiled batch (default: 64 per CPU device; on a GPU about a tenth "
+            "of the grid, 64 to 1024 per device)"
         ),
     )
     sp.add_argument("--no-plot", action="store_true", help="do not write sweep.png")

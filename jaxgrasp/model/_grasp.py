@@ -99,7 +99,7 @@ class Grasp:
         Every field is validated in float64 and stored as ``dtype``: by default float64
         whatever the inputs' dtypes (float32 where JAX's x64 mode is off), so float32
         arrays passed in become float64; give ``dtype=jnp.float32`` for a float32 grasp
-        (screening, see the README's Precision section).
+        (screening, see the Precision section of ``docs/guide/grasp-files.md``).
 
         Args:
             positions: ``(N, 3)`` contact positions, m.

@@ -8,8 +8,9 @@ and that face's normal (a :class:`SurfacePoint`).
 Behaviour a caller relies on:
 
 * **Closest point.** Exact over every face, by the triangle's Voronoi regions (Ericson,
-  *Real-Time Collision Detection*, Sec. 5.1.5), the same rule as
-  :func:`jaxgrasp.io.closest_on_triangles`. Cost ``O(points x faces)``.
+  *Real-Time Collision Detection*, Sec. 5.1.5), the same rule as its NumPy twin
+  ``jaxgrasp.io._mesh.closest_on_triangles`` (the tests check one against the other).
+  Cost ``O(points x faces)``.
 * **Normal.** The outward normal of the face the point lies on: piecewise constant on the
   surface, as the paper's planar contact surface needs (the model's normal is the face's,
   Sec. V). Where the closest point lies on an edge or a vertex (several faces tie), the
@@ -107,8 +108,8 @@ class Surface:
 
     @classmethod
     def from_trimesh(cls, mesh, pad_to: int | None = None) -> "Surface":
-        """The surface of a ``trimesh.Trimesh`` (its vertices in m, faces outward, as
-        :func:`jaxgrasp.io.load_mesh` returns them); ``pad_to``: see :meth:`padded`."""
+        """The surface of a ``trimesh.Trimesh`` (its vertices in m, faces outward, e.g.
+        ``trimesh.load(path)`` of a watertight mesh in metres); ``pad_to``: see :meth:`padded`."""
         surface = cls.create(mesh.vertices, mesh.faces)
         return surface if pad_to is None else surface.padded(pad_to)
 
