@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -62,7 +63,17 @@ class UsageError(Exception):
 
 
 class Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one :class:`UsageError` line, not usage + message."""
+    """An argument parser whose errors are one :class:`UsageError` line, not usage + message.
+
+    A value that starts with a minus sign followed by a digit or a point (``-2e5``,
+    ``-9.81,0,0``, ``-0.1:0.5:3``) is a value, not an option: argparse's own rule knows only
+    plain integers and decimals, so ``--gravity -9.81,0,0`` failed with "expected one
+    argument" and ``--young-modulus -2e5`` never reached the check that says it must be
+    positive. No jaxgrasp option starts with ``-`` and a digit."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message):
         raise UsageError(f"{message} (see '{self.prog} --help')")
@@ -198,6 +209,10 @@ def _check_override(name: str, value: float) -> None:
 # --------------------------------------------------------------------------- names
 
 
+PATH_ARGUMENTS = ("file", "mesh", "out", "glb", "hand", "allow_dir")
+"""The arguments that name a file or folder: an empty one is refused (:func:`check_names`)."""
+
+
 def check_names(args) -> None:
     """Every text argument (input file, ``--out``, ``--glb`` ...) must be valid UTF-8.
 
@@ -210,6 +225,9 @@ def check_names(args) -> None:
         for text in value if isinstance(value, (list, tuple)) else [value]:
             if not isinstance(text, str):
                 continue
+            if dest in PATH_ARGUMENTS and not text.strip():  # Path("") is the working folder
+                what = "the input file name" if dest in ("file", "mesh") else f"--{dest.replace('_', '-')}"
+                raise UsageError(f"{what} is empty: give a file or folder name")
             try:
                 text.encode("utf-8")
             except UnicodeEncodeError:
@@ -235,14 +253,22 @@ def _shown(text: str) -> str:
 def check_out(out: Path) -> None:
     """``--out`` must be a folder (existing or not) where files can be created, and hold
     no symbolic link where jaxgrasp keeps its own files (the lock file and the
-    checkpoints): a link there is refused, before anything is computed, not followed."""
+    checkpoints): a link there is refused, before anything is computed, not followed; so
+    is a folder where a file belongs (the lock file, a sweep's checkpoint) or a file where
+    a folder belongs (a batch's finished chunks)."""
     from jaxgrasp.engine._checkpoint import BATCH_FOLDER, SWEEP_FILE
 
     try:
         outputs.check_writable(out)
-        for name, what in ((outputs.LOCK_NAME, "its lock file"), (BATCH_FOLDER, "a batch's finished chunks"),
-                           (SWEEP_FILE, "a sweep's finished points")):
-            outputs.refuse_link(out / name, what)
+        for name, what, folder in ((outputs.LOCK_NAME, "its lock file", False),
+                                   (BATCH_FOLDER, "a batch's finished chunks", True),
+                                   (SWEEP_FILE, "a sweep's finished points", False)):
+            path = out / name
+            outputs.refuse_link(path, what)
+            if path.exists() and path.is_dir() != folder:  # else found only when written, after the work
+                kind = "not a folder" if folder else "a folder"
+                raise outputs.OutputError(f"{str(path)!r}, where jaxgrasp keeps {what}, is {kind}: "
+                                          "remove it or choose another --out")
     except outputs.OutputError as exc:
         raise UsageError(f"--out: {exc}") from None
 

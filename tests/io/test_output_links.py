@@ -95,6 +95,49 @@ def test_sweep_refuses_a_link_at_its_files_before_computing(name, out, target, n
     assert _untouched(target) and sorted(os.listdir(out)) == [name]
 
 
+@pytest.mark.parametrize("name", [outputs.LOCK_NAME, _checkpoint.BATCH_FOLDER, _checkpoint.SWEEP_FILE])
+def test_sweep_refuses_its_files_of_the_wrong_kind_before_computing(name, out, no_computing, capsys):
+    """A folder where the lock file or a sweep's checkpoint belongs (a file where a batch's
+    chunks belong) was found only when written, after the whole sweep (exit 1), or named
+    the output folder itself as the culprit."""
+    if name == _checkpoint.BATCH_FOLDER:
+        (out / name).write_bytes(b"")
+    else:
+        (out / name).mkdir()
+    rc = cli.main(["sweep", "--preset", "cube", "--mass", "0,0.1", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    kind = "not a folder" if name == _checkpoint.BATCH_FOLDER else "a folder"
+    assert err.startswith(f"jaxgrasp: error: --out: {str(out / name)!r}, where jaxgrasp keeps ") and f"is {kind}:" in err
+    assert err.count("\n") == 1 and sorted(os.listdir(out)) == [name]
+
+
+@pytest.mark.parametrize("argv", [["sweep", "--preset", "cube", "--out", ""], ["batch", " "],
+                                  ["show", "--preset", "cube", "--out", ""]])
+def test_an_empty_file_or_folder_name_is_refused(argv, tmp_path, monkeypatch, no_computing, capsys):
+    """``Path("")`` is the working folder: an empty --out wrote the sweep's files there."""
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is empty: give a file or folder name" in err, err
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("option, value", [("--young-modulus", "-2e5"), ("--friction", "-.5"), ("--mass", "-1e-3")])
+def test_a_negative_value_in_exponent_or_point_form_reaches_its_check(option, value, no_computing, capsys):
+    """argparse took ``-2e5`` for an option ("expected one argument"): the check that says
+    what is wrong with the value never ran."""
+    assert cli.main(["evaluate", "--preset", "cube", option, value]) == 2
+    err = capsys.readouterr().err
+    assert "expected one argument" not in err and err.count("\n") == 1, err
+    assert err.startswith(f"jaxgrasp: error: {option} -") and "must be" in err, err
+
+
+def test_a_vector_starting_with_a_minus_sign_is_a_value():
+    args = cli.build_parser().parse_args(["plan", "block.stl", "--gravity", "-9.81,0,0"])
+    assert args.gravity == "-9.81,0,0"
+
+
 # ----------------------------------------------------------------------------- batch checkpoint
 
 
