@@ -108,7 +108,8 @@ def test_sweep_refuses_its_files_of_the_wrong_kind_before_computing(name, out, n
     err = capsys.readouterr().err
     assert rc == 2, err
     kind = "not a folder" if name == _checkpoint.BATCH_FOLDER else "a folder"
-    assert err.startswith(f"jaxgrasp: error: --out: {str(out / name)!r}, where jaxgrasp keeps ") and f"is {kind}:" in err
+    assert err.startswith(f"jaxgrasp: error: --out: {str(out / name)!r}, where jaxgrasp keeps "), err
+    assert f"is {kind}:" in err
     assert err.count("\n") == 1 and sorted(os.listdir(out)) == [name]
 
 
