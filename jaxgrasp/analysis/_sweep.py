@@ -52,6 +52,7 @@ from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._validation import (
     GraspValueError,
     as_float_array,
+    check_corners,
     check_grasp_inputs,
     format_value,
 )
@@ -308,10 +309,19 @@ jax.tree_util.register_pytree_node(SweepResult, _flatten, _unflatten)
 # --------------------------------------------------------------------------- validation
 
 
-def _check_axes(base: dict[str, np.ndarray], axes: Mapping[str, Any]) -> dict[str, np.ndarray]:
-    """Validate the axes against the (validated) base grasp fields; one-line errors."""
+def _check_axes(fields: dict[str, np.ndarray], axes: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """Validate the axes of a grid over the grasp ``fields`` (SI units); one-line errors.
+
+    Each axis is checked on its own (:func:`_check_axis`); then every grid point must be a
+    grasp :func:`jaxgrasp.evaluate` accepts. The rules of
+    :func:`~jaxgrasp.model._validation.check_grasp_inputs` are monotone in each swept
+    parameter, so the grid's corners (each axis at its smallest or largest value, at most
+    ``2^6 = 64`` grasps) break a rule wherever any grid point does
+    (:func:`~jaxgrasp.model._validation.check_corners` says why); nothing grid-sized is made.
+    """
     out = {name: _check_axis(name, values) for name, values in axes.items()}
-    _check_deformation_below_radius(base, out)
+    ends = {name: (np.min(a), np.max(a)) for name, a in out.items()}
+    check_corners(fields, ends, "sweep grid point")
     return out
 
 
@@ -336,22 +346,6 @@ def _check_axis(name: str, values: Any) -> np.ndarray:
             i = int(bad[0])
             raise GraspValueError(f"sweep axis {name}[{i}] = {format_value(a[i])}{unit} must be {rule}")
     return a
-
-
-def _check_deformation_below_radius(base: dict[str, np.ndarray], axes: dict[str, np.ndarray]) -> None:
-    """Every grid point must keep ``initial_deformation < radius`` at every contact."""
-    dr = axes.get("initial_deformation", base["initial_deformation"])
-    r = axes.get("radius", base["radius"])
-    dr_max, r_min = float(np.max(dr)), float(np.min(r))
-    if dr_max < r_min:
-        return
-    where_dr = ("sweep axis " if "initial_deformation" in axes else "the grasp's ") + "initial_deformation"
-    where_r = ("sweep axis " if "radius" in axes else "the grasp's ") + "radius"
-    dr_unit, r_unit = FIELD["initial_deformation"].unit, FIELD["radius"].unit
-    raise GraspValueError(
-        f"initial_deformation must be < radius at every grid point, but {where_dr} reaches "
-        f"{format_value(dr_max)} {dr_unit} and {where_r} goes down to {format_value(r_min)} {r_unit}"
-    )
 
 
 # --------------------------------------------------------------------------- compiled batch
@@ -396,7 +390,12 @@ def sweep(
     Raises:
         GraspValueError: before anything is compiled, for an invalid base grasp, an unknown
             parameter name, an empty, non-numeric, non-finite or out-of-range axis, a grid
-            point with ``initial_deformation >= radius``, or a grid of more than
+            point :func:`jaxgrasp.evaluate` rejects (``initial_deformation >= radius``,
+            ``friction`` above :data:`~jaxgrasp.model._validation.MAX_FRICTION`,
+            ``young_modulus * initial_deformation^3`` below
+            :data:`~jaxgrasp.model._validation.MIN_ENERGY_SCALE` J, a weight over
+            :data:`~jaxgrasp.model._validation.MAX_LOAD_RATIO` times the initial squeeze;
+            the message names the grid point's axes and values), or a grid of more than
             :data:`MAX_GRID_POINTS` points; the message is one line.
     """
     base, axes = _check_inputs(grasp, chunk_size, axes)
@@ -475,11 +474,12 @@ def _check_inputs(grasp, chunk_size, axes) -> tuple[dict[str, np.ndarray], dict[
             "sweep needs a grasp without inactive contacts: sweep grasp.compact() (its active "
             "contacts, renumbered from 0)"
         )
+    fields = grasp.to_numpy()
     try:
-        base = check_grasp_inputs(**grasp.to_numpy())
+        base = check_grasp_inputs(**fields)
     except GraspValueError as exc:
         raise GraspValueError(f"base grasp: {exc}") from None
-    checked = _check_axes(base, axes)
+    checked = _check_axes(fields, axes)
     total = math.prod(a.size for a in checked.values())
     if total > MAX_GRID_POINTS:
         shape = " x ".join(f"{a.size:,}" for a in checked.values())

@@ -14,7 +14,7 @@ import numpy as np
 
 from jaxgrasp.model._fields import FIELD, TUNABLE
 from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model._validation import GraspValueError, check_corners
 
 __all__ = [
     "ParamSpec",
@@ -125,7 +125,8 @@ def default_bounds(grasp: Grasp, name: str):
 
 
 def _field_checks(name: str, lo, hi, grasp: Grasp):
-    """Physical validity of bounds (values every iterate may take)."""
+    """Physical validity of one parameter's bounds against the grasp's other fields (the
+    rules of every parameter together: :func:`_check_corners`)."""
     a = grasp.to_numpy()
     if name == "mass":
         if np.any(lo < 0):
@@ -145,6 +146,29 @@ def _field_checks(name: str, lo, hi, grasp: Grasp):
             f"tune: the lower bound of 'radius' ({lo.min():g} m) must exceed the initial "
             f"deformation ({a['initial_deformation'].max():g} m)"
         )
+
+
+def _check_corners(specs, los, his, grasp: Grasp) -> None:
+    """Every iterate the box allows is a grasp :func:`jaxgrasp.evaluate` accepts: the rules
+    of :func:`~jaxgrasp.model._validation.check_grasp_inputs` (friction at most
+    ``MAX_FRICTION``, ``young_modulus * initial_deformation^3`` at least
+    ``MIN_ENERGY_SCALE`` J, a weight at most ``MAX_LOAD_RATIO`` times the initial squeeze
+    ``sum pi E dr^2`` N, ``initial_deformation < radius`` m with both tuned) hold at the
+    box's corners, each tuned parameter at its lower or at its upper bounds (SI units).
+
+    The corners are enough: each rule is monotone in each of these parameters, in the same
+    direction at every contact (e.g. the squeeze grows with ``E`` and ``dr``, the weight
+    with the mass), so where any point of the box breaks a rule, the corner with every
+    parameter at its worst end breaks it too (:func:`~jaxgrasp.model._validation.check_corners`).
+    ``positions`` stay at the grasp's own (no rule but distinct positions involves them).
+    """
+    ends = {}
+    for spec, lo, hi in zip(specs, los, his):
+        if spec.name == "positions":
+            continue
+        one = lo.size == 1  # mass, or a shared value: the same at every contact
+        ends[spec.name] = (lo[0], hi[0]) if one else (lo, hi)
+    check_corners(grasp.to_numpy(), ends, "tune: at the bounds' corner")
 
 
 def _bounds_for(spec: ParamSpec, grasp: Grasp, given) -> tuple[np.ndarray, np.ndarray]:
@@ -260,6 +284,7 @@ class ParamBox:
             los.append(lo)
             his.append(hi)
             x0s.append(np.clip(x0, lo, hi))
+        _check_corners(specs, los, his, grasp)
         u0 = np.concatenate([(x - lo) / (hi - lo) for x, lo, hi in zip(x0s, los, his)])
         return cls(tuple(los), tuple(his), tuple(x0s), u0, tuple(clipped), moved or bool(clipped))
 

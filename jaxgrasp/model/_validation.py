@@ -9,7 +9,8 @@ and the rule it breaks.
 
 from __future__ import annotations
 
-from typing import Any
+import itertools
+from typing import Any, Mapping
 
 import jax
 import numpy as np
@@ -20,6 +21,8 @@ __all__ = [
     "GraspValueError",
     "check_grasp_inputs",
     "check_batch_inputs",
+    "check_corners",
+    "MONOTONE",
     "format_value",
     "counted",
     "as_float_array",
@@ -52,6 +55,10 @@ until the equilibrium solve ends where the penalty and rounding leave it: on the
 on status and equilibrium (to 1e-15 m) up to a ratio of 2e4 and disagreed from 6.5e4
 (issue 40). No grip holds an object ten thousand times heavier than it squeezes (the
 paper's heavy examples are below 10), so such a grasp is rejected."""
+
+MONOTONE: tuple[str, ...] = (*PER_CONTACT, "mass")
+"""Fields in each of which every rule of :func:`check_grasp_inputs` is monotone, so that a
+box of their values is valid where its corners are (:func:`check_corners`)."""
 
 _UNIT_TOLERANCE = 1e-14
 """Normals within this of unit length are kept bit for bit (so validation is idempotent
@@ -202,6 +209,46 @@ def check_batch_inputs(fields: dict[str, np.ndarray], skip=()) -> None:
             check_grasp_inputs(**{k: v[i] for k, v in fields.items()})
         except GraspValueError as exc:
             raise GraspValueError(f"grasp {i}: {exc}") from None
+
+
+def check_corners(fields: Mapping[str, Any], ends: Mapping[str, tuple[Any, Any]], where: str) -> None:
+    """Validate with :func:`check_grasp_inputs` the grasp ``fields`` at every corner of the
+    box ``ends``: each field of ``ends`` at its lower or at its upper end, at every contact.
+
+    Every point of the box is then valid too, because every rule is monotone in each field
+    of :data:`MONOTONE`, in the same direction at every contact: a range rule (``> 0``,
+    ``>= 0``) breaks first at the lower end, ``friction <= MAX_FRICTION`` at the upper one,
+    ``initial_deformation < radius`` at the upper deformation and the lower radius,
+    ``E dr^3 >= MIN_ENERGY_SCALE`` at the lower modulus and deformation, and the load rule
+    ``mass |g| <= MAX_LOAD_RATIO sum pi E dr^2`` at the upper mass and the lower modulus
+    and deformation (products and sums of non-negative floats keep that order: rounding
+    is monotone). So a point that breaks a rule has a corner that breaks it too: move each
+    field to the end where that rule is hardest. The other rules (shapes, finite values,
+    normals, distinct positions, ``active``) do not depend on these fields.
+
+    Args:
+        fields: the grasp's fields by name, as :func:`check_grasp_inputs` takes them (SI).
+        ends: field of :data:`MONOTONE` -> ``(lo, hi)``: scalars or per-contact ``(N,)``
+            arrays in its unit (m, Pa, dimensionless, N; ``mass`` kg); every value finite.
+            ``2^k`` corners for ``k`` fields, fewer where ``lo`` equals ``hi``.
+        where: what a corner is, for the message: ``"sweep grid point"``.
+
+    Raises:
+        GraspValueError: ``WHERE (name = value unit, ...): RULE``, one line, at the first
+            corner (in the order of ``ends``, lower ends first) that breaks a rule.
+    """
+    names = list(ends)
+    odd = [name for name in names if name not in MONOTONE]
+    if odd:  # a caller's mistake, not the user's
+        raise ValueError(f"check_corners: {odd[0]!r} is not one of {MONOTONE}")
+    choices = [[lo] if np.array_equal(lo, hi) else [lo, hi] for lo, hi in ends.values()]
+    for corner in itertools.product(*choices):
+        at = dict(zip(names, corner))
+        try:
+            check_grasp_inputs(**{**fields, **at})
+        except GraspValueError as exc:
+            point = ", ".join(f"{name} = {_with_unit(format_value(v), name)}" for name, v in at.items())
+            raise GraspValueError(f"{where} ({point}): {exc}") from None
 
 
 def _check_active(active, n: int) -> np.ndarray | None:

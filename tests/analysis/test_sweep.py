@@ -196,8 +196,9 @@ def test_prism_heavier_object_lower_value():
         ({"friction": [0.0, 0.5]}, r"friction\[0\] = 0 must be positive"),
         ({"max_force": 0}, "must be positive"),
         ({"mass": [0.0, -0.1]}, r"mass\[1\] = -0.1 kg must be >= 0"),
-        ({"initial_deformation": [1e-3, 0.025]}, "initial_deformation must be < radius"),
-        ({"radius": [0.0015]}, "initial_deformation must be < radius"),
+        ({"initial_deformation": [1e-3, 0.025]},
+         r"grid point \(initial_deformation = 0.025 m\): initial_deformation = 0.025 m must be in \(0, radius"),
+        ({"radius": [0.0015]}, r"grid point \(radius = 0.0015 m\): initial_deformation\[0\] = 0.002 m must be in"),
         ({"initial_deformation": [0.0]}, "must be positive"),
         ({"young_modulus": "abc"}, "must be a number"),
         ({"young_modulus": [[1e5, 2e5]]}, "1-D"),
@@ -212,6 +213,71 @@ def test_bad_axes_raise_one_line(axes, match):
     with pytest.raises(GraspValueError, match=match) as info:
         sweep(cube(), **axes)
     assert "\n" not in str(info.value)
+
+
+def _must_not_compile(*args, **kwargs):
+    raise AssertionError("the sweep got past its input checks and compiled")
+
+
+@pytest.mark.parametrize(
+    "axes, match",
+    [  # grid points jaxgrasp.evaluate rejects: the base grasp is the cube (E 2e5 Pa, dr 2 mm, squeeze 5.03 N)
+        ({"young_modulus": 1e-300}, r"grid point \(young_modulus = 1e-300 Pa\): contact 0: .* below 1e-150 J"),
+        ({"mass": 1e300}, r"grid point \(mass = 1e\+300 kg\): mass \* \|gravity\| = 9.81e\+300 N is more than 10000"),
+        ({"mass": [0.0, 1e10]}, r"grid point \(mass = 10000000000 kg\): mass \* \|gravity\| .* more than 10000 times"),
+        ({"friction": [0.5, 1e6]}, r"grid point \(friction = 1000000\): friction = 1000000 must be at most 1000"),
+        (  # each axis alone is fine; the corner of least squeeze and most weight is not
+            {"young_modulus": [1e6, 2e5], "initial_deformation": [4e-3, 1e-3], "mass": [0.0, 2000.0]},
+            (r"grid point \(young_modulus = 200000 Pa, initial_deformation = 0.001 m, mass = 2000 kg\): "
+             r"mass \* \|gravity\| = 1.962e\+04 N is more than 10000 times"),
+        ),
+    ],
+)
+def test_grid_points_evaluate_rejects_are_refused_before_compiling(monkeypatch, axes, match):
+    """The rules of jaxgrasp.evaluate's validation (energy scale, friction limit, load
+    ratio) hold at every grid point: a sweep that breaks one is refused in one line naming
+    the grid point's axes and values, before anything is compiled (audit: ``sweep --mass
+    1e10`` ran, ``--young-modulus 1e-300`` reported stable)."""
+    monkeypatch.setattr("jaxgrasp.analysis._sweep.chunk_evaluator", _must_not_compile)
+    with pytest.raises(GraspValueError, match=match) as info:
+        sweep(cube(), **axes)
+    assert "\n" not in str(info.value)
+
+
+def test_grid_check_agrees_with_every_grid_point():
+    """The grid is checked at its corners only; on random grids near every rule's limit
+    that rejects a grid exactly where check_grasp_inputs (evaluate's validation) rejects
+    one of its points (per-axis range errors aside, which both raise)."""
+    from jaxgrasp.analysis._sweep import check_inputs
+    from jaxgrasp.model._validation import check_grasp_inputs
+
+    near = {  # SI; each straddles a rule's limit on the cube
+        "young_modulus": [1e-143, 1e-141, 1e3, 2e5, 5e5, 1e6],  # Pa; E dr^3 >= 1e-150 J
+        "initial_deformation": [2e-4, 1e-3, 2e-3, 3e-3, 0.02, 0.03],  # m; < radius
+        "mass": [0.0, 0.1, 10.0, 3000.0, 1e5],  # kg; weight <= 1e4 x squeeze
+        "friction": [0.5, 1.0, 999.0, 1e3, 1001.0],  # <= 1e3
+        "radius": [1.5e-3, 0.01, 0.025, 0.05],  # m
+    }
+    rng = np.random.default_rng(0)
+    base = cube().to_numpy()
+    verdicts = []
+    for _ in range(60):
+        names = rng.choice(list(near), size=rng.integers(1, 4), replace=False)
+        axes = {str(n): rng.choice(near[n], size=rng.integers(1, 4), replace=False) for n in names}
+        rejected = False
+        for point in np.array(np.meshgrid(*axes.values(), indexing="ij")).reshape(len(axes), -1).T:
+            try:
+                check_grasp_inputs(**{**base, **dict(zip(axes, point))})
+            except GraspValueError:
+                rejected = True
+                break
+        try:
+            check_inputs(cube(), **axes)
+            verdicts.append(False)
+        except GraspValueError:
+            verdicts.append(True)
+        assert verdicts[-1] == rejected, axes
+    assert 15 <= sum(verdicts) <= 45, sum(verdicts)  # both kinds of grid were drawn
 
 
 def test_bad_chunk_size():

@@ -286,3 +286,61 @@ def test_tune_and_batch_print_a_first_line_within_a_second(tmp_path):
         seconds, line = _first_line_seconds(argv, env, wait=budget + 5)
         assert line.startswith(start), line
         assert seconds < budget, (argv[0], seconds, budget)
+
+
+# ----------------------------------------------------------------------------- grid points and bounds evaluate rejects
+
+
+@pytest.mark.parametrize(
+    "axis, fragment",
+    [  # the cube: E 2e5 Pa, dr 2 mm, initial squeeze 5.03 N
+        (["--young-modulus", "1e-300"], "sweep grid point (young_modulus = 1e-300 Pa): contact 0: young_modulus"),
+        (["--mass", "1e300"], "sweep grid point (mass = 1e+300 kg): mass * |gravity| = 9.81e+300 N is more than 10000"),
+        (["--mass", "1e10"], "sweep grid point (mass = 10000000000 kg): mass * |gravity|"),
+        (["--friction", "1e6"], "sweep grid point (friction = 1000000): friction = 1000000 must be at most 1000"),
+    ],
+)
+def test_sweep_refuses_grid_points_evaluate_rejects(run_cli, no_compute, tmp_path, axis, fragment):
+    """``jaxgrasp sweep`` applies ``evaluate``'s rules (energy scale, load ratio, friction
+    limit) to its grid: exit 2, one line naming the axis and value (audit: these ran with
+    exit 0 and reported stable, unstable or not_converged)."""
+    one_line_error(run_cli, ["sweep", *axis, "--out", tmp_path / "o"], fragment)
+    assert no_compute == [] and not (tmp_path / "o").exists()
+
+
+TUNE_BOUNDS_EVALUATE_REJECTS = [  # the cube: E 2e5 Pa, dr 2 mm, radius 25 mm, squeeze 5.03 N
+    (["young_modulus"], {"young_modulus": (1e-300, 1e6)}, "(young_modulus = [1e-300, 1e-300] Pa): contact 0: "),
+    (["friction:shared"], {"friction": (0.1, 1e6)}, "(friction = 1000000): friction = 1000000 must be at most 1000"),
+    (["mass"], {"mass": (0.0, 1e10)}, "(mass = 10000000000 kg): mass * |gravity| = 9.81e+10 N is more than 10000"),
+    (  # each bound fits the grasp's other fields, not the other tuned parameter's bounds
+        ["initial_deformation", "radius"], {"initial_deformation": (1e-3, 4e-3), "radius": (3e-3, 0.03)},
+        ("(initial_deformation = [0.004, 0.004] m, radius = [0.003, 0.003] m): initial_deformation[0] = 0.004 m "
+         "must be in (0, radius[0] = 0.003 m)"),
+    ),
+]
+
+
+@pytest.fixture
+def no_tune_compile(monkeypatch):
+    """tune's compilation of the value and its gradient, replaced by a :class:`Computed`."""
+    def stand_in(*args, **kwargs):
+        raise Computed
+
+    monkeypatch.setattr("jaxgrasp.analysis._tune._compiled", stand_in)
+
+
+@pytest.mark.parametrize("params, bounds, fragment", TUNE_BOUNDS_EVALUATE_REJECTS)
+def test_tune_bounds_evaluate_rejects_are_refused_before_compiling(no_tune_compile, params, bounds, fragment):
+    """tune's box holds only grasps ``evaluate`` accepts: checked at its corners, one line
+    naming the parameters and their bounds (audit: young_modulus=1e-300:1e6 passed)."""
+    with pytest.raises(jaxgrasp.GraspValueError) as info:
+        jaxgrasp.tune(jaxgrasp.presets.cube(), params, bounds)
+    assert str(info.value).startswith("tune: at the bounds' corner ") and fragment in str(info.value), info.value
+    assert "\n" not in str(info.value)
+
+
+def test_tune_command_refuses_bounds_evaluate_rejects(run_cli, no_tune_compile, tmp_path):
+    one_line_error(run_cli, ["tune", "--preset", "cube", "--param", "young_modulus", "--bounds",
+                             "young_modulus=1e-300:1e6", "--quiet", "--out", tmp_path / "t.toml"],
+                   "tune: at the bounds' corner (young_modulus = [1e-300, 1e-300] Pa)", "below 1e-150 J")
+    assert list(tmp_path.iterdir()) == []
