@@ -390,13 +390,8 @@ def sweep(
     Raises:
         GraspValueError: before anything is compiled, for an invalid base grasp, an unknown
             parameter name, an empty, non-numeric, non-finite or out-of-range axis, a grid
-            point :func:`jaxgrasp.evaluate` rejects (``initial_deformation >= radius``,
-            ``friction`` above :data:`~jaxgrasp.model._validation.MAX_FRICTION`,
-            ``young_modulus * initial_deformation^3`` below
-            :data:`~jaxgrasp.model._validation.MIN_ENERGY_SCALE` J, a weight over
-            :data:`~jaxgrasp.model._validation.MAX_LOAD_RATIO` times the initial squeeze;
-            the message names the grid point's axes and values), or a grid of more than
-            :data:`MAX_GRID_POINTS` points; the message is one line.
+            point :func:`jaxgrasp.evaluate` rejects (:func:`~jaxgrasp.model._validation.check_corners`),
+            or a grid of more than :data:`MAX_GRID_POINTS` points; the message is one line.
     """
     base, axes = _check_inputs(grasp, chunk_size, axes)
     shape = tuple(a.size for a in axes.values())
