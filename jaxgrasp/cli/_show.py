@@ -48,7 +48,9 @@ def add_parser(sub) -> None:
     p.add_argument("--magnification", type=float, metavar="X",
                    help=(f"factor the ghost's motion is magnified by, {MAGNIFICATION_RANGE[0]:g} to "
                          f"{MAGNIFICATION_RANGE[1]:g} (default: a round one that makes it visible)"))
-    p.add_argument("--hand", metavar="FILE", help="draw a hand's grasp instead: a hand grasp file (.toml, see docs/guide/hands.md)")
+    p.add_argument("--hand", metavar="FILE",
+                   help=("draw a hand's grasp instead: a hand grasp file (.toml, see docs/guide/hands.md), which "
+                         "sets the fingertips and the object (no --young-modulus etc. with it)"))
     p.set_defaults(func=run)
 
 

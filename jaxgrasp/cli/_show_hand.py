@@ -3,7 +3,8 @@ way it fails), from a hand grasp file (:mod:`jaxgrasp.hands._file`)."""
 
 from __future__ import annotations
 
-from jaxgrasp.cli._common import UsageError, write_picture
+from jaxgrasp.cli._common import OVERRIDES, UsageError, write_picture
+from jaxgrasp.model._fields import FIELD
 
 __all__ = ["run_hand"]
 
@@ -17,6 +18,7 @@ def run_hand(args, targets) -> int:
 
     if args.file is not None or args.preset is not None:
         raise UsageError("give either a grasp FILE, --preset or --hand FILE, not more than one")
+    _reject_overrides(args)
     hg = load_hand_grasp(args.hand, getattr(args, "allow_dir", None))
     if hg.status != "grasp":
         raise UsageError(f"{args.hand}: {hg.num_active} fingertip(s) touch the object; a grasp needs at least 2")
@@ -29,3 +31,14 @@ def run_hand(args, targets) -> int:
           f"in contact; wrote " + ", ".join(map(str, targets))
           + (f" (replacing the previous {', '.join(p.name for p in replaced)})" if replaced else ""))
     return 0
+
+
+def _reject_overrides(args) -> None:
+    """``--young-modulus`` etc. have no meaning with ``--hand``: the hand grasp file sets
+    its fingertips (``[fingertip]``, their radius and squeeze from the hand's model and pose)
+    and its object (``[object]``); a one-line :class:`UsageError` naming those given."""
+    given = [FIELD[name].option for name in OVERRIDES if getattr(args, name, None) is not None]
+    if given:
+        raise UsageError(f"{', '.join(given)}: not used with --hand; the hand grasp file {args.hand} sets its "
+                         "fingertips ([fingertip], the radius and squeeze from the hand's model and pose) and "
+                         "its object ([object]); edit the file instead")

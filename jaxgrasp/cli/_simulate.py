@@ -18,8 +18,9 @@ from jaxgrasp.cli._common import (
     say,
 )
 from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.simulation._options import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION, check_options
 
-__all__ = ["PLOT", "RESULTS", "add_parser", "run"]
+__all__ = ["OPTION_NAMES", "PLOT", "RESULTS", "add_parser", "run"]
 
 RESULTS = "results.json"
 """The results file in ``--out``."""
@@ -37,7 +38,10 @@ def add_parser(sub) -> None:
             "Evaluate one grasp, then simulate it in MuJoCo: fingertips as fixed spheres calibrated to the "
             "paper's normal force (eq. 4), condim 4 with elliptic cones; hold under gravity, a force of "
             "m * 10 m/s^2 along +-x, +-y, +-z (DexGraspBench), and kicks with kinetic energy s times the "
-            "value. Writes DIR/results.json and DIR/trials.png. Needs: pip install \"jaxgrasp[sim]\"."
+            "value. Writes DIR/results.json and DIR/trials.png. Limits: all trials together at most "
+            f"{MAX_SIMULATED_S:g} s of simulated time and {MAX_STEPS:,} MuJoCo steps (time / timestep; a few "
+            f"minutes); a --timestep at most 1/{round(1 / TIMESTEP_FRACTION)} of the shortest trial. "
+            "Needs: pip install \"jaxgrasp[sim]\"."
         ),
     )
     add_grasp_source(p)
@@ -50,28 +54,49 @@ def add_parser(sub) -> None:
                    help="kick energies as multiples of the value (default 0.5,0.9,1.1,2)")
     p.add_argument("--random-kicks", type=int, default=2, metavar="N", help="random kick directions per scale (default 2)")
     p.add_argument("--sim-friction", metavar="MU", help="the simulator's friction instead of the grasp's (a what-if)")
-    p.add_argument("--timestep", metavar="S", help="simulator timestep, s (default: from the contact stiffness)")
+    p.add_argument("--timestep", metavar="S",
+                   help=(f"simulator timestep, s, at most 1/{round(1 / TIMESTEP_FRACTION)} of the shortest trial "
+                         "(default: from the contact stiffness)"))
     p.add_argument("--simulate-unstable", action="store_true",
                    help="also simulate an unstable grasp from its equilibrium pose")
     p.set_defaults(func=run)
 
 
+OPTION_NAMES = {
+    "hold_time_s": "--hold-time", "six_axis_time_s": "--six-axis-time", "kick_time_s": "--kick-time",
+    "kick_scales": "--scales", "random_kicks": "--random-kicks", "friction": "--sim-friction", "timestep": "--timestep",
+}
+"""The options of :func:`jaxgrasp.simulate` this command sets, by their parameter's name."""
+
+
 def _options(args) -> dict:
-    times = {k: parse_number(f"--{k.replace('_', '-')}", getattr(args, k), "time")
-             for k in ("hold_time", "six_axis_time", "kick_time")}
-    scales = [parse_number("--scales", s, "scale") for s in args.scales.split(",") if s.strip()]
-    opts = {"hold_time_s": times["hold_time"], "six_axis_time_s": times["six_axis_time"],
-            "kick_time_s": times["kick_time"], "kick_scales": scales, "random_kicks": args.random_kicks,
-            "simulate_unstable": args.simulate_unstable}
+    """The options for :func:`jaxgrasp.simulate`, checked by the simulation's own rules
+    (:func:`~jaxgrasp.simulation._options.check_options`) under their option names."""
+    opts = {k: parse_number(OPTION_NAMES[k], getattr(args, k[:-2]), "time")
+            for k in ("hold_time_s", "six_axis_time_s", "kick_time_s")}
+    opts["kick_scales"] = _scales(args.scales)
+    opts["random_kicks"] = args.random_kicks
     if args.sim_friction is not None:
         opts["friction"] = parse_number("--sim-friction", args.sim_friction, "friction")
     if args.timestep is not None:
         opts["timestep"] = parse_number("--timestep", args.timestep, "timestep")
-    return opts
+    check_options(**opts, names=OPTION_NAMES)
+    return opts | {"simulate_unstable": args.simulate_unstable}
+
+
+def _scales(text: str) -> list[float]:
+    """``--scales S,S,...``: at least one, no empty item."""
+    if not text.strip():
+        raise UsageError("--scales: empty value; give at least one scale, e.g. 0.5,0.9,1.1,2")
+    items = text.split(",")
+    if any(not s.strip() for s in items):
+        raise UsageError(f"--scales: list {text!r} has an empty item")
+    return [parse_number("--scales", s, "scale") for s in items]
 
 
 def run(args) -> int:
-    """Check the output folder, evaluate, simulate, write results.json and the plot as one set."""
+    """Check the options and the output folder, evaluate, simulate, write results.json and
+    the plot as one set."""
     from jaxgrasp.engine._evaluate import evaluate
     from jaxgrasp.io._mesh import MeshGrasp
     from jaxgrasp.simulation import simulate

@@ -22,56 +22,17 @@ import math
 import numpy as np
 
 from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.simulation._options import check_number, check_options, check_steps
 from jaxgrasp.simulation._result import SimulationResult, SimulationStatus
 from jaxgrasp.simulation._scene import IMPEDANCE, build_scene, load_mujoco
 from jaxgrasp.simulation._trials import Runner, least_energy_direction
 
-__all__ = ["DEFAULTS", "simulate"]
-
-DEFAULTS = {
-    "hold_time_s": 1.0,
-    "hold_tolerance_m": 1e-3,
-    "hold_tolerance_rad": math.radians(1.0),
-    "six_axis_time_s": 2.0,
-    "disturbance_acceleration_m_s2": 10.0,
-    "six_axis_tolerance_m": 0.05,
-    "six_axis_tolerance_rad": math.radians(15.0),
-    "kick_time_s": 0.3,
-    "sample_s": 0.005,
-}
-"""The default durations and tolerances of the trials (SI units)."""
+__all__ = ["simulate"]
 
 _UNITS = {
     "timestep_s": "s", "stiffness_N_m": "N/m", "spring_offset_m": "m (force zero at this penetration)",
     "damping_N_s_m": "N s/m", "friction_torsional_m": "m (mu e, eq. 10)", "slip_threshold_m": "m",
 }
-
-
-def _check(name: str, value, lo: float = 0.0, strict: bool = True) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise GraspValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(x) or (x <= lo if strict else x < lo):
-        raise GraspValueError(f"{name} = {x:g} must be finite and {'>' if strict else '>='} {lo:g}")
-    return x
-
-
-def _options(friction, nominal_mass, damping_ratio, timestep, kick_scales, random_kicks, durations) -> dict:
-    """The options, checked (one-line :class:`~jaxgrasp.GraspValueError` naming the bad one)."""
-    opts = {k: _check(k, durations.get(k, v)) for k, v in DEFAULTS.items()}
-    opts["friction"] = None if friction is None else _check("friction", friction)
-    opts["nominal_mass_kg"] = _check("nominal_mass", nominal_mass)
-    opts["damping_ratio"] = _check("damping_ratio", damping_ratio, strict=False)
-    opts["timestep"] = None if timestep is None else _check("timestep", timestep)
-    opts["kick_scales"] = [_check("kick_scales", s, strict=False) for s in kick_scales]
-    if isinstance(random_kicks, bool) or not isinstance(random_kicks, (int, np.integer)) or random_kicks < 0:
-        raise GraspValueError(f"random_kicks must be an integer >= 0, got {random_kicks!r}")
-    opts["random_kicks"] = int(random_kicks)
-    unknown = sorted(set(durations) - set(DEFAULTS))
-    if unknown:
-        raise GraspValueError(f"unknown option {unknown[0]!r}; the trial options are {', '.join(DEFAULTS)}")
-    return opts
 
 
 def simulate(
@@ -96,7 +57,8 @@ def simulate(
         nominal_mass: kg, the simulated mass of a weightless grasp (mass 0: no gravity).
         damping_ratio: of each contact's normal spring against the object's mass (light:
             the paper's model has no damping at all).
-        timestep: s (default: resolves the stiffest contact mode, at most ``_scene.MAX_TIMESTEP``).
+        timestep: s, at most 1/100 of the shortest trial (default: resolves the stiffest
+            contact mode, at most ``_scene.MAX_TIMESTEP``).
         kick_scales: the ``s`` of the energy kicks, each ``>= 0``.
         random_kicks: random directions per scale; ``seed`` seeds them.
         simulate_unstable: also simulate unstable and not-converged grasps (from their
@@ -104,7 +66,8 @@ def simulate(
         slip_threshold: m, the sliding that counts as a slip (default per contact
             ``mu_i d_i / 2``: the tangential deformation at which the paper's fingertip
             starts to slip without torsion, eq. 6 and 9).
-        **durations: any of :data:`DEFAULTS` (s, m, rad, m/s^2).
+        **durations: any of :data:`~jaxgrasp.simulation.DEFAULTS` (s, m, rad, m/s^2); all trials
+            together at most ``_options.MAX_SIMULATED_S`` and ``_options.MAX_STEPS`` steps.
 
     Returns:
         A :class:`~jaxgrasp.simulation.SimulationResult`; its ``parameters`` hold every
@@ -112,18 +75,13 @@ def simulate(
 
     Raises:
         ImportError: MuJoCo is not installed (one line: ``pip install "jaxgrasp[sim]"``).
-        GraspValueError: a bad grasp or option (one line naming it).
+        GraspValueError: a bad grasp or option (one line naming it; options before evaluating).
     """
     load_mujoco()
-    from jaxgrasp.io._mesh import MeshGrasp
-    from jaxgrasp.model._grasp import Grasp
-
-    opts = _options(friction, nominal_mass, damping_ratio, timestep, kick_scales, random_kicks, durations)
-    if not isinstance(grasp, (Grasp, MeshGrasp)):
-        raise GraspValueError(f"simulate needs a jaxgrasp.Grasp or MeshGrasp, got {type(grasp).__name__}")
-    plain = (grasp.grasp if isinstance(grasp, MeshGrasp) else grasp).compact()
-    if np.ndim(plain.positions) != 2:
-        raise GraspValueError(f"simulate takes one grasp, got positions of shape {np.shape(plain.positions)}")
+    opts = check_options(friction=friction, nominal_mass=nominal_mass, damping_ratio=damping_ratio, timestep=timestep,
+                         kick_scales=kick_scales, random_kicks=random_kicks, **durations)
+    slip_threshold = None if slip_threshold is None else check_number("slip_threshold", slip_threshold)
+    plain = _one_grasp(grasp)
     if evaluation is None:
         from jaxgrasp.engine._evaluate import evaluate
 
@@ -132,6 +90,19 @@ def simulate(
     if skip is not None:
         return _not_simulated(plain, evaluation, skip, opts)
     return _simulated(grasp, plain, evaluation, opts, seed, slip_threshold)
+
+
+def _one_grasp(grasp):
+    """The plain grasp of ``grasp`` (a Grasp or MeshGrasp of one grasp), compacted."""
+    from jaxgrasp.io._mesh import MeshGrasp
+    from jaxgrasp.model._grasp import Grasp
+
+    if not isinstance(grasp, (Grasp, MeshGrasp)):
+        raise GraspValueError(f"simulate needs a jaxgrasp.Grasp or MeshGrasp, got {type(grasp).__name__}")
+    plain = (grasp.grasp if isinstance(grasp, MeshGrasp) else grasp).compact()
+    if np.ndim(plain.positions) != 2:
+        raise GraspValueError(f"simulate takes one grasp, got positions of shape {np.shape(plain.positions)}")
+    return plain
 
 
 def _skip_status(evaluation, simulate_unstable: bool):
@@ -175,9 +146,10 @@ def _simulated(grasp, plain, evaluation, opts, seed, slip_threshold) -> Simulati
     w = np.asarray(evaluation.equilibrium_rotation, dtype=np.float64)
     scene = build_scene(grasp, plain, dp, w, friction=opts["friction"], nominal_mass=opts["nominal_mass_kg"],
                         damping_ratio=opts["damping_ratio"], timestep=opts["timestep"])
+    check_steps(opts, scene.timestep)  # the automatic timestep is known now, before any trial
     cal, c = scene.calibration, scene.contacts
     thresholds = (0.5 * c.mu * np.clip(cal["d_eq"], 0.0, None) if slip_threshold is None
-                  else np.full(len(c.r), _check("slip_threshold", slip_threshold)))
+                  else np.full(len(c.r), slip_threshold))
     runner = Runner(scene, thresholds, opts["sample_s"])
     hold, state, settled = runner.hold(opts["hold_time_s"], opts["hold_tolerance_m"], opts["hold_tolerance_rad"])
     six = runner.six_axis(state, opts["disturbance_acceleration_m_s2"], opts["six_axis_time_s"],

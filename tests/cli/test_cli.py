@@ -157,3 +157,16 @@ def test_console_script_subprocess(warm_cache, preset_json):
     assert "Traceback" not in proc.stderr
     assert_same_numbers(json.loads(proc.stdout), json.loads(preset_json[1]))  # to the last digit on a CPU
     assert warm_cache.program_files() == before
+
+
+@pytest.mark.parametrize("overrides", [["--young-modulus", "5e6", "--friction", "0.1"],
+                                       ["--young-modulus=-5", "--friction", "nan"]], ids=["valid", "invalid"])
+def test_show_hand_rejects_overrides(run_cli, tmp_path, overrides):
+    """``show --hand FILE``: the hand grasp file sets the fingertips and the object, so the
+    overrides are refused (one line naming them, exit 2, nothing drawn), not ignored."""
+    out = tmp_path / "hand.png"
+    rc, stdout, err = run_cli(["show", "--hand", ROOT / "examples" / "hands" / "two_finger" / "pinch.toml",
+                               "--out", out, *overrides])
+    assert rc == 2 and stdout == "", err
+    assert err.splitlines() == [err.strip()] and err.startswith("jaxgrasp: error: --young-modulus, --friction: "), err
+    assert "--hand" in err and not out.exists()

@@ -137,3 +137,74 @@ def test_results_json_and_plot(run_cli, tmp_path):
     assert p["timestep_s"] > 0 and p["condim"] == 4 and p["cone"] == "elliptic"
     assert p["friction_torsional_m"] == pytest.approx(
         [0.5 * 8 / 15 * 0.5 * math.sqrt(0.025**2 - (0.025 - d) ** 2) for d in p["equilibrium_deformation_m"]])
+
+
+def _no_evaluation(monkeypatch):
+    """Make any evaluation fail the test: the options must be checked before it."""
+    from jaxgrasp.engine import _evaluate
+
+    def evaluate(*_, **__):
+        raise AssertionError("evaluated before the options were checked")
+
+    monkeypatch.setattr(_evaluate, "evaluate", evaluate)
+
+
+@pytest.mark.parametrize("options, mentions", [
+    (dict(hold_time_s=-1.0), "hold_time_s must be finite and > 0, got -1"),
+    (dict(kick_scales=(-1.0, 2.0)), "kick_scales must be finite and >= 0, got -1"),
+    (dict(timestep=10.0), "timestep 10 s is too long: at most 1/100 of the shortest trial (kick_time_s 0.3 s)"),
+    (dict(hold_time_s=1e9), "the trials add up to 1e+09 s of simulated time"),
+    (dict(timestep=1e-7), "the trials need 1.66e+08 MuJoCo steps (16.6 s at timestep 1e-07 s)"),
+], ids=["negative-hold", "negative-scale", "timestep-above-trial", "too-long", "too-many-steps"])
+def test_options_are_checked_before_any_evaluation(monkeypatch, options, mentions):
+    """Every rule of the options (sign, the timestep against the shortest trial, the caps on
+    simulated time and steps) is one line naming the parameter, raised before evaluating."""
+    _no_evaluation(monkeypatch)
+    with pytest.raises(jaxgrasp.GraspValueError) as info:
+        simulate(PRESETS[0], **options)
+    assert mentions in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_automatic_timestep_is_held_to_the_step_cap():
+    """With the automatic timestep the steps are counted once the scene is built; the check
+    says the timestep was the automatic one. A timestep of 1/100 of the shortest trial passes."""
+    from jaxgrasp.simulation._options import MAX_STEPS, check_options, check_steps
+
+    opts = check_options(kick_scales=(), random_kicks=0, hold_time_s=1.0, six_axis_time_s=1.0)
+    check_steps(opts, 8.0 / MAX_STEPS)
+    with pytest.raises(jaxgrasp.GraspValueError, match="the automatic timestep 1e-07 s, from the contact stiffness"):
+        check_steps(opts, 1e-7)
+    assert check_options(kick_scales=(1.0,), random_kicks=0, timestep=0.003)["timestep"] == 0.003
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["--hold-time=-1"], "--hold-time"),
+    (["--hold-time", "0"], "--hold-time"),
+    (["--kick-time", "0"], "--kick-time"),
+    (["--six-axis-time=-2"], "--six-axis-time"),
+    (["--scales=-1,2"], "--scales"),
+    (["--random-kicks=-1"], "--random-kicks"),
+    (["--sim-friction", "0"], "--sim-friction"),
+    (["--timestep", "0"], "--timestep"),
+    (["--scales", ""], "--scales"),
+    (["--scales", "1,,2"], "--scales"),
+    (["--timestep", "10"], "--timestep"),
+    (["--hold-time", "1e9"], "--hold-time"),
+    (["--timestep", "1e-7"], "--timestep"),
+])
+def test_command_checks_its_options_before_evaluating(monkeypatch, run_cli, tmp_path, argv, option):
+    """Bad input: exit 2, one line naming the option (not the library's parameter), before
+    the evaluation and MuJoCo, and nothing written."""
+    _no_evaluation(monkeypatch)
+    out = tmp_path / "sim"
+    code, stdout, stderr = run_cli(["simulate", "examples/cube.toml", "--out", str(out), *argv])
+    assert code == 2 and stdout == "", stderr
+    assert len(stderr.splitlines()) == 1 and stderr.startswith("jaxgrasp: error: "), stderr
+    assert option in stderr and "running MuJoCo" not in stderr
+    from jaxgrasp.cli._simulate import OPTION_NAMES
+
+    bare = stderr
+    for name in OPTION_NAMES.values():
+        bare = bare.replace(name, "")
+    assert not any(param in bare for param in OPTION_NAMES), stderr  # no hold_time_s, kick_scales ...
+    assert not out.exists()
