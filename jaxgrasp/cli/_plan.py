@@ -1,6 +1,8 @@
 """``jaxgrasp plan MESH --fingers N --out DIR``: the best grasps of a meshed object.
 
-Runs :func:`jaxgrasp.plan` and writes, as one set into ``DIR`` (checked writable and locked
+Checks every option and the mesh first (:func:`jaxgrasp.planning._plan.check_plan`, the
+check :func:`jaxgrasp.plan` makes), so that bad input creates nothing; then runs
+:func:`jaxgrasp.plan` and writes, as one set into ``DIR`` (checked writable and locked
 before any computation, :func:`jaxgrasp.io._outputs.write_set`):
 
 * ``ranked.jsonl``: the ranked grasps, best first, one grasp file (JSON) per line naming the
@@ -90,25 +92,34 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    """Plan, write the set, print one summary line."""
+    """Check every option and the mesh (:func:`jaxgrasp.planning._plan.check_plan`), then
+    create and lock ``--out``, plan, write the set, print one summary line."""
     from jaxgrasp.planning import plan
-    from jaxgrasp.surface import ContactRules
+    from jaxgrasp.planning._plan import check_plan
 
     out = Path(args.out)
     check_out(out)
-    kwargs = _object_options(args)
-    kwargs.update(_robust_options(args))
+    kwargs = _plan_options(args)
+    check_plan(args.mesh, args.fingers, **kwargs)  # bad input: one line, nothing created or printed
     if not args.quiet:
         say(f"jaxgrasp: plan {args.mesh}: {args.samples} valid {args.fingers}-finger candidates to find and "
             "evaluate, the best refined; compiling (or loading from the cache) first")
     with lock_out(out):
         t0 = time.perf_counter()
-        res = plan(args.mesh, args.fingers, samples=args.samples, top=args.top, refine=args.refine, seed=args.seed,
-                   rules=ContactRules(flatness_deg=args.flatness), sampler=args.sampler,
-                   progress=None if args.quiet else _Progress(t0), **kwargs)
+        res = plan(args.mesh, args.fingers, progress=None if args.quiet else _Progress(t0), **kwargs)
         written, replaced = _write(res, out, args)
     print(f"plan {args.mesh}: {res.summary()}; wrote {out}/{{{','.join(written)}}}" + replaced_text(replaced, ()))
     return 0
+
+
+def _plan_options(args) -> dict:
+    """The keyword arguments of :func:`jaxgrasp.plan` (mesh and fingers aside), the options
+    that are the command's own checked."""
+    from jaxgrasp.surface import ContactRules
+
+    return dict(samples=args.samples, top=args.top, refine=args.refine, seed=args.seed,
+                rules=ContactRules(flatness_deg=args.flatness), sampler=args.sampler,
+                **_object_options(args), **_robust_options(args))
 
 
 def _robust_options(args) -> dict:
@@ -132,9 +143,13 @@ def _object_options(args) -> dict:
     gravity = [parse_number("--gravity", p, "component") for p in parts]
     for name in ("radius", "young_modulus", "friction", "max_force", "density", "mass"):
         v = getattr(args, name)
-        if v is not None and not (math.isfinite(v) and (v > 0 or (v == 0 and name in ("density", "mass")))):
-            raise UsageError(f"--{name.replace('_', '-')} must be a finite number > 0, got {v:g}")
-    mass = dict(mass=args.mass) if args.mass is not None else dict(density=args.density or DEFAULTS["density"])
+        zero = name in ("density", "mass")  # 0: a weightless object (the model's default mass), honoured
+        if v is not None and not (math.isfinite(v) and (v > 0 or (zero and v == 0))):
+            raise UsageError(f"--{name.replace('_', '-')} must be a finite number {'>=' if zero else '>'} 0, got {v:g}")
+    if args.mass is not None:
+        mass = dict(mass=args.mass)
+    else:
+        mass = dict(density=DEFAULTS["density"] if args.density is None else args.density)
     return dict(radius=args.radius, young_modulus=args.young_modulus, friction=args.friction,
                 max_force=args.max_force, gravity=gravity, units=args.units, **mass)
 

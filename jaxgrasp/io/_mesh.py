@@ -37,9 +37,9 @@ from jaxgrasp.io._inputs import MAX_MESH_BYTES, allowed_folders, check_mesh_suff
 from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._units import LENGTH_UNITS
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model._validation import COINCIDENT_DISTANCE, GraspValueError
 
-__all__ = ["MeshGrasp", "MeshReader", "from_mesh", "load_mesh", "read_mesh", "snap_to_surface", "closest_on_triangles", "DEFAULT_TOLERANCE", "SHARP_EDGE_DEG"]
+__all__ = ["MeshGrasp", "MeshReader", "from_mesh", "load_mesh", "read_mesh", "snap_to_surface", "closest_on_triangles", "DEFAULT_TOLERANCE", "SHARP_EDGE_DEG", "MAX_COORDINATE"]
 
 DEFAULT_TOLERANCE = 1e-3
 """Farthest a contact point may lie from the mesh surface, m."""
@@ -48,6 +48,14 @@ SHARP_EDGE_DEG = 30.0
 """A contact where faces meet at more than this angle (degrees) is on a sharp edge or
 corner, where the surface has no normal: an error. Below it (a tessellated curved surface)
 the normals of the faces meeting there are averaged."""
+
+MAX_COORDINATE = 1e3
+"""Largest magnitude of a mesh vertex coordinate, m (after the unit conversion). The model
+tells two contacts apart down to :data:`~jaxgrasp.model._validation.COINCIDENT_DISTANCE`
+(1e-12 m); float64 numbers near 1e3 are 1.1e-13 apart, fine enough for that, while near
+1e4 they are 1.8e-12 apart, too coarse. A grasped object is at most a few metres across,
+so a kilometre leaves room for a mesh frame far from the object. It also keeps the
+surface checks' areas and volumes (scale squared and cubed) far from overflow."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -100,9 +108,10 @@ def load_mesh(mesh, units: str = "m"):
 
     Raises:
         GraspValueError: unknown units, a file that is not a mesh format, too large, not a
-            regular file or unreadable, or a degenerate mesh (no faces, non-finite
-            vertices, no area, a closed mesh enclosing no volume or with faces not
-            consistently oriented); one line.
+            regular file or unreadable, or a degenerate mesh (no faces, NaN or infinite
+            vertex coordinates, a coordinate beyond :data:`MAX_COORDINATE`, no area, a
+            closed mesh enclosing no volume or with faces not consistently oriented); one
+            line.
     """
     import trimesh
 
@@ -136,23 +145,45 @@ def read_mesh(path: str | os.PathLike, units: str = "m", *, real: str | os.PathL
         raw = read_input(source, MAX_MESH_BYTES, "mesh")
     except GraspValueError as exc:  # "<source>: no such file" -> "mesh '<path>': no such file"
         raise GraspValueError(f"{where}: {str(exc).removeprefix(source + ': ')}") from None
-    try:
-        loaded = trimesh.load(io.BytesIO(raw), file_type=fmt, force="mesh", process=True)
+    try:  # processed in _checked, after its vertices are checked: processing drops NaN vertices silently
+        loaded = trimesh.load(io.BytesIO(raw), file_type=fmt, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many kinds for unreadable files
         raise GraspValueError(f"{where}: cannot read it as a mesh ({' '.join(str(exc).split()) or type(exc).__name__})") from None
-    return _checked(loaded, where, units), hashlib.sha256(raw).hexdigest()
+    return _checked(loaded, where, units, process=True), hashlib.sha256(raw).hexdigest()
 
 
-def _checked(loaded, where: str, units: str):
-    """A copy of ``loaded`` in metres whose surface passed :func:`_check_surface`."""
+def _checked(loaded, where: str, units: str, process: bool = False):
+    """A copy of ``loaded`` in metres whose vertices passed :func:`_check_vertices` and
+    surface :func:`_check_surface`; with ``process``, its duplicate vertices merged as
+    ``trimesh.load(..., process=True)`` does (in the file's units, as that does)."""
     import trimesh
 
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise GraspValueError(f"{where} has no faces (a degenerate mesh)")
+    _check_vertices(np.asarray(loaded.vertices, dtype=np.float64), where, LENGTH_UNITS[units])
     out = loaded.copy()
+    if process:
+        out.process()
     out.apply_scale(LENGTH_UNITS[units])
     _check_surface(out, where)
     return out
+
+
+def _check_vertices(vertices: np.ndarray, where: str, metres_per_unit: float) -> None:
+    """Reject NaN or infinite vertex coordinates and coordinates beyond :data:`MAX_COORDINATE`
+    (``vertices (V, 3)`` in the mesh's units, ``metres_per_unit`` <= 1)."""
+    for bad, what in ((np.isnan(vertices), "NaN"), (np.isinf(vertices), "infinite")):
+        if bad.any():
+            rows = np.flatnonzero(bad.any(axis=1))
+            raise GraspValueError(f"{where} has {what} vertex coordinates ({len(rows)} of its {len(vertices)} "
+                                  f"vertices; the first: {_vec(vertices[rows[0]])})")
+    if len(vertices) and np.abs(vertices).max() * metres_per_unit > MAX_COORDINATE:
+        row = int(np.argmax(np.abs(vertices).max(axis=1)))
+        raise GraspValueError(
+            f"{where} has a vertex at {_vec(vertices[row] * metres_per_unit)} m, beyond the largest coordinate "
+            f"{MAX_COORDINATE:g} m (past it float64 no longer resolves contacts {COINCIDENT_DISTANCE:g} m apart): "
+            "is the mesh's units right?"
+        )
 
 
 class MeshReader:
@@ -203,9 +234,8 @@ class MeshReader:
 
 
 def _check_surface(mesh, where: str) -> None:
-    """Reject a mesh that has no usable surface; turn a closed inward mesh outward (in place)."""
-    if not np.all(np.isfinite(mesh.vertices)):
-        raise GraspValueError(f"{where} has vertices that are not finite numbers")
+    """Reject a mesh that has no usable surface; turn a closed inward mesh outward (in place).
+    Its vertices passed :func:`_check_vertices`, so the powers of ``scale`` below are finite."""
     scale = float(np.ptp(mesh.vertices, axis=0).max())
     if not scale > 0 or not mesh.area > 1e-12 * scale**2:
         raise GraspValueError(f"{where} has no surface area (a degenerate mesh)")
@@ -395,7 +425,11 @@ def _unit_hint(tri: np.ndarray, points, tolerance: float) -> str:
 
 
 def _vec_mm(p) -> str:
-    return "(" + ", ".join(f"{x * 1e3:.4g}" for x in p) + ")"
+    return _vec(np.asarray(p) * 1e3)
+
+
+def _vec(p) -> str:
+    return "(" + ", ".join(f"{x:.4g}" for x in p) + ")"
 
 
 def closest_on_triangles(p, a, b, c) -> np.ndarray:

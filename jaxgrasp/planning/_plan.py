@@ -43,7 +43,7 @@ from jaxgrasp.planning._sampling import antipodal_pairs, spread_tuples, surface_
 from jaxgrasp.surface import PAD_FACES, ContactRules, RuleCheck, Surface, check_contacts, deformation_range
 from jaxgrasp.tolerance._status import GraspStatus
 
-__all__ = ["plan", "SAMPLERS"]
+__all__ = ["plan", "check_plan", "PlanInputs", "SAMPLERS"]
 
 SAMPLERS = ("antipodal", "spread", "uniform")
 """Candidate generators: ``antipodal`` (two fingers), ``spread`` (three or more), ``uniform``
@@ -112,12 +112,23 @@ def plan(
         A :class:`~jaxgrasp.planning.PlanResult`.
 
     Raises:
-        GraspValueError: bad arguments or mesh (one line), before anything is computed.
+        GraspValueError: bad arguments or mesh (one line), before anything is computed
+            (:func:`check_plan`).
     """
     t0 = time.perf_counter()
-    sampler = _checked_args(fingers, samples, top, refine, seed, sampler)
-    rules = ContactRules() if rules is None else rules
-    setup = _setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force)
+    checked = check_plan(mesh, fingers, radius=radius, young_modulus=young_modulus, friction=friction,
+                         max_force=max_force, mass=mass, density=density, center_of_mass=center_of_mass,
+                         gravity=gravity, units=units, samples=samples, top=top, refine=refine, seed=seed,
+                         rules=rules, sampler=sampler, tune_maxiter=tune_maxiter, robust=robust,
+                         robust_samples=robust_samples)
+    return _planned(checked, fingers, samples, top, refine, seed, tune_maxiter, robust, robust_samples, progress, t0)
+
+
+def _planned(checked: "PlanInputs", fingers, samples, top, refine, seed, tune_maxiter, robust, robust_samples,
+             progress, t0) -> PlanResult:
+    """:func:`plan` on its checked inputs: draw, evaluate, rank, refine, (robust) rank again;
+    ``t0`` the :func:`time.perf_counter` at which the plan began."""
+    setup, sampler, rules = checked.setup, checked.sampler, checked.rules
     rng = np.random.default_rng(seed)
     pos, nrm, dr, sampled, failures = _draw_valid(setup, fingers, samples, sampler, rules, rng, progress)
     if len(pos) == 0:
@@ -135,6 +146,73 @@ def plan(
     settings = dict(fingers=fingers, sampler=sampler, rules=dataclasses.asdict(rules), samples=samples,
                     rank="value" if robust is None else f"robust ({robust.to_spec()}, {robust_samples} samples)")
     return _result(ranked, setup, sampled, failures, counts, seed, t0, settings)
+
+
+@dataclasses.dataclass(frozen=True)
+class PlanInputs:
+    """A plan's inputs as :func:`check_plan` found them.
+
+    Attributes:
+        sampler: the candidate generator, one of :data:`SAMPLERS` (the default resolved).
+        rules: the :class:`~jaxgrasp.surface.ContactRules`.
+        mesh: the object's ``trimesh.Trimesh``, m, mesh frame.
+        center_of_mass: ``(3,)`` m, mesh frame. mass: kg.
+        setup: everything :func:`plan` computes from (internal).
+    """
+
+    sampler: str
+    rules: ContactRules
+    setup: _Setup
+
+    @property
+    def mesh(self):
+        return self.setup.mesh
+
+    @property
+    def center_of_mass(self) -> np.ndarray:
+        return self.setup.com
+
+    @property
+    def mass(self) -> float:
+        return self.setup.mass
+
+
+def check_plan(
+    mesh, fingers: int = 2, *, radius: float, young_modulus: float, friction: float, max_force: float,
+    mass: float | None = None, density: float | None = None, center_of_mass=None, gravity=DEFAULT_GRAVITY,
+    units: str = "m", samples: int = 150, top: int = 10, refine: int = 3, seed: int = 0,
+    rules: ContactRules | None = None, sampler: str | None = None, tune_maxiter: int = 30,
+    robust: Uncertainty | None = None, robust_samples: int = 64,
+) -> PlanInputs:
+    """Check :func:`plan`'s arguments and read its mesh, computing nothing: the one check
+    :func:`plan` makes first, for callers that must know the input is good before they
+    start (``jaxgrasp plan`` checks it before it creates ``--out``).
+
+    Args: as :func:`plan` (``progress`` aside).
+
+    Returns:
+        The checked :class:`PlanInputs`.
+
+    Raises:
+        GraspValueError: one line: a count out of range (``fingers`` 2 to 8, ``samples`` and
+        ``top`` >= 1, ``refine`` and ``seed`` >= 0, ``tune_maxiter`` >= 1, ``robust_samples``
+        >= 2), an unknown sampler or one that cannot make ``fingers``-finger grasps, a
+        fingertip value, mass, density or gravity that is not a finite number in range, a
+        bad mesh (:func:`jaxgrasp.io._mesh.load_mesh`; not watertight without
+        ``center_of_mass``), or rules that no initial deformation keeps (rule 5).
+    """
+    sampler = _checked_args(fingers, samples, top, refine, seed, sampler)
+    for name, v, lo in (("tune_maxiter", tune_maxiter, 1), ("robust_samples", robust_samples, 2)):
+        if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo):
+            raise GraspValueError(f"plan: {name} must be an integer >= {lo}, got {v!r}")
+    if robust is not None and not isinstance(robust, Uncertainty):
+        raise GraspValueError(f"plan: robust must be an Uncertainty or None, got {type(robust).__name__}")
+    rules = ContactRules() if rules is None else rules
+    if not isinstance(rules, ContactRules):
+        raise GraspValueError(f"plan: rules must be a ContactRules or None, got {type(rules).__name__}")
+    setup = _setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force)
+    _dr_range(setup, rules)
+    return PlanInputs(sampler, rules, setup)
 
 
 def _checked_args(fingers, samples, top, refine, seed, sampler) -> str:
@@ -158,6 +236,15 @@ def _setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_mo
     import os
 
     surface_mesh = load_mesh(mesh, units)
+    if center_of_mass is None and not surface_mesh.is_watertight:
+        where = f"mesh {os.fspath(mesh)!r}" if isinstance(mesh, (str, os.PathLike)) else "the mesh"
+        raise GraspValueError(
+            f"plan: {where} is not watertight (not a closed surface), so it has no centre of mass or "
+            "volume of its own: plan needs a closed mesh (jaxgrasp.plan also takes center_of_mass= and mass=)"
+        )
+    for name, v in (("mass", mass), ("density", density)):
+        if v is not None and not (isinstance(v, (int, float, np.floating, np.integer)) and np.isfinite(v) and v >= 0):
+            raise GraspValueError(f"plan: {name} = {v!r} must be a finite number >= 0 (SI units)")
     com, m = mass_properties(surface_mesh, mass, density, center_of_mass)
     tip = {}
     for name, v in (("radius", radius), ("young_modulus", young_modulus), ("friction", friction),

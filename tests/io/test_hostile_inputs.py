@@ -296,3 +296,28 @@ def test_batch_allow_dir_reaches_the_dataset(folders, tmp_path, run_cli):
     BatchCheckpoint(tmp_path / "o" / "results.partial", "other.jsonl", "0" * 64, 1, 2).start()
     rc, _, err = run_cli(["batch", path, "--out", tmp_path / "o", "--allow-dir", outside, "--resume"])
     assert rc == 2 and "was made from other input (other.jsonl" in err and err.count("\n") == 1, err
+
+
+# --------------------------------------------------------------------------- huge and NaN vertices
+
+
+@pytest.mark.parametrize(
+    "coordinate, message",
+    [("1e300", "huge.obj' has a vertex at (1e+300, 0, 0) m, beyond the largest coordinate 1000 m"),
+     ("nan", "huge.obj' has NaN vertex coordinates (3 of its 4 vertices")],
+    ids=["1e300", "nan"],
+)
+def test_huge_or_nan_mesh_is_one_line_in_every_command(tmp_path, run_cli, coordinate, message):
+    """A tetrahedron with vertices at 1e300 m ended ``plan``, ``evaluate`` and ``show`` with an
+    OverflowError traceback; one with NaN vertices was called not watertight (or faceless)."""
+    (tmp_path / "huge.obj").write_text(
+        f"v 0 0 0\nv {coordinate} 0 0\nv 0 {coordinate} 0\nv 0 0 {coordinate}\n"
+        "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+    )
+    grasp = tmp_path / "mesh_huge.json"
+    grasp.write_text(json.dumps(grasp_dict("huge.obj")))
+    for argv in (["plan", tmp_path / "huge.obj", "--out", tmp_path / "po"], ["evaluate", grasp],
+                 ["show", grasp, "--out", tmp_path / "x.png"]):
+        rc, out, err = run_cli(argv)
+        assert rc == 2 and out == "" and err.count("\n") == 1 and message in err, (argv[0], err)
+    assert not (tmp_path / "po").exists() and not (tmp_path / "x.png").exists()

@@ -316,3 +316,45 @@ def test_show_without_a_mesh_draws_the_contacts_hull(tmp_path, cube_value):
 def test_show_option_errors(run_cli, argv, message):
     rc, out, err = run_cli(["show", "--preset", "cube", *argv])
     assert rc == 2 and err.startswith(f"jaxgrasp: error: {message}") and err.count("\n") == 1
+
+
+# --------------------------------------------------------------------------- coordinates
+
+
+def _tetra_obj(path, coordinate: str):
+    """A tetrahedron OBJ with vertices at 0 and at ``coordinate`` on each axis."""
+    c = coordinate
+    path.write_text(f"v 0 0 0\nv {c} 0 0\nv 0 {c} 0\nv 0 0 {c}\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    return path
+
+
+@pytest.mark.parametrize(
+    "coordinate, units, message",
+    [
+        ("1e300", "m", "has a vertex at (1e+300, 0, 0) m, beyond the largest coordinate 1000 m"),
+        ("2e6", "mm", "has a vertex at (2000, 0, 0) m, beyond the largest coordinate 1000 m"),  # after units
+        ("inf", "m", "has infinite vertex coordinates (3 of its 4 vertices; the first: (inf, 0, 0))"),
+        ("nan", "m", "has NaN vertex coordinates (3 of its 4 vertices; the first: (nan, 0, 0))"),
+    ],
+    ids=["1e300", "2e6-mm", "inf", "nan"],
+)
+def test_huge_or_not_finite_vertices_are_one_line(tmp_path, coordinate, units, message):
+    """A tetrahedron at 1e300 m overflowed a Python float in the area check (a traceback);
+    NaN vertices were dropped by trimesh's processing and the rest reported as not watertight."""
+    path = _tetra_obj(tmp_path / "t.obj", coordinate)
+    with pytest.raises(jaxgrasp.GraspValueError) as info:
+        jaxgrasp.io._mesh.load_mesh(path, units)
+    text = str(info.value)
+    assert text.startswith(f"mesh {str(path)!r} {message}") and "\n" not in text, text
+
+
+def test_coordinates_up_to_the_limit_are_read():
+    from jaxgrasp.io._mesh import MAX_COORDINATE, load_mesh
+
+    near = box()
+    near.apply_translation([MAX_COORDINATE - 1.0, 0.0, 0.0])
+    assert load_mesh(near).is_watertight
+    far = box()
+    far.apply_translation([MAX_COORDINATE + 1.0, 0.0, 0.0])
+    with pytest.raises(jaxgrasp.GraspValueError, match=r"beyond the largest coordinate 1000 m"):
+        load_mesh(far)

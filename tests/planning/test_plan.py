@@ -131,3 +131,89 @@ def test_no_single_contact_keeps_the_rules_gives_no_valid_not_an_error():
     res = plan(tiny, 2, units="m", density=500.0, samples=4, top=2, refine=0, **TIP)
     assert res.status == PlanStatus.NO_VALID
     assert len(res.grasps) == 0 and "contact rules" in res.status.message
+
+
+# --------------------------------------------------------------------------- input checks
+
+
+@pytest.fixture(scope="module")
+def bad_inputs(tmp_path_factory):
+    """A folder with a 0.1 m box, an open box, a file that is not a mesh and an empty one."""
+    folder = tmp_path_factory.mktemp("plan_inputs")
+    box = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    box.export(folder / "block.stl")
+    trimesh.Trimesh(box.vertices, box.faces[box.face_normals[:, 2] < 0.5]).export(folder / "open.stl")
+    (folder / "notmesh.stl").write_text("hello\n")
+    (folder / "empty.stl").write_bytes(b"")
+    return folder
+
+
+@pytest.mark.parametrize(
+    "mesh, options, message",
+    [
+        ("nonexist.stl", [], "nonexist.stl': no such file"),
+        ("notmesh.stl", [], "notmesh.stl' has no faces"),
+        ("empty.stl", [], "empty.stl' has no faces"),
+        ("block.stl", ["--fingers", "1"], "fingers must be an integer >= 2, got 1"),
+        ("block.stl", ["--fingers", "9"], "fingers = 9 is more than 8"),
+        ("block.stl", ["--samples", "0"], "samples must be an integer >= 1, got 0"),
+        ("block.stl", ["--top", "0"], "top must be an integer >= 1, got 0"),
+        ("block.stl", ["--refine", "-1"], "refine must be an integer >= 0, got -1"),
+        ("block.stl", ["--seed", "-1"], "seed must be an integer >= 0, got -1"),
+        ("block.stl", ["--flatness", "-5"], "flatness_deg = -5.0 must be a number of degrees in [0, 90)"),
+        ("block.stl", ["--flatness", "nan"], "flatness_deg = nan must be a number of degrees"),
+        ("block.stl", ["--sampler", "antipodal", "--fingers", "3"], "antipodal sampler makes two-finger grasps, not 3"),
+        ("block.stl", ["--max-force", "0.001"], "no initial deformation keeps rule 5"),
+        ("open.stl", [], ("open.stl' is not watertight (not a closed surface), so it has no centre of mass or "
+                          "volume of its own: plan needs a closed mesh")),
+    ],
+    ids=["missing", "not-a-mesh", "empty", "fingers-1", "fingers-9", "samples-0", "top-0", "refine--1", "seed--1",
+         "flatness--5", "flatness-nan", "antipodal-3", "rule-5", "open"],
+)
+def test_cli_plan_bad_input_creates_nothing(bad_inputs, tmp_path, run_cli, mesh, options, message):
+    """Every option and the mesh are checked (``check_plan``) before ``--out`` is created and
+    before the "compiling first" line: bad input leaves no folder and prints one line. An
+    open mesh is not sent to ``center_of_mass``, a grasp-file key ``plan`` has no option for."""
+    out = tmp_path / "pz" / "a" / "b"
+    rc, stdout, err = run_cli(["plan", bad_inputs / mesh, *options, "--out", out])
+    assert rc == 2 and stdout == "" and err.count("\n") == 1, err
+    assert err.startswith("jaxgrasp: error: ") and message in err and "give center_of_mass" not in err, err
+    assert not (tmp_path / "pz").exists()
+
+
+def test_plan_and_check_plan_take_the_same_arguments():
+    import inspect
+
+    from jaxgrasp.planning._plan import check_plan
+
+    params = dict(inspect.signature(plan).parameters)
+    params.pop("progress")
+    assert list(inspect.signature(check_plan).parameters.values()) == list(params.values())
+
+
+def test_density_zero_is_a_weightless_object(bad_inputs, tmp_path, run_cli, monkeypatch):
+    """``--density 0`` was replaced by the default 500 kg/m^3 (``0 or 500``): it now reaches
+    :func:`jaxgrasp.plan` as 0, a mass of 0 (the model's default, no weight to carry)."""
+    import jaxgrasp.planning
+
+    got = {}
+
+    def stop(mesh, fingers, progress=None, **kwargs):
+        got.update(kwargs, mesh=mesh, fingers=fingers)
+        raise jaxgrasp.GraspValueError("stopped before planning")
+
+    monkeypatch.setattr(jaxgrasp.planning, "plan", stop)
+    rc, _, err = run_cli(["plan", bad_inputs / "block.stl", "--density", "0", "--quiet", "--out", tmp_path / "o"])
+    assert rc == 2 and "stopped before planning" in err, err
+    assert got["density"] == 0.0
+
+    from jaxgrasp.planning._plan import check_plan
+
+    options = {k: v for k, v in got.items() if k not in ("mesh", "fingers")}
+    assert check_plan(got["mesh"], got["fingers"], **options).mass == 0.0
+    rc, _, err = run_cli(["plan", bad_inputs / "block.stl", "--density", "-1", "--out", tmp_path / "o2"])
+    assert rc == 2 and "--density must be a finite number >= 0, got -1" in err and not (tmp_path / "o2").exists()
+    # the default: 500 kg/m^3 of a 0.1 m box (its STL's float32 vertices)
+    rc, _, err = run_cli(["plan", bad_inputs / "block.stl", "--quiet", "--out", tmp_path / "o3"])
+    options = {k: v for k, v in got.items() if k not in ("mesh", "fingers")}
+    assert got["density"] == 500.0 and check_plan(got["mesh"], 2, **options).mass == pytest.approx(0.5, rel=1e-6)
