@@ -37,9 +37,9 @@ from jaxgrasp.io._inputs import MAX_MESH_BYTES, allowed_folders, check_mesh_suff
 from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._units import LENGTH_UNITS
-from jaxgrasp.model._validation import COINCIDENT_DISTANCE, GraspValueError
+from jaxgrasp.model._validation import COINCIDENT_DISTANCE, MAX_COORDINATE, GraspValueError
 
-__all__ = ["MeshGrasp", "MeshReader", "from_mesh", "load_mesh", "read_mesh", "snap_to_surface", "closest_on_triangles", "DEFAULT_TOLERANCE", "SHARP_EDGE_DEG", "MAX_COORDINATE"]
+__all__ = ["MeshGrasp", "MeshReader", "from_mesh", "load_mesh", "read_mesh", "snap_to_surface", "closest_on_triangles", "DEFAULT_TOLERANCE", "SHARP_EDGE_DEG"]
 
 DEFAULT_TOLERANCE = 1e-3
 """Farthest a contact point may lie from the mesh surface, m."""
@@ -49,13 +49,6 @@ SHARP_EDGE_DEG = 30.0
 corner, where the surface has no normal: an error. Below it (a tessellated curved surface)
 the normals of the faces meeting there are averaged."""
 
-MAX_COORDINATE = 1e3
-"""Largest magnitude of a mesh vertex coordinate, m (after the unit conversion). The model
-tells two contacts apart down to :data:`~jaxgrasp.model._validation.COINCIDENT_DISTANCE`
-(1e-12 m); float64 numbers near 1e3 are 1.1e-13 apart, fine enough for that, while near
-1e4 they are 1.8e-12 apart, too coarse. A grasped object is at most a few metres across,
-so a kilometre leaves room for a mesh frame far from the object. It also keeps the
-surface checks' areas and volumes (scale squared and cubed) far from overflow."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

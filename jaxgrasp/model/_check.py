@@ -28,6 +28,7 @@ from jaxgrasp.model._fields import FIELDS
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._validation import (
     COINCIDENT_DISTANCE,
+    MAX_COORDINATE,
     MAX_FRICTION,
     MAX_LOAD_RATIO,
     MIN_ENERGY_SCALE,
@@ -58,6 +59,7 @@ class CheckReason(Coded):
         f"mass * |gravity| must be at most {MAX_LOAD_RATIO:g} times the initial squeeze "
         "(sum of pi * young_modulus * initial_deformation^2 over the active contacts, N)"
     )
+    FAR = 13, f"a position's coordinates must be at most {MAX_COORDINATE:g} m from the centre of mass"
 
 
 @jax.tree_util.register_dataclass
@@ -132,6 +134,7 @@ def _rules(g: Grasp, n: int) -> list:
         (CheckReason.TOO_FEW_CONTACTS, jnp.sum(on, -1) < 2),
         (CheckReason.COINCIDENT, jnp.any(close, -2)),  # the later contact of the pair
         (CheckReason.OVERLOAD, ~(weight <= MAX_LOAD_RATIO * squeeze)),
+        (CheckReason.FAR, ~jnp.all(jnp.abs(pos) <= MAX_COORDINATE, -1)),
     ]
 
 

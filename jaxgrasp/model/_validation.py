@@ -22,6 +22,7 @@ __all__ = [
     "check_grasp_inputs",
     "check_batch_inputs",
     "check_corners",
+    "MAX_COORDINATE",
     "MONOTONE",
     "format_value",
     "counted",
@@ -38,6 +39,13 @@ energies by the initial elastic energy, which must stay far from float64 underfl
 
 COINCIDENT_DISTANCE = 1e-12
 """Two contacts closer than this, m, are at the same position."""
+
+MAX_COORDINATE = 1e3
+"""Largest magnitude of a contact position's coordinate (m, centre-of-mass frame), and of a
+mesh vertex's (:mod:`jaxgrasp.io._mesh`, after its units). The model tells two contacts
+apart down to :data:`COINCIDENT_DISTANCE`; float64 numbers near 1e3 are 1.1e-13 apart, fine
+enough for that, while near 1e4 they are 1.8e-12 apart, too coarse. A grasped object is at
+most a few metres across, so a kilometre leaves room for a frame far from the object."""
 
 MAX_FRICTION = 1e3
 """Largest static friction coefficient accepted. Real materials stay below about 10
@@ -150,7 +158,8 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     """Validate and normalise the fields of one grasp (concrete values only).
 
     Keyword arguments are the :class:`Grasp` fields by name, with the units, shapes and
-    ranges of :data:`jaxgrasp.model.FIELDS`: ``positions`` ``(N, 3)`` m; ``normals``
+    ranges of :data:`jaxgrasp.model.FIELDS`: ``positions`` ``(N, 3)`` m, each coordinate at
+    most :data:`MAX_COORDINATE` in magnitude; ``normals``
     ``(N, 3)`` (any non-zero length); ``initial_deformation`` m in ``(0, radius)``,
     ``radius`` m, ``young_modulus`` Pa, ``friction``, ``max_force`` N, each a scalar or
     ``(N,)`` and ``> 0``, friction at most :data:`MAX_FRICTION`; ``mass`` kg ``>= 0`` and
@@ -189,6 +198,7 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     mask = _check_active(active, n)
     _check_distinct(arrs["positions"] if mask is None else arrs["positions"][mask])
     _check_load(out, arrs, mask)
+    _check_reach(arrs["positions"])
     out.update(positions=arrs["positions"], mass=arrs["mass"], gravity=arrs["gravity"])
     checked = {name: out[name] for name in NAMES}
     return checked if mask is None else {**checked, "active": mask}
@@ -329,6 +339,18 @@ def _check_friction(arrs: dict) -> None:
         raise GraspValueError(
             f"{label} = {format_value(flat[int(bad[0])])} must be at most {MAX_FRICTION:g} "
             "(static friction coefficients of real materials stay below about 10)"
+        )
+
+
+def _check_reach(pos: np.ndarray) -> None:
+    """Every contact (active or not) within :data:`MAX_COORDINATE` m of the centre of mass
+    along each axis."""
+    far = np.flatnonzero(np.any(np.abs(pos) > MAX_COORDINATE, axis=-1))
+    if far.size:
+        i = int(far[0])
+        raise GraspValueError(
+            f"positions[{i}] = {format_value(pos[i])} m: a coordinate beyond {MAX_COORDINATE:g} m from the centre "
+            f"of mass (past it float64 no longer resolves contacts {COINCIDENT_DISTANCE:g} m apart)"
         )
 
 

@@ -349,7 +349,8 @@ def test_huge_or_not_finite_vertices_are_one_line(tmp_path, coordinate, units, m
 
 
 def test_coordinates_up_to_the_limit_are_read():
-    from jaxgrasp.io._mesh import MAX_COORDINATE, load_mesh
+    from jaxgrasp.io._mesh import load_mesh
+    from jaxgrasp.model._validation import MAX_COORDINATE
 
     near = box()
     near.apply_translation([MAX_COORDINATE - 1.0, 0.0, 0.0])

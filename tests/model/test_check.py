@@ -17,7 +17,7 @@ import pytest
 import jaxgrasp
 from jaxgrasp import presets
 from jaxgrasp.model import CheckReason
-from jaxgrasp.model._validation import MAX_FRICTION, MAX_LOAD_RATIO, GraspValueError
+from jaxgrasp.model._validation import MAX_COORDINATE, MAX_FRICTION, MAX_LOAD_RATIO, GraspValueError
 
 CUBE = presets.cube(young_modulus=6e5, initial_deformation=0.002)
 SQUEEZE = 2 * np.pi * 6e5 * 0.002**2  # N, the cube's initial normal forces summed
@@ -40,6 +40,8 @@ BROKEN = {  # name: (grasp, the rule it breaks, the contact, -1 for a rule of th
     "coincident contacts": (CUBE.replace(positions=CUBE.positions.at[1].set(CUBE.positions[0])),
                             CheckReason.COINCIDENT, 1),
     "weight beyond the bound": (CUBE.replace(mass=2 * MAX_LOAD_RATIO * SQUEEZE / 9.81), CheckReason.OVERLOAD, -1),
+    "contact a kilometre away": (CUBE.replace(positions=CUBE.positions.at[1, 1].set(1.5 * MAX_COORDINATE)),
+                                 CheckReason.FAR, 1),
 }
 
 
