@@ -133,18 +133,28 @@ def _first_order(z, data: ProblemData) -> FirstOrder:
 
 def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProblemData):
     """``(6, 6)`` Hessian in ``z`` of ``f + weights . g`` (``weights`` ``(3N,)`` fixed), from
-    the kinematics' derivatives in ``d.aux``: ``sum_i dq_i^T H_i dq_i + sum_ik
-    (d psi / d q_ik) d2q_ik`` with ``psi_i`` contact ``i``'s share of the function of its
-    own kinematics, ``H_i`` its ``4 x 4`` Hessian (:func:`jaxgrasp.model._potential.contact_hessians`,
-    written out) and the second sum :func:`jaxgrasp.model._potential.kinematics_curvature`."""
+    the kinematics' derivatives in ``d.aux`` (:func:`kinematic_hessian`), with ``psi_i``
+    contact ``i``'s share of the function of its own kinematics and its ``4 x 4`` Hessian
+    :func:`jaxgrasp.model._potential.contact_hessians`, written out."""
     p = data.params
     q, dq, geometry, de, dm = d.aux
     w = weights.reshape(3, -1)
     he, hm = contact_hessians(tuple(q.T), p)
     gq = de / data.scale + contract("rn,rnk->nk", w, dm)  # (N, 4): d psi_i / dq_i
     hq = he / data.scale + contract("rn,rnkl->nkl", w, hm)  # (N, 4, 4)
+    return kinematic_hessian(z, data, dq, geometry, gq, hq)
+
+
+def kinematic_hessian(z, data: ProblemData, dq, geometry, gq, hq):
+    """``(6, 6)`` Hessian in ``z`` of ``sum_i psi_i(q_i)``, a sum of functions of each
+    contact's own kinematics ``q_i = (d, cos phi, dt^2, theta)``, from their gradients
+    ``gq`` ``(N, 4)`` and Hessians ``hq`` ``(N, 4, 4)`` in ``q_i`` and the kinematics'
+    Jacobian ``dq`` ``(N, 4, 6)`` and ``geometry`` at ``z``
+    (:func:`jaxgrasp.model._potential.kinematics_jacobian`): ``sum_i dq_i^T H_i dq_i +
+    sum_ik (d psi_i / d q_ik) d2q_ik``, the second sum
+    :func:`jaxgrasp.model._potential.kinematics_curvature`."""
     hd = contract("nkl,nlj->nkj", hq, dq)  # (N, 4, 6): H_i dq_i
-    hx = contract("njm,njl->ml", dq, hd) + kinematics_curvature(to_pose(z, data.lever), p, geometry, gq)
+    hx = contract("njm,njl->ml", dq, hd) + kinematics_curvature(to_pose(z, data.lever), data.params, geometry, gq)
     scale = _pose_scale(data, z.dtype)
     return hx * scale[:, None] * scale[None, :]
 

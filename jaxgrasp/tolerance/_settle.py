@@ -10,9 +10,11 @@ import numpy as np
 
 from jaxgrasp.model._codes import Constraint
 from jaxgrasp.model._potential import (
+    contact_hessians,
     contact_kinematics,
     energy_of,
     margins_of,
+    rotation_hessian_along,
     rotation_matrix,
     slip_torsion,
 )
@@ -20,7 +22,15 @@ from jaxgrasp.solver._dense import solve as dense_solve
 from jaxgrasp.solver._rows import over_rows, put_rows
 from jaxgrasp.solver._solver import SolverOptions, SolverResult, kkt_tol
 from jaxgrasp.solver._status import LaneStatus
-from jaxgrasp.tolerance._problems import ProblemData, constraints, objective, to_pose
+from jaxgrasp.tolerance._problems import (
+    ProblemData,
+    _first_order,
+    _pose_scale,
+    constraints,
+    kinematic_hessian,
+    objective,
+    to_pose,
+)
 
 __all__ = ["settle_stalled", "settle_equilibrium", "needs_settling", "RELEASED_TOL", "MAX_POLISHED"]
 
@@ -107,40 +117,101 @@ def _relaxed_problem(z, data: ProblemData, v, relaxed_rows, cone):
     ``P_kj = (mu_j d_j / (2 cos^2 phi_j) + v_jk . u_j) / dr_j`` (``v``: the ``(N, 3, 3)``
     face directions of each contact; row ``k * N + j`` holds ``P_kj``), and where ``cone``
     ``()`` every other slip row in its cone form (:func:`_cone_margins`). One evaluation of
-    the contact kinematics serves every row, so that the polish's derivatives are taken
-    once."""
+    the contact kinematics serves every row. Its derivatives are written out
+    (:func:`_relaxed_derivatives`)."""
     p = data.params
     n = p.c.shape[0]
     x = to_pose(z, data.lever)
     kinematics = contact_kinematics(x, p)
     f = energy_of(x, kinematics, p) / data.scale
     g = margins_of(kinematics, p)  # (3, N)
-    d, cphi = kinematics[0], kinematics[1]  # (N,)
     u = jax.vmap(lambda j: _tangential(z, data, j)[0])(jnp.arange(n))  # (N, 3)
-    slope = p.mu * d / (2.0 * cphi**2)
-    pyramid = (slope[:, None] + jnp.einsum("jkc,jc->jk", v, u)) / jax.lax.stop_gradient(p.dr)[:, None]
+    pyramid = _slope_row(jnp.stack(kinematics, axis=-1), p)[:, None] + jnp.einsum(
+        "jkc,jc->jk", v, u) / jax.lax.stop_gradient(p.dr)[:, None]
     g = g.at[Constraint.SLIP].set(jnp.where(cone & p.on, _cone_margins(kinematics, u, p), g[Constraint.SLIP]))
     return f, jnp.where(relaxed_rows, pyramid.T.reshape(-1), g.reshape(-1))
 
 
+def _slope_row(q, p):
+    """``(N,)`` the part of each pyramid row (:func:`_relaxed_problem`) in the contact's
+    own kinematics ``q`` ``(N, 4)``, ``mu d / (2 cos^2 phi dr)``."""
+    return p.mu * q[:, 0] / (2.0 * q[:, 1] ** 2) / jax.lax.stop_gradient(p.dr)
+
+
 def _cone_margins(kinematics, u, p):
+    """``(N,)`` :func:`_cone_row` at the contact kinematics ``(d, cos phi, dt^2, theta)``
+    and displacements ``u`` ``(N, 3)``, mm, with ``dt^2`` taken as ``|t|^2`` of the vector
+    ``t = u - (u . n) n``."""
+    t = u - jnp.sum(u * p.n, axis=-1, keepdims=True) * p.n
+    return _cone_row(jnp.stack(kinematics, axis=-1).at[:, 2].set(jnp.sum(t * t, axis=-1)), p)
+
+
+def _cone_row(q, p):
     """``(N,)`` the slip margins in cone form, ``(mu d / cos^2 phi - sqrt(4 |t|^2 + K d
-    theta^2)) / dr`` (``t = u - (u . n) n`` the tangential displacement, mm; ``K d theta^2``
-    the torsion term, :func:`~jaxgrasp.model._potential.slip_torsion`): where ``d >= 0`` the
+    theta^2)) / dr``, from each contact's kinematics ``q`` ``(N, 4)`` with ``dt^2 = |t|^2``
+    (``t = u - (u . n) n`` the tangential displacement, mm; ``K d theta^2`` the torsion
+    term, :func:`~jaxgrasp.model._potential.slip_torsion`): where ``d >= 0`` the
     same region as the squared margin ``(mu^2 d^2 / cos^4 phi - 4 dt^2 - K d theta^2) /
     (mu dr)^2``, but with a gradient of order 1 up to the cone's apex, where the squared
     margin's vanishes with ``d``. A fingertip held on its cone a few tenths of a micrometre
     from its apex (``random_urdfs`` 015, issue 42) gives the squared row a multiplier of
     4e3 and a KKT system that Newton's method cannot solve to ``tol``; in cone form the
-    multiplier is 2 and it converges. ``t`` is the vector itself, not ``|u|^2 - (u .
-    n)^2``, whose cancellation leaves ``|t|`` a relative error of 1e-8 there and the
-    stationarity a floor of 1e-8."""
-    d, cphi, _, theta = kinematics
-    t = u - jnp.sum(u * p.n, axis=-1, keepdims=True) * p.n
-    q = 4.0 * jnp.sum(t * t, axis=-1) + slip_torsion(d, theta, p)
-    safe = q > 0.0  # the square root's derivative is infinite at 0: where-guarded
-    b = jnp.where(safe, jnp.sqrt(jnp.where(safe, q, 1.0)), 0.0)
+    multiplier is 2 and it converges. ``|t|^2`` is taken from the vector ``t``, not from
+    ``|u|^2 - (u . n)^2``, whose cancellation leaves ``|t|`` a relative error of 1e-8
+    there and the stationarity a floor of 1e-8."""
+    d, cphi, dt2, theta = q.T
+    b2 = 4.0 * dt2 + slip_torsion(d, theta, p)
+    safe = b2 > 0.0  # the square root's derivative is infinite at 0: where-guarded
+    b = jnp.where(safe, jnp.sqrt(jnp.where(safe, b2, 1.0)), 0.0)
     return (p.mu * d / cphi**2 - b) / jax.lax.stop_gradient(p.dr)
+
+
+def _per_contact_derivatives(row, q):
+    """``(N, 4)`` gradients and ``(N, 4, 4)`` Hessians of ``row(q)`` ``(N,)`` whose entry
+    ``j`` depends on ``q_j`` ``(4,)`` alone, each in its own ``q_j``: the gradient of the
+    sum, and its derivative along each coordinate of every ``q_j`` at once."""
+    grad = jax.grad(lambda q: jnp.sum(row(q)))
+    tangents = jnp.broadcast_to(jnp.eye(4, dtype=q.dtype)[:, None, :], (4,) + q.shape)
+    g, h = jax.vmap(lambda t: jax.jvp(grad, (q,), (t,)), out_axes=(None, 0))(tangents)
+    return g, jnp.moveaxis(h, 0, -1)
+
+
+def _relaxed_derivatives(z, lam, data: ProblemData, v, relaxed_rows, cone):
+    """``(grad_f (6,), jac (3N, 6), hess (6, 6))`` of :func:`_relaxed_problem` at scaled
+    pose ``z``: the objective's gradient, the constraints' Jacobian and the Hessian of the
+    Lagrangian ``f - lam . g`` (``lam`` ``(3N,)``), written out from the contact
+    kinematics' derivatives as the lanes' are
+    (:func:`~jaxgrasp.tolerance._problems.lane_problem`). Every row is a function of its
+    contact's kinematics ``q_j`` (the problem's own rows, :func:`_slope_row`,
+    :func:`_cone_row`) plus, for a pyramid row, ``v_jk . u_j / dr_j``, linear in the
+    contact's displacement ``u_j = (R - I) c_j + dp``: ``d u_j / dx = [I | dR/dw_k c_j]``,
+    and the second derivatives of ``sum_j m_j . u_j`` are those of ``R : sum_j m_j c_j^T``
+    (:func:`~jaxgrasp.model._potential.rotation_hessian_along`). Autodiff of the relaxed
+    problem (``jacfwd`` of its ``grad``) gives the same to rounding
+    (``tests/tolerance/test_settle_derivatives.py``) from more code to trace."""
+    p = data.params
+    n = p.c.shape[0]
+    first = _first_order(z, data)
+    q, dq, geometry, de, dm = first.aux
+    _, _, pu, a_c, _ = geometry
+    he, hm = contact_hessians(tuple(q.T), p)
+    dr = jax.lax.stop_gradient(p.dr)
+    sg, sh = _per_contact_derivatives(lambda q: _slope_row(q, p), q)
+    cg, ch = _per_contact_derivatives(lambda q: _cone_row(q, p), q.at[:, 2].set(jnp.sum(pu * pu, axis=-1)))
+    rel = relaxed_rows.reshape(3, n)
+    in_cone = jnp.zeros((3, n), bool).at[Constraint.SLIP].set(cone & p.on & ~rel[Constraint.SLIP])
+    gq_rows = jnp.where(rel[..., None], sg, jnp.where(in_cone[..., None], cg, dm))  # (3, N, 4)
+    hq_rows = jnp.where(rel[..., None, None], sh, jnp.where(in_cone[..., None, None], ch, hm))
+    gu_rows = jnp.where(rel[..., None], jnp.swapaxes(v, 0, 1) / dr[None, :, None], 0.0)  # (3, N, 3)
+    du = jnp.concatenate([jnp.broadcast_to(jnp.eye(3, dtype=z.dtype), (n, 3, 3)), jnp.swapaxes(a_c, 1, 2)], -1)
+    scale = _pose_scale(data, z.dtype)
+    jac = (jnp.einsum("rnk,nkj->rnj", gq_rows, dq) + jnp.einsum("rna,naj->rnj", gu_rows, du)).reshape(-1, 6) * scale
+    w = -lam.reshape(3, n)
+    gq = de / data.scale + jnp.einsum("rn,rnk->nk", w, gq_rows)
+    hq = he / data.scale + jnp.einsum("rn,rnkl->nkl", w, hq_rows)
+    rot = rotation_hessian_along(to_pose(z, data.lever)[3:], jnp.einsum("rn,rna,nb->ab", w, gu_rows, p.c))
+    hess = kinematic_hessian(z, data, dq, geometry, gq, hq).at[3:, 3:].add(rot * scale[3:, None] * scale[None, 3:])
+    return first.grad_f, jac, hess
 
 
 def _polish(data: ProblemData, z0, k, released, warm, cone, o: SolverOptions):
@@ -149,7 +220,7 @@ def _polish(data: ProblemData, z0, k, released, warm, cone, o: SolverOptions):
     ``released`` ``(N,)`` (none: the problem itself), from the multipliers 0, or where
     ``warm`` ``()`` from the active rows' least-squares multipliers at ``z0``
     (:func:`_kkt_newton`); where ``cone`` ``()``, with the other slip rows in cone form
-    (:func:`_cone_margins`), and a contact held on its cone not held at ``d = 0`` as well
+    (:func:`_cone_row`), and a contact held on its cone not held at ``d = 0`` as well
     (the cone holds ``d >= 0``; holding both pins the apex).
 
     Returns ``(z, lam_rel, ok, (stat, feas, comp))``: ``lam_rel`` ``(3N,)`` multipliers
@@ -163,11 +234,14 @@ def _polish(data: ProblemData, z0, k, released, warm, cone, o: SolverOptions):
     has_eq = ~((k >= n) & (k < 2 * n) & released[jnp.clip(k - n, 0, n - 1)])
     is_eq = (rows == k) & has_eq
     v = jax.vmap(lambda j: _pyramid_basis(z0, data, j))(jnp.arange(n))  # (N, 3, 3)
-    fg = lambda z: _relaxed_problem(z, data, v, j_rows, cone)
+
+    def problem(z, lam):  # the relaxed problem's constraints and derivatives, for the polish
+        return (_relaxed_problem(z, data, v, j_rows, cone)[1],) + _relaxed_derivatives(z, lam, data, v, j_rows, cone)
+
     near = constraints(z0, data) <= RELEASED_TOL
     on_cone = cone & near[n + rows % n] & (rows < n)  # a contact row whose slip row is held
     active = j_rows | is_eq | (near & ~on_cone)
-    y, r, gz = _kkt_newton(fg, active, z0, warm)
+    y, r, gz = _kkt_newton(problem, active, z0, warm)
     z, lam = y[:6], y[6:]
     stat = jnp.max(jnp.abs(r[:6]))
     feas = jnp.max(jnp.where(is_eq, jnp.abs(gz), jnp.maximum(-gz, 0.0)))
@@ -219,9 +293,10 @@ def _polish_released(data: ProblemData, z0, k, released, o: SolverOptions):
     return jax.tree_util.tree_map(lambda a: a[use], tries) + (masks[use], cone[use])
 
 
-def _kkt_newton(fg, active, z0, warm):
+def _kkt_newton(problem, active, z0, warm):
     """:data:`_POLISH_STEPS` damped Newton steps (:func:`_levenberg_marquardt_step`) on
-    the KKT equations of ``fg`` (``z -> (f, g (3N,))``) with the rows ``active`` ``(3N,)``
+    the KKT equations of ``problem`` (``(z, lam) -> (g (3N,), grad f (6,), J (3N, 6),
+    Hessian of f - lam . g (6, 6))``) with the rows ``active`` ``(3N,)``
     held at ``g = 0`` and the others at ``lam = 0``, from ``(z0, lam = 0)``, or where
     ``warm`` ``()`` from ``(z0, lam_A)``: the least-squares multipliers of the active rows,
     ``min |grad f - J_A^T lam_A|``, read off the KKT Jacobian at ``(z0, 0)`` (its block
@@ -230,13 +305,7 @@ def _kkt_newton(fg, active, z0, warm):
     at the last point."""
     n3 = active.shape[0]
     dtype = z0.dtype
-
-    def residual(y):  # the KKT equations, and the constraints for the statistics
-        z, lam = y[:6], y[6:]
-        grad_l = jax.grad(lambda z: (lambda a: a[0] - jnp.dot(lam, a[1]))(fg(z)))(z)
-        gz = fg(z)[1]
-        r = jnp.concatenate([grad_l, jnp.where(active, gz, lam)])
-        return r, (r, gz)
+    held = jnp.diag(jnp.where(active, 0.0, 1.0).astype(dtype))
 
     def newton(i, carry):
         # Pass 0 of a warm polish only sets the multipliers, then _POLISH_STEPS damped Newton
@@ -245,10 +314,12 @@ def _kkt_newton(fg, active, z0, warm):
         # (no step in z), the active rows' block -J_A^T against grad f = r[:6], and the
         # inactive multipliers held at 0.
         y, _, _ = carry
-        jac, (r, gz) = jax.jacfwd(residual, has_aux=True)(y)
+        z, lam = y[:6], y[6:]
+        gz, grad_f, jg, hess = problem(z, lam)
+        r = jnp.concatenate([grad_f - jg.T @ lam, jnp.where(active, gz, lam)])
+        jac = jnp.block([[hess, -jg.T], [jnp.where(active[:, None], jg, 0.0), held]])
         first = warm & (i == 0)
         lam_rows = jnp.where(active[None, :], jac[:6, 6:], 0.0)
-        held = jnp.diag(jnp.where(active, 0.0, 1.0).astype(dtype))
         jac0 = jnp.zeros_like(jac).at[:6, 6:].set(lam_rows).at[6:, 6:].set(held)
         r0 = jnp.zeros_like(r).at[:6].set(r[:6])
         steps = jnp.where(warm, (i >= 1) & (i <= _POLISH_STEPS), i < _POLISH_STEPS)
