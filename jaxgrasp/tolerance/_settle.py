@@ -32,7 +32,7 @@ from jaxgrasp.tolerance._problems import (
     to_pose,
 )
 
-__all__ = ["settle_stalled", "settle_equilibrium", "needs_settling", "RELEASED_TOL", "MAX_POLISHED"]
+__all__ = ["settle_stalled", "settle_equilibrium", "needs_settling", "RELEASED_TOL"]
 
 
 def _at_equilibrium(eq: SolverResult, lanes: SolverResult, at_eq, g_eq, lane_k) -> SolverResult:
@@ -77,12 +77,9 @@ LM_FLOOR = 1e-8
 ``sqrt(eps)`` of float64, so that ``mu`` is above the rounding of ``J^T J`` (``eps |J|^2``)
 and singular values below ``LM_FLOOR |J|_F`` count as null."""
 
-MAX_POLISHED = 2
-"""Boundary problems of one grasp that :func:`settle_stalled` polishes per round: a grasp
-with more stalled problems takes further rounds (:func:`_lanes_to_polish`)."""
-
-SETTLE_BLOCK = 4
-"""Grasps per block of the settling stage in a batch (:func:`_settle_where_stalled`)."""
+SETTLE_BLOCK = 8
+"""Lanes polished per block of the settling (:func:`settle_stalled`,
+:func:`settle_equilibrium`), gathered over the batch."""
 
 
 def _tangential(z, data: ProblemData, j):
@@ -362,35 +359,23 @@ def _polish_candidates(lanes: SolverResult, found, num_starts: int):
     return stalled.reshape(-1, num_starts) & ~jnp.any(converged, axis=1, keepdims=True)
 
 
-def _settle_where_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_starts: int,
-                          o: SolverOptions) -> SolverResult:
-    """:func:`settle_stalled` of each grasp of a batch (leading axis ``B`` on ``data``,
-    ``lanes`` and ``found``) that has a lane to polish, in gathered blocks of
-    :data:`SETTLE_BLOCK` grasps (:func:`jaxgrasp.solver._rows.over_rows`); every other
-    grasp's lanes are returned as they are, which is what :func:`settle_stalled` returns
-    for them. Under ``vmap`` the stage would cost every grasp its polish; stalls are rare,
-    so a batch pays for the few grasps that need it."""
-    need = jax.vmap(lambda l, f: jnp.any(_polish_candidates(l, f, num_starts)))(lanes, found)
-
-    def update(rows, valid, lanes):
-        pick = lambda t: jax.tree_util.tree_map(lambda a: a[rows], t)
-        settled = jax.vmap(lambda d, l, f: settle_stalled(d, l, lane_k, f, num_starts, o))(
-            pick(data), pick(lanes), found[rows]
-        )
-        return jax.tree_util.tree_map(lambda a, s: put_rows(a, rows, valid, s), lanes, settled)
-
-    return over_rows(need, SETTLE_BLOCK, update, lanes)
+def _lanes_to_polish(lanes: SolverResult, found, num_starts: int):
+    """``(pick (2N,), wanted (2N,))`` of one grasp (``lanes`` and ``found`` with leading
+    axis ``2N * D``): for each boundary problem the lane :func:`settle_stalled` polishes,
+    its lowest-energy candidate (:func:`_polish_candidates`), and whether it has one."""
+    candidate = _polish_candidates(lanes, found, num_starts)  # (2N, D)
+    best = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
+    return jnp.arange(candidate.shape[0]) * num_starts + best, jnp.any(candidate, axis=1)
 
 
 def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_starts: int, o: SolverOptions):
     """Certify boundary lanes that stalled at a feasible point (a post-solve stage).
 
-    For each boundary problem that no start settled (:data:`MAX_POLISHED` per round, as
-    many rounds as there are such problems, :func:`_lanes_to_polish`), the
-    lowest-energy lane that ended ``NOT_CONVERGED``
-    with its violation within :data:`RELEASED_TOL` is polished by Newton's method on the
-    KKT equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
-    fixed: on the relaxation above at the contacts released there
+    For each boundary problem of each grasp of the batch that no start settled, the
+    lowest-energy lane that ended ``NOT_CONVERGED`` with its violation within
+    :data:`RELEASED_TOL` is polished (:func:`_polished_lane`): Newton's method on the KKT
+    equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
+    fixed, on the relaxation above at the contacts released there
     (:func:`_released_contacts`), else on the problem itself (bounded multipliers, but an
     inner solve that stalled, e.g. at the largest penalty). Where that gives a KKT point
     within ``tol`` (inequality multipliers ``>= 0``) that is feasible for the original
@@ -398,39 +383,35 @@ def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_st
     the relaxation's multipliers mapped back (:func:`_original_multipliers`). Every other
     lane is returned unchanged; a lane that converged is never touched.
 
+    The problems to polish are gathered over the whole batch, :data:`SETTLE_BLOCK` at a
+    time (:func:`jaxgrasp.solver._rows.over_rows`): stalls are rare, so a batch pays for
+    the problems that need it, however they fall on its grasps (with four fingertips a
+    released contact can stall three or four force-limit problems of one grasp at once,
+    issue 42), and the polish is batched once, not per grasp and again per problem.
+
     Args:
-        data: the grasp's :class:`ProblemData`.
-        lanes: the boundary lanes, leading axis ``2N * D``.
+        data: the batch's :class:`ProblemData`, leading axis ``B``.
+        lanes: the boundary lanes, leading axes ``(B, 2N * D)``.
         lane_k: ``(2N * D,)`` equality row of each lane.
-        found: ``(2N * D,)`` the lanes that were started.
+        found: ``(B, 2N * D)`` the lanes that were started.
         num_starts: ``D``.
         o: the :class:`~jaxgrasp.solver._solver.SolverOptions` the lanes were solved with.
     """
-    released = _released_contacts(data, lanes, lane_k)  # (2N * D, N)
-    pick_all, wanted_all, rounds = _lanes_to_polish(lanes, found, num_starts)
+    b = found.shape[0]
+    pick, wanted = jax.vmap(lambda lane, f: _lanes_to_polish(lane, f, num_starts))(lanes, found)  # (B, 2N)
+    two_n = pick.shape[1]
+    pick = pick.reshape(-1)
 
-    def polish_round(r, out):
-        # a later round's problems are other problems: the lanes it reads are unchanged
-        pick = jax.lax.dynamic_slice_in_dim(pick_all, r * MAX_POLISHED, MAX_POLISHED)
-        wanted = jax.lax.dynamic_slice_in_dim(wanted_all, r * MAX_POLISHED, MAX_POLISHED)
-        z, lam_rel, ok, (stat, feas, comp), relaxed, cone = jax.vmap(
-            lambda l: _polish_released(data, lanes.x[l], lane_k[l], released[l], o)
-        )(pick)
-        lam, nu = _original_multipliers(data, z, lam_rel, lane_k[pick], relaxed, cone)
-        new = SolverResult(
-            x=z,
-            lam=lam,
-            nu=nu,
-            objective=jax.vmap(lambda z: objective(z, data))(z),
-            status=jnp.full(pick.shape, LaneStatus.CONVERGED, jnp.int32),
-            stationarity=stat,
-            feasibility=feas,
-            complementarity=comp,
-            steps=lanes.steps[pick] + _POLISH_STEPS,
+    def update(rows, valid, lanes):
+        grasp, lane = rows // two_n, pick[rows]
+        gathered = jax.tree_util.tree_map(lambda a: a[grasp], data)
+        new, ok = jax.vmap(lambda d, x, k, steps: _polished_lane(d, x, k, steps, o))(
+            gathered, lanes.x[grasp, lane], lane_k[lane], lanes.steps[grasp, lane]
         )
-        return _write_back(out, pick, ok & wanted, new)
+        to = jnp.where(valid & ok, grasp, b)  # a padding row, or a polish that did not certify: dropped
+        return jax.tree_util.tree_map(lambda a, s: a.at[to, lane].set(s.astype(a.dtype), mode="drop"), lanes, new)
 
-    return jax.lax.fori_loop(0, rounds, polish_round, lanes)
+    return over_rows(wanted.reshape(-1), SETTLE_BLOCK, update, lanes)
 
 
 NO_EQUALITY = -1
@@ -441,8 +422,9 @@ def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) ->
     """Certify equilibria that stalled at a feasible point: each grasp's equilibrium lane of
     a batch (leading axis ``B`` on ``data`` and ``eq``) that ended ``NOT_CONVERGED`` with
     its violation within :data:`RELEASED_TOL` is polished as :func:`settle_stalled`
-    polishes a boundary lane (:func:`_settle_equilibrium_lane`), in gathered blocks of
-    :data:`SETTLE_BLOCK` grasps; every other equilibrium is returned as it is.
+    polishes a boundary lane (:func:`_polished_lane`, no equality), in gathered blocks of
+    :data:`SETTLE_BLOCK` grasps, and becomes ``CONVERGED`` where that certifies it; every
+    other equilibrium is returned as it is.
 
     Why: on grasps of real objects the equilibrium often lets go of a fingertip (the
     weight pulls the object off it, e.g. two fingertips on a tilted face of a mesh): the
@@ -454,69 +436,49 @@ def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) ->
     released contact is regular at that apex and certifies it exactly where the cone
     does (:func:`_pyramid_basis`)."""
     need = (eq.status == LaneStatus.NOT_CONVERGED) & (eq.feasibility <= RELEASED_TOL)
+    k = jnp.asarray(NO_EQUALITY, jnp.int32)
 
     def update(rows, valid, eq):
-        pick = lambda t: jax.tree_util.tree_map(lambda a: a[rows], t)
-        settled = jax.vmap(lambda d, l: _settle_equilibrium_lane(d, l, o))(pick(data), pick(eq))
-        return jax.tree_util.tree_map(lambda a, s: put_rows(a, rows, valid, s), eq, settled)
+        new, ok = jax.vmap(lambda d, x, steps: _polished_lane(d, x, k, steps, o))(
+            jax.tree_util.tree_map(lambda a: a[rows], data), eq.x[rows], eq.steps[rows]
+        )
+        return jax.tree_util.tree_map(lambda a, s: put_rows(a, rows, valid & ok, s.astype(a.dtype)), eq, new)
 
     return over_rows(need, SETTLE_BLOCK, update, eq)
 
 
-def _settle_equilibrium_lane(data: ProblemData, eq: SolverResult, o: SolverOptions) -> SolverResult:
-    """One grasp's stalled equilibrium lane ``eq`` polished (:func:`_polish`, no equality;
-    the relaxation at its released contacts, if any): ``CONVERGED`` at the polished
-    point where that is a KKT point within tol and feasible, else ``eq`` unchanged."""
-    k = jnp.full((1,), NO_EQUALITY, jnp.int32)
-    one = jax.tree_util.tree_map(lambda a: a[None], eq)
-    released = _released_contacts(data, one, k)
-    z, lam_rel, ok, (stat, feas, comp), relaxed, cone = _polish_released(data, eq.x, k[0], released[0], o)
-    lam, _ = _original_multipliers(data, z[None], lam_rel[None], k, relaxed[None], cone[None])
+def _polished_lane(data: ProblemData, x, k, steps, o: SolverOptions):
+    """``(new, ok)``: the lane that stalled at scaled pose ``x`` ``(6,)`` of the problem
+    with equality row ``k`` (:data:`NO_EQUALITY`: the equilibrium) after ``steps``,
+    polished (:func:`_polish_released`, relaxing the contacts released at ``x``): the
+    :class:`SolverResult` of one lane, ``CONVERGED`` at the polished point, with the
+    multipliers mapped back to the original rows (:func:`_original_multipliers`; for the
+    equilibrium ``nu`` is 0), and whether it certifies that point."""
+    released = _released_contacts(data, x, k)
+    z, lam_rel, ok, (stat, feas, comp), relaxed, cone = _polish_released(data, x, k, released, o)
+    lam, nu = _original_multipliers(data, z[None], lam_rel[None], k[None], relaxed[None], cone[None])
     new = SolverResult(
         x=z,
         lam=lam[0],
-        nu=jnp.zeros_like(eq.nu),
+        nu=nu[0],
         objective=objective(z, data),
-        status=jnp.asarray(LaneStatus.CONVERGED, eq.status.dtype),
+        status=jnp.asarray(LaneStatus.CONVERGED, jnp.int32),
         stationarity=stat,
         feasibility=feas,
         complementarity=comp,
-        steps=eq.steps + _POLISH_STEPS,
+        steps=steps + _POLISH_STEPS,
     )
-    return jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a.astype(b.dtype), b), new, eq)
+    return new, ok
 
 
-def _released_contacts(data: ProblemData, lanes: SolverResult, lane_k):
-    """``(L, N)`` bool: the contacts released at each lane's point (contact and slip
-    margins within :data:`RELEASED_TOL`, active, their force row not the lane's
-    equality)."""
+def _released_contacts(data: ProblemData, x, k):
+    """``(N,)`` bool: the contacts released at the scaled pose ``x`` ``(6,)`` of the
+    problem with equality row ``k`` (contact and slip margins within
+    :data:`RELEASED_TOL`, active, their force row not ``k``)."""
     n = data.params.c.shape[0]
-    g = jax.vmap(lambda z: constraints(z, data))(lanes.x).reshape(-1, 3, n)  # (L, 3, N)
-    released = (g[:, 0] <= RELEASED_TOL) & (g[:, 1] <= RELEASED_TOL) & data.params.on  # (L, N)
-    return released & (lane_k[:, None] != 2 * n + jnp.arange(n))
-
-
-def _lanes_to_polish(lanes: SolverResult, found, num_starts: int):
-    """``(pick, wanted, rounds)``: the lane polished for each boundary problem (its
-    lowest-energy candidate, :func:`_polish_candidates`), problems with a candidate first,
-    padded to a whole number of rounds of :data:`MAX_POLISHED` (each ``(R *
-    MAX_POLISHED,)``); whether the problem has a candidate at all; and ``rounds`` ``()``,
-    how many rounds hold one. Under ``vmap`` every grasp polishes as many as the one that
-    needs most, and stalls are rare, so a round polishes :data:`MAX_POLISHED`, not all
-    ``2N``, and only a grasp with more stalled problems takes further rounds: with four
-    fingertips a released contact can stall three or four force-limit problems at once,
-    and a single round left the others ``NOT_CONVERGED`` (issue 42)."""
-    candidate = _polish_candidates(lanes, found, num_starts)  # (2N, D)
-    two_n = candidate.shape[0]
-    pick = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
-    pick = jnp.arange(two_n) * num_starts + pick  # (2N,) one lane per boundary problem
-    has_candidate = jnp.any(candidate, axis=1)
-    chosen = jnp.argsort(~has_candidate, stable=True)
-    pad = -two_n % MAX_POLISHED
-    pick = jnp.concatenate([pick[chosen], jnp.full((pad,), pick[0])])
-    wanted = jnp.concatenate([has_candidate[chosen], jnp.zeros((pad,), bool)])
-    rounds = (jnp.sum(has_candidate) + MAX_POLISHED - 1) // MAX_POLISHED
-    return pick, wanted, rounds
+    g = constraints(x, data).reshape(3, n)
+    released = (g[0] <= RELEASED_TOL) & (g[1] <= RELEASED_TOL) & data.params.on
+    return released & (k != 2 * n + jnp.arange(n))
 
 
 def _original_multipliers(data: ProblemData, z, lam_rel, k, released, cone):
@@ -547,15 +509,6 @@ def _original_multipliers(data: ProblemData, z, lam_rel, k, released, cone):
     lam_rel = lam_rel.at[:, n : 2 * n].set(lam_slip * to_squared)
     lam = jnp.where(is_eq | j_rows, 0.0, lam_rel).at[:, :n].add(lam_d)
     return lam, -jnp.sum(jnp.where(is_eq, lam_rel, 0.0), axis=1)
-
-
-def _write_back(lanes: SolverResult, pick, ok, new: SolverResult) -> SolverResult:
-    """``lanes`` with lanes ``pick`` ``(P,)`` replaced by ``new`` where ``ok`` ``(P,)``."""
-    old = jax.tree_util.tree_map(lambda a: a[pick], lanes)
-    upd = jax.tree_util.tree_map(
-        lambda a, b: jnp.where(ok.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), new, old
-    )
-    return jax.tree_util.tree_map(lambda a, u: a.at[pick].set(u.astype(a.dtype)), lanes, upd)
 
 
 def needs_settling(boundary_status, equilibrium_status=None) -> np.ndarray:

@@ -19,7 +19,7 @@ from jaxgrasp.tolerance._problems import (
     _num_lanes,
     lane_problem,
 )
-from jaxgrasp.tolerance._settle import _at_equilibrium, _settle_where_stalled, settle_equilibrium
+from jaxgrasp.tolerance._settle import _at_equilibrium, settle_equilibrium, settle_stalled
 from jaxgrasp.tolerance._starts import (
     LaneStarts,
     equilibrium_of,
@@ -206,7 +206,7 @@ def finish_problems(data: ProblemData, eq: SolverResult, lanes: SolverResult, st
     lanes = jax.vmap(lambda *a: _at_equilibrium(*a, lane_k))(eq, lanes, starts.at_eq, starts.g_eq)
     found = starts.active | starts.at_eq
     if settle:
-        lanes = _settle_where_stalled(data, lanes, lane_k, found, options.num_starts, options.solver)
+        lanes = settle_stalled(data, lanes, lane_k, found, options.num_starts, options.solver)
     return Problems(
         equilibrium=eq,
         boundary=lanes,

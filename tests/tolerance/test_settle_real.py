@@ -168,7 +168,7 @@ def test_a_fingertip_on_its_cone_beside_one_at_its_apex_is_certified_in_cone_for
     import jax.numpy as jnp
 
     from jaxgrasp.model._potential import contact_kinematics, model_params
-    from jaxgrasp.solver._solver import SolverOptions, SolverResult, kkt_tol
+    from jaxgrasp.solver._solver import SolverOptions, kkt_tol
     from jaxgrasp.tolerance import _settle
     from jaxgrasp.tolerance._problems import constraints, objective, problem_data, to_pose
 
@@ -178,12 +178,7 @@ def test_a_fingertip_on_its_cone_beside_one_at_its_apex_is_certified_in_cone_for
     z0 = jnp.asarray(row["z"])
     o = SolverOptions()
     tol = kkt_tol(jnp.float64, o)
-    lane = SolverResult(
-        x=z0[None], lam=jnp.zeros((1, 3 * n)), nu=jnp.zeros(1), objective=objective(z0, data)[None],
-        status=jnp.full(1, LaneStatus.NOT_CONVERGED, jnp.int32), stationarity=jnp.zeros(1),
-        feasibility=jnp.zeros(1), complementarity=jnp.zeros(1), steps=jnp.zeros(1, jnp.int32),
-    )
-    released = _settle._released_contacts(data, lane, jnp.asarray([k]))[0]
+    released = _settle._released_contacts(data, z0, k)
     assert np.asarray(released).tolist() == [False, True, False, True]
     first = jnp.asarray([False, True, False, False])
     masks, warm = jnp.stack([first, released, first, released]), jnp.asarray([False, False, True, True])
