@@ -47,7 +47,7 @@ code as the user. So nothing is read that another user could have written:
   file, the user's, not writable by group or others) before a byte of it is unpickled;
   otherwise it is skipped with a warning (and counted in :func:`stats`);
 * a stored file starts with a format line and a JSON header holding the executable's full
-  key (options, shapes, versions, jaxgrasp's source digest, machine) and the SHA-256 and
+  key (options, shapes, versions, jaxgrasp's source digest, machine, ``XLA_FLAGS``) and the SHA-256 and
   length of its payload; a file whose key is not exactly the expected one, or whose
   payload does not match, is not unpickled: the executable is compiled again and the file
   replaced;
@@ -376,11 +376,13 @@ def source_digest() -> str:
 
 def _machine() -> str:
     """What compiled code depends on beyond JAX's version: the backend (platform, version,
-    device kind) and, on the CPU, the processor's instruction-set flags, so that a cache
-    folder shared by machines with different processors never loads code built for
-    another (it builds its own)."""
+    device kind), the ``XLA_FLAGS`` the process runs with (they change the code XLA emits:
+    an executable built under other flags is another program) and, on the CPU, the
+    processor's instruction-set flags, so that a cache folder shared by machines with
+    different processors never loads code built for another (it builds its own)."""
     dev = jax.devices()[0]
-    parts = [dev.platform, dev.client.platform_version, dev.device_kind, platform.machine()]
+    parts = [dev.platform, dev.client.platform_version, dev.device_kind, platform.machine(),
+             os.environ.get("XLA_FLAGS", "")]
     if dev.platform == "cpu":
         try:
             with open("/proc/cpuinfo") as f:

@@ -215,6 +215,25 @@ def test_file_of_other_options_is_rebuilt(clean, caplog):
     )]
 
 
+def test_executable_of_other_xla_flags_is_not_loaded(clean, monkeypatch):
+    """``XLA_FLAGS`` change the code XLA emits, so they are part of the key: under other
+    flags the stored executable is not loaded (built again, under its own file name), and
+    under the flags it was built with it loads again (found on a GPU lease, 2026-11-28:
+    a run with command buffers turned on loaded the executable built without them)."""
+    want, default_bytes = clean
+    default = _entry()
+    monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", "") + " --xla_cpu_enable_fast_math=false")
+    other = _entry()
+    assert other.path != default.path and other.key != default.key
+    fn, counted = _compiled()
+    assert counted == {"traced": 1, "deserialized": 0, "cache_errors": 0}
+    np.testing.assert_array_equal(_result(fn), want)
+    assert other.path.is_file() and default.path.read_bytes() == default_bytes
+    monkeypatch.undo()
+    fn, counted = _compiled()
+    assert counted == {"traced": 0, "deserialized": 1, "cache_errors": 0}
+
+
 def test_links_are_never_written_through(folder, tmp_path, monkeypatch, caplog):
     """A link planted at the stored file's name is not read (refused) and replaced by a
     file; a link planted at the temporary file's name is skipped (another name is used);
