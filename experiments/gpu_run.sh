@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # One lease of a GPU machine (issue 41, item 3), each stage time-boxed to one deadline so
 # that the logs of the earlier ones come back whatever happens later:
-#   1. where the GPU's time goes in a steady evaluate_batch of the mixed 1000-grasp set
+#   1. the work queue's width (experiments/gpu_slots.py): the mixed 1000-grasp set at the
+#      default 128 slots and at wider ones, chunks of 1024 to 16384;
+#   2. where the GPU's time goes in a steady evaluate_batch of the set
 #      (experiments/gpu_profile.py), with the same machine's CPU cores beside it;
-#   2. the same with XLA's command buffers (CUDA graphs) for loops and conditionals (a
+#   3. the same with XLA's command buffers (CUDA graphs) for loops and conditionals (a
 #      program of its own: jaxgrasp's store keys executables by XLA_FLAGS since 2026-11-28);
-#   3. the tests that failed on the last lease (2026-11-26) and the MuJoCo and Ipopt
-#      modules that could not run there;
-#   4. the whole suite in the time left.
+#   4. test_degenerate, which had not finished on either earlier lease;
+#   5. the whole suite in the time left.
 # Runs in the repository root of a machine whose Python already has JAX's CUDA build,
 # NumPy, SciPy, matplotlib and pytest, and nothing else: jaxgrasp's other dependencies
 # come as wheels in .whl/ (carried), since such a machine reaches no package index, and
@@ -53,14 +54,13 @@ stage() {
 }
 PYTEST=(python3 -m pytest -v -p no:cacheprovider --timeout 240 -o addopts="-ra --strict-markers --dist loadfile")
 
-stage profile 210 python3 experiments/gpu_profile.py --cpu --json "$OUT/profile.json"
-stage profile_graphs 150 env XLA_FLAGS="--xla_gpu_enable_command_buffer=+WHILE,+CONDITIONAL --xla_gpu_graph_min_graph_size=1" \
-    python3 experiments/gpu_profile.py --json "$OUT/profile_graphs.json"
-stage tests_lease1 150 "${PYTEST[@]}" -n 8 tests/solver/test_dense.py tests/solver/test_line_search.py \
-    tests/engine/test_cache.py tests/cli/test_cli.py tests/model/test_hardening_inputs.py tests/cli/test_cli_limits.py \
-    tests/hands tests/simulation tests/tolerance/test_ipopt_reference.py
+stage slots 240 python3 experiments/gpu_slots.py --json "$OUT/slots.json"
+stage profile 150 python3 experiments/gpu_profile.py --cpu --json "$OUT/profile.json"
+stage profile_graphs 100 env XLA_FLAGS="--xla_gpu_enable_command_buffer=+WHILE,+CONDITIONAL --xla_gpu_graph_min_graph_size=1" \
+    python3 experiments/gpu_profile.py
+stage tests_degenerate 150 "${PYTEST[@]}" -n 4 tests/tolerance/test_degenerate.py
 stage suite 600 "${PYTEST[@]}" -n 14 tests
-for f in "$OUT"/tests_lease1.log "$OUT"/suite.log; do
+for f in "$OUT"/tests_degenerate.log "$OUT"/suite.log; do
     [ -f "$f" ] || continue
     echo "$f: PASSED $(grep -c ' PASSED' "$f") SKIPPED $(grep -c ' SKIPPED' "$f") FAILED $(grep -c ' FAILED' "$f") ERROR $(grep -c ' ERROR' "$f")"
     grep -E " (FAILED|ERROR) " "$f" | sed 's/^\[gw[0-9]*\] \[ *[0-9]*%\] //' | sort -u | head -30

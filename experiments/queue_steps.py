@@ -2,6 +2,7 @@
 set (issue 41): a count that does not depend on the machine's speed or load.
 
     python experiments/queue_steps.py [--count 1000] [--seed 0] [--max-steps 300] [--rho0 1]
+        [--max-slots 128] [--slot-fraction 0.0625] [--chunk N --one-device] [--save FILE.npz]
 
 Every ``while_loop`` of :mod:`jaxgrasp.solver._lanes` is wrapped (in this process only)
 so that it also counts its loop steps and, in each, the slots not running a lane; the
@@ -66,22 +67,38 @@ def main():
                    help="the solver's step budget per lane (default: SolverOptions' own)")
     p.add_argument("--rho0", type=float, default=None,
                    help="the solver's initial penalty (default: SolverOptions' own)")
+    p.add_argument("--max-slots", type=int, default=None,
+                   help="the queue's widest loop step (default: SolverOptions' own)")
+    p.add_argument("--slot-fraction", type=float, default=None, help="slots per lane (default: SolverOptions' own)")
+    p.add_argument("--chunk", type=int, default=None, help="grasps per compiled call (default: the engine's)")
+    p.add_argument("--one-device", action="store_true", help="one CPU device, as one GPU is (default: every core)")
+    p.add_argument("--save", default=None, help="also write the grasps' statuses and values to this .npz")
     args = p.parse_args()
     import jaxgrasp
     from jaxgrasp.engine import _store
 
-    given = {k: v for k, v in (("max_steps", args.max_steps), ("rho0", args.rho0)) if v is not None}
+    given = {k: v for k, v in (("max_steps", args.max_steps), ("rho0", args.rho0), ("max_slots", args.max_slots),
+                               ("slot_fraction", args.slot_fraction)) if v is not None}
     solver = jaxgrasp.SolverOptions(**given)
 
     from batch_benchmark import make_grasps
 
     _store.set_executable_dir(None)
+    import jax
+
+    devices = jax.devices()[:1] if args.one_device else None
     say(f"$ python experiments/queue_steps.py --count {args.count} --seed {args.seed} "
-        f"--max-steps {solver.max_steps} --rho0 {solver.rho0:g}    [load {', '.join(f'{x:.2f}' for x in os.getloadavg())}]")
+        f"--max-steps {solver.max_steps} --rho0 {solver.rho0:g} --max-slots {solver.max_slots} "
+        f"--slot-fraction {solver.slot_fraction:g} --chunk {args.chunk} {'--one-device' if args.one_device else ''}"
+        f"    [load {', '.join(f'{x:.2f}' for x in os.getloadavg())}]")
     runs: list = []
     counting_queue(runs, solver.max_steps)
-    res = jaxgrasp.evaluate_batch(make_grasps(args.count, args.seed),
+    res = jaxgrasp.evaluate_batch(make_grasps(args.count, args.seed), chunk_size=args.chunk, devices=devices,
                                   options=jaxgrasp.EvaluateOptions(solver=solver))
+    if args.save:
+        import numpy as np
+
+        np.savez(args.save, status=np.asarray(res.status), value=np.asarray(res.value))
     for r in runs:
         say(f"   queue run: {r[0]} loop steps x {r[1]} slots, idle slot-steps {r[2]} ({r[2] / max(r[0] * r[1], 1):.3f})")
     steps = sum(r[0] for r in runs)
