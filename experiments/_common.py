@@ -25,6 +25,17 @@ def say(msg: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')} load {os.getloadavg()[0]:.2f}] {msg}", flush=True)
 
 
+def agreement(status, value, ref_status, ref_value) -> str:
+    """Two runs of the same grasps compared: statuses differing, finite/NaN values
+    differing, and the largest relative difference of the values finite in both."""
+    status, value, ref_status, ref_value = (np.asarray(a) for a in (status, value, ref_status, ref_value))
+    both = np.isfinite(value) & np.isfinite(ref_value)
+    rel = np.abs(value - ref_value)[both] / np.maximum(np.abs(ref_value[both]), 1e-300)
+    return (f"statuses differing {int(np.sum(status != ref_status))}, finite/NaN differing "
+            f"{int(np.sum(np.isfinite(value) != np.isfinite(ref_value)))}, largest relative value difference "
+            f"{(rel.max() if rel.size else 0.0):.1e}")
+
+
 def parse_args(description: str) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=description)
     p.add_argument("--quick", action="store_true", help="small grid (minutes), written to figures/quick/")

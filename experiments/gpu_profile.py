@@ -43,6 +43,7 @@ for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
         sys.path.insert(0, str(_p))
 
 import jax  # noqa: E402
+from _common import agreement  # noqa: E402
 from batch_benchmark import STATUS, log, make_grasps  # noqa: E402
 
 import jaxgrasp  # noqa: E402
@@ -107,14 +108,9 @@ def cpu_beside(grasps: list, steady) -> str:
     cpu = jax.devices("cpu")
     first = jaxgrasp.evaluate_batch(grasps, devices=cpu)
     again = jaxgrasp.evaluate_batch(grasps, devices=cpu)
-    va, vb = np.asarray(steady.value), np.asarray(again.value)
-    both = np.isfinite(va) & np.isfinite(vb)
-    rel = np.abs(va - vb)[both] / np.maximum(np.abs(vb[both]), 1e-12)
     return (f"{len(cpu)} CPU devices: compile {first.compile_seconds:.1f} s, steady run {again.run_seconds:.2f} s = "
-            f"{len(grasps) / again.run_seconds:.0f} grasps/s; statuses differing from the profiled device's: "
-            f"{int(np.sum(np.asarray(steady.status) != np.asarray(again.status)))}, finite/NaN differing: "
-            f"{int(np.sum(np.isfinite(va) != np.isfinite(vb)))}, largest relative value difference "
-            f"{(rel.max() if rel.size else 0.0):.1e}")
+            f"{len(grasps) / again.run_seconds:.0f} grasps/s; against the profiled device: "
+            + agreement(again.status, again.value, steady.status, steady.value))
 
 
 def main() -> None:

@@ -41,6 +41,7 @@ for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
         sys.path.insert(0, str(_p))
 
 import jax  # noqa: E402
+from _common import agreement  # noqa: E402
 from batch_benchmark import log, make_grasps  # noqa: E402
 
 import jaxgrasp  # noqa: E402
@@ -72,16 +73,6 @@ def measure(base: list, device, chunk: int, max_slots: int, slot_fraction: float
             "status": np.asarray(second.status)[: len(base)], "value": np.asarray(second.value)[: len(base)]}
 
 
-def agreement(row: dict, ref: dict) -> str:
-    """Statuses and values of ``row`` against ``ref`` (the same grasps)."""
-    va, vb = row["value"], ref["value"]
-    both = np.isfinite(va) & np.isfinite(vb)
-    rel = np.abs(va - vb)[both] / np.maximum(np.abs(vb[both]), 1e-300)
-    return (f"statuses differing {int(np.sum(row['status'] != ref['status']))}, finite/NaN differing "
-            f"{int(np.sum(np.isfinite(va) != np.isfinite(vb)))}, largest relative value difference "
-            f"{(rel.max() if rel.size else 0.0):.1e}")
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--count", type=int, default=1000, help="grasps in the set (default 1000)")
@@ -102,7 +93,8 @@ def main() -> None:
             log(f"chunk {chunk}, max_slots {slots}, slot_fraction {fraction:g}: failed: "
                 f"{type(e).__name__}: {str(e)[:300]}")
             break
-        row["agreement"] = agreement(row, rows[0]) if rows else "reference"
+        row["agreement"] = agreement(row["status"], row["value"], rows[0]["status"], rows[0]["value"]) if rows \
+            else "reference"
         rows.append(row)
         log(f"chunk {chunk}, max_slots {slots}, slot_fraction {fraction:g}: {row['grasps']} grasps, compile "
             f"{row['compile_s']:.1f} s, first run {row['first_run_s']:.2f} s, steady {row['run_s']:.2f} s = "
