@@ -7,8 +7,10 @@ default (:class:`jaxgrasp.SolverOptions`), a width chosen for a CPU's caches. On
 4096): what a loop step costs there hardly depends on its width, and the number of loop
 steps grows with the lanes over ``W``. On this project's CPU, one device, chunk 1024, the
 same 1000 grasps take 16,885 loop steps at ``W = 128`` and 676 at ``max_slots=16384,
-slot_fraction=1``, with every status and value identical
-(``experiments/queue_steps.py``; ``FINDINGS.md``, "A second lease of an H100").
+slot_fraction=1``, with every status and value identical; repeated to 4096 in one chunk,
+68,604 at ``W = 128`` and 680 at ``max_slots=65536`` (``experiments/queue_steps.py``, log
+``queue_width.log``; ``FINDINGS.md``, "A second lease of an H100"). A run's seconds over
+those counts are a loop step's cost at each width.
 
 For each ``CHUNK:MAX_SLOTS:SLOT_FRACTION`` in ``--configs``, the set
 (``batch_benchmark.py``'s mixed grasps, 2-7 contacts padded to 7, float64) repeated to

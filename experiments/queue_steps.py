@@ -2,7 +2,7 @@
 set (issue 41): a count that does not depend on the machine's speed or load.
 
     python experiments/queue_steps.py [--count 1000] [--seed 0] [--max-steps 300] [--rho0 1]
-        [--max-slots 128] [--slot-fraction 0.0625] [--chunk N --one-device] [--save FILE.npz]
+        [--max-slots 128] [--slot-fraction 0.0625] [--chunk N --one-device] [--repeat-to N] [--save FILE.npz]
 
 Every ``while_loop`` of :mod:`jaxgrasp.solver._lanes` is wrapped (in this process only)
 so that it also counts its loop steps and, in each, the slots not running a lane; the
@@ -72,6 +72,8 @@ def main():
     p.add_argument("--slot-fraction", type=float, default=None, help="slots per lane (default: SolverOptions' own)")
     p.add_argument("--chunk", type=int, default=None, help="grasps per compiled call (default: the engine's)")
     p.add_argument("--one-device", action="store_true", help="one CPU device, as one GPU is (default: every core)")
+    p.add_argument("--repeat-to", type=int, default=None,
+                   help="the set repeated to this many grasps (as gpu_slots.py repeats it for a wide chunk)")
     p.add_argument("--save", default=None, help="also write the grasps' statuses and values to this .npz")
     args = p.parse_args()
     import jaxgrasp
@@ -89,18 +91,23 @@ def main():
     devices = jax.devices()[:1] if args.one_device else None
     say(f"$ python experiments/queue_steps.py --count {args.count} --seed {args.seed} "
         f"--max-steps {solver.max_steps} --rho0 {solver.rho0:g} --max-slots {solver.max_slots} "
-        f"--slot-fraction {solver.slot_fraction:g} --chunk {args.chunk} {'--one-device' if args.one_device else ''}"
+        f"--slot-fraction {solver.slot_fraction:g} --chunk {args.chunk} --repeat-to {args.repeat_to} "
+        f"{'--one-device' if args.one_device else ''}"
         f"    [load {', '.join(f'{x:.2f}' for x in os.getloadavg())}]")
     runs: list = []
     counting_queue(runs, solver.max_steps)
-    res = jaxgrasp.evaluate_batch(make_grasps(args.count, args.seed), chunk_size=args.chunk, devices=devices,
+    grasps = make_grasps(args.count, args.seed)
+    if args.repeat_to:
+        grasps = (grasps * -(-args.repeat_to // args.count))[: args.repeat_to]
+    res = jaxgrasp.evaluate_batch(grasps, chunk_size=args.chunk, devices=devices,
                                   options=jaxgrasp.EvaluateOptions(solver=solver))
     if args.save:
         import numpy as np
 
         np.savez(args.save, status=np.asarray(res.status), value=np.asarray(res.value))
     for r in runs:
-        say(f"   queue run: {r[0]} loop steps x {r[1]} slots, idle slot-steps {r[2]} ({r[2] / max(r[0] * r[1], 1):.3f})")
+        share = r[2] / max(r[0] * r[1], 1)
+        say(f"   queue run: {r[0]} loop steps x {r[1]} slots, idle slot-steps {r[2]} ({share:.3f})")
     steps = sum(r[0] for r in runs)
     slots = sum(r[0] * r[1] for r in runs)
     idle = sum(r[2] for r in runs)
