@@ -14,9 +14,10 @@ trace's device plane (``jax.profiler.ProfileData``) and prints:
 - the kernels that take most of the time, by name.
 
 Without an accelerator it profiles the CPU device (a dry run of the script: the host
-plane's events are printed instead). On the H100 lease of 2026-11-28 its profiled run did
-not come back within 170 s (the host and Python tracers were on then; they are off now),
-so it has not yet given a GPU profile: ``experiments/gpu_run_h100_2026-11-28.log``.
+plane's events are printed instead). On the H100 lease of 2026-11-28 it had not finished
+170 s after its profiled run started: the host and Python tracers were on then (they are
+off now), and it then told kernels from copies in time quadratic in the events (linear
+now), so it has not yet given a GPU profile: ``experiments/gpu_run_h100_2026-11-28.log``.
 
     python experiments/gpu_profile.py [--count 1000] [--chunk 1024] [--json out.json]
 
@@ -84,8 +85,9 @@ def summarize(events: list, wall_s: float, top: int) -> dict:
     # A GPU plane's stream lines hold one event per kernel or copy; its other lines
     # (XLA modules, XLA ops) restate the same time at coarser grain.
     streams = [e for e in events if e[0].startswith("Stream")] or events
-    copies = [e for e in streams if "memcpy" in e[1].lower() or "memset" in e[1].lower()]
-    kernels = [e for e in streams if e not in copies] if len(copies) < len(streams) else streams
+    is_copy = [("memcpy" in e[1].lower() or "memset" in e[1].lower()) for e in streams]
+    copies = [e for e, c in zip(streams, is_copy) if c]
+    kernels = [e for e, c in zip(streams, is_copy) if not c] or streams
     by_name = collections.defaultdict(lambda: [0, 0])
     for _, name, _, dur in kernels:
         by_name[name][0] += 1
@@ -133,8 +135,9 @@ def main() -> None:
     log(f"compile {first.compile_seconds:.1f} s, first run {first.run_seconds:.2f} s")
     steady = jaxgrasp.evaluate_batch(grasps, chunk_size=args.chunk, devices=devices)
     log(f"steady run {steady.run_seconds:.2f} s, {args.count / steady.run_seconds:.0f} grasps/s")
-    # The device's activity only: on the lease of 2026-11-28 a trace with the default host and
-    # Python tracers had not come back 170 s after a run of 9 s started.
+    # The device's activity only: on the lease of 2026-11-28 the trace (default host and Python
+    # tracers) and its reading (then quadratic in the events) had not ended 170 s after a run of
+    # 9 s started.
     options = jax.profiler.ProfileOptions()
     if acc:  # on a CPU the host's events are the device's
         options.host_tracer_level, options.python_tracer_level, options.enable_hlo_proto = 0, 0, False
