@@ -5,7 +5,8 @@ generator (``tests/grasp_draws.py:build_grasp``), contact counts cycling 2, 3, 4
 6, 7 (``n = 2 + i % 6``), default :class:`jaxgrasp.EvaluateOptions`, default chunk size.
 Measured in one run of this script, each phase in its own subprocess of it (``--phase
 NAME``), so that each phase's compile time starts from a cold process (no JAX tracing
-caches left by another phase) and its peak RSS (``ru_maxrss``) is its own:
+caches left by another phase, and an empty executable store of its own: nothing loaded
+from the user's cache folder) and its peak RSS (``ru_maxrss``) is its own:
 
 * ``padded``: ``jaxgrasp.evaluate_batch(all grasps)`` after ``_compile.clear_compiled()``:
   the grasps are padded with inactive contacts to 7, so ONE compilation serves the set.
@@ -371,7 +372,10 @@ def run_phase(name: str, args, tmp: Path) -> dict:
            "--count", str(args.count), "--seed", str(args.seed), "--repeats", str(args.repeats),
            "--ipopt", str(args.ipopt)]
     log(f"phase {name} (subprocess)")
-    subprocess.run(cmd, check=True, cwd=ROOT)
+    # An executable store of its own, empty: with the user's (or an earlier run's) store a
+    # phase would load its programs, and its compile seconds would be a read from disk.
+    env = dict(os.environ, JAXGRASP_CACHE_DIR=str(tmp / f"store-{name}"))
+    subprocess.run(cmd, check=True, cwd=ROOT, env=env)
     return json.loads(out.read_text())
 
 
