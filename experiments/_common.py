@@ -25,15 +25,23 @@ def say(msg: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')} load {os.getloadavg()[0]:.2f}] {msg}", flush=True)
 
 
-def agreement(status, value, ref_status, ref_value) -> str:
-    """Two runs of the same grasps compared: statuses differing, finite/NaN values
-    differing, and the largest relative difference of the values finite in both."""
+def agreement_numbers(status, value, ref_status, ref_value) -> dict:
+    """Two runs of the same grasps compared: ``status_mismatches``, ``finite_mismatches``
+    (finite against NaN values) and ``value_max_rel_diff`` (the largest relative
+    difference of the values finite in both, relative to the reference)."""
     status, value, ref_status, ref_value = (np.asarray(a) for a in (status, value, ref_status, ref_value))
     both = np.isfinite(value) & np.isfinite(ref_value)
     rel = np.abs(value - ref_value)[both] / np.maximum(np.abs(ref_value[both]), 1e-300)
-    return (f"statuses differing {int(np.sum(status != ref_status))}, finite/NaN differing "
-            f"{int(np.sum(np.isfinite(value) != np.isfinite(ref_value)))}, largest relative value difference "
-            f"{(rel.max() if rel.size else 0.0):.1e}")
+    return {"status_mismatches": int(np.sum(status != ref_status)),
+            "finite_mismatches": int(np.sum(np.isfinite(value) != np.isfinite(ref_value))),
+            "value_max_rel_diff": float(rel.max()) if rel.size else 0.0}
+
+
+def agreement(status, value, ref_status, ref_value) -> str:
+    """:func:`agreement_numbers` as one line."""
+    a = agreement_numbers(status, value, ref_status, ref_value)
+    return (f"statuses differing {a['status_mismatches']}, finite/NaN differing {a['finite_mismatches']}, "
+            f"largest relative value difference {a['value_max_rel_diff']:.1e}")
 
 
 def parse_args(description: str) -> argparse.Namespace:

@@ -44,6 +44,7 @@ for _p in (ROOT, ROOT / "tests", ROOT / "experiments"):
 import jax  # noqa: E402
 
 import jaxgrasp  # noqa: E402
+from _common import agreement_numbers  # noqa: E402
 from batch_benchmark import STATUS, log, make_grasps  # noqa: E402
 
 from jaxgrasp.engine._plan import default_chunk_size  # noqa: E402
@@ -69,13 +70,9 @@ def measure(grasps: list, devices, chunk: int | None) -> dict:
 
 
 def agreement(a: dict, b: dict, count: int) -> dict:
-    """Statuses and values of the first ``count`` grasps of two runs."""
-    va, vb = np.asarray(a["value"][:count]), np.asarray(b["value"][:count])
-    both = np.isfinite(va) & np.isfinite(vb)
-    rel = np.abs(va - vb)[both] / np.maximum(np.abs(vb[both]), 1e-12)
-    return {"status_mismatches": int(np.sum(a["status"][:count] != b["status"][:count])),
-            "finite_mismatches": int(np.sum(np.isfinite(va) != np.isfinite(vb))),
-            "value_max_rel_diff": float(rel.max()) if rel.size else 0.0}
+    """Statuses and values of the first ``count`` grasps of two runs (``b`` the reference,
+    :func:`_common.agreement_numbers`)."""
+    return agreement_numbers(a["status"][:count], a["value"][:count], b["status"][:count], b["value"][:count])
 
 
 def main() -> None:
