@@ -613,7 +613,12 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
     s_upd = _multiplier_update(s, d, gphi, floor, o)
     s1 = _select(update, dataclasses.replace(s_upd, steps=s.steps + 1), s)
     gphi1, inner_done1 = _inner_done(s1, d, floor, o)
-    newton = is_running & running(s1, o) & ~inner_done1
+    # A running lane without an update takes its Newton step whatever the second test
+    # says: it repeats the first on the same numbers, but XLA may round the two apart (far
+    # out, phi's gradient is a difference of terms of 1e10), and a lane whose first test
+    # said "not done" and second "done" took neither and stepped no more, its queue never
+    # ending (a 7-contact grasp of the 100k benchmark set hung `jaxgrasp batch`).
+    newton = is_running & running(s1, o) & (~inner_done1 | ~update)
     p = _newton_direction(_phi_hessian(problem, s1, d), gphi1, newton, o)
     phi0 = _phi_of(d.fx, d.gx, s1.lam, s1.nu, s1.rho, s1.eq_mask)
     return Trial(state=s1, newton=newton, p=p, phi0=phi0, slope=contract("i,i->", gphi1, p), fx=d.fx)

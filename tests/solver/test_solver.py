@@ -523,6 +523,41 @@ def test_nan_nu0_is_the_least_squares_multiplier():
     assert float(off.nu) == 0.0
 
 
+@pytest.mark.parametrize("eq_row, minimiser", [(None, -2.0), (1, -0.5)])
+def test_a_running_lane_steps_whatever_its_two_stationarity_tests_say(monkeypatch, eq_row, minimiser):
+    """``propose`` asks whether the inner solve is done twice: before the multiplier update
+    and, after it, of the updated lane. Where there was no update the second asks the
+    same of the same numbers, but XLA may round the two apart (far from feasibility phi's
+    gradient is a difference of terms of 1e10). A lane whose first test says "not done"
+    and whose second says "done" must still take its Newton step: before, it took neither,
+    its step count stood still and its work queue never ended (a 7-contact grasp of
+    ``experiments/batch_100k.py``'s set hung ``jaxgrasp batch``). Here the two tests are
+    made to disagree on every step."""
+    from jaxgrasp.solver import _solver as S
+
+    real, calls = S._inner_done, []
+
+    def disagreeing(s, d, floor, o):
+        gphi, _ = real(s, d, floor, o)
+        calls.append(None)
+        return gphi, jnp.asarray(len(calls) % 2 == 0)  # first test of a step: not done; second: done
+
+    monkeypatch.setattr(S, "_inner_done", disagreeing)
+    fg = lambda x: (0.5 * _sq(x - jnp.array([1.0, -2.0, 0.5])), jnp.stack([x[0] + 4.0, 1.0 - x[1], 4.0 - x[2]]))
+    o = SolverOptions()
+    mask = jnp.zeros(3) if eq_row is None else jnp.eye(3)[eq_row]
+    s = S.init(jnp.zeros(3), mask, 0.0, True, o)
+    for k in range(3):
+        calls.clear()
+        new = S.step(fg, s, o)
+        assert len(calls) == 2
+        assert int(new.steps) == int(s.steps) + 1, k  # the Newton step (no update was asked for)
+        s = new
+    # the steps were taken: phi's minimiser (with the equality h = 1 - x1, rho 1 and nu 0,
+    # (x1 + 2)^2 / 2 + h^2 / 2 is least at x1 = -0.5)
+    np.testing.assert_allclose(s.x, [1.0, minimiser, 0.5], rtol=0, atol=1e-12)
+
+
 def test_stationarity_tolerance_is_the_gradient_rounding_floor_capped():
     """Where phi's penalty Hessian ``rho J^T D J`` is so stiff that moving ``x`` by a few
     ulps moves phi's gradient by more than tol, a lane counts as stationary at that floor
