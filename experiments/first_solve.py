@@ -86,13 +86,19 @@ def run_al(step, st, theta, o):
     return st
 
 
-def first_inner(st0, theta, o) -> None:
-    """Part 2: the first inner solve of every boundary lane, step by step."""
+def lane_steps(o):
+    """One loop step of every lane (``jit(vmap(step))``), compiled once for the three parts."""
+    return jax.jit(jax.vmap(lambda s, t: S.step(lane_problem(t), s, o)))
+
+
+def first_inner(st0, theta, o, step) -> None:
+    """Part 2: the first inner solve of every boundary lane, step by step (``step``:
+    :func:`lane_steps`)."""
 
     def look(s, t):
         prob = lane_problem(t)
-        s = S._initial_multiplier(s, S._first_order(prob, s.x))
         d = S._first_order(prob, s.x)
+        s = S._initial_multiplier(s, d)
         _, shifted, w = S._penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
         trial = S.propose(prob, s, o)
         one = jax.tree_util.tree_map(lambda a: a[None], trial)
@@ -104,7 +110,6 @@ def first_inner(st0, theta, o) -> None:
         return jnp.max(jnp.abs(d.grad_f + d.jac.T @ w)), quadratic, frac, cap, ev[0] < 0, trial.newton
 
     look = jax.jit(jax.vmap(look))
-    step = jax.jit(jax.vmap(lambda s, t: S.step(lane_problem(t), s, o)))
     boundary = np.asarray(st0.eq_mask).sum(1) > 0
     st, rec = st0, []
     for _ in range(40):
@@ -135,8 +140,9 @@ def first_inner(st0, theta, o) -> None:
             + " ".join(f"{q:.3f}" for q in np.percentile(ratio[sel], (25, 50, 75))))
 
 
-def violation_first(st0, theta, o, k_max: int, feasible: float, base) -> None:
-    """Part 3: a first phase of Newton steps on the violation, then the augmented Lagrangian."""
+def violation_first(st0, theta, o, step, k_max: int, feasible: float, base) -> None:
+    """Part 3: a first phase of Newton steps on the violation, then the augmented Lagrangian
+    (``step``: :func:`lane_steps`; ``base``: today's lanes, run to their end)."""
 
     def parts(prob, x, eq_mask):
         d = S._first_order(prob, x)
@@ -158,7 +164,6 @@ def violation_first(st0, theta, o, k_max: int, feasible: float, base) -> None:
         return jnp.where(jnp.any(ok), x + ladder[jnp.argmax(ok)] * p, x), jnp.any(ok), viol, jnp.max(jnp.abs(gv))
 
     newton_on_v = jax.jit(jax.vmap(newton_on_v))
-    step = jax.jit(jax.vmap(lambda s, t: S.step(lane_problem(t), s, o)))
     active = np.asarray(st0.status) == LaneStatus.NOT_CONVERGED
     boundary = active & (np.asarray(st0.eq_mask).sum(1) > 0)
     x, eq_mask = np.asarray(st0.x), st0.eq_mask
@@ -204,11 +209,12 @@ def main() -> None:
     from infeasible_certificate import benchmark_lanes
 
     st0, theta, o = benchmark_lanes(a.contacts, a.grasps)
-    first_inner(st0, theta, o)
-    base = run_al(jax.jit(jax.vmap(lambda s, t: S.step(lane_problem(t), s, o))), st0, theta, o)
+    step = lane_steps(o)
+    first_inner(st0, theta, o, step)
+    base = run_al(step, st0, theta, o)
     for pair in a.phase1.split(","):
         k, feasible = pair.split(":")
-        violation_first(st0, theta, o, int(k), float(feasible), base)
+        violation_first(st0, theta, o, step, int(k), float(feasible), base)
 
 
 if __name__ == "__main__":
