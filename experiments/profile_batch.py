@@ -75,8 +75,9 @@ def profile(grasps, label: str, repeats: int = 2, options=None, chunk_size=None)
             walls.append(time.perf_counter() - t0)
     finally:
         _evaluator.compiled_evaluator = real
-    out = {"label": label, "grasps": len(grasps), "compile_s": first_compile,
-           "wall_s": min(walls), "rate": len(grasps) / min(walls), "load": os.getloadavg()[0],
+    count = grasps.positions.shape[0] if hasattr(grasps, "positions") else len(grasps)  # one batched Grasp, or a list
+    out = {"label": label, "grasps": count, "compile_s": first_compile,
+           "wall_s": min(walls), "rate": count / min(walls), "load": os.getloadavg()[0],
            "stage_s": {k: v / repeats for k, v in times.items()}}
     kinds = {}
     for i, (st, sp) in enumerate(lanes[: len(lanes) // repeats]):
