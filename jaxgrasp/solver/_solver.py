@@ -265,12 +265,14 @@ class Problem:
             call (so that they can share their work).
         first_order: ``(n,) -> FirstOrder`` at a point, or ``None``: one forward-mode
             Jacobian of ``fg`` (``n`` tangents).
-        lagrangian_hessian: ``(FirstOrder, x, w) -> (n, n)``, the Hessian of
-            ``f + w . g`` at ``x`` for fixed weights ``w`` ``(m,)``, given the
-            ``first_order`` at ``x``; or ``None``: ``jax.hessian`` of ``f + w . g``. A
-            problem with structure supplies both (:mod:`jaxgrasp.tolerance._problems` writes
-            them from the contact kinematics' derivatives, cheaper than autodiff's nested
-            passes).
+        lagrangian_hessian: ``(FirstOrder, x, w, gn) -> (n, n)``, the Hessian of
+            ``f + w . g`` at ``x`` for fixed weights ``w`` ``(m,)``, plus the Gauss-Newton
+            term ``J^T diag(gn) J`` of the rows' weights ``gn`` ``(m,)`` (``J`` the
+            Jacobian of ``g``; phi's penalty contributes it), given the ``first_order`` at
+            ``x``; or ``None``: ``jax.hessian`` of ``f + w . g`` plus that term from
+            ``FirstOrder.jac``. A problem with structure supplies both
+            (:mod:`jaxgrasp.tolerance._problems` writes them from the contact kinematics'
+            derivatives, cheaper than autodiff's nested passes).
     """
 
     fg: Callable
@@ -291,17 +293,19 @@ def _first_order(problem: Problem, x) -> FirstOrder:
     return FirstOrder(fx, gx, grad_f, jac)
 
 
-def _lagrangian_hessian(problem: Problem, d: FirstOrder, x, weights):
-    """``(n, n)`` Hessian of ``f + weights . g`` at ``x`` (weights held fixed)."""
+def _lagrangian_hessian(problem: Problem, d: FirstOrder, x, weights, gauss_newton=None):
+    """``(n, n)`` Hessian of ``f + weights . g`` at ``x`` (weights held fixed), plus
+    ``J^T diag(gauss_newton) J`` where ``gauss_newton`` ``(m,)`` is given (``J = d.jac``)."""
     weights = jax.lax.stop_gradient(weights)
+    gauss_newton = jnp.zeros_like(weights) if gauss_newton is None else jax.lax.stop_gradient(gauss_newton)
     if problem.lagrangian_hessian is not None:
-        return problem.lagrangian_hessian(d, x, weights)
+        return problem.lagrangian_hessian(d, x, weights, gauss_newton)
 
     def lagrangian(x):
         fx, gx = problem.fg(x)
         return fx + contract("m,m->", weights, gx)
 
-    return jax.hessian(lagrangian)(x)
+    return jax.hessian(lagrangian)(x) + contract("mi,m,mj->ij", d.jac, gauss_newton, d.jac)
 
 
 def init(x0, eq_mask, nu0, active, o: SolverOptions) -> SolverState:
@@ -356,15 +360,20 @@ def _tolerances(dtype, o: SolverOptions):
 
 
 def _phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
-    """``(n, n)`` exact Hessian of phi at ``s.x``, assembled from its two parts:
-    ``hess(f + w . g)`` with the weights ``w = d phi / d g`` held fixed
-    (:func:`_lagrangian_hessian`), plus ``rho J^T D J`` with ``D`` selecting the equality
+    """``(n, n)`` exact Hessian of phi at ``s.x``: ``hess(f + w . g)`` with the weights
+    ``w = d phi / d g`` held fixed, plus ``rho J^T D J`` with ``D`` selecting the equality
     and the inequalities whose shifted multiplier is positive (where phi's penalty is
-    quadratic in ``g``). This equals ``jax.hessian`` of phi (to rounding) with a smaller
-    traced graph and less work: ``J`` is already at hand."""
+    quadratic in ``g``), both from the problem's :func:`_lagrangian_hessian`. This equals
+    ``jax.hessian`` of phi (to rounding) with a smaller traced graph and less work.
+
+    The problem forms the second term with the first: a structured problem folds it into
+    its per-row pieces (:mod:`jaxgrasp.tolerance._problems`: each contact's ``4 x 4``
+    block). Formed here as a product of the whole ``(m, n)`` Jacobian, XLA's CPU backend
+    fused the rows' mask into that product and, at some row counts (five contacts),
+    recomputed it for every entry of the ``n x n`` result."""
     _, shifted, weights = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
     quadratic = ((s.eq_mask > 0) | (shifted > 0)).astype(d.jac.dtype)
-    return _lagrangian_hessian(problem, d, s.x, weights) + s.rho * contract("mi,m,mj->ij", d.jac, quadratic, d.jac)
+    return _lagrangian_hessian(problem, d, s.x, weights, s.rho * quadratic)
 
 
 def _newton_direction(hmat, gphi, needed, o: SolverOptions):

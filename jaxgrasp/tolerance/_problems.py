@@ -131,17 +131,24 @@ def _first_order(z, data: ProblemData) -> FirstOrder:
     return FirstOrder(fx, margins_of(tuple(q.T), p).reshape(-1), grad_f, jac, aux=(q, dq, geometry, de, dm))
 
 
-def _lagrangian_hessian(d: FirstOrder, z, weights, data: ProblemData):
-    """``(6, 6)`` Hessian in ``z`` of ``f + weights . g`` (``weights`` ``(3N,)`` fixed), from
-    the kinematics' derivatives in ``d.aux`` (:func:`kinematic_hessian`), with ``psi_i``
-    contact ``i``'s share of the function of its own kinematics and its ``4 x 4`` Hessian
-    :func:`jaxgrasp.model._potential.contact_hessians`, written out."""
+def _lagrangian_hessian(d: FirstOrder, z, weights, gauss_newton, data: ProblemData):
+    """``(6, 6)`` Hessian in ``z`` of ``f + weights . g`` (``weights`` ``(3N,)`` fixed) plus
+    ``J^T diag(gauss_newton) J`` (``gauss_newton`` ``(3N,)``, ``J`` the constraints'
+    Jacobian in ``z``), from the kinematics' derivatives in ``d.aux``
+    (:func:`kinematic_hessian`), with ``psi_i`` contact ``i``'s share of the function of
+    its own kinematics and its ``4 x 4`` Hessian
+    :func:`jaxgrasp.model._potential.contact_hessians`, written out.
+
+    Row ``(r, i)`` of ``J`` is ``dm_ri . dq_i`` (times the pose scale), so the
+    Gauss-Newton term is contact ``i``'s ``dq_i^T (sum_r gn_ri dm_ri dm_ri^T) dq_i``: a
+    ``4 x 4`` block added to ``H_i`` in ``q_i``."""
     p = data.params
     q, dq, geometry, de, dm = d.aux
     w = weights.reshape(3, -1)
     he, hm = contact_hessians(tuple(q.T), p)
     gq = de / data.scale + contract("rn,rnk->nk", w, dm)  # (N, 4): d psi_i / dq_i
-    hq = he / data.scale + contract("rn,rnkl->nkl", w, hm)  # (N, 4, 4)
+    hq = (he / data.scale + contract("rn,rnkl->nkl", w, hm)
+          + contract("rn,rnk,rnl->nkl", gauss_newton.reshape(3, -1), dm, dm))  # (N, 4, 4)
     return kinematic_hessian(z, data, dq, geometry, gq, hq)
 
 
@@ -165,7 +172,7 @@ def lane_problem(data: ProblemData) -> Problem:
     return Problem(
         fg=lambda z: objective_and_constraints(z, data),
         first_order=lambda z: _first_order(z, data),
-        lagrangian_hessian=lambda d, z, w: _lagrangian_hessian(d, z, w, data),
+        lagrangian_hessian=lambda d, z, w, gn: _lagrangian_hessian(d, z, w, gn, data),
     )
 
 

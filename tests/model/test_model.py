@@ -6,6 +6,7 @@ Everything is in the model's internal units (mm, N, N/mm^2, mJ).
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import jax
@@ -580,15 +581,16 @@ def test_contact_derivatives_written_out_equal_autodiff(name, grasp, x):
 
 
 @jax.jit
-def _program_derivatives(data, z, weights):
-    """(fx, gx, grad f, jac, Lagrangian Hessian) from the grasp programs' Problem, and the
-    same from the solver's autodiff default for the same fg."""
+def _program_derivatives(data, z, weights, gauss_newton):
+    """(fx, gx, grad f, jac, Lagrangian Hessian with the Gauss-Newton term of weights
+    ``gauss_newton``) from the grasp programs' Problem, and the same from the solver's
+    autodiff default for the same fg."""
     from jaxgrasp.tolerance import _problems as P
     from jaxgrasp.solver import _solver as S
 
     def both(problem):
         d = S._first_order(problem, z)
-        return d.fx, d.gx, d.grad_f, d.jac, S._lagrangian_hessian(problem, d, z, weights)
+        return d.fx, d.gx, d.grad_f, d.jac, S._lagrangian_hessian(problem, d, z, weights, gauss_newton)
 
     return both(P.lane_problem(data)), both(S.Problem(lambda z: P.objective_and_constraints(z, data)))
 
@@ -602,7 +604,45 @@ def test_program_derivatives_equal_autodiff(name, grasp, x):
 
     data = P.problem_data(model_params(grasp))
     z = jnp.concatenate([x[:3], x[3:] * data.lever])
-    weights = jnp.asarray(np.random.default_rng(5).normal(size=3 * grasp.num_contacts))
-    got, want = _program_derivatives(data, z, weights)
+    rng = np.random.default_rng(5)
+    weights = jnp.asarray(rng.normal(size=3 * grasp.num_contacts))
+    gauss_newton = jnp.asarray(rng.uniform(0.0, 10.0, size=3 * grasp.num_contacts) * (rng.random(3 * grasp.num_contacts) < 0.6))
+    got, want = _program_derivatives(data, z, weights, gauss_newton)
     for g, w in zip(got, want):
         _close(g, w)
+
+
+@jax.jit
+def _phi_hessians(data, z, lam, nu, rho, eq_mask):
+    """The solver's Hessian of phi for the grasp programs' Problem, and ``jax.hessian`` of
+    phi itself (:func:`jaxgrasp.solver._solver.augmented_lagrangian`)."""
+    from jaxgrasp.tolerance import _problems as P
+    from jaxgrasp.solver import _solver as S
+
+    problem = P.lane_problem(data)
+    s = S.init(z, eq_mask, nu, True, S.SolverOptions())
+    s = dataclasses.replace(s, lam=lam, rho=rho)
+    phi = lambda z: S.augmented_lagrangian(problem.fg, z, lam, nu, rho, eq_mask)  # noqa: E731
+    return S._phi_hessian(problem, s, S._first_order(problem, z)), jax.hessian(phi)(z)
+
+
+@pytest.mark.slow  # compiles autodiff of the model
+@pytest.mark.parametrize("name, grasp, x", _derivative_cases()[1::2], ids=lambda v: v if isinstance(v, str) else "")
+def test_phi_hessian_equals_autodiff_of_phi(name, grasp, x):
+    """The Newton step's Hessian of the augmented Lagrangian phi (the Lagrangian's, with
+    the penalty's Gauss-Newton term folded into each contact's 4 x 4 block) equals
+    jax.hessian of phi, with an equality row, inequality rows on both sides of their
+    kink (shifted multiplier positive and zero) and a large penalty."""
+    from jaxgrasp.tolerance import _problems as P
+
+    data = P.problem_data(model_params(grasp))
+    z = jnp.concatenate([x[:3], x[3:] * data.lever])
+    m = 3 * grasp.num_contacts
+    gx = P.objective_and_constraints(z, data)[1]
+    rng = np.random.default_rng(11)
+    rho = 30.0
+    # lam - rho g > 0 on about half of the rows, clearly negative on the rest
+    lam = jnp.where(jnp.asarray(rng.random(m) < 0.5), rho * gx + rng.uniform(0.5, 2.0, m), 0.0)
+    eq_mask = jnp.zeros(m).at[grasp.num_contacts + 1].set(1.0)
+    got, want = _phi_hessians(data, z, lam, 0.7, rho, eq_mask)
+    _close(got, want, 1e-11)
