@@ -4,21 +4,23 @@ For each contact count ``N`` of ``--counts``, the batch benchmark's grasps with 
 contacts (``batch_benchmark.make_grasps(1000, 0)``, about 167 each) are evaluated by
 :func:`jaxgrasp.evaluate_batch` twice: at their own width (``jaxgrasp.stack``: ``N``
 contacts) and padded with inactive contacts to ``--width`` (``stack(..., num_contacts=
-width)``), as a mixed set pads them. Printed per count: the boundary lanes' loop steps of
-both (one run each, counted as ``profile_batch.profile`` counts them: the padded lanes
-are the same lanes, so their steps should be equal), the process CPU seconds per grasp of
-both (median of ``--repeats`` runs, own and padded alternating, after one run of each to
-compile), their ratio (the padding tax), and whether statuses and values agree. Each
-phase reads an empty executable store of its own (``JAXGRASP_CACHE_DIR``), so nothing is
-read from an earlier run.
+width)``), as a mixed set pads them. Printed per count: the boundary lanes run and their
+lane-steps at both widths (one run each, counted as ``profile_batch.profile`` counts
+them: the padded lanes are the same lanes, so these should be equal), the process CPU
+seconds per grasp of both (median of ``--repeats`` runs, own and padded alternating,
+after one run of each to compile), their ratio (the padding tax), and whether statuses
+and values agree. The process reads an empty executable store of its own
+(``JAXGRASP_CACHE_DIR``), so nothing is read from an earlier run.
 
 With ``--queue`` each count is evaluated twice more, in a child process of its own with
 the executable store off (the evaluators are memoised per process, and the timed runs
-must not carry the counter), with the work queue's loop counted (``queue_steps.counting_queue``): loop steps, slots and idle
-slot-steps of every queue run, own width against padded. A loop step costs every slot,
-running or idle, so these tell a dearer step from more of them.
+must not carry the counter), with the work queue's loop counted
+(``queue_steps.counting_queue``): loop steps and idle slot-steps summed over the queue
+runs, own width against padded. A loop step costs every slot, running or idle, so these
+tell a dearer step from more of them.
 
-    python experiments/padding_tax.py [--counts 2,3,4,5,6,7] [--width 7] [--repeats 3] [--queue]
+    python experiments/padding_tax.py [--counts 2,3,4,5,6,7] [--width 7] [--repeats 3]
+        [--queue]
 """
 
 from __future__ import annotations
@@ -138,8 +140,8 @@ def main() -> None:
             say(queue_line(n, a.width))
         rows.append((n, len(grasps), steps_own, steps_pad, ms_own, ms_pad))
     print(f"\npadding tax, {os.cpu_count()} CPUs, load average at the end {os.getloadavg()}\n")
-    print(f"| contacts | grasps | boundary lane-steps, own / padded | CPU ms per grasp, own width | padded to {a.width} "
-          "| padded / own |")
+    print("| contacts | grasps | boundary lane-steps, own / padded | CPU ms per grasp, own width "
+          f"| padded to {a.width} | padded / own |")
     print("|---:|---:|---:|---:|---:|---:|")
     for n, count, s_own, s_pad, m_own, m_pad in rows:
         print(f"| {n} | {count} | {s_own} / {s_pad} | {m_own:.2f} | {m_pad:.2f} | {m_pad / m_own:.2f} |")
