@@ -151,8 +151,8 @@ def run_processes(args, uncertainty) -> int:
     try:
         with contextlib.ExitStack() as held:
             opened, failure = processes.attempt(lambda: processes.open_share(args, out, out / PARTIAL_NAME, held))
-            n_contacts = processes.agree_on_inputs(opened, failure)
-            blob, failure = processes.attempt(lambda: _evaluate_share(opened[0], n_contacts, uncertainty, args))
+            n_contacts, counts = processes.agree_on_inputs(opened, failure)
+            blob, failure = processes.attempt(lambda: _evaluate_share(opened[0], n_contacts, counts, uncertainty, args))
             merged, extra, timing = processes.gather_results(blob, failure, opened[1], n_contacts, jax.device_count())
             if me != 0:
                 print(f"batch {args.file}: process {me} of {args.num_processes} ({jax.local_device_count()} of "
@@ -172,11 +172,13 @@ def run_processes(args, uncertainty) -> int:
     return 0
 
 
-def _evaluate_share(share, n_contacts: int, uncertainty, args) -> bytes:
+def _evaluate_share(share, n_contacts: int, counts: dict[int, int], uncertainty, args) -> bytes:
     """This process's share evaluated on its own devices, padded to the dataset's
-    ``n_contacts``, with its ``--epsilon`` and ``--robust`` columns: what it sends
-    process 0 (:func:`._batch_processes.share_blob`)."""
+    ``n_contacts``, each contact count at the width a run of one process gives it (from
+    the dataset's ``counts``, ``{count: grasps}``), with its ``--epsilon`` and
+    ``--robust`` columns: what it sends process 0 (:func:`._batch_processes.share_blob`)."""
     from jaxgrasp.engine._batch import evaluate_dataset
+    from jaxgrasp.engine._plan import plan_widths
     from jaxgrasp.io._dataset import padded_set
 
     if not share.valid.any():
@@ -185,7 +187,8 @@ def _evaluate_share(share, n_contacts: int, uncertainty, args) -> bytes:
     progress = ChunkProgress("evaluating", "grasp", show=not args.quiet)
     announce_run("batch", f"{args.file} (share {args.process_id} of {args.num_processes})",
                  int(share.valid.sum()), "grasp", args.quiet)
-    merged, run = evaluate_dataset(share, chunk_size=args.chunk_size, progress=progress, devices=local)
+    widths = plan_widths(counts, local[0].platform)
+    merged, run = evaluate_dataset(share, chunk_size=args.chunk_size, progress=progress, devices=local, widths=widths)
     extra = _epsilon(share) if args.epsilon else {}
     if uncertainty is not None:
         extra.update(_robust(share, uncertainty, args, devices=local))

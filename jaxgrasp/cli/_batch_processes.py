@@ -111,16 +111,19 @@ def open_share(args, out, partial, held) -> tuple:
     return share, total
 
 
-def agree_on_inputs(opened, failure: BaseException | None) -> int:
+def agree_on_inputs(opened, failure: BaseException | None) -> tuple[int, dict[int, int]]:
     """The first meeting: every process's share read (``opened``: ``(share, total)``, or
-    ``None`` with its ``failure``). Returns the dataset's largest contact count; raises
-    where any process failed, where the processes read different files (by SHA-256 and
-    number of grasps), or where the dataset has no valid grasp."""
+    ``None`` with its ``failure``). Returns the dataset's largest contact count and its
+    valid grasps by contact count (``{count: grasps}``, from which every process plans
+    the same widths, :func:`~jaxgrasp.engine._plan.plan_widths`); raises where any
+    process failed, where the processes read different files (by SHA-256 and number of
+    grasps), or where the dataset has no valid grasp."""
     facts = {"failure": None if failure is None else str(failure)}
     if opened is not None:
         share, total = opened
+        counts, n = np.unique(share.num_contacts[share.valid], return_counts=True)
         facts.update(contacts=int(share.num_contacts.max(initial=0)), valid=int(share.valid.sum()), total=total,
-                     sha256=share.source_sha256)
+                     sha256=share.source_sha256, counts=dict(zip(map(str, counts.tolist()), n.tolist())))
     every = [json.loads(b) for b in exchange(json.dumps(facts).encode())]
     _raise_first([f["failure"] for f in every], failure)
     if len({(f["total"], f["sha256"]) for f in every}) > 1:
@@ -128,7 +131,11 @@ def agree_on_inputs(opened, failure: BaseException | None) -> int:
         raise UsageError(f"the processes read different datasets ({seen}): give every host the same file")
     if not sum(f["valid"] for f in every):
         raise UsageError(f"{opened[0].source}: no valid grasp ({opened[1]} invalid)")
-    return max(f["contacts"] for f in every)
+    histogram: dict[int, int] = {}
+    for f in every:
+        for c, n in f["counts"].items():
+            histogram[int(c)] = histogram.get(int(c), 0) + n
+    return max(f["contacts"] for f in every), dict(sorted(histogram.items()))
 
 
 def share_blob(share, merged, run, extra: dict) -> bytes:

@@ -341,24 +341,32 @@ class ChunkProgress:
     def __init__(self, verb: str, noun: str, show: bool = True):
         self.verb, self.noun, self.show = verb, noun, show
         self.chunk = self.nchunks = 1
+        self.calls = 0  # chunks reported
         self.t_start = time.perf_counter()
         self._first: tuple[int, float] | None = None  # (done, time) after the first chunk
 
     def start(self, plan) -> None:
         """The line before the first chunk (how many items, chunks and devices), from the
-        engine's :class:`~jaxgrasp.engine._plan.ChunkPlan`."""
-        self.chunk, self.nchunks = plan.chunk, plan.n_chunks
+        engine's :class:`~jaxgrasp.engine._plan.ChunkPlan` or
+        :class:`~jaxgrasp.engine._plan.SegmentPlan` (whose programs by contact count it
+        names: the first chunk of each includes its compilation)."""
+        self.chunk, self.nchunks, self.calls = plan.chunk, plan.n_chunks, 0
         self.show = self.show and plan.n_chunks > 1
         self.t_start = time.perf_counter()
         if self.show:
             on = f" on {plan.n_devices} devices" if plan.n_devices > 1 else ""
-            say(
-                f"jaxgrasp: {self.verb} {plan.total} {self.noun}s in {plan.n_chunks} chunks of {plan.chunk}{on} "
-                "(the first chunk includes compilation)"
-            )
+            segments = getattr(plan, "segments", ())
+            if len(segments) > 1:
+                say(f"jaxgrasp: {self.verb} {plan.total} {self.noun}s in {plan.n_chunks} chunks of up to "
+                    f"{plan.chunk}{on}, {len(segments)} programs by contact count ({plan.describe()}; "
+                    "the first chunk of each includes its compilation)")
+            else:
+                say(f"jaxgrasp: {self.verb} {plan.total} {self.noun}s in {plan.n_chunks} chunks of {plan.chunk}{on} "
+                    "(the first chunk includes compilation)")
 
     def __call__(self, done: int, total: int) -> None:
         now = time.perf_counter()
+        self.calls += 1
         if self._first is None:
             self._first = (done, now)
             left = "time left known after the next chunk" if done < total else "done"
@@ -368,9 +376,8 @@ class ChunkProgress:
         else:
             left = "done"
         if self.show:
-            k = math.ceil(done / self.chunk)
             say(
-                f"jaxgrasp: chunk {k}/{self.nchunks} ({done}/{total} {self.noun}s), "
+                f"jaxgrasp: chunk {self.calls}/{self.nchunks} ({done}/{total} {self.noun}s), "
                 f"elapsed {now - self.t_start:.1f} s, {left}"
             )
 

@@ -4,13 +4,14 @@ stages, sharded over the devices, kept in an executable store on disk, with chec
 :data:`PIPELINE` is the evaluation, step by step; :func:`evaluate` runs it inline under
 the caller's trace (``jit``, ``vmap``, ``grad``), :func:`evaluate_batch` and
 :func:`evaluate_dataset` run it one compiled stage at a time over chunks of grasps cut by
-:func:`plan_chunks`. :func:`solve_problems` stops it at the solved problems.
+:func:`plan_chunks`, in segments by contact count (:func:`plan_segments`, each at the
+width :func:`plan_widths` gives it). :func:`solve_problems` stops it at the solved problems.
 """
 
 from jaxgrasp.engine._batch import evaluate_batch, evaluate_dataset
 from jaxgrasp.engine._batch_result import BatchResult
 from jaxgrasp.engine._evaluate import evaluate, solve_problems
-from jaxgrasp.engine._plan import ChunkPlan, plan_chunks
+from jaxgrasp.engine._plan import ChunkPlan, SegmentPlan, plan_chunks, plan_segments, plan_widths
 from jaxgrasp.engine._stages import PIPELINE, run_inline, stage_functions
 from jaxgrasp.engine._store import enable_compilation_cache
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
@@ -26,6 +27,9 @@ __all__ = [
     "stage_functions",
     "ChunkPlan",
     "plan_chunks",
+    "SegmentPlan",
+    "plan_segments",
+    "plan_widths",
     "enable_compilation_cache",
     "COMPILER_OPTIONS",
 ]

@@ -8,7 +8,9 @@
     res.value, res.status_names              # (B,) J, names
     res.rank()[:10]                          # indices of the best grasps
 
-The grasps are cut into chunks (:func:`~jaxgrasp.engine._plan.plan_chunks`), each
+The grasps are cut into segments by contact count, each run at its own width where that
+pays for its compilation (:func:`~jaxgrasp.engine._plan.plan_segments`), and each segment
+into chunks (:func:`~jaxgrasp.engine._plan.plan_chunks`), each
 evaluated by the compiled pipeline (:func:`~jaxgrasp.engine._evaluator.chunk_evaluator`:
 equal to ``jax.vmap(jaxgrasp.evaluate)`` grasp by grasp), split over every device, each
 device running its own work queue on its slice (:func:`~jaxgrasp.engine._run.run_chunks`);
@@ -20,17 +22,18 @@ from __future__ import annotations
 
 from typing import Any, Callable, Mapping
 
+import jax
 import numpy as np
 
-from jaxgrasp.engine._batch_result import BatchResult, assemble, mark_invalid
-from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields
-from jaxgrasp.engine._plan import ChunkPlan, check_chunk_size, plan_chunks
+from jaxgrasp.engine._batch_result import BatchResult, assemble
+from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields, release_chunk_evaluator
+from jaxgrasp.engine._plan import ChunkPlan, SegmentPlan, check_chunk_size, plan_segments, plan_widths
 from jaxgrasp.engine._run import run_chunks
+from jaxgrasp.engine._widths import contact_slots, narrow, widen
 from jaxgrasp.io._dataset import GraspSet
 from jaxgrasp.model._grasp import Grasp, stack
 from jaxgrasp.model._validation import GraspValueError, check_batch_inputs
 from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._result import FIELDS
 
 __all__ = ["evaluate_batch", "evaluate_dataset", "start_progress"]
 
@@ -77,7 +80,7 @@ def _set_fields(gset: GraspSet, rows: np.ndarray | None = None) -> dict[str, np.
     return fields
 
 
-def start_progress(progress, plan: ChunkPlan) -> None:
+def start_progress(progress, plan: ChunkPlan | SegmentPlan) -> None:
     """Tell ``progress`` the plan before the first chunk, where it asks (an object with a
     ``start(plan)`` method, such as the command line's progress lines)."""
     start = getattr(progress, "start", None)
@@ -92,11 +95,18 @@ def evaluate_batch(
     options: EvaluateOptions = EvaluateOptions(),
     chunk_size: int | None = None,
     progress: Callable[[int, int], Any] | None = None,
-    on_chunk: Callable[[int, int, Mapping[str, np.ndarray]], Any] | None = None,
+    on_chunk: Callable[[np.ndarray, Mapping[str, np.ndarray]], Any] | None = None,
     devices=None,
 ) -> BatchResult:
-    """Evaluate many grasps in chunks of one compiled evaluator; every result equals
+    """Evaluate many grasps in chunks of compiled evaluators; every result equals
     :func:`jaxgrasp.evaluate` of that grasp.
+
+    Grasps of different contact counts are padded to the widest (inactive contacts), in
+    one compiled program; where a count has enough grasps to pay for a compilation of
+    its own (tens of thousands on a CPU), its grasps run in a narrower program
+    (:func:`~jaxgrasp.engine._plan.plan_widths`), which costs a 2-contact grasp half of
+    what it costs padded to 7. The widths depend on the batch's contact counts only; the
+    results are laid out at the widest count either way.
 
     Args:
         grasps: a sequence of :class:`~jaxgrasp.Grasp` (any contact counts: they are
@@ -110,12 +120,12 @@ def evaluate_batch(
             ... per device) that holds them, so batches of different sizes share
             compilations (:func:`~jaxgrasp.engine._plan.plan_chunks`).
         progress: ``progress(done, total)`` after each chunk (an object with a
-            ``start(plan)`` method is also told the chunk plan before the first).
-        on_chunk: ``on_chunk(start, stop, results)`` after each chunk (before
-            ``progress``): grasps ``start .. stop - 1`` and all before are done;
-            ``results`` maps each :class:`~jaxgrasp.Evaluation` field to a ``(B, ...)``
-            array whose first ``stop`` rows are final (the engine's own buffers: read,
-            never write).
+            ``start(plan)`` method is also told the plan before the first: a
+            :class:`~jaxgrasp.engine._plan.SegmentPlan`).
+        on_chunk: ``on_chunk(rows, results)`` after each chunk (before ``progress``):
+            ``rows`` the input indices of its grasps (segments by contact count finish
+            out of input order), ``results`` each :class:`~jaxgrasp.Evaluation` field for
+            them (leading axis ``len(rows)``, contacts laid out as in the result).
         devices: the devices each chunk is sharded over (default ``jax.devices()``,
             which after ``jax.distributed.initialize()`` spans every host).
 
@@ -129,46 +139,99 @@ def evaluate_batch(
     """
     check_chunk_size(chunk_size)  # before the grasps: nothing is validated for a bad call
     fields, errors = _batched_fields(grasps)
-    return _evaluate_fields(fields, errors, plan_chunks(len(errors), chunk_size, devices), options, progress, on_chunk)
+    return _evaluate_fields(fields, errors, chunk_size, devices, options, progress, on_chunk)
 
 
-def _evaluate_fields(fields: dict[str, np.ndarray], errors, plan: ChunkPlan, options: EvaluateOptions,
-                     progress, on_chunk, rows: np.ndarray | None = None) -> BatchResult:
-    """:func:`evaluate_batch` of validated fields (:func:`_batched_fields`) by ``plan``;
-    ``rows``: the rows of ``fields`` to evaluate, in order (default all), gathered a chunk
-    at a time."""
-    masked = "active" in fields
-    start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
-    fn, compile_seconds, settling = chunk_evaluator("batch", options, fields["positions"].shape[1], plan, masked)
-    invalid = np.flatnonzero([e is not None for e in errors])
-
-    def finished(start: int, stop: int, outs: dict[str, np.ndarray]) -> None:
-        mark_invalid(outs, invalid[(invalid >= start) & (invalid < stop)])
-        if on_chunk is not None:
-            on_chunk(start, stop, outs)
-
-    outs, run_seconds = run_chunks(
-        fn, lambda start: _chunk_of(fields, start, plan.chunk, rows), grasp_fields(masked), plan, progress, finished,
-        settling=settling,
-    )
-    shape = (plan.total, fields["positions"].shape[1])
-    active = np.ones(shape, dtype=bool) if "active" not in fields else (
-        fields["active"] if rows is None else fields["active"][rows])
-    return assemble([(np.arange(plan.total), outs)], plan.total, invalid, active, errors,
+def _evaluate_fields(fields: dict[str, np.ndarray], errors, chunk_size, devices, options: EvaluateOptions,
+                     progress, on_chunk, rows: np.ndarray | None = None, widths=None) -> BatchResult:
+    """:func:`evaluate_batch` of validated fields (:func:`_batched_fields`): the valid
+    ``rows`` (default every row whose error is ``None``) in segments by contact count
+    (:func:`~jaxgrasp.engine._plan.plan_segments`, by ``widths``, default
+    :func:`~jaxgrasp.engine._plan.plan_widths` of these rows' counts), each gathered a
+    chunk at a time. ``on_chunk(rows, results)`` after each chunk. The result has a row
+    for every row of ``fields``."""
+    total, n_contacts = fields["positions"].shape[:2]
+    rows = np.flatnonzero([e is None for e in errors]) if rows is None else rows
+    active = fields.get("active")
+    counts = np.full(rows.size, n_contacts) if active is None else active[rows].sum(axis=1)
+    if widths is None:
+        widths = plan_widths(dict(zip(*np.unique(counts, return_counts=True))), _platform(devices))
+    plan = plan_segments(counts, widths, chunk_size, devices)
+    outs, compile_seconds, run_seconds = _run_segments(fields, rows, plan, options, progress, on_chunk)
+    if rows.size != total:  # rows not evaluated (invalid): marked by assemble
+        outs = {f: _scattered(a, rows, total) for f, a in outs.items()}
+    invalid = np.setdiff1d(np.arange(total), rows)
+    full = np.ones((total, n_contacts), dtype=bool) if active is None else active
+    return assemble([(np.arange(total), outs)], total, invalid, full, errors,
                     compile_seconds=compile_seconds, run_seconds=run_seconds, devices=plan.n_devices)
 
 
-def _chunk_of(fields: Mapping[str, np.ndarray], start: int, chunk: int, rows: np.ndarray | None = None
-              ) -> dict[str, np.ndarray]:
+def _platform(devices) -> str:
+    return (jax.devices() if devices is None else list(devices))[0].platform
+
+
+def _scattered(a: np.ndarray, rows: np.ndarray, total: int) -> np.ndarray:
+    out = np.empty((total, *a.shape[1:]), dtype=a.dtype)
+    out[rows] = a
+    return out
+
+
+def _run_segments(fields: Mapping[str, np.ndarray], rows: np.ndarray, plan: SegmentPlan, options: EvaluateOptions,
+                  progress, on_chunk) -> tuple[dict[str, np.ndarray], float, float]:
+    """Evaluate the grasps ``rows`` of ``fields`` by ``plan``, segment after segment:
+    ``(results, compile seconds, run seconds)``, each :class:`~jaxgrasp.Evaluation` field
+    ``(len(rows), ...)`` in the order of ``rows``, at the width of ``fields``."""
+    n_contacts = fields["positions"].shape[1]
+    start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
+    outs: dict[str, np.ndarray] = {}
+    compile_seconds = run_seconds = 0.0
+    done = 0
+    for seg in plan.segments:
+        fn, seconds, settling = chunk_evaluator("batch", options, seg.width, seg.plan, seg.masked)
+        compile_seconds += seconds
+        picked = rows[seg.at]
+
+        def chunk_fields(start: int, seg=seg, picked=picked) -> dict[str, np.ndarray]:
+            chunk = _chunk_of(fields, start, seg.plan.chunk, picked, keep_padding_active=not seg.masked)
+            return narrow(chunk, contact_slots(chunk.get("active"), seg.width, seg.plan.chunk), seg.masked)
+
+        def finished(start: int, stop: int, res: Mapping[str, np.ndarray], seg=seg, picked=picked) -> None:
+            active = fields.get("active")
+            slots = contact_slots(None if active is None else active[picked[start:stop]], seg.width, stop - start)
+            wide = widen({f: a[start:stop] for f, a in res.items()}, slots, n_contacts)
+            for f, a in wide.items():
+                if f not in outs:
+                    outs[f] = np.empty((rows.size, *a.shape[1:]), dtype=a.dtype)
+                outs[f][seg.at[start:stop]] = a
+            if on_chunk is not None:
+                on_chunk(picked[start:stop], wide)
+
+        def reported(stop: int, _total: int, before=done) -> None:
+            if progress is not None:
+                progress(before + stop, plan.total)
+
+        _, seconds = run_chunks(fn, chunk_fields, grasp_fields(seg.masked), seg.plan, reported, finished,
+                                settling=settling)
+        run_seconds += seconds
+        done += seg.plan.total
+        if seg is not plan.segments[-1]:  # one program held at a time (the store keeps them all)
+            del fn, settling
+            release_chunk_evaluator("batch", options, seg.width, seg.plan, seg.masked)
+    return outs, compile_seconds, run_seconds
+
+
+def _chunk_of(fields: Mapping[str, np.ndarray], start: int, chunk: int, rows: np.ndarray | None = None,
+              keep_padding_active: bool = False) -> dict[str, np.ndarray]:
     """The fields of grasps ``start .. start + chunk - 1`` (of ``rows`` of ``fields``,
     default all), padded with the last grasp, its contacts inactive where there is a
-    mask, so that the padding solves nothing. Only the chunk is copied."""
+    mask (unless ``keep_padding_active``: a program without a mask evaluates the
+    repeats), so that the padding solves nothing. Only the chunk is copied."""
     total = fields["positions"].shape[0] if rows is None else len(rows)
     idx = np.arange(start, start + chunk)
     pick = np.minimum(idx, total - 1)
     pick = pick if rows is None else rows[pick]
     out = {k: v[pick] for k, v in fields.items()}
-    if "active" in out:
+    if "active" in out and not keep_padding_active:
         out["active"] = out["active"] & (idx < total)[:, None]
     return out
 
@@ -183,6 +246,7 @@ def evaluate_dataset(
     chunk_size: int | None = None,
     progress: Callable[[int, int], Any] | None = None,
     devices=None,
+    widths: Mapping[int, int] | None = None,
 ) -> tuple[BatchResult, BatchResult | None]:
     """Evaluate the valid grasps of ``dataset`` that are not ``done`` yet, and merge.
 
@@ -194,12 +258,15 @@ def evaluate_dataset(
         on_chunk_rows: ``on_chunk_rows(rows, results)`` after each chunk, with its input
             rows and their results (to keep them in a checkpoint,
             :meth:`~jaxgrasp.engine._checkpoint.BatchCheckpoint.keeper`).
-        options, chunk_size, progress, devices: as :func:`evaluate_batch`. Grasps are
-            padded to the dataset's largest contact count, so a resumed run compiles what
-            the first one did. Each chunk's grasps are gathered from the dataset's
-            columns (:class:`~jaxgrasp.io._dataset.GraspColumns`) when it runs: beyond
-            the columns, memory grows with the chunk and the results, not with a copy
-            of the set.
+        options, chunk_size, progress, devices: as :func:`evaluate_batch`. Each chunk's
+            grasps are gathered from the dataset's columns
+            (:class:`~jaxgrasp.io._dataset.GraspColumns`) when it runs: beyond the
+            columns, memory grows with the chunk and the results, not with a copy of
+            the set.
+        widths: the width each contact count runs at (default
+            :func:`~jaxgrasp.engine._plan.plan_widths` of the dataset's valid grasps'
+            counts, all of them, done or not: so a resumed run evaluates every grasp at
+            the width an uninterrupted one does, and compiles what it did).
 
     Returns:
         ``(every row, this run)``: the :class:`~jaxgrasp.BatchResult` of every row of the
@@ -212,14 +279,15 @@ def evaluate_dataset(
     parts = [(rows, results)] if rows.size else []
     run = None
     if todo.size:
-        check_chunk_size(chunk_size)
-        fields = _set_fields(dataset, todo)
-        keep = None if on_chunk_rows is None else (
-            lambda start, stop, res: on_chunk_rows(todo[start:stop], {f: a[start:stop] for f, a in res.items()})
-        )
-        run = _evaluate_fields(fields, (None,) * todo.size, plan_chunks(todo.size, chunk_size, devices), options,
-                               progress, keep, rows=todo)
-        parts.append((todo, {f: getattr(run, f) for f in FIELDS}))
+        fields = dict(columns.fields, active=columns.active)
+        if widths is None:
+            counts, n = np.unique(columns.counts[columns.valid], return_counts=True)
+            widths = plan_widths(dict(zip(counts.tolist(), n.tolist())), _platform(devices))
+        plan = plan_segments(columns.counts[todo], widths, chunk_size, devices)
+        outs, compile_seconds, run_seconds = _run_segments(fields, todo, plan, options, progress, on_chunk_rows)
+        run = assemble([(np.arange(todo.size), outs)], todo.size, [], columns.active[todo], (None,) * todo.size,
+                       compile_seconds=compile_seconds, run_seconds=run_seconds, devices=plan.n_devices)
+        parts.append((todo, outs))
     timings = {} if run is None else dict(
         compile_seconds=run.compile_seconds, run_seconds=run.run_seconds, devices=run.devices
     )

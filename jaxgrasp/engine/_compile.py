@@ -24,7 +24,7 @@ from jaxgrasp.engine._store import (
 )
 
 __all__ = ["MEMO_SIZE", "StoredFunction", "canonical_dtype", "clear_compiled", "compiled", "default_device",
-           "wait_for_saves"]
+           "forget", "wait_for_saves"]
 
 
 MEMO_SIZE = 16
@@ -298,6 +298,13 @@ def default_device():
 def _devices(devices: Sequence | None) -> list:
     """``devices``, or ``[default_device()]``."""
     return list(devices) if devices else [default_device()]
+
+
+def forget(key: Hashable) -> None:
+    """Drop the executable of ``key`` from this process's memo: its memory (tens of MiB
+    for a batch evaluator) is freed once nothing else holds it; the next build loads it
+    from the store, or compiles it where the store is off."""
+    _MEMO.pop(key, None)
 
 
 def clear_compiled() -> None:

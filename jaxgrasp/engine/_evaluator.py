@@ -18,7 +18,8 @@ from jaxgrasp.model._fields import NAMES
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
 
-__all__ = ["SETTLE_INLINE", "grasp_fields", "over_devices", "compiled_evaluator", "chunk_evaluator"]
+__all__ = ["SETTLE_INLINE", "grasp_fields", "over_devices", "compiled_evaluator", "chunk_evaluator",
+           "release_chunk_evaluator"]
 
 SETTLE_INLINE = {"evaluate": False, "sweep": False, "batch": True}
 """The settling policy, by entry point (:func:`jaxgrasp.evaluate`, :func:`jaxgrasp.sweep`,
@@ -97,7 +98,7 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
     x64 = jax.config.jax_enable_x64
     sharding = batch_sharding(devices)
     return _compile.compiled(
-        ("sweep", options, n_contacts, chunk, x64, tuple(d.id for d in devices), masked, settle),
+        _memo_key(options, n_contacts, chunk, devices, masked, settle),
         lambda: _staged(options, sharding, masked, settle),
         _chunk_spec(n_contacts, chunk, sharding, masked),
         name="sweep_settled" if settle else "sweep",
@@ -106,6 +107,11 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
         devices=list(sharding.mesh.devices.flat),
         n_outputs=len(RESULT_FIELDS),
     )
+
+
+def _memo_key(options: EvaluateOptions, n_contacts: int, chunk: int, devices: tuple, masked: bool, settle: bool):
+    return ("sweep", options, n_contacts, chunk, jax.config.jax_enable_x64, tuple(d.id for d in devices), masked,
+            settle)
 
 
 def chunk_evaluator(entry: str, options: EvaluateOptions, n_contacts: int, plan: ChunkPlan, masked: bool):
@@ -122,3 +128,14 @@ def chunk_evaluator(entry: str, options: EvaluateOptions, n_contacts: int, plan:
         return fn, seconds, None
     size = plan.n_devices
     return fn, seconds, (lambda: compiled_evaluator(options, n_contacts, size, plan.devices, masked)[0], size)
+
+
+def release_chunk_evaluator(entry: str, options: EvaluateOptions, n_contacts: int, plan: ChunkPlan,
+                            masked: bool) -> None:
+    """Forget what :func:`chunk_evaluator` gave for these arguments in this process
+    (:func:`~jaxgrasp.engine._compile.forget`): a batch in segments by contact count
+    holds one program at a time, not one per segment."""
+    inline = SETTLE_INLINE[entry]
+    _compile.forget(_memo_key(options, n_contacts, plan.chunk, plan.devices, masked, inline))
+    if not inline:
+        _compile.forget(_memo_key(options, n_contacts, plan.n_devices, plan.devices, masked, True))

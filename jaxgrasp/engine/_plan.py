@@ -5,6 +5,10 @@ Every batch of jaxgrasp (:func:`jaxgrasp.evaluate_batch`, :func:`jaxgrasp.sweep`
 is a bucket (:func:`bucket_size`), so that sets and grids of different sizes share a few
 compilations, at the price of padding lanes; the last chunk is padded to the same size.
 Memory is bounded by the chunk size.
+
+A batch of mixed contact counts is cut first into segments by count
+(:func:`plan_segments`): each segment runs at its own width where that saves more than
+its compilation costs (:func:`plan_widths`), and is then cut into chunks.
 """
 
 from __future__ import annotations
@@ -31,6 +35,13 @@ __all__ = [
     "ACCELERATOR_CHUNK_SIZE",
     "MIN_AUTO_CHUNK",
     "AUTO_CHUNKS",
+    "Segment",
+    "SegmentPlan",
+    "plan_segments",
+    "plan_widths",
+    "grasp_cpu_seconds",
+    "COMPILE_CPU_SECONDS",
+    "WIDTH_PLATFORMS",
 ]
 
 BUCKET_BASE = 4
@@ -145,3 +156,146 @@ def plan_chunks(total: int, chunk_size: int | None = None, devices=None, *, auto
     if auto and chunk_size is None:
         chunk = bucket_size(chunk, max(MIN_AUTO_CHUNK * len(devices), math.ceil(total / AUTO_CHUNKS)))
     return ChunkPlan(int(total), bucket_size(chunk, total, len(devices)), devices)
+
+
+# ------------------------------------------------------------------ segments by contact count
+
+COMPILE_CPU_SECONDS = 20.0
+"""CPU seconds one compilation of the batch evaluator costs, at any contact count: 11-15 s
+of wall time on two cores, part of it in two threads (``experiments/batch_benchmark.log``,
+per-count rows; ``experiments/segment_plan.log``). What a segment of its own must save
+(:func:`plan_widths`)."""
+
+WIDTH_PLATFORMS = ("cpu",)
+"""Platforms where :func:`plan_widths` gives a contact count a narrower program than the
+batch's widest. On a CPU a padded contact costs its share of every solver step
+(``experiments/padding_tax.log``); the saving on an accelerator, where the lanes of a
+step run side by side, has not been measured, so there every count runs at the widest."""
+
+
+def grasp_cpu_seconds(count: int, width: int) -> float:
+    """Estimated CPU seconds of evaluating one grasp of ``count`` contacts in a program of
+    ``width >= count`` contacts: ``(12 + 1.1 count) ms * (width**2 + 43) / 92``, fitted to
+    ``experiments/padding_tax.log`` (a random set's grasps of 2-7 contacts at their own
+    width and padded to 7; within 8 %). The first factor is the grasp's work at
+    width 7 (its 1 + 2 count programs share a work queue, so it grows slowly with the
+    count), the second what a solver step costs at ``width`` against width 7."""
+    return (0.012 + 0.0011 * count) * (width**2 + 43) / 92
+
+
+def plan_widths(counts, platform: str = "cpu") -> dict[int, int]:
+    """The width (contacts of the compiled program) each contact count of a batch runs at:
+    ``{count: width}``, ``width >= count``, the largest count at its own.
+
+    ``counts`` maps each contact count to its number of grasps (``{2: 5000, 7: 300}``).
+    Counts are grouped into runs of neighbours, each group run at its largest count,
+    so as to spend the least estimated CPU time: each group one compilation
+    (:data:`COMPILE_CPU_SECONDS`) and its grasps' evaluation (:func:`grasp_cpu_seconds`);
+    a tie goes to fewer groups. So a few hundred grasps of a count share the widest
+    program and tens of thousands get their own. On a platform not in
+    :data:`WIDTH_PLATFORMS`, every count runs at the widest.
+
+    The widths depend only on ``counts`` and ``platform``, so a run resumed, or split
+    over processes, evaluates every grasp at the width a single run does (a grasp's
+    value can differ with the width by rounding: within 1.2e-11 of its equilibrium
+    energy, no status changed, on 22,000 grasps in ``experiments/segment_plan.log``).
+    """
+    have = sorted(int(c) for c, n in dict(counts).items() if n > 0 and c > 0)
+    if not have:
+        return {}
+    if platform not in WIDTH_PLATFORMS:
+        return {c: have[-1] for c in have}
+    n = [int(dict(counts)[c]) for c in have]
+    # best[j]: least cost of the counts have[:j], groups ending at a count; cut[j]: where its last group starts
+    best, cut = [0.0] + [math.inf] * len(have), [0] * (len(have) + 1)
+    for j in range(1, len(have) + 1):
+        width = have[j - 1]
+        for i in range(j):  # group have[i:j] at width; strict <: ties keep the fewer, wider groups
+            cost = best[i] + COMPILE_CPU_SECONDS + sum(n[m] * grasp_cpu_seconds(have[m], width) for m in range(i, j))
+            if cost < best[j]:
+                best[j], cut[j] = cost, i
+    widths, j = {}, len(have)
+    while j:
+        widths.update({c: have[j - 1] for c in have[cut[j] : j]})
+        j = cut[j]
+    return widths
+
+
+@dataclasses.dataclass(frozen=True)
+class Segment:
+    """The grasps of a batch that run in one program.
+
+    Attributes:
+        width: contacts of the program (the segment's largest count).
+        counts: the contact counts it holds.
+        masked: whether the program takes a contact mask (``counts`` holds more than
+            ``width``: the smaller counts' grasps are padded to ``width``).
+        at: ``(n,)`` positions of its grasps among the batch's rows to evaluate, in order.
+        plan: its :class:`ChunkPlan`.
+    """
+
+    width: int
+    counts: tuple[int, ...]
+    masked: bool
+    at: np.ndarray
+    plan: ChunkPlan
+
+
+@dataclasses.dataclass(frozen=True)
+class SegmentPlan:
+    """A batch's grasps in :class:`Segment` s, one per width, each cut into chunks.
+
+    ``total``, ``chunk`` (the largest), ``n_chunks`` (of every segment), ``devices`` and
+    ``n_devices`` read as a :class:`ChunkPlan` 's (a progress report's ``start(plan)``
+    takes either)."""
+
+    segments: tuple[Segment, ...]
+    devices: tuple
+
+    @property
+    def total(self) -> int:
+        return sum(s.plan.total for s in self.segments)
+
+    @property
+    def chunk(self) -> int:
+        return max((s.plan.chunk for s in self.segments), default=1)
+
+    @property
+    def n_chunks(self) -> int:
+        return sum(s.plan.n_chunks for s in self.segments)
+
+    @property
+    def n_devices(self) -> int:
+        return len(self.devices)
+
+    def describe(self) -> str:
+        """The segments in words: ``2-3 contacts at 3: 5000 grasps; 7 at 7: 300 grasps``."""
+        return "; ".join(
+            f"{s.counts[0]}{'-' + str(s.counts[-1]) if len(s.counts) > 1 else ''} contacts at width {s.width}: "
+            f"{s.plan.total} grasps" for s in self.segments
+        )
+
+
+def plan_segments(counts: np.ndarray, widths, chunk_size: int | None = None, devices=None) -> SegmentPlan:
+    """The segments of the grasps whose contact counts are ``counts`` ``(n,)`` (each > 0),
+    by ``widths`` (:func:`plan_widths`, of these counts or of a whole set they belong to),
+    widest first, each cut by :func:`plan_chunks` (``chunk_size``, ``devices``).
+
+    Raises:
+        GraspValueError: ``chunk_size`` is not a positive integer, or there is no device.
+        ValueError: a count that ``widths`` has no width for.
+    """
+    check_chunk_size(chunk_size)
+    devices = tuple(jax.devices() if devices is None else devices)
+    counts = np.asarray(counts, dtype=np.int64)
+    missing = sorted(set(np.unique(counts).tolist()) - set(widths))
+    if missing:
+        raise ValueError(f"no width planned for contact counts {missing}")
+    width_of = np.array([widths[int(c)] for c in counts], dtype=np.int64) if counts.size else counts
+    segments = []
+    for width in sorted(set(widths.values()), reverse=True):
+        at = np.flatnonzero(width_of == width)
+        if at.size:
+            held = tuple(sorted(c for c, w in widths.items() if w == width))
+            segments.append(Segment(int(width), held, len(held) > 1, at, plan_chunks(at.size, chunk_size, devices)))
+    return SegmentPlan(tuple(segments), devices)
