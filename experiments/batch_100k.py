@@ -168,13 +168,22 @@ def read_results(path: Path) -> list[dict]:
 
 
 def check_rows(data: Path, rows: list[dict], k: int, seed: int, fh) -> None:
-    """Evaluate ``k`` random rows again in this process: statuses equal, values to 1e-12."""
+    """Evaluate ``k`` random rows again in this process, each contact count at the width
+    the command planned for the whole set: statuses equal, values to 1e-9."""
     import jaxgrasp
     from jaxgrasp.io import load_dataset
 
+    from jaxgrasp.engine import plan_widths
+    from jaxgrasp.engine._batch import evaluate_dataset
+
     gset = load_dataset(data)
     pick = np.sort(np.random.default_rng(seed + 1).choice(len(rows), size=min(k, len(rows)), replace=False))
-    ev = jaxgrasp.evaluate_batch([gset.grasps[int(i)] for i in pick])
+    # each row at the width the command gave its contact count (planned from the whole set)
+    counts, n = np.unique(gset.num_contacts[gset.valid], return_counts=True)
+    widths = plan_widths(dict(zip(counts.tolist(), n.tolist())))
+    sample = jaxgrasp.GraspSet(grasps=tuple(gset.grasps[int(i)] for i in pick), errors=(None,) * len(pick),
+                               source=str(data))
+    ev, _ = evaluate_dataset(sample, widths=widths)
     value_key = next(c for c in rows[0] if c.startswith("value"))
     worst, mismatched = 0.0, 0
     for j, i in enumerate(pick):

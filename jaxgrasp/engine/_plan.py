@@ -160,11 +160,11 @@ def plan_chunks(total: int, chunk_size: int | None = None, devices=None, *, auto
 
 # ------------------------------------------------------------------ segments by contact count
 
-COMPILE_CPU_SECONDS = 20.0
-"""CPU seconds one compilation of the batch evaluator costs, at any contact count: 11-15 s
-of wall time on two cores, part of it in two threads (``experiments/batch_benchmark.log``,
-per-count rows; ``experiments/segment_plan.log``). What a segment of its own must save
-(:func:`plan_widths`)."""
+COMPILE_CPU_SECONDS = 30.0
+"""What one compilation of the batch evaluator costs, in CPU seconds of evaluation: it
+takes 12-16 s of wall time on two cores, mostly on one of them, while the evaluation would
+keep both busy (``experiments/segment_plan.log``). What a program of a count's own must
+save (:func:`plan_widths`)."""
 
 WIDTH_PLATFORMS = ("cpu",)
 """Platforms where :func:`plan_widths` gives a contact count a narrower program than the
@@ -185,14 +185,16 @@ def grasp_cpu_seconds(count: int, width: int) -> float:
 
 def plan_widths(counts, platform: str = "cpu") -> dict[int, int]:
     """The width (contacts of the compiled program) each contact count of a batch runs at:
-    ``{count: width}``, ``width >= count``, the largest count at its own.
+    ``{count: width}``, either the count's own or the batch's largest count.
 
-    ``counts`` maps each contact count to its number of grasps (``{2: 5000, 7: 300}``).
-    Counts are grouped into runs of neighbours, each group run at its largest count,
-    so as to spend the least estimated CPU time: each group one compilation
-    (:data:`COMPILE_CPU_SECONDS`) and its grasps' evaluation (:func:`grasp_cpu_seconds`);
-    a tie goes to fewer groups. So a few hundred grasps of a count share the widest
-    program and tens of thousands get their own. On a platform not in
+    ``counts`` maps each contact count to its number of grasps (``{2: 5000, 7: 300}``). A
+    count gets a program of its own where its grasps save more CPU time there than a
+    compilation costs (:data:`COMPILE_CPU_SECONDS`; the grasps' cost
+    :func:`grasp_cpu_seconds`): on a CPU from about 4300 grasps of 2 contacts in a set of
+    7, 11,400 of 6 contacts. The others are padded to the largest count, in one program
+    with a contact mask. (A program for a group of counts, padded to the group's largest,
+    would need a mask too: masked programs cost more per step, and such a group saved
+    half of what the cost model said, ``experiments/FINDINGS.md``.) On a platform not in
     :data:`WIDTH_PLATFORMS`, every count runs at the widest.
 
     The widths depend only on ``counts`` and ``platform``, so a run resumed, or split
@@ -203,22 +205,12 @@ def plan_widths(counts, platform: str = "cpu") -> dict[int, int]:
     have = sorted(int(c) for c, n in dict(counts).items() if n > 0 and c > 0)
     if not have:
         return {}
+    widest = have[-1]
     if platform not in WIDTH_PLATFORMS:
-        return {c: have[-1] for c in have}
-    n = [int(dict(counts)[c]) for c in have]
-    # best[j]: least cost of the counts have[:j], groups ending at a count; cut[j]: where its last group starts
-    best, cut = [0.0] + [math.inf] * len(have), [0] * (len(have) + 1)
-    for j in range(1, len(have) + 1):
-        width = have[j - 1]
-        for i in range(j):  # group have[i:j] at width; strict <: ties keep the fewer, wider groups
-            cost = best[i] + COMPILE_CPU_SECONDS + sum(n[m] * grasp_cpu_seconds(have[m], width) for m in range(i, j))
-            if cost < best[j]:
-                best[j], cut[j] = cost, i
-    widths, j = {}, len(have)
-    while j:
-        widths.update({c: have[j - 1] for c in have[cut[j] : j]})
-        j = cut[j]
-    return widths
+        return {c: widest for c in have}
+    n = {int(c): int(k) for c, k in dict(counts).items()}
+    return {c: c if n[c] * (grasp_cpu_seconds(c, widest) - grasp_cpu_seconds(c, c)) > COMPILE_CPU_SECONDS
+            else widest for c in have}
 
 
 @dataclasses.dataclass(frozen=True)
