@@ -161,24 +161,24 @@ def plan_chunks(total: int, chunk_size: int | None = None, devices=None, *, auto
 # ------------------------------------------------------------------ segments by contact count
 
 COMPILE_CPU_SECONDS = 30.0
-"""What one compilation of the batch evaluator costs, in CPU seconds of evaluation: it
-takes 12-16 s of wall time on two cores, mostly on one of them, while the evaluation would
-keep both busy (``experiments/segment_plan.log``). What a program of a count's own must
-save (:func:`plan_widths`)."""
+"""What one compilation of the batch evaluator costs, in CPU seconds of evaluation
+forgone: its wall time, spent mostly on one core, on a two-core machine that the
+evaluation keeps busy (the docs' Benchmarks page, "Datasets", has the measurements).
+What a program of a count's own must save (:func:`plan_widths`)."""
 
 WIDTH_PLATFORMS = ("cpu",)
 """Platforms where :func:`plan_widths` gives a contact count a narrower program than the
-batch's widest. On a CPU a padded contact costs its share of every solver step
-(``experiments/padding_tax.log``); the saving on an accelerator, where the lanes of a
-step run side by side, has not been measured, so there every count runs at the widest."""
+batch's widest. On a CPU a padded contact costs its share of every solver step; the
+saving on an accelerator, where the lanes of a step run side by side, has not been
+measured, so there every count runs at the widest."""
 
 
 def grasp_cpu_seconds(count: int, width: int) -> float:
     """Estimated CPU seconds of evaluating one grasp of ``count`` contacts in a program of
-    ``width >= count`` contacts: ``(12 + 1.1 count) ms * (width**2 + 43) / 92``, fitted to
-    ``experiments/padding_tax.log`` (a random set's grasps of 2-7 contacts at their own
-    width and padded to 7; within 8 %). The first factor is the grasp's work at
-    width 7 (its 1 + 2 count programs share a work queue, so it grows slowly with the
+    ``width >= count`` contacts: ``(0.012 + 0.0011 count) * (width**2 + 43) / 92``,
+    fitted to a random set's grasps of 2-7 contacts at their own width and padded to 7 on
+    two CPU cores (``experiments/padding_tax.py``). The first factor is the grasp's work
+    at width 7 (its 1 + 2 count programs share a work queue, so it grows slowly with the
     count), the second what a solver step costs at ``width`` against width 7."""
     return (0.012 + 0.0011 * count) * (width**2 + 43) / 92
 
@@ -190,17 +190,17 @@ def plan_widths(counts, platform: str = "cpu") -> dict[int, int]:
     ``counts`` maps each contact count to its number of grasps (``{2: 5000, 7: 300}``). A
     count gets a program of its own where its grasps save more CPU time there than a
     compilation costs (:data:`COMPILE_CPU_SECONDS`; the grasps' cost
-    :func:`grasp_cpu_seconds`): on a CPU from about 4300 grasps of 2 contacts in a set of
-    7, 11,400 of 6 contacts. The others are padded to the largest count, in one program
-    with a contact mask. (A program for a group of counts, padded to the group's largest,
-    would need a mask too: masked programs cost more per step, and such a group saved
-    half of what the cost model said, ``experiments/FINDINGS.md``.) On a platform not in
+    :func:`grasp_cpu_seconds`): by this model, from about 4300 grasps of 2 contacts in a
+    set of 7, 11,400 of 6 contacts. The others are padded to the largest count, in one
+    program with a contact mask. (A program for a group of counts, padded to the group's
+    largest, would need a mask too: masked programs cost more per step, which the model
+    does not know; ``experiments/FINDINGS.md``.) On a platform not in
     :data:`WIDTH_PLATFORMS`, every count runs at the widest.
 
     The widths depend only on ``counts`` and ``platform``, so a run resumed, or split
     over processes, evaluates every grasp at the width a single run does (a grasp's
-    value can differ with the width by rounding: within 1.2e-11 of its equilibrium
-    energy, no status changed, on 22,000 grasps in ``experiments/segment_plan.log``).
+    value can differ with the width by rounding, relative to its equilibrium energy;
+    ``experiments/segment_plan.py`` compares the two).
     """
     have = sorted(int(c) for c, n in dict(counts).items() if n > 0 and c > 0)
     if not have:

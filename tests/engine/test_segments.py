@@ -2,8 +2,8 @@
 width of their own where that pays for a compilation (``plan_widths``), results laid out
 at the batch's widest count as the padded program lays them out.
 
-The plan is checked against every partition of the counts (it must be the cheapest by
-its own cost model) and for its platform and tie rules. The evaluation runs the five
+The plan is checked against every choice of own or widest width per count (it must be
+the cheapest by its own cost model) and for its platform rule. The evaluation runs the five
 grasps of ``tests/engine/test_batch.py`` and a 2-contact grasp padded to 4 with its
 contacts in slots 1 and 3, with the widths ``{2: 2, 3: 4, 4: 4}`` forced: the 3- and
 4-contact grasps in that module's program (4 contacts, masked, chunks of 2), the
@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import itertools
 import json
-from pathlib import Path
 
 import jax
 import numpy as np
@@ -36,8 +35,8 @@ from jaxgrasp.engine._plan import (
 from jaxgrasp.model._fields import FIELDS as GRASP_FIELDS
 from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.tolerance._result import FIELDS
+from test_batch import _grasps as batch_grasps
 
-ROOT = Path(__file__).resolve().parents[2]
 FORCED = {2: 2, 3: 4, 4: 4}
 CODES = ("status", "limiting_kind", "limiting_contact", "boundary_status", "equilibrium_status", "steps")
 
@@ -99,14 +98,10 @@ def test_segments_hold_every_grasp_once_widest_first():
 
 
 def _grasps():
-    return [
-        jaxgrasp.presets.cube(young_modulus=6e5, initial_deformation=0.002),
-        jaxgrasp.presets.prism(mass=0.1),
-        jaxgrasp.load(ROOT / "examples" / "four_finger.json"),
-        jaxgrasp.presets.cube(young_modulus=1e6, initial_deformation=4.5e-3),  # infeasible
-        jaxgrasp.presets.cube(young_modulus=8e5, initial_deformation=0.002, mass=0.05),  # slots 1 and 3; sags
-        jaxgrasp.presets.cube(young_modulus=1e6, initial_deformation=0.002),
-    ]
+    """``tests/engine/test_batch.py``'s five grasps (2, 3, 4, 2 infeasible, 2 contacts) with
+    a sagging cube as grasp 4."""
+    grasps = batch_grasps()
+    return grasps[:4] + [jaxgrasp.presets.cube(young_modulus=8e5, initial_deformation=0.002, mass=0.05)] + grasps[4:]
 
 
 def _batch() -> Grasp:
