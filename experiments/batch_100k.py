@@ -174,13 +174,13 @@ def check_rows(data: Path, rows: list[dict], k: int, seed: int, fh) -> None:
     from jaxgrasp.io import load_dataset
 
     from jaxgrasp.engine import plan_widths
+    from jaxgrasp.engine._plan import grasps_by_count
     from jaxgrasp.engine._batch import evaluate_dataset
 
     gset = load_dataset(data)
     pick = np.sort(np.random.default_rng(seed + 1).choice(len(rows), size=min(k, len(rows)), replace=False))
     # each row at the width the command gave its contact count (planned from the whole set)
-    counts, n = np.unique(gset.num_contacts[gset.valid], return_counts=True)
-    widths = plan_widths(dict(zip(counts.tolist(), n.tolist())))
+    widths = plan_widths(grasps_by_count(gset.num_contacts))
     sample = jaxgrasp.GraspSet(grasps=tuple(gset.grasps[int(i)] for i in pick), errors=(None,) * len(pick),
                                source=str(data))
     ev, _ = evaluate_dataset(sample, widths=widths)

@@ -66,11 +66,12 @@ def run_mode(args) -> None:
     the statuses and values to ``--save``."""
     import jaxgrasp
     from jaxgrasp.engine import _batch
+    from jaxgrasp.engine._plan import grasps_by_count
 
     grasps = make_set(args.set, args)
     if args.mode == "padded":
         _batch.plan_widths = lambda counts, platform: {c: max(counts) for c in counts}
-    widths = _batch.plan_widths(dict(zip(*np.unique([g.num_contacts for g in grasps], return_counts=True))), "cpu")
+    widths = _batch.plan_widths(grasps_by_count([g.num_contacts for g in grasps]), "cpu")
     cpu0, t0 = time.process_time(), time.perf_counter()
     res = jaxgrasp.evaluate_batch(grasps)
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0

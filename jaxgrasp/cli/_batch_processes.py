@@ -31,6 +31,7 @@ import numpy as np
 from jaxgrasp.cli._common import UsageError, check_out, lock_out
 from jaxgrasp.engine._batch_result import BatchResult, mark_invalid
 from jaxgrasp.engine._hosts import exchange, pack, parse_coordinator, unpack
+from jaxgrasp.engine._plan import grasps_by_count
 from jaxgrasp.io._dataset import load_share, share_rows
 from jaxgrasp.tolerance._result import FIELDS, Evaluation
 
@@ -121,9 +122,9 @@ def agree_on_inputs(opened, failure: BaseException | None) -> tuple[int, dict[in
     facts = {"failure": None if failure is None else str(failure)}
     if opened is not None:
         share, total = opened
-        counts, n = np.unique(share.num_contacts[share.valid], return_counts=True)
+        counts = {str(c): n for c, n in grasps_by_count(share.num_contacts).items()}  # JSON: keys are text
         facts.update(contacts=int(share.num_contacts.max(initial=0)), valid=int(share.valid.sum()), total=total,
-                     sha256=share.source_sha256, counts=dict(zip(map(str, counts.tolist()), n.tolist())))
+                     sha256=share.source_sha256, counts=counts)
     every = [json.loads(b) for b in exchange(json.dumps(facts).encode())]
     _raise_first([f["failure"] for f in every], failure)
     if len({(f["total"], f["sha256"]) for f in every}) > 1:

@@ -27,7 +27,14 @@ import numpy as np
 
 from jaxgrasp.engine._batch_result import BatchResult, assemble
 from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields, release_chunk_evaluator
-from jaxgrasp.engine._plan import ChunkPlan, SegmentPlan, check_chunk_size, plan_segments, plan_widths
+from jaxgrasp.engine._plan import (
+    ChunkPlan,
+    SegmentPlan,
+    check_chunk_size,
+    grasps_by_count,
+    plan_segments,
+    plan_widths,
+)
 from jaxgrasp.engine._run import run_chunks
 from jaxgrasp.engine._widths import contact_slots, narrow, widen
 from jaxgrasp.io._dataset import GraspSet
@@ -155,7 +162,7 @@ def _evaluate_fields(fields: dict[str, np.ndarray], errors, chunk_size, devices,
     active = fields.get("active")
     counts = np.full(rows.size, n_contacts) if active is None else active[rows].sum(axis=1)
     if widths is None:
-        widths = plan_widths(dict(zip(*np.unique(counts, return_counts=True))), _platform(devices))
+        widths = plan_widths(grasps_by_count(counts), _platform(devices))
     plan = plan_segments(counts, widths, chunk_size, devices)
     outs, compile_seconds, run_seconds = _run_segments(fields, rows, plan, options, progress, on_chunk)
     if rows.size != total:  # rows not evaluated (invalid): marked by assemble
@@ -191,13 +198,16 @@ def _run_segments(fields: Mapping[str, np.ndarray], rows: np.ndarray, plan: Segm
         compile_seconds += seconds
         picked = rows[seg.at]
 
-        def chunk_fields(start: int, seg=seg, picked=picked) -> dict[str, np.ndarray]:
-            chunk = _chunk_of(fields, start, seg.plan.chunk, picked, keep_padding_active=not seg.masked)
-            return narrow(chunk, contact_slots(chunk.get("active"), seg.width, seg.plan.chunk), seg.masked)
+        slots_of: dict[int, np.ndarray] = {}  # each chunk's contact slots, from its gathering to its results
 
-        def finished(start: int, stop: int, res: Mapping[str, np.ndarray], seg=seg, picked=picked) -> None:
-            active = fields.get("active")
-            slots = contact_slots(None if active is None else active[picked[start:stop]], seg.width, stop - start)
+        def chunk_fields(start: int, seg=seg, picked=picked, slots_of=slots_of) -> dict[str, np.ndarray]:
+            chunk = _chunk_of(fields, start, seg.plan.chunk, picked, keep_padding_active=not seg.masked)
+            slots_of[start] = contact_slots(chunk.get("active"), seg.width, seg.plan.chunk)
+            return narrow(chunk, slots_of[start], seg.masked)
+
+        def finished(start: int, stop: int, res: Mapping[str, np.ndarray], seg=seg, picked=picked,
+                     slots_of=slots_of) -> None:
+            slots = slots_of.pop(start)[: stop - start]
             wide = widen({f: a[start:stop] for f, a in res.items()}, slots, n_contacts)
             for f, a in wide.items():
                 if f not in outs:
@@ -281,8 +291,7 @@ def evaluate_dataset(
     if todo.size:
         fields = dict(columns.fields, active=columns.active)
         if widths is None:
-            counts, n = np.unique(columns.counts[columns.valid], return_counts=True)
-            widths = plan_widths(dict(zip(counts.tolist(), n.tolist())), _platform(devices))
+            widths = plan_widths(grasps_by_count(columns.counts), _platform(devices))
         plan = plan_segments(columns.counts[todo], widths, chunk_size, devices)
         outs, compile_seconds, run_seconds = _run_segments(fields, todo, plan, options, progress, on_chunk_rows)
         run = assemble([(np.arange(todo.size), outs)], todo.size, [], columns.active[todo], (None,) * todo.size,

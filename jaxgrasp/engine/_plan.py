@@ -39,6 +39,7 @@ __all__ = [
     "SegmentPlan",
     "plan_segments",
     "plan_widths",
+    "grasps_by_count",
     "grasp_cpu_seconds",
     "COMPILE_CPU_SECONDS",
     "WIDTH_PLATFORMS",
@@ -181,6 +182,13 @@ def grasp_cpu_seconds(count: int, width: int) -> float:
     at width 7 (its 1 + 2 count programs share a work queue, so it grows slowly with the
     count), the second what a solver step costs at ``width`` against width 7."""
     return (0.012 + 0.0011 * count) * (width**2 + 43) / 92
+
+
+def grasps_by_count(counts) -> dict[int, int]:
+    """``{count: grasps}`` of the contact counts ``counts`` ``(B,)``, what
+    :func:`plan_widths` takes (0, an invalid grasp's count, left out)."""
+    values, n = np.unique(np.asarray(counts, dtype=np.int64), return_counts=True)
+    return {int(c): int(k) for c, k in zip(values, n) if c > 0}
 
 
 def plan_widths(counts, platform: str = "cpu") -> dict[int, int]:
