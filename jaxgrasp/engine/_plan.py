@@ -228,8 +228,8 @@ class Segment:
     Attributes:
         width: contacts of the program (the segment's largest count).
         counts: the contact counts it holds.
-        masked: whether the program takes a contact mask (``counts`` holds more than
-            ``width``: the smaller counts' grasps are padded to ``width``).
+        masked: whether the program takes a contact mask (``counts`` holds more than one
+            count: the smaller counts' grasps are padded to ``width``).
         at: ``(n,)`` positions of its grasps among the batch's rows to evaluate, in order.
         plan: its :class:`ChunkPlan`.
     """
@@ -269,7 +269,8 @@ class SegmentPlan:
         return len(self.devices)
 
     def describe(self) -> str:
-        """The segments in words: ``2-3 contacts at 3: 5000 grasps; 7 at 7: 300 grasps``."""
+        """The segments in words, e.g. ``7 contacts at width 7: 300 grasps; 2-3 contacts at
+        width 3: 5000 grasps``."""
         return "; ".join(
             f"{s.counts[0]}{'-' + str(s.counts[-1]) if len(s.counts) > 1 else ''} contacts at width {s.width}: "
             f"{s.plan.total} grasps" for s in self.segments
@@ -291,7 +292,9 @@ def plan_segments(counts: np.ndarray, widths, chunk_size: int | None = None, dev
     missing = sorted(set(np.unique(counts).tolist()) - set(widths))
     if missing:
         raise ValueError(f"no width planned for contact counts {missing}")
-    width_of = np.array([widths[int(c)] for c in counts], dtype=np.int64) if counts.size else counts
+    lookup = np.zeros(max(widths, default=0) + 1, dtype=np.int64)
+    lookup[list(widths)] = list(widths.values())
+    width_of = lookup[counts]
     segments = []
     for width in sorted(set(widths.values()), reverse=True):
         at = np.flatnonzero(width_of == width)

@@ -51,7 +51,7 @@ def widen(results: Mapping[str, np.ndarray], slots: np.ndarray, n_contacts: int)
     b, width = slots.shape
     if width == n_contacts and np.array_equal(slots, np.broadcast_to(np.arange(width), slots.shape)):
         return dict(results)
-    out = {k: v for k, v in results.items()}
+    out = dict(results)
     rows = np.arange(b)[:, None]
 
     def per_contact(name, fill):
