@@ -17,7 +17,10 @@ Logged: the grasps done and RSS at every tenth of the set, the peak RSS of each 
 phase, so compiling is apart), and the slope of RSS against grasps done over the steady
 part of the resumed phase (MiB per 10,000 grasps: memory flat in the number of grasps
 means a slope near the bytes of the result arrays each grasp adds, which the command holds
-until it writes them). Afterwards ``results.csv`` must hold every row once, in input
+until it writes them). Where the engine runs the set as several programs by contact count
+(``jaxgrasp.engine.plan_widths``), the RSS while each ran and its slope: a program is
+compiled in its first chunk, so memory may step there (bounded by the number of
+programs); within a program it should be flat. Afterwards ``results.csv`` must hold every row once, in input
 order; ``--check K`` rows drawn at random are evaluated again in this process with
 ``jaxgrasp.evaluate_batch`` and must give the same statuses and values (rows from both
 phases, so the resume is checked too).
@@ -48,6 +51,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 PER_CONTACT = ("initial_deformation", "radius", "young_modulus", "friction", "max_force")
 PROGRESS = re.compile(r"chunk (\d+)/(\d+) \((\d+)/(\d+) grasps\)")
 RESUMING = re.compile(r"resuming: (\d+) of")
+PROGRAMS = re.compile(r"programs by contact count \((.*?); the first chunk")
+SEGMENT = re.compile(r"^(\d+)(?:-(\d+))? contacts at width (\d+): (\d+) grasps$")
 
 
 def log_line(fh, text: str) -> None:
@@ -101,6 +106,7 @@ class Phase:
         self.argv, self.dt, self.stop_at = argv, dt, stop_at
         self.done, self.samples, self.progress, self.peak = 0, [], [], float("nan")
         self.base = 0  # grasps a resumed run found finished (its progress counts the rest)
+        self.segments: list[tuple[str, int, int]] = []  # (program, first done, last done), grasps done
         self.stderr_tail: list[str] = []
 
     def _read(self, proc) -> None:
@@ -109,6 +115,16 @@ class Phase:
             r = RESUMING.search(line)
             if r:
                 self.base = self.done = int(r.group(1))
+            g = PROGRAMS.search(line)
+            if g:  # the engine's programs, in the order it runs them
+                at = self.base
+                for part in g.group(1).split("; "):
+                    seg = SEGMENT.match(part)
+                    if seg:
+                        lo, hi, width, n = seg.groups()
+                        name = f"{lo}{'-' + hi if hi else ''} at width {width}"
+                        self.segments.append((name, at, at + int(n)))
+                        at += int(n)
             m = PROGRESS.search(line)
             if m:
                 self.done = self.base + int(m.group(3))
@@ -145,6 +161,21 @@ class Phase:
         if len(s) < 3 or np.ptp(s[:, 0]) == 0:
             return float("nan")
         return float(np.polyfit(s[:, 0], s[:, 1], 1)[0] * 1e4)
+
+    def per_program(self) -> list[tuple[str, int, float, float, float]]:
+        """Each program's ``(name, grasps, RSS MiB after its first chunk, RSS MiB before
+        its last, slope MiB per 10,000 grasps)`` over the samples taken while it ran:
+        after its first chunk (which holds its compilation) and before its last chunk
+        ended (after which the next program compiles with the count unchanged)."""
+        out = []
+        for name, lo, hi in self.segments:
+            first = next((d for _, d in self.progress if d > lo), None)
+            s = np.array([(d, r) for _, d, r in self.samples if first is not None and first <= d < hi], float)
+            if len(s) < 3 or np.ptp(s[:, 0]) == 0:
+                out.append((name, hi - lo, float("nan"), float("nan"), float("nan")))
+                continue
+            out.append((name, hi - lo, s[0, 1], s[-1, 1], float(np.polyfit(s[:, 0], s[:, 1], 1)[0] * 1e4)))
+        return out
 
     def at_tenths(self, total: int) -> list[tuple[int, float]]:
         """(grasps done, RSS MiB) at the first sample past each tenth of ``total``."""
@@ -202,6 +233,10 @@ def report_phase(name: str, ph: Phase, total: int, rc: int, fh) -> None:
                  f"peak RSS (VmHWM) {ph.peak:.0f} MiB")
     tenths = ", ".join(f"{d}: {r:.0f}" for d, r in ph.at_tenths(total))
     log_line(fh, f"{name}: RSS MiB at grasps done (each tenth of the set reached) {tenths}")
+    if ph.segments:
+        rows = "; ".join(f"{p}: {n} grasps, {a:.0f} -> {b:.0f} MiB, {k:+.2f} MiB per 10,000"
+                         for p, n, a, b, k in ph.per_program())
+        log_line(fh, f"{name}: RSS while each program ran (after its first chunk, which compiles it) {rows}")
 
 
 def main() -> None:
