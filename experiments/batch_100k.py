@@ -20,10 +20,11 @@ means a slope near the bytes of the result arrays each grasp adds, which the com
 until it writes them). Where the engine runs the set as several programs by contact count
 (``jaxgrasp.engine.plan_widths``), the RSS while each ran and its slope: a program is
 compiled in its first chunk, so memory may step there (bounded by the number of
-programs); within a program it should be flat. Afterwards ``results.csv`` must hold every row once, in input
-order; ``--check K`` rows drawn at random are evaluated again in this process with
-``jaxgrasp.evaluate_batch`` and must give the same statuses and values (rows from both
-phases, so the resume is checked too).
+programs); within a program it should be flat once the result arrays' pages are touched.
+Afterwards ``results.csv`` must hold every row once, in input order; ``--check K`` rows
+drawn at random are evaluated again in this process with ``jaxgrasp.evaluate_batch`` and
+must give the same statuses and values (rows from both phases, so the resume is checked
+too).
 
     python experiments/batch_100k.py --log experiments/batch_100k.log
     python experiments/batch_100k.py --count 3000 --check 50     # a quick try
@@ -106,7 +107,7 @@ class Phase:
         self.argv, self.dt, self.stop_at = argv, dt, stop_at
         self.done, self.samples, self.progress, self.peak = 0, [], [], float("nan")
         self.base = 0  # grasps a resumed run found finished (its progress counts the rest)
-        self.segments: list[tuple[str, int, int]] = []  # (program, first done, last done), grasps done
+        self.segments: list[tuple[str, int, int]] = []  # (program, grasps done before it, after it)
         self.stderr_tail: list[str] = []
 
     def _read(self, proc) -> None:
