@@ -5,7 +5,7 @@ invariance tests apply to them.
 A grasp has 2 to 5 fingertips pressed onto a sphere or a box around the centre of mass,
 outward normals, random fingertips, masses and gravity directions (:func:`build_grasp`).
 ``tests/tolerance/test_properties.py`` checks the value's invariances on them;
-``experiments/robustness.py`` evaluates 1000 seeded ones.
+``experiments/robustness/robustness.py`` evaluates 1000 seeded ones.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ Issue 34's done-when list: the top level of ``jaxgrasp/`` holds subpackages and 
 modules; the packages form layers and none imports one above it; no import cycle between
 modules; implementation modules are private; no function is longer than 60 lines; no
 comment or docstring cites a timing, a speed-up, a percentage or a benchmark log (those
-live in ``experiments/BENCHMARK.md``).
+live in the write-ups of ``experiments/``, one ``FINDINGS.md`` per study).
 
 Each check is a function of a source folder that returns its offenders, one line each;
 ``test_checks_find_planted_offenders`` plants one of each kind in a small fake package so
@@ -280,7 +280,7 @@ MEASUREMENT = re.compile(
             r"\b\d+(?:\.\d+)?(?:-\d+(?:\.\d+)?)?\s?(?:ms|us|µs|s|secs?|seconds?|min|minutes?)\b",  # a timing
             r"\b\d+(?:\.\d+)?(?:-\d+(?:\.\d+)?)?\s?%",  # a percentage
             r"\b\d+(?:\.\d+)?[x×](?![\w(])(?!\s*[-+*/=^(\d])",  # a speed-up (not 2x + 1, not 3x3)
-            r"BENCHMARK",  # experiments/BENCHMARK.md
+            r"BENCHMARK",  # the former experiments/BENCHMARK.md
             r"(?i:\bbenchmark\w*\.(?:py|md|json|log)\b)",
             r"(?<!np)(?<!math)(?<!numpy)(?<!lax)\.log\b",  # a log file, not np.log
             r"(?i:experiments/[\w/.-]+\.json\b)",
@@ -375,7 +375,7 @@ def test_no_function_over_60_lines():
 
 def test_no_comment_or_docstring_cites_a_measurement():
     offenders = measurement_offenders(SOURCE)
-    _assert_none("comments or docstrings citing a measurement (they go to experiments/BENCHMARK.md)", offenders)
+    _assert_none("comments or docstrings citing a measurement (they go to experiments/<study>/FINDINGS.md)", offenders)
 
 
 # ----------------------------------------------------------------------------- the checks can fail

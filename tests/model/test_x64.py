@@ -1,7 +1,7 @@
 """``import jaxgrasp`` and JAX's float64 mode: on by default, an explicit choice left alone.
 
 Each case runs in a fresh process (JAX reads ``JAX_ENABLE_X64`` when it starts).
-``experiments/x64_scope.py`` measures why the flag is process-wide rather than scoped.
+``experiments/startup/x64_scope.py`` measures why the flag is process-wide rather than scoped.
 """
 
 from __future__ import annotations

@@ -531,7 +531,7 @@ def test_a_running_lane_steps_whatever_its_two_stationarity_tests_say(monkeypatc
     gradient is a difference of terms of 1e10). A lane whose first test says "not done"
     and whose second says "done" must still take its Newton step: before, it took neither,
     its step count stood still and its work queue never ended (a 7-contact grasp of
-    ``experiments/batch_100k.py``'s set hung ``jaxgrasp batch``). Here the two tests are
+    ``experiments/memory_at_scale/batch_100k.py``'s set hung ``jaxgrasp batch``). Here the two tests are
     made to disagree on every step."""
     from jaxgrasp.solver import _solver as S
 

@@ -13,7 +13,7 @@
   the external one, with the same value;
 * 2 contacts holding a weight purely by friction, 3 contacts not opposing each other.
 
-Failures found by ``experiments/robustness.py`` and the property tests are kept here,
+Failures found by ``experiments/robustness/robustness.py`` and the property tests are kept here,
 with the grasp written out literally (``KNOWN``), as regression tests of their fixes.
 
 Every grasp of this module is evaluated in one batched call (``evaluate_many``); the

@@ -156,7 +156,7 @@ def test_cube_too_heavy_is_unstable():
 
 
 # random_urdfs 078 (mm mesh scaled by 15, density 500 kg/m^3), two fingertips drawn by
-# experiments/settle_real.py (part 0/2, two-finger candidate 1304): without the
+# experiments/settling/settle_real.py (part 0/2, two-finger candidate 1304): without the
 # reference's |w| < pi rule, Ipopt reached contact 0's slip boundary at |w| = 6.28 rad
 # (a full turn, whose torsion w . n is an artefact) and gave a value of 1.847e-3 J.
 GRASP_078 = {

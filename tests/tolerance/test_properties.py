@@ -19,14 +19,14 @@ count, shared with the other test modules). Environment:
 
 * ``JAXGRASP_PROPERTY_PROFILE``: ``ci`` (default, :data:`PROFILES`) or ``long`` (200
   examples per property, for a run before a release: 4-5 minutes on 2 shared cores, see
-  ``experiments/property_long.sh`` and its logs ``experiments/property_long*.log``);
+  ``experiments/robustness/property_long.sh`` and its logs ``experiments/robustness/property_long*.log``);
 * ``JAXGRASP_PROPERTY_EXAMPLES``: examples per property, overriding the profile;
 * ``JAXGRASP_PROPERTY_RANDOM=1``: new random examples each run (default: derandomized,
   the same examples every run);
 * ``JAXGRASP_PROPERTY_SHRINK=1``: let hypothesis shrink a failure (off by default: every
   shrink step is an evaluation, and a failure message prints the grasp literally anyway).
 
-``experiments/robustness.py`` reuses :func:`build_grasp` on 1000 seeded grasps;
+``experiments/robustness/robustness.py`` reuses :func:`build_grasp` on 1000 seeded grasps;
 :func:`test_seeded_grasps_converge` is its 16-grasp version.
 
 The value is a minimum over a multi-start search. The start directions live in the
@@ -85,7 +85,7 @@ def describe(res) -> str:
 
 def check_sane(res, g) -> None:
     """A finite value >= 0 and a converged status (stable, unstable or infeasible, never
-    ``not_converged``: ``experiments/robustness.py`` finds none in 1000 such grasps)."""
+    ``not_converged``: ``experiments/robustness/robustness.py`` finds none in 1000 such grasps)."""
     v = float(res.value)
     assert math.isfinite(v) and v >= 0.0, describe(res) + "\n" + literal(g)
     assert int(res.status) in (jaxgrasp.GraspStatus.STABLE, jaxgrasp.GraspStatus.UNSTABLE, jaxgrasp.GraspStatus.INFEASIBLE), (
@@ -164,7 +164,7 @@ _PROP_SETTINGS = settings(
 
 # ----------------------------------------------------------------------------- seeded set
 SEEDED_COUNT = 16
-"""Small version of ``experiments/robustness.py`` (4 grasps per contact count, seed 0)."""
+"""Small version of ``experiments/robustness/robustness.py`` (4 grasps per contact count, seed 0)."""
 
 
 def test_seeded_grasps_converge(evaluate_many):

@@ -1,7 +1,7 @@
 """The hardest grasps of real objects (issue 42): every program settles, and the value is Ipopt's.
 
 ``tests/data/settle_hard.json`` holds grasps of ``pybullet_data`` meshes drawn by the
-planner's own code (``experiments/settle_real.py``) on which, before issue 42's fix, the
+planner's own code (``experiments/settling/settle_real.py``) on which, before issue 42's fix, the
 equilibrium problem stalled: the weight pulls the object off one fingertip, whose contact
 then sits at the apex of its friction cone (``d = 0``, ``dt = 0``), where the slip
 margin's gradient vanishes and the augmented Lagrangian crawls at its largest penalty
@@ -13,7 +13,7 @@ equilibrium stalled beside two slip boundaries its Newton steps crossed, until a
 lane could walk the deeper step ladder (:mod:`jaxgrasp.solver._line_search`). Beside each
 is the status and value of the independent CasADi/Ipopt multi-start reference
 (``tests/ipopt_reference.py``, 24 starts; 7-20 s a grasp, so stored, with the note of how:
-``experiments/settle_hard_data.py``).
+``experiments/settling/settle_hard_data.py``).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ The boundary problems are non-convex and ``evaluate`` solves each from
 ``EvaluateOptions().num_starts`` = 20 starts (the 12 half-axes of the start frame, then 8
 seeded random directions in it; :func:`jaxgrasp.tolerance._starts.start_frame`), keeping the
 lowest. The start frame was the world's coordinate axes until issue 13, when the grasps
-below were found by ``experiments/start_search.py`` (log: ``experiments/start_search.log``): two
+below were found by ``experiments/robustness/start_search.py`` (log: ``experiments/robustness/start_search.log``): two
 fingertips off the centre of mass (so gravity and the stiffer tip twist the object),
 where the lowest boundary point was reached only from the random directions. With fewer
 starts the value is overstated, i.e. the grasp is reported more stable than it is
@@ -65,7 +65,7 @@ independently, so the value of a subset of the starts is the minimum over its la
 The first wave's checks at the end of this module read the same lanes."""
 
 CASES = {
-    # experiments/start_search.py --offset 0.1, N = 2: generation 9 #15
+    # experiments/robustness/start_search.py --offset 0.1, N = 2: generation 9 #15
     "offset_a": jaxgrasp.Grasp.create(
         positions=[
             [-0.04205213653154721, -0.04235648021310565, 0.01800987357054853],
