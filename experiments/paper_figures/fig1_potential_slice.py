@@ -19,13 +19,13 @@ region boundary in the slice, minus the equilibrium energy, equals the evaluatio
 from __future__ import annotations
 
 import sys
-from pathlib import Path
-
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: the shared helpers (_lab)
 from _lab import finding, parse_args, write_rows  # noqa: E402
 from matplotlib.colors import LogNorm

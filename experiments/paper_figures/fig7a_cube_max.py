@@ -8,7 +8,7 @@ between the neighbours of the first pass's best point. Every pass is one 41-poin
 so the evaluator compiles once.
 
 Writes into its folder fig7a_cube_max.{png,csv} (one row per E: max value, best dr, limiting
-boundary at the max) and figures/fig7a_cube_max_points.csv (every evaluated point), and
+boundary at the max) and fig7a_cube_max_points.csv (every evaluated point), and
 prints the numbers behind the paper's finding: the maximum value falls as E grows.
 
     python experiments/paper_figures/fig7a_cube_max.py [--quick]
@@ -17,11 +17,11 @@ prints the numbers behind the paper's finding: the maximum value falls as E grow
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
-import time
-
 import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: the shared helpers (_lab)
 from _lab import Progress, finding, force_limit_deformation, parse_args, refine_interval, timings, write_rows  # noqa: E402
 

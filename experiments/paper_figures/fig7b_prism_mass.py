@@ -18,11 +18,11 @@ the paper's finding: heavier objects give lower values.
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
-import time
-
 import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: the shared helpers (_lab)
 from _lab import Progress, finding, force_limit_deformation, parse_args, timings, write_rows  # noqa: E402
 

@@ -92,7 +92,7 @@ stages = {name: covered(spans.get(event, [])) for name, event in
           [("trace", "jaxpr_trace_duration"), ("lower", "jaxpr_to_mlir_module_duration"),
            ("xla", "backend_compile_duration")]}
 stages["rest"] = (t2 - t1) - covered([iv for event in spans.values() for iv in event])
-print("RESULT " + json.dumps({"import": t1 - t0, "first": t2 - t1, **stages, "stats": store_stats()}))
+print("RESULT " + json.dumps({"import": t1 - t0, "first": t2 - t1, **stages, "stats": jaxgrasp.engine.stats()}))
 """
 FIRST_EVALUATE_KEYS = ("first", "import", "trace", "lower", "xla", "rest")
 
