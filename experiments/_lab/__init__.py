@@ -53,14 +53,12 @@ def reuse(*studies: str) -> None:
             sys.path.insert(0, str(folder))
 
 
-def _from_tests(name: str):
-    """The test suite's module ``tests/<name>.py``, loaded once under its own name (so that
-    pickling for worker processes finds it)."""
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, TESTS / f"{name}.py")
+def _from_tests(name: str, as_name: str):
+    """Run ``tests/<name>.py`` as the module ``as_name`` (in ``sys.modules`` under that name,
+    so that worker processes, which import ``_lab``'s modules by name, unpickle its objects)."""
+    spec = importlib.util.spec_from_file_location(as_name, TESTS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
+    sys.modules[as_name] = module
     spec.loader.exec_module(module)
     return module
 
