@@ -261,7 +261,7 @@ def set_executable_dir(path) -> Path | None:
         _EXECUTABLE_DIR = None
         return None
     _EXECUTABLE_DIR = folder
-    storage.remove_stale_temps(folder)
+    storage.remove_stale_temps(folder, earlier_store_names=True)
     return folder
 
 

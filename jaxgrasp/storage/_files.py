@@ -66,12 +66,14 @@ NO_SPACE = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
 
 NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)  # 0 where the platform lacks it (Windows: no symlinks by default)
 
-_TEMP_NAMES = (
-    re.compile(r".+\.(?P<pid>\d+)-[0-9a-f]{8}" + re.escape(TEMP_SUFFIX)),  # NAME.<pid>-<token>.tmp
-    re.compile(r"\.[^/]+\.(?P<pid>\d+)\.[0-9a-f]+\.tmp"),  # .NAME.PID.RANDOM.tmp: the store's, before
-    re.compile(r"[\w.-]+\.tmp(?P<pid>\d+)"),  # NAME.tmpPID: the store's, earlier still
+_TEMP_NAME = re.compile(r".+\.(?P<pid>\d+)-[0-9a-f]{8}" + re.escape(TEMP_SUFFIX))
+"""The name of a temporary file (full match): ``NAME.<pid>-<token>.tmp``."""
+
+_STORE_TEMP_NAMES = (
+    re.compile(r"\.[^/]+\.(?P<pid>\d+)\.[0-9a-f]+\.tmp"),  # .NAME.PID.RANDOM.tmp
+    re.compile(r"[\w.-]+\.tmp(?P<pid>\d+)"),  # NAME.tmpPID
 )
-"""Names of jaxgrasp's temporary files (full match): this version's, then earlier versions'."""
+"""Names the executable store's temporary files had in earlier versions (full match)."""
 
 PUBLISH_LOCK = threading.Lock()
 """Held while a set of files is renamed into place (and forever after :func:`abandon`)."""
@@ -340,14 +342,16 @@ def write_to(target, content: Content) -> None:
 # --------------------------------------------------------------------------- stale temporary files
 
 
-def remove_stale_temps(folder) -> int:
+def remove_stale_temps(folder, *, earlier_store_names: bool = False) -> int:
     """Remove the temporary files killed runs left in ``folder``; how many.
 
-    A temporary file is stale where its name has jaxgrasp's pattern (``NAME.<pid>-<token>.tmp``,
-    or an earlier version's) and its process no longer runs or it is older than
-    :data:`STALE_TEMP_SECONDS`; this process's own temporary files are never stale. Only
-    regular files are removed (a link is left alone), and nothing that cannot be removed
-    stops the caller.
+    A temporary file is stale where its name has jaxgrasp's pattern (``NAME.<pid>-<token>.tmp``)
+    and its process no longer runs or it is older than :data:`STALE_TEMP_SECONDS`; this
+    process's own temporary files are never stale. With ``earlier_store_names`` (a folder
+    of the executable store) the names its temporary files had in earlier versions
+    (``.NAME.PID.RANDOM.tmp``, ``NAME.tmpPID``) count too; elsewhere they could be the
+    user's. Only regular files are removed (a link is left alone), and nothing that
+    cannot be removed stops the caller.
     """
     removed = 0
     try:
@@ -356,8 +360,9 @@ def remove_stale_temps(folder) -> int:
         return 0
     with REGISTRY:
         mine = set(_TEMPS)
+    patterns = (_TEMP_NAME, *_STORE_TEMP_NAMES) if earlier_store_names else (_TEMP_NAME,)
     for entry in entries:
-        match = next((m for p in _TEMP_NAMES if (m := p.fullmatch(entry.name))), None)
+        match = next((m for p in patterns if (m := p.fullmatch(entry.name))), None)
         try:
             if match is None or not entry.is_file(follow_symlinks=False) or Path(entry.path) in mine:
                 continue

@@ -306,3 +306,16 @@ def test_stale_temps_in_the_checkpoint_folder_are_removed_on_resume(out):
     finally:
         _notes.clear_notes()
     assert sorted(os.listdir(folder)) == ["manifest.json"]
+
+
+def test_only_the_store_sweeps_its_earlier_temp_names(out):
+    """The executable store's earlier temporary names (``.NAME.PID.RANDOM.tmp``,
+    ``NAME.tmpPID``) are swept in the store's folder only: in an output folder a file so
+    named may be the user's, and stays."""
+    dead = _dead_pid()
+    names = [f".a.xla.{dead}.00ff.tmp", f"b.tmp{dead}"]
+    for name in names:
+        (out / name).write_bytes(b"x")
+    with outputs.FolderLock(out):
+        assert sorted(os.listdir(out)) == sorted([*names, outputs.LOCK_NAME])
+    assert outputs.remove_stale_temps(out, earlier_store_names=True) == 2 and os.listdir(out) == []
