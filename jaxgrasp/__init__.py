@@ -4,10 +4,11 @@ The names here (``jaxgrasp.__all__``) are the public API. The implementation liv
 packages, each importing only from those before it in this list:
 
 * :mod:`jaxgrasp.solver`: a generic augmented-Lagrangian solver and its lane queue;
+* :mod:`jaxgrasp.storage`: files written whole or not at all, folder locks, private folders;
 * :mod:`jaxgrasp.model`: grasp fields, :class:`Grasp`, the potential field (eq. 3-21);
 * :mod:`jaxgrasp.surface`: meshes in JAX (:class:`Surface`), the contact rules;
 * :mod:`jaxgrasp.presets`: the paper's two grasps (Sec. VII);
-* :mod:`jaxgrasp.io`: grasp files, datasets, meshes, output files;
+* :mod:`jaxgrasp.io`: grasp files, datasets, meshes;
 * :mod:`jaxgrasp.tolerance`: the method (eq. 1): problems, starts, settling, verdict;
 * :mod:`jaxgrasp.engine`: :func:`evaluate` and :func:`evaluate_batch`, compiled stages,
   the executable store, checkpoints;

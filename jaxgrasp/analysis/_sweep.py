@@ -45,7 +45,7 @@ from jaxgrasp.engine._checkpoint import SweepKeeper
 from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields
 from jaxgrasp.engine._plan import check_chunk_size, plan_chunks
 from jaxgrasp.engine._run import run_chunks
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage
 from jaxgrasp.model._codes import BoundaryKind
 from jaxgrasp.model._fields import FIELD, SWEEPABLE, Field
 from jaxgrasp.model._grasp import Grasp
@@ -205,7 +205,7 @@ class SweepResult(SummaryNames):
         """Write a tidy CSV to ``path``: one row per grid point (C order: last axis fastest).
 
         ``path`` is written atomically (a temporary file renamed into place, see
-        :mod:`jaxgrasp.io._outputs`): a failure leaves the previous file as it was. A binary
+        :mod:`jaxgrasp.storage`): a failure leaves the previous file as it was. A binary
         file object is written to directly.
 
         Columns: each axis with its SI unit (``young_modulus_Pa``, ``initial_deformation_m``,
@@ -230,14 +230,14 @@ class SweepResult(SummaryNames):
         kind = self.limiting_kind_names.ravel()
         contact = np.asarray(self.limiting_contact).ravel()
         energy = np.asarray(self.equilibrium_energy).ravel()
-        fmt = outputs.csv_cell
+        fmt = storage.csv_cell
         rows = (
             [fmt(g[i]) for g in flat]
             + [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
             + [fmt(a[i]) for a in extra.values()]
             for i in range(value.size)
         )
-        outputs.write_to(path, outputs.csv_content(cols, rows))
+        storage.write_to(path, storage.csv_content(cols, rows))
 
     def to_npz(self, path, extra: Mapping[str, Any] | None = None) -> None:
         """Write a ``.npz``: ``axis_names``, ``axis_<name>`` (1-D, SI), the grid-shaped
@@ -264,7 +264,7 @@ class SweepResult(SummaryNames):
         if not hasattr(path, "write"):
             path = os.fspath(path)
             path = path if path.endswith(".npz") else path + ".npz"
-        outputs.write_to(path, lambda fh: np.savez(fh, **arrays))
+        storage.write_to(path, lambda fh: np.savez(fh, **arrays))
 
     @classmethod
     def from_npz(cls, path) -> "SweepResult":

@@ -89,7 +89,8 @@ def main(argv=None) -> int:
 def _main(argv) -> int:
     """Parse ``argv`` and run its command; input errors as one line, exit status 2; a
     failure of the machine (a full disk, an I/O error) as one line, exit status 1."""
-    from jaxgrasp.io._outputs import OutputError, clear_notes
+    from jaxgrasp.cli._notes import clear_notes
+    from jaxgrasp.storage import OutputError
     from jaxgrasp.model._validation import GraspValueError
 
     parser = build_parser()
@@ -116,7 +117,7 @@ def _report(exc: Exception) -> int:
     A write abandoned by an interrupt prints nothing: the command's thread reaches it
     while the main thread ends the process with the interrupt's one line, which must be
     the only line after the progress lines."""
-    from jaxgrasp.io._outputs import Abandoned
+    from jaxgrasp.storage import Abandoned
 
     if isinstance(exc, Abandoned):
         return 130
@@ -128,19 +129,20 @@ def _report(exc: Exception) -> int:
 def _error_line(exc: Exception) -> tuple[int, str]:
     """The exit status and one-line message of an error that ended a command.
 
-    A full disk (:class:`~jaxgrasp.io._outputs.DiskFull`, or an ``OSError`` with its errno
+    A full disk (:class:`~jaxgrasp.storage.DiskFull`, or an ``OSError`` with its errno
     that no writer turned into one) and any other ``OSError`` (the machine, not the input:
     an I/O error, a file removed meanwhile) exit 1; a full disk's line also says what
-    the command kept (:func:`~jaxgrasp.io._outputs.keeping`). The rest is bad input, exit 2.
+    the command kept (:func:`~jaxgrasp.cli._notes.keeping`). The rest is bad input, exit 2.
     """
-    from jaxgrasp.io import _outputs as outputs
+    from jaxgrasp import storage
+    from jaxgrasp.cli import _notes
 
-    full = isinstance(exc, outputs.DiskFull) or (isinstance(exc, OSError) and exc.errno in outputs.NO_SPACE)
+    full = isinstance(exc, storage.DiskFull) or (isinstance(exc, OSError) and exc.errno in storage.NO_SPACE)
     if isinstance(exc, OSError) and not full:
         what = (exc.strerror or str(exc) or type(exc).__name__).lower()
         return EXIT_ENVIRONMENT, f"{exc.filename}: {what}" if exc.filename else what
     if not full:
         return EXIT_USAGE, str(exc)
-    if not isinstance(exc, outputs.DiskFull):
-        exc = outputs.DiskFull(exc.filename or "an output file", exc)
-    return EXIT_ENVIRONMENT, "; ".join([str(exc), *outputs.keeping()])
+    if not isinstance(exc, storage.DiskFull):
+        exc = storage.DiskFull(exc.filename or "an output file", exc)
+    return EXIT_ENVIRONMENT, "; ".join([str(exc), *_notes.keeping()])

@@ -6,7 +6,7 @@ contact counts, padded to the largest and evaluated in chunks by one compiled ev
 status ``invalid`` and its one-line error (``--strict``: exit 2 before computing).
 
 Nothing finished is lost: each finished chunk is kept at once in ``DIR/results.partial``
-(:class:`jaxgrasp.engine._checkpoint.BatchCheckpoint`, one atomic file per chunk), so a run stopped at
+(:class:`jaxgrasp.cli._keepers.BatchCheckpoint`, one atomic file per chunk), so a run stopped at
 any moment (Ctrl-C, SIGTERM, ``kill -9``) is finished by ``--resume`` without
 recomputing those chunks; a resumed run must read the same dataset and the same mesh files
 its rows name (:func:`resume_key`). At the end ``results.csv``, ``results.npz`` and
@@ -23,7 +23,9 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from jaxgrasp import storage
 from jaxgrasp.cli import _batch_processes as processes
+from jaxgrasp.cli import _notes
 from jaxgrasp.cli._common import (
     ChunkProgress,
     UsageError,
@@ -40,7 +42,6 @@ from jaxgrasp.cli._common import (
     say,
 )
 from jaxgrasp.engine._prefetch import prefetch
-from jaxgrasp.io import _outputs as outputs
 from jaxgrasp.model._validation import counted
 
 __all__ = ["add_parser", "run", "resume_key", "OUTPUT_NAMES", "PARTIAL_NAME", "DEFAULT_TOP"]
@@ -49,7 +50,7 @@ OUTPUT_NAMES = ("results.csv", "results.npz", "results.png")
 """The files of one batch's output set, in ``--out``."""
 
 PARTIAL_NAME = "results.partial"
-"""The checkpoint folder of the finished chunks (:class:`jaxgrasp.engine._checkpoint.BatchCheckpoint`), in ``--out``."""
+"""The checkpoint folder of the finished chunks (:class:`jaxgrasp.cli._keepers.BatchCheckpoint`), in ``--out``."""
 
 DEFAULT_TOP = 5
 """Best grasps listed in the summary (``--top``)."""
@@ -97,7 +98,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Evaluate the dataset of the command line; write the files and print a summary."""
     from jaxgrasp.engine._batch import evaluate_dataset
-    from jaxgrasp.engine._checkpoint import BatchCheckpoint
+    from jaxgrasp.cli._keepers import BatchCheckpoint
     from jaxgrasp.io._dataset import load_dataset
 
     _check_numbers(args)
@@ -141,7 +142,7 @@ def run_processes(args, uncertainty) -> int:
     :mod:`._batch_processes`): join the others, evaluate this process's share of the
     dataset on this host's devices, meet the others; process 0 writes the files in input
     order and prints the summary, the others one line."""
-    from jaxgrasp.engine._hosts import join, leave
+    from jaxgrasp.cli._hosts import join, leave
 
     out, me = Path(args.out), args.process_id
     if not args.no_plot and me == 0:
@@ -250,10 +251,10 @@ def _write_outputs(result, out: Path, checkpoint, args, extra=None) -> tuple[lis
         members[out / "results.png"] = lambda fh: save_figure(fig, fh, format="png")
     stale = [out / n for n in OUTPUT_NAMES if out / n not in members and (out / n).exists()]
     try:
-        replaced = outputs.write_set(
+        replaced = storage.write_set(
             members,
             remove=stale + (checkpoint.files() if checkpoint is not None else []),
-            on_publish=lambda: outputs.set_note("batch", f"the results are in {out}"),
+            on_publish=lambda: _notes.set_note("batch", f"the results are in {out}"),
         )
     except OSError as exc:
         raise UsageError(f"cannot write to --out {str(out)!r}: {exc.strerror or exc}") from None

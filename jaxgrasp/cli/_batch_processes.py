@@ -7,7 +7,7 @@ share of the dataset, the grasps ``i, i + P, i + 2P, ...``
 (:func:`~jaxgrasp.io._dataset.share_rows`), on its own devices
 (``jax.local_devices()``), through the same engine as one process
 (:func:`~jaxgrasp.engine._batch.evaluate_dataset`). The processes meet twice
-(:func:`~jaxgrasp.engine._hosts.exchange`): once every share is read (the dataset's
+(:func:`~jaxgrasp.cli._hosts.exchange`): once every share is read (the dataset's
 largest contact count, which every share is padded to, so that every process runs the
 program one process would, but where a share of a mixed dataset holds only grasps of the
 largest count: that one runs without a contact mask, equal to round-off; the file's SHA-256, which must be the same everywhere; and
@@ -29,8 +29,8 @@ from typing import Any, Callable
 import numpy as np
 
 from jaxgrasp.cli._common import UsageError, check_out, lock_out
+from jaxgrasp.cli._hosts import exchange, pack, parse_coordinator, unpack
 from jaxgrasp.engine._batch_result import BatchResult, mark_invalid
-from jaxgrasp.engine._hosts import exchange, pack, parse_coordinator, unpack
 from jaxgrasp.engine._plan import grasps_by_count
 from jaxgrasp.io._dataset import load_share, share_rows
 from jaxgrasp.tolerance._result import FIELDS, Evaluation

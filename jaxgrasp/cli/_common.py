@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage
 from jaxgrasp.model._fields import FIELD, SWEEPABLE
 from jaxgrasp.model._validation import counted
 from jaxgrasp.presets import PRESETS
@@ -259,30 +259,30 @@ def check_out(out: Path) -> None:
     from jaxgrasp.engine._checkpoint import BATCH_FOLDER, SWEEP_FILE
 
     try:
-        outputs.check_writable(out)
-        for name, what, folder in ((outputs.LOCK_NAME, "its lock file", False),
+        storage.check_writable(out)
+        for name, what, folder in ((storage.LOCK_NAME, "its lock file", False),
                                    (BATCH_FOLDER, "a batch's finished chunks", True),
                                    (SWEEP_FILE, "a sweep's finished points", False)):
             path = out / name
-            outputs.refuse_link(path, what)
+            storage.refuse_link(path, what)
             if path.exists() and path.is_dir() != folder:  # else found only when written, after the work
                 kind = "not a folder" if folder else "a folder"
-                raise outputs.OutputError(f"{str(path)!r}, where jaxgrasp keeps {what}, is {kind}: "
+                raise storage.OutputError(f"{str(path)!r}, where jaxgrasp keeps {what}, is {kind}: "
                                           "remove it or choose another --out")
-    except outputs.OutputError as exc:
+    except storage.OutputError as exc:
         raise UsageError(f"--out: {exc}") from None
 
 
-def lock_out(out: Path) -> outputs.FolderLock:
+def lock_out(out: Path) -> storage.FolderLock:
     """The lock of ``--out`` (created if needed), held; a one-line error if another run
     holds it or its lock file is a link. Taking it removes the stale temporary files of
     killed runs in ``--out``."""
-    lock = outputs.FolderLock(out)
+    lock = storage.FolderLock(out)
     try:
         return lock.acquire()
-    except outputs.DiskFull:
+    except storage.DiskFull:
         raise  # exit 1, not an input error
-    except outputs.OutputError as exc:  # FolderBusy, or a link at the lock file's path
+    except storage.OutputError as exc:  # FolderBusy, or a link at the lock file's path
         raise UsageError(f"--out: {exc}") from None
     except OSError as exc:
         raise UsageError(f"cannot create --out folder {str(out)!r}: {exc.strerror or exc}") from None
@@ -299,7 +299,7 @@ def write_picture(targets, fig, scene) -> list:
     try:
         for t in targets:
             t.parent.mkdir(parents=True, exist_ok=True)
-        return outputs.write_set(members)
+        return storage.write_set(members)
     except OSError as exc:
         raise UsageError(f"cannot write {', '.join(map(str, targets))}: {exc.strerror or exc}") from None
 

@@ -11,7 +11,7 @@ worker blocks both signals for itself and the threads it starts (XLA's), so they
 the main thread only. On SIGINT or SIGTERM the main thread:
 
 1. ignores further signals (a second Ctrl-C cannot cut the clean-up short);
-2. calls :func:`jaxgrasp.io._outputs.abandon`: waits at most :data:`PUBLISH_WAIT_SECONDS`
+2. calls :func:`jaxgrasp.cli._notes.abandon`: waits at most :data:`PUBLISH_WAIT_SECONDS`
    for a set of output files being renamed into place, removes this run's temporary
    files and lock files, and forbids later writes; then waits as long again at most
    for a compiled executable being written to the executable store
@@ -35,8 +35,8 @@ import threading
 from typing import Callable
 
 from jaxgrasp._startup import EXIT
+from jaxgrasp.cli import _notes
 from jaxgrasp.engine import _compile
-from jaxgrasp.io import _outputs as outputs
 
 __all__ = ["run_interruptibly", "Interrupted", "EXIT_STATUS", "POLL_SECONDS", "PUBLISH_WAIT_SECONDS"]
 
@@ -138,7 +138,7 @@ def _exit_interrupted(signum: int) -> int:
     """Clean up, print the one line and end the process (see the module's docstring)."""
     for s in EXIT_STATUS:
         signal.signal(s, signal.SIG_IGN)
-    notes = outputs.abandon(PUBLISH_WAIT_SECONDS)
+    notes = _notes.abandon(PUBLISH_WAIT_SECONDS)
     _compile.wait_for_saves(PUBLISH_WAIT_SECONDS)  # an executable being stored: no temporary file left
     _say_last(f"jaxgrasp: {_WORDS.get(signum, 'interrupted')}" + "".join(f"; {n}" for n in notes))
     status = EXIT_STATUS.get(signum, 130)

@@ -3,7 +3,7 @@
 Checks every option and the mesh first (:func:`jaxgrasp.planning._plan.check_plan`, the
 check :func:`jaxgrasp.plan` makes), so that bad input creates nothing; then runs
 :func:`jaxgrasp.plan` and writes, as one set into ``DIR`` (checked writable and locked
-before any computation, :func:`jaxgrasp.io._outputs.write_set`):
+before any computation, :func:`jaxgrasp.storage.write_set`):
 
 * ``ranked.jsonl``: the ranked grasps, best first, one grasp file (JSON) per line naming the
   mesh (a dataset: ``jaxgrasp batch DIR/ranked.jsonl`` evaluates it);
@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 from jaxgrasp.cli._common import UsageError, check_out, lock_out, parse_number, replaced_text, say
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage
 
 __all__ = ["add_parser", "run", "RESULT_COLUMNS", "DEFAULTS"]
 
@@ -185,14 +185,14 @@ def _write(res, out: Path, args) -> tuple[list[str], list[str]]:
     members = {
         out / "ranked.jsonl": "".join(json.dumps(d) + "\n" for d in files).encode("utf-8"),
         out / "best.toml": dict_to_toml(files[0]).encode("utf-8"),
-        out / "results.csv": outputs.csv_content(columns, ([r[c] for c in columns] for r in res.rows())),
+        out / "results.csv": storage.csv_content(columns, ([r[c] for c in columns] for r in res.rows())),
     }
     if raw is not None:
         members[out / name] = raw
     if not args.no_plot:
         members[out / "best.png"] = _picture(res)
     try:
-        replaced = outputs.write_set(members)
+        replaced = storage.write_set(members)
     except OSError as exc:
         raise UsageError(f"cannot write to --out {str(out)!r}: {exc.strerror or exc}") from None
     return [p.name for p in members], [p.name for p in replaced]

@@ -14,7 +14,7 @@ from jaxgrasp.cli._common import (
     load_grasp,
     write_picture,
 )
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage
 
 __all__ = ["add_parser", "run", "PICTURE_SUFFIXES", "MAGNIFICATION_RANGE"]
 
@@ -97,8 +97,8 @@ def _check_outputs(args) -> list[Path]:
         if path.is_dir():
             raise UsageError(f"{option} {str(path)!r} is a folder; give a file name")
         try:
-            outputs.check_writable(path.parent)  # creates nothing
-        except outputs.OutputError as exc:
+            storage.check_writable(path.parent)  # creates nothing
+        except storage.OutputError as exc:
             raise UsageError(f"{option} {str(path)!r}: {exc}") from None
     if len(targets) > 1 and targets[0][1].resolve() == targets[1][1].resolve():
         raise UsageError("--out and --glb name the same file")

@@ -17,7 +17,7 @@ from jaxgrasp.cli._common import (
     replaced_text,
     say,
 )
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage
 from jaxgrasp.simulation._options import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION, check_options
 
 __all__ = ["OPTION_NAMES", "PLOT", "RESULTS", "add_parser", "run"]
@@ -121,7 +121,7 @@ def run(args) -> int:
     if result.simulated:
         members[out / PLOT] = _plot_bytes(result)
     with lock_out(out):
-        replaced = outputs.write_set(members, remove=[] if result.simulated else [out / PLOT])
+        replaced = storage.write_set(members, remove=[] if result.simulated else [out / PLOT])
     print(_summary(source, result) + f"; wrote {', '.join(str(p) for p in members)}"
           + replaced_text([p.name for p in replaced], []))
     return 0

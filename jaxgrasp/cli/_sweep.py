@@ -8,10 +8,10 @@ allocated). With no axis at all the paper's Fig. 6 grid is swept (E 2e5..1e6 Pa 
 initial deformation 1..5 mm x 41); with no grasp, preset ``cube``.
 
 The output folder is checked for writability before anything is computed and locked
-(:class:`jaxgrasp.io._outputs.FolderLock`) for the whole run, so a second sweep into it fails
+(:class:`jaxgrasp.storage.FolderLock`) for the whole run, so a second sweep into it fails
 at once. After each chunk the finished points are kept in ``DIR/sweep.partial.npz``
-(:mod:`jaxgrasp.engine._checkpoint`); at the end ``sweep.npz``, ``sweep.csv`` and ``sweep.png``
-replace the previous ones as one set (:func:`jaxgrasp.io._outputs.write_set`) and the
+(:class:`jaxgrasp.cli._keepers.SweepKeeper`); at the end ``sweep.npz``, ``sweep.csv`` and ``sweep.png``
+replace the previous ones as one set (:func:`jaxgrasp.storage.write_set`) and the
 checkpoint is removed.
 """
 
@@ -25,7 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxgrasp import storage
 from jaxgrasp.analysis._sweep import MAX_GRID_POINTS
+from jaxgrasp.cli import _notes
 from jaxgrasp.cli._common import (
     OVERRIDES,
     ChunkProgress,
@@ -43,7 +45,6 @@ from jaxgrasp.cli._common import (
     replaced_text,
 )
 from jaxgrasp.engine._prefetch import prefetch
-from jaxgrasp.io import _outputs as outputs
 from jaxgrasp.model._codes import NO_BOUNDARY
 from jaxgrasp.model._fields import FIELD
 from jaxgrasp.model._validation import counted
@@ -64,7 +65,7 @@ OUTPUT_NAMES = ("sweep.npz", "sweep.csv", "sweep.png")
 """The files of one sweep's output set, in ``--out``."""
 
 PARTIAL_NAME = "sweep.partial.npz"
-"""The checkpoint of the finished points (:mod:`jaxgrasp.engine._checkpoint`), in ``--out``."""
+"""The checkpoint of the finished points (:class:`jaxgrasp.cli._keepers.SweepKeeper`), in ``--out``."""
 
 
 FIG6_TITLE = "Fig. 6: evaluation value for each Young's modulus and initial deformation (cube)"
@@ -211,6 +212,7 @@ class _AxisInOrder(argparse.Action):
 def run(args) -> int:
     """Sweep the grasp of the command line; write the files and print one summary line."""
     from jaxgrasp.analysis._sweep import check_inputs, grid_grasp, sweep
+    from jaxgrasp.cli._keepers import SweepKeeper
     from jaxgrasp.engine._plan import plan_chunks
 
     axes, paper = _parse_axes(args)
@@ -227,7 +229,8 @@ def run(args) -> int:
         progress = ChunkProgress("sweeping", "point", show=not args.quiet)
         announce_run("sweep", grasp_source(args), plan.total, "point", args.quiet)
         t_start = time.perf_counter()
-        result = sweep(grasp, chunk_size=plan.chunk, progress=progress, checkpoint=out / PARTIAL_NAME, **axes)
+        keeper = SweepKeeper(out / PARTIAL_NAME, grasp, axes, plan.chunk)
+        result = sweep(grasp, chunk_size=plan.chunk, progress=progress, on_chunk=keeper, **axes)
         wall = time.perf_counter() - t_start
 
         title = f"jaxgrasp sweep: {grasp_source(args)}"
@@ -278,7 +281,7 @@ def _write_outputs(result, out: Path, title: str | None, extra=None) -> tuple[li
         members[out / "sweep.png"] = lambda fh: save_figure(fig, fh, format="png")
     stale = [out / n for n in OUTPUT_NAMES if out / n not in members and (out / n).exists()]
     try:
-        replaced = outputs.write_set(
+        replaced = storage.write_set(
             members,
             remove=stale + [out / PARTIAL_NAME],
             on_publish=lambda: _published(out),
@@ -290,8 +293,8 @@ def _write_outputs(result, out: Path, title: str | None, extra=None) -> tuple[li
 
 def _published(out: Path) -> None:
     """The whole set is in place: an interrupt now only says so (no checkpoint to write)."""
-    outputs.set_last_write("sweep", None)
-    outputs.set_note("sweep", f"the results are in {out}")
+    _notes.set_last_write("sweep", None)
+    _notes.set_note("sweep", f"the results are in {out}")
 
 
 def _fmt_param(name: str, x: float) -> str:

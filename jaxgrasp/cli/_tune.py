@@ -3,7 +3,7 @@
 Writes the tuned grasp to ``--out`` (``.toml`` or ``.json``) and a plot of the value over
 the iterations next to it (same name, ``.png``), and prints one summary line. The folder
 of ``--out`` is checked for writability before tuning; the grasp file and its plot then
-replace the previous ones as one set (:func:`jaxgrasp.io._outputs.write_set`).
+replace the previous ones as one set (:func:`jaxgrasp.storage.write_set`).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from jaxgrasp.cli._common import (
     parse_number,
     say,
 )
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage
 from jaxgrasp.model._fields import TUNABLE
 from jaxgrasp.model._validation import counted
 
@@ -205,8 +205,8 @@ def _check_options(args) -> Path:
     if t is not None and not (math.isfinite(t) and t > 0):
         raise UsageError(f"--smooth-min-temperature must be a finite number > 0 (J), got {t}")
     try:
-        outputs.check_writable(out.parent)  # before any computation; creates nothing
-    except outputs.OutputError as exc:
+        storage.check_writable(out.parent)  # before any computation; creates nothing
+    except storage.OutputError as exc:
         raise UsageError(f"--out {str(out)!r}: {exc}") from None
     return out
 
@@ -243,7 +243,7 @@ def _write_outputs(res, out: Path, title: str | None) -> list[str]:
         members[out.with_suffix(".png")] = lambda fh: save_figure(fig, fh, format="png")
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        replaced = outputs.write_set(members)
+        replaced = storage.write_set(members)
     except OSError as exc:
         raise UsageError(f"cannot write {str(out)!r}: {exc.strerror or exc}") from None
     return [p.name for p in replaced]

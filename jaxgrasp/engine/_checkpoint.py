@@ -7,7 +7,7 @@ checkpoint costs the same at every chunk and survives ``kill -9``).
 The sweep's checkpoint ``sweep.partial.npz``:
 
 ``jaxgrasp sweep --out DIR`` rewrites ``DIR/sweep.partial.npz`` (atomically, see
-:mod:`jaxgrasp.io._outputs`) after its chunks, and deletes it once the final
+:mod:`jaxgrasp.storage`) after its chunks, and deletes it once the final
 ``sweep.npz``/``sweep.csv``/``sweep.png`` are in place; an interrupted sweep leaves it
 behind with every point finished before the last checkpoint. Read it with
 :meth:`SweepCheckpoint.load`.
@@ -44,9 +44,8 @@ from typing import Mapping
 
 import numpy as np
 
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage
 from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.model._validation import counted as _counted
 from jaxgrasp.tolerance._result import SUMMARY_FIELDS as RESULT_FIELDS
 from jaxgrasp.tolerance._status import GraspStatus
 
@@ -135,7 +134,7 @@ class SweepCheckpoint:
 
     def save(self, file) -> None:
         """Write the checkpoint to ``file`` (a path or a binary file object); not atomic
-        by itself (the CLI writes it through :func:`jaxgrasp.io._outputs.write_file`)."""
+        by itself (the CLI writes it through :func:`jaxgrasp.storage.write_file`)."""
         arrays = {
             "format": np.asarray(FORMAT),
             "axis_names": np.asarray(list(self.axes), dtype=str),
@@ -158,7 +157,7 @@ class SweepCheckpoint:
                 unreadable, an array missing, or shapes that disagree with its grid.
         """
         try:
-            data = outputs.read_own(path)
+            data = storage.read_own(path)
             with np.load(io.BytesIO(data), allow_pickle=False) as z:
                 if "format" not in z.files or str(z["format"]) != FORMAT:
                     raise ValueError(f"{path}: not a jaxgrasp sweep checkpoint ({FORMAT})")
@@ -195,12 +194,12 @@ class SweepKeeper:
     """``on_chunk`` of :func:`jaxgrasp.sweep` that keeps the finished points in a
     :class:`SweepCheckpoint` file at ``path``, atomically.
 
-    Each write also leaves the note an interrupt prints (``kept K of N points in PATH``).
     A write is skipped while the previous one cost more than :data:`CHECKPOINT_SHARE`
-    of the time since; the skipped write is then left to an interrupt
-    (:func:`jaxgrasp.io._outputs.set_last_write`), so a Ctrl-C or SIGTERM keeps every
-    finished point, and only a hard kill (``kill -9``) loses those since the last write.
-    The last chunk's is always written.
+    of the time since; the skipped write is handed to :meth:`deferred` (which a caller
+    that can be interrupted keeps, to run :meth:`write` before it exits: the command
+    line's keeper, :mod:`jaxgrasp.cli`), so only a hard kill (``kill -9``) loses the
+    points since the last write. The last chunk's is always written. Each write, once in
+    place, is passed to :meth:`kept`. Both hooks do nothing here.
     """
 
     def __init__(self, path, grasp, axes: Mapping[str, np.ndarray], chunk: int):
@@ -221,7 +220,7 @@ class SweepKeeper:
             self._results = results
         now = time.perf_counter()
         if stop < self.total and self._cost > CHECKPOINT_SHARE * (now - self._end):
-            outputs.set_last_write("sweep", self.write)
+            self.deferred(self.write)
             return
         self.write()
         self._end = time.perf_counter()
@@ -229,16 +228,18 @@ class SweepKeeper:
 
     def write(self) -> None:
         """Write the points finished so far (the worker's later chunks do not touch them)."""
-        outputs.set_last_write("sweep", None)
+        self.deferred(None)
         with self._lock:
             partial = SweepCheckpoint.from_flat(self.axes, self.done.copy(), self._results, self.grasp, self.chunk)
-        note = f"kept {partial.done_count} of {self.total} points in {self.path}"
+        storage.write_set({self.path: partial.save}, on_publish=lambda: self.kept(partial))
 
-        def published() -> None:
-            outputs.set_note("sweep", note)
-            outputs.set_keeping("sweep", f"{partial.done_count} of {self.total} finished points kept in {self.path}")
+    def deferred(self, write) -> None:
+        """A write skipped (``write``, to call to make it) or none pending any more
+        (``None``). Here: nothing."""
 
-        outputs.write_set({self.path: partial.save}, on_publish=published)
+    def kept(self, partial: SweepCheckpoint) -> None:
+        """``partial`` is in place at :attr:`path` (called under
+        :data:`jaxgrasp.storage.PUBLISH_LOCK`). Here: nothing."""
 
 
 # --------------------------------------------------------------------------- batches
@@ -333,9 +334,9 @@ class BatchCheckpoint:
     def check_folder(self) -> None:
         """Raise :class:`~jaxgrasp.io.OutputError` (one line) unless the folder is absent
         or a real folder (not a link, not a file)."""
-        outputs.refuse_link(self.folder, "a batch's finished chunks")
+        storage.refuse_link(self.folder, "a batch's finished chunks")
         if os.path.lexists(self.folder) and not self.folder.is_dir():
-            raise outputs.OutputError(
+            raise storage.OutputError(
                 f"{str(self.folder)!r} is not a folder; jaxgrasp keeps a batch's finished chunks there: remove it"
             )
 
@@ -352,15 +353,15 @@ class BatchCheckpoint:
         self.folder.mkdir(exist_ok=True)
         self.check_folder()  # nothing put a link there meanwhile
         text = json.dumps(self.manifest, indent=1) + "\n"
-        outputs.write_file(self.folder / self.MANIFEST, text.encode())
+        storage.write_file(self.folder / self.MANIFEST, text.encode())
 
     def check(self) -> None:
         """Raise ``ValueError`` (one line) unless the checkpoint on disk is of this run:
         same format, input bytes, number of grasps and padded contact count."""
         path = self.folder / self.MANIFEST
         try:
-            have = json.loads(outputs.read_own(path, self.MANIFEST_LIMIT).decode("utf-8"))
-        except (OSError, ValueError, outputs.OutputError) as exc:
+            have = json.loads(storage.read_own(path, self.MANIFEST_LIMIT).decode("utf-8"))
+        except (OSError, ValueError, storage.OutputError) as exc:
             raise ValueError(f"{path}: not a readable checkpoint ({exc})") from None
         if not isinstance(have, dict) or have.get("format") != BATCH_FORMAT:
             raise ValueError(f"{path}: not a jaxgrasp batch checkpoint ({BATCH_FORMAT})")
@@ -378,8 +379,7 @@ class BatchCheckpoint:
         it holds and their results (after :meth:`check`, whose ``ValueError`` it raises;
         damaged chunks skipped, :attr:`skipped`); otherwise a fresh checkpoint
         (:meth:`start`) and no rows. Stale temporary files of killed runs in the folder are
-        removed first, and from then on a failed write's error says the folder is kept
-        (:func:`jaxgrasp.io._outputs.set_keeping`).
+        removed first.
 
         Raises:
             CheckpointBusy: the folder holds an unfinished run and ``resume`` is false (an
@@ -388,35 +388,31 @@ class BatchCheckpoint:
         """
         self.check_folder()
         if self.folder.is_dir():
-            outputs.remove_stale_temps(self.folder)
+            storage.remove_stale_temps(self.folder)
         if self.exists():
             if not resume:
                 raise CheckpointBusy(self.folder)
             self.check()
-            opened = (*self.load(), True)
-        else:
-            self.start()
-            opened = (np.zeros(0, dtype=np.int64), {}, False)
-        outputs.set_keeping("batch", f"finished chunks kept in {self.folder}, rerun with --resume")
-        return opened
+            return (*self.load(), True)
+        self.start()
+        return np.zeros(0, dtype=np.int64), {}, False
 
     def keeper(self, before: int, total: int):
         """``on_chunk_rows(rows, results)`` for
         :func:`~jaxgrasp.engine._batch.evaluate_dataset`: each finished chunk saved at once
-        (:meth:`save_rows`), and the note an interrupt prints says how much is kept
-        (``before`` rows from an earlier run, ``total`` in the dataset)."""
-        kept = [before]
+        (:meth:`save_rows`), then :meth:`kept` told how many rows are kept (``before``
+        from an earlier run, of ``total`` in the dataset)."""
+        count = [before]
 
         def keep(rows: np.ndarray, results: Mapping[str, np.ndarray]) -> None:
             self.save_rows(rows, results)
-            kept[0] += len(rows)
-            outputs.set_note(
-                "batch",
-                f"kept {kept[0]} of {_counted(total, 'grasp')} in {self.folder}; "
-                "the same command with --resume finishes the rest",
-            )
+            count[0] += len(rows)
+            self.kept(count[0], total)
 
         return keep
+
+    def kept(self, rows: int, total: int) -> None:
+        """``rows`` of the dataset's ``total`` are kept in the folder. Here: nothing."""
 
     def chunk_files(self) -> list[Path]:
         """Every entry named like a chunk file (``rows-<first>.npz``), in order of its
@@ -452,16 +448,6 @@ class BatchCheckpoint:
             return np.zeros(0, dtype=np.int64), {}
         return np.concatenate(rows), {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
-    def skipped_note(self) -> str | None:
-        """One line on the chunk files the last :meth:`load` skipped (``None``: none)."""
-        if not self.skipped:
-            return None
-        n = len(self.skipped)
-        return (
-            f"jaxgrasp: --resume: skipped {n} damaged chunk file{'s' if n > 1 else ''} in {self.folder} "
-            f"(first: {self.skipped[0]}); {'their' if n > 1 else 'its'} grasps are evaluated again"
-        )
-
     def _read_chunk(self, path: Path, seen: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """A chunk file's ``(rows, results)``, checked against the manifest (``seen``: rows
         of earlier chunks); ``ValueError`` (or whatever reading raises) where damaged."""
@@ -469,7 +455,7 @@ class BatchCheckpoint:
         total = self.manifest["grasps"]
         row_bytes = 8 + sum(int(np.prod(shape)) * dt.itemsize for shape, dt in layout.values())
         limit = total * row_bytes + (len(layout) + 1) * _NPY_HEADER_BYTES
-        data = outputs.read_own(path, limit)
+        data = storage.read_own(path, limit)
         with zipfile.ZipFile(io.BytesIO(data)) as zf:  # compressed members: bound what they inflate to
             if sum(i.file_size for i in zf.infolist()) > limit:
                 raise ValueError(f"its arrays would take more than {limit} bytes")
@@ -492,7 +478,7 @@ class BatchCheckpoint:
     def save_rows(self, rows: np.ndarray, results: Mapping[str, np.ndarray]) -> None:
         """Keep one finished chunk: input ``rows`` and their ``results`` (by field), atomically."""
         arrays = {"rows": np.asarray(rows, dtype=np.int64), **{k: np.asarray(v) for k, v in results.items()}}
-        outputs.write_file(self.folder / f"rows-{int(arrays['rows'][0]):09d}.npz", lambda fh: np.savez(fh, **arrays))
+        storage.write_file(self.folder / f"rows-{int(arrays['rows'][0]):09d}.npz", lambda fh: np.savez(fh, **arrays))
 
     def files(self) -> list[Path]:
         """Every file of the checkpoint, to remove once the final results are written: its
@@ -501,9 +487,9 @@ class BatchCheckpoint:
         real folder: a link is never followed to delete what it points at."""
         try:
             self.check_folder()
-        except outputs.OutputError:
+        except storage.OutputError:
             return []
-        found = self.chunk_files() + [self.folder / self.MANIFEST] + sorted(self.folder.glob("*" + outputs.TEMP_SUFFIX))
+        found = self.chunk_files() + [self.folder / self.MANIFEST] + sorted(self.folder.glob("*" + storage.TEMP_SUFFIX))
         return [p for p in found if _is_real_file(p)]
 
 

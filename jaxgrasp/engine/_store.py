@@ -51,11 +51,14 @@ code as the user. So nothing is read that another user could have written:
   length of its payload; a file whose key is not exactly the expected one, or whose
   payload does not match, is not unpickled: the executable is compiled again and the file
   replaced;
-* files are written through a temporary file created exclusively (``O_EXCL``,
-  ``O_NOFOLLOW``, mode 0600) under a random name in the same folder, synced, then renamed
-  over the file (atomic: a reader sees the old file or the new one); a failed write
-  removes it, and temporary files of dead processes (or older than an hour) are removed
-  when the store is turned on.
+* files are written as every file of jaxgrasp (:func:`jaxgrasp.storage.write_file`):
+  through a temporary file created exclusively (``O_EXCL``, ``O_NOFOLLOW``, here mode
+  0600) under a random name in the same folder, synced, then renamed over the file
+  (atomic: a reader sees the old file or the new one); a failed write removes it, and
+  temporary files of dead processes (or older than
+  :data:`jaxgrasp.storage.STALE_TEMP_SECONDS`) are removed when the store is turned on
+  (:func:`jaxgrasp.storage.remove_stale_temps`). The private folders and files are
+  :func:`jaxgrasp.storage.private_folder` and :func:`jaxgrasp.storage.read_private`.
 
 Warnings and the report of each compilation go to the ``logging`` logger ``"jaxgrasp"``
 (:data:`LOGGER`): a compilation is reported at INFO level (what, why, where it is stored),
@@ -67,7 +70,6 @@ did with :func:`stats` and start afresh with
 from __future__ import annotations
 
 import contextlib
-import errno
 import functools
 import hashlib
 import json
@@ -75,13 +77,8 @@ import logging
 import os
 import pickle
 import platform
-import re
-import secrets
-import stat
 import sys
-import tempfile
 import threading
-import time
 import warnings
 from collections.abc import Callable, Hashable, Sequence
 from pathlib import Path
@@ -90,6 +87,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
+from jaxgrasp import storage
 from jaxgrasp.engine._pipeline import Staged
 
 __all__ = [
@@ -106,7 +104,6 @@ __all__ = [
     "executable_entry",
     "load_executable",
     "log_lines_on_stderr",
-    "remove_stale_temp_files",
     "save_executable",
     "serialized_stages",
     "set_executable_dir",
@@ -127,9 +124,6 @@ EXECUTABLE_SUBDIR = "jaxgrasp-executables"
 
 LOGGER = logging.getLogger("jaxgrasp")
 """Where the caches report: refused folders and files (WARNING), compilations (INFO)."""
-
-STALE_TEMP_SECONDS = 3600.0
-"""Age (s) after which a temporary file of the store is removed even if its process lives."""
 
 _EXECUTABLE_DIR: Path | None = None
 
@@ -172,7 +166,7 @@ def enable_from_environment() -> Path | None:
     folder = default_dir()
     if folder is None:
         return None
-    problem = _private_folder(folder, create=True)
+    problem = storage.private_folder(folder, create=True)
     if problem is not None:
         _refuse(folder, problem)
         return None
@@ -200,7 +194,8 @@ def enable_compilation_cache(path=None) -> Path | None:
     folder = default_dir() if path is None else Path(path).expanduser()
     if folder is None:
         return None
-    problem = _private_folder(folder, create=True) or _private_folder(folder / EXECUTABLE_SUBDIR, create=False)
+    problem = (storage.private_folder(folder, create=True)
+               or storage.private_folder(folder / EXECUTABLE_SUBDIR, create=False))
     if problem is not None:
         _refuse(folder, problem)
         return None
@@ -235,55 +230,10 @@ def _writable(folder: Path) -> bool:
     """Whether a file can be created in ``folder`` (``os.access`` says yes to root even
     where the file system refuses)."""
     try:
-        with tempfile.TemporaryFile(dir=folder):
-            return True
-    except OSError:
+        storage.check_writable(folder)
+        return True
+    except storage.OutputError:
         return False
-
-
-def _make_private(folder: Path) -> None:
-    """Create ``folder`` and its missing parents, each with mode 0700 whatever the umask;
-    raises ``OSError`` where it cannot. Folders that exist are left as they are."""
-    missing = []
-    for level in (folder, *folder.parents):
-        if os.path.lexists(level):
-            break
-        missing.append(level)
-    for level in reversed(missing):
-        try:
-            os.mkdir(level, 0o700)
-        except FileExistsError:  # made by another process meanwhile: checked as any other
-            continue
-        os.chmod(level, 0o700)  # the umask may have removed the owner's bits
-
-
-def _not_private(st: os.stat_result, kind: str) -> str | None:
-    """Why a file or folder with status ``st`` (of ``lstat`` or ``fstat``) could hold what
-    another user wrote; ``None`` where it is the user's alone. ``kind``: ``"folder"`` or
-    ``"file"``."""
-    if stat.S_ISLNK(st.st_mode):
-        return "it is a symbolic link"
-    if not (stat.S_ISDIR if kind == "folder" else stat.S_ISREG)(st.st_mode):
-        return f"not a {'folder' if kind == 'folder' else 'regular file'}"
-    if st.st_uid != os.geteuid():
-        return f"owned by user id {st.st_uid}, not by this user ({os.geteuid()})"
-    if st.st_mode & 0o022:
-        return f"writable by group or others (mode {stat.S_IMODE(st.st_mode):o})"
-    return None
-
-
-def _private_folder(folder: Path, create: bool) -> str | None:
-    """Why ``folder`` must not be used as a cache; ``None`` where it may. With ``create``,
-    a missing folder is created private; without, a missing one may be used (nothing to
-    read; it is created when the first file is written)."""
-    try:
-        if create:
-            _make_private(folder)
-        return _not_private(os.lstat(folder), "folder")
-    except FileNotFoundError:
-        return None if not create else "cannot be created (a parent was removed)"
-    except OSError as exc:
-        return f"cannot be created ({exc.strerror or exc})"
 
 
 def set_executable_dir(path) -> Path | None:
@@ -303,63 +253,21 @@ def set_executable_dir(path) -> Path | None:
         _EXECUTABLE_DIR = None
         return None
     folder = Path(path).expanduser()
-    problem = _private_folder(folder, create=True)
+    problem = storage.private_folder(folder, create=True)
     if problem is not None and os.path.isdir(folder.parent) and problem.startswith("cannot be created"):
-        problem = _private_folder(folder, create=False)  # a read-only cache: read what it has
+        problem = storage.private_folder(folder, create=False)  # a read-only cache: read what it has
     if problem is not None:
         _refuse(folder, problem)
         _EXECUTABLE_DIR = None
         return None
     _EXECUTABLE_DIR = folder
-    remove_stale_temp_files(folder)
+    storage.remove_stale_temps(folder, earlier_store_names=True)
     return folder
 
 
 def executable_dir() -> Path | None:
     """The folder of stored executables, ``None`` when they are not kept."""
     return _EXECUTABLE_DIR
-
-
-_TEMP = re.compile(r"^\.(?P<name>[^/]+)\.(?P<pid>\d+)\.[0-9a-f]+\.tmp$")
-"""A temporary file of the store (:func:`_write_atomically`): ``.NAME.PID.RANDOM.tmp``."""
-
-_OLD_TEMP = re.compile(r"^[\w.-]+\.tmp(?P<pid>\d+)$")
-"""A temporary file of earlier versions of the store: ``NAME.tmpPID``."""
-
-
-def _process_is_gone(pid: int) -> bool:
-    """Whether no process ``pid`` runs on this machine."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    except OSError:  # another user's process: alive
-        return False
-    return False
-
-
-def remove_stale_temp_files(folder: Path, now: float | None = None) -> int:
-    """Remove the store's temporary files in ``folder`` whose process is gone or that are
-    older than :data:`STALE_TEMP_SECONDS` (a write killed half-way leaves one); how many.
-    Never follows a link (a link is removed as a link)."""
-    now = time.time() if now is None else now
-    removed = 0
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return 0
-    for entry in entries:
-        match = _TEMP.match(entry.name) or _OLD_TEMP.match(entry.name)
-        if match is None:
-            continue
-        try:
-            age = now - entry.stat(follow_symlinks=False).st_mtime
-            if age > STALE_TEMP_SECONDS or _process_is_gone(int(match["pid"])):
-                os.unlink(entry.path)
-                removed += 1
-        except OSError:  # gone meanwhile, or not ours to remove
-            continue
-    return removed
 
 
 @functools.cache
@@ -434,22 +342,16 @@ class _Refused(_Unusable):
 
 
 def _read_private(path: Path) -> bytes:
-    """The bytes of ``path``, opened without following a link, if it is a regular file of
-    the user's that no one else can write; raises ``FileNotFoundError``, :class:`_Refused`
-    or :class:`_Unusable`."""
+    """The bytes of ``path`` (:func:`jaxgrasp.storage.read_private`); raises
+    ``FileNotFoundError``, :class:`_Refused` or :class:`_Unusable`."""
     try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0))
+        return storage.read_private(path)
+    except storage.NotPrivate as exc:
+        raise _Refused(str(exc)) from None
     except FileNotFoundError:
         raise
     except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise _Refused("it is a symbolic link") from None
         raise _Unusable(f"it cannot be read ({exc.strerror})") from None
-    with os.fdopen(fd, "rb") as f:
-        problem = _not_private(os.fstat(f.fileno()), "file")  # the file opened, not a name
-        if problem is not None:
-            raise _Refused(problem)
-        return f.read()
 
 
 def _encode(key: str, payload: bytes) -> bytes:
@@ -567,39 +469,6 @@ def load_executable(entry: StoreEntry, spec: Sequence, devices: Sequence, n_outp
         return None, f"its stored file does not load here ({exc})"
 
 
-def _random_suffix() -> str:
-    return secrets.token_hex(8)
-
-
-def _write_atomically(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path``: into a new temporary file in the same folder (created
-    exclusively, never through a link, mode 0600), synced, then renamed over ``path`` (which
-    replaces a link there, not its target). Raises ``OSError``; the temporary file is
-    removed on any failure."""
-    if not path.parent.is_dir():
-        _make_private(path.parent)
-    flags = os.O_CREAT | os.O_EXCL | os.O_WRONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
-    for _ in range(8):  # a name that exists (planted, or another writer's): another name
-        tmp = path.parent / f".{path.name}.{os.getpid()}.{_random_suffix()}.tmp"
-        try:
-            fd = os.open(tmp, flags, 0o600)
-            break
-        except FileExistsError:
-            continue
-    else:
-        raise FileExistsError(errno.EEXIST, "no free temporary name", str(path))
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)  # atomic: a concurrent reader sees the old file or the new one
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
 def serialized_stages(fn) -> list | None:
     """The stages of the compiled executable ``fn`` (``jax.stages.Compiled`` or
     :class:`Staged`) serialized, as :func:`save_executable` writes them; ``None`` where it
@@ -624,7 +493,9 @@ def save_executable(entry: StoreEntry, stages: list) -> bool:
     cannot be written is built again next time, and counts in ``stats()["cache_errors"]``)."""
     try:
         data = _encode(entry.key, pickle.dumps(stages, protocol=pickle.HIGHEST_PROTOCOL))
-        _write_atomically(entry.path, data)
+        if not entry.path.parent.is_dir():
+            storage.make_private(entry.path.parent)
+        storage.write_file(entry.path, data, mode=0o600)  # the user's alone: it is loaded and run
         return True
     except Exception:  # noqa: BLE001  no writable cache: build every time
         _STATS["cache_errors"] += 1

@@ -1,9 +1,9 @@
-"""Files in and out: grasp files, datasets, meshes, and output files written whole or not at all.
+"""Files in and out: grasp files, datasets and meshes.
 
 Grasp files (TOML, JSON; :func:`load`, :func:`save`), datasets of many grasps (NPZ,
 JSONL; :func:`load_dataset`, :func:`save_dataset`), grasps on an object's mesh
 (:func:`from_mesh`), and :class:`OutputError` for an output that cannot be written. All
-in SI units.
+in SI units. Every file is written whole or not at all (:mod:`jaxgrasp.storage`).
 
 Inputs are treated as untrusted: every file is read only if it is a regular file under
 its kind's size cap (special files such as FIFOs and ``/dev/zero`` are refused in one
@@ -16,7 +16,7 @@ caller allows more folders (``allowed_dirs=``, ``--allow-dir``); see
 from jaxgrasp.io._dataset import GraspSet, load_dataset, save_dataset
 from jaxgrasp.io._grasp_file import grasp_from_dict, grasp_to_dict, load, save
 from jaxgrasp.io._mesh import MeshGrasp, from_mesh
-from jaxgrasp.io._outputs import OutputError
+from jaxgrasp.storage import OutputError
 
 __all__ = [
     "load",

@@ -71,7 +71,7 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage
 from jaxgrasp.io._grasp_file import _parse_json, checked_fields, grasp_to_dict
 from jaxgrasp.io._inputs import MAX_DATASET_BYTES, open_input
 from jaxgrasp.io._mesh import MeshReader
@@ -627,4 +627,4 @@ def save_dataset(path: str | os.PathLike, grasps) -> None:
     suffix = _suffix(path)
     items = _as_list(grasps)
     content = _npz_bytes(items) if suffix == ".npz" else _jsonl_bytes(items)
-    outputs.write_file(path, content)
+    storage.write_file(path, content)

@@ -47,7 +47,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage
 from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, MAX_MESH_BYTES, read_input
 from jaxgrasp.io._mesh import MeshGrasp, MeshReader, from_mesh, load_mesh
 from jaxgrasp.model._fields import FIELD, FIELDS, FINGERTIP
@@ -508,7 +508,7 @@ def save(grasp: Grasp | MeshGrasp, path: str | os.PathLike, *, copy_mesh: bool =
 
     Floats are written so that :func:`load` reproduces the grasp bit for bit (a mesh grasp:
     to the rounding of moving its positions into the mesh's frame and back). The file is
-    written atomically (a temporary file renamed into place, :mod:`jaxgrasp.io._outputs`): a
+    written atomically (a temporary file renamed into place, :mod:`jaxgrasp.storage`): a
     failure leaves the previous file as it was.
 
     A :class:`MeshGrasp` is written with ``[object] mesh`` naming its mesh file relative to
@@ -520,10 +520,10 @@ def save(grasp: Grasp | MeshGrasp, path: str | os.PathLike, *, copy_mesh: bool =
     if isinstance(grasp, MeshGrasp):
         name, raw = mesh_reference(grasp, Path(path).parent, copy_mesh)
         if raw is not None:
-            outputs.write_file(Path(path).parent / name, raw)
-        outputs.write_file(path, to_text(grasp, path, name).encode("utf-8"))
+            storage.write_file(Path(path).parent / name, raw)
+        storage.write_file(path, to_text(grasp, path, name).encode("utf-8"))
         return
-    outputs.write_file(path, to_text(grasp, path).encode("utf-8"))
+    storage.write_file(path, to_text(grasp, path).encode("utf-8"))
 
 
 def mesh_reference(mesh_grasp: MeshGrasp, folder, copy: bool) -> tuple[str, bytes | None]:

@@ -36,7 +36,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage
 from jaxgrasp.model._codes import BoundaryKind
 from jaxgrasp.model._fields import FIELD
 from jaxgrasp.model._units import MJ_TO_J
@@ -95,7 +95,7 @@ def new_figure(**kwargs) -> Figure:
 def save_figure(fig, path, format: str | None = None) -> None:
     """Save ``fig`` (150 dpi, tight box) to ``path`` atomically, or into a binary file object.
 
-    A path is written as a temporary file renamed into place (:mod:`jaxgrasp.io._outputs`),
+    A path is written as a temporary file renamed into place (:mod:`jaxgrasp.storage`),
     so a failure or an interrupt never leaves half an image. The format is ``format``,
     else the path's suffix, else matplotlib's default (``png``; its suffix is then added,
     as ``savefig`` does).
@@ -108,7 +108,7 @@ def save_figure(fig, path, format: str | None = None) -> None:
     if not fmt:
         fmt = matplotlib.rcParams["savefig.format"]
         path = f"{path}.{fmt}"
-    outputs.write_file(path, lambda fh: fig.savefig(fh, format=fmt, dpi=150, bbox_inches="tight"))
+    storage.write_file(path, lambda fh: fig.savefig(fh, format=fmt, dpi=150, bbox_inches="tight"))
 
 
 def _save(fig, path):

@@ -27,7 +27,7 @@ import pytest
 import jaxgrasp
 from jaxgrasp.analysis import TuneStatus
 from jaxgrasp.cli import _common, _show, _sweep, _tune, build_parser
-from jaxgrasp.io._outputs import csv_cell
+from jaxgrasp.storage import csv_cell
 from jaxgrasp.presets import PRESETS
 
 ROOT = Path(__file__).resolve().parents[2]

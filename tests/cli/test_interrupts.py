@@ -635,7 +635,7 @@ def test_a_write_abandoned_by_the_interrupt_prints_no_line(capsys):
     """The command's thread can reach a write after the main thread abandoned output
     writing (the interrupt's handler, which prints the last line): it ends with the
     interrupt's status and no ``error`` line of its own, whatever it was writing."""
-    from jaxgrasp.io import _outputs as outputs
+    from jaxgrasp import storage as outputs
 
     assert issubclass(outputs.Abandoned, outputs.OutputError)
     assert cli._report(outputs.Abandoned("output writing was abandoned (interrupted)")) == 130

@@ -15,8 +15,10 @@ import numpy as np
 import pytest
 
 import jaxgrasp
-from jaxgrasp.engine._checkpoint import BatchCheckpoint, SweepCheckpoint, chunk_layout
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage as outputs
+from jaxgrasp.cli import _notes
+from jaxgrasp.cli._keepers import BatchCheckpoint
+from jaxgrasp.engine._checkpoint import SweepCheckpoint, chunk_layout
 from jaxgrasp.tolerance._result import FIELDS
 
 GRASPS, CONTACTS = 6, 3
@@ -36,7 +38,7 @@ def checkpoint(tmp_path) -> BatchCheckpoint:
     """A checkpoint of 6 grasps padded to 3 contacts with two good chunks: rows 0-1, 4-5."""
     cp = BatchCheckpoint(tmp_path / "results.partial", "set.jsonl", "0" * 64, GRASPS, CONTACTS)
     cp.open(resume=False)
-    outputs.clear_notes()
+    _notes.clear_notes()
     cp.save_rows(np.array([0, 1]), _results([0, 1]))
     cp.save_rows(np.array([4, 5]), _results([4, 5]))
     return cp

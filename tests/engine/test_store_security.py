@@ -24,7 +24,9 @@ import numpy as np
 import pytest
 
 from jaxgrasp.engine import _compile
+from jaxgrasp import storage
 from jaxgrasp.engine import _store as store
+from jaxgrasp.storage import _files
 
 NOBODY = 65534
 SPEC = (jax.ShapeDtypeStruct((4,), jnp.float64),)
@@ -242,21 +244,21 @@ def test_links_are_never_written_through(folder, tmp_path, monkeypatch, caplog):
     target.write_bytes(b"precious")
     path = _entry().path
     path.symlink_to(target)
-    names = iter(["0" * 16, "1" * 16])
-    monkeypatch.setattr(store, "_random_suffix", lambda: next(names))
-    (folder / f".{path.name}.{os.getpid()}.{'0' * 16}.tmp").symlink_to(target)
+    names = iter(["0" * 8, "1" * 8])
+    monkeypatch.setattr(_files.secrets, "token_hex", lambda n: next(names))
+    (folder / f"{path.name}.{os.getpid()}-{'0' * 8}.tmp").symlink_to(target)
     with caplog.at_level(logging.WARNING, logger="jaxgrasp"):
         built, counted = _compiled()
     assert counted == {"traced": 1, "deserialized": 0, "cache_errors": 1}
     assert "it is a symbolic link" in caplog.text
     assert target.read_bytes() == b"precious"
     _assert_replaced(_result(built))
-    assert not (folder / f".{path.name}.{os.getpid()}.{'1' * 16}.tmp").exists()
+    assert not (folder / f"{path.name}.{os.getpid()}-{'1' * 8}.tmp").exists()
     # a write that fails at the rename removes its temporary file
-    monkeypatch.setattr(store, "_random_suffix", lambda: "2" * 16)
+    monkeypatch.setattr(_files.secrets, "token_hex", lambda n: "2" * 8)
     monkeypatch.setattr(store.os, "replace", lambda *a: (_ for _ in ()).throw(OSError(28, "No space left")))
     assert store.save_executable(_entry(), store.serialized_stages(built)) is False
-    assert not (folder / f".{path.name}.{os.getpid()}.{'2' * 16}.tmp").exists()
+    assert not (folder / f"{path.name}.{os.getpid()}-{'2' * 8}.tmp").exists()
 
 
 def test_stale_temporary_files_are_removed(tmp_path):
@@ -268,7 +270,7 @@ def test_stale_temporary_files_are_removed(tmp_path):
     for name in names:
         (tmp_path / name).write_bytes(b"")
     old = tmp_path / f".d.xla.{live}.00ff.tmp"
-    os.utime(old, (old.stat().st_atime - 2 * store.STALE_TEMP_SECONDS,) * 2)
+    os.utime(old, (old.stat().st_atime - 2 * storage.STALE_TEMP_SECONDS,) * 2)
     saved = store.executable_dir()
     try:
         store.set_executable_dir(tmp_path)

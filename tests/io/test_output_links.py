@@ -20,9 +20,12 @@ import pytest
 import jaxgrasp
 from jaxgrasp import cli
 from jaxgrasp.cli import _batch, _sweep
+from jaxgrasp import storage as outputs
+from jaxgrasp.cli import _notes
+from jaxgrasp.cli._keepers import BatchCheckpoint
 from jaxgrasp.engine import _checkpoint
-from jaxgrasp.engine._checkpoint import BatchCheckpoint, SweepKeeper
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.engine._checkpoint import SweepKeeper
+from jaxgrasp.storage import _files
 
 SECRET = b"a file of the user's, elsewhere\n"
 
@@ -208,7 +211,7 @@ def test_sweep_checkpoint_and_result_links_are_replaced_not_followed(out, target
     try:
         keeper(0, 1, results)
     finally:
-        outputs.clear_notes()
+        _notes.clear_notes()
     assert not (out / _checkpoint.SWEEP_FILE).is_symlink()
     assert _checkpoint.SweepCheckpoint.load(out / _checkpoint.SWEEP_FILE).done_count == 1
     (out / "results.csv").symlink_to(target)
@@ -231,7 +234,7 @@ def test_temp_name_taken_by_a_link_is_skipped(out, target, monkeypatch):
     """A temporary file's name pre-created as a link used to have its target overwritten.
     Names are random and created exclusively: a taken name is passed over."""
     tokens = iter(["0badc0de", "0badc0de", "5afe5afe"])
-    monkeypatch.setattr(outputs.secrets, "token_hex", lambda n: next(tokens))
+    monkeypatch.setattr(_files.secrets, "token_hex", lambda n: next(tokens))
     planted = out / f"results.csv.{os.getpid()}-0badc0de{outputs.TEMP_SUFFIX}"
     planted.symlink_to(target)
     outputs.write_file(out / "results.csv", b"new")
@@ -299,7 +302,20 @@ def test_stale_temps_in_the_checkpoint_folder_are_removed_on_resume(out):
     stale.write_bytes(b"half a chunk")
     try:
         assert cp.open(resume=True)[2] is True
-        assert outputs.keeping() == [f"finished chunks kept in {folder}, rerun with --resume"]
+        assert _notes.keeping() == [f"finished chunks kept in {folder}, rerun with --resume"]
     finally:
-        outputs.clear_notes()
+        _notes.clear_notes()
     assert sorted(os.listdir(folder)) == ["manifest.json"]
+
+
+def test_only_the_store_sweeps_its_earlier_temp_names(out):
+    """The executable store's earlier temporary names (``.NAME.PID.RANDOM.tmp``,
+    ``NAME.tmpPID``) are swept in the store's folder only: in an output folder a file so
+    named may be the user's, and stays."""
+    dead = _dead_pid()
+    names = [f".a.xla.{dead}.00ff.tmp", f"b.tmp{dead}"]
+    for name in names:
+        (out / name).write_bytes(b"x")
+    with outputs.FolderLock(out):
+        assert sorted(os.listdir(out)) == sorted([*names, outputs.LOCK_NAME])
+    assert outputs.remove_stale_temps(out, earlier_store_names=True) == 2 and os.listdir(out) == []

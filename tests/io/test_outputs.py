@@ -1,4 +1,4 @@
-"""Atomic output files, sets, the folder lock and the writability check (``jaxgrasp.io._outputs``),
+"""Atomic output files, sets, the folder lock and the writability check (``jaxgrasp.storage``),
 and the library writers that use them (``SweepResult.to_csv``/``to_npz``, ``jaxgrasp.save``,
 the plots). In-process and fast: nothing here compiles."""
 
@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 import jaxgrasp
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage as outputs
+from jaxgrasp.cli import _notes
 from jaxgrasp.engine._checkpoint import SweepCheckpoint
+from jaxgrasp.storage import _files
 from jaxgrasp.analysis._sweep import SweepResult
 
 
@@ -125,7 +127,7 @@ def test_check_writable_creates_nothing_and_names_the_file(tmp_path):
 
 READ_ONLY_CHECK = """
 import sys
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp import storage as outputs
 for path in sys.argv[1:]:
     try:
         outputs.check_writable(path)
@@ -192,7 +194,7 @@ def test_folder_lock_takes_over_a_stale_lock(tmp_path):
 @pytest.mark.slow  # a subprocess
 def test_folder_lock_held_by_another_process(tmp_path):
     code = (
-        "import sys, time; from jaxgrasp.io._outputs import FolderLock; "
+        "import sys, time; from jaxgrasp.storage import FolderLock; "
         "l = FolderLock(sys.argv[1]).acquire(); print('held', flush=True); time.sleep(60)"
     )
     p = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], stdout=subprocess.PIPE, text=True)
@@ -238,10 +240,10 @@ def test_interrupt_writes_the_checkpoint_a_throttled_chunk_skipped(tmp_path, mon
     the sweep is interrupted: abandon() runs the skipped write first."""
     import threading
 
-    from jaxgrasp.engine._checkpoint import SweepKeeper
+    from jaxgrasp.cli._keepers import SweepKeeper
 
-    monkeypatch.setattr(outputs, "PUBLISH_LOCK", threading.Lock())  # abandon() keeps it forever
-    monkeypatch.setattr(outputs, "_ABANDONED", False)
+    monkeypatch.setattr(_files, "PUBLISH_LOCK", threading.Lock())  # abandon() keeps it forever
+    monkeypatch.setattr(_files, "_ABANDONED", False)
     axes = {"mass": np.array([0.0, 0.1, 0.2, 0.3])}
     flat = {
         "value": np.arange(4.0),
@@ -259,9 +261,9 @@ def test_interrupt_writes_the_checkpoint_a_throttled_chunk_skipped(tmp_path, mon
         cp(1, 2, flat)
         cp(2, 3, flat)
         assert SweepCheckpoint.load(path).done_count == 1
-        notes = outputs.abandon(0.1)
+        notes = _notes.abandon(0.1)
     finally:
-        outputs.clear_notes()
+        _notes.clear_notes()
     kept = SweepCheckpoint.load(path)
     assert kept.done_count == 3
     np.testing.assert_array_equal(kept.results["value"][:3], [0.0, 1.0, 2.0])
@@ -274,7 +276,7 @@ def test_full_disk_keeps_the_last_sweep_checkpoint(tmp_path, monkeypatch):
     previous checkpoint whole, no temporary file, and the error can say what is kept."""
     import errno
 
-    from jaxgrasp.engine._checkpoint import SweepKeeper
+    from jaxgrasp.cli._keepers import SweepKeeper
 
     path = tmp_path / "sweep.partial.npz"
     flat = {"value": np.arange(2.0), "status": np.zeros(2, np.int32), "limiting_kind": np.zeros(2, np.int32),
@@ -285,8 +287,8 @@ def test_full_disk_keeps_the_last_sweep_checkpoint(tmp_path, monkeypatch):
         monkeypatch.setattr(os, "fsync", lambda fd: (_ for _ in ()).throw(OSError(errno.ENOSPC, "No space left on device")))
         with pytest.raises(outputs.DiskFull, match=f"^no space left on device writing {path}$"):
             keeper(1, 2, flat)
-        assert outputs.keeping() == [f"1 of 2 finished points kept in {path}"]
+        assert _notes.keeping() == [f"1 of 2 finished points kept in {path}"]
     finally:
-        outputs.clear_notes()
+        _notes.clear_notes()
     monkeypatch.undo()
     assert SweepCheckpoint.load(path).done_count == 1 and _tmp_files(tmp_path) == []

@@ -1,0 +1,54 @@
+"""The command's checkpoints: the engine's (:mod:`jaxgrasp.engine._checkpoint`), with the
+words the command says of them (:mod:`._notes`): what an interrupt prints, what a failed
+write's error adds, and which damaged chunk files ``--resume`` skipped."""
+
+from __future__ import annotations
+
+from jaxgrasp.cli._notes import set_keeping, set_last_write, set_note
+from jaxgrasp.engine import _checkpoint
+from jaxgrasp.model._validation import counted
+
+__all__ = ["SweepKeeper", "BatchCheckpoint"]
+
+
+class SweepKeeper(_checkpoint.SweepKeeper):
+    """``jaxgrasp sweep``'s checkpoint (:class:`jaxgrasp.engine._checkpoint.SweepKeeper`):
+    a skipped write is left to an interrupt (:func:`set_last_write`), and each write
+    leaves the note an interrupt prints (``kept K of N points in PATH``) and what a failed
+    write's error adds."""
+
+    def deferred(self, write) -> None:
+        set_last_write("sweep", write)
+
+    def kept(self, partial) -> None:
+        set_note("sweep", f"kept {partial.done_count} of {self.total} points in {self.path}")
+        set_keeping("sweep", f"{partial.done_count} of {self.total} finished points kept in {self.path}")
+
+
+class BatchCheckpoint(_checkpoint.BatchCheckpoint):
+    """``jaxgrasp batch``'s checkpoint (:class:`jaxgrasp.engine._checkpoint.BatchCheckpoint`)
+    with the command's words: once opened, a failed write's error says the folder is kept;
+    each chunk kept leaves the note an interrupt prints; :meth:`skipped_note` names the
+    damaged chunk files ``--resume`` skipped."""
+
+    def open(self, resume: bool):
+        opened = super().open(resume)
+        set_keeping("batch", f"finished chunks kept in {self.folder}, rerun with --resume")
+        return opened
+
+    def kept(self, rows: int, total: int) -> None:
+        set_note(
+            "batch",
+            f"kept {rows} of {counted(total, 'grasp')} in {self.folder}; "
+            "the same command with --resume finishes the rest",
+        )
+
+    def skipped_note(self) -> str | None:
+        """One line on the chunk files the last :meth:`load` skipped (``None``: none)."""
+        if not self.skipped:
+            return None
+        n = len(self.skipped)
+        return (
+            f"jaxgrasp: --resume: skipped {n} damaged chunk file{'s' if n > 1 else ''} in {self.folder} "
+            f"(first: {self.skipped[0]}); {'their' if n > 1 else 'its'} grasps are evaluated again"
+        )
