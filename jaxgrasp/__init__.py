@@ -59,13 +59,13 @@ import jax as _jax  # noqa: E402
 if "JAX_ENABLE_X64" not in _os.environ:  # an explicit choice of the user's stands
     _jax.config.update("jax_enable_x64", True)
 
-from jaxgrasp.engine import _devices  # noqa: E402
+from jaxgrasp.engine import configure_cpu_devices as _configure_cpu_devices  # noqa: E402
 
-_devices.configure_cpu_devices()  # before JAX makes its devices: batches run on every core
+_configure_cpu_devices()  # before JAX makes its devices: batches run on every core
 
-from jaxgrasp.engine import _store  # noqa: E402
+from jaxgrasp.engine import enable_from_environment as _enable_from_environment  # noqa: E402
 
-_store.enable_from_environment()  # the executable store, in the user's cache folder: every process starts warm
+_enable_from_environment()  # the executable store, in the user's cache folder: every process starts warm
 
 from jaxgrasp import presets  # noqa: E402
 from jaxgrasp.analysis import (  # noqa: E402

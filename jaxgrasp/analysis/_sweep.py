@@ -40,25 +40,29 @@ from typing import Any, Callable, Mapping
 import jax
 import numpy as np
 
-from jaxgrasp.engine._batch import start_progress
-from jaxgrasp.engine._checkpoint import SweepKeeper
-from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields
-from jaxgrasp.engine._plan import check_chunk_size, plan_chunks
-from jaxgrasp.engine._run import run_chunks
-from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.model._fields import FIELD, SWEEPABLE, Field
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._validation import (
+from jaxgrasp.engine import (
+    SweepKeeper,
+    check_chunk_size,
+    chunk_evaluator,
+    grasp_fields,
+    plan_chunks,
+    run_chunks,
+    start_progress,
+)
+from jaxgrasp.io import csv_cell, csv_content, write_to
+from jaxgrasp.model import (
+    FIELD,
+    SWEEPABLE,
+    BoundaryKind,
+    Field,
+    Grasp,
     GraspValueError,
     as_float_array,
     check_corners,
     check_grasp_inputs,
     format_value,
 )
-from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._result import SUMMARY_FIELDS, SummaryNames
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.tolerance import SUMMARY_FIELDS, EvaluateOptions, GraspStatus, SummaryNames
 
 __all__ = [
     "sweep",
@@ -230,14 +234,14 @@ class SweepResult(SummaryNames):
         kind = self.limiting_kind_names.ravel()
         contact = np.asarray(self.limiting_contact).ravel()
         energy = np.asarray(self.equilibrium_energy).ravel()
-        fmt = outputs.csv_cell
+        fmt = csv_cell
         rows = (
             [fmt(g[i]) for g in flat]
             + [fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i])]
             + [fmt(a[i]) for a in extra.values()]
             for i in range(value.size)
         )
-        outputs.write_to(path, outputs.csv_content(cols, rows))
+        write_to(path, csv_content(cols, rows))
 
     def to_npz(self, path, extra: Mapping[str, Any] | None = None) -> None:
         """Write a ``.npz``: ``axis_names``, ``axis_<name>`` (1-D, SI), the grid-shaped
@@ -264,7 +268,7 @@ class SweepResult(SummaryNames):
         if not hasattr(path, "write"):
             path = os.fspath(path)
             path = path if path.endswith(".npz") else path + ".npz"
-        outputs.write_to(path, lambda fh: np.savez(fh, **arrays))
+        write_to(path, lambda fh: np.savez(fh, **arrays))
 
     @classmethod
     def from_npz(cls, path) -> "SweepResult":

@@ -20,8 +20,7 @@ from importlib import metadata
 from jaxgrasp.cli import _batch, _evaluate, _plan, _show, _simulate, _sweep, _tune
 from jaxgrasp.cli._common import EXIT_USAGE, Parser, UsageError, check_names, load_grasp, parse_number
 from jaxgrasp.cli._interrupt import run_interruptibly
-from jaxgrasp.engine import _compile
-from jaxgrasp.engine._store import enable_compilation_cache, log_lines_on_stderr
+from jaxgrasp.engine import enable_compilation_cache, log_lines_on_stderr, wait_for_saves
 
 __all__ = [
     "main",
@@ -89,8 +88,8 @@ def main(argv=None) -> int:
 def _main(argv) -> int:
     """Parse ``argv`` and run its command; input errors as one line, exit status 2; a
     failure of the machine (a full disk, an I/O error) as one line, exit status 1."""
-    from jaxgrasp.io._outputs import OutputError, clear_notes
-    from jaxgrasp.model._validation import GraspValueError
+    from jaxgrasp.io import OutputError, clear_notes
+    from jaxgrasp.model import GraspValueError
 
     parser = build_parser()
     try:
@@ -107,7 +106,7 @@ def _main(argv) -> int:
         return _report(exc)
     finally:
         clear_notes()
-        _compile.wait_for_saves()  # the process may end with os._exit next
+        wait_for_saves()  # the process may end with os._exit next
 
 
 def _report(exc: Exception) -> int:
@@ -116,7 +115,7 @@ def _report(exc: Exception) -> int:
     A write abandoned by an interrupt prints nothing: the command's thread reaches it
     while the main thread ends the process with the interrupt's one line, which must be
     the only line after the progress lines."""
-    from jaxgrasp.io._outputs import Abandoned
+    from jaxgrasp.io import Abandoned
 
     if isinstance(exc, Abandoned):
         return 130
@@ -133,14 +132,14 @@ def _error_line(exc: Exception) -> tuple[int, str]:
     an I/O error, a file removed meanwhile) exit 1; a full disk's line also says what
     the command kept (:func:`~jaxgrasp.io._outputs.keeping`). The rest is bad input, exit 2.
     """
-    from jaxgrasp.io import _outputs as outputs
+    from jaxgrasp.io import NO_SPACE, DiskFull, keeping
 
-    full = isinstance(exc, outputs.DiskFull) or (isinstance(exc, OSError) and exc.errno in outputs.NO_SPACE)
+    full = isinstance(exc, DiskFull) or (isinstance(exc, OSError) and exc.errno in NO_SPACE)
     if isinstance(exc, OSError) and not full:
         what = (exc.strerror or str(exc) or type(exc).__name__).lower()
         return EXIT_ENVIRONMENT, f"{exc.filename}: {what}" if exc.filename else what
     if not full:
         return EXIT_USAGE, str(exc)
-    if not isinstance(exc, outputs.DiskFull):
-        exc = outputs.DiskFull(exc.filename or "an output file", exc)
-    return EXIT_ENVIRONMENT, "; ".join([str(exc), *outputs.keeping()])
+    if not isinstance(exc, DiskFull):
+        exc = DiskFull(exc.filename or "an output file", exc)
+    return EXIT_ENVIRONMENT, "; ".join([str(exc), *keeping()])

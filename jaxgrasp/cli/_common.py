@@ -15,9 +15,8 @@ import sys
 import time
 from pathlib import Path
 
-from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.model._fields import FIELD, SWEEPABLE
-from jaxgrasp.model._validation import counted
+from jaxgrasp.io import LOCK_NAME, DiskFull, FolderLock, OutputError, check_writable, refuse_link, write_set
+from jaxgrasp.model import FIELD, SWEEPABLE, counted
 from jaxgrasp.presets import PRESETS
 
 __all__ = [
@@ -129,7 +128,7 @@ def grasp_source(args) -> str:
 def grasp_notes(grasp) -> list[str]:
     """Remarks on a valid grasp that may not be what its author meant (one line each):
     normals pointing towards the centre of mass (:func:`jaxgrasp.model._validation.inward_contacts`)."""
-    from jaxgrasp.model._validation import inward_contacts
+    from jaxgrasp.model import inward_contacts
 
     inward = inward_contacts(grasp.positions, grasp.normals)
     if not inward:
@@ -149,8 +148,7 @@ def load_grasp(args, overrides: bool = True, keep_mesh: bool = False):
     """The grasp named on the command line (file or preset), with overrides applied; with
     ``keep_mesh``, a file naming a mesh gives its :class:`~jaxgrasp.io._mesh.MeshGrasp` (the
     overrides applied to its grasp)."""
-    from jaxgrasp.io._grasp_file import load
-    from jaxgrasp.io._mesh import MeshGrasp
+    from jaxgrasp.io import MeshGrasp, load
 
     if (args.file is None) == (args.preset is None):
         if args.file is None and getattr(args, "default_preset", None):
@@ -170,8 +168,7 @@ def _overridden(grasp, args):
     """``grasp`` with the command line's overrides (``--young-modulus`` ...) applied."""
     import numpy as np
 
-    from jaxgrasp.model._grasp import Grasp
-    from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
+    from jaxgrasp.model import Grasp, GraspValueError, check_grasp_inputs
 
     given = {name: getattr(args, name) for name in OVERRIDES if getattr(args, name, None) is not None}
     if not given:
@@ -256,33 +253,33 @@ def check_out(out: Path) -> None:
     checkpoints): a link there is refused, before anything is computed, not followed; so
     is a folder where a file belongs (the lock file, a sweep's checkpoint) or a file where
     a folder belongs (a batch's finished chunks)."""
-    from jaxgrasp.engine._checkpoint import BATCH_FOLDER, SWEEP_FILE
+    from jaxgrasp.engine import BATCH_FOLDER, SWEEP_FILE
 
     try:
-        outputs.check_writable(out)
-        for name, what, folder in ((outputs.LOCK_NAME, "its lock file", False),
+        check_writable(out)
+        for name, what, folder in ((LOCK_NAME, "its lock file", False),
                                    (BATCH_FOLDER, "a batch's finished chunks", True),
                                    (SWEEP_FILE, "a sweep's finished points", False)):
             path = out / name
-            outputs.refuse_link(path, what)
+            refuse_link(path, what)
             if path.exists() and path.is_dir() != folder:  # else found only when written, after the work
                 kind = "not a folder" if folder else "a folder"
-                raise outputs.OutputError(f"{str(path)!r}, where jaxgrasp keeps {what}, is {kind}: "
+                raise OutputError(f"{str(path)!r}, where jaxgrasp keeps {what}, is {kind}: "
                                           "remove it or choose another --out")
-    except outputs.OutputError as exc:
+    except OutputError as exc:
         raise UsageError(f"--out: {exc}") from None
 
 
-def lock_out(out: Path) -> outputs.FolderLock:
+def lock_out(out: Path) -> FolderLock:
     """The lock of ``--out`` (created if needed), held; a one-line error if another run
     holds it or its lock file is a link. Taking it removes the stale temporary files of
     killed runs in ``--out``."""
-    lock = outputs.FolderLock(out)
+    lock = FolderLock(out)
     try:
         return lock.acquire()
-    except outputs.DiskFull:
+    except DiskFull:
         raise  # exit 1, not an input error
-    except outputs.OutputError as exc:  # FolderBusy, or a link at the lock file's path
+    except OutputError as exc:  # FolderBusy, or a link at the lock file's path
         raise UsageError(f"--out: {exc}") from None
     except OSError as exc:
         raise UsageError(f"cannot create --out folder {str(out)!r}: {exc.strerror or exc}") from None
@@ -291,7 +288,7 @@ def lock_out(out: Path) -> outputs.FolderLock:
 def write_picture(targets, fig, scene) -> list:
     """Write the picture ``fig`` to ``targets[0]`` (PNG, SVG or PDF by its suffix) and, where
     given, ``scene``'s GLB to ``targets[1]``, as one set; the previous files replaced."""
-    from jaxgrasp.plots._plots import save_figure
+    from jaxgrasp.plots import save_figure
 
     members = {targets[0]: lambda fh: save_figure(fig, fh, format=targets[0].suffix[1:].lower())}
     if len(targets) > 1:
@@ -299,7 +296,7 @@ def write_picture(targets, fig, scene) -> list:
     try:
         for t in targets:
             t.parent.mkdir(parents=True, exist_ok=True)
-        return outputs.write_set(members)
+        return write_set(members)
     except OSError as exc:
         raise UsageError(f"cannot write {', '.join(map(str, targets))}: {exc.strerror or exc}") from None
 
@@ -419,7 +416,7 @@ def add_epsilon_option(p: argparse.ArgumentParser) -> None:
 def epsilon_columns(grasps, shape=None) -> dict:
     """``{"epsilon": values, "force_closure": bools}`` of a batched grasp
     (:func:`jaxgrasp.epsilon`), reshaped to ``shape`` (e.g. a sweep's grid)."""
-    from jaxgrasp.analysis._epsilon import epsilon
+    from jaxgrasp.analysis import epsilon
 
     eps = epsilon(grasps)
     cols = {"epsilon": eps.value, "force_closure": eps.force_closure}
@@ -449,8 +446,8 @@ def add_robust_options(p: argparse.ArgumentParser) -> None:
 def robust_uncertainty(args):
     """The :class:`~jaxgrasp.Uncertainty` of ``--robust`` (``None`` without it), after
     checking ``--samples`` and ``--seed``; a one-line :class:`UsageError` otherwise."""
-    from jaxgrasp.analysis._uncertainty import parse_spec
-    from jaxgrasp.model._validation import GraspValueError
+    from jaxgrasp.analysis import parse_spec
+    from jaxgrasp.model import GraspValueError
 
     if args.robust is None:
         return None

@@ -35,8 +35,8 @@ import threading
 from typing import Callable
 
 from jaxgrasp._startup import EXIT
-from jaxgrasp.engine import _compile
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.engine import wait_for_saves
+from jaxgrasp.io import abandon
 
 __all__ = ["run_interruptibly", "Interrupted", "EXIT_STATUS", "POLL_SECONDS", "PUBLISH_WAIT_SECONDS"]
 
@@ -138,8 +138,8 @@ def _exit_interrupted(signum: int) -> int:
     """Clean up, print the one line and end the process (see the module's docstring)."""
     for s in EXIT_STATUS:
         signal.signal(s, signal.SIG_IGN)
-    notes = outputs.abandon(PUBLISH_WAIT_SECONDS)
-    _compile.wait_for_saves(PUBLISH_WAIT_SECONDS)  # an executable being stored: no temporary file left
+    notes = abandon(PUBLISH_WAIT_SECONDS)
+    wait_for_saves(PUBLISH_WAIT_SECONDS)  # an executable being stored: no temporary file left
     _say_last(f"jaxgrasp: {_WORDS.get(signum, 'interrupted')}" + "".join(f"; {n}" for n in notes))
     status = EXIT_STATUS.get(signum, 130)
     _exit(status)

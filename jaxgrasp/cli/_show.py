@@ -14,7 +14,7 @@ from jaxgrasp.cli._common import (
     load_grasp,
     write_picture,
 )
-from jaxgrasp.io import _outputs as outputs
+from jaxgrasp.io import OutputError, check_writable
 
 __all__ = ["add_parser", "run", "PICTURE_SUFFIXES", "MAGNIFICATION_RANGE"]
 
@@ -56,10 +56,9 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """Evaluate the grasp, write the picture (and the GLB) as one set; one summary line."""
-    from jaxgrasp.engine._evaluate import evaluate
-    from jaxgrasp.io._mesh import MeshGrasp
-    from jaxgrasp.plots._plots import draw_scene
-    from jaxgrasp.plots._scene import grasp_scene
+    from jaxgrasp.engine import evaluate
+    from jaxgrasp.io import MeshGrasp
+    from jaxgrasp.plots import draw_scene, grasp_scene
 
     targets = _check_outputs(args)
     if getattr(args, "hand", None) is not None:
@@ -97,8 +96,8 @@ def _check_outputs(args) -> list[Path]:
         if path.is_dir():
             raise UsageError(f"{option} {str(path)!r} is a folder; give a file name")
         try:
-            outputs.check_writable(path.parent)  # creates nothing
-        except outputs.OutputError as exc:
+            check_writable(path.parent)  # creates nothing
+        except OutputError as exc:
             raise UsageError(f"{option} {str(path)!r}: {exc}") from None
     if len(targets) > 1 and targets[0][1].resolve() == targets[1][1].resolve():
         raise UsageError("--out and --glb name the same file")

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxgrasp.analysis._sweep import MAX_GRID_POINTS
+from jaxgrasp.analysis import MAX_GRID_POINTS
 from jaxgrasp.cli._common import (
     OVERRIDES,
     ChunkProgress,
@@ -42,11 +42,9 @@ from jaxgrasp.cli._common import (
     parse_number,
     replaced_text,
 )
-from jaxgrasp.engine._prefetch import prefetch
-from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.model._codes import NO_BOUNDARY
-from jaxgrasp.model._fields import FIELD
-from jaxgrasp.model._validation import counted
+from jaxgrasp.engine import prefetch
+from jaxgrasp.io import set_last_write, set_note, write_set
+from jaxgrasp.model import FIELD, NO_BOUNDARY, counted
 
 __all__ = ["add_parser", "run", "parse_axis_spec", "AXES", "PAPER_AXES"]
 
@@ -210,8 +208,8 @@ class _AxisInOrder(argparse.Action):
 
 def run(args) -> int:
     """Sweep the grasp of the command line; write the files and print one summary line."""
-    from jaxgrasp.analysis._sweep import check_inputs, grid_grasp, sweep
-    from jaxgrasp.engine._plan import plan_chunks
+    from jaxgrasp.analysis import check_inputs, grid_grasp, sweep
+    from jaxgrasp.engine import plan_chunks
 
     axes, paper = _parse_axes(args)
     check_chunk_size(args.chunk_size)
@@ -272,13 +270,13 @@ def _write_outputs(result, out: Path, title: str | None, extra=None) -> tuple[li
         out / "sweep.csv": lambda fh: result.to_csv(fh, extra),
     }
     if title is not None:
-        from jaxgrasp.plots._plots import plot_sweep, save_figure
+        from jaxgrasp.plots import plot_sweep, save_figure
 
         fig = plot_sweep(result, title=title)
         members[out / "sweep.png"] = lambda fh: save_figure(fig, fh, format="png")
     stale = [out / n for n in OUTPUT_NAMES if out / n not in members and (out / n).exists()]
     try:
-        replaced = outputs.write_set(
+        replaced = write_set(
             members,
             remove=stale + [out / PARTIAL_NAME],
             on_publish=lambda: _published(out),
@@ -290,8 +288,8 @@ def _write_outputs(result, out: Path, title: str | None, extra=None) -> tuple[li
 
 def _published(out: Path) -> None:
     """The whole set is in place: an interrupt now only says so (no checkpoint to write)."""
-    outputs.set_last_write("sweep", None)
-    outputs.set_note("sweep", f"the results are in {out}")
+    set_last_write("sweep", None)
+    set_note("sweep", f"the results are in {out}")
 
 
 def _fmt_param(name: str, x: float) -> str:

@@ -21,10 +21,9 @@ from typing import Any, Mapping
 import jax
 import numpy as np
 
-from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.tolerance._result import FIELDS, Evaluation, SummaryNames
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.io import csv_cell, csv_content, write_to
+from jaxgrasp.model import BoundaryKind
+from jaxgrasp.tolerance import FIELDS, Evaluation, GraspStatus, SummaryNames
 
 __all__ = ["BatchResult", "CSV_COLUMNS", "mark_invalid", "assemble"]
 
@@ -150,7 +149,7 @@ class BatchResult(SummaryNames):
         status, kind = self.status_names, self.limiting_kind_names  # object arrays of shared names
         contact, count = np.asarray(self.limiting_contact), np.asarray(self.num_contacts)
         extra = [np.asarray(a) for a in (extra or {}).values()]
-        fmt = outputs.csv_cell
+        fmt = csv_cell
         for i in range(len(self)):
             yield ([i, int(count[i]), fmt(value[i]), status[i], kind[i], int(contact[i]), fmt(energy[i]),
                     self.errors[i] or ""] + [fmt(a[i]) for a in extra])
@@ -162,7 +161,7 @@ class BatchResult(SummaryNames):
         ``error`` (empty for a valid grasp); then a column per ``extra`` entry (name ->
         ``(B,)`` array, e.g. ``epsilon``). Atomic for a path; a binary file object is
         written to directly."""
-        outputs.write_to(path, outputs.csv_content(CSV_COLUMNS + tuple(extra or ()), self._rows(extra)))
+        write_to(path, csv_content(CSV_COLUMNS + tuple(extra or ()), self._rows(extra)))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Every array of :meth:`to_npz`, by name."""
@@ -186,7 +185,7 @@ class BatchResult(SummaryNames):
         arrays by name; no pickled objects. Atomic for a path; read it back with
         :meth:`from_npz`."""
         arrays = self.arrays() | {k: np.asarray(v) for k, v in (extra or {}).items()}
-        outputs.write_to(path, lambda fh: np.savez(fh, **arrays))
+        write_to(path, lambda fh: np.savez(fh, **arrays))
 
     @classmethod
     def from_arrays(cls, z: Mapping[str, np.ndarray]) -> "BatchResult":

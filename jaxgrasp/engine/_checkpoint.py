@@ -44,11 +44,20 @@ from typing import Mapping
 
 import numpy as np
 
-from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.model._validation import counted as _counted
-from jaxgrasp.tolerance._result import SUMMARY_FIELDS as RESULT_FIELDS
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.io import (
+    TEMP_SUFFIX,
+    OutputError,
+    read_own,
+    refuse_link,
+    remove_stale_temps,
+    set_keeping,
+    set_last_write,
+    set_note,
+    write_file,
+    write_set,
+)
+from jaxgrasp.model import BoundaryKind, counted as _counted
+from jaxgrasp.tolerance import SUMMARY_FIELDS as RESULT_FIELDS, GraspStatus
 
 __all__ = [
     "SweepCheckpoint",
@@ -158,7 +167,7 @@ class SweepCheckpoint:
                 unreadable, an array missing, or shapes that disagree with its grid.
         """
         try:
-            data = outputs.read_own(path)
+            data = read_own(path)
             with np.load(io.BytesIO(data), allow_pickle=False) as z:
                 if "format" not in z.files or str(z["format"]) != FORMAT:
                     raise ValueError(f"{path}: not a jaxgrasp sweep checkpoint ({FORMAT})")
@@ -221,7 +230,7 @@ class SweepKeeper:
             self._results = results
         now = time.perf_counter()
         if stop < self.total and self._cost > CHECKPOINT_SHARE * (now - self._end):
-            outputs.set_last_write("sweep", self.write)
+            set_last_write("sweep", self.write)
             return
         self.write()
         self._end = time.perf_counter()
@@ -229,16 +238,16 @@ class SweepKeeper:
 
     def write(self) -> None:
         """Write the points finished so far (the worker's later chunks do not touch them)."""
-        outputs.set_last_write("sweep", None)
+        set_last_write("sweep", None)
         with self._lock:
             partial = SweepCheckpoint.from_flat(self.axes, self.done.copy(), self._results, self.grasp, self.chunk)
         note = f"kept {partial.done_count} of {self.total} points in {self.path}"
 
         def published() -> None:
-            outputs.set_note("sweep", note)
-            outputs.set_keeping("sweep", f"{partial.done_count} of {self.total} finished points kept in {self.path}")
+            set_note("sweep", note)
+            set_keeping("sweep", f"{partial.done_count} of {self.total} finished points kept in {self.path}")
 
-        outputs.write_set({self.path: partial.save}, on_publish=published)
+        write_set({self.path: partial.save}, on_publish=published)
 
 
 # --------------------------------------------------------------------------- batches
@@ -333,9 +342,9 @@ class BatchCheckpoint:
     def check_folder(self) -> None:
         """Raise :class:`~jaxgrasp.io.OutputError` (one line) unless the folder is absent
         or a real folder (not a link, not a file)."""
-        outputs.refuse_link(self.folder, "a batch's finished chunks")
+        refuse_link(self.folder, "a batch's finished chunks")
         if os.path.lexists(self.folder) and not self.folder.is_dir():
-            raise outputs.OutputError(
+            raise OutputError(
                 f"{str(self.folder)!r} is not a folder; jaxgrasp keeps a batch's finished chunks there: remove it"
             )
 
@@ -352,15 +361,15 @@ class BatchCheckpoint:
         self.folder.mkdir(exist_ok=True)
         self.check_folder()  # nothing put a link there meanwhile
         text = json.dumps(self.manifest, indent=1) + "\n"
-        outputs.write_file(self.folder / self.MANIFEST, text.encode())
+        write_file(self.folder / self.MANIFEST, text.encode())
 
     def check(self) -> None:
         """Raise ``ValueError`` (one line) unless the checkpoint on disk is of this run:
         same format, input bytes, number of grasps and padded contact count."""
         path = self.folder / self.MANIFEST
         try:
-            have = json.loads(outputs.read_own(path, self.MANIFEST_LIMIT).decode("utf-8"))
-        except (OSError, ValueError, outputs.OutputError) as exc:
+            have = json.loads(read_own(path, self.MANIFEST_LIMIT).decode("utf-8"))
+        except (OSError, ValueError, OutputError) as exc:
             raise ValueError(f"{path}: not a readable checkpoint ({exc})") from None
         if not isinstance(have, dict) or have.get("format") != BATCH_FORMAT:
             raise ValueError(f"{path}: not a jaxgrasp batch checkpoint ({BATCH_FORMAT})")
@@ -388,7 +397,7 @@ class BatchCheckpoint:
         """
         self.check_folder()
         if self.folder.is_dir():
-            outputs.remove_stale_temps(self.folder)
+            remove_stale_temps(self.folder)
         if self.exists():
             if not resume:
                 raise CheckpointBusy(self.folder)
@@ -397,7 +406,7 @@ class BatchCheckpoint:
         else:
             self.start()
             opened = (np.zeros(0, dtype=np.int64), {}, False)
-        outputs.set_keeping("batch", f"finished chunks kept in {self.folder}, rerun with --resume")
+        set_keeping("batch", f"finished chunks kept in {self.folder}, rerun with --resume")
         return opened
 
     def keeper(self, before: int, total: int):
@@ -410,7 +419,7 @@ class BatchCheckpoint:
         def keep(rows: np.ndarray, results: Mapping[str, np.ndarray]) -> None:
             self.save_rows(rows, results)
             kept[0] += len(rows)
-            outputs.set_note(
+            set_note(
                 "batch",
                 f"kept {kept[0]} of {_counted(total, 'grasp')} in {self.folder}; "
                 "the same command with --resume finishes the rest",
@@ -469,7 +478,7 @@ class BatchCheckpoint:
         total = self.manifest["grasps"]
         row_bytes = 8 + sum(int(np.prod(shape)) * dt.itemsize for shape, dt in layout.values())
         limit = total * row_bytes + (len(layout) + 1) * _NPY_HEADER_BYTES
-        data = outputs.read_own(path, limit)
+        data = read_own(path, limit)
         with zipfile.ZipFile(io.BytesIO(data)) as zf:  # compressed members: bound what they inflate to
             if sum(i.file_size for i in zf.infolist()) > limit:
                 raise ValueError(f"its arrays would take more than {limit} bytes")
@@ -492,7 +501,7 @@ class BatchCheckpoint:
     def save_rows(self, rows: np.ndarray, results: Mapping[str, np.ndarray]) -> None:
         """Keep one finished chunk: input ``rows`` and their ``results`` (by field), atomically."""
         arrays = {"rows": np.asarray(rows, dtype=np.int64), **{k: np.asarray(v) for k, v in results.items()}}
-        outputs.write_file(self.folder / f"rows-{int(arrays['rows'][0]):09d}.npz", lambda fh: np.savez(fh, **arrays))
+        write_file(self.folder / f"rows-{int(arrays['rows'][0]):09d}.npz", lambda fh: np.savez(fh, **arrays))
 
     def files(self) -> list[Path]:
         """Every file of the checkpoint, to remove once the final results are written: its
@@ -501,9 +510,9 @@ class BatchCheckpoint:
         real folder: a link is never followed to delete what it points at."""
         try:
             self.check_folder()
-        except outputs.OutputError:
+        except OutputError:
             return []
-        found = self.chunk_files() + [self.folder / self.MANIFEST] + sorted(self.folder.glob("*" + outputs.TEMP_SUFFIX))
+        found = self.chunk_files() + [self.folder / self.MANIFEST] + sorted(self.folder.glob("*" + TEMP_SUFFIX))
         return [p for p in found if _is_real_file(p)]
 
 

@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, allowed_folders, confine, read_input
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.io import MAX_GRASP_FILE_BYTES, allowed_folders, confine, read_input
+from jaxgrasp.model import GraspValueError
 
 __all__ = ["load_hand_grasp", "save_hand_grasp", "hand_grasp_toml"]
 
@@ -117,11 +117,11 @@ def save_hand_grasp(path: str | os.PathLike, *, mjcf: str, fingertips, qpos, mes
                     max_force, wrist=None, pose=None, mass=None, density=None, units: str = "m") -> None:
     """Write a hand grasp file (atomically); ``mjcf`` and ``mesh`` as they should be
     written (relative to the file's folder)."""
-    from jaxgrasp.io import _outputs
+    from jaxgrasp.io import write_file
 
     text = hand_grasp_toml({
         "hand": {"mjcf": mjcf, "fingertips": list(fingertips), "qpos": np.asarray(qpos, float), "wrist": wrist},
         "object": {"mesh": mesh, "units": units, "pose": pose, "mass": mass, "density": density},
         "fingertip": {"young_modulus": young_modulus, "friction": friction, "max_force": max_force},
     })
-    _outputs.write_file(Path(path), text.encode("utf-8"))
+    write_file(Path(path), text.encode("utf-8"))

@@ -34,10 +34,15 @@ from typing import Any
 import numpy as np
 
 from jaxgrasp.io._inputs import MAX_MESH_BYTES, allowed_folders, check_mesh_suffix, confine, read_input
-from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._units import LENGTH_UNITS
-from jaxgrasp.model._validation import COINCIDENT_DISTANCE, MAX_COORDINATE, GraspValueError
+from jaxgrasp.model import (
+    COINCIDENT_DISTANCE,
+    DEFAULT_GRAVITY,
+    DEFAULT_MASS,
+    LENGTH_UNITS,
+    MAX_COORDINATE,
+    Grasp,
+    GraspValueError,
+)
 
 __all__ = ["MeshGrasp", "MeshReader", "from_mesh", "load_mesh", "read_mesh", "snap_to_surface", "closest_on_triangles", "DEFAULT_TOLERANCE", "SHARP_EDGE_DEG"]
 

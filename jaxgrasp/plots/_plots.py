@@ -36,11 +36,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from jaxgrasp.io import _outputs as outputs
-from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.model._fields import FIELD
-from jaxgrasp.model._units import MJ_TO_J
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.io import write_file
+from jaxgrasp.model import FIELD, MJ_TO_J, BoundaryKind
+from jaxgrasp.tolerance import GraspStatus
 
 __all__ = [
     "plot_sweep",
@@ -108,7 +106,7 @@ def save_figure(fig, path, format: str | None = None) -> None:
     if not fmt:
         fmt = matplotlib.rcParams["savefig.format"]
         path = f"{path}.{fmt}"
-    outputs.write_file(path, lambda fh: fig.savefig(fh, format=fmt, dpi=150, bbox_inches="tight"))
+    write_file(path, lambda fh: fig.savefig(fh, format=fmt, dpi=150, bbox_inches="tight"))
 
 
 def _save(fig, path):
@@ -463,8 +461,8 @@ def plot_grasp(grasp, path=None, *, result=None, magnification=None, title=None,
     from jaxgrasp.plots._scene import grasp_scene
 
     if result is None:
-        from jaxgrasp.engine._evaluate import evaluate
-        from jaxgrasp.io._mesh import MeshGrasp
+        from jaxgrasp.engine import evaluate
+        from jaxgrasp.io import MeshGrasp
 
         result = evaluate(grasp.grasp if isinstance(grasp, MeshGrasp) else grasp)
     scene = grasp_scene(grasp, result, magnification=magnification)

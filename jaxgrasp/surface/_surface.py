@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model import GraspValueError
 
 __all__ = ["Surface", "SurfacePoint", "closest_on_triangles", "PAD_FACES"]
 
