@@ -3,6 +3,7 @@
 The names here (``jaxgrasp.__all__``) are the public API. The implementation lives in
 packages, each importing only from those before it in this list:
 
+* :mod:`jaxgrasp.base`: what the solver and the model share: named integer codes, contractions;
 * :mod:`jaxgrasp.solver`: a generic augmented-Lagrangian solver and its lane queue;
 * :mod:`jaxgrasp.model`: grasp fields, :class:`Grasp`, the potential field (eq. 3-21);
 * :mod:`jaxgrasp.surface`: meshes in JAX (:class:`Surface`), the contact rules;

@@ -35,7 +35,7 @@ from jaxgrasp.analysis._uncertainty import CLIP_SOURCES, Uncertainty, draw_norma
 from jaxgrasp.engine import BatchResult, assemble, evaluate, evaluate_batch, plan_chunks
 from jaxgrasp.io import MeshGrasp
 from jaxgrasp.model import Grasp, GraspValueError, stack
-from jaxgrasp.solver import Coded
+from jaxgrasp.base import Coded
 from jaxgrasp.surface import Surface
 from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus
 

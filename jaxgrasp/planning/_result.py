@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from jaxgrasp.solver import Coded
+from jaxgrasp.base import Coded
 
 __all__ = ["PlanResult", "PlanStatus"]
 

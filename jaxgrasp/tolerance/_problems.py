@@ -42,7 +42,8 @@ from jaxgrasp.model import (
     margins_of,
     potential_energy,
 )
-from jaxgrasp.solver import FirstOrder, Problem, SolverResult, contract
+from jaxgrasp.base import contract
+from jaxgrasp.solver import FirstOrder, Problem, SolverResult
 from jaxgrasp.tolerance._options import EvaluateOptions
 
 __all__ = [
