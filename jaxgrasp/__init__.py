@@ -85,7 +85,6 @@ from jaxgrasp.engine import BatchResult, enable_compilation_cache, evaluate, eva
 from jaxgrasp.hands import Hand, tune_hand  # noqa: E402  (mujoco is imported when a hand is read)
 from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is used)
     GraspSet,
-    MeshGrasp,
     from_mesh,
     grasp_from_dict,
     grasp_to_dict,
@@ -98,7 +97,7 @@ from jaxgrasp.model import BoundaryKind, Grasp, GraspValueError, check, stack  #
 from jaxgrasp.planning import PlanResult, plan  # noqa: E402
 from jaxgrasp.simulation import simulate  # noqa: E402  (mujoco is imported when it runs)
 from jaxgrasp.solver import LaneStatus, SolverOptions  # noqa: E402
-from jaxgrasp.surface import Surface  # noqa: E402
+from jaxgrasp.surface import MeshGrasp, Surface  # noqa: E402
 from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus  # noqa: E402
 
 try:  # the version is defined once, in pyproject.toml; the installed metadata carries it

@@ -33,10 +33,9 @@ import numpy as np
 
 from jaxgrasp.analysis._uncertainty import CLIP_SOURCES, Uncertainty, draw_normals, perturb
 from jaxgrasp.engine import BatchResult, assemble, evaluate, evaluate_batch, plan_chunks
-from jaxgrasp.io import MeshGrasp
 from jaxgrasp.model import Grasp, GraspValueError, stack
 from jaxgrasp.base import Coded
-from jaxgrasp.surface import Surface
+from jaxgrasp.surface import MeshGrasp, Surface
 from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus
 
 __all__ = ["robust", "robust_batch", "perturbed", "RobustResult", "RobustBatch", "RobustStatus", "DEFAULT_QUANTILES",

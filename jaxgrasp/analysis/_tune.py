@@ -52,9 +52,8 @@ from jaxgrasp.analysis._tune_spec import (
 )
 from jaxgrasp.analysis._tune_status import TuneStatus
 from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, evaluate_compiled
-from jaxgrasp.io import MeshGrasp
 from jaxgrasp.model import MJ_TO_J, Grasp, GraspValueError, check_grasp_inputs, counted
-from jaxgrasp.surface import PAD_FACES, Surface
+from jaxgrasp.surface import PAD_FACES, MeshGrasp, Surface
 from jaxgrasp.tolerance import EVALUATION_TREE, EvaluateOptions, Evaluation, GraspStatus
 
 __all__ = ["tune", "TuneResult"]

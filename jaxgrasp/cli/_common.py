@@ -146,9 +146,10 @@ def grasp_notes(grasp) -> list[str]:
 
 def load_grasp(args, overrides: bool = True, keep_mesh: bool = False):
     """The grasp named on the command line (file or preset), with overrides applied; with
-    ``keep_mesh``, a file naming a mesh gives its :class:`~jaxgrasp.io._mesh.MeshGrasp` (the
+    ``keep_mesh``, a file naming a mesh gives its :class:`~jaxgrasp.MeshGrasp` (the
     overrides applied to its grasp)."""
-    from jaxgrasp.io import MeshGrasp, load
+    from jaxgrasp.io import load
+    from jaxgrasp.surface import MeshGrasp
 
     if (args.file is None) == (args.preset is None):
         if args.file is None and getattr(args, "default_preset", None):

@@ -57,7 +57,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Evaluate the grasp, write the picture (and the GLB) as one set; one summary line."""
     from jaxgrasp.engine import evaluate
-    from jaxgrasp.io import MeshGrasp
+    from jaxgrasp.surface import MeshGrasp
     from jaxgrasp.plots import draw_scene, grasp_scene
 
     targets = _check_outputs(args)

@@ -98,7 +98,7 @@ def run(args) -> int:
     """Check the options and the output folder, evaluate, simulate, write results.json and
     the plot as one set."""
     from jaxgrasp.engine import evaluate
-    from jaxgrasp.io import MeshGrasp
+    from jaxgrasp.surface import MeshGrasp
     from jaxgrasp.simulation import load_mujoco, simulate
 
     try:

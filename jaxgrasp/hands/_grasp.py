@@ -71,7 +71,7 @@ def material(num_fingertips: int, mesh, young_modulus, friction, max_force, mass
     """A checked :class:`Material` (scalars broadcast to every fingertip); the centre of
     mass and mass from the mesh as :func:`jaxgrasp.from_mesh` has them (``mass`` or
     ``density``, kg or kg/m^3; neither: 0)."""
-    from jaxgrasp.io import mass_properties
+    from jaxgrasp.surface import mass_properties
 
     com, m = mass_properties(mesh, mass, density, center_of_mass)
     angle = 2.0 * np.pi * np.arange(num_fingertips) / num_fingertips
@@ -164,7 +164,7 @@ class HandGrasp:
     def mesh_grasp(self):
         """The grasp as a :class:`~jaxgrasp.MeshGrasp` (the grasp, the mesh, the centre of
         mass): what :func:`jaxgrasp.plots.plot_grasp` and ``jaxgrasp show`` draw."""
-        from jaxgrasp.io import MeshGrasp
+        from jaxgrasp.surface import MeshGrasp
 
         return MeshGrasp(self.grasp, self.mesh, np.asarray(self.center_of_mass), "<hand>")
 

@@ -1,8 +1,9 @@
 """Files in and out: grasp files, datasets, meshes, and output files written whole or not at all.
 
 Grasp files (TOML, JSON; :func:`load`, :func:`save`), datasets of many grasps (NPZ,
-JSONL; :func:`load_dataset`, :func:`save_dataset`), grasps on an object's mesh
-(:func:`from_mesh`), and :class:`OutputError` for an output that cannot be written. All
+JSONL; :func:`load_dataset`, :func:`save_dataset`), mesh files and the grasp on an
+object's mesh (:func:`from_mesh`: the file read here, the :class:`~jaxgrasp.MeshGrasp` and
+its geometry in :mod:`jaxgrasp.surface`), and :class:`OutputError` for an output that cannot be written. All
 in SI units.
 
 Inputs are treated as untrusted: every file is read only if it is a regular file under
@@ -20,14 +21,14 @@ caller allows more folders (``allowed_dirs=``, ``--allow-dir``); see
 
 from jaxgrasp.io._dataset import GraspSet, load_dataset, save_dataset
 from jaxgrasp.io._grasp_file import grasp_from_dict, grasp_to_dict, load, save
-from jaxgrasp.io._mesh import MeshGrasp, from_mesh
+from jaxgrasp.io._mesh import from_mesh
 from jaxgrasp.io._outputs import OutputError
 
 # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
 from jaxgrasp.io._dataset import load_share, padded_set, share_rows
 from jaxgrasp.io._grasp_file import dict_to_toml, mesh_grasp_to_dict, mesh_reference, to_text
 from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, allowed_folders, confine, read_input
-from jaxgrasp.io._mesh import load_mesh, mass_properties
+from jaxgrasp.io._mesh import load_mesh
 from jaxgrasp.io._outputs import (
     LOCK_NAME,
     NO_SPACE,
@@ -60,7 +61,6 @@ __all__ = [
     "GraspSet",
     "load_dataset",
     "save_dataset",
-    "MeshGrasp",
     "from_mesh",
     "OutputError",
 ]

@@ -30,11 +30,20 @@ import numpy as np
 
 from jaxgrasp.analysis import Uncertainty, epsilon, robust_batch, tune
 from jaxgrasp.engine import evaluate, evaluate_batch
-from jaxgrasp.io import MeshGrasp, from_mesh, load_mesh, mass_properties
+from jaxgrasp.io import from_mesh, load_mesh
 from jaxgrasp.model import DEFAULT_GRAVITY, Grasp, GraspValueError
 from jaxgrasp.planning._result import PlanResult, PlanStatus
 from jaxgrasp.planning._sampling import antipodal_pairs, spread_tuples, surface_points
-from jaxgrasp.surface import PAD_FACES, ContactRules, RuleCheck, Surface, check_contacts, deformation_range
+from jaxgrasp.surface import (
+    PAD_FACES,
+    ContactRules,
+    MeshGrasp,
+    RuleCheck,
+    Surface,
+    check_contacts,
+    deformation_range,
+    mass_properties,
+)
 from jaxgrasp.tolerance import GraspStatus
 
 __all__ = ["plan", "check_plan", "PlanInputs", "SAMPLERS"]

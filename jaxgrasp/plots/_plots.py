@@ -462,7 +462,7 @@ def plot_grasp(grasp, path=None, *, result=None, magnification=None, title=None,
 
     if result is None:
         from jaxgrasp.engine import evaluate
-        from jaxgrasp.io import MeshGrasp
+        from jaxgrasp.surface import MeshGrasp
 
         result = evaluate(grasp.grasp if isinstance(grasp, MeshGrasp) else grasp)
     scene = grasp_scene(grasp, result, magnification=magnification)

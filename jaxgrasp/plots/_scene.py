@@ -124,7 +124,7 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
             ten, at least 1) that moves the object's farthest point by about 0.15 of its
             size (:func:`nice_magnification`).
     """
-    from jaxgrasp.io import MeshGrasp
+    from jaxgrasp.surface import MeshGrasp
     from jaxgrasp.model import KINDS
 
     g = grasp.grasp if isinstance(grasp, MeshGrasp) else grasp.compact()

@@ -94,7 +94,7 @@ def simulate(
 
 def _one_grasp(grasp):
     """The plain grasp of ``grasp`` (a Grasp or MeshGrasp of one grasp), compacted."""
-    from jaxgrasp.io import MeshGrasp
+    from jaxgrasp.surface import MeshGrasp
     from jaxgrasp.model import Grasp
 
     if not isinstance(grasp, (Grasp, MeshGrasp)):
