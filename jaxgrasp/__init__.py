@@ -3,6 +3,7 @@
 The names here (``jaxgrasp.__all__``) are the public API. The implementation lives in
 packages, each importing only from those before it in this list:
 
+* :mod:`jaxgrasp.base`: what the solver and the model share: named integer codes, contractions;
 * :mod:`jaxgrasp.solver`: a generic augmented-Lagrangian solver and its lane queue;
 * :mod:`jaxgrasp.storage`: files written whole or not at all, folder locks, private folders;
 * :mod:`jaxgrasp.model`: grasp fields, :class:`Grasp`, the potential field (eq. 3-21);
@@ -60,13 +61,13 @@ import jax as _jax  # noqa: E402
 if "JAX_ENABLE_X64" not in _os.environ:  # an explicit choice of the user's stands
     _jax.config.update("jax_enable_x64", True)
 
-from jaxgrasp.engine import _devices  # noqa: E402
+from jaxgrasp.engine import configure_cpu_devices as _configure_cpu_devices  # noqa: E402
 
-_devices.configure_cpu_devices()  # before JAX makes its devices: batches run on every core
+_configure_cpu_devices()  # before JAX makes its devices: batches run on every core
 
-from jaxgrasp.engine import _store  # noqa: E402
+from jaxgrasp.engine import enable_from_environment as _enable_from_environment  # noqa: E402
 
-_store.enable_from_environment()  # the executable store, in the user's cache folder: every process starts warm
+_enable_from_environment()  # the executable store, in the user's cache folder: every process starts warm
 
 from jaxgrasp import presets  # noqa: E402
 from jaxgrasp.analysis import (  # noqa: E402
@@ -85,7 +86,6 @@ from jaxgrasp.engine import BatchResult, enable_compilation_cache, evaluate, eva
 from jaxgrasp.hands import Hand, tune_hand  # noqa: E402  (mujoco is imported when a hand is read)
 from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is used)
     GraspSet,
-    MeshGrasp,
     from_mesh,
     grasp_from_dict,
     grasp_to_dict,
@@ -98,7 +98,7 @@ from jaxgrasp.model import BoundaryKind, Grasp, GraspValueError, check, stack  #
 from jaxgrasp.planning import PlanResult, plan  # noqa: E402
 from jaxgrasp.simulation import simulate  # noqa: E402  (mujoco is imported when it runs)
 from jaxgrasp.solver import LaneStatus, SolverOptions  # noqa: E402
-from jaxgrasp.surface import Surface  # noqa: E402
+from jaxgrasp.surface import MeshGrasp, Surface  # noqa: E402
 from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus  # noqa: E402
 
 try:  # the version is defined once, in pyproject.toml; the installed metadata carries it

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from jaxgrasp.model._grasp import STANDARD_GRAVITY, Grasp
+from jaxgrasp.model import STANDARD_GRAVITY, Grasp
 
 __all__ = ["cube", "prism", "PRESETS", "FINGERTIP_RADIUS", "FRICTION", "MAX_FORCE", "SIDE"]
 

@@ -5,7 +5,8 @@ Issue 34's done-when list: the top level of ``jaxgrasp/`` holds subpackages and 
 modules; the packages form layers and none imports one above it; no import cycle between
 modules; implementation modules are private; no function is longer than 60 lines; no
 comment or docstring cites a timing, a speed-up, a percentage or a benchmark log (those
-live in the write-ups of ``experiments/``, one ``FINDINGS.md`` per study).
+live in the write-ups of ``experiments/``, one ``FINDINGS.md`` per study). Issue 64: no
+module imports another package's private module; the other packages import from its face.
 
 Each check is a function of a source folder that returns its offenders, one line each;
 ``test_checks_find_planted_offenders`` plants one of each kind in a small fake package so
@@ -25,7 +26,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent / "jaxgrasp"
 
-LAYERS = ["_startup", "solver", "storage", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "planning", "hands", "simulation", "plots", "cli"]
+LAYERS = ["_startup", "base", "solver", "storage", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "planning", "hands", "simulation", "plots", "cli"]
 """The layers from the bottom up: a module may import from its own layer or one below."""
 
 TOP = len(LAYERS)  # jaxgrasp/__init__.py and jaxgrasp/__main__.py: the faces above every layer
@@ -261,6 +262,37 @@ def public_module_offenders(src: Source) -> list[str]:
     return out
 
 
+def package_of(src: Source, name: str) -> str | None:
+    """The subpackage a dotted module name belongs to (``"engine"`` for
+    ``jaxgrasp.engine._store`` and for ``jaxgrasp.engine``); None for the top level's own
+    modules (``jaxgrasp``, ``jaxgrasp.__main__``, ``jaxgrasp._startup``, ``jaxgrasp.presets``),
+    which are outside every subpackage."""
+    parts = name.split(".")
+    if len(parts) > 2 or (len(parts) == 2 and name in src.modules and src.modules[name].is_package):
+        return parts[1]
+    return None
+
+
+def private_import_offenders(src: Source) -> list[str]:
+    """Imports of another package's private module: a module ``jaxgrasp.P._m`` (any part
+    below ``P`` private, dunders aside) imported by a module outside ``P``, in any form
+    (``from jaxgrasp.P._m import x``, ``import jaxgrasp.P._m``, ``from jaxgrasp.P import
+    _m``, relative, in a function). The other packages import from ``P``'s face, its
+    ``__init__``. One line per import statement and module."""
+    top = src.root.name
+    found = sorted({
+        (src.rel(src.modules[e.source]), e.line, e.source, e.target, e.local)
+        for e in import_edges(src)
+        if any(p.startswith("_") and not p.startswith("__") for p in e.target.split(".")[2:])
+        and package_of(src, e.target) != package_of(src, e.source)
+    })
+    return [
+        f"{rel}:{line}: {source} imports {target}, a private module of {top}.{package_of(src, target)}"
+        f"{' (in a function)' if local else ''}; import from {top}.{package_of(src, target)}"
+        for rel, line, source, target, local in found
+    ]
+
+
 def long_function_offenders(src: Source, limit: int = MAX_FUNCTION_LINES) -> list[str]:
     """Functions longer than ``limit`` lines, from the ``def`` line to the last."""
     out = []
@@ -368,6 +400,11 @@ def test_implementation_modules_are_private():
     _assert_none("public modules below a package", offenders)
 
 
+def test_no_import_of_another_packages_private_module():
+    offenders = private_import_offenders(SOURCE)
+    _assert_none("imports of another package's private module (import from its face)", offenders)
+
+
 def test_no_function_over_60_lines():
     offenders = long_function_offenders(SOURCE)
     _assert_none("functions over 60 lines", offenders)
@@ -398,6 +435,7 @@ _FAKE = {
     "cli/__init__.py": "def main():\n    # runs 2.5x faster, 12 ms a call, 20-30 % of the time\n    pass\n",
     "cli/_d.py": '"""See experiments/BENCHMARK.md and sweep.log; 40 grasps/s. Not 2x + 1, not 3x3, not np.log."""\n',
     "stray/_e.py": "import pkg.nowhere._f\n",
+    "cli/_f.py": "import pkg.model._b\nfrom pkg.model import _c, x\nfrom pkg.solver import f\n\n\ndef late():\n    from ..model._c import y\n    return y\n",
 }
 
 
@@ -438,6 +476,12 @@ def test_checks_find_planted_offenders(tmp_path):
 
     assert long_function_offenders(src) == ["pkg/engine/public.py:1: g has 62 lines (at most 60)"]
 
+    assert private_import_offenders(src) == [  # not pkg.model._c's import of pkg.model._b, its own package's
+        "pkg/cli/_f.py:1: pkg.cli._f imports pkg.model._b, a private module of pkg.model; import from pkg.model",
+        "pkg/cli/_f.py:2: pkg.cli._f imports pkg.model._c, a private module of pkg.model; import from pkg.model",
+        "pkg/cli/_f.py:7: pkg.cli._f imports pkg.model._c, a private module of pkg.model (in a function); import from pkg.model",
+    ]
+
     found = measurement_offenders(src)
     assert len(found) == 2, found
     assert found[0].startswith("pkg/cli/__init__.py:2: '2.5x', 'faster', '12 ms', '20-30 %'"), found
@@ -446,9 +490,10 @@ def test_checks_find_planted_offenders(tmp_path):
 
 def test_layers_cover_the_planned_packages():
     # the order of issue 34, with the surfaces (36), planning (36), hands (37) and physics
-    # check (38) packages, and storage (64) under every writer; a change here is a change of the architecture
-    assert LAYERS == ["_startup", "solver", "storage", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "planning", "hands", "simulation", "plots", "cli"]
-    assert [layer_of(n) for n in ("jaxgrasp", "jaxgrasp.__main__", "jaxgrasp.solver._lanes", "jaxgrasp.cli")] == [TOP, TOP, 1, 14]
+    # check (38) packages, the base below the solver and the model, and storage under every
+    # writer (64); a change here is a change of the architecture
+    assert LAYERS == ["_startup", "base", "solver", "storage", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "planning", "hands", "simulation", "plots", "cli"]
+    assert [layer_of(n) for n in ("jaxgrasp", "jaxgrasp.__main__", "jaxgrasp.solver._lanes", "jaxgrasp.cli")] == [TOP, TOP, 2, 15]
 
 
 def test_package_docstring_and_developers_guide_list_the_layers_in_order():

@@ -1,5 +1,10 @@
 """Analyses built on the engine: parameter sweeps, gradient tuning, the Ferrari-Canny epsilon,
 the robust value under uncertainty.
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
 from jaxgrasp.analysis._epsilon import EpsilonResult, epsilon
@@ -8,6 +13,12 @@ from jaxgrasp.analysis._sweep import PARAMETERS, SweepResult, sweep
 from jaxgrasp.analysis._tune import TuneResult, tune
 from jaxgrasp.analysis._tune_status import TuneStatus
 from jaxgrasp.analysis._uncertainty import Uncertainty, parse_spec
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.analysis._epsilon import prefetch_qhull
+from jaxgrasp.analysis._sweep import MAX_GRID_POINTS, check_inputs, grid_grasp
+from jaxgrasp.analysis._tune_drivers import METHODS, run_search
+from jaxgrasp.analysis._tune_spec import parse_param
 
 __all__ = [
     "sweep",

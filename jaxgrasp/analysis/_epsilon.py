@@ -42,8 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._validation import GraspValueError, check_batch_inputs, check_grasp_inputs
+from jaxgrasp.model import Grasp, GraspValueError, check_batch_inputs, check_grasp_inputs
 
 __all__ = ["epsilon", "EpsilonResult", "wrenches", "tangent_basis", "FORCE_CLOSURE_TOL", "prefetch_qhull"]
 
@@ -123,7 +122,7 @@ def prefetch_qhull() -> None:
     :func:`jaxgrasp.engine._prefetch.prefetch`): a caller that will need :func:`epsilon`
     after a compile or the load of a stored executable has ``scipy.spatial`` imported
     during that wait rather than after it."""
-    from jaxgrasp.engine._prefetch import prefetch
+    from jaxgrasp.engine import prefetch
 
     prefetch("scipy.spatial")
 

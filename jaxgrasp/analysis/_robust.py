@@ -32,18 +32,11 @@ import jax
 import numpy as np
 
 from jaxgrasp.analysis._uncertainty import CLIP_SOURCES, Uncertainty, draw_normals, perturb
-from jaxgrasp.engine._batch import evaluate_batch
-from jaxgrasp.engine._batch_result import BatchResult, assemble
-from jaxgrasp.engine._evaluate import evaluate
-from jaxgrasp.engine._plan import plan_chunks
-from jaxgrasp.io._mesh import MeshGrasp
-from jaxgrasp.model._grasp import Grasp, stack
-from jaxgrasp.model._validation import GraspValueError
-from jaxgrasp.solver._status import Coded
-from jaxgrasp.surface import Surface
-from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._result import Evaluation
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.engine import BatchResult, assemble, evaluate, evaluate_batch, plan_chunks
+from jaxgrasp.model import Grasp, GraspValueError, stack
+from jaxgrasp.base import Coded
+from jaxgrasp.surface import MeshGrasp, Surface
+from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus
 
 __all__ = ["robust", "robust_batch", "perturbed", "RobustResult", "RobustBatch", "RobustStatus", "DEFAULT_QUANTILES",
            "quantile_name"]

@@ -40,25 +40,23 @@ from typing import Any, Callable, Mapping
 import jax
 import numpy as np
 
-from jaxgrasp.engine._batch import start_progress
-from jaxgrasp.engine._checkpoint import SweepKeeper
-from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields
-from jaxgrasp.engine._plan import check_chunk_size, plan_chunks
-from jaxgrasp.engine._run import run_chunks
+from jaxgrasp.engine import start_progress
+from jaxgrasp.engine import SweepKeeper
+from jaxgrasp.engine import chunk_evaluator, grasp_fields
+from jaxgrasp.engine import check_chunk_size, plan_chunks
+from jaxgrasp.engine import run_chunks
 from jaxgrasp import storage
-from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.model._fields import FIELD, SWEEPABLE, Field
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._validation import (
+from jaxgrasp.model import BoundaryKind
+from jaxgrasp.model import FIELD, SWEEPABLE, Field
+from jaxgrasp.model import Grasp
+from jaxgrasp.model import (
     GraspValueError,
     as_float_array,
     check_corners,
     check_grasp_inputs,
     format_value,
 )
-from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._result import SUMMARY_FIELDS, SummaryNames
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.tolerance import SUMMARY_FIELDS, EvaluateOptions, GraspStatus, SummaryNames
 
 __all__ = [
     "sweep",

@@ -51,17 +51,10 @@ from jaxgrasp.analysis._tune_spec import (
     param_specs,
 )
 from jaxgrasp.analysis._tune_status import TuneStatus
-from jaxgrasp.engine._compile import StoredFunction
-from jaxgrasp.engine._evaluate import evaluate_compiled
-from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
-from jaxgrasp.io._mesh import MeshGrasp
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._units import MJ_TO_J
-from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs, counted
-from jaxgrasp.surface import PAD_FACES, Surface
-from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._result import EVALUATION_TREE, Evaluation
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, evaluate_compiled
+from jaxgrasp.model import MJ_TO_J, Grasp, GraspValueError, check_grasp_inputs, counted
+from jaxgrasp.surface import PAD_FACES, MeshGrasp, Surface
+from jaxgrasp.tolerance import EVALUATION_TREE, EvaluateOptions, Evaluation, GraspStatus
 
 __all__ = ["tune", "TuneResult"]
 

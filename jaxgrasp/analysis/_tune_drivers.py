@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.analysis._tune_status import TuneStatus
-from jaxgrasp.model._validation import GraspValueError
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.model import GraspValueError
+from jaxgrasp.tolerance import GraspStatus
 
 __all__ = ["METHODS", "SearchRecord", "run_search"]
 

@@ -12,9 +12,7 @@ import math
 
 import numpy as np
 
-from jaxgrasp.model._fields import FIELD, TUNABLE
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._validation import GraspValueError, check_corners
+from jaxgrasp.model import FIELD, TUNABLE, Grasp, GraspValueError, check_corners
 
 __all__ = [
     "ParamSpec",

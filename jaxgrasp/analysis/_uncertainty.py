@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from jaxgrasp.analysis._epsilon import tangent_basis
-from jaxgrasp.model._validation import MAX_FRICTION, MAX_LOAD_RATIO, GraspValueError, format_value
+from jaxgrasp.model import MAX_FRICTION, MAX_LOAD_RATIO, GraspValueError, format_value
 
 __all__ = [
     "Uncertainty",

@@ -20,8 +20,7 @@ from importlib import metadata
 from jaxgrasp.cli import _batch, _evaluate, _plan, _show, _simulate, _sweep, _tune
 from jaxgrasp.cli._common import EXIT_USAGE, Parser, UsageError, check_names, load_grasp, parse_number
 from jaxgrasp.cli._interrupt import run_interruptibly
-from jaxgrasp.engine import _compile
-from jaxgrasp.engine._store import enable_compilation_cache, log_lines_on_stderr
+from jaxgrasp.engine import enable_compilation_cache, log_lines_on_stderr, wait_for_saves
 
 __all__ = [
     "main",
@@ -91,7 +90,7 @@ def _main(argv) -> int:
     failure of the machine (a full disk, an I/O error) as one line, exit status 1."""
     from jaxgrasp.cli._notes import clear_notes
     from jaxgrasp.storage import OutputError
-    from jaxgrasp.model._validation import GraspValueError
+    from jaxgrasp.model import GraspValueError
 
     parser = build_parser()
     try:
@@ -108,7 +107,7 @@ def _main(argv) -> int:
         return _report(exc)
     finally:
         clear_notes()
-        _compile.wait_for_saves()  # the process may end with os._exit next
+        wait_for_saves()  # the process may end with os._exit next
 
 
 def _report(exc: Exception) -> int:

@@ -41,8 +41,8 @@ from jaxgrasp.cli._common import (
     robust_uncertainty,
     say,
 )
-from jaxgrasp.engine._prefetch import prefetch
-from jaxgrasp.model._validation import counted
+from jaxgrasp.engine import prefetch
+from jaxgrasp.model import counted
 
 __all__ = ["add_parser", "run", "resume_key", "OUTPUT_NAMES", "PARTIAL_NAME", "DEFAULT_TOP"]
 
@@ -97,9 +97,9 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """Evaluate the dataset of the command line; write the files and print a summary."""
-    from jaxgrasp.engine._batch import evaluate_dataset
+    from jaxgrasp.engine import evaluate_dataset
     from jaxgrasp.cli._keepers import BatchCheckpoint
-    from jaxgrasp.io._dataset import load_dataset
+    from jaxgrasp.io import load_dataset
 
     _check_numbers(args)
     uncertainty = robust_uncertainty(args)
@@ -178,9 +178,8 @@ def _evaluate_share(share, n_contacts: int, counts: dict[int, int], uncertainty,
     ``n_contacts``, each contact count at the width a run of one process gives it (from
     the dataset's ``counts``, ``{count: grasps}``), with its ``--epsilon`` and
     ``--robust`` columns: what it sends process 0 (:func:`._batch_processes.share_blob`)."""
-    from jaxgrasp.engine._batch import evaluate_dataset
-    from jaxgrasp.engine._plan import plan_widths
-    from jaxgrasp.io._dataset import padded_set
+    from jaxgrasp.engine import evaluate_dataset, plan_widths
+    from jaxgrasp.io import padded_set
 
     if not share.valid.any():
         return processes.share_blob(share, None, None, {})
@@ -216,7 +215,7 @@ def _check_numbers(args) -> None:
 def _open_checkpoint(checkpoint, resume: bool, total: int) -> tuple[np.ndarray, dict]:
     """The rows a previous run finished (``--resume``) and their results, saying so; a
     fresh checkpoint otherwise. An unfinished run's checkpoint is never overwritten silently."""
-    from jaxgrasp.engine._checkpoint import CheckpointBusy
+    from jaxgrasp.engine import CheckpointBusy
 
     try:
         rows, results, resumed = checkpoint.open(resume)
@@ -245,7 +244,7 @@ def _write_outputs(result, out: Path, checkpoint, args, extra=None) -> tuple[lis
         out / "results.npz": lambda fh: result.to_npz(fh, extra),
     }
     if not args.no_plot:
-        from jaxgrasp.plots._plots import plot_ranking, save_figure
+        from jaxgrasp.plots import plot_ranking, save_figure
 
         fig = plot_ranking(result, top=args.top, title=f"jaxgrasp batch: {args.file} ({counted(len(result), 'grasp')})")
         members[out / "results.png"] = lambda fh: save_figure(fig, fh, format="png")
@@ -268,7 +267,7 @@ def _write_outputs(result, out: Path, checkpoint, args, extra=None) -> tuple[lis
 
 def _epsilon(gset) -> dict:
     """The ``--epsilon`` columns of every input row (NaN and False for an invalid grasp)."""
-    from jaxgrasp.model._grasp import Grasp
+    from jaxgrasp.model import Grasp
 
     columns = gset.columns()
     valid = columns.valid
@@ -285,8 +284,8 @@ def _robust(gset, uncertainty, args, devices=None) -> dict:
     ``p_stable``, ``p_stable_stderr``, ``value_mean``, ``value_q05``, ``value_q50``), NaN
     for an invalid grasp; every valid grasp's samples through one compiled evaluator,
     on ``devices`` (default every device)."""
-    from jaxgrasp.analysis._robust import robust_batch
-    from jaxgrasp.model._grasp import Grasp
+    from jaxgrasp.analysis import robust_batch
+    from jaxgrasp.model import Grasp
 
     columns = gset.columns()
     valid = columns.valid
@@ -346,7 +345,7 @@ def _summary(result, source, wall, timing, out, written, replaced, removed, top)
 def _top_lines(result, top: int) -> list[str]:
     """``top`` lines: rank, input index, value, contacts and limiting boundary of the best
     stable grasps."""
-    from jaxgrasp.tolerance._status import GraspStatus
+    from jaxgrasp.tolerance import GraspStatus
 
     best = [int(i) for i in result.rank()[:top] if result.status[i] == GraspStatus.STABLE]
     if top and not best:

@@ -30,10 +30,10 @@ import numpy as np
 
 from jaxgrasp.cli._common import UsageError, check_out, lock_out
 from jaxgrasp.cli._hosts import exchange, pack, parse_coordinator, unpack
-from jaxgrasp.engine._batch_result import BatchResult, mark_invalid
-from jaxgrasp.engine._plan import grasps_by_count
-from jaxgrasp.io._dataset import load_share, share_rows
-from jaxgrasp.tolerance._result import FIELDS, Evaluation
+from jaxgrasp.engine import BatchResult, mark_invalid
+from jaxgrasp.engine import grasps_by_count
+from jaxgrasp.io import load_share, share_rows
+from jaxgrasp.tolerance import FIELDS, Evaluation
 
 __all__ = ["add_process_options", "check_process_options", "attempt", "open_share", "agree_on_inputs",
            "share_blob", "gather_results"]

@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 
 from jaxgrasp import storage
-from jaxgrasp.model._fields import FIELD, SWEEPABLE
-from jaxgrasp.model._validation import counted
+from jaxgrasp.model import FIELD, SWEEPABLE
+from jaxgrasp.model import counted
 from jaxgrasp.presets import PRESETS
 
 __all__ = [
@@ -129,7 +129,7 @@ def grasp_source(args) -> str:
 def grasp_notes(grasp) -> list[str]:
     """Remarks on a valid grasp that may not be what its author meant (one line each):
     normals pointing towards the centre of mass (:func:`jaxgrasp.model._validation.inward_contacts`)."""
-    from jaxgrasp.model._validation import inward_contacts
+    from jaxgrasp.model import inward_contacts
 
     inward = inward_contacts(grasp.positions, grasp.normals)
     if not inward:
@@ -147,10 +147,10 @@ def grasp_notes(grasp) -> list[str]:
 
 def load_grasp(args, overrides: bool = True, keep_mesh: bool = False):
     """The grasp named on the command line (file or preset), with overrides applied; with
-    ``keep_mesh``, a file naming a mesh gives its :class:`~jaxgrasp.io._mesh.MeshGrasp` (the
+    ``keep_mesh``, a file naming a mesh gives its :class:`~jaxgrasp.MeshGrasp` (the
     overrides applied to its grasp)."""
-    from jaxgrasp.io._grasp_file import load
-    from jaxgrasp.io._mesh import MeshGrasp
+    from jaxgrasp.io import load
+    from jaxgrasp.surface import MeshGrasp
 
     if (args.file is None) == (args.preset is None):
         if args.file is None and getattr(args, "default_preset", None):
@@ -170,8 +170,7 @@ def _overridden(grasp, args):
     """``grasp`` with the command line's overrides (``--young-modulus`` ...) applied."""
     import numpy as np
 
-    from jaxgrasp.model._grasp import Grasp
-    from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
+    from jaxgrasp.model import Grasp, GraspValueError, check_grasp_inputs
 
     given = {name: getattr(args, name) for name in OVERRIDES if getattr(args, name, None) is not None}
     if not given:
@@ -256,7 +255,7 @@ def check_out(out: Path) -> None:
     checkpoints): a link there is refused, before anything is computed, not followed; so
     is a folder where a file belongs (the lock file, a sweep's checkpoint) or a file where
     a folder belongs (a batch's finished chunks)."""
-    from jaxgrasp.engine._checkpoint import BATCH_FOLDER, SWEEP_FILE
+    from jaxgrasp.engine import BATCH_FOLDER, SWEEP_FILE
 
     try:
         storage.check_writable(out)
@@ -291,7 +290,7 @@ def lock_out(out: Path) -> storage.FolderLock:
 def write_picture(targets, fig, scene) -> list:
     """Write the picture ``fig`` to ``targets[0]`` (PNG, SVG or PDF by its suffix) and, where
     given, ``scene``'s GLB to ``targets[1]``, as one set; the previous files replaced."""
-    from jaxgrasp.plots._plots import save_figure
+    from jaxgrasp.plots import save_figure
 
     members = {targets[0]: lambda fh: save_figure(fig, fh, format=targets[0].suffix[1:].lower())}
     if len(targets) > 1:
@@ -419,7 +418,7 @@ def add_epsilon_option(p: argparse.ArgumentParser) -> None:
 def epsilon_columns(grasps, shape=None) -> dict:
     """``{"epsilon": values, "force_closure": bools}`` of a batched grasp
     (:func:`jaxgrasp.epsilon`), reshaped to ``shape`` (e.g. a sweep's grid)."""
-    from jaxgrasp.analysis._epsilon import epsilon
+    from jaxgrasp.analysis import epsilon
 
     eps = epsilon(grasps)
     cols = {"epsilon": eps.value, "force_closure": eps.force_closure}
@@ -449,8 +448,8 @@ def add_robust_options(p: argparse.ArgumentParser) -> None:
 def robust_uncertainty(args):
     """The :class:`~jaxgrasp.Uncertainty` of ``--robust`` (``None`` without it), after
     checking ``--samples`` and ``--seed``; a one-line :class:`UsageError` otherwise."""
-    from jaxgrasp.analysis._uncertainty import parse_spec
-    from jaxgrasp.model._validation import GraspValueError
+    from jaxgrasp.analysis import parse_spec
+    from jaxgrasp.model import GraspValueError
 
     if args.robust is None:
         return None

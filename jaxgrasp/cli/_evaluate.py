@@ -33,8 +33,8 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """Evaluate the grasp of the command line and print the result; exit status 0."""
-    from jaxgrasp.analysis._epsilon import epsilon, prefetch_qhull
-    from jaxgrasp.engine._evaluate import evaluate
+    from jaxgrasp.analysis import epsilon, prefetch_qhull
+    from jaxgrasp.engine import evaluate
 
     prefetch_qhull()  # SciPy's import overlaps the evaluation's compile or cache load
 
@@ -62,7 +62,7 @@ def run(args) -> int:
 def _robust_fields(grasp, uncertainty, args) -> dict:
     """The ``--robust`` fields: ``p_stable``, ``p_stable_stderr``, ``value_mean``, one
     ``value_qNN`` per quantile, and ``robust`` (status, samples, seed, spreads, clip counts)."""
-    from jaxgrasp.analysis._robust import robust
+    from jaxgrasp.analysis import robust
 
     r = robust(grasp, uncertainty, samples=args.samples, seed=args.seed, chunk_size=args.chunk_size).to_dict()
     stats = ("p_stable", "p_stable_stderr", "value_mean")

@@ -36,7 +36,7 @@ from typing import Callable
 
 from jaxgrasp._startup import EXIT
 from jaxgrasp.cli import _notes
-from jaxgrasp.engine import _compile
+from jaxgrasp.engine import wait_for_saves
 
 __all__ = ["run_interruptibly", "Interrupted", "EXIT_STATUS", "POLL_SECONDS", "PUBLISH_WAIT_SECONDS"]
 
@@ -139,7 +139,7 @@ def _exit_interrupted(signum: int) -> int:
     for s in EXIT_STATUS:
         signal.signal(s, signal.SIG_IGN)
     notes = _notes.abandon(PUBLISH_WAIT_SECONDS)
-    _compile.wait_for_saves(PUBLISH_WAIT_SECONDS)  # an executable being stored: no temporary file left
+    wait_for_saves(PUBLISH_WAIT_SECONDS)  # an executable being stored: no temporary file left
     _say_last(f"jaxgrasp: {_WORDS.get(signum, 'interrupted')}" + "".join(f"; {n}" for n in notes))
     status = EXIT_STATUS.get(signum, 130)
     _exit(status)

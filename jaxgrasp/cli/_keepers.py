@@ -5,13 +5,13 @@ write's error adds, and which damaged chunk files ``--resume`` skipped."""
 from __future__ import annotations
 
 from jaxgrasp.cli._notes import set_keeping, set_last_write, set_note
-from jaxgrasp.engine import _checkpoint
-from jaxgrasp.model._validation import counted
+from jaxgrasp import engine
+from jaxgrasp.model import counted
 
 __all__ = ["SweepKeeper", "BatchCheckpoint"]
 
 
-class SweepKeeper(_checkpoint.SweepKeeper):
+class SweepKeeper(engine.SweepKeeper):
     """``jaxgrasp sweep``'s checkpoint (:class:`jaxgrasp.engine._checkpoint.SweepKeeper`):
     a skipped write is left to an interrupt (:func:`set_last_write`), and each write
     leaves the note an interrupt prints (``kept K of N points in PATH``) and what a failed
@@ -25,7 +25,7 @@ class SweepKeeper(_checkpoint.SweepKeeper):
         set_keeping("sweep", f"{partial.done_count} of {self.total} finished points kept in {self.path}")
 
 
-class BatchCheckpoint(_checkpoint.BatchCheckpoint):
+class BatchCheckpoint(engine.BatchCheckpoint):
     """``jaxgrasp batch``'s checkpoint (:class:`jaxgrasp.engine._checkpoint.BatchCheckpoint`)
     with the command's words: once opened, a failed write's error says the folder is kept;
     each chunk kept leaves the note an interrupt prints; :meth:`skipped_note` names the

@@ -94,8 +94,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Check every option and the mesh (:func:`jaxgrasp.planning._plan.check_plan`), then
     create and lock ``--out``, plan, write the set, print one summary line."""
-    from jaxgrasp.planning import plan
-    from jaxgrasp.planning._plan import check_plan
+    from jaxgrasp.planning import check_plan, plan
 
     out = Path(args.out)
     check_out(out)
@@ -124,7 +123,7 @@ def _plan_options(args) -> dict:
 
 def _robust_options(args) -> dict:
     """``robust`` and ``robust_samples`` of :func:`jaxgrasp.plan` (empty for ``--rank value``)."""
-    from jaxgrasp.analysis._uncertainty import parse_spec
+    from jaxgrasp.analysis import parse_spec
 
     if args.rank == "value":
         if args.robust is not None:
@@ -174,7 +173,7 @@ class _Progress:
 
 def _write(res, out: Path, args) -> tuple[list[str], list[str]]:
     """Write the set into ``out``; the names written and those that replaced previous files."""
-    from jaxgrasp.io._grasp_file import dict_to_toml, mesh_grasp_to_dict, mesh_reference
+    from jaxgrasp.io import dict_to_toml, mesh_grasp_to_dict, mesh_reference
 
     if not res.grasps:
         raise UsageError(f"plan {args.mesh}: {res.status.message}; nothing written")
@@ -200,9 +199,8 @@ def _write(res, out: Path, args) -> tuple[list[str], list[str]]:
 
 def _picture(res):
     """``write(fh)`` of the best grasp's ``show`` picture."""
-    from jaxgrasp.engine._evaluate import evaluate
-    from jaxgrasp.plots._plots import draw_scene, save_figure
-    from jaxgrasp.plots._scene import grasp_scene
+    from jaxgrasp.engine import evaluate
+    from jaxgrasp.plots import draw_scene, grasp_scene, save_figure
 
     fig = draw_scene(grasp_scene(res.best, evaluate(res.best.grasp)))
     return lambda fh: save_figure(fig, fh, format="png")

@@ -56,10 +56,9 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """Evaluate the grasp, write the picture (and the GLB) as one set; one summary line."""
-    from jaxgrasp.engine._evaluate import evaluate
-    from jaxgrasp.io._mesh import MeshGrasp
-    from jaxgrasp.plots._plots import draw_scene
-    from jaxgrasp.plots._scene import grasp_scene
+    from jaxgrasp.engine import evaluate
+    from jaxgrasp.surface import MeshGrasp
+    from jaxgrasp.plots import draw_scene, grasp_scene
 
     targets = _check_outputs(args)
     if getattr(args, "hand", None) is not None:

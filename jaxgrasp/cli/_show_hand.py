@@ -4,7 +4,7 @@ way it fails), from a hand grasp file (:mod:`jaxgrasp.hands._file`)."""
 from __future__ import annotations
 
 from jaxgrasp.cli._common import OVERRIDES, UsageError, write_picture
-from jaxgrasp.model._fields import FIELD
+from jaxgrasp.model import FIELD
 
 __all__ = ["run_hand"]
 
@@ -12,9 +12,9 @@ __all__ = ["run_hand"]
 def run_hand(args, targets) -> int:
     """Evaluate the hand grasp of ``args.hand`` and write the picture (and the GLB) as one
     set (``targets``, checked by ``show``); one summary line."""
-    from jaxgrasp.engine._evaluate import evaluate
-    from jaxgrasp.hands._file import load_hand_grasp
-    from jaxgrasp.plots._hand import hand_scene, plot_hand_grasp
+    from jaxgrasp.engine import evaluate
+    from jaxgrasp.hands import load_hand_grasp
+    from jaxgrasp.plots import hand_scene, plot_hand_grasp
 
     if args.file is not None or args.preset is not None:
         raise UsageError("give either a grasp FILE, --preset or --hand FILE, not more than one")

@@ -18,7 +18,7 @@ from jaxgrasp.cli._common import (
     say,
 )
 from jaxgrasp import storage
-from jaxgrasp.simulation._options import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION, check_options
+from jaxgrasp.simulation import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION, check_options
 
 __all__ = ["OPTION_NAMES", "PLOT", "RESULTS", "add_parser", "run"]
 
@@ -97,10 +97,9 @@ def _scales(text: str) -> list[float]:
 def run(args) -> int:
     """Check the options and the output folder, evaluate, simulate, write results.json and
     the plot as one set."""
-    from jaxgrasp.engine._evaluate import evaluate
-    from jaxgrasp.io._mesh import MeshGrasp
-    from jaxgrasp.simulation import simulate
-    from jaxgrasp.simulation._scene import load_mujoco
+    from jaxgrasp.engine import evaluate
+    from jaxgrasp.surface import MeshGrasp
+    from jaxgrasp.simulation import load_mujoco, simulate
 
     try:
         load_mujoco()
@@ -130,8 +129,7 @@ def run(args) -> int:
 def _plot_bytes(result) -> bytes:
     import io
 
-    from jaxgrasp.plots._plots import save_figure
-    from jaxgrasp.plots._trials_plot import plot_trials
+    from jaxgrasp.plots import plot_trials, save_figure
 
     buf = io.BytesIO()
     save_figure(plot_trials(result), buf, format="png")

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxgrasp import storage
-from jaxgrasp.analysis._sweep import MAX_GRID_POINTS
+from jaxgrasp.analysis import MAX_GRID_POINTS
 from jaxgrasp.cli import _notes
 from jaxgrasp.cli._common import (
     OVERRIDES,
@@ -44,10 +44,10 @@ from jaxgrasp.cli._common import (
     parse_number,
     replaced_text,
 )
-from jaxgrasp.engine._prefetch import prefetch
-from jaxgrasp.model._codes import NO_BOUNDARY
-from jaxgrasp.model._fields import FIELD
-from jaxgrasp.model._validation import counted
+from jaxgrasp.engine import prefetch
+from jaxgrasp.model import NO_BOUNDARY
+from jaxgrasp.model import FIELD
+from jaxgrasp.model import counted
 
 __all__ = ["add_parser", "run", "parse_axis_spec", "AXES", "PAPER_AXES"]
 
@@ -211,9 +211,9 @@ class _AxisInOrder(argparse.Action):
 
 def run(args) -> int:
     """Sweep the grasp of the command line; write the files and print one summary line."""
-    from jaxgrasp.analysis._sweep import check_inputs, grid_grasp, sweep
+    from jaxgrasp.analysis import check_inputs, grid_grasp, sweep
     from jaxgrasp.cli._keepers import SweepKeeper
-    from jaxgrasp.engine._plan import plan_chunks
+    from jaxgrasp.engine import plan_chunks
 
     axes, paper = _parse_axes(args)
     check_chunk_size(args.chunk_size)
@@ -275,7 +275,7 @@ def _write_outputs(result, out: Path, title: str | None, extra=None) -> tuple[li
         out / "sweep.csv": lambda fh: result.to_csv(fh, extra),
     }
     if title is not None:
-        from jaxgrasp.plots._plots import plot_sweep, save_figure
+        from jaxgrasp.plots import plot_sweep, save_figure
 
         fig = plot_sweep(result, title=title)
         members[out / "sweep.png"] = lambda fh: save_figure(fig, fh, format="png")

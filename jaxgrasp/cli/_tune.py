@@ -24,8 +24,8 @@ from jaxgrasp.cli._common import (
     say,
 )
 from jaxgrasp import storage
-from jaxgrasp.model._fields import TUNABLE
-from jaxgrasp.model._validation import counted
+from jaxgrasp.model import TUNABLE
+from jaxgrasp.model import counted
 
 __all__ = ["add_parser", "run", "parse_bounds", "check_bounds"]
 
@@ -72,8 +72,8 @@ def check_bounds(params, bounds: dict) -> None:
     """Every ``--param`` without default bounds has ``--bounds``, and every ``--bounds`` is
     of a ``--param`` (:class:`UsageError` naming the options; library messages would show
     Python syntax such as ``bounds={'positions': 0.01}``)."""
-    from jaxgrasp.analysis._tune_spec import parse_param
-    from jaxgrasp.model._fields import FIELD
+    from jaxgrasp.analysis import parse_param
+    from jaxgrasp.model import FIELD
 
     specs = [parse_param(p) for p in params]
     tuned = {s.name for s in specs} | {s.label for s in specs}
@@ -95,7 +95,7 @@ def check_bounds(params, bounds: dict) -> None:
 
 def add_parser(sub) -> None:
     """Add the ``tune`` command to the ``jaxgrasp`` sub-parsers."""
-    from jaxgrasp.analysis._tune_drivers import METHODS
+    from jaxgrasp.analysis import METHODS
 
     sp = sub.add_parser(
         "tune",
@@ -154,7 +154,7 @@ def run(args) -> int:
     whether the tuned grasp is usable.
     """
     from jaxgrasp.analysis import tune
-    from jaxgrasp.tolerance._options import EvaluateOptions
+    from jaxgrasp.tolerance import EvaluateOptions
 
     out = _check_options(args)
     bounds = parse_bounds(args.bounds)
@@ -227,7 +227,7 @@ def _progress_printer(quiet: bool):
 def _write_outputs(res, out: Path, title: str | None) -> list[str]:
     """Write the tuned grasp to ``out`` and (with a ``title``) its history plot beside it,
     as one set; the names of the previous files they replaced."""
-    from jaxgrasp.io._grasp_file import mesh_reference, to_text
+    from jaxgrasp.io import mesh_reference, to_text
 
     if res.mesh_grasp is None:
         members = {out: to_text(res.grasp, out).encode("utf-8")}

@@ -6,6 +6,11 @@ the caller's trace (``jit``, ``vmap``, ``grad``), :func:`evaluate_batch` and
 :func:`evaluate_dataset` run it one compiled stage at a time over chunks of grasps cut by
 :func:`plan_chunks`, in segments by contact count (:func:`plan_segments`, each at the
 width :func:`plan_widths` gives it). :func:`solve_problems` stops it at the solved problems.
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
 from jaxgrasp.engine._batch import evaluate_batch, evaluate_dataset
@@ -15,6 +20,19 @@ from jaxgrasp.engine._plan import ChunkPlan, SegmentPlan, plan_chunks, plan_segm
 from jaxgrasp.engine._stages import PIPELINE, run_inline, stage_functions
 from jaxgrasp.engine._store import enable_compilation_cache
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.engine._batch import start_progress
+from jaxgrasp.engine._batch_result import assemble, mark_invalid
+from jaxgrasp.engine._checkpoint import BATCH_FOLDER, SWEEP_FILE, BatchCheckpoint, CheckpointBusy, SweepKeeper
+from jaxgrasp.engine._compile import StoredFunction, wait_for_saves
+from jaxgrasp.engine._devices import configure_cpu_devices
+from jaxgrasp.engine._evaluate import evaluate_compiled
+from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields
+from jaxgrasp.engine._plan import check_chunk_size, grasps_by_count
+from jaxgrasp.engine._prefetch import prefetch
+from jaxgrasp.engine._run import run_chunks
+from jaxgrasp.engine._store import enable_from_environment, log_lines_on_stderr
 
 __all__ = [
     "evaluate",

@@ -37,10 +37,9 @@ from jaxgrasp.engine._plan import (
 )
 from jaxgrasp.engine._run import run_chunks
 from jaxgrasp.engine._widths import contact_slots, narrow, widen
-from jaxgrasp.io._dataset import GraspSet
-from jaxgrasp.model._grasp import Grasp, stack
-from jaxgrasp.model._validation import GraspValueError, check_batch_inputs
-from jaxgrasp.tolerance._options import EvaluateOptions
+from jaxgrasp.io import GraspSet
+from jaxgrasp.model import Grasp, GraspValueError, check_batch_inputs, stack
+from jaxgrasp.tolerance import EvaluateOptions
 
 __all__ = ["evaluate_batch", "evaluate_dataset", "start_progress"]
 

@@ -22,9 +22,9 @@ import jax
 import numpy as np
 
 from jaxgrasp import storage
-from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.tolerance._result import FIELDS, Evaluation, SummaryNames
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.model import BoundaryKind
+from jaxgrasp.tolerance import FIELDS, Evaluation, SummaryNames
+from jaxgrasp.tolerance import GraspStatus
 
 __all__ = ["BatchResult", "CSV_COLUMNS", "mark_invalid", "assemble"]
 

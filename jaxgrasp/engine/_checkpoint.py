@@ -45,9 +45,9 @@ from typing import Mapping
 import numpy as np
 
 from jaxgrasp import storage
-from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.tolerance._result import SUMMARY_FIELDS as RESULT_FIELDS
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.model import BoundaryKind
+from jaxgrasp.tolerance import SUMMARY_FIELDS as RESULT_FIELDS
+from jaxgrasp.tolerance import GraspStatus
 
 __all__ = [
     "SweepCheckpoint",

@@ -44,13 +44,15 @@ from jaxgrasp.engine import _compile
 from jaxgrasp.engine._evaluator import SETTLE_INLINE
 from jaxgrasp.engine._stages import run_inline, stage_functions
 from jaxgrasp.engine._xla_options import latency_options
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._problems import Problems
-from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
-from jaxgrasp.tolerance._result import Evaluation
-from jaxgrasp.tolerance._settle import needs_settling
-from jaxgrasp.tolerance._verdict import split_temperature
+from jaxgrasp.model import Grasp
+from jaxgrasp.tolerance import (
+    FIELDS as RESULT_FIELDS,
+    EvaluateOptions,
+    Evaluation,
+    Problems,
+    needs_settling,
+    split_temperature,
+)
 
 __all__ = ["evaluate", "evaluate_traced", "evaluate_batch_traced", "evaluate_compiled", "compiled_executable", "solve_problems"]
 
@@ -95,7 +97,7 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
     if not _is_concrete(grasp):  # inside the caller's jit, vmap or grad
         return evaluate_traced(grasp, options)
     options, temperature = split_temperature(options)
-    from jaxgrasp.model._validation import check_grasp_inputs
+    from jaxgrasp.model import check_grasp_inputs
 
     check_grasp_inputs(**grasp.to_numpy())
     leaves = jax.tree_util.tree_leaves(grasp)
@@ -121,8 +123,7 @@ def _check_unbatched(grasp) -> None:
     """One grasp, not a batch: a one-line error that points to ``jax.vmap`` otherwise
     (shapes are static, so this holds for traced grasps too; inside ``vmap`` they are
     those of one grasp)."""
-    from jaxgrasp.model._fields import FIELDS
-    from jaxgrasp.model._validation import GraspValueError
+    from jaxgrasp.model import FIELDS, GraspValueError
 
     if not isinstance(grasp, Grasp):
         raise GraspValueError(f"evaluate needs a jaxgrasp.Grasp, got {type(grasp).__name__}")

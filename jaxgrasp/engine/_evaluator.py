@@ -14,9 +14,8 @@ from jaxgrasp.engine import _compile, _pipeline
 from jaxgrasp.engine import _stages as stages
 from jaxgrasp.engine._plan import ChunkPlan, batch_sharding
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS, latency_options
-from jaxgrasp.model._fields import NAMES
-from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
+from jaxgrasp.model import NAMES
+from jaxgrasp.tolerance import FIELDS as RESULT_FIELDS, EvaluateOptions
 
 __all__ = ["SETTLE_INLINE", "grasp_fields", "over_devices", "compiled_evaluator", "chunk_evaluator",
            "release_chunk_evaluator"]

@@ -9,8 +9,7 @@ import jax
 import numpy as np
 
 from jaxgrasp.engine._plan import ChunkPlan
-from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
-from jaxgrasp.tolerance._settle import needs_settling
+from jaxgrasp.tolerance import FIELDS as RESULT_FIELDS, needs_settling
 
 __all__ = ["run_chunks"]
 

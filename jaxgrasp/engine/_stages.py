@@ -25,15 +25,24 @@ from typing import Any, Callable, Mapping
 import jax
 import jax.numpy as jnp
 
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._potential import model_params
-from jaxgrasp.solver._solver import SolverResult
-from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._problems import batch_data, problems_treedef
-from jaxgrasp.tolerance._result import Evaluation
-from jaxgrasp.tolerance._stages import depend_on, finish_problems, settled_equilibrium, solve_stage, unsolved
-from jaxgrasp.tolerance._starts import LaneStarts, boundary_starts, equilibrium_starts
-from jaxgrasp.tolerance._verdict import evaluations_of, split_temperature
+from jaxgrasp.model import Grasp, model_params
+from jaxgrasp.solver import SolverResult
+from jaxgrasp.tolerance import (
+    EvaluateOptions,
+    Evaluation,
+    LaneStarts,
+    batch_data,
+    boundary_starts,
+    depend_on,
+    equilibrium_starts,
+    evaluations_of,
+    finish_problems,
+    problems_treedef,
+    settled_equilibrium,
+    solve_stage,
+    split_temperature,
+    unsolved,
+)
 
 __all__ = [
     "Step",

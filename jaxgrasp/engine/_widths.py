@@ -9,8 +9,8 @@ from typing import Mapping
 
 import numpy as np
 
-from jaxgrasp.model._fields import FIELD
-from jaxgrasp.solver._status import LaneStatus
+from jaxgrasp.model import FIELD
+from jaxgrasp.solver import LaneStatus
 
 __all__ = ["contact_slots", "narrow", "widen"]
 

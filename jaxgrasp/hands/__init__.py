@@ -4,6 +4,11 @@
 configuration makes on a mesh (:meth:`Hand.grasp` -> :class:`HandGrasp`), its value and
 gradient with respect to the joints (:func:`hand_value`), and :func:`tune_hand`, which
 maximises the value over the joint angles with the other links kept out of the object.
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
 from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp
@@ -11,6 +16,9 @@ from jaxgrasp.hands._hand import Hand
 from jaxgrasp.hands._links import link_samples
 from jaxgrasp.hands._mjcf import INSTALL_HINT, KinematicTree
 from jaxgrasp.hands._tune import HandTuneResult, HandValue, hand_value, tune_hand
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.hands._file import load_hand_grasp
 
 __all__ = [
     "Hand",

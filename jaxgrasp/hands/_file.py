@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, allowed_folders, confine, read_input
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.io import MAX_GRASP_FILE_BYTES, allowed_folders, confine, read_input
+from jaxgrasp.model import GraspValueError
 
 __all__ = ["load_hand_grasp", "save_hand_grasp", "hand_grasp_toml"]
 

@@ -39,9 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.hands._kinematics import wrist_transform
-from jaxgrasp.model._fields import DEFAULT_GRAVITY
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
+from jaxgrasp.model import DEFAULT_GRAVITY, Grasp, GraspValueError, check_grasp_inputs
 
 __all__ = ["HandGrasp", "hand_grasp", "contact_grasp", "Material", "material", "DEFAULT_MAX_TILT"]
 
@@ -73,7 +71,7 @@ def material(num_fingertips: int, mesh, young_modulus, friction, max_force, mass
     """A checked :class:`Material` (scalars broadcast to every fingertip); the centre of
     mass and mass from the mesh as :func:`jaxgrasp.from_mesh` has them (``mass`` or
     ``density``, kg or kg/m^3; neither: 0)."""
-    from jaxgrasp.io._mesh import mass_properties
+    from jaxgrasp.surface import mass_properties
 
     com, m = mass_properties(mesh, mass, density, center_of_mass)
     angle = 2.0 * np.pi * np.arange(num_fingertips) / num_fingertips
@@ -166,7 +164,7 @@ class HandGrasp:
     def mesh_grasp(self):
         """The grasp as a :class:`~jaxgrasp.MeshGrasp` (the grasp, the mesh, the centre of
         mass): what :func:`jaxgrasp.plots.plot_grasp` and ``jaxgrasp show`` draw."""
-        from jaxgrasp.io._mesh import MeshGrasp
+        from jaxgrasp.surface import MeshGrasp
 
         return MeshGrasp(self.grasp, self.mesh, np.asarray(self.center_of_mass), "<hand>")
 
@@ -217,7 +215,7 @@ def hand_grasp(hand, qpos, mesh, *, wrist=None, object_pose=None, young_modulus,
     Raises:
         GraspValueError: a malformed ``qpos``, pose or field; one line naming it.
     """
-    from jaxgrasp.io._mesh import load_mesh
+    from jaxgrasp.io import load_mesh
     from jaxgrasp.surface import Surface
 
     if not isinstance(qpos, jax.core.Tracer):

@@ -22,7 +22,7 @@ import numpy as np
 from jaxgrasp.hands._kinematics import body_frames, cap_offsets, geom_frames
 from jaxgrasp.hands._links import link_depths, link_samples
 from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER, SPHERE, KinematicTree, read_mjcf
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model import GraspValueError
 
 __all__ = ["Hand"]
 

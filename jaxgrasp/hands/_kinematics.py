@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.hands._mjcf import CAPSULE, CYLINDER, HINGE, KinematicTree
-from jaxgrasp.model._potential import rotation_matrix
+from jaxgrasp.model import rotation_matrix
 
 __all__ = ["quat_to_matrix", "body_frames", "geom_frames", "wrist_transform", "cap_offsets"]
 

@@ -15,7 +15,7 @@ import os
 
 import numpy as np
 
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model import GraspValueError
 
 __all__ = ["KinematicTree", "read_mjcf", "require_mujoco", "INSTALL_HINT", "HINGE", "SLIDE", "SPHERE", "CAPSULE", "BOX", "CYLINDER"]
 

@@ -29,17 +29,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.analysis._tune_drivers import run_search
-from jaxgrasp.analysis._tune_status import TuneStatus
-from jaxgrasp.engine._compile import StoredFunction
-from jaxgrasp.engine._evaluate import evaluate_compiled
-from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
+from jaxgrasp.analysis import TuneStatus, run_search
+from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, evaluate_compiled
 from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp, _pose, contact_grasp, hand_grasp, material
-from jaxgrasp.model._fields import DEFAULT_GRAVITY
-from jaxgrasp.model._validation import GraspValueError
-from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._result import EVALUATION_TREE
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.model import DEFAULT_GRAVITY, GraspValueError
+from jaxgrasp.tolerance import EVALUATION_TREE, EvaluateOptions, GraspStatus
 
 __all__ = ["tune_hand", "HandTuneResult", "HandValue", "hand_value", "PENETRATION_UNIT"]
 
@@ -101,7 +95,7 @@ class HandValue:
 
 def _setup(hand, mesh, kw):
     """``(data, mesh)``: the objective's data for a mesh and the grasp fields ``kw``."""
-    from jaxgrasp.io._mesh import load_mesh
+    from jaxgrasp.io import load_mesh
     from jaxgrasp.surface import PAD_FACES, Surface
 
     mesh = load_mesh(mesh, kw.pop("units", "m"))

@@ -11,12 +11,23 @@ line), and a mesh named by a grasp file or a dataset line must be a mesh format 
 OBJ, PLY, OFF, GLB; no archives) inside that file's folder after symlinks, unless the
 caller allows more folders (``allowed_dirs=``, ``--allow-dir``); see
 :mod:`jaxgrasp.io._inputs`.
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
 from jaxgrasp.io._dataset import GraspSet, load_dataset, save_dataset
 from jaxgrasp.io._grasp_file import grasp_from_dict, grasp_to_dict, load, save
-from jaxgrasp.io._mesh import MeshGrasp, from_mesh
+from jaxgrasp.io._mesh import from_mesh
 from jaxgrasp.storage import OutputError
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.io._dataset import load_share, padded_set, share_rows
+from jaxgrasp.io._grasp_file import dict_to_toml, mesh_grasp_to_dict, mesh_reference, to_text
+from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, allowed_folders, confine, read_input
+from jaxgrasp.io._mesh import load_mesh
 
 __all__ = [
     "load",
@@ -26,7 +37,6 @@ __all__ = [
     "GraspSet",
     "load_dataset",
     "save_dataset",
-    "MeshGrasp",
     "from_mesh",
     "OutputError",
 ]

@@ -75,9 +75,16 @@ from jaxgrasp import storage
 from jaxgrasp.io._grasp_file import _parse_json, checked_fields, grasp_to_dict
 from jaxgrasp.io._inputs import MAX_DATASET_BYTES, open_input
 from jaxgrasp.io._mesh import MeshReader
-from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS, FIELD, NAMES
-from jaxgrasp.model._grasp import Grasp, stack
-from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
+from jaxgrasp.model import (
+    DEFAULT_GRAVITY,
+    DEFAULT_MASS,
+    FIELD,
+    NAMES,
+    Grasp,
+    GraspValueError,
+    check_grasp_inputs,
+    stack,
+)
 
 __all__ = ["SUFFIXES", "GraspColumns", "GraspRows", "GraspSet", "load_dataset", "load_share", "share_rows", "padded_set",
            "save_dataset"]

@@ -49,10 +49,9 @@ import numpy as np
 
 from jaxgrasp import storage
 from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, MAX_MESH_BYTES, read_input
-from jaxgrasp.io._mesh import MeshGrasp, MeshReader, from_mesh, load_mesh
-from jaxgrasp.model._fields import FIELD, FIELDS, FINGERTIP
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
+from jaxgrasp.io._mesh import MeshReader, from_mesh, load_mesh
+from jaxgrasp.model import FIELD, FIELDS, FINGERTIP, Grasp, GraspValueError, check_grasp_inputs
+from jaxgrasp.surface import MeshGrasp
 
 __all__ = ["checked_fields", "dict_to_text", "dict_to_toml", "grasp_from_dict", "grasp_to_dict", "load", "mesh_grasp_to_dict", "mesh_reference", "save", "to_text", "to_toml"]
 

@@ -28,7 +28,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import BinaryIO
 
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model import GraspValueError
 
 __all__ = [
     "MAX_DATASET_BYTES",

@@ -1,23 +1,14 @@
-"""Objects from triangle meshes: contacts snapped to the surface, the centre of mass, the frame.
+"""Mesh files in: a checked mesh in metres from a file or a ``trimesh.Trimesh``, and
+:func:`from_mesh`, which reads one and builds the grasp on it.
 
-:func:`from_mesh` turns a mesh (a ``trimesh.Trimesh`` or a mesh file: STL, OBJ, PLY, OFF, GLB)
-and fingertip contact points given in the mesh's own frame into a :class:`MeshGrasp`:
-
-* each point is snapped to the closest point of the surface (an exact closest point over
-  every triangle, in NumPy: trimesh's own ``closest_point`` needs the optional ``rtree``);
-  the outward normal of the face there is the contact normal;
-* the centre of mass is the mesh's (a watertight mesh of uniform density) or the one
-  given; the mass is given, or ``density`` times the enclosed volume;
-* positions are moved into the model's frame (origin at the centre of mass, the mesh's
-  axes), and :class:`MeshGrasp` keeps the offset beside the grasp.
-
-Design (the one way the library keeps a grasp's mesh): the :class:`~jaxgrasp.Grasp`
-pytree is left exactly as for any other grasp, so ``evaluate``, ``sweep``, ``tune``,
-``evaluate_batch`` and their compiled executables and caches see nothing new. The mesh and the
-frame offset live beside it in :class:`MeshGrasp`, a small frozen object that is not a
-pytree and never enters ``jit``: evaluate ``mesh_grasp.grasp``; draw with
-``mesh_grasp.mesh`` and ``mesh_grasp.to_mesh_frame``. :func:`jaxgrasp.load` with
-``keep_mesh=True`` and ``jaxgrasp show`` use it.
+:func:`load_mesh` (and :func:`read_mesh`, which also gives the bytes' SHA-256) parses a
+mesh file (STL, OBJ, PLY, OFF, GLB) from its bytes as the format its name says, rejects a
+degenerate mesh in one line (no faces, NaN, infinite or far vertices, no area, a closed
+mesh with no volume or no inside) and turns a closed inward mesh outward;
+:class:`MeshReader` reads the meshes a grasp file or a dataset names, confined to its
+folder. :func:`from_mesh` is :func:`load_mesh` then
+:func:`jaxgrasp.surface.grasp_on_mesh`: the geometry (snapping contacts to the surface, the
+centre of mass, the frame) and :class:`~jaxgrasp.MeshGrasp` live in :mod:`jaxgrasp.surface`.
 
 trimesh is imported when a mesh is used, so ``import jaxgrasp`` does not pay for it.
 """
@@ -25,63 +16,17 @@ trimesh is imported when a mesh is used, so ``import jaxgrasp`` does not pay for
 from __future__ import annotations
 
 import collections
-import dataclasses
 import hashlib
 import io
 import os
-from typing import Any
 
 import numpy as np
 
 from jaxgrasp.io._inputs import MAX_MESH_BYTES, allowed_folders, check_mesh_suffix, confine, read_input
-from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._units import LENGTH_UNITS
-from jaxgrasp.model._validation import COINCIDENT_DISTANCE, MAX_COORDINATE, GraspValueError
+from jaxgrasp.model import COINCIDENT_DISTANCE, DEFAULT_GRAVITY, LENGTH_UNITS, MAX_COORDINATE, GraspValueError
+from jaxgrasp.surface import DEFAULT_TOLERANCE, MeshGrasp, grasp_on_mesh
 
-__all__ = ["MeshGrasp", "MeshReader", "from_mesh", "load_mesh", "read_mesh", "snap_to_surface", "closest_on_triangles", "DEFAULT_TOLERANCE", "SHARP_EDGE_DEG"]
-
-DEFAULT_TOLERANCE = 1e-3
-"""Farthest a contact point may lie from the mesh surface, m."""
-
-SHARP_EDGE_DEG = 30.0
-"""A contact where faces meet at more than this angle (degrees) is on a sharp edge or
-corner, where the surface has no normal: an error. Below it (a tessellated curved surface)
-the normals of the faces meeting there are averaged."""
-
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class MeshGrasp:
-    """A grasp made from a mesh, with the mesh and where the model's frame sits in it.
-
-    Not a pytree: pass :attr:`grasp` to :func:`jaxgrasp.evaluate` (and the other entry
-    points); the rest is for drawing results in the mesh's frame.
-
-    Attributes:
-        grasp: the :class:`~jaxgrasp.Grasp`, model frame: origin at the centre of mass,
-            axes of the mesh (SI units).
-        mesh: the ``trimesh.Trimesh`` in metres, in the mesh's own frame, faces outward.
-        center_of_mass: ``(3,)`` m, the centre of mass in the mesh's frame: a model-frame
-            point ``p`` is ``p + center_of_mass`` in the mesh's frame.
-        source: where the mesh came from (a path, or ``"<trimesh>"``).
-        units: the length unit of the mesh file's vertices (``"m"``, ``"cm"``, ``"mm"``);
-            :attr:`mesh` is in metres whatever it is.
-    """
-
-    grasp: Grasp
-    mesh: Any
-    center_of_mass: np.ndarray
-    source: str = "<trimesh>"
-    units: str = "m"
-
-    def to_mesh_frame(self, points) -> np.ndarray:
-        """Model-frame points ``(..., 3)`` (m) in the mesh's frame (m)."""
-        return np.asarray(points, dtype=np.float64) + self.center_of_mass
-
-    def replace(self, **changes) -> "MeshGrasp":
-        """A copy with some attributes replaced (e.g. ``grasp`` with other fingertips)."""
-        return dataclasses.replace(self, **changes)
+__all__ = ["MeshReader", "from_mesh", "load_mesh", "read_mesh"]
 
 
 def load_mesh(mesh, units: str = "m"):
@@ -271,7 +216,7 @@ def from_mesh(
         tolerance: farthest a point may lie from the surface, m (default 1 mm).
 
     Returns:
-        A :class:`MeshGrasp`: ``.grasp`` in the model frame, ``.mesh`` (m, mesh frame),
+        A :class:`~jaxgrasp.MeshGrasp`: ``.grasp`` in the model frame, ``.mesh`` (m, mesh frame),
         ``.center_of_mass`` (the offset).
 
     Raises:
@@ -284,177 +229,12 @@ def from_mesh(
     """
     surface = load_mesh(mesh, units)
     source = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "<trimesh>"
-    pts = _points(points)
-    com, mass = mass_properties(surface, mass, density, center_of_mass)
-    snapped, normal = _contacts(surface, pts, normals, tolerance)
-    grasp = Grasp.create(
-        positions=snapped - com, normals=normal, initial_deformation=initial_deformation, radius=radius,
-        young_modulus=young_modulus, friction=friction, max_force=max_force, mass=mass, gravity=gravity,
+    return grasp_on_mesh(
+        surface, points, initial_deformation=initial_deformation, radius=radius, young_modulus=young_modulus,
+        friction=friction, max_force=max_force, mass=mass, density=density, center_of_mass=center_of_mass,
+        gravity=gravity, normals=normals, tolerance=tolerance, source=source, units=units,
     )
-    return MeshGrasp(grasp=grasp, mesh=surface, center_of_mass=com, source=source, units=units)
-
-
-def _contacts(surface, pts, normals, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(positions (N, 3) m, normals (N, 3))`` of the contacts, mesh frame: ``pts`` snapped
-    to the surface (:func:`snap_to_surface`), each normal the one given in ``normals``
-    (``None`` or a length-``N`` sequence of ``None`` or 3-vectors) or else the surface's."""
-    given = [None] * len(pts) if normals is None else list(normals)
-    if len(given) != len(pts):
-        raise GraspValueError(f"normals has {len(given)} entries for {len(pts)} points")
-    snapped, found = snap_to_surface(surface, pts, tolerance, need_normal=[g is None for g in given])
-    normal = np.array([found[i] if g is None else np.asarray(g, dtype=np.float64) for i, g in enumerate(given)])
-    return snapped, normal
-
-
-def _points(points) -> np.ndarray:
-    try:
-        pts = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise GraspValueError("points must be an (N, 3) array of numbers, m") from None
-    if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
-        raise GraspValueError(f"points must be an (N, 3) array of finite numbers, m; got shape {pts.shape}")
-    return pts
-
-
-def mass_properties(surface, mass, density, center_of_mass) -> tuple[np.ndarray, float]:
-    """``(centre of mass (3,) m, mass kg)`` of the object: given, or from its closed surface."""
-    closed = surface.is_watertight
-    if mass is not None and density is not None:
-        raise GraspValueError("give mass or density, not both")
-    if center_of_mass is None:
-        if not closed:
-            raise GraspValueError(
-                "the mesh is not watertight, so it has no centre of mass of its own: give center_of_mass (m, mesh frame)"
-            )
-        com = np.asarray(surface.center_mass, dtype=np.float64)
-    else:
-        com = np.asarray(center_of_mass, dtype=np.float64)
-        if com.shape != (3,) or not np.all(np.isfinite(com)):
-            raise GraspValueError(f"center_of_mass must be 3 finite numbers, m; got {center_of_mass!r}")
-    if density is None:
-        return com, DEFAULT_MASS if mass is None else mass
-    density = float(density)
-    if not closed:
-        raise GraspValueError("density needs a watertight mesh (its volume); give mass instead")
-    if not (np.isfinite(density) and density >= 0):
-        raise GraspValueError(f"density = {density:g} must be >= 0 (kg/m^3)")
-    return com, density * float(surface.volume)
-
-
-def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE, need_normal=None) -> tuple[np.ndarray, np.ndarray]:
-    """The closest surface point and the outward unit normal there, for each point.
-
-    Args:
-        surface: ``trimesh.Trimesh`` (m).
-        points: ``(N, 3)`` m, the mesh's frame.
-        tolerance: farthest a point may lie from the surface, m.
-        need_normal: ``None`` (every point) or ``(N,)`` bools: the points whose normal is
-            taken from the surface; a point whose normal is given may lie on a sharp edge.
-
-    Returns:
-        ``(closest (N, 3) m, normals (N, 3))``: the normal of the face the closest point
-        lies on; where it lies on faces meeting at less than :data:`SHARP_EDGE_DEG`
-        (a tessellated curved surface), their mean normal.
-
-    Raises:
-        GraspValueError: a point farther than ``tolerance`` (naming the contact, the
-            distance in mm and a unit mistake that would explain every point, if one does)
-            or on a sharp edge or corner.
-    """
-    keep = surface.area_faces > 0
-    tri = np.asarray(surface.triangles, dtype=np.float64)[keep]
-    face_normals = np.asarray(surface.face_normals, dtype=np.float64)[keep]
-    scale = float(np.ptp(surface.vertices, axis=0).max())
-    closest, normals = [], []
-    for i, p in enumerate(points):
-        q = closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
-        dist = np.linalg.norm(q - p, axis=1)
-        best = float(dist.min())
-        if best > tolerance:
-            raise GraspValueError(
-                f"contact {i} at {_vec_mm(p)} mm is {best * 1e3:.3g} mm from the mesh surface "
-                f"(tolerance {tolerance * 1e3:.3g} mm): " + _unit_hint(tri, points, tolerance)
-            )
-        near = dist <= best + 1e-9 * scale
-        ns = face_normals[near]
-        angle = np.degrees(np.arccos(np.clip(ns @ ns.T, -1.0, 1.0))).max()
-        if angle > SHARP_EDGE_DEG and (need_normal is None or need_normal[i]):
-            raise GraspValueError(
-                f"contact {i} at {_vec_mm(p)} mm lies on an edge or corner where faces meet at "
-                f"{angle:.0f} degrees, so it has no one normal: move it onto a face or give its normal"
-            )
-        n = ns.mean(axis=0)
-        closest.append(q[int(np.argmin(dist))])
-        normals.append(n / np.linalg.norm(n))
-    return np.array(closest), np.array(normals)
-
-
-_METRES = " (units sets the mesh's vertices only; positions are always in metres)"
-_UNIT_MISTAKES = (
-    (1e-3, "the contact positions lie on the surface when read as millimetres: write them in metres"
-           + _METRES),
-    (1e-2, "the contact positions lie on the surface when read as centimetres: write them in metres"
-           + _METRES),
-    (1e3, 'the contacts lie on the mesh 1000 times larger, as if its vertices were in mm: set units = "mm"'),
-    (1e2, 'the contacts lie on the mesh 100 times larger, as if its vertices were in cm: set units = "cm"'),
-)
-"""Unit mistakes :func:`snap_to_surface` recognises: ``(factor, what to say)`` where every
-contact point times ``factor`` lies on the surface (points typed in mm or cm; a mesh whose
-``units`` do not match its vertices, which scales the mesh instead)."""
-
-
-def _unit_hint(tri: np.ndarray, points, tolerance: float) -> str:
-    """What to say of contacts off the surface: the unit mistake that would put every one
-    of them on it (:data:`_UNIT_MISTAKES`), or the general question."""
-    pts = np.asarray(points, dtype=np.float64)
-    for factor, text in _UNIT_MISTAKES:
-        near = [
-            np.linalg.norm(closest_on_triangles(p * factor, tri[:, 0], tri[:, 1], tri[:, 2]) - p * factor, axis=1).min()
-            for p in pts
-        ]
-        if max(near) <= tolerance * max(factor, 1.0):
-            return text
-    return "is it in the mesh's frame and units?"
-
-
-def _vec_mm(p) -> str:
-    return _vec(np.asarray(p) * 1e3)
 
 
 def _vec(p) -> str:
     return "(" + ", ".join(f"{x:.4g}" for x in p) + ")"
-
-
-def closest_on_triangles(p, a, b, c) -> np.ndarray:
-    """The closest point to ``p (3,)`` on each triangle ``(a, b, c)``, each ``(F, 3)``.
-
-    Exact, by the triangle's Voronoi regions (Ericson, *Real-Time Collision Detection*,
-    Sec. 5.1.5). Triangles must have non-zero area. Returns ``(F, 3)``.
-    """
-    ab, ac = b - a, c - a
-    ap, bp, cp = p - a, p - b, p - c
-
-    def dot(u, v):
-        return np.einsum("ij,ij->i", u, v)
-
-    d1, d2 = dot(ab, ap), dot(ac, ap)
-    d3, d4 = dot(ab, bp), dot(ac, bp)
-    d5, d6 = dot(ab, cp), dot(ac, cp)
-    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-
-    def ratio(num, den):
-        return (num / np.where(den == 0, 1.0, den))[:, None]
-
-    inside = 1.0 / np.where(va + vb + vc == 0, 1.0, va + vb + vc)
-    regions = [  # (condition, point), in Ericson's order: the first that holds applies
-        (((d1 <= 0) & (d2 <= 0)), a),
-        (((d3 >= 0) & (d4 <= d3)), b),
-        (((vc <= 0) & (d1 >= 0) & (d3 <= 0)), a + ratio(d1, d1 - d3) * ab),
-        (((d6 >= 0) & (d5 <= d6)), c),
-        (((vb <= 0) & (d2 >= 0) & (d6 <= 0)), a + ratio(d2, d2 - d6) * ac),
-        (((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)), b + ratio(d4 - d3, (d4 - d3) + (d5 - d6)) * (c - b)),
-    ]
-    out = a + ab * (vb * inside)[:, None] + ac * (vc * inside)[:, None]
-    for cond, point in reversed(regions):
-        out = np.where(cond[:, None], point, out)
-    return out

@@ -5,6 +5,11 @@ its validation (:class:`GraspValueError`; :func:`check`, the same rules as array
 for traced and batched grasps), the conversion to internal units
 (:func:`model_params`), the potential energy and constraint margins of a grasp (Tsuji et
 al., eq. 3-21), and the model's codes (:class:`BoundaryKind`, :class:`Constraint`).
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
 from jaxgrasp.model._check import CheckReason, GraspCheck, check
@@ -13,6 +18,37 @@ from jaxgrasp.model._fields import FIELD, FIELDS, Field
 from jaxgrasp.model._grasp import STANDARD_GRAVITY, Grasp, stack
 from jaxgrasp.model._potential import ModelParams, constraint_margins, model_params, potential_energy
 from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS, FINGERTIP, NAMES, SWEEPABLE, TUNABLE
+from jaxgrasp.model._potential import (
+    KINDS,
+    contact_gradients,
+    contact_hessians,
+    contact_kinematics,
+    energy_and_margins,
+    energy_of,
+    energy_scale,
+    kinematics_curvature,
+    kinematics_jacobian,
+    margins_of,
+    rotation_hessian_along,
+    rotation_matrix,
+    slip_torsion,
+)
+from jaxgrasp.model._units import LENGTH_UNITS, MJ_TO_J, M_TO_MM
+from jaxgrasp.model._validation import (
+    COINCIDENT_DISTANCE,
+    MAX_COORDINATE,
+    MAX_FRICTION,
+    MAX_LOAD_RATIO,
+    as_float_array,
+    check_batch_inputs,
+    check_corners,
+    counted,
+    format_value,
+    inward_contacts,
+)
 
 __all__ = [
     "Grasp",

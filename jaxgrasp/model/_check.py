@@ -35,7 +35,7 @@ from jaxgrasp.model._validation import (
     NORMAL_MIN_NORM,
     GraspValueError,
 )
-from jaxgrasp.solver._status import Coded
+from jaxgrasp.base import Coded
 
 __all__ = ["check", "GraspCheck", "CheckReason"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxgrasp.solver._status import Coded
+from jaxgrasp.base import Coded
 
 __all__ = ["BoundaryKind", "Constraint", "NO_BOUNDARY"]
 

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 from jaxgrasp.model._codes import BoundaryKind
 from jaxgrasp.model._grasp import Grasp
 from jaxgrasp.model._units import M_TO_MM, PA_TO_MPA
-from jaxgrasp.solver._contract import contract
+from jaxgrasp.base import contract
 
 __all__ = [
     "ModelParams",

@@ -3,9 +3,17 @@
 :func:`plan` draws candidates on the mesh, keeps those the paper's model describes (the
 contact rules of :mod:`jaxgrasp.surface`), evaluates them in batches, refines the best by
 surface-constrained gradient tuning and ranks them (:class:`PlanResult`).
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
 from jaxgrasp.planning._plan import SAMPLERS, plan
 from jaxgrasp.planning._result import PlanResult, PlanStatus
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.planning._plan import check_plan
 
 __all__ = ["plan", "PlanResult", "PlanStatus", "SAMPLERS"]

@@ -28,20 +28,23 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.analysis._epsilon import epsilon
-from jaxgrasp.analysis._robust import robust_batch
-from jaxgrasp.analysis._uncertainty import Uncertainty
-from jaxgrasp.analysis._tune import tune
-from jaxgrasp.engine._batch import evaluate_batch
-from jaxgrasp.engine._evaluate import evaluate
-from jaxgrasp.io._mesh import MeshGrasp, mass_properties, from_mesh, load_mesh
-from jaxgrasp.model._fields import DEFAULT_GRAVITY
-from jaxgrasp.model._grasp import Grasp
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.analysis import Uncertainty, epsilon, robust_batch, tune
+from jaxgrasp.engine import evaluate, evaluate_batch
+from jaxgrasp.io import from_mesh, load_mesh
+from jaxgrasp.model import DEFAULT_GRAVITY, Grasp, GraspValueError
 from jaxgrasp.planning._result import PlanResult, PlanStatus
 from jaxgrasp.planning._sampling import antipodal_pairs, spread_tuples, surface_points
-from jaxgrasp.surface import PAD_FACES, ContactRules, RuleCheck, Surface, check_contacts, deformation_range
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.surface import (
+    PAD_FACES,
+    ContactRules,
+    MeshGrasp,
+    RuleCheck,
+    Surface,
+    check_contacts,
+    deformation_range,
+    mass_properties,
+)
+from jaxgrasp.tolerance import GraspStatus
 
 __all__ = ["plan", "check_plan", "PlanInputs", "SAMPLERS"]
 

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from jaxgrasp.solver._status import Coded
+from jaxgrasp.base import Coded
 
 __all__ = ["PlanResult", "PlanStatus"]
 
@@ -95,8 +95,8 @@ class PlanResult:
         """One dict per ranked grasp: rank (1-based), value_J, status, limiting_kind,
         limiting_contact, epsilon, refined, and where the plan ranked by the robust value
         p_stable, value_mean_J, value_q05_J."""
-        from jaxgrasp.model._codes import BoundaryKind
-        from jaxgrasp.tolerance._status import GraspStatus
+        from jaxgrasp.model import BoundaryKind
+        from jaxgrasp.tolerance import GraspStatus
 
         out = []
         for i in range(len(self.grasps)):

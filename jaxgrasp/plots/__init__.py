@@ -1,12 +1,20 @@
 """Pictures (matplotlib, Agg backend): sweep and ranking plots, the 3-D scene of a grasp
 and the way it fails (with a hand's links: :func:`plot_hand_grasp`), the value over the
 iterations of a tuning.
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
 from jaxgrasp.plots._plots import draw_scene, plot_grasp, plot_max, plot_max_over, plot_ranking, plot_sweep, save_figure
 from jaxgrasp.plots._hand import hand_scene, plot_hand_grasp
 from jaxgrasp.plots._scene import grasp_scene
 from jaxgrasp.plots._tune_plot import plot_history
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.plots._trials_plot import plot_trials
 
 __all__ = [
     "plot_sweep",

@@ -106,7 +106,7 @@ def plot_hand_grasp(hand_grasp, path=None, *, result=None, magnification=None, t
     from jaxgrasp.plots._plots import _grasp_title, _save, draw_scene, plain_text
 
     if result is None:
-        from jaxgrasp.engine._evaluate import evaluate
+        from jaxgrasp.engine import evaluate
 
         result = evaluate(hand_grasp.grasp.compact())
     scene = hand_scene(hand_grasp, result, magnification=magnification)

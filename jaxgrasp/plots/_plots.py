@@ -37,10 +37,10 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from jaxgrasp import storage
-from jaxgrasp.model._codes import BoundaryKind
-from jaxgrasp.model._fields import FIELD
-from jaxgrasp.model._units import MJ_TO_J
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.model import BoundaryKind
+from jaxgrasp.model import FIELD
+from jaxgrasp.model import MJ_TO_J
+from jaxgrasp.tolerance import GraspStatus
 
 __all__ = [
     "plot_sweep",
@@ -463,8 +463,8 @@ def plot_grasp(grasp, path=None, *, result=None, magnification=None, title=None,
     from jaxgrasp.plots._scene import grasp_scene
 
     if result is None:
-        from jaxgrasp.engine._evaluate import evaluate
-        from jaxgrasp.io._mesh import MeshGrasp
+        from jaxgrasp.engine import evaluate
+        from jaxgrasp.surface import MeshGrasp
 
         result = evaluate(grasp.grasp if isinstance(grasp, MeshGrasp) else grasp)
     scene = grasp_scene(grasp, result, magnification=magnification)

@@ -124,8 +124,8 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
             ten, at least 1) that moves the object's farthest point by about 0.15 of its
             size (:func:`nice_magnification`).
     """
-    from jaxgrasp.io._mesh import MeshGrasp
-    from jaxgrasp.model._potential import KINDS
+    from jaxgrasp.surface import MeshGrasp
+    from jaxgrasp.model import KINDS
 
     g = grasp.grasp if isinstance(grasp, MeshGrasp) else grasp.compact()
     com = grasp.center_of_mass if isinstance(grasp, MeshGrasp) else np.zeros(3)
@@ -180,7 +180,7 @@ def pose_points(points, com, translation, rotation) -> np.ndarray:
     :func:`jaxgrasp.model._potential.rotation_matrix` (the model's own convention)."""
     import jax.numpy as jnp
 
-    from jaxgrasp.model._potential import rotation_matrix
+    from jaxgrasp.model import rotation_matrix
 
     rot = np.asarray(rotation_matrix(jnp.asarray(rotation, dtype=jnp.float64)))
     return com + (np.asarray(points) - com) @ rot.T + np.asarray(translation)

@@ -7,9 +7,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from jaxgrasp.analysis import TuneResult
-from jaxgrasp.model._units import MJ_TO_J
+from jaxgrasp.model import MJ_TO_J
 from jaxgrasp.plots._plots import VALUE_LABEL, _save, plain_text
-from jaxgrasp.tolerance._status import GraspStatus
+from jaxgrasp.tolerance import GraspStatus
 
 __all__ = ["plot_history"]
 

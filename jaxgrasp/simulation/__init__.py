@@ -6,10 +6,19 @@ with kinetic energies that are multiples of the evaluation value (:mod:`._trials
 returns a :class:`SimulationResult` (:mod:`._result`); its options are checked before
 anything is evaluated (:mod:`._options`). MuJoCo is imported only when
 :func:`simulate` runs.
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
 from jaxgrasp.simulation._options import DEFAULTS
 from jaxgrasp.simulation._result import AXES, DIRECTIONS, SimulationResult, SimulationStatus, Trial
 from jaxgrasp.simulation._simulate import simulate
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.simulation._options import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION, check_options
+from jaxgrasp.simulation._scene import load_mujoco
 
 __all__ = ["AXES", "DEFAULTS", "DIRECTIONS", "SimulationResult", "SimulationStatus", "Trial", "simulate"]

@@ -25,7 +25,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model import GraspValueError
 
 __all__ = ["DEFAULTS", "MAX_SIMULATED_S", "MAX_STEPS", "TIMESTEP_FRACTION", "check_number", "check_options",
            "check_steps", "simulated_time"]

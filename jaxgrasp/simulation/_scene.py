@@ -142,7 +142,7 @@ def object_shape(grasp_like) -> tuple[np.ndarray, np.ndarray, str]:
     convex hull of a disc of the fingertip's radius in each contact's tangent plane (``"hull"``)."""
     import trimesh
 
-    from jaxgrasp.io._mesh import MeshGrasp
+    from jaxgrasp.surface import MeshGrasp
 
     if isinstance(grasp_like, MeshGrasp):
         mesh = grasp_like.mesh

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model import GraspValueError
 from jaxgrasp.simulation._options import check_number, check_options, check_steps
 from jaxgrasp.simulation._result import SimulationResult, SimulationStatus
 from jaxgrasp.simulation._scene import IMPEDANCE, build_scene, load_mujoco
@@ -83,7 +83,7 @@ def simulate(
     slip_threshold = None if slip_threshold is None else check_number("slip_threshold", slip_threshold)
     plain = _one_grasp(grasp)
     if evaluation is None:
-        from jaxgrasp.engine._evaluate import evaluate
+        from jaxgrasp.engine import evaluate
 
         evaluation = evaluate(plain)
     skip = _skip_status(evaluation, simulate_unstable)
@@ -94,8 +94,8 @@ def simulate(
 
 def _one_grasp(grasp):
     """The plain grasp of ``grasp`` (a Grasp or MeshGrasp of one grasp), compacted."""
-    from jaxgrasp.io._mesh import MeshGrasp
-    from jaxgrasp.model._grasp import Grasp
+    from jaxgrasp.surface import MeshGrasp
+    from jaxgrasp.model import Grasp
 
     if not isinstance(grasp, (Grasp, MeshGrasp)):
         raise GraspValueError(f"simulate needs a jaxgrasp.Grasp or MeshGrasp, got {type(grasp).__name__}")

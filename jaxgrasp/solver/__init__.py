@@ -2,13 +2,22 @@
 
 It knows nothing of grasps: a :class:`Problem` is an objective with equality and
 inequality rows; :func:`solve` runs one lane of it, :func:`solve_lanes` many lanes as a
-work queue. Its statuses are :class:`LaneStatus`; :class:`Coded` is the base of every
-named integer code of jaxgrasp.
+work queue. Its statuses are :class:`LaneStatus` (a :class:`jaxgrasp.base.Coded`).
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
 from jaxgrasp.solver._lanes import Held, solve_lane_batches, solve_lanes
 from jaxgrasp.solver._solver import FirstOrder, Problem, SolverOptions, SolverResult, solve
-from jaxgrasp.solver._status import Coded, LaneStatus
+from jaxgrasp.solver._status import LaneStatus
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.solver._dense import eigh as serial_eigh, solve as dense_solve
+from jaxgrasp.solver._rows import over_rows, put_rows
+from jaxgrasp.solver._solver import kkt_tol
 
 __all__ = [
     "Problem",
@@ -19,6 +28,5 @@ __all__ = [
     "solve_lanes",
     "solve_lane_batches",
     "Held",
-    "Coded",
     "LaneStatus",
 ]

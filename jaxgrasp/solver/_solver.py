@@ -55,7 +55,7 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
-from jaxgrasp.solver._contract import contract
+from jaxgrasp.base import contract
 from jaxgrasp.solver._direction import newton_direction
 from jaxgrasp.solver._line_search import line_search as ladder_search
 from jaxgrasp.solver._status import LaneStatus

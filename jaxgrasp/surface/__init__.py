@@ -4,8 +4,17 @@
 it); :meth:`Surface.closest` puts points on the surface with the outward normal of the face
 there (:class:`SurfacePoint`). :func:`check_contacts` checks contacts against the rules that
 make the paper's planar-contact model apply (:class:`ContactRules`, :class:`RuleCheck`).
+A grasp on a mesh is a :class:`MeshGrasp`: its contacts snapped to the surface, the centre
+of mass and the frame (:func:`jaxgrasp.from_mesh` reads a mesh file and builds one).
+:func:`closest_on_triangles` is the one closest-point rule, in JAX (traced) or NumPy.
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
+from jaxgrasp.surface._mesh import MeshGrasp
 from jaxgrasp.surface._rules import (
     ContactRules,
     RuleCheck,
@@ -15,6 +24,9 @@ from jaxgrasp.surface._rules import (
     fingertip_centers,
 )
 from jaxgrasp.surface._surface import PAD_FACES, Surface, SurfacePoint, closest_on_triangles
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.surface._mesh import DEFAULT_TOLERANCE, grasp_on_mesh, mass_properties
 
 __all__ = [
     "Surface",
@@ -27,4 +39,5 @@ __all__ = [
     "contact_radius",
     "deformation_range",
     "fingertip_centers",
+    "MeshGrasp",
 ]

@@ -30,7 +30,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model import GraspValueError
 from jaxgrasp.surface._surface import Surface
 
 __all__ = ["ContactRules", "RuleCheck", "check_contacts", "contact_radius", "fingertip_centers", "deformation_range"]

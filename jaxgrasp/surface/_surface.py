@@ -8,8 +8,9 @@ and that face's normal (a :class:`SurfacePoint`).
 Behaviour a caller relies on:
 
 * **Closest point.** Exact over every face, by the triangle's Voronoi regions (Ericson,
-  *Real-Time Collision Detection*, Sec. 5.1.5), the same rule as its NumPy twin
-  ``jaxgrasp.io._mesh.closest_on_triangles`` (the tests check one against the other).
+  *Real-Time Collision Detection*, Sec. 5.1.5): :func:`closest_on_triangles`, the one rule
+  of jaxgrasp, which the host code that snaps a mesh grasp's contacts runs in NumPy
+  (:mod:`jaxgrasp.surface._mesh`; the tests check one library against the other).
   Cost ``O(points x faces)``.
 * **Normal.** The outward normal of the face the point lies on: piecewise constant on the
   surface, as the paper's planar contact surface needs (the model's normal is the face's,
@@ -32,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.model._validation import GraspValueError
+from jaxgrasp.model import GraspValueError
 
 __all__ = ["Surface", "SurfacePoint", "closest_on_triangles", "PAD_FACES"]
 
@@ -187,39 +188,45 @@ def _closest_one(surface: Surface, p) -> SurfacePoint:
     return SurfacePoint(point=point, normal=n, face=face, distance=dist, signed_distance=side * dist)
 
 
-def closest_on_triangles(p, tri) -> jax.Array:
+def closest_on_triangles(p, tri, xp=jnp):
     """The closest point to ``p (3,)`` on each triangle of ``tri (F, 3, 3)``, ``(F, 3)``.
 
     Exact, by the triangle's Voronoi regions (Ericson, *Real-Time Collision Detection*,
     Sec. 5.1.5); denominators are guarded so that the branches not taken carry finite
     derivatives. Triangles must have non-zero area.
+
+    ``xp`` is the array library: ``jax.numpy`` (the default: traceable, differentiable) or
+    ``numpy``, for the host code that snaps a mesh grasp's contacts
+    (:func:`~jaxgrasp.surface.grasp_on_mesh`, once per grasp of a dataset or a plan), where
+    dispatching each operation to JAX would cost more than the arithmetic. One rule, run
+    by either library; the tests hold the two to each other.
     """
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
     ab, ac = b - a, c - a
-    d1, d2 = _dot(ab, p - a), _dot(ac, p - a)
-    d3, d4 = _dot(ab, p - b), _dot(ac, p - b)
-    d5, d6 = _dot(ab, p - c), _dot(ac, p - c)
+    d1, d2 = _dot(ab, p - a, xp), _dot(ac, p - a, xp)
+    d3, d4 = _dot(ab, p - b, xp), _dot(ac, p - b, xp)
+    d5, d6 = _dot(ab, p - c, xp), _dot(ac, p - c, xp)
     va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
     denom = va + vb + vc
-    inside = a + ab * _ratio(vb, denom) + ac * _ratio(vc, denom)
+    inside = a + ab * _ratio(vb, denom, xp) + ac * _ratio(vc, denom, xp)
     regions = [  # (condition, point), in Ericson's order: the first that holds applies
         ((d1 <= 0) & (d2 <= 0), a),
         ((d3 >= 0) & (d4 <= d3), b),
-        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + _ratio(d1, d1 - d3) * ab),
+        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + _ratio(d1, d1 - d3, xp) * ab),
         ((d6 >= 0) & (d5 <= d6), c),
-        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + _ratio(d2, d2 - d6) * ac),
-        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), b + _ratio(d4 - d3, (d4 - d3) + (d5 - d6)) * (c - b)),
+        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + _ratio(d2, d2 - d6, xp) * ac),
+        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), b + _ratio(d4 - d3, (d4 - d3) + (d5 - d6), xp) * (c - b)),
     ]
     out = inside
     for cond, point in reversed(regions):
-        out = jnp.where(cond[:, None], point, out)
+        out = xp.where(cond[:, None], point, out)
     return out
 
 
-def _dot(u, v):
-    return jnp.einsum("fd,fd->f", u, jnp.broadcast_to(v, u.shape))
+def _dot(u, v, xp):
+    return xp.einsum("fd,fd->f", u, xp.broadcast_to(v, u.shape))
 
 
-def _ratio(num, den):
-    safe = jnp.where(den == 0, 1.0, den)
-    return (jnp.where(den == 0, 0.0, num) / safe)[:, None]
+def _ratio(num, den, xp):
+    safe = xp.where(den == 0, 1.0, den)
+    return (xp.where(den == 0, 0.0, num) / safe)[:, None]

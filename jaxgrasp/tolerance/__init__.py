@@ -5,6 +5,11 @@ per contact; Sec. VI), their starts, settling of stalled lanes, the verdict (val
 status, limiting boundary), the minimum energies with their envelope-theorem
 derivatives, and the :class:`Evaluation` result with its :class:`GraspStatus`. Running
 it over many grasps, compiled and sharded, is :mod:`jaxgrasp.engine`'s job.
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users.
 """
 
 from jaxgrasp.tolerance._envelope import envelope_energy, soft_minimum
@@ -13,6 +18,14 @@ from jaxgrasp.tolerance._problems import Problems
 from jaxgrasp.tolerance._result import Evaluation
 from jaxgrasp.tolerance._status import GraspStatus
 from jaxgrasp.tolerance._verdict import evaluations_of
+
+# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+from jaxgrasp.tolerance._problems import batch_data, problems_treedef
+from jaxgrasp.tolerance._result import EVALUATION_TREE, FIELDS, SUMMARY_FIELDS, SummaryNames
+from jaxgrasp.tolerance._settle import needs_settling
+from jaxgrasp.tolerance._stages import depend_on, finish_problems, settled_equilibrium, solve_stage, unsolved
+from jaxgrasp.tolerance._starts import LaneStarts, boundary_starts, equilibrium_starts
+from jaxgrasp.tolerance._verdict import split_temperature
 
 __all__ = [
     "EvaluateOptions",

@@ -13,7 +13,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from jaxgrasp.model._potential import energy_scale
+from jaxgrasp.model import energy_scale
 from jaxgrasp.tolerance._problems import lagrangian, problem_data
 
 __all__ = ["envelope_energy", "soft_minimum"]

@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from jaxgrasp.solver._solver import SolverOptions
+from jaxgrasp.solver import SolverOptions
 
 __all__ = ["EvaluateOptions"]
 

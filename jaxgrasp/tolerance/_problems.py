@@ -29,7 +29,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from jaxgrasp.model._potential import (
+from jaxgrasp.model import (
     ModelParams,
     constraint_margins,
     contact_gradients,
@@ -42,8 +42,8 @@ from jaxgrasp.model._potential import (
     margins_of,
     potential_energy,
 )
-from jaxgrasp.solver._contract import contract
-from jaxgrasp.solver._solver import FirstOrder, Problem, SolverResult
+from jaxgrasp.base import contract
+from jaxgrasp.solver import FirstOrder, Problem, SolverResult
 from jaxgrasp.tolerance._options import EvaluateOptions
 
 __all__ = [

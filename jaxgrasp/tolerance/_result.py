@@ -9,8 +9,8 @@ from typing import Any
 import jax
 import numpy as np
 
-from jaxgrasp.model._codes import NO_BOUNDARY, BoundaryKind, Constraint
-from jaxgrasp.solver._status import LaneStatus
+from jaxgrasp.model import NO_BOUNDARY, BoundaryKind, Constraint
+from jaxgrasp.solver import LaneStatus
 from jaxgrasp.tolerance._status import GraspStatus
 
 __all__ = [

@@ -8,8 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.model._codes import Constraint
-from jaxgrasp.model._potential import (
+from jaxgrasp.model import (
+    Constraint,
     contact_hessians,
     contact_kinematics,
     energy_of,
@@ -18,10 +18,7 @@ from jaxgrasp.model._potential import (
     rotation_matrix,
     slip_torsion,
 )
-from jaxgrasp.solver._dense import solve as dense_solve
-from jaxgrasp.solver._rows import over_rows, put_rows
-from jaxgrasp.solver._solver import SolverOptions, SolverResult, kkt_tol
-from jaxgrasp.solver._status import LaneStatus
+from jaxgrasp.solver import LaneStatus, SolverOptions, SolverResult, dense_solve, kkt_tol, over_rows, put_rows
 from jaxgrasp.tolerance._problems import (
     ProblemData,
     _first_order,

@@ -8,9 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.solver._lanes import Held, solve_lane_batches
-from jaxgrasp.solver._solver import SolverResult
-from jaxgrasp.solver._status import LaneStatus
+from jaxgrasp.solver import Held, LaneStatus, SolverResult, solve_lane_batches
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._problems import (
     ProblemData,

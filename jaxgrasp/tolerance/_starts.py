@@ -9,9 +9,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from jaxgrasp.solver._dense import eigh as serial_eigh
-from jaxgrasp.solver._solver import SolverResult, kkt_tol
-from jaxgrasp.solver._status import LaneStatus
+from jaxgrasp.solver import LaneStatus, SolverResult, kkt_tol, serial_eigh
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._problems import (
     ProblemData,

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from jaxgrasp.solver._status import Coded
+from jaxgrasp.base import Coded
 
 __all__ = ["GraspStatus"]
 

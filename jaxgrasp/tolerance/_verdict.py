@@ -26,10 +26,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.model._codes import NO_BOUNDARY, Constraint
-from jaxgrasp.model._potential import ModelParams
-from jaxgrasp.model._units import M_TO_MM, MJ_TO_J
-from jaxgrasp.solver._status import LaneStatus
+from jaxgrasp.model import MJ_TO_J, M_TO_MM, NO_BOUNDARY, Constraint, ModelParams
+from jaxgrasp.solver import LaneStatus
 from jaxgrasp.tolerance._envelope import envelope_energy, soft_minimum
 from jaxgrasp.tolerance._options import EvaluateOptions
 from jaxgrasp.tolerance._problems import Problems, constraints, problem_data, to_pose

@@ -48,8 +48,8 @@ def no_compute(monkeypatch):
         calls.append((args, kwargs))
         raise Computed
 
-    monkeypatch.setattr("jaxgrasp.engine._evaluate.evaluate", stand_in)
-    monkeypatch.setattr("jaxgrasp.analysis._sweep.sweep", stand_in)
+    monkeypatch.setattr("jaxgrasp.engine.evaluate", stand_in)  # the commands import it from the face
+    monkeypatch.setattr("jaxgrasp.analysis.sweep", stand_in)
     monkeypatch.setattr("jaxgrasp.analysis.tune", stand_in)
     return calls
 

@@ -28,7 +28,7 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp.hands import hand_value
-from jaxgrasp.io._mesh import closest_on_triangles
+from jaxgrasp.surface import closest_on_triangles
 
 from conftest import json_from_new_process
 
@@ -59,7 +59,7 @@ def cube():
 def brute_closest(mesh, point):
     """``(p, normal)``: the closest point of ``mesh`` to ``point`` over every triangle, NumPy."""
     tri = np.asarray(mesh.triangles)
-    q = closest_on_triangles(np.asarray(point), tri[:, 0], tri[:, 1], tri[:, 2])
+    q = closest_on_triangles(np.asarray(point), tri, xp=np)
     k = int(np.argmin(np.linalg.norm(q - point, axis=1)))
     return q[k], np.asarray(mesh.face_normals[k])
 

@@ -53,12 +53,10 @@ def _untouched(target: Path) -> bool:
 @pytest.fixture
 def no_computing(monkeypatch):
     """``jaxgrasp.cli.main`` in-process with every computation replaced by a test failure."""
-    from jaxgrasp.analysis import _sweep as sweep_module
-    from jaxgrasp.engine import _batch as batch_module
-
+    # the commands import them from the faces
     monkeypatch.setattr(cli, "enable_compilation_cache", lambda: None)
-    monkeypatch.setattr(sweep_module, "sweep", lambda *a, **k: pytest.fail("computed"))
-    monkeypatch.setattr(batch_module, "evaluate_dataset", lambda *a, **k: pytest.fail("computed"))
+    monkeypatch.setattr(jaxgrasp.analysis, "sweep", lambda *a, **k: pytest.fail("computed"))
+    monkeypatch.setattr(jaxgrasp.engine, "evaluate_dataset", lambda *a, **k: pytest.fail("computed"))
 
 
 def test_checkpoint_names_are_the_commands(out):

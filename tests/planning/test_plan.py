@@ -13,7 +13,8 @@ import pytest
 import trimesh
 
 import jaxgrasp
-from jaxgrasp.io._mesh import closest_on_triangles, load_mesh
+from jaxgrasp.io._mesh import load_mesh
+from jaxgrasp.surface import closest_on_triangles
 from jaxgrasp.planning import PlanStatus, plan
 from jaxgrasp.planning._sampling import antipodal_pairs, first_hits, spread_tuples, surface_points
 
@@ -33,11 +34,11 @@ def _numpy_rules(mesh, pos, nrm, dr, r=0.01, flatness_deg=25.0):
     ok = True
     c = pos + (r - dr)[:, None] * nrm
     for i, p in enumerate(pos):
-        d = np.linalg.norm(closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2]) - p, axis=1)
+        d = np.linalg.norm(closest_on_triangles(p, tri, xp=np) - p, axis=1)
         on = d.min() < 1e-6 and np.any(fn[d < 1e-6] @ nrm[i] > np.cos(np.radians(2.0)))
         a = np.sqrt(r**2 - (r - dr[i]) ** 2)
         flat = np.all(fn[d <= a] @ nrm[i] >= np.cos(np.radians(flatness_deg)))
-        dc = np.linalg.norm(closest_on_triangles(c[i], tri[:, 0], tri[:, 1], tri[:, 2]) - c[i], axis=1).min()
+        dc = np.linalg.norm(closest_on_triangles(c[i], tri, xp=np) - c[i], axis=1).min()
         alone = dc >= r - dr[i] - 1e-6
         apart = all(np.linalg.norm(c[i] - c[j]) >= 2 * r for j in range(len(pos)) if j != i)
         in_range = 5e-4 <= dr[i] <= min(0.9 * r, np.sqrt(15.0 / (np.pi * 3e5)))

@@ -141,12 +141,12 @@ def test_results_json_and_plot(run_cli, tmp_path):
 
 def _no_evaluation(monkeypatch):
     """Make any evaluation fail the test: the options must be checked before it."""
-    from jaxgrasp.engine import _evaluate
+    from jaxgrasp import engine
 
     def evaluate(*_, **__):
         raise AssertionError("evaluated before the options were checked")
 
-    monkeypatch.setattr(_evaluate, "evaluate", evaluate)
+    monkeypatch.setattr(engine, "evaluate", evaluate)  # simulate imports it from the face
 
 
 @pytest.mark.parametrize("options, mentions", [

@@ -15,12 +15,11 @@ import jaxgrasp
 
 
 def test_without_mujoco_import_works_and_simulate_says_what_to_install(monkeypatch):
-    from jaxgrasp import _startup
-    from jaxgrasp.engine import _devices, _store
+    from jaxgrasp import _startup, engine
 
     # the package's face runs again; its process-wide set-up (the session's executable
     # store, JAX's devices, the command's interrupt handler) stays as the session made it
-    for module, name in ((_store, "enable_from_environment"), (_devices, "configure_cpu_devices"),
+    for module, name in ((engine, "enable_from_environment"), (engine, "configure_cpu_devices"),
                          (_startup, "install_if_command_line")):
         monkeypatch.setattr(module, name, lambda: None)
     monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco -> ImportError

@@ -1,4 +1,4 @@
-"""Small contractions as one product and sum (:mod:`jaxgrasp.solver._contract`), and the
+"""Small contractions as one product and sum (:func:`jaxgrasp.base.contract`, below the solver and the model), and the
 gathered blocks of rows (:mod:`jaxgrasp.solver._rows`) the solver runs its rare branches on.
 
 :func:`contract` must be ``einsum`` to rounding for every pattern the model and the
@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrasp.solver._contract import contract
+from jaxgrasp.base import contract
 from jaxgrasp.solver._rows import over_rows, put_rows  # importing jaxgrasp turns on float64
 
 # every pattern jaxgrasp's model and solver contract with, with operand shapes

@@ -1,6 +1,6 @@
 """Small tensor contractions written as one broadcast product and one sum.
 
-The solver's lanes contract arrays of a few entries per axis (``3 x 3`` rotations, the
+The solver's and the model's lanes contract arrays of a few entries per axis (``3 x 3`` rotations, the
 ``3N x 6`` constraint Jacobian, ``4 x 6`` kinematic Jacobians). Under ``vmap`` a
 ``jnp.einsum`` or ``@`` of such arrays becomes a batched ``dot``, which XLA's CPU backend
 runs as one small matrix product per lane, each a call of its own, and which fuses with
