@@ -368,8 +368,8 @@ print(json.dumps({{"stats": jaxgrasp.engine._store.stats(), "fields": fields}}))
 
 _SETUPS = {
     "store": "",  # what import jaxgrasp turns on: the executable store alone
-    "both": "jaxgrasp.enable_compilation_cache()",  # as the command does
-    "xla": "jaxgrasp.enable_compilation_cache(); jaxgrasp.engine._store.set_executable_dir(None)",
+    "both": "jaxgrasp.engine.enable_compilation_cache()",  # as the command does
+    "xla": "jaxgrasp.engine.enable_compilation_cache(); jaxgrasp.engine._store.set_executable_dir(None)",
 }
 """What a process turns on after ``import jaxgrasp``, by name (:meth:`WarmCache.evaluate_in_new_process`)."""
 

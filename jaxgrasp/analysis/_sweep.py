@@ -397,7 +397,7 @@ def sweep(
     shape = tuple(a.size for a in axes.values())
     plan = plan_chunks(int(math.prod(shape)), chunk_size, devices)
     n_contacts = base["positions"].shape[0]
-    start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
+    progress = start_progress(progress, plan, "sweeping", "point")  # before the compilation, which the first chunk's time includes
     fn, compile_seconds, settling = chunk_evaluator("sweep", options, n_contacts, plan, masked=False)
     own = _own_fields(grasp, base)
     if checkpoint is not None:
