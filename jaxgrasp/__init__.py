@@ -128,10 +128,15 @@ _HOMES = {
 _HOME = {name: package for package, names in _HOMES.items() for name in names}
 
 
+_SUBMODULES = ("solver", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "planning",
+               "hands", "simulation", "plots", "cli")
+"""The packages (and the module ``presets``) that ``jaxgrasp.<name>`` loads when first used."""
+
+
 def __getattr__(name: str):
-    """Load a top-level name from its package face the first time it is used."""
-    if name == "presets":
-        return _importlib.import_module("jaxgrasp.presets")  # binds jaxgrasp.presets too
+    """Load a top-level name from its package face, or a subpackage, the first time it is used."""
+    if name in _SUBMODULES:
+        return _importlib.import_module(f"jaxgrasp.{name}")  # which binds jaxgrasp.<name> too
     if name == "__version__":
         globals()[name] = _version()
         return globals()[name]
@@ -143,7 +148,7 @@ def __getattr__(name: str):
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__) | {"__version__"})
+    return sorted(set(globals()) | set(__all__) | set(_SUBMODULES) | {"__version__"})
 
 
 def _version() -> str:
