@@ -19,8 +19,9 @@ packages, each importing only from those before it in this list:
 
 The top level holds what a user calls and holds for the method itself, plus each
 feature's entry points. One rule chooses its names: *the functions a user calls to
-build, check, evaluate and store grasps, one or many, with the types passed in and
-returned and the error raised; and each feature's entry function (or class)*. A
+build, check, evaluate and store grasps, one or many, and to set up the process, with the
+types passed in and returned and the error raised; and each feature's entry function (or
+class)*. A
 feature's own types (its results, statuses, uncertainty model), internals
 (:class:`~jaxgrasp.solver.LaneStatus`, :class:`~jaxgrasp.surface.Surface`) and
 dict-level twins (:func:`jaxgrasp.io.grasp_from_dict`) live on the feature's package

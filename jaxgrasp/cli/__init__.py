@@ -134,16 +134,15 @@ def main(argv=None) -> int:
 
 
 def _answer_without_library(argv: list[str]) -> int | None:
-    """The exit status of a command line :func:`top_parser` answers alone (``--version``,
-    ``--help``, no command, an unknown command or top-level option), after printing its
-    answer; ``None`` for a sub-command to run."""
+    """The exit status of a command line :func:`top_parser` answers alone (no command, an
+    unknown command or top-level option), after printing its one line; ``None`` for a
+    sub-command to run. ``--version`` and ``--help`` print and raise ``SystemExit(0)``,
+    as argparse does."""
     try:
         args, rest = top_parser().parse_known_args(argv)
     except UsageError as exc:
         print(f"jaxgrasp: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except SystemExit as exc:  # --help, --version
-        return exc.code if isinstance(exc.code, int) else 0
     if args.command is None:
         line = (f"unrecognized arguments: {' '.join(rest)} (see 'jaxgrasp --help')" if rest else
                 "choose a command: evaluate, sweep, batch, tune, plan, show or simulate (see 'jaxgrasp --help')")
