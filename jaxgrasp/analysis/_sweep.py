@@ -26,7 +26,7 @@ device count), so one call uses every GPU of a machine, or every device of sever
 after ``jax.distributed.initialize()``. Results are gathered to the host.
 
 The compiled evaluator is memoised in the process and, where the caches are on
-(:func:`jaxgrasp.enable_compilation_cache`; the CLI turns them on), kept in the executable
+(:func:`jaxgrasp.engine.enable_compilation_cache`; the CLI turns them on), kept in the executable
 store on disk, so that a later process neither traces nor compiles it.
 """
 

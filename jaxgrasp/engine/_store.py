@@ -24,10 +24,10 @@ Which caches are on:
 * jaxgrasp's first use (its first compilation or batch, or :func:`jaxgrasp.configure`)
   turns on the executable store alone (:func:`enable_from_environment`), in the subfolder
   ``jaxgrasp-executables`` of :func:`default_dir`: every process of a script starts warm,
-  without a change to its code; ``import jaxgrasp`` writes nothing. It does not turn on JAX's persistent
-  compilation cache, which is global to the process: it would change how the user's own
-  ``jit`` functions are compiled and stored, which is the user's choice.
-* :func:`enable_compilation_cache` (``jaxgrasp.enable_compilation_cache()``) and the
+  without a change to its code; ``import jaxgrasp`` writes nothing. It does not turn on
+  JAX's persistent compilation cache, which is global to the process: it would change how
+  the user's own ``jit`` functions are compiled and stored, which is the user's choice.
+* :func:`enable_compilation_cache` (``jaxgrasp.engine.enable_compilation_cache()``) and the
   ``jaxgrasp`` command turn on both: JAX's cache in :func:`default_dir`, the executables
   in its subfolder.
 * The environment variable ``JAXGRASP_CACHE_DIR`` (:data:`ENV_VAR`) moves the folder;
