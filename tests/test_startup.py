@@ -145,7 +145,8 @@ def test_first_evaluate_and_a_batch_report_on_the_logger(caplog):
     cube = jaxgrasp.presets.cube(6e5, 0.002)
     fresh = jaxgrasp.EvaluateOptions(seed=640_005)  # no other test builds this evaluator
     jaxgrasp.evaluate(cube, options=fresh)
-    assert [m for m in _records(caplog) if m.startswith("jaxgrasp: compiling evaluate for 2 contacts")], _records(caplog)
+    said = _records(caplog)
+    assert [m for m in said if m.startswith("jaxgrasp: compiling evaluate for 2 contacts")], said
 
     caplog.clear()
     grasps = jaxgrasp.stack([cube, jaxgrasp.presets.cube(4e5, 0.002), cube])
