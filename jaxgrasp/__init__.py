@@ -7,7 +7,7 @@ packages, each importing only from those before it in this list:
 * :mod:`jaxgrasp.solver`: a generic augmented-Lagrangian solver and its lane queue;
 * :mod:`jaxgrasp.storage`: files written whole or not at all, folder locks, private folders;
 * :mod:`jaxgrasp.model`: grasp fields, :class:`Grasp`, the potential field (eq. 3-21);
-* :mod:`jaxgrasp.surface`: meshes in JAX (:class:`Surface`), the contact rules;
+* :mod:`jaxgrasp.surface`: meshes in JAX (:class:`~jaxgrasp.surface.Surface`), the contact rules;
 * :mod:`jaxgrasp.presets`: the paper's two grasps (Sec. VII);
 * :mod:`jaxgrasp.io`: grasp files, datasets, meshes;
 * :mod:`jaxgrasp.tolerance`: the method (eq. 1): problems, starts, settling, verdict;
@@ -19,6 +19,17 @@ packages, each importing only from those before it in this list:
 * :mod:`jaxgrasp.simulation`: :func:`simulate`, the grasp in MuJoCo (extra ``jaxgrasp[sim]``);
 * :mod:`jaxgrasp.plots` and :mod:`jaxgrasp.cli` (the ``jaxgrasp`` command).
 
+The top level holds what a user calls and holds for the method itself, plus each
+feature's entry points. One rule chooses its names: *the functions a user calls to
+build, check, evaluate and store grasps, one or many, and to set up the process, with the
+types passed in and returned and the error raised; and each feature's entry function (or
+class)*. A
+feature's own types (its results, statuses, uncertainty model), internals
+(:class:`~jaxgrasp.solver.LaneStatus`, :class:`~jaxgrasp.surface.Surface`) and
+dict-level twins (:func:`jaxgrasp.io.grasp_from_dict`) live on the feature's package
+face: ``jaxgrasp.analysis.SweepResult``, ``jaxgrasp.planning.PlanResult``,
+``jaxgrasp.hands.HandTuneResult``, ``jaxgrasp.simulation.SimulationResult``.
+
 Importing jaxgrasp turns on JAX's 64-bit mode (``jax_enable_x64``) for the whole process,
 so that results are float64 without the user touching JAX's configuration, also where the
 user's own ``jit``/``vmap``/``grad`` trace :func:`evaluate`. JAX fixes dtypes when it
@@ -26,18 +37,18 @@ traces, in the caller's mode: with x64 on only inside jaxgrasp's own calls, the 
 ``jax.jit`` and ``jax.grad`` of :func:`evaluate` would mix float32 and float64 and fail,
 and the user's own arrays would be float32. Set the environment variable
 ``JAX_ENABLE_X64`` (to ``0`` or ``1``) before importing to keep JAX's own setting: with
-``JAX_ENABLE_X64=0`` jaxgrasp computes in float32. It also asks JAX for one CPU device
-per core, so that batches and sweeps run on every core (``JAXGRASP_CPU_DEVICES=1`` keeps
-JAX's single device; see :mod:`jaxgrasp.engine`). Every public function takes and
+``JAX_ENABLE_X64=0`` jaxgrasp computes in float32. Every public function takes and
 returns SI units (m, Pa, N, kg, J, rad).
 
-Compiling an evaluator takes seconds. Importing jaxgrasp turns on its executable store
-in the user's cache folder (``~/.cache/jaxgrasp/xla``, private): a later process loads
-what an earlier one compiled (each compilation is reported once on the ``logging`` logger
-``"jaxgrasp"``). The environment variable ``JAXGRASP_CACHE_DIR`` moves the folder, and
-``JAXGRASP_CACHE_DIR=off`` switches it off. JAX's own persistent cache (for the user's
-``jit`` functions too) is turned on only by :func:`enable_compilation_cache` and the
-``jaxgrasp`` command (see :mod:`jaxgrasp.engine._store`).
+That is the import's only process-wide change: it imports JAX and nothing else of
+jaxgrasp. The names below are loaded when first used (PEP 562 ``__getattr__``), so that
+the ``jaxgrasp`` command, whose ``--version``, ``--help`` and argument errors need no
+JAX, imports this package cheaply: in the command (:func:`jaxgrasp._startup.is_command_line`)
+the import does not even load JAX, and the command turns float64 on itself before it
+loads the library. Everything else jaxgrasp sets for the process (the CPU device
+count, the executable store on disk, where its messages go) is chosen at its first
+use or by :func:`configure`; the guide's page "Process-wide settings"
+(``docs/guide/caching.md``) lists each and when.
 
 Quick start::
 
@@ -47,110 +58,110 @@ Quick start::
     result.value, result.status_name   # J, 'stable'
 """
 
+import importlib as _importlib
+import sys as _sys
+from typing import TYPE_CHECKING
+
 from jaxgrasp import _startup
 
-# First of all: a Ctrl-C from here on, while JAX loads, is one line and exit 130 (in the
-# command only). Every import above this line widens the window of Python's traceback.
-_startup.install_if_command_line()
+if not _startup.is_command_line(list(getattr(_sys, "orig_argv", []))):
+    _startup.enable_x64()  # before any array exists: the user's own arrays are float64 too
 
-import os as _os  # noqa: E402
-from importlib import metadata as _metadata  # noqa: E402
-
-import jax as _jax  # noqa: E402
-
-if "JAX_ENABLE_X64" not in _os.environ:  # an explicit choice of the user's stands
-    _jax.config.update("jax_enable_x64", True)
-
-from jaxgrasp.engine import configure_cpu_devices as _configure_cpu_devices  # noqa: E402
-
-_configure_cpu_devices()  # before JAX makes its devices: batches run on every core
-
-from jaxgrasp.engine import enable_from_environment as _enable_from_environment  # noqa: E402
-
-_enable_from_environment()  # the executable store, in the user's cache folder: every process starts warm
-
-from jaxgrasp import presets  # noqa: E402
-from jaxgrasp.analysis import (  # noqa: E402
-    EpsilonResult,
-    SweepResult,
-    TuneResult,
-    TuneStatus,
-    Uncertainty,
-    epsilon,
-    robust,
-    robust_batch,
-    sweep,
-    tune,
-)
-from jaxgrasp.engine import BatchResult, enable_compilation_cache, evaluate, evaluate_batch  # noqa: E402
-from jaxgrasp.hands import Hand, tune_hand  # noqa: E402  (mujoco is imported when a hand is read)
-from jaxgrasp.io import (  # noqa: E402  (trimesh is imported when a mesh is used)
-    GraspSet,
-    from_mesh,
-    grasp_from_dict,
-    grasp_to_dict,
-    load,
-    load_dataset,
-    save,
-    save_dataset,
-)
-from jaxgrasp.model import BoundaryKind, Grasp, GraspValueError, check, stack  # noqa: E402
-from jaxgrasp.planning import PlanResult, plan  # noqa: E402
-from jaxgrasp.simulation import simulate  # noqa: E402  (mujoco is imported when it runs)
-from jaxgrasp.solver import LaneStatus, SolverOptions  # noqa: E402
-from jaxgrasp.surface import MeshGrasp, Surface  # noqa: E402
-from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus  # noqa: E402
-
-try:  # the version is defined once, in pyproject.toml; the installed metadata carries it
-    __version__ = _metadata.version("jaxgrasp")
-except _metadata.PackageNotFoundError:  # a source tree on sys.path that was never installed
-    __version__ = "0+unknown"
+if TYPE_CHECKING:  # for static tools (type checkers, the API reference); at run time: __getattr__
+    from jaxgrasp import presets
+    from jaxgrasp.analysis import epsilon, robust, robust_batch, sweep, tune
+    from jaxgrasp.engine import BatchResult, configure, evaluate, evaluate_batch
+    from jaxgrasp.hands import Hand, tune_hand
+    from jaxgrasp.io import GraspSet, from_mesh, load, load_dataset, save, save_dataset
+    from jaxgrasp.surface import MeshGrasp
+    from jaxgrasp.model import Grasp, GraspValueError, check, stack
+    from jaxgrasp.planning import plan
+    from jaxgrasp.simulation import simulate
+    from jaxgrasp.solver import SolverOptions
+    from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus
 
 __all__ = [
     # one grasp
     "Grasp",
     "stack",
     "presets",
+    "check",
     "evaluate",
     "EvaluateOptions",
     "SolverOptions",
     "Evaluation",
-    # statuses
     "GraspStatus",
-    "LaneStatus",
-    "BoundaryKind",
-    "TuneStatus",
+    "GraspValueError",
     # files
     "load",
     "save",
-    "grasp_from_dict",
-    "grasp_to_dict",
     "from_mesh",
     "MeshGrasp",
     "load_dataset",
     "save_dataset",
     "GraspSet",
-    "Surface",
-    # many grasps and analyses
+    # many grasps
     "evaluate_batch",
     "BatchResult",
+    "configure",
+    # features
     "sweep",
-    "SweepResult",
     "tune",
-    "TuneResult",
-    "plan",
-    "PlanResult",
     "epsilon",
-    "EpsilonResult",
     "robust",
     "robust_batch",
-    "Uncertainty",
+    "plan",
     "simulate",
-    # hands
     "Hand",
     "tune_hand",
-    # errors and set-up
-    "GraspValueError",
-    "check",
-    "enable_compilation_cache",
 ]
+
+_HOMES = {
+    "jaxgrasp.model": ("Grasp", "stack", "check", "GraspValueError"),
+    "jaxgrasp.tolerance": ("EvaluateOptions", "Evaluation", "GraspStatus"),
+    "jaxgrasp.solver": ("SolverOptions",),
+    "jaxgrasp.io": ("load", "save", "from_mesh", "load_dataset", "save_dataset", "GraspSet"),
+    "jaxgrasp.surface": ("MeshGrasp",),
+    "jaxgrasp.engine": ("evaluate", "evaluate_batch", "BatchResult", "configure"),
+    "jaxgrasp.analysis": ("sweep", "tune", "epsilon", "robust", "robust_batch"),
+    "jaxgrasp.planning": ("plan",),
+    "jaxgrasp.simulation": ("simulate",),  # mujoco is imported when it runs
+    "jaxgrasp.hands": ("Hand", "tune_hand"),  # mujoco is imported when a hand is read
+}
+"""The package face each top-level name comes from (``presets`` is a module of its own)."""
+
+_HOME = {name: package for package, names in _HOMES.items() for name in names}
+
+
+_SUBMODULES = ("solver", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "planning",
+               "hands", "simulation", "plots", "cli")
+"""The packages (and the module ``presets``) that ``jaxgrasp.<name>`` loads when first used."""
+
+
+def __getattr__(name: str):
+    """Load a top-level name from its package face, or a subpackage, the first time it is used."""
+    if name in _SUBMODULES:
+        return _importlib.import_module(f"jaxgrasp.{name}")  # which binds jaxgrasp.<name> too
+    if name == "__version__":
+        globals()[name] = _version()
+        return globals()[name]
+    if name not in _HOME:
+        raise AttributeError(f"module 'jaxgrasp' has no attribute {name!r}")
+    value = getattr(_importlib.import_module(_HOME[name]), name)
+    globals()[name] = value  # later uses find it here
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__) | set(_SUBMODULES) | {"__version__"})
+
+
+def _version() -> str:
+    """The installed jaxgrasp's version: defined once, in ``pyproject.toml``, and carried
+    by the package's installed metadata."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("jaxgrasp")
+    except metadata.PackageNotFoundError:  # a source tree on sys.path that was never installed
+        return "0+unknown"

@@ -1,14 +1,18 @@
-"""Ctrl-C while the ``jaxgrasp`` command is still starting: one line and exit 130, no traceback.
+"""What happens when jaxgrasp starts: float64 for a library user, Ctrl-C for the command.
 
-The command's own handling (:mod:`jaxgrasp.cli._interrupt`) begins only once ``import
-jaxgrasp`` has loaded JAX, which takes a while. A Ctrl-C before that would
-unwind the import and print Python's multi-line ``KeyboardInterrupt`` traceback. So
-``jaxgrasp/__init__.py`` calls :func:`install_if_command_line` before it imports JAX:
-in the ``jaxgrasp`` command only (the console script, ``python -m jaxgrasp`` or
-``python -m jaxgrasp.cli``), SIGINT and SIGTERM then print ``jaxgrasp: interrupted``
-(``terminated``) and end the process with status 130 (143) at once; nothing has been
-written yet at that stage. A script that merely imports jaxgrasp keeps Python's own
-handlers. This module imports nothing heavy (it runs before JAX is loaded).
+Nothing here imports more than Python's own start-up modules, except :func:`enable_x64`
+(which imports JAX when it is called).
+
+* ``import jaxgrasp`` calls :func:`enable_x64` unless the process is the ``jaxgrasp``
+  command (:func:`is_command_line`): the only process-wide setting of the import.
+* The command (:func:`jaxgrasp.cli.main`) calls :func:`install_if_command_line` before it
+  loads JAX, then :func:`enable_x64`. Its own handling (:mod:`jaxgrasp.cli._interrupt`)
+  begins only once the library is loaded, which takes a while; a Ctrl-C before that
+  would unwind the import and print Python's multi-line ``KeyboardInterrupt`` traceback.
+  So in the ``jaxgrasp`` command only (the console script, ``python -m jaxgrasp`` or
+  ``python -m jaxgrasp.cli``), SIGINT and SIGTERM then print ``jaxgrasp: interrupted``
+  (``terminated``) and end the process with status 130 (143) at once; nothing has been
+  written yet at that stage. A script that imports jaxgrasp keeps Python's own handlers.
 """
 
 from __future__ import annotations
@@ -18,12 +22,16 @@ import signal
 import sys
 import threading
 
-__all__ = ["EXIT", "is_command_line", "install_if_command_line"]
+__all__ = ["EXIT", "X64_ENV_VAR", "enable_x64", "is_command_line", "install_if_command_line"]
 
 EXIT = {signal.SIGINT: (130, "interrupted"), signal.SIGTERM: (143, "terminated")}
 """The signals the ``jaxgrasp`` command handles: signal -> (exit status, 128 + the signal
 number as a shell reports it; the word of its one line). :mod:`jaxgrasp.cli._interrupt`
 uses the same table once the command runs."""
+
+X64_ENV_VAR = "JAX_ENABLE_X64"
+"""JAX's own switch of 64-bit mode: where it is set (to anything), :func:`enable_x64`
+leaves JAX's setting alone."""
 
 _COMMAND = "jaxgrasp"
 _MODULES = ("jaxgrasp", "jaxgrasp.cli")
@@ -64,4 +72,16 @@ def install_if_command_line() -> bool:
         return False
     for signum in EXIT:
         signal.signal(signum, _end_at_once)
+    return True
+
+
+def enable_x64(environ=os.environ) -> bool:
+    """Turn on JAX's 64-bit mode (``jax_enable_x64``) for the process, unless the user
+    chose with ``JAX_ENABLE_X64`` (:data:`X64_ENV_VAR`); whether it was turned on here.
+    Imports JAX; starts none of its backends."""
+    if X64_ENV_VAR in environ:  # an explicit choice of the user's stands
+        return False
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
     return True

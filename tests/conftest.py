@@ -46,7 +46,7 @@ try:
 except ImportError:  # pragma: no cover - not POSIX
     fcntl = None
 
-# ``import jaxgrasp`` turns on its executable store in JAXGRASP_CACHE_DIR, else in the
+# jaxgrasp's first use turns on its executable store in JAXGRASP_CACHE_DIR, else in the
 # user's ~/.cache: the suite (and every subprocess it starts, which inherits the variable)
 # uses a folder of its own instead, so that it neither loads programs compiled elsewhere
 # (and counts no traces) nor fills the developer's or the CI's cache. Removed at the end.
@@ -367,11 +367,11 @@ print(json.dumps({{"stats": jaxgrasp.engine._store.stats(), "fields": fields}}))
 """
 
 _SETUPS = {
-    "store": "",  # what import jaxgrasp turns on: the executable store alone
-    "both": "jaxgrasp.enable_compilation_cache()",  # as the command does
-    "xla": "jaxgrasp.enable_compilation_cache(); jaxgrasp.engine._store.set_executable_dir(None)",
+    "store": "",  # what jaxgrasp's first use turns on: the executable store alone
+    "both": "jaxgrasp.engine.enable_compilation_cache()",  # as the command does
+    "xla": "jaxgrasp.engine.enable_compilation_cache(); jaxgrasp.engine._store.set_executable_dir(None)",
 }
-"""What a process turns on after ``import jaxgrasp``, by name (:meth:`WarmCache.evaluate_in_new_process`)."""
+"""What a process turns on after ``import jaxgrasp``, before its first use, by name (:meth:`WarmCache.evaluate_in_new_process`)."""
 
 
 @dataclasses.dataclass(frozen=True)

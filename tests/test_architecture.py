@@ -332,8 +332,6 @@ ALLOWED = {
     ("jaxgrasp/plots/_scene.py", "15 % of its"),  # the ghost's drawing scale
     ("jaxgrasp/tolerance/_verdict.py", "10 % of the value"),  # the rule in the code below it
     ("jaxgrasp/solver/_solver.py", "did not fall 4x"),  # the penalty rule's factor
-    ("jaxgrasp/cli/_common.py", "elapsed 3.1 s"),  # an example of the progress line
-    ("jaxgrasp/cli/_common.py", "4 s left"),
 }
 
 

@@ -160,7 +160,7 @@ def page_folder(tmp_path, cache_dir, monkeypatch):
     shutil.copytree(ROOT / "examples", tmp_path / "examples")
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("JAXGRASP_CACHE_DIR", str(cache_dir))
-    jaxgrasp.enable_compilation_cache(cache_dir)  # cache_dir restores the settings after the module
+    jaxgrasp.engine.enable_compilation_cache(cache_dir)  # cache_dir restores the settings after the module
     root = logging.getLogger()
     saved = (root.level, list(root.handlers))
     yield tmp_path

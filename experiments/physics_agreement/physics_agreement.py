@@ -23,6 +23,7 @@ import math
 import os
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 

@@ -311,7 +311,7 @@ def _perturbed(fields, project, uncertainty, samples, seed) -> tuple[Grasp, dict
 def _check_call(uncertainty, samples, seed, quantiles) -> tuple:
     """The quantile levels as a tuple, after checking every argument but the grasps."""
     if not isinstance(uncertainty, Uncertainty):
-        raise GraspValueError(f"uncertainty must be a jaxgrasp.Uncertainty, got {type(uncertainty).__name__}")
+        raise GraspValueError(f"uncertainty must be a jaxgrasp.analysis.Uncertainty, got {type(uncertainty).__name__}")
     for name, x, low in (("samples", samples, 2), ("seed", seed, 0)):
         if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < low:
             raise GraspValueError(f"{name} must be an integer >= {low}, got {x!r}")

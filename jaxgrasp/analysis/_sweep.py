@@ -26,7 +26,7 @@ device count), so one call uses every GPU of a machine, or every device of sever
 after ``jax.distributed.initialize()``. Results are gathered to the host.
 
 The compiled evaluator is memoised in the process and, where the caches are on
-(:func:`jaxgrasp.enable_compilation_cache`; the CLI turns them on), kept in the executable
+(:func:`jaxgrasp.engine.enable_compilation_cache`; the CLI turns them on), kept in the executable
 store on disk, so that a later process neither traces nor compiles it.
 """
 
@@ -395,7 +395,7 @@ def sweep(
     shape = tuple(a.size for a in axes.values())
     plan = plan_chunks(int(math.prod(shape)), chunk_size, devices)
     n_contacts = base["positions"].shape[0]
-    start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
+    progress = start_progress(progress, plan, "sweeping", "point")  # before the compilation, which the first chunk's time includes
     fn, compile_seconds, settling = chunk_evaluator("sweep", options, n_contacts, plan, masked=False)
     own = _own_fields(grasp, base)
     if checkpoint is not None:

@@ -10,14 +10,13 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 import sys
-import time
 from pathlib import Path
 
 from jaxgrasp import storage
-from jaxgrasp.model import FIELD, SWEEPABLE
-from jaxgrasp.model import counted
+from jaxgrasp.cli._parser import EXIT_USAGE, Parser, UsageError
+from jaxgrasp.engine import ChunkProgress
+from jaxgrasp.model import FIELD, SWEEPABLE, counted
 from jaxgrasp.presets import PRESETS
 
 __all__ = [
@@ -50,33 +49,9 @@ __all__ = [
     "DEFAULT_ROBUST_SAMPLES",
 ]
 
-EXIT_USAGE = 2
-"""Exit status of a command whose input is wrong."""
-
 OVERRIDES = SWEEPABLE
 """Fields one number sets for the whole grasp (every contact at once), in option order:
 ``jaxgrasp evaluate --young-modulus PA ...`` and the sweep's axes."""
-
-
-class UsageError(Exception):
-    """A problem with the command line or its input; reported in one line, exit 2."""
-
-
-class Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one :class:`UsageError` line, not usage + message.
-
-    A value that starts with a minus sign followed by a digit or a point (``-2e5``,
-    ``-9.81,0,0``, ``-0.1:0.5:3``) is a value, not an option: argparse's own rule knows only
-    plain integers and decimals, so ``--gravity -9.81,0,0`` failed with "expected one
-    argument" and ``--young-modulus -2e5`` never reached the check that says it must be
-    positive. No jaxgrasp option starts with ``-`` and a digit."""
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self._negative_number_matcher = re.compile(r"^-\.?\d")
-
-    def error(self, message):
-        raise UsageError(f"{message} (see '{self.prog} --help')")
 
 
 def parse_number(option: str, text: str, what: str = "value") -> float:
@@ -330,57 +305,6 @@ def announce_run(command: str, source: str, count: int, noun: str, quiet: bool =
         )
 
 
-class ChunkProgress:
-    """``progress`` of the engine's batches: a line before the first chunk and one per
-    chunk on stderr (``jaxgrasp: chunk 2/8 (6/24 points), elapsed 3.1 s, about 4 s
-    left``); the time left is estimated from the chunks after the first, which includes
-    the compilation. Silent unless ``show`` and the run has more than one chunk (a run
-    of one chunk has said what it does with :func:`announce_run`)."""
-
-    def __init__(self, verb: str, noun: str, show: bool = True):
-        self.verb, self.noun, self.show = verb, noun, show
-        self.chunk = self.nchunks = 1
-        self.calls = 0  # chunks reported
-        self.t_start = time.perf_counter()
-        self._first: tuple[int, float] | None = None  # (done, time) after the first chunk
-
-    def start(self, plan) -> None:
-        """The line before the first chunk (how many items, chunks and devices), from the
-        engine's :class:`~jaxgrasp.engine._plan.ChunkPlan` or
-        :class:`~jaxgrasp.engine._plan.SegmentPlan` (whose programs by contact count it
-        names: the first chunk of each includes its compilation)."""
-        self.chunk, self.nchunks, self.calls = plan.chunk, plan.n_chunks, 0
-        self.show = self.show and plan.n_chunks > 1
-        self.t_start = time.perf_counter()
-        if self.show:
-            on = f" on {plan.n_devices} devices" if plan.n_devices > 1 else ""
-            segments = getattr(plan, "segments", ())
-            if len(segments) > 1:
-                say(f"jaxgrasp: {self.verb} {plan.total} {self.noun}s in {plan.n_chunks} chunks of up to "
-                    f"{plan.chunk}{on}, {len(segments)} programs by contact count ({plan.describe()}; "
-                    "the first chunk of each includes its compilation)")
-            else:
-                say(f"jaxgrasp: {self.verb} {plan.total} {self.noun}s in {plan.n_chunks} chunks of {plan.chunk}{on} "
-                    "(the first chunk includes compilation)")
-
-    def __call__(self, done: int, total: int) -> None:
-        now = time.perf_counter()
-        self.calls += 1
-        if self._first is None:
-            self._first = (done, now)
-            left = "time left known after the next chunk" if done < total else "done"
-        elif done < total:
-            rate = (done - self._first[0]) / max(now - self._first[1], 1e-9)
-            left = f"about {math.ceil((total - done) / rate)} s left"
-        else:
-            left = "done"
-        if self.show:
-            say(
-                f"jaxgrasp: chunk {self.calls}/{self.nchunks} ({done}/{total} {self.noun}s), "
-                f"elapsed {now - self.t_start:.1f} s, {left}"
-            )
-
-
 LONG_EVALUATION_CONTACTS = 32
 """Grasps of more contacts than this get a line on stderr before their evaluation
 (:func:`announce_large_grasp`). The evaluation of one grasp is one compiled call without
@@ -438,7 +362,7 @@ def add_robust_options(p: argparse.ArgumentParser) -> None:
         "--robust", metavar="SPEC", default=None,
         help=("also evaluate SAMPLES perturbed copies of each grasp; SPEC gives each source's spread "
               "in SI units, e.g. friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3 "
-              "(also friction_per_fingertip, mass, gravity_angle; see jaxgrasp.Uncertainty)"),
+              "(also friction_per_fingertip, mass, gravity_angle; see jaxgrasp.analysis.Uncertainty)"),
     )
     p.add_argument("--samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
                    help=f"perturbed copies per grasp with --robust (default {DEFAULT_ROBUST_SAMPLES})")

@@ -94,7 +94,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Check every option and the mesh (:func:`jaxgrasp.planning._plan.check_plan`), then
     create and lock ``--out``, plan, write the set, print one summary line."""
-    from jaxgrasp.planning import check_plan, plan
+    from jaxgrasp.planning import PlanProgress, check_plan, plan
 
     out = Path(args.out)
     check_out(out)
@@ -105,7 +105,7 @@ def run(args) -> int:
             "evaluate, the best refined; compiling (or loading from the cache) first")
     with lock_out(out):
         t0 = time.perf_counter()
-        res = plan(args.mesh, args.fingers, progress=None if args.quiet else _Progress(t0), **kwargs)
+        res = plan(args.mesh, args.fingers, progress=PlanProgress(t0, show=not args.quiet), **kwargs)
         written, replaced = _write(res, out, args)
     print(f"plan {args.mesh}: {res.summary()}; wrote {out}/{{{','.join(written)}}}" + replaced_text(replaced, ()))
     return 0
@@ -151,24 +151,6 @@ def _object_options(args) -> dict:
         mass = dict(density=DEFAULTS["density"] if args.density is None else args.density)
     return dict(radius=args.radius, young_modulus=args.young_modulus, friction=args.friction,
                 max_force=args.max_force, gravity=gravity, units=args.units, **mass)
-
-
-class _Progress:
-    """``progress(stage, done, total)`` of :func:`jaxgrasp.plan`: a line on stderr when a
-    stage starts, then at most one a second."""
-
-    WORDS = {"draw": "valid candidates found", "evaluate": "candidates evaluated", "refine": "best refined",
-             "robust": "perturbed copies evaluated"}
-
-    def __init__(self, t0: float):
-        self.t0, self.stage, self.last = t0, None, 0.0
-
-    def __call__(self, stage: str, done: int, total: int) -> None:
-        now = time.perf_counter()
-        if stage == self.stage and now - self.last < 1.0 and done < total:
-            return
-        self.stage, self.last = stage, now
-        say(f"jaxgrasp: plan: {done}/{total} {self.WORDS.get(stage, stage)}, elapsed {now - self.t0:.1f} s")
 
 
 def _write(res, out: Path, args) -> tuple[list[str], list[str]]:

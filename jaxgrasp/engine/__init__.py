@@ -11,12 +11,17 @@ width :func:`plan_widths` gives it). :func:`solve_problems` stops it at the solv
 "For jaxgrasp's other packages" are what the library's other packages use from here
 (they import from this face, never from its private modules); they are not in
 ``__all__`` and not promised to users.
+:func:`configure` chooses the engine's process-wide settings (CPU devices, the executable
+store, messages), else its first use does (:mod:`jaxgrasp.engine._setup`); long calls
+report on the ``"jaxgrasp"`` logger (:class:`ChunkProgress`, :mod:`jaxgrasp.engine._progress`).
 """
 
 from jaxgrasp.engine._batch import evaluate_batch, evaluate_dataset
 from jaxgrasp.engine._batch_result import BatchResult
 from jaxgrasp.engine._evaluate import evaluate, solve_problems
+from jaxgrasp.engine._progress import ChunkProgress
 from jaxgrasp.engine._plan import ChunkPlan, SegmentPlan, plan_chunks, plan_segments, plan_widths
+from jaxgrasp.engine._setup import configure
 from jaxgrasp.engine._stages import PIPELINE, run_inline, stage_functions
 from jaxgrasp.engine._store import enable_compilation_cache
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
@@ -48,6 +53,8 @@ __all__ = [
     "SegmentPlan",
     "plan_segments",
     "plan_widths",
+    "configure",
     "enable_compilation_cache",
+    "ChunkProgress",
     "COMPILER_OPTIONS",
 ]

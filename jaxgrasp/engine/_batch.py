@@ -35,6 +35,7 @@ from jaxgrasp.engine._plan import (
     plan_segments,
     plan_widths,
 )
+from jaxgrasp.engine._progress import chunk_progress
 from jaxgrasp.engine._run import run_chunks
 from jaxgrasp.engine._widths import contact_slots, narrow, widen
 from jaxgrasp.io import GraspSet
@@ -86,12 +87,16 @@ def _set_fields(gset: GraspSet, rows: np.ndarray | None = None) -> dict[str, np.
     return fields
 
 
-def start_progress(progress, plan: ChunkPlan | SegmentPlan) -> None:
-    """Tell ``progress`` the plan before the first chunk, where it asks (an object with a
-    ``start(plan)`` method, such as the command line's progress lines)."""
+def start_progress(progress, plan: ChunkPlan | SegmentPlan, verb: str = "evaluating", noun: str = "grasp"):
+    """The progress report of a run: ``progress``, or where it is ``None`` the engine's
+    chunk records on the ``"jaxgrasp"`` logger (:class:`~jaxgrasp.engine.ChunkProgress`
+    of ``verb`` and ``noun``); told the plan before the first chunk, where it asks (an
+    object with a ``start(plan)`` method, such as :class:`~jaxgrasp.engine.ChunkProgress`)."""
+    progress = chunk_progress(progress, verb, noun)
     start = getattr(progress, "start", None)
     if callable(start):
         start(plan)
+    return progress
 
 
 def evaluate_batch(
@@ -188,7 +193,7 @@ def _run_segments(fields: Mapping[str, np.ndarray], rows: np.ndarray, plan: Segm
     ``(results, compile seconds, run seconds)``, each :class:`~jaxgrasp.Evaluation` field
     ``(len(rows), ...)`` in the order of ``rows``, at the width of ``fields``."""
     n_contacts = fields["positions"].shape[1]
-    start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
+    progress = start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
     outs: dict[str, np.ndarray] = {}
     compile_seconds = run_seconds = 0.0
     done = 0

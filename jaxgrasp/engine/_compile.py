@@ -12,6 +12,7 @@ import jax
 import numpy as np
 
 from jaxgrasp.engine._pipeline import Pipeline, Staged, lower_stages
+from jaxgrasp.engine._setup import first_use
 from jaxgrasp.engine._store import (
     _STATS,
     LOGGER,
@@ -134,6 +135,7 @@ def compiled(
     if hit is not None:
         _MEMO[key] = hit  # now the most recently used
         return hit, 0.0
+    first_use()  # the executable store (and the CPU devices, where JAX has not made them yet)
     t0 = time.perf_counter()
     entry = None if store_key is None else executable_entry(name, (store_key, len(devices or ()), *_process()), spec)
     built = build()

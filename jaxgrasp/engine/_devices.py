@@ -6,10 +6,11 @@ chain of small operations that keeps one core busy. :func:`jaxgrasp.evaluate_bat
 work queue (:func:`jaxgrasp.engine._evaluator.over_devices`), so on the CPU they use as many
 cores as JAX has CPU devices, and JAX creates one unless told otherwise.
 
-So ``import jaxgrasp`` asks JAX for one CPU device per core this process may run on
-(``jax_num_cpu_devices``), as it turns on 64-bit mode: a batch then runs on every core
-instead of one. A single :func:`jaxgrasp.evaluate` and the user's own ``jit`` run on the
-first device as before.
+So jaxgrasp asks JAX for one CPU device per core this process may run on
+(``jax_num_cpu_devices``) at its first use, or when the program calls
+:func:`jaxgrasp.configure` (:mod:`jaxgrasp.engine._setup`): a batch then runs on every
+core instead of one. A single :func:`jaxgrasp.evaluate` and the user's own ``jit`` run
+on the first device as before.
 
 It is left alone where the choice is the user's or can no longer be made:
 
@@ -17,8 +18,8 @@ It is left alone where the choice is the user's or can no longer be made:
   (``1``: JAX's own single device);
 * ``JAX_NUM_CPU_DEVICES``, ``jax.config.update("jax_num_cpu_devices", n)`` before the
   import, or ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS`` are kept;
-* JAX has already started its backends (some JAX computation ran before
-  ``import jaxgrasp``): JAX's devices stay as they are.
+* JAX has already started its backends (some JAX computation ran before jaxgrasp's
+  first use, such as making a preset grasp): JAX's devices stay as they are.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import os
 
 import jax
 
-__all__ = ["ENV_VAR", "usable_cores", "requested_cpu_devices", "configure_cpu_devices"]
+__all__ = ["ENV_VAR", "usable_cores", "requested_cpu_devices", "user_chose", "configure_cpu_devices"]
 
 ENV_VAR = "JAXGRASP_CPU_DEVICES"
 """The environment variable that sets the number of CPU devices (a positive integer;
@@ -60,7 +61,7 @@ def requested_cpu_devices(environ=os.environ) -> int:
     return n
 
 
-def _user_chose(environ=os.environ) -> bool:
+def user_chose(environ=os.environ) -> bool:
     """Whether the CPU device count is already the user's choice (JAX's own settings)."""
     return (
         "JAX_NUM_CPU_DEVICES" in environ
@@ -71,10 +72,10 @@ def _user_chose(environ=os.environ) -> bool:
 
 def configure_cpu_devices(environ=os.environ) -> int | None:
     """Ask JAX for :func:`requested_cpu_devices` CPU devices; the number set, or ``None``
-    where it is left alone (see the module docstring). Called by ``import jaxgrasp``."""
+    where it is left alone (see the module docstring). Called by :func:`jaxgrasp.configure`."""
     explicit = ENV_VAR in environ
     n = requested_cpu_devices(environ)  # a bad value fails even where it would not be used
-    if not explicit and _user_chose(environ):
+    if not explicit and user_chose(environ):
         return None
     try:
         jax.config.update("jax_num_cpu_devices", n)

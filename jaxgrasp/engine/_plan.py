@@ -21,6 +21,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from jaxgrasp.engine._setup import first_use
 from jaxgrasp.model import GraspValueError
 
 __all__ = [
@@ -150,6 +151,8 @@ def plan_chunks(total: int, chunk_size: int | None = None, devices=None, *, auto
         GraspValueError: ``chunk_size`` is not a positive integer, or there is no device.
     """
     check_chunk_size(chunk_size)
+    if devices is None:
+        first_use(batch=True)  # JAX's CPU devices, where they can still be chosen
     devices = tuple(jax.devices() if devices is None else devices)
     if not devices:
         raise GraspValueError("a batch needs at least one device")
@@ -287,6 +290,8 @@ def plan_segments(counts: np.ndarray, widths, chunk_size: int | None = None, dev
         ValueError: a count that ``widths`` has no width for.
     """
     check_chunk_size(chunk_size)
+    if devices is None:
+        first_use(batch=True)  # JAX's CPU devices, where they can still be chosen
     devices = tuple(jax.devices() if devices is None else devices)
     counts = np.asarray(counts, dtype=np.int64)
     missing = sorted(set(np.unique(counts).tolist()) - set(widths))

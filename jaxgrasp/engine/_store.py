@@ -21,16 +21,17 @@ The executables of :func:`jaxgrasp.evaluate` on a concrete grasp, of
 
 Which caches are on:
 
-* ``import jaxgrasp`` turns on the executable store alone (:func:`enable_from_environment`),
-  in the subfolder ``jaxgrasp-executables`` of :func:`default_dir`: every process of a
-  script starts warm, without a change to its code. It does not turn on JAX's persistent
-  compilation cache, which is global to the process: it would change how the user's own
-  ``jit`` functions are compiled and stored, which is the user's choice.
-* :func:`enable_compilation_cache` (``jaxgrasp.enable_compilation_cache()``) and the
+* jaxgrasp's first use (its first compilation or batch, or :func:`jaxgrasp.configure`)
+  turns on the executable store alone (:func:`enable_from_environment`), in the subfolder
+  ``jaxgrasp-executables`` of :func:`default_dir`: every process of a script starts warm,
+  without a change to its code; ``import jaxgrasp`` writes nothing. It does not turn on
+  JAX's persistent compilation cache, which is global to the process: it would change how
+  the user's own ``jit`` functions are compiled and stored, which is the user's choice.
+* :func:`enable_compilation_cache` (``jaxgrasp.engine.enable_compilation_cache()``) and the
   ``jaxgrasp`` command turn on both: JAX's cache in :func:`default_dir`, the executables
   in its subfolder.
 * The environment variable ``JAXGRASP_CACHE_DIR`` (:data:`ENV_VAR`) moves the folder;
-  ``JAXGRASP_CACHE_DIR=off`` switches every jaxgrasp cache off (the import's, the
+  ``JAXGRASP_CACHE_DIR=off`` switches every jaxgrasp cache off (the first use's, the
   command's and ``enable_compilation_cache()``'s; a folder passed to it explicitly is
   still used). Unset, the folder is ``$XDG_CACHE_HOME/jaxgrasp/xla``, else
   ``~/.cache/jaxgrasp/xla``.
@@ -126,6 +127,9 @@ LOGGER = logging.getLogger("jaxgrasp")
 """Where the caches report: refused folders and files (WARNING), compilations (INFO)."""
 
 _EXECUTABLE_DIR: Path | None = None
+_CHOSEN = False
+"""Whether the store was chosen (:func:`set_executable_dir`, directly or through
+:func:`enable_compilation_cache` or :func:`enable_from_environment`), on or off."""
 
 _STATS = {"traced": 0, "deserialized": 0, "cache_errors": 0}
 
@@ -160,9 +164,12 @@ def default_dir() -> Path | None:
 
 def enable_from_environment() -> Path | None:
     """Turn on the executable store alone in :func:`default_dir`'s subfolder
-    ``jaxgrasp-executables`` (not JAX's own cache, see the module docstring); the folder
-    of the store, or ``None`` (switched off, refused, or it cannot be created).
-    ``import jaxgrasp`` calls it once; it starts no JAX backend."""
+    ``jaxgrasp-executables`` (not JAX's own cache, see the module docstring), unless the
+    store was chosen before (:func:`set_executable_dir`, :func:`enable_compilation_cache`);
+    the folder of the store, or ``None`` (switched off, refused, or it cannot be created).
+    jaxgrasp's first use calls it (:func:`jaxgrasp.configure`); it starts no JAX backend."""
+    if _CHOSEN:
+        return _EXECUTABLE_DIR
     folder = default_dir()
     if folder is None:
         return None
@@ -248,7 +255,8 @@ def set_executable_dir(path) -> Path | None:
     stale or damaged file is ignored (the executable is built and the file replaced).
     Temporary files of the store left by dead processes are removed.
     """
-    global _EXECUTABLE_DIR
+    global _EXECUTABLE_DIR, _CHOSEN
+    _CHOSEN = True
     if path is None:
         _EXECUTABLE_DIR = None
         return None

@@ -2,7 +2,8 @@
 
 :func:`plan` draws candidates on the mesh, keeps those the paper's model describes (the
 contact rules of :mod:`jaxgrasp.surface`), evaluates them in batches, refines the best by
-surface-constrained gradient tuning and ranks them (:class:`PlanResult`).
+surface-constrained gradient tuning and ranks them (:class:`PlanResult`), saying what it
+does on the ``"jaxgrasp"`` logger (:class:`PlanProgress`).
 
 ``__all__`` lists the names promised to users. The names imported below the comment
 "For jaxgrasp's other packages" are what the library's other packages use from here
@@ -11,9 +12,10 @@ surface-constrained gradient tuning and ranks them (:class:`PlanResult`).
 """
 
 from jaxgrasp.planning._plan import SAMPLERS, plan
+from jaxgrasp.planning._progress import PlanProgress
 from jaxgrasp.planning._result import PlanResult, PlanStatus
 
 # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
 from jaxgrasp.planning._plan import check_plan
 
-__all__ = ["plan", "PlanResult", "PlanStatus", "SAMPLERS"]
+__all__ = ["plan", "PlanResult", "PlanStatus", "PlanProgress", "SAMPLERS"]

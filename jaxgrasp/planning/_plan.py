@@ -32,6 +32,7 @@ from jaxgrasp.analysis import Uncertainty, epsilon, robust_batch, tune
 from jaxgrasp.engine import evaluate, evaluate_batch
 from jaxgrasp.io import from_mesh, load_mesh
 from jaxgrasp.model import DEFAULT_GRAVITY, Grasp, GraspValueError
+from jaxgrasp.planning._progress import PlanProgress
 from jaxgrasp.planning._result import PlanResult, PlanStatus
 from jaxgrasp.planning._sampling import antipodal_pairs, spread_tuples, surface_points
 from jaxgrasp.surface import (
@@ -109,7 +110,8 @@ def plan(
             :func:`jaxgrasp.robust_batch`; ties in the order of their values); ``None``: by
             the value.
         robust_samples: perturbed copies of each ranked grasp. progress: ``progress(stage,
-            done, total)`` (stage ``"draw"``, ``"evaluate"``, ``"refine"``, ``"robust"``).
+            done, total)`` (stage ``"draw"``, ``"evaluate"``, ``"refine"``, ``"robust"``);
+            default a :class:`~jaxgrasp.planning.PlanProgress`: records on the ``"jaxgrasp"`` logger.
 
     Returns:
         A :class:`~jaxgrasp.planning.PlanResult`.
@@ -124,6 +126,7 @@ def plan(
                          gravity=gravity, units=units, samples=samples, top=top, refine=refine, seed=seed,
                          rules=rules, sampler=sampler, tune_maxiter=tune_maxiter, robust=robust,
                          robust_samples=robust_samples)
+    progress = PlanProgress(t0) if progress is None else progress
     return _planned(checked, fingers, samples, top, refine, seed, tune_maxiter, robust, robust_samples, progress, t0)
 
 

@@ -125,7 +125,7 @@ def test_reproducible_for_a_seed_and_independent_of_the_chunking():
 
 def test_bad_calls_are_one_line_errors():
     cases = [
-        ((_cube(), "friction=0.1"), "must be a jaxgrasp.Uncertainty"),
+        ((_cube(), "friction=0.1"), "must be a jaxgrasp.analysis.Uncertainty"),
         ((_cube(), Uncertainty(), 1), "samples must be an integer >= 2"),
         ((_cube(), Uncertainty(), 4, -1), "seed must be an integer >= 0"),
         (([], Uncertainty()), "non-empty list"),

@@ -28,7 +28,7 @@ from jaxgrasp.model._validation import GraspValueError
 CHUNK = 6
 E_AXIS = np.array([2e5, 1e6])  # Pa
 DR_AXIS = np.array([1.0, 2.0, 3.0, 4.0, 4.5, 4.7, 4.85]) * 1e-3  # m; 14 points: 3 chunks, last padded
-MAX_FORCE = jaxgrasp.BoundaryKind.labels().index("max_force")
+MAX_FORCE = jaxgrasp.model.BoundaryKind.labels().index("max_force")
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 """Tests of the uncertainty model (``jaxgrasp/analysis/_uncertainty.py``): the spec, the
 draws and the perturbed fields. Pure NumPy, nothing is evaluated or compiled.
 
-Each distribution of :class:`jaxgrasp.Uncertainty`'s docstring is checked on many
+Each distribution of :class:`jaxgrasp.analysis.Uncertainty`'s docstring is checked on many
 samples against its stated moments, each geometric rule exactly (a tangential move keeps
 the normal and is orthogonal to it; a tilt keeps gravity's magnitude), and each clip is
 counted where the sampled number left its valid range.

@@ -56,13 +56,13 @@ def test_evaluate_preset_json(preset_json, expected_cube):
     for key in ("value", "status", "equilibrium_energy", "limiting", "boundaries"):
         assert key in d
     assert set(d["limiting"]) == {"kind", "contact"}
-    assert d["limiting"]["kind"] in jaxgrasp.BoundaryKind.labels() and d["limiting"]["contact"] in (0, 1)
+    assert d["limiting"]["kind"] in jaxgrasp.model.BoundaryKind.labels() and d["limiting"]["contact"] in (0, 1)
     assert len(d["boundaries"]) == 4
     for b in d["boundaries"]:
         assert {"kind", "contact", "energy", "translation", "rotation"} <= set(b)
         assert len(b["translation"]) == 3 and len(b["rotation"]) == 3
     assert {(b["kind"], b["contact"]) for b in d["boundaries"]} == {
-        (k, j) for k in jaxgrasp.BoundaryKind.labels() for j in (0, 1)
+        (k, j) for k in jaxgrasp.model.BoundaryKind.labels() for j in (0, 1)
     }
     assert d["status"] == "stable"
     assert d["force_closure"] is True and d["epsilon"] > 0

@@ -242,16 +242,21 @@ def test_sigint_while_jax_loads_exits_130_in_one_line(module):
 
 
 def test_startup_handler_comes_before_every_other_import():
-    """The window of Python's traceback ends where ``jaxgrasp/__init__.py`` installs the
-    handler: nothing is imported before it but :mod:`jaxgrasp._startup` (which imports
-    only modules Python loads at start)."""
+    """The window of Python's traceback ends where :func:`jaxgrasp.cli.main` installs the
+    handler, first thing: nothing is imported before ``jaxgrasp.cli`` is (whose import
+    ends before ``main`` runs) but modules of Python's own and ``jaxgrasp._startup``;
+    JAX and NumPy come after, when the sub-command loads the library."""
     proc = subprocess.run(
-        [sys.executable, "-X", "importtime", "-m", "jaxgrasp", "--version"], capture_output=True, text=True, timeout=120
+        [sys.executable, "-X", "importtime", "-m", "jaxgrasp", "evaluate", "--help"],
+        capture_output=True, text=True, timeout=300,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     names = [ln.rsplit("|", 1)[1].strip() for ln in proc.stderr.splitlines() if ln.startswith("import time:")]
-    first = names.index("jaxgrasp._startup")
-    assert not any(n.startswith(("jax", "importlib.metadata", "numpy")) for n in names[:first]), names[: first + 1]
+    first = names.index("jaxgrasp.cli")
+    assert names.index("jaxgrasp._startup") < first
+    assert not any(n.startswith(("jax.", "jaxlib", "numpy", "importlib.metadata")) or n == "jax"
+                   for n in names[:first]), names[: first + 1]
+    assert "jax" in names[first:]  # the sub-command's options come from the library
 
 
 @pytest.mark.parametrize(

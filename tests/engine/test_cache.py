@@ -1,5 +1,5 @@
-"""Every process starts warm (issues 13 and 35): ``import jaxgrasp`` turns on the
-executable store in the user's cache folder, a concrete :func:`jaxgrasp.evaluate` stores
+"""Every process starts warm (issues 13, 35 and 64): jaxgrasp's first use turns on the
+executable store in the user's cache folder (``import jaxgrasp`` writes nothing), a concrete :func:`jaxgrasp.evaluate` stores
 its compiled program (and reports its compilation on the ``jaxgrasp`` logger), and a later
 process loads it instead of tracing and compiling.
 
@@ -30,11 +30,11 @@ def _assert_same_fields(a: dict, b) -> None:
         assert_same_numbers(np.asarray(a["fields"][f], dtype=mine.dtype), mine, f)
 
 
-def test_import_turns_the_store_on(warm_cache):
+def test_first_use_turns_the_store_on(warm_cache):
     """With no environment set, the first process stores its compiled program in
     ``~/.cache/jaxgrasp/xla/jaxgrasp-executables``, every folder it made private, and
     says once, on the ``jaxgrasp`` logger, what it compiled, why and where it stores it.
-    XLA's own cache is not turned on by the import: no entry of the program there."""
+    XLA's own cache is not turned on by the first use: no entry of the program there."""
     first = warm_cache.first
     assert first["stats"] == {"traced": 1, "deserialized": 0, "cache_errors": 0}
     files = warm_cache.program_files()

@@ -153,7 +153,7 @@ def test_compact_files_and_sweep_see_the_active_contacts(tmp_path):
     for n in NAMES:
         np.testing.assert_array_equal(np.asarray(getattr(compact, n)), np.asarray(getattr(cube, n)), err_msg=n)
     assert compact.active is None
-    assert jaxgrasp.grasp_to_dict(padded) == jaxgrasp.grasp_to_dict(cube)
+    assert jaxgrasp.io.grasp_to_dict(padded) == jaxgrasp.io.grasp_to_dict(cube)
     jaxgrasp.save_dataset(tmp_path / "s.npz", stack([cube, jaxgrasp.presets.prism()]))
     got = jaxgrasp.load_dataset(tmp_path / "s.npz")
     assert got.num_contacts.tolist() == [2, 3]

@@ -211,13 +211,16 @@ def test_a_resumed_dataset_run_gives_every_grasp_its_uninterrupted_result(padded
 
 
 def test_progress_names_the_programs_and_counts_every_chunk(capsys):
-    from jaxgrasp.cli._common import ChunkProgress
+    """The chunk records on the ``"jaxgrasp"`` logger, printed as the command prints them."""
+    from jaxgrasp.engine import ChunkProgress
+    from jaxgrasp.engine._store import log_lines_on_stderr
 
     plan = plan_segments(np.array([2] * 5 + [4] * 3), {2: 2, 4: 4}, chunk_size=2, devices=jax.devices()[:1])
     progress = ChunkProgress("evaluating", "grasp")
-    progress.start(plan)
-    for done in (2, 3, 5, 7, 8):  # 2 chunks of the 4-contact program, 3 of the 2-contact one
-        progress(done, 8)
+    with log_lines_on_stderr():
+        progress.start(plan)
+        for done in (2, 3, 5, 7, 8):  # 2 chunks of the 4-contact program, 3 of the 2-contact one
+            progress(done, 8)
     err = capsys.readouterr().err.splitlines()
     assert err[0] == ("jaxgrasp: evaluating 8 grasps in 5 chunks of up to 2, 2 programs by contact count "
                       "(4 contacts at width 4: 3 grasps; 2 contacts at width 2: 5 grasps; the first chunk of "

@@ -121,11 +121,11 @@ def test_npz_invalid_grasp_is_reported_not_fatal(tmp_path):
 
 def test_jsonl_rows_reported_one_by_one(tmp_path):
     cube, prism = _grasps()[:2]
-    good = json.dumps(jaxgrasp.grasp_to_dict(cube))
-    bad_value = jaxgrasp.grasp_to_dict(prism)
+    good = json.dumps(jaxgrasp.io.grasp_to_dict(cube))
+    bad_value = jaxgrasp.io.grasp_to_dict(prism)
     bad_value["fingertip"]["friction"] = 0.0
     dup = good.replace('"radius":', '"radius": 0.02, "radius":', 1)
-    lines = [good, "", "{not json", json.dumps(bad_value), dup, "   ", json.dumps(jaxgrasp.grasp_to_dict(prism))]
+    lines = [good, "", "{not json", json.dumps(bad_value), dup, "   ", json.dumps(jaxgrasp.io.grasp_to_dict(prism))]
     path = tmp_path / "set.jsonl"
     path.write_bytes(b"\xef\xbb\xbf" + "\n".join(lines).encode())  # a byte-order mark too
     got = load_dataset(path)

@@ -323,7 +323,7 @@ def test_read_only_cache_folder_is_quiet(tmp_path):
     code = textwrap.dedent(
         """
         import jax, jax.numpy as jnp
-        from jaxgrasp import enable_compilation_cache
+        from jaxgrasp.engine import enable_compilation_cache
         print(enable_compilation_cache())
         print(float(jax.jit(lambda x: jnp.sin(x) * 3.0 + 1.0)(jnp.float64(0.5))))
         print(jax.config.jax_persistent_cache_enable_xla_caches)

@@ -345,8 +345,8 @@ def test_expected_statuses(results):
     for k in ("cube_E1e6_dr3e-3", "cube_heavy", "prism_heavy"):
         assert float(results[k].value) == 0.0
     # paper's cube, E = 1e6 Pa, dr = 2 mm: the force limit binds, not friction
-    assert jaxgrasp.BoundaryKind.labels()[int(results["cube_E1e+06_dr2e-03"].limiting_kind)] == "max_force"
-    assert jaxgrasp.BoundaryKind.labels()[int(results["cube_E6e+05_dr2e-03"].limiting_kind)] == "slip"
+    assert jaxgrasp.model.BoundaryKind.labels()[int(results["cube_E1e+06_dr2e-03"].limiting_kind)] == "max_force"
+    assert jaxgrasp.model.BoundaryKind.labels()[int(results["cube_E6e+05_dr2e-03"].limiting_kind)] == "slip"
 
 
 @pytest.mark.parametrize("case", ["cube_E6e+05_dr2e-03", "prism_E2e5_dr2e-3_m0.1", "four_finger"])
@@ -420,8 +420,8 @@ def test_boundary_poses_lie_on_their_boundary(results, case):
             if int(res.boundary_status[k, j]) != 0:
                 continue
             m = _margins(g, res.boundary_translation[k, j], res.boundary_rotation[k, j])
-            assert abs(m[1 + k, j]) <= 1e-8, (case, jaxgrasp.BoundaryKind.labels()[k], j, m[1 + k, j])
-            assert m.min() >= -1e-8, (case, jaxgrasp.BoundaryKind.labels()[k], j, m)
+            assert abs(m[1 + k, j]) <= 1e-8, (case, jaxgrasp.model.BoundaryKind.labels()[k], j, m[1 + k, j])
+            assert m.min() >= -1e-8, (case, jaxgrasp.model.BoundaryKind.labels()[k], j, m)
             checked += 1
     if int(res.status) == jaxgrasp.GraspStatus.STABLE:
         assert checked >= 1

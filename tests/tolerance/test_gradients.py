@@ -341,7 +341,7 @@ def test_tune_cube_reaches_grid_best(cube_grid):
     dr_best, v_best = cube_grid
     res = tune(presets.cube(E_TUNE, 1.5e-3), ["initial_deformation:shared"], maxiter=50)
     assert res.converged, res.message
-    assert isinstance(res.status, jaxgrasp.TuneStatus) and res.status in ("converged", "stalled")
+    assert isinstance(res.status, jaxgrasp.analysis.TuneStatus) and res.status in ("converged", "stalled")
     assert res.message == res.status.message.format(ftol=1e-7, patience=4, maxiter=50)  # the defaults
     # the optimum, to 1e-6: neither short of it nor above it (measured: 5e-10 below)
     assert res.value == pytest.approx(v_best, rel=1e-6), (res.value, v_best)
