@@ -117,7 +117,7 @@ def parse_args(description: str, study: str | Path) -> argparse.Namespace:
     # reuse compilations across runs (same cache as the jaxgrasp command)
     import jaxgrasp
 
-    jaxgrasp.enable_compilation_cache()
+    jaxgrasp.engine.enable_compilation_cache()
     return args
 
 

@@ -111,7 +111,7 @@ def main() -> None:
     fig_dir.mkdir(parents=True, exist_ok=True)
     import jaxgrasp
 
-    jaxgrasp.enable_compilation_cache()
+    jaxgrasp.engine.enable_compilation_cache()
     from _lab.grasp_draws import seeded_grasps
 
     say(f"# metrics_compare: Ferrari-Canny epsilon (torsion, {EDGES} edges) vs energy tolerance J")

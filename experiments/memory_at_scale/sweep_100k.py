@@ -110,7 +110,7 @@ def main() -> None:
     from jaxgrasp.tolerance import EvaluateOptions
 
     if not args.no_cache:
-        jaxgrasp.enable_compilation_cache()
+        jaxgrasp.engine.enable_compilation_cache()
     cube = jaxgrasp.presets.cube()
     n_dev = jax.device_count()
     say(

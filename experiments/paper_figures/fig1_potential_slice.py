@@ -133,7 +133,7 @@ def main() -> None:
                 xb = pose(bt[kk, cc], bw[kk, cc])
                 ax.plot([xb[ia]], [xb[ib]], "s", mfc="none", mec="w", ms=7)
     ax.plot([x_lim[ia]], [x_lim[ib]], "o", color="tab:red", mec="w", ms=10,
-            label=f"lowest boundary point ({jaxgrasp.BoundaryKind.labels()[k]}, contact {c})")
+            label=f"lowest boundary point ({jaxgrasp.model.BoundaryKind.labels()[k]}, contact {c})")
     handles, _ = ax.get_legend_handles_labels()
     handles += [
         Line2D([], [], color="k", lw=2, label="equilibrium region boundary (min margin = 0)"),
@@ -183,7 +183,7 @@ def main() -> None:
           f"field on the slice {t_field:.1f} s)")
     print(f"grasp: cube, E = {YOUNG_MODULUS:g} Pa, dr = {INITIAL_DEFORMATION:g} m, status {ev.status_name}")
     print(f"slice: {COORDS[ia][0]} x {COORDS[ib][0]}, {n} x {n} points")
-    print(f"evaluation value: {value:.6e} J, limiting boundary {jaxgrasp.BoundaryKind.labels()[k]} of contact {c}")
+    print(f"evaluation value: {value:.6e} J, limiting boundary {jaxgrasp.model.BoundaryKind.labels()[k]} of contact {c}")
     print(f"limiting boundary point: {COORDS[ia][1]} = {x_lim[ia]:.4g} {COORDS[ia][2]}, "
           f"{COORDS[ib][1]} = {x_lim[ib]:.4g} {COORDS[ib][2]}; off-slice part {np.max(np.abs(off)):.2e} mm (scaled)")
     print(f"lowest U on the region boundary in the slice, above min U: {ub_min:.6e} J")

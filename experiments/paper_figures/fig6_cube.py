@@ -29,7 +29,7 @@ from jaxgrasp.analysis import sweep
 
 STABLE, INFEASIBLE = GraspStatus.STABLE, GraspStatus.INFEASIBLE
 
-SLIP, FORCE = jaxgrasp.BoundaryKind.labels().index("slip"), jaxgrasp.BoundaryKind.labels().index("max_force")
+SLIP, FORCE = jaxgrasp.model.BoundaryKind.labels().index("slip"), jaxgrasp.model.BoundaryKind.labels().index("max_force")
 
 
 def main() -> None:
@@ -62,7 +62,7 @@ def main() -> None:
         dlim = force_limit_deformation(e, MAX_FORCE)
         print(
             f"{e:10.3g} {v[0] * 1e3:12.5f} {v[k] * 1e3:10.5f} {dr[k] * 1e3:10.2f} "
-            f"{jaxgrasp.BoundaryKind.labels()[kd[k]] if kd[k] >= 0 else 'none':>9} "
+            f"{jaxgrasp.model.BoundaryKind.labels()[kd[k]] if kd[k] >= 0 else 'none':>9} "
             f"{dr[force_idx[0]] * 1e3 if force_idx.size else float('nan'):16.2f} "
             f"{dr[inf_idx[0]] * 1e3 if inf_idx.size else float('nan'):17.2f} {dlim * 1e3:14.3f}"
         )

@@ -33,7 +33,7 @@ from jaxgrasp.analysis import SweepResult, sweep
 
 STATUS_NAMES = GraspStatus.labels()
 
-KIND_NAMES = tuple(jaxgrasp.BoundaryKind.labels()) + ("none",)
+KIND_NAMES = tuple(jaxgrasp.model.BoundaryKind.labels()) + ("none",)
 
 
 def best_over_dr(grasp, E: float, n: int, label: str):

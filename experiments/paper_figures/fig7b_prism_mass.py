@@ -34,7 +34,7 @@ from jaxgrasp.analysis import SweepResult, sweep
 
 STATUS_NAMES = GraspStatus.labels()
 
-KIND_NAMES = tuple(jaxgrasp.BoundaryKind.labels()) + ("none",)
+KIND_NAMES = tuple(jaxgrasp.model.BoundaryKind.labels()) + ("none",)
 FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
 
 

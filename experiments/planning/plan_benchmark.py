@@ -136,7 +136,7 @@ def main() -> None:
     args = p.parse_args()
     import jaxgrasp
 
-    jaxgrasp.enable_compilation_cache()
+    jaxgrasp.engine.enable_compilation_cache()
     folder = Path.home() / ".cache" / "jaxgrasp-experiments" / "objects"  # generated meshes, not committed
     folder.mkdir(parents=True, exist_ok=True)
     record = HERE / "plan_benchmark.jsonl"

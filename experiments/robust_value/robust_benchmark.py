@@ -71,7 +71,7 @@ def timed(fn) -> tuple[float, object]:
 
 
 def main() -> None:
-    jaxgrasp.enable_compilation_cache()
+    jaxgrasp.engine.enable_compilation_cache()
     load0 = os.getloadavg()
     print(f"jax {jax.__version__}, devices {jax.devices()}, load average at start {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}")
     grasp = jaxgrasp.presets.prism(mass=0.1)

@@ -140,7 +140,7 @@ def main() -> None:
     p.add_argument("--count", type=int, default=1000)
     p.add_argument("--samples", type=int, default=16)
     args = p.parse_args()
-    jaxgrasp.enable_compilation_cache()
+    jaxgrasp.engine.enable_compilation_cache()
     FIGURES.mkdir(exist_ok=True)
     load0 = os.getloadavg()
     print(f"{args.count} grasps x {args.samples} samples, {SPEC}; load average at start {load0[0]:.2f}")

@@ -219,7 +219,7 @@ def write_report(args, grasps, results, rows, timing, comps, refs, t_jax, t_tota
         L.append(f"| {n} | " + " | ".join(str(c.get(s, 0)) for s in STATUS) + f" | {len(sel)} |")
     L.append("")
     kinds = collections.Counter(
-        (jaxgrasp.BoundaryKind.labels()[int(r.limiting_kind)]) for r, row in zip(results, rows) if row["status"] == "stable" and int(r.limiting_kind) >= 0
+        (jaxgrasp.model.BoundaryKind.labels()[int(r.limiting_kind)]) for r, row in zip(results, rows) if row["status"] == "stable" and int(r.limiting_kind) >= 0
     )
     L.append(f"Limiting boundary of the stable grasps: {dict(kinds)}.")
     vals = np.array([r["value"] for r in rows if r["status"] == "stable"])

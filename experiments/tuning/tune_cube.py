@@ -38,7 +38,7 @@ from jaxgrasp.presets import MAX_FORCE, cube
 
 HERE = Path(__file__).resolve().parent
 EXAMPLES = HERE.parent.parent / "examples"
-KINDS = tuple(jaxgrasp.BoundaryKind.labels()) + ("none",)
+KINDS = tuple(jaxgrasp.model.BoundaryKind.labels()) + ("none",)
 
 
 class Tee:
@@ -205,7 +205,7 @@ def main():
     args = p.parse_args()
     out = args.out or (HERE / ("quick" if args.quick else ""))
     out.mkdir(parents=True, exist_ok=True)
-    jaxgrasp.enable_compilation_cache()
+    jaxgrasp.engine.enable_compilation_cache()
     log = Tee(out / "tune_cube.log")
     log(f"jaxgrasp {jaxgrasp.__version__}, jax {jax.__version__}, {jax.devices()[0].platform}")
     skip = set(filter(None, args.skip.split(",")))

@@ -5,7 +5,7 @@ stiffness, squeeze, placement, mass and gravity, by Monte Carlo through the engi
 
     import jaxgrasp
     grasp = jaxgrasp.presets.cube(mass=0.2)
-    r = jaxgrasp.robust(grasp, jaxgrasp.Uncertainty(friction=0.1), samples=64, seed=0)
+    r = jaxgrasp.robust(grasp, jaxgrasp.analysis.Uncertainty(friction=0.1), samples=64, seed=0)
     r.p_stable, r.p_stable_stderr, r.value_mean, r.quantiles   # -, -, J, (2,) J
 
 Each grasp's ``S`` perturbed copies (:mod:`jaxgrasp.analysis._uncertainty`) are stacked
@@ -87,7 +87,7 @@ class RobustResult:
         nominal: the :class:`~jaxgrasp.Evaluation` of the unperturbed grasp.
         clipped: sampled numbers clipped into their valid range, by field
             (``friction``, ``initial_deformation``, ``mass``).
-        uncertainty: the :class:`~jaxgrasp.Uncertainty` sampled.
+        uncertainty: the :class:`~jaxgrasp.analysis.Uncertainty` sampled.
         samples: ``S``.
         seed: the seed of the draws.
     """
@@ -222,7 +222,7 @@ def robust(grasp, uncertainty: Uncertainty, samples: int = 256, seed: int = 0, *
         grasp: a :class:`~jaxgrasp.Grasp` or a :class:`~jaxgrasp.MeshGrasp` (its contact
             moves follow the mesh); or a list of them, or one batched grasp, which is
             :func:`robust_batch`.
-        uncertainty: the :class:`~jaxgrasp.Uncertainty` of each source (SI units).
+        uncertainty: the :class:`~jaxgrasp.analysis.Uncertainty` of each source (SI units).
         samples: perturbed copies per grasp, ``>= 2``.
         seed: the seed of the draws (the same seed, the same samples; see
             :mod:`jaxgrasp.analysis._uncertainty`).

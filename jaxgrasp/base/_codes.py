@@ -8,16 +8,16 @@ and ``GraspStatus(int(code)).label`` is the name written to files and JSON.
 Four kinds of integer code, never to be mixed up (they share some names, not their
 numbers), each defined in the package it belongs to:
 
-* :class:`jaxgrasp.LaneStatus` (:mod:`jaxgrasp.solver`): how one solver lane (one problem
+* :class:`jaxgrasp.solver.LaneStatus` (:mod:`jaxgrasp.solver`): how one solver lane (one problem
   from one start) ended;
 * :class:`jaxgrasp.GraspStatus` (:mod:`jaxgrasp.tolerance`): what an evaluation says of
   a grasp;
-* :class:`jaxgrasp.BoundaryKind` (:mod:`jaxgrasp.model`): which boundary of the
+* :class:`jaxgrasp.model.BoundaryKind` (:mod:`jaxgrasp.model`): which boundary of the
   equilibrium region (eq. 20, 21);
 * :class:`jaxgrasp.model.Constraint`: the rows of
   :func:`jaxgrasp.model.constraint_margins`;
 
-and one string status, :class:`jaxgrasp.TuneStatus`: how :func:`jaxgrasp.tune` stopped
+and one string status, :class:`jaxgrasp.analysis.TuneStatus`: how :func:`jaxgrasp.tune` stopped
 (a Python loop, not an array, so its members are strings).
 """
 

@@ -370,7 +370,7 @@ def add_robust_options(p: argparse.ArgumentParser) -> None:
 
 
 def robust_uncertainty(args):
-    """The :class:`~jaxgrasp.Uncertainty` of ``--robust`` (``None`` without it), after
+    """The :class:`~jaxgrasp.analysis.Uncertainty` of ``--robust`` (``None`` without it), after
     checking ``--samples`` and ``--seed``; a one-line :class:`UsageError` otherwise."""
     from jaxgrasp.analysis import parse_spec
     from jaxgrasp.model import GraspValueError

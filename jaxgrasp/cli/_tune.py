@@ -150,7 +150,7 @@ def run(args) -> int:
 
     Unless ``--quiet``, a first line on stderr says what is tuned, before the value and
     its gradient are compiled; then one line per iteration. The summary line names the
-    :class:`~jaxgrasp.TuneStatus` with its explanation: why the search stopped and
+    :class:`~jaxgrasp.analysis.TuneStatus` with its explanation: why the search stopped and
     whether the tuned grasp is usable.
     """
     from jaxgrasp.analysis import tune

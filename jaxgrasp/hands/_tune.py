@@ -159,7 +159,7 @@ class HandTuneResult:
         start_deepest: m, the same at the start.
         history: ``(iterations + 1,)`` value at the start and after each iteration, J.
         depth_history: ``(iterations + 1,)`` deepest link penetration there, m.
-        status: a :class:`~jaxgrasp.TuneStatus` (how L-BFGS-B stopped).
+        status: a :class:`~jaxgrasp.analysis.TuneStatus` (how L-BFGS-B stopped).
         iterations, evaluations: optimiser iterations, value-and-gradient evaluations.
         message: one line: the status's explanation.
     """
@@ -226,7 +226,7 @@ def tune_hand(hand, mesh, qpos0, wrist0=None, *, object_pose=None, tune_wrist: b
 
     Returns:
         A :class:`~jaxgrasp.hands.HandTuneResult`: the configuration, its grasp, the
-        history and a :class:`~jaxgrasp.TuneStatus`.
+        history and a :class:`~jaxgrasp.analysis.TuneStatus`.
 
     Raises:
         GraspValueError: a start outside the limits, with value 0 (not stable: nothing

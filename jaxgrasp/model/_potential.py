@@ -50,7 +50,7 @@ __all__ = [
 
 KINDS = BoundaryKind.labels()
 """Boundary kind names (``"slip"``, ``"max_force"``), indexed by
-:class:`~jaxgrasp.BoundaryKind`: the order of every ``(2, N)`` array of the library
+:class:`~jaxgrasp.model.BoundaryKind`: the order of every ``(2, N)`` array of the library
 (``BoundaryKind.labels()``)."""
 
 

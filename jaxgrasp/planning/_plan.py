@@ -105,7 +105,7 @@ def plan(
         rules: the rules' tolerances (default ``ContactRules()``, :class:`~jaxgrasp.surface.ContactRules`).
         sampler: one of :data:`SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
         tune_maxiter: iterations of each refinement.
-        robust: an :class:`~jaxgrasp.Uncertainty`: rank the ``top`` grasps by their robust
+        robust: an :class:`~jaxgrasp.analysis.Uncertainty`: rank the ``top`` grasps by their robust
             value instead (the mean value over ``robust_samples`` perturbed copies,
             :func:`jaxgrasp.robust_batch`; ties in the order of their values); ``None``: by
             the value.

@@ -31,7 +31,7 @@ class PlanResult:
             Only settled grasps (status stable, unstable or infeasible) are ranked.
         values: ``(K,)`` J, their evaluation values.
         statuses: ``(K,)`` int :class:`~jaxgrasp.GraspStatus` codes.
-        limiting_kind: ``(K,)`` int :class:`~jaxgrasp.BoundaryKind` of the limiting boundary
+        limiting_kind: ``(K,)`` int :class:`~jaxgrasp.model.BoundaryKind` of the limiting boundary
             (-1 none); limiting_contact: ``(K,)`` its contact (-1 none).
         epsilon: ``(K,)`` the Ferrari-Canny epsilon of each (:func:`jaxgrasp.epsilon`).
         refined: ``(K,)`` bool, the grasp came out of surface-constrained tuning.

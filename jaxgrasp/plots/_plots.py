@@ -220,7 +220,7 @@ def plot_sweep(result, path=None, *, x=None, curves=None, panels=None, title=Non
     Any further axes become more panels (one per combination, at most ``max_panels``).
 
     Args:
-        result: a :class:`~jaxgrasp.SweepResult`.
+        result: a :class:`~jaxgrasp.analysis.SweepResult`.
         path: where to save the figure (PNG, ...); ``None`` returns it open.
         title: figure title, drawn as written (a ``$`` is a dollar sign, not mathtext).
 
@@ -318,7 +318,7 @@ def plot_max(reduced, best, path=None, *, over="initial_deformation", x=None, cu
     """Like :func:`plot_max_over`, from an already reduced result.
 
     Args:
-        reduced: a :class:`~jaxgrasp.SweepResult` of the maximising points (one or
+        reduced: a :class:`~jaxgrasp.analysis.SweepResult` of the maximising points (one or
             two axes), e.g. the first output of ``SweepResult.max_over``.
         best: the maximising value of parameter ``over`` at each of its points (SI).
     """

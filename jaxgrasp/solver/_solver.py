@@ -160,7 +160,7 @@ class SolverResult:
         lam: ``(m,)`` inequality multipliers, ``>= 0`` (zero at the equality's index).
         nu: ``()`` equality multiplier (0 when there is no equality).
         objective: ``()`` ``f(x)``.
-        status: ``()`` int32 :class:`~jaxgrasp.LaneStatus` (``NO_START`` for an
+        status: ``()`` int32 :class:`~jaxgrasp.solver.LaneStatus` (``NO_START`` for an
             inactive lane).
         stationarity, feasibility, complementarity: ``()`` KKT residuals at ``(x, lam, nu)``.
         steps: ``()`` int32, Newton steps plus multiplier updates taken.
@@ -194,7 +194,7 @@ class SolverState:
         prev_viol: ``()`` constraint violation at the last multiplier update (``inf`` before
             the first).
         steps: ``()`` int32, Newton steps plus multiplier updates taken.
-        status: ``()`` int32 :class:`~jaxgrasp.LaneStatus`, ``NOT_CONVERGED``
+        status: ``()`` int32 :class:`~jaxgrasp.solver.LaneStatus`, ``NOT_CONVERGED``
             while running.
         stationarity, feasibility, complementarity: ``()`` KKT residuals at the last
             multiplier update (``inf`` before the first).
@@ -431,7 +431,7 @@ def line_search(merit_of, trials: Trial, o: SolverOptions):
 
 
 def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, floor, o: SolverOptions):
-    """``()`` :class:`~jaxgrasp.LaneStatus` after a multiplier update, from the KKT
+    """``()`` :class:`~jaxgrasp.solver.LaneStatus` after a multiplier update, from the KKT
     residuals ``stat``, ``viol``, ``comp`` at ``s.x`` and the violation ``s.prev_viol``
     before it: converged (stationarity within :func:`_stationarity_tol` of the rounding
     ``floor``, feasibility and complementarity within tol), infeasible, or not converged

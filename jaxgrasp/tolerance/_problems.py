@@ -197,7 +197,7 @@ class Problems:
             ``b = kind * N + contact``.
         start: ``(2N * D, 6)`` starting points of the boundary lanes.
         found: ``(2N * D,)`` whether the start search crossed the boundary (lanes where it
-            did not carry status :attr:`jaxgrasp.LaneStatus.NO_START`, as do found lanes
+            did not carry status :attr:`jaxgrasp.solver.LaneStatus.NO_START`, as do found lanes
             of a problem that its first wave of starts settled:
             ``EvaluateOptions.first_wave``).
         constraint_index: ``(2N * D,)`` index ``k`` of the equality in the flattened

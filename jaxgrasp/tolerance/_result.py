@@ -44,7 +44,7 @@ class Evaluation:
     """Energy-tolerance evaluation of one grasp (SI units; add leading axes under ``vmap``).
 
     ``N`` is the number of contacts; every ``(2, N, ...)`` array is indexed
-    ``[kind, contact]`` by :class:`~jaxgrasp.BoundaryKind`: 0 = ``slip`` (eq. 20),
+    ``[kind, contact]`` by :class:`~jaxgrasp.model.BoundaryKind`: 0 = ``slip`` (eq. 20),
     1 = ``max_force`` (eq. 21).
 
     Attributes:
@@ -54,7 +54,7 @@ class Evaluation:
         status: ``()`` int, a :class:`~jaxgrasp.GraspStatus` code: ``STABLE``,
             ``UNSTABLE``, ``INFEASIBLE`` or ``NOT_CONVERGED`` (names:
             ``GraspStatus.labels()``, or :attr:`status_name`).
-        limiting_kind: ``()`` int, :class:`~jaxgrasp.BoundaryKind` of the boundary
+        limiting_kind: ``()`` int, :class:`~jaxgrasp.model.BoundaryKind` of the boundary
             that sets ``value`` (0 slip, 1 max_force), -1 (``NO_BOUNDARY``) when there is none.
         limiting_contact: ``()`` int, 0-based contact of that boundary, -1 when none.
         equilibrium_energy: ``()`` J, ``min U`` over the equilibrium region (energy zero
@@ -66,10 +66,10 @@ class Evaluation:
         boundary_translation: ``(2, N, 3)`` m, pose of each boundary minimum (the
             equilibrium pose where the boundary cannot be reached).
         boundary_rotation: ``(2, N, 3)`` rad, likewise.
-        boundary_status: ``(2, N)`` int, :class:`~jaxgrasp.LaneStatus` of each
+        boundary_status: ``(2, N)`` int, :class:`~jaxgrasp.solver.LaneStatus` of each
             boundary problem (converged; infeasible = unreachable; not converged; no start
             because the equilibrium problem did not converge).
-        equilibrium_status: ``()`` int, :class:`~jaxgrasp.LaneStatus` of the equilibrium
+        equilibrium_status: ``()`` int, :class:`~jaxgrasp.solver.LaneStatus` of the equilibrium
             problem.
         equilibrium_margins: ``(3, N)`` scaled constraint margins at the equilibrium (or,
             for an infeasible grasp, at the least-violating pose found), rows: contact
@@ -224,7 +224,7 @@ tables): value (J), status, limiting kind and contact, equilibrium energy (J).""
 
 class SummaryNames:
     """Names and counts of the codes of a result with ``status`` and ``limiting_kind``
-    arrays of any shape (:class:`jaxgrasp.SweepResult`, :class:`jaxgrasp.BatchResult`)."""
+    arrays of any shape (:class:`jaxgrasp.analysis.SweepResult`, :class:`jaxgrasp.BatchResult`)."""
 
     @property
     def status_names(self) -> np.ndarray:

@@ -94,7 +94,7 @@ class Boundaries:
         lam, nu: ``(B, 3N)``, ``(B,)`` its multipliers.
         objective: ``(B,)`` its scaled energy (the equilibrium's where not reached).
         reached: ``(B,)`` some start converged.
-        status: ``(B,)`` :class:`~jaxgrasp.LaneStatus` of the problem: converged
+        status: ``(B,)`` :class:`~jaxgrasp.solver.LaneStatus` of the problem: converged
             (reached), infeasible (every start infeasible or not started), not converged,
             or no start (the equilibrium did not converge).
         estimate: ``(B,)`` lowest scaled energy of a feasible start that did not converge
