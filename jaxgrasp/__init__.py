@@ -140,16 +140,38 @@ _SUBMODULES = ("solver", "model", "surface", "presets", "io", "tolerance", "engi
 
 def __getattr__(name: str):
     """Load a top-level name from its package face, or a subpackage, the first time it is used."""
-    if name in _SUBMODULES:
-        return _importlib.import_module(f"jaxgrasp.{name}")  # which binds jaxgrasp.<name> too
     if name == "__version__":
         globals()[name] = _version()
         return globals()[name]
-    if name not in _HOME:
+    if name not in _HOME and name not in _SUBMODULES:
         raise AttributeError(f"module 'jaxgrasp' has no attribute {name!r}")
+    _choose_cpu_devices()
+    if name in _SUBMODULES:
+        return _importlib.import_module(f"jaxgrasp.{name}")  # which binds jaxgrasp.<name> too
     value = getattr(_importlib.import_module(_HOME[name]), name)
     globals()[name] = value  # later uses find it here
     return value
+
+
+_DEVICES_CHOSEN = False
+
+
+def _choose_cpu_devices() -> None:
+    """At the first use of a top-level name: ask JAX for one CPU device per core
+    (``jaxgrasp.engine.configure_cpu_devices``), before the program's first jaxgrasp array
+    makes JAX start its devices, so that a script's batches run on every core without a
+    call of :func:`configure`. Sets a JAX option only: no file, no handler. Where JAX runs
+    already, or the user chose the count, it changes nothing."""
+    global _DEVICES_CHOSEN
+    if _DEVICES_CHOSEN or _startup.is_command_line(list(getattr(_sys, "orig_argv", []))):
+        return  # the command chooses its devices in jaxgrasp.cli, after parsing
+    _DEVICES_CHOSEN = True
+    from jaxgrasp.engine import configure_cpu_devices
+
+    try:
+        configure_cpu_devices()
+    except ValueError:  # a bad JAXGRASP_CPU_DEVICES: jaxgrasp.configure() says so in one line at first use
+        pass
 
 
 def __dir__() -> list[str]:

@@ -67,10 +67,19 @@ def test_backends_already_running_are_left_alone():
 
 
 @pytest.mark.slow  # a subprocess
+def test_the_first_name_used_chooses_the_devices():
+    """A preset grasp is a JAX array, but using ``jaxgrasp.presets`` (a name of the face)
+    asked for the devices first: the script's batches run on every core."""
+    code = "import jax, jaxgrasp; g = jaxgrasp.presets.cube(6e5, 2e-3); print(jax.device_count())"
+    assert _devices(code, JAXGRASP_CPU_DEVICES="3") == 3
+    assert _devices("import jax, jaxgrasp; jaxgrasp.load; print(jax.device_count())", JAXGRASP_CPU_DEVICES="3") == 3
+
+
+@pytest.mark.slow  # a subprocess
 def test_a_batch_after_jax_made_its_devices_says_so_once(tmp_path):
-    """A preset grasp is a JAX array: JAX has made one CPU device before the first batch,
-    which runs on it and says once, on the ``"jaxgrasp"`` logger, how to get more."""
-    code = ("import jax, jaxgrasp; g = jaxgrasp.presets.cube(6e5, 2e-3); "
+    """The program's own JAX array came first: JAX has made one CPU device before the first
+    batch, which runs on it and says once, on the ``"jaxgrasp"`` logger, how to get more."""
+    code = ("import jax, jaxgrasp; jax.numpy.ones(1).block_until_ready(); g = jaxgrasp.presets.cube(6e5, 2e-3); "
             "jaxgrasp.engine.plan_chunks(8); jaxgrasp.engine.plan_chunks(8); print(jax.device_count())")
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
     env.update(JAXGRASP_CPU_DEVICES="3", JAX_PLATFORMS="cpu")
