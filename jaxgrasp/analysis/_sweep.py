@@ -45,6 +45,7 @@ from jaxgrasp.engine._checkpoint import SweepKeeper
 from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields
 from jaxgrasp.engine._plan import check_chunk_size, plan_chunks
 from jaxgrasp.engine._run import run_chunks
+from jaxgrasp.engine._settling import RETRY
 from jaxgrasp.io import _outputs as outputs
 from jaxgrasp.model._codes import BoundaryKind
 from jaxgrasp.model._fields import FIELD, SWEEPABLE, Field
@@ -398,7 +399,7 @@ def sweep(
     plan = plan_chunks(int(math.prod(shape)), chunk_size, devices)
     n_contacts = base["positions"].shape[0]
     start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
-    fn, compile_seconds, settling = chunk_evaluator("sweep", options, n_contacts, plan, masked=False)
+    fn, compile_seconds, settling = chunk_evaluator(RETRY, options, n_contacts, plan, masked=False)
     own = _own_fields(grasp, base)
     if checkpoint is not None:
         on_chunk = _also(SweepKeeper(checkpoint, grasp, axes, plan.chunk), on_chunk)

@@ -36,6 +36,7 @@ from jaxgrasp.engine._plan import (
     plan_widths,
 )
 from jaxgrasp.engine._run import run_chunks
+from jaxgrasp.engine._settling import INLINE
 from jaxgrasp.engine._widths import contact_slots, narrow, widen
 from jaxgrasp.io._dataset import GraspSet
 from jaxgrasp.model._grasp import Grasp, stack
@@ -194,7 +195,7 @@ def _run_segments(fields: Mapping[str, np.ndarray], rows: np.ndarray, plan: Segm
     compile_seconds = run_seconds = 0.0
     done = 0
     for seg in plan.segments:
-        fn, seconds, settling = chunk_evaluator("batch", options, seg.width, seg.plan, seg.masked)
+        fn, seconds, settling = chunk_evaluator(INLINE, options, seg.width, seg.plan, seg.masked)
         compile_seconds += seconds
         picked = rows[seg.at]
 
@@ -226,7 +227,7 @@ def _run_segments(fields: Mapping[str, np.ndarray], rows: np.ndarray, plan: Segm
         done += seg.plan.total
         if seg is not plan.segments[-1]:  # one program held at a time (the store keeps them all)
             del fn, settling
-            release_chunk_evaluator("batch", options, seg.width, seg.plan, seg.masked)
+            release_chunk_evaluator(INLINE, options, seg.width, seg.plan, seg.masked)
     return outs, compile_seconds, run_seconds
 
 

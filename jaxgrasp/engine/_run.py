@@ -9,8 +9,8 @@ import jax
 import numpy as np
 
 from jaxgrasp.engine._plan import ChunkPlan
+from jaxgrasp.engine._settling import settle_then_retry
 from jaxgrasp.tolerance._result import FIELDS as RESULT_FIELDS
-from jaxgrasp.tolerance._settle import needs_settling
 
 __all__ = ["run_chunks"]
 
@@ -63,22 +63,23 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
 
 
 def _settled(res: dict, fields, names, count: int, settling, sharding) -> dict:
-    """A chunk's results ``res``, those of its first ``count`` grasps that need the
-    settling stage replaced by ``settling``'s evaluator's (``size`` at a time, padded by
-    repeats)."""
-    rows = np.flatnonzero(needs_settling(res["boundary_status"], res["equilibrium_status"])[:count])
-    if not len(rows):
-        return res
+    """A chunk's results ``res`` by the :data:`~jaxgrasp.engine._settling.RETRY` policy
+    (:func:`~jaxgrasp.engine._settling.settle_then_retry`): those of its first ``count``
+    grasps that need the settling stage evaluated again by ``settling``'s evaluator
+    (``size`` at a time, padded by repeats)."""
     get, size = settling
-    settle = get()
-    res = {f: np.array(a) for f, a in res.items()}  # writable copies
-    for first in range(0, rows.size, size):
-        sel = rows[first : first + size]
-        sub = [_put(fields[k][np.resize(sel, size)], sharding) for k in names]
-        again = dict(zip(RESULT_FIELDS, settle(*sub)))
-        for f in res:
-            res[f][sel] = _gather(again[f])[: sel.size]
-    return res
+
+    def again(rows: np.ndarray) -> dict[str, np.ndarray]:
+        settle = get()
+        parts = []
+        for first in range(0, rows.size, size):
+            sel = rows[first : first + size]
+            sub = [_put(fields[k][np.resize(sel, size)], sharding) for k in names]
+            out = dict(zip(RESULT_FIELDS, settle(*sub)))
+            parts.append({f: _gather(out[f])[: sel.size] for f in res})
+        return {f: np.concatenate([p[f] for p in parts]) for f in res}
+
+    return settle_then_retry(res, again, count)
 
 
 def _put(a: np.ndarray, sharding) -> jax.Array:
