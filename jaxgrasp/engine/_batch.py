@@ -8,14 +8,17 @@
     res.value, res.status_names              # (B,) J, names
     res.rank()[:10]                          # indices of the best grasps
 
-The grasps are cut into segments by contact count, each run at its own width where that
-pays for its compilation (:func:`~jaxgrasp.engine._plan.plan_segments`), and each segment
-into chunks (:func:`~jaxgrasp.engine._plan.plan_chunks`), each
-evaluated by the compiled pipeline (:func:`~jaxgrasp.engine._evaluator.chunk_evaluator`:
-equal to ``jax.vmap(jaxgrasp.evaluate)`` grasp by grasp), split over every device, each
-device running its own work queue on its slice (:func:`~jaxgrasp.engine._run.run_chunks`);
-the last chunk is padded to the same size, so a set compiles once per chunk size, number
-of contacts and options. Memory is bounded by the chunk size.
+Both are adapters over the engine's one batch runner
+(:func:`~jaxgrasp.engine._runner.run_batch`, a :class:`~jaxgrasp.engine._runner.Stacked`
+source): the grasps are cut into segments by contact count, each run at its own width
+where that pays for its compilation (:func:`~jaxgrasp.engine._plan.plan_segments`), and
+each segment into chunks (:func:`~jaxgrasp.engine._plan.plan_chunks`), each evaluated by
+the compiled pipeline (:func:`~jaxgrasp.engine._evaluator.chunk_evaluator`, the settling
+stage inline), split over every device, each device running its own work queue on its
+slice (:func:`~jaxgrasp.engine._run.run_chunks`); the last chunk is padded to the same
+size, so a set compiles once per chunk size, number of contacts and options. Memory is
+bounded by the chunk size. Each result equals :func:`jaxgrasp.evaluate`'s within the
+solver's precision (``tests/engine/test_single_vs_batch.py``).
 """
 
 from __future__ import annotations
@@ -89,7 +92,9 @@ def evaluate_batch(
     devices=None,
 ) -> BatchResult:
     """Evaluate many grasps in chunks of compiled evaluators; every result equals
-    :func:`jaxgrasp.evaluate` of that grasp.
+    :func:`jaxgrasp.evaluate` of that grasp to the solver's precision (the same status and
+    limiting boundary; energies within ``1e-12`` of ``|U0|``: another program, whose
+    solver takes other steps to the same minima).
 
     Grasps of different contact counts are padded to the widest (inactive contacts), in
     one compiled program; where a count has enough grasps to pay for a compilation of
@@ -175,7 +180,7 @@ def _run(source: Stacked, widths, chunk_size, devices, options: EvaluateOptions,
     return run_batch(source, plan, options, settle=INLINE, progress=progress, on_chunk=rows_of)
 
 
-def _timings(run: Run) -> dict:
+def _timings(run: Run | BatchResult) -> dict:
     return dict(compile_seconds=run.compile_seconds, run_seconds=run.run_seconds, devices=run.devices)
 
 
@@ -235,7 +240,5 @@ def evaluate_dataset(
         run = assemble([(np.arange(todo.size), ran.results)], todo.size, [], columns.active[todo],
                        (None,) * todo.size, **_timings(ran))
         parts.append((todo, ran.results))
-    timings = {} if run is None else dict(
-        compile_seconds=run.compile_seconds, run_seconds=run.run_seconds, devices=run.devices
-    )
+    timings = {} if run is None else _timings(run)
     return assemble(parts, len(dataset), ~columns.valid, columns.active, dataset.errors, **timings), run
