@@ -11,10 +11,11 @@ stiffness, squeeze, placement, mass and gravity, by Monte Carlo through the engi
 Each grasp's ``S`` perturbed copies (:mod:`jaxgrasp.analysis._uncertainty`) are stacked
 into one batched grasp with those of every other grasp of the same contact count and
 evaluated by :func:`jaxgrasp.evaluate_batch`: one compiled evaluator for all samples of
-all grasps of a contact count, cut into the engine's chunks. The nominal grasps are
-evaluated by :func:`jaxgrasp.evaluate_batch` too, in a batch of their own with the
-samples' chunk (a single grasp by :func:`jaxgrasp.evaluate`, whose compiled program a
-process has anyway).
+all grasps of a contact count, cut into the engine's chunks. The nominal grasps (one
+grasp is a list of one: no path of its own) are evaluated by the same runner in a batch
+of their own with the samples' chunk, so by their samples' program; that program's
+numbers equal :func:`jaxgrasp.evaluate`'s within rounding (the energies to about
+``1e-15`` of themselves: ``tests/engine/test_single_vs_batch.py``).
 
 The statistics of a grasp are over its samples whose evaluation settled (status
 ``stable``, ``unstable`` or ``infeasible``): ``p_stable`` is the fraction of them that
@@ -28,13 +29,12 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Callable, Sequence
 
-import jax
 import numpy as np
 
 from jaxgrasp.analysis._uncertainty import CLIP_SOURCES, Uncertainty, draw_normals, perturb
-from jaxgrasp.engine import BatchResult, assemble, evaluate, evaluate_batch, plan_chunks
-from jaxgrasp.model import Grasp, GraspValueError, stack
 from jaxgrasp.base import Coded
+from jaxgrasp.engine import BatchResult, evaluate_batch, evaluate_in_chunks, plan_chunks
+from jaxgrasp.model import Grasp, GraspValueError, stack
 from jaxgrasp.surface import MeshGrasp, Surface
 from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus
 
@@ -351,28 +351,14 @@ def _groups(grasps) -> tuple[list, Any]:
 
 
 def _nominal(grasps, options: EvaluateOptions, chunk_size, samples: int, devices=None) -> BatchResult:
-    """The evaluation of the unperturbed grasps: :func:`jaxgrasp.evaluate` for a single
-    grasp of a list (as a batch of one), else :func:`jaxgrasp.evaluate_batch` in the
-    chunks of the samples (fewer grasps than a chunk are padded to one with copies of the
-    last, as the engine pads), so that the nominal batch needs no program of its own."""
-    if not isinstance(grasps, Grasp) and len(grasps) == 1:
-        one = evaluate(grasps[0], options)
-        results = {f.name: np.array(getattr(one, f.name))[None] for f in dataclasses.fields(Evaluation)}
-        active = np.ones((1, grasps[0].num_contacts), dtype=bool)
-        return assemble([(np.arange(1), results)], 1, np.zeros(0, dtype=int), active, (None,))
+    """The evaluation of the unperturbed grasps (a list or a batched grasp; one grasp is a
+    list of one) by the batch runner in the chunks of the samples
+    (:func:`~jaxgrasp.engine._batch.evaluate_in_chunks`), so that the nominal batch needs
+    no program of its own and each nominal grasp is evaluated by the program of its
+    samples (zero uncertainty: the samples' values are the nominal value bit for bit)."""
     g = np.shape(grasps.positions)[0] if isinstance(grasps, Grasp) else len(grasps)
     chunk = plan_chunks(g * samples, chunk_size, devices).chunk
-    if g >= chunk:
-        return evaluate_batch(grasps, options=options, chunk_size=chunk, devices=devices)
-    if isinstance(grasps, Grasp):
-        padded = jax.tree_util.tree_map(lambda a: np.concatenate([a, np.repeat(a[-1:], chunk - g, axis=0)]), grasps)
-    else:
-        padded = list(grasps) + [grasps[-1]] * (chunk - g)
-    res = evaluate_batch(padded, options=options, chunk_size=chunk, devices=devices)
-    return dataclasses.replace(
-        res, evaluation=jax.tree_util.tree_map(lambda a: a[:g], res.evaluation), num_contacts=res.num_contacts[:g],
-        active=res.active[:g], errors=res.errors[:g],
-    )
+    return evaluate_in_chunks(grasps, chunk, options=options, devices=devices)
 
 
 def _mesh_projection(meshes: list, normals: np.ndarray) -> Callable:

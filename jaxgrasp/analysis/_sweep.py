@@ -11,8 +11,9 @@
     result.value.shape          # (9, 41), J
     result.to_csv("sweep.csv")  # one row per grid point, SI units in the column names
 
-A sweep is a grid of grasps for the engine (:mod:`jaxgrasp.engine`, shared with
-:func:`jaxgrasp.evaluate_batch`): the grid points are cut into chunks whose size is a bucket
+A sweep is a grid of grasps for the engine's one batch runner
+(:func:`~jaxgrasp.engine._runner.run_batch`, shared with :func:`jaxgrasp.evaluate_batch`),
+a source whose points are made a chunk at a time: the grid points are cut into chunks whose size is a bucket
 (1, 4, 16 or 64 points per CPU device; :func:`~jaxgrasp.engine._plan.plan_chunks`), each
 evaluated by the compiled pipeline; the last chunk is padded to the same size, so one
 sweep compiles once, and a later sweep or batch of grasps with the same number of
@@ -40,16 +41,14 @@ from typing import Any, Callable, Mapping
 import jax
 import numpy as np
 
-from jaxgrasp.engine import start_progress
-from jaxgrasp.engine import SweepKeeper
-from jaxgrasp.engine import chunk_evaluator, grasp_fields
-from jaxgrasp.engine import check_chunk_size, plan_chunks
-from jaxgrasp.engine import run_chunks
 from jaxgrasp import storage
-from jaxgrasp.model import BoundaryKind
-from jaxgrasp.model import FIELD, SWEEPABLE, Field
-from jaxgrasp.model import Grasp
+from jaxgrasp.engine import RETRY, SweepKeeper, check_chunk_size, plan_source, run_batch
 from jaxgrasp.model import (
+    FIELD,
+    SWEEPABLE,
+    BoundaryKind,
+    Field,
+    Grasp,
     GraspValueError,
     as_float_array,
     check_corners,
@@ -346,8 +345,6 @@ def _check_axis(name: str, values: Any) -> np.ndarray:
     return a
 
 
-# --------------------------------------------------------------------------- compiled batch
-
 # --------------------------------------------------------------------------- sweep
 
 
@@ -392,25 +389,50 @@ def sweep(
             or a grid of more than :data:`MAX_GRID_POINTS` points; the message is one line.
     """
     base, axes = _check_inputs(grasp, chunk_size, axes)
-    shape = tuple(a.size for a in axes.values())
-    plan = plan_chunks(int(math.prod(shape)), chunk_size, devices)
-    n_contacts = base["positions"].shape[0]
-    progress = start_progress(progress, plan, "sweeping", "point")  # before the compilation, which the first chunk's time includes
-    fn, compile_seconds, settling = chunk_evaluator("sweep", options, n_contacts, plan, masked=False)
-    own = _own_fields(grasp, base)
+    grid = _Grid(_own_fields(grasp, base), axes)
+    plan = plan_source(grid, chunk_size, devices)
     if checkpoint is not None:
         on_chunk = _also(SweepKeeper(checkpoint, grasp, axes, plan.chunk), on_chunk)
-    outs, run_seconds = run_chunks(
-        fn, lambda start: _chunk_fields(own, axes, start, plan.chunk), grasp_fields(False), plan,
-        progress, on_chunk, keep=_RESULT_FIELDS, settling=settling,
-    )
+    flat: dict[str, np.ndarray] = {}  # the points' results, filled chunk by chunk (what on_chunk reads)
+    reached = None if on_chunk is None else (lambda at, _res: on_chunk(int(at[0]), int(at[-1]) + 1, flat))
+    # the points of a grid rarely need the settling stage: RETRY spares them it (engine._settling)
+    run = run_batch(grid, plan, options, settle=RETRY, keep=_RESULT_FIELDS, progress=progress, on_chunk=reached,
+                    results=flat, verb="sweeping", noun="point")
     return SweepResult(
         axes=dict(axes),
-        **{f: outs[f].reshape(shape) for f in _RESULT_FIELDS},
-        compile_seconds=compile_seconds,
-        run_seconds=run_seconds,
-        devices=plan.n_devices,
+        **{f: flat[f].reshape(grid.shape) for f in _RESULT_FIELDS},
+        compile_seconds=run.compile_seconds,
+        run_seconds=run.run_seconds,
+        devices=run.devices,
     )
+
+
+@dataclasses.dataclass(frozen=True)
+class _Grid:
+    """The points of a grid as a :class:`~jaxgrasp.engine._runner.GraspSource`: point ``k``
+    (C order, last axis fastest) is the grasp ``own`` (its own fields, SI units) with each
+    axis of ``axes`` at its value there."""
+
+    own: dict
+    axes: dict
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(a.size for a in self.axes.values())
+
+    @property
+    def size(self) -> int:
+        return int(math.prod(self.shape))
+
+    @property
+    def width(self) -> int:
+        return int(self.own["positions"].shape[0])
+
+    def counts(self) -> np.ndarray:
+        return np.full(self.size, self.width)
+
+    def gather(self, at: np.ndarray) -> dict[str, np.ndarray]:
+        return _point_fields(self.own, self.axes, at)
 
 
 def _also(first: Callable, then: Callable | None) -> Callable:
@@ -435,7 +457,7 @@ def grid_grasp(grasp: Grasp, /, **axes) -> Grasp:
     """
     base, checked = _check_inputs(grasp, None, axes)
     total = int(math.prod(a.size for a in checked.values()))
-    return Grasp(**_chunk_fields(_own_fields(grasp, base), checked, 0, total))
+    return Grasp(**_point_fields(_own_fields(grasp, base), checked, np.arange(total)))
 
 
 def _own_fields(grasp: Grasp, base: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -483,20 +505,16 @@ def _check_inputs(grasp, chunk_size, axes) -> tuple[dict[str, np.ndarray], dict[
     return base, checked
 
 
-def _chunk_fields(own: dict, axes: dict, start: int, chunk: int) -> dict[str, np.ndarray]:
-    """The :class:`Grasp` fields of grid points ``start .. start + chunk - 1`` (C order),
-    the points past the end padded with the last one."""
+def _point_fields(own: dict, axes: dict, idx: np.ndarray) -> dict[str, np.ndarray]:
+    """The :class:`Grasp` fields of grid points ``idx`` ``(K,)`` (C order), each with a
+    leading axis ``K``."""
     shape = tuple(a.size for a in axes.values())
-    total = int(math.prod(shape))
     n_contacts = own["positions"].shape[0]
-    idx = np.minimum(np.arange(start, start + chunk), total - 1)  # pad with the last point
-    fields = {k: np.broadcast_to(v, (chunk, *v.shape)) for k, v in own.items()}
+    fields = {k: np.broadcast_to(v, (idx.size, *v.shape)) for k, v in own.items()}
     grid_idx = np.unravel_index(idx, shape) if axes else ()
     for (name, values), i_ax in zip(axes.items(), grid_idx):
         v = values[i_ax]
         if PARAMETERS[name].per_contact:
-            v = np.broadcast_to(v[:, None], (chunk, n_contacts))
+            v = np.broadcast_to(v[:, None], (idx.size, n_contacts))
         fields[name] = v
     return fields
-
-

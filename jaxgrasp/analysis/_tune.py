@@ -51,7 +51,7 @@ from jaxgrasp.analysis._tune_spec import (
     param_specs,
 )
 from jaxgrasp.analysis._tune_status import TuneStatus
-from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, evaluate_compiled
+from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, value_and_grad_builder
 from jaxgrasp.model import MJ_TO_J, Grasp, GraspValueError, check_grasp_inputs, counted
 from jaxgrasp.surface import PAD_FACES, MeshGrasp, Surface
 from jaxgrasp.tolerance import EVALUATION_TREE, EvaluateOptions, Evaluation, GraspStatus
@@ -109,16 +109,12 @@ def _compiled(specs: tuple[ParamSpec, ...], options: EvaluateOptions) -> StoredF
     kept in the executable store (:class:`~jaxgrasp.engine._compile.StoredFunction`): a
     second process tuning the same parameters of a grasp with as many contacts loads it."""
 
-    def objective(u, data):
-        ev = evaluate_compiled(_apply(specs, u, data), data["temperature"], options)
-        v = jnp.where(jnp.isfinite(ev.value), ev.value, 0.0)
-        return -v / data["value_scale"], ev
-
-    vg = jax.value_and_grad(objective, has_aux=True)
+    vg = value_and_grad_builder(lambda u, data: (_apply(specs, u, data), None), options,
+                                temperature_of=lambda data: data["temperature"],
+                                objective=lambda v, data: -v / data["value_scale"])
 
     def safe_vg(u, data):
-        (f, ev), g = vg(u, data)
-        g = jnp.where(jnp.isfinite(g), g, 0.0)
+        (f, (ev, _)), g = vg(u, data)
         return (f, ev), g
 
     leaf = jax.tree_util.tree_structure(0.0)

@@ -27,16 +27,17 @@ from jaxgrasp.engine._store import enable_compilation_cache
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS
 
 # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.engine._batch import start_progress
+from jaxgrasp.engine._batch import evaluate_in_chunks
 from jaxgrasp.engine._batch_result import assemble, mark_invalid
 from jaxgrasp.engine._checkpoint import BATCH_FOLDER, SWEEP_FILE, BatchCheckpoint, CheckpointBusy, SweepKeeper
 from jaxgrasp.engine._compile import StoredFunction, wait_for_saves
 from jaxgrasp.engine._devices import configure_cpu_devices
 from jaxgrasp.engine._evaluate import evaluate_compiled
-from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields
+from jaxgrasp.engine._gradient import value_and_grad_builder
 from jaxgrasp.engine._plan import check_chunk_size, grasps_by_count
 from jaxgrasp.engine._prefetch import prefetch
-from jaxgrasp.engine._run import run_chunks
+from jaxgrasp.engine._runner import GraspSource, Stacked, plan_source, run_batch, start_progress
+from jaxgrasp.engine._settling import INLINE, RETRY
 from jaxgrasp.engine._store import enable_from_environment, log_lines_on_stderr
 
 __all__ = [

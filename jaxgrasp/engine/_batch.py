@@ -8,41 +8,34 @@
     res.value, res.status_names              # (B,) J, names
     res.rank()[:10]                          # indices of the best grasps
 
-The grasps are cut into segments by contact count, each run at its own width where that
-pays for its compilation (:func:`~jaxgrasp.engine._plan.plan_segments`), and each segment
-into chunks (:func:`~jaxgrasp.engine._plan.plan_chunks`), each
-evaluated by the compiled pipeline (:func:`~jaxgrasp.engine._evaluator.chunk_evaluator`:
-equal to ``jax.vmap(jaxgrasp.evaluate)`` grasp by grasp), split over every device, each
-device running its own work queue on its slice (:func:`~jaxgrasp.engine._run.run_chunks`);
-the last chunk is padded to the same size, so a set compiles once per chunk size, number
-of contacts and options. Memory is bounded by the chunk size.
+Both are adapters over the engine's one batch runner
+(:func:`~jaxgrasp.engine._runner.run_batch`, a :class:`~jaxgrasp.engine._runner.Stacked`
+source): the grasps are cut into segments by contact count, each run at its own width
+where that pays for its compilation (:func:`~jaxgrasp.engine._plan.plan_segments`), and
+each segment into chunks (:func:`~jaxgrasp.engine._plan.plan_chunks`), each evaluated by
+the compiled pipeline (:func:`~jaxgrasp.engine._evaluator.chunk_evaluator`, the settling
+stage inline), split over every device, each device running its own work queue on its
+slice (:func:`~jaxgrasp.engine._run.run_chunks`); the last chunk is padded to the same
+size, so a set compiles once per chunk size, number of contacts and options. Memory is
+bounded by the chunk size. Each result equals :func:`jaxgrasp.evaluate`'s within the
+solver's precision (``tests/engine/test_single_vs_batch.py``).
 """
 
 from __future__ import annotations
 
 from typing import Any, Callable, Mapping
 
-import jax
 import numpy as np
 
 from jaxgrasp.engine._batch_result import BatchResult, assemble
-from jaxgrasp.engine._evaluator import chunk_evaluator, grasp_fields, release_chunk_evaluator
-from jaxgrasp.engine._plan import (
-    ChunkPlan,
-    SegmentPlan,
-    check_chunk_size,
-    grasps_by_count,
-    plan_segments,
-    plan_widths,
-)
-from jaxgrasp.engine._progress import chunk_progress
-from jaxgrasp.engine._run import run_chunks
-from jaxgrasp.engine._widths import contact_slots, narrow, widen
+from jaxgrasp.engine._plan import check_chunk_size, grasps_by_count, plan_widths
+from jaxgrasp.engine._runner import Run, Stacked, plan_source, platform, run_batch
+from jaxgrasp.engine._settling import INLINE
 from jaxgrasp.io import GraspSet
 from jaxgrasp.model import Grasp, GraspValueError, check_batch_inputs, stack
 from jaxgrasp.tolerance import EvaluateOptions
 
-__all__ = ["evaluate_batch", "evaluate_dataset", "start_progress"]
+__all__ = ["evaluate_batch", "evaluate_dataset", "evaluate_in_chunks"]
 
 
 def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], tuple]:
@@ -87,18 +80,6 @@ def _set_fields(gset: GraspSet, rows: np.ndarray | None = None) -> dict[str, np.
     return fields
 
 
-def start_progress(progress, plan: ChunkPlan | SegmentPlan, verb: str = "evaluating", noun: str = "grasp"):
-    """The progress report of a run: ``progress``, or where it is ``None`` the engine's
-    chunk records on the ``"jaxgrasp"`` logger (:class:`~jaxgrasp.engine.ChunkProgress`
-    of ``verb`` and ``noun``); told the plan before the first chunk, where it asks (an
-    object with a ``start(plan)`` method, such as :class:`~jaxgrasp.engine.ChunkProgress`)."""
-    progress = chunk_progress(progress, verb, noun)
-    start = getattr(progress, "start", None)
-    if callable(start):
-        start(plan)
-    return progress
-
-
 def evaluate_batch(
     grasps,
     /,
@@ -110,7 +91,9 @@ def evaluate_batch(
     devices=None,
 ) -> BatchResult:
     """Evaluate many grasps in chunks of compiled evaluators; every result equals
-    :func:`jaxgrasp.evaluate` of that grasp.
+    :func:`jaxgrasp.evaluate` of that grasp to the solver's precision (the same status and
+    limiting boundary; energies within ``1e-12`` of ``|U0|``: another program, whose
+    solver takes other steps to the same minima).
 
     Grasps of different contact counts are padded to the widest (inactive contacts), in
     one compiled program; where a count has enough grasps to pay for a compilation of
@@ -153,100 +136,56 @@ def evaluate_batch(
     return _evaluate_fields(fields, errors, chunk_size, devices, options, progress, on_chunk)
 
 
+def evaluate_in_chunks(grasps, chunk: int, /, *, options: EvaluateOptions = EvaluateOptions(), devices=None,
+                       progress: Callable[[int, int], Any] | None = None) -> BatchResult:
+    """:func:`evaluate_batch` of ``grasps`` in chunks of exactly ``chunk`` grasps however
+    few there are (:func:`~jaxgrasp.engine._runner.plan_source`'s ``exact_chunk``): a few
+    grasps run in the program compiled for a larger run of the same width (a robust
+    evaluation's nominal grasps in its samples', a plan's candidates in one program
+    whatever their number); each grasp's result is the one it has in that program.
+    ``options``, ``devices``, ``progress``: as :func:`evaluate_batch`."""
+    check_chunk_size(chunk)
+    fields, errors = _batched_fields(grasps)
+    return _evaluate_fields(fields, errors, chunk, devices, options, progress, None, exact_chunk=True)
+
+
 def _evaluate_fields(fields: dict[str, np.ndarray], errors, chunk_size, devices, options: EvaluateOptions,
-                     progress, on_chunk, rows: np.ndarray | None = None, widths=None) -> BatchResult:
-    """:func:`evaluate_batch` of validated fields (:func:`_batched_fields`): the valid
-    ``rows`` (default every row whose error is ``None``) in segments by contact count
-    (:func:`~jaxgrasp.engine._plan.plan_segments`, by ``widths``, default
-    :func:`~jaxgrasp.engine._plan.plan_widths` of these rows' counts), each gathered a
-    chunk at a time. ``on_chunk(rows, results)`` after each chunk. The result has a row
-    for every row of ``fields``."""
+                     progress, on_chunk, exact_chunk: bool = False) -> BatchResult:
+    """:func:`evaluate_batch` of validated fields (:func:`_batched_fields`): the rows whose
+    error is ``None`` through the runner (:func:`_run`). The result has a row for every
+    row of ``fields``."""
     total, n_contacts = fields["positions"].shape[:2]
-    rows = np.flatnonzero([e is None for e in errors]) if rows is None else rows
+    rows = np.flatnonzero([e is None for e in errors])
     active = fields.get("active")
-    counts = np.full(rows.size, n_contacts) if active is None else active[rows].sum(axis=1)
-    if widths is None:
-        widths = plan_widths(grasps_by_count(counts), _platform(devices))
-    plan = plan_segments(counts, widths, chunk_size, devices)
-    outs, compile_seconds, run_seconds = _run_segments(fields, rows, plan, options, progress, on_chunk)
+    run = _run(Stacked(fields, rows), None, chunk_size, devices, options, progress, on_chunk, exact_chunk)
+    outs = run.results
     if rows.size != total:  # rows not evaluated (invalid): marked by assemble
         outs = {f: _scattered(a, rows, total) for f, a in outs.items()}
     invalid = np.setdiff1d(np.arange(total), rows)
     full = np.ones((total, n_contacts), dtype=bool) if active is None else active
-    return assemble([(np.arange(total), outs)], total, invalid, full, errors,
-                    compile_seconds=compile_seconds, run_seconds=run_seconds, devices=plan.n_devices)
+    return assemble([(np.arange(total), outs)], total, invalid, full, errors, **_timings(run))
 
 
-def _platform(devices) -> str:
-    return (jax.devices() if devices is None else list(devices))[0].platform
+def _run(source: Stacked, widths, chunk_size, devices, options: EvaluateOptions, progress, on_chunk,
+         exact_chunk: bool = False) -> Run:
+    """The grasps of ``source`` through :func:`~jaxgrasp.engine._runner.run_batch`, at
+    ``widths`` (default: :func:`~jaxgrasp.engine._plan.plan_widths` of their counts), the
+    settling stage inline (a set of varied grasps, :mod:`~jaxgrasp.engine._settling`);
+    ``on_chunk(rows, results)`` with the rows of ``source.fields``."""
+    if widths is None:
+        widths = plan_widths(grasps_by_count(source.counts()), platform(devices))
+    plan = plan_source(source, chunk_size, devices, widths, exact_chunk=exact_chunk)
+    rows_of = None if on_chunk is None else (lambda at, results: on_chunk(source.rows[at], results))
+    return run_batch(source, plan, options, settle=INLINE, progress=progress, on_chunk=rows_of)
+
+
+def _timings(run: Run | BatchResult) -> dict:
+    return dict(compile_seconds=run.compile_seconds, run_seconds=run.run_seconds, devices=run.devices)
 
 
 def _scattered(a: np.ndarray, rows: np.ndarray, total: int) -> np.ndarray:
     out = np.empty((total, *a.shape[1:]), dtype=a.dtype)
     out[rows] = a
-    return out
-
-
-def _run_segments(fields: Mapping[str, np.ndarray], rows: np.ndarray, plan: SegmentPlan, options: EvaluateOptions,
-                  progress, on_chunk) -> tuple[dict[str, np.ndarray], float, float]:
-    """Evaluate the grasps ``rows`` of ``fields`` by ``plan``, segment after segment:
-    ``(results, compile seconds, run seconds)``, each :class:`~jaxgrasp.Evaluation` field
-    ``(len(rows), ...)`` in the order of ``rows``, at the width of ``fields``."""
-    n_contacts = fields["positions"].shape[1]
-    progress = start_progress(progress, plan)  # before the compilation, which the first chunk's time includes
-    outs: dict[str, np.ndarray] = {}
-    compile_seconds = run_seconds = 0.0
-    done = 0
-    for seg in plan.segments:
-        fn, seconds, settling = chunk_evaluator("batch", options, seg.width, seg.plan, seg.masked)
-        compile_seconds += seconds
-        picked = rows[seg.at]
-
-        slots_of: dict[int, np.ndarray] = {}  # each chunk's contact slots, from its gathering to its results
-
-        def chunk_fields(start: int, seg=seg, picked=picked, slots_of=slots_of) -> dict[str, np.ndarray]:
-            chunk = _chunk_of(fields, start, seg.plan.chunk, picked, keep_padding_active=not seg.masked)
-            slots_of[start] = contact_slots(chunk.get("active"), seg.width, seg.plan.chunk)
-            return narrow(chunk, slots_of[start], seg.masked)
-
-        def finished(start: int, stop: int, res: Mapping[str, np.ndarray], seg=seg, picked=picked,
-                     slots_of=slots_of) -> None:
-            slots = slots_of.pop(start)[: stop - start]
-            wide = widen({f: a[start:stop] for f, a in res.items()}, slots, n_contacts)
-            for f, a in wide.items():
-                if f not in outs:
-                    outs[f] = np.empty((rows.size, *a.shape[1:]), dtype=a.dtype)
-                outs[f][seg.at[start:stop]] = a
-            if on_chunk is not None:
-                on_chunk(picked[start:stop], wide)
-
-        def reported(stop: int, _total: int, before=done) -> None:
-            if progress is not None:
-                progress(before + stop, plan.total)
-
-        _, seconds = run_chunks(fn, chunk_fields, grasp_fields(seg.masked), seg.plan, reported, finished,
-                                settling=settling)
-        run_seconds += seconds
-        done += seg.plan.total
-        if seg is not plan.segments[-1]:  # one program held at a time (the store keeps them all)
-            del fn, settling
-            release_chunk_evaluator("batch", options, seg.width, seg.plan, seg.masked)
-    return outs, compile_seconds, run_seconds
-
-
-def _chunk_of(fields: Mapping[str, np.ndarray], start: int, chunk: int, rows: np.ndarray | None = None,
-              keep_padding_active: bool = False) -> dict[str, np.ndarray]:
-    """The fields of grasps ``start .. start + chunk - 1`` (of ``rows`` of ``fields``,
-    default all), padded with the last grasp, its contacts inactive where there is a
-    mask (unless ``keep_padding_active``: a program without a mask evaluates the
-    repeats), so that the padding solves nothing. Only the chunk is copied."""
-    total = fields["positions"].shape[0] if rows is None else len(rows)
-    idx = np.arange(start, start + chunk)
-    pick = np.minimum(idx, total - 1)
-    pick = pick if rows is None else rows[pick]
-    out = {k: v[pick] for k, v in fields.items()}
-    if "active" in out and not keep_padding_active:
-        out["active"] = out["active"] & (idx < total)[:, None]
     return out
 
 
@@ -293,15 +232,12 @@ def evaluate_dataset(
     parts = [(rows, results)] if rows.size else []
     run = None
     if todo.size:
-        fields = dict(columns.fields, active=columns.active)
-        if widths is None:
-            widths = plan_widths(grasps_by_count(columns.counts), _platform(devices))
-        plan = plan_segments(columns.counts[todo], widths, chunk_size, devices)
-        outs, compile_seconds, run_seconds = _run_segments(fields, todo, plan, options, progress, on_chunk_rows)
-        run = assemble([(np.arange(todo.size), outs)], todo.size, [], columns.active[todo], (None,) * todo.size,
-                       compile_seconds=compile_seconds, run_seconds=run_seconds, devices=plan.n_devices)
-        parts.append((todo, outs))
-    timings = {} if run is None else dict(
-        compile_seconds=run.compile_seconds, run_seconds=run.run_seconds, devices=run.devices
-    )
+        if widths is None:  # of every valid grasp, done or not: a resumed run runs at the same widths
+            widths = plan_widths(grasps_by_count(columns.counts), platform(devices))
+        ran = _run(Stacked(dict(columns.fields, active=columns.active), todo), widths, chunk_size, devices, options,
+                   progress, on_chunk_rows)
+        run = assemble([(np.arange(todo.size), ran.results)], todo.size, [], columns.active[todo],
+                       (None,) * todo.size, **_timings(ran))
+        parts.append((todo, ran.results))
+    timings = {} if run is None else _timings(run)
     return assemble(parts, len(dataset), ~columns.valid, columns.active, dataset.errors, **timings), run

@@ -41,18 +41,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.engine import _compile
-from jaxgrasp.engine._evaluator import SETTLE_INLINE
+from jaxgrasp.engine._settling import RETRY, check_settle, settle_then_retry
 from jaxgrasp.engine._stages import run_inline, stage_functions
 from jaxgrasp.engine._xla_options import latency_options
 from jaxgrasp.model import Grasp
-from jaxgrasp.tolerance import (
-    FIELDS as RESULT_FIELDS,
-    EvaluateOptions,
-    Evaluation,
-    Problems,
-    needs_settling,
-    split_temperature,
-)
+from jaxgrasp.tolerance import FIELDS as RESULT_FIELDS
+from jaxgrasp.tolerance import EvaluateOptions, Evaluation, Problems, split_temperature
 
 __all__ = ["evaluate", "evaluate_traced", "evaluate_batch_traced", "evaluate_compiled", "compiled_executable", "solve_problems"]
 
@@ -88,10 +82,9 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
     rules as arrays (``jnp.where(jaxgrasp.check(g).valid, value, jnp.nan)``). A concrete grasp runs an
     executable compiled once per process for its shapes and options
     (:func:`compiled_executable`), loaded from the executable store instead where the
-    caches are on: as the settling policy has it
-    (:data:`~jaxgrasp.engine._evaluator.SETTLE_INLINE`), first the one without the
-    settling stage, then, only if a boundary problem did not settle, the one with it; the
-    result is the traced path's.
+    caches are on: by the settling policy :data:`~jaxgrasp.engine._settling.RETRY`, first
+    the one without the settling stage, then, only if a problem did not settle, the one
+    with it; the result is the traced path's.
     """
     _check_unbatched(grasp)
     if not _is_concrete(grasp):  # inside the caller's jit, vmap or grad
@@ -101,14 +94,13 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
 
     check_grasp_inputs(**grasp.to_numpy())
     leaves = jax.tree_util.tree_leaves(grasp)
-    inline = SETTLE_INLINE["evaluate"]
-    fn, _ = compiled_executable(grasp, options, settle=inline)
-    out = fn(temperature, *leaves)
-    if not inline and needs_settling(out[RESULT_FIELDS.index("boundary_status")],
-                                     out[RESULT_FIELDS.index("equilibrium_status")]):
-        fn, _ = compiled_executable(grasp, options, settle=True)
-        out = fn(temperature, *leaves)
-    return Evaluation(**dict(zip(RESULT_FIELDS, out)))
+
+    def run(settle: bool) -> dict:
+        fn, _ = compiled_executable(grasp, options, settle=settle)
+        return dict(zip(RESULT_FIELDS, fn(temperature, *leaves)))
+
+    # one grasp rarely needs the settling stage: RETRY spares it the stage (see _settling)
+    return Evaluation(**settle_then_retry(run(check_settle(RETRY)), lambda rows: run(True)))
 
 
 def evaluate_traced(grasp: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:

@@ -1,5 +1,6 @@
 """The compiled chunk evaluator (the pipeline's stages, each ``jit`` over the devices,
-memoised in the process and kept in the executable store) and the settling policy."""
+memoised in the process and kept in the executable store), by settling policy
+(:mod:`~jaxgrasp.engine._settling`)."""
 
 from __future__ import annotations
 
@@ -13,24 +14,14 @@ from jax.sharding import PartitionSpec as P
 from jaxgrasp.engine import _compile, _pipeline
 from jaxgrasp.engine import _stages as stages
 from jaxgrasp.engine._plan import ChunkPlan, batch_sharding
+from jaxgrasp.engine._settling import check_settle
 from jaxgrasp.engine._xla_options import COMPILER_OPTIONS, latency_options
 from jaxgrasp.model import NAMES
-from jaxgrasp.tolerance import FIELDS as RESULT_FIELDS, EvaluateOptions
+from jaxgrasp.tolerance import FIELDS as RESULT_FIELDS
+from jaxgrasp.tolerance import EvaluateOptions
 
-__all__ = ["SETTLE_INLINE", "grasp_fields", "over_devices", "compiled_evaluator", "chunk_evaluator",
+__all__ = ["grasp_fields", "over_devices", "compiled_evaluator", "chunk_evaluator",
            "release_chunk_evaluator"]
-
-SETTLE_INLINE = {"evaluate": False, "sweep": False, "batch": True}
-"""The settling policy, by entry point (:func:`jaxgrasp.evaluate`, :func:`jaxgrasp.sweep`,
-:func:`jaxgrasp.evaluate_batch`): whether every grasp's evaluation has the settling stage
-(:func:`~jaxgrasp.tolerance._settle.settle_stalled`) inline (``True``), or whether the
-grasps are evaluated without it and only those that
-:func:`~jaxgrasp.tolerance._settle.needs_settling` are evaluated again with it (``False``).
-Both give every grasp the same result. One grasp and the points of a grid rarely need the
-stage, so they are spared it; a dataset of varied grasps has some that need it in nearly
-every chunk, where evaluating them again would cost more than the stage inline, and the
-set compiles once."""
-
 
 def grasp_fields(masked: bool) -> tuple[str, ...]:
     """The :class:`~jaxgrasp.Grasp` fields a compiled chunk takes, in order: every field
@@ -100,7 +91,7 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
         _memo_key(options, n_contacts, chunk, devices, masked, settle),
         lambda: _staged(options, sharding, masked, settle),
         _chunk_spec(n_contacts, chunk, sharding, masked),
-        name="sweep_settled" if settle else "sweep",
+        name="chunk_settled" if settle else "chunk",
         what=f"the batch evaluator for chunks of {chunk} grasps of {n_contacts} contacts",
         store_key=(options, n_contacts, chunk, x64, masked, settle),
         devices=list(sharding.mesh.devices.flat),
@@ -109,19 +100,20 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
 
 
 def _memo_key(options: EvaluateOptions, n_contacts: int, chunk: int, devices: tuple, masked: bool, settle: bool):
-    return ("sweep", options, n_contacts, chunk, jax.config.jax_enable_x64, tuple(d.id for d in devices), masked,
+    return ("chunk", options, n_contacts, chunk, jax.config.jax_enable_x64, tuple(d.id for d in devices), masked,
             settle)
 
 
-def chunk_evaluator(entry: str, options: EvaluateOptions, n_contacts: int, plan: ChunkPlan, masked: bool):
-    """``(fn, compile seconds, settling)`` for the chunks of ``plan``, as
-    :data:`SETTLE_INLINE` has it for ``entry`` (``"sweep"`` or ``"batch"``): ``fn`` with
-    the settling stage inline, ``settling`` ``None``; or ``fn`` without it and
-    ``settling = (get, size)`` for :func:`~jaxgrasp.engine._run.run_chunks`, ``get()``
+def chunk_evaluator(settle: str, options: EvaluateOptions, n_contacts: int, plan: ChunkPlan, masked: bool):
+    """``(fn, compile seconds, settling)`` for the chunks of ``plan`` by the settling
+    policy ``settle`` (:mod:`~jaxgrasp.engine._settling`): for
+    :data:`~jaxgrasp.engine._settling.INLINE`, ``fn`` with the settling stage and
+    ``settling`` ``None``; for :data:`~jaxgrasp.engine._settling.RETRY`, ``fn`` without it
+    and ``settling = (get, size)`` for :func:`~jaxgrasp.engine._run.run_chunks`, ``get()``
     compiling (or loading) the evaluator with the stage for ``size`` grasps, one per
     device, when a chunk first needs it (the grasps that need it are few: a wider chunk
     would be padded with repeats that cost as much as they do)."""
-    inline = SETTLE_INLINE[entry]
+    inline = check_settle(settle)
     fn, seconds = compiled_evaluator(options, n_contacts, plan.chunk, plan.devices, masked, settle=inline)
     if inline:
         return fn, seconds, None
@@ -129,12 +121,12 @@ def chunk_evaluator(entry: str, options: EvaluateOptions, n_contacts: int, plan:
     return fn, seconds, (lambda: compiled_evaluator(options, n_contacts, size, plan.devices, masked)[0], size)
 
 
-def release_chunk_evaluator(entry: str, options: EvaluateOptions, n_contacts: int, plan: ChunkPlan,
+def release_chunk_evaluator(settle: str, options: EvaluateOptions, n_contacts: int, plan: ChunkPlan,
                             masked: bool) -> None:
     """Forget what :func:`chunk_evaluator` gave for these arguments in this process
     (:func:`~jaxgrasp.engine._compile.forget`): a batch in segments by contact count
     holds one program at a time, not one per segment."""
-    inline = SETTLE_INLINE[entry]
+    inline = check_settle(settle)
     _compile.forget(_memo_key(options, n_contacts, plan.chunk, plan.devices, masked, inline))
     if not inline:
         _compile.forget(_memo_key(options, n_contacts, plan.n_devices, plan.devices, masked, True))

@@ -9,32 +9,34 @@ import jax
 import numpy as np
 
 from jaxgrasp.engine._plan import ChunkPlan
-from jaxgrasp.tolerance import FIELDS as RESULT_FIELDS, needs_settling
+from jaxgrasp.engine._settling import settle_then_retry
+from jaxgrasp.tolerance import FIELDS as RESULT_FIELDS
 
 __all__ = ["run_chunks"]
 
 
 def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], names, plan: ChunkPlan,
                progress=None, on_chunk=None, keep=RESULT_FIELDS,
-               settling: tuple[Callable[[], Callable], int] | None = None) -> tuple[dict[str, np.ndarray], float]:
+               settling: tuple[Callable[[], Callable], int] | None = None) -> float:
     """Evaluate the ``plan.total`` grasps of ``plan`` a chunk at a time with the compiled
-    ``fn``; the ``(total, ...)`` result arrays named in ``keep`` (of the
-    :class:`~jaxgrasp.Evaluation` fields) and the run seconds.
+    ``fn``; the run seconds. Each chunk's results go to ``on_chunk``.
 
     ``chunk_fields(start)`` gives the fields (``names``) of grasps ``start .. start +
     chunk - 1``, each with a leading axis of ``chunk`` (past ``total``: any valid grasp,
     e.g. the last one repeated). ``on_chunk(start, stop, results)`` (first: a checkpoint
-    it writes is on disk before ``progress`` reports the chunk) and ``progress(stop,
-    total)`` are called after each chunk. No device buffer outlives its chunk.
+    it writes is on disk before ``progress`` reports the chunk; ``results`` the
+    :class:`~jaxgrasp.Evaluation` fields named in ``keep`` of grasps ``start .. stop - 1``,
+    leading axis ``stop - start``) and ``progress(stop, total)`` are called after each
+    chunk. No device buffer outlives its chunk.
 
     ``settling = (get, size)``, where given (``fn`` being the evaluator without the
-    settling stage, :func:`~jaxgrasp.engine._evaluator.chunk_evaluator`): the grasps of a
-    chunk that :func:`~jaxgrasp.tolerance._settle.needs_settling` are evaluated again by
-    ``get()``, ``size`` at a time, and take its results, so every grasp's result is the
-    same whatever chunk it is in. ``get`` is called (and compiles, its seconds counted as
-    run time) only once a chunk has such grasps.
+    settling stage, :func:`~jaxgrasp.engine._evaluator.chunk_evaluator`): the settling
+    policy :data:`~jaxgrasp.engine._settling.RETRY`, the grasps of a chunk that
+    :func:`~jaxgrasp.tolerance._settle.needs_settling` evaluated again by ``get()``,
+    ``size`` at a time, so every grasp's result is the same whatever chunk it is in.
+    ``get`` is called (and compiles, its seconds counted as run time) only once a chunk
+    has such grasps.
     """
-    outs: dict[str, np.ndarray] = {}  # host-side, filled chunk by chunk
     deal, undeal = _dealt(plan.chunk, plan.n_devices)
     sharding = plan.sharding
     want = tuple(dict.fromkeys((*keep, "boundary_status", "equilibrium_status"))) if settling else keep
@@ -50,34 +52,31 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
         if settling:
             res = _settled(res, fields, names, stop - start, settling, sharding)
         run_seconds += time.perf_counter() - t0
-        for f in keep:
-            if f not in outs:
-                outs[f] = np.empty((plan.total, *res[f].shape[1:]), dtype=res[f].dtype)
-            outs[f][start:stop] = res[f][: stop - start]
         if on_chunk is not None:
-            on_chunk(start, stop, outs)
+            on_chunk(start, stop, {f: res[f][: stop - start] for f in keep})
         if progress is not None:
             progress(stop, plan.total)
-    return outs, run_seconds
+    return run_seconds
 
 
 def _settled(res: dict, fields, names, count: int, settling, sharding) -> dict:
-    """A chunk's results ``res``, those of its first ``count`` grasps that need the
-    settling stage replaced by ``settling``'s evaluator's (``size`` at a time, padded by
-    repeats)."""
-    rows = np.flatnonzero(needs_settling(res["boundary_status"], res["equilibrium_status"])[:count])
-    if not len(rows):
-        return res
+    """A chunk's results ``res`` by the :data:`~jaxgrasp.engine._settling.RETRY` policy
+    (:func:`~jaxgrasp.engine._settling.settle_then_retry`): those of its first ``count``
+    grasps that need the settling stage evaluated again by ``settling``'s evaluator
+    (``size`` at a time, padded by repeats)."""
     get, size = settling
-    settle = get()
-    res = {f: np.array(a) for f, a in res.items()}  # writable copies
-    for first in range(0, rows.size, size):
-        sel = rows[first : first + size]
-        sub = [_put(fields[k][np.resize(sel, size)], sharding) for k in names]
-        again = dict(zip(RESULT_FIELDS, settle(*sub)))
-        for f in res:
-            res[f][sel] = _gather(again[f])[: sel.size]
-    return res
+
+    def again(rows: np.ndarray) -> dict[str, np.ndarray]:
+        settle = get()
+        parts = []
+        for first in range(0, rows.size, size):
+            sel = rows[first : first + size]
+            sub = [_put(fields[k][np.resize(sel, size)], sharding) for k in names]
+            out = dict(zip(RESULT_FIELDS, settle(*sub)))
+            parts.append({f: _gather(out[f])[: sel.size] for f in res})
+        return {f: np.concatenate([p[f] for p in parts]) for f in res}
+
+    return settle_then_retry(res, again, count)
 
 
 def _put(a: np.ndarray, sharding) -> jax.Array:

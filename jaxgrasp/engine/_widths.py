@@ -47,6 +47,7 @@ def widen(results: Mapping[str, np.ndarray], slots: np.ndarray, n_contacts: int)
     segment becomes the batch's ``slots[:, j]``; the batch's other contacts hold what an
     inactive one does (boundary energy ``+inf``, the equilibrium pose, status
     ``NO_START``, margins 1, KKT rows NaN, 0 steps); ``limiting_contact`` is renumbered.
+    Only the fields in ``results`` are laid out (a boundary pose needs its equilibrium's).
     """
     b, width = slots.shape
     if width == n_contacts and np.array_equal(slots, np.broadcast_to(np.arange(width), slots.shape)):
@@ -64,14 +65,18 @@ def widen(results: Mapping[str, np.ndarray], slots: np.ndarray, n_contacts: int)
             wide[rows, r, slots] = a[:, r]
         return wide
 
-    out["boundary_energy"] = per_contact("boundary_energy", np.inf)
-    out["boundary_status"] = per_contact("boundary_status", LaneStatus.NO_START)
+    fills = {"boundary_energy": np.inf, "boundary_status": LaneStatus.NO_START, "equilibrium_margins": 1.0}
+    for name, fill in fills.items():
+        if name in results:
+            out[name] = per_contact(name, fill)
     for name, pose in (("boundary_translation", "equilibrium_translation"),
                        ("boundary_rotation", "equilibrium_rotation")):
-        out[name] = per_contact(name, np.asarray(results[pose])[:, None, None, :])
-    out["equilibrium_margins"] = per_contact("equilibrium_margins", 1.0)
+        if name in results:
+            out[name] = per_contact(name, np.asarray(results[pose])[:, None, None, :])
     # kkt and steps: row 0 the equilibrium, row 1 + kind * N + contact a boundary problem
     for name, fill in (("kkt", np.nan), ("steps", 0)):
+        if name not in results:
+            continue
         a = np.asarray(results[name])
         wide = np.empty((b, 1 + 2 * n_contacts, *a.shape[2:]), dtype=a.dtype)
         wide[...] = fill
@@ -79,7 +84,8 @@ def widen(results: Mapping[str, np.ndarray], slots: np.ndarray, n_contacts: int)
         for kind in range(2):
             wide[rows, 1 + kind * n_contacts + slots] = a[:, 1 + kind * width : 1 + (kind + 1) * width]
         out[name] = wide
-    limit = np.asarray(results["limiting_contact"])
-    picked = np.take_along_axis(slots, np.clip(limit, 0, width - 1)[:, None], axis=1)[:, 0]
-    out["limiting_contact"] = np.where(limit >= 0, picked, limit).astype(limit.dtype)
+    if "limiting_contact" in results:
+        limit = np.asarray(results["limiting_contact"])
+        picked = np.take_along_axis(slots, np.clip(limit, 0, width - 1)[:, None], axis=1)[:, 0]
+        out["limiting_contact"] = np.where(limit >= 0, picked, limit).astype(limit.dtype)
     return out

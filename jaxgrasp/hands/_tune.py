@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.analysis import TuneStatus, run_search
-from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, evaluate_compiled
+from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, value_and_grad_builder
 from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp, _pose, contact_grasp, hand_grasp, material
 from jaxgrasp.model import DEFAULT_GRAVITY, GraspValueError
 from jaxgrasp.tolerance import EVALUATION_TREE, EvaluateOptions, GraspStatus
@@ -48,21 +48,20 @@ def _compiled(hand, options: EvaluateOptions, max_tilt: float):
     hand's content (:meth:`~jaxgrasp.Hand.digest`)."""
     j = hand.num_joints
 
-    def value(x, data):
+    def grasp_of(x, data):
         grasp, tilt, _ = contact_grasp(hand, x[:j], x[j:], data["object_pose"], data["surface"], data["material"], max_tilt)
-        ev = evaluate_compiled(grasp, jnp.float64(0.0), options)
-        v = jnp.where(jnp.isfinite(ev.value) & (jnp.sum(grasp.active) >= 2), ev.value, 0.0)
-        return v, (ev, tilt)
+        return grasp, tilt
+
+    value = value_and_grad_builder(grasp_of, options, counts=lambda grasp: jnp.sum(grasp.active) >= 2)
 
     def penalty(x, data):
         depth = hand.link_depths(x[:j], x[j:], data["object_pose"], data["surface"])
         return jnp.sum(jnp.maximum(depth, 0.0) ** 2) / PENETRATION_UNIT**2, jnp.max(depth)
 
     def core(x, data):
-        (v, (ev, tilt)), gv = jax.value_and_grad(value, has_aux=True)(x, data)
+        (v, (ev, tilt)), gv = value(x, data)
         (p, deepest), gp = jax.value_and_grad(penalty, has_aux=True)(x, data)
-        finite = lambda g: jnp.where(jnp.isfinite(g), g, 0.0)  # noqa: E731
-        return v, finite(gv), p, finite(gp), ev, deepest, tilt
+        return v, gv, p, jnp.where(jnp.isfinite(gp), gp, 0.0), ev, deepest, tilt
 
     leaf = jax.tree_util.tree_structure(0.0)
     out_tree = jax.tree_util.treedef_tuple((leaf,) * 4 + (EVALUATION_TREE, leaf, leaf))

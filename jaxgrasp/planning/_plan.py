@@ -9,7 +9,8 @@
    initial deformation drawn uniformly in rule 5's range;
 2. **keep** the candidates that keep every contact rule (:func:`jaxgrasp.surface.check_contacts`),
    drawing more rounds until ``samples`` are valid;
-3. **evaluate** them all in batches (:func:`jaxgrasp.evaluate_batch`);
+3. **evaluate** them all in batches (the engine's runner, in chunks of :data:`_CHUNK`:
+   :func:`~jaxgrasp.engine._batch.evaluate_in_chunks`);
 4. **refine** the best ``refine`` by gradient tuning of positions (sliding along the surface)
    and initial deformations (:func:`jaxgrasp.tune` of a :class:`~jaxgrasp.MeshGrasp`),
    keeping a tuned grasp only where it still keeps every rule and settles;
@@ -29,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.analysis import Uncertainty, epsilon, robust_batch, tune
-from jaxgrasp.engine import evaluate, evaluate_batch
+from jaxgrasp.engine import evaluate, evaluate_in_chunks
 from jaxgrasp.io import from_mesh, load_mesh
 from jaxgrasp.model import DEFAULT_GRAVITY, Grasp, GraspValueError
 from jaxgrasp.planning._progress import PlanProgress
@@ -371,14 +372,11 @@ def _grasps(setup: _Setup, pos, nrm, dr) -> Grasp:
 
 
 def _evaluate(setup: _Setup, pos, nrm, dr, progress) -> tuple[np.ndarray, np.ndarray]:
-    """``(values (B,) J, statuses (B,))`` of the candidates, in chunks of :data:`_CHUNK` (the
-    last one filled with copies of the first candidate), so that every plan of a finger
-    count runs one compiled evaluator, whatever its number of samples."""
-    b = len(pos)
-    pad = lambda a: np.concatenate([a, np.repeat(a[:1], -b % _CHUNK, axis=0)])  # noqa: E731
-    ev = evaluate_batch(_grasps(setup, pad(pos), pad(nrm), pad(dr)), chunk_size=_CHUNK,
-                        progress=_stage(progress, "evaluate"))
-    return np.asarray(ev.value)[:b], np.asarray(ev.status)[:b]
+    """``(values (B,) J, statuses (B,))`` of the candidates, in chunks of exactly
+    :data:`_CHUNK` (:func:`~jaxgrasp.engine._batch.evaluate_in_chunks`), so that every plan
+    of a finger count runs one compiled evaluator, whatever its number of samples."""
+    ev = evaluate_in_chunks(_grasps(setup, pos, nrm, dr), _CHUNK, progress=_stage(progress, "evaluate"))
+    return np.asarray(ev.value), np.asarray(ev.status)
 
 
 def _ranked(values, statuses) -> np.ndarray:
@@ -424,7 +422,9 @@ def _final(setup: _Setup, entries, top: int) -> dict:
     """The ``top`` best settled entries, rebuilt as their files load and evaluated again,
     best first, with their epsilon."""
     grasps = [_mesh_grasp(setup, p, n, d) for p, n, d, _ in entries]
-    # one at a time, as `jaxgrasp evaluate` of the grasp's file does: the very same numbers
+    # one at a time, as `jaxgrasp evaluate` of the grasp's file does, for its very numbers:
+    # the batch's may round apart from them (tests/engine/test_single_vs_batch.py bounds
+    # how far), and a refined grasp was never in a batch
     evs = [evaluate(g.grasp) for g in grasps]
     ev = jax.tree_util.tree_map(lambda *a: np.stack([np.asarray(x) for x in a]), *evs)
     values, statuses = np.asarray(ev.value), np.asarray(ev.status)

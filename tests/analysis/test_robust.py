@@ -1,9 +1,10 @@
 """Tests of :func:`jaxgrasp.robust` and :func:`jaxgrasp.robust_batch` (issue 39).
 
 Cheap by construction: every evaluation is of 2-contact grasps through the two programs
-the suite compiles anyway, :func:`jaxgrasp.evaluate` for 2 contacts (the nominal of one
-grasp) and :func:`jaxgrasp.evaluate_batch` for 2 contacts in chunks of 4 (the samples;
-``tests/tolerance/test_degenerate.py`` uses it too).
+the suite compiles anyway, :func:`jaxgrasp.evaluate` for 2 contacts (the friction
+threshold's bisection) and :func:`jaxgrasp.evaluate_batch` for 2 contacts in chunks of 4
+(the samples and the nominal grasps, one grasp too; ``tests/tolerance/test_degenerate.py``
+uses it too).
 
 The friction test has a closed answer: on the cube with a mass the grasp is stable
 exactly where the friction exceeds a threshold ``mu*`` (found here by bisection with
@@ -85,19 +86,20 @@ def test_doubling_the_samples_shrinks_the_standard_error_by_sqrt2(friction_runs)
 
 @pytest.mark.slow  # evaluates (the 2-contact programs)
 def test_zero_uncertainty_gives_the_nominal_evaluation():
-    # the samples are the nominal grasp bit for bit; they are evaluated by the batch
-    # executable and the nominal by evaluate's, two programs whose sums may round apart:
-    # the energies by about 1e-15 of themselves, the value (their difference, here a
-    # few thousandths of the equilibrium energy) by that much of the energy
+    # the samples are the nominal grasp bit for bit, and the nominal grasp (one grasp is a
+    # list of one) runs in its samples' program: the same numbers. evaluate's program may
+    # round apart from the batch's: the energies by about 1e-15 of themselves, the value
+    # (their difference, here a few thousandths of the equilibrium energy) by that much
+    # of the energy
     r = jaxgrasp.robust(_cube(), Uncertainty(), samples=4, seed=5, chunk_size=CHUNK)
     nominal = jaxgrasp.evaluate(_cube())
     rounding = 1e-13 * float(nominal.equilibrium_energy)
     assert r.nominal.status_name == nominal.status_name == "stable"
-    assert np.all(r.values == r.values[0]) and np.all(r.statuses == int(nominal.status))
+    assert np.all(r.values == float(r.nominal.value)) and np.all(r.statuses == int(nominal.status))
     np.testing.assert_allclose(r.values, float(nominal.value), rtol=0, atol=rounding)
     assert r.p_stable == 1.0 and r.p_stable_stderr == 0.0
-    assert r.value_mean == pytest.approx(float(nominal.value), rel=0, abs=rounding)
-    assert float(r.nominal.value) == float(nominal.value)
+    assert r.value_mean == float(r.nominal.value)
+    assert float(r.nominal.value) == pytest.approx(float(nominal.value), rel=0, abs=rounding)
 
 
 @pytest.mark.slow  # evaluates (the 2-contact programs)

@@ -238,7 +238,7 @@ def test_grid_points_evaluate_rejects_are_refused_before_compiling(monkeypatch, 
     ratio) hold at every grid point: a sweep that breaks one is refused in one line naming
     the grid point's axes and values, before anything is compiled (audit: ``sweep --mass
     1e10`` ran, ``--young-modulus 1e-300`` reported stable)."""
-    monkeypatch.setattr("jaxgrasp.analysis._sweep.chunk_evaluator", _must_not_compile)
+    monkeypatch.setattr("jaxgrasp.analysis._sweep.run_batch", _must_not_compile)
     with pytest.raises(GraspValueError, match=match) as info:
         sweep(cube(), **axes)
     assert "\n" not in str(info.value)

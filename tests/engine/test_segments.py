@@ -125,7 +125,7 @@ def padded_and_segmented():
         mp.setattr(batch_module, "plan_widths", lambda counts, platform: FORCED)
         segmented = evaluate_batch(grasps, chunk_size=2, on_chunk=lambda rows, res: chunks.append((rows, res)),
                                    progress=lambda done, total: reports.append((done, total)))
-    held = {key[2:4] + key[6:7] for key in _compile._MEMO if key[0] == "sweep"}  # (contacts, chunk, masked)
+    held = {key[2:4] + key[6:7] for key in _compile._MEMO if key[0] == "chunk"}  # (contacts, chunk, masked)
     return padded, segmented, chunks, reports, held
 
 
