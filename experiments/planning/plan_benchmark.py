@@ -56,7 +56,7 @@ def on_surface_error(result) -> float:
     g = result.best
     tri = np.asarray(g.mesh.triangles)
     pts = result.mesh_positions[0]
-    return max(float(np.linalg.norm(np.asarray(closest_on_triangles(p, tri)) - p, axis=1).min())
+    return max(float(np.linalg.norm(np.asarray(closest_on_triangles(p, tri, xp=np)) - p, axis=1).min())
                for p in pts)
 
 

@@ -7,13 +7,16 @@ the caller's trace (``jit``, ``vmap``, ``grad``), :func:`evaluate_batch` and
 :func:`plan_chunks`, in segments by contact count (:func:`plan_segments`, each at the
 width :func:`plan_widths` gives it). :func:`solve_problems` stops it at the solved problems.
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
 :func:`configure` chooses the engine's process-wide settings (CPU devices, the executable
 store, messages), else its first use does (:mod:`jaxgrasp.engine._setup`); long calls
 report on the ``"jaxgrasp"`` logger (:class:`ChunkProgress`, :mod:`jaxgrasp.engine._progress`).
+
+``__all__`` lists the names promised to users. The names imported below the comment
+"For jaxgrasp's other packages" are what the library's other packages use from here
+(they import from this face, never from its private modules); they are not in
+``__all__`` and not promised to users. The names imported below the comment "For the
+studies in experiments/" are the instruments the lab's scripts use (stages, internals);
+they are not in ``__all__`` and not promised to users either.
 """
 
 from jaxgrasp.engine._batch import evaluate_batch, evaluate_dataset
@@ -39,6 +42,15 @@ from jaxgrasp.engine._prefetch import prefetch
 from jaxgrasp.engine._runner import GraspSource, Stacked, plan_source, run_batch, start_progress
 from jaxgrasp.engine._settling import INLINE, RETRY
 from jaxgrasp.engine._store import enable_from_environment, log_lines_on_stderr
+
+# For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
+from jaxgrasp.engine._compile import clear_compiled
+from jaxgrasp.engine._evaluate import evaluate_batch_traced
+from jaxgrasp.engine._evaluator import compiled_evaluator, over_devices
+from jaxgrasp.engine._plan import COMPILE_CPU_SECONDS, batch_sharding, default_chunk_size, grasp_cpu_seconds
+from jaxgrasp.engine._stages import inputs_of
+from jaxgrasp.engine._store import executable_dir, set_executable_dir, stats
+from jaxgrasp.engine._xla_options import LATENCY_CPU_OPTIONS
 
 __all__ = [
     "evaluate",

@@ -181,7 +181,7 @@ def grasp_cpu_seconds(count: int, width: int) -> float:
     """Estimated CPU seconds of evaluating one grasp of ``count`` contacts in a program of
     ``width >= count`` contacts: ``(0.012 + 0.0011 count) * (width**2 + 43) / 92``,
     fitted to a random set's grasps of 2-7 contacts at their own width and padded to 7 on
-    two CPU cores (``experiments/padding_tax.py``). The first factor is the grasp's work
+    two CPU cores (``experiments/padding_and_segments/padding_tax.py``). The first factor is the grasp's work
     at width 7 (its 1 + 2 count programs share a work queue, so it grows slowly with the
     count), the second what a solver step costs at ``width`` against width 7."""
     return (0.012 + 0.0011 * count) * (width**2 + 43) / 92
@@ -205,13 +205,13 @@ def plan_widths(counts, platform: str = "cpu") -> dict[int, int]:
     set of 7, 11,400 of 6 contacts. The others are padded to the largest count, in one
     program with a contact mask. (A program for a group of counts, padded to the group's
     largest, would need a mask too: masked programs cost more per step, which the model
-    does not know; ``experiments/FINDINGS.md``.) On a platform not in
+    does not know; ``experiments/padding_and_segments/FINDINGS.md``.) On a platform not in
     :data:`WIDTH_PLATFORMS`, every count runs at the widest.
 
     The widths depend only on ``counts`` and ``platform``, so a run resumed, or split
     over processes, evaluates every grasp at the width a single run does (a grasp's
     value can differ with the width by rounding, relative to its equilibrium energy;
-    ``experiments/segment_plan.py`` compares the two).
+    ``experiments/padding_and_segments/segment_plan.py`` compares the two).
     """
     have = sorted(int(c) for c, n in dict(counts).items() if n > 0 and c > 0)
     if not have:

@@ -9,6 +9,9 @@ does on the ``"jaxgrasp"`` logger (:class:`PlanProgress`).
 "For jaxgrasp's other packages" are what the library's other packages use from here
 (they import from this face, never from its private modules); they are not in
 ``__all__`` and not promised to users.
+The names imported below the comment "For the studies in experiments/" are the
+instruments the lab's scripts use (stages, internals); they are not in ``__all__`` and not
+promised to users either.
 """
 
 from jaxgrasp.planning._plan import SAMPLERS, plan
@@ -17,5 +20,8 @@ from jaxgrasp.planning._result import PlanResult, PlanStatus
 
 # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
 from jaxgrasp.planning._plan import check_plan
+
+# For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
+from jaxgrasp.planning._plan import CHUNK, draw_valid, grasps_of, setup
 
 __all__ = ["plan", "PlanResult", "PlanStatus", "PlanProgress", "SAMPLERS"]

@@ -9,7 +9,7 @@
    initial deformation drawn uniformly in rule 5's range;
 2. **keep** the candidates that keep every contact rule (:func:`jaxgrasp.surface.check_contacts`),
    drawing more rounds until ``samples`` are valid;
-3. **evaluate** them all in batches (the engine's runner, in chunks of :data:`_CHUNK`:
+3. **evaluate** them all in batches (the engine's runner, in chunks of :data:`CHUNK`:
    :func:`~jaxgrasp.engine._batch.evaluate_in_chunks`);
 4. **refine** the best ``refine`` by gradient tuning of positions (sliding along the surface)
    and initial deformations (:func:`jaxgrasp.tune` of a :class:`~jaxgrasp.MeshGrasp`),
@@ -57,7 +57,7 @@ SAMPLERS = ("antipodal", "spread", "uniform")
 _ROUND = 512
 """Candidates drawn and checked per round."""
 
-_CHUNK = 64
+CHUNK = 64
 """Candidates per compiled evaluation call."""
 
 _MAX_DRAWS = 100
@@ -137,7 +137,7 @@ def _planned(checked: "PlanInputs", fingers, samples, top, refine, seed, tune_ma
     ``t0`` the :func:`time.perf_counter` at which the plan began."""
     setup, sampler, rules = checked.setup, checked.sampler, checked.rules
     rng = np.random.default_rng(seed)
-    pos, nrm, dr, sampled, failures = _draw_valid(setup, fingers, samples, sampler, rules, rng, progress)
+    pos, nrm, dr, sampled, failures = draw_valid(setup, fingers, samples, sampler, rules, rng, progress)
     if len(pos) == 0:
         return _empty(PlanStatus.NO_VALID, sampled, failures, seed, t0, setup, fingers, sampler, rules)
     values, statuses = _evaluate(setup, pos, nrm, dr, progress)
@@ -217,9 +217,9 @@ def check_plan(
     rules = ContactRules() if rules is None else rules
     if not isinstance(rules, ContactRules):
         raise GraspValueError(f"plan: rules must be a ContactRules or None, got {type(rules).__name__}")
-    setup = _setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force)
-    _dr_range(setup, rules)
-    return PlanInputs(sampler, rules, setup)
+    built = setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force)
+    _dr_range(built, rules)
+    return PlanInputs(sampler, rules, built)
 
 
 def _checked_args(fingers, samples, top, refine, seed, sampler) -> str:
@@ -238,7 +238,7 @@ def _checked_args(fingers, samples, top, refine, seed, sampler) -> str:
     return sampler
 
 
-def _setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force) -> _Setup:
+def setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force) -> _Setup:
     """The checked object and fingertips."""
     import os
 
@@ -331,7 +331,7 @@ def _dr_range(setup: _Setup, rules: ContactRules) -> tuple[float, float]:
     return lo, hi
 
 
-def _draw_valid(setup: _Setup, fingers, samples, sampler, rules, rng, progress):
+def draw_valid(setup: _Setup, fingers, samples, sampler, rules, rng, progress):
     """Rounds of candidates until ``samples`` keep every rule (or ``_MAX_DRAWS`` per sample):
     ``(positions, normals, dr, drawn, failures by rule)`` of the first ``samples`` valid."""
     keep: list = []
@@ -358,7 +358,7 @@ def _draw_valid(setup: _Setup, fingers, samples, sampler, rules, rng, progress):
 # ---------------------------------------------------------------------- evaluate, refine, rank
 
 
-def _grasps(setup: _Setup, pos, nrm, dr) -> Grasp:
+def grasps_of(setup: _Setup, pos, nrm, dr) -> Grasp:
     """The batched grasp ``(B, N, ...)`` of candidates, in the centre-of-mass frame."""
     b, n = dr.shape
     full = lambda v: jnp.full((b, n), v, jnp.float64)  # noqa: E731
@@ -373,9 +373,9 @@ def _grasps(setup: _Setup, pos, nrm, dr) -> Grasp:
 
 def _evaluate(setup: _Setup, pos, nrm, dr, progress) -> tuple[np.ndarray, np.ndarray]:
     """``(values (B,) J, statuses (B,))`` of the candidates, in chunks of exactly
-    :data:`_CHUNK` (:func:`~jaxgrasp.engine._batch.evaluate_in_chunks`), so that every plan
+    :data:`CHUNK` (:func:`~jaxgrasp.engine._batch.evaluate_in_chunks`), so that every plan
     of a finger count runs one compiled evaluator, whatever its number of samples."""
-    ev = evaluate_in_chunks(_grasps(setup, pos, nrm, dr), _CHUNK, progress=_stage(progress, "evaluate"))
+    ev = evaluate_in_chunks(grasps_of(setup, pos, nrm, dr), CHUNK, progress=_stage(progress, "evaluate"))
     return np.asarray(ev.value), np.asarray(ev.status)
 
 

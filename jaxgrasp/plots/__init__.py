@@ -6,6 +6,9 @@ iterations of a tuning.
 "For jaxgrasp's other packages" are what the library's other packages use from here
 (they import from this face, never from its private modules); they are not in
 ``__all__`` and not promised to users.
+The names imported below the comment "For the studies in experiments/" are the
+instruments the lab's scripts use (stages, internals); they are not in ``__all__`` and not
+promised to users either.
 """
 
 from jaxgrasp.plots._plots import draw_scene, plot_grasp, plot_max, plot_max_over, plot_ranking, plot_sweep, save_figure
@@ -15,6 +18,9 @@ from jaxgrasp.plots._tune_plot import plot_history
 
 # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
 from jaxgrasp.plots._trials_plot import plot_trials
+
+# For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
+from jaxgrasp.plots._plots import new_figure
 
 __all__ = [
     "plot_sweep",

@@ -8,6 +8,9 @@ work queue. Its statuses are :class:`LaneStatus` (a :class:`jaxgrasp.base.Coded`
 "For jaxgrasp's other packages" are what the library's other packages use from here
 (they import from this face, never from its private modules); they are not in
 ``__all__`` and not promised to users.
+The names imported below the comment "For the studies in experiments/" are the
+instruments the lab's scripts use (stages, internals); they are not in ``__all__`` and not
+promised to users either.
 """
 
 from jaxgrasp.solver._lanes import Held, solve_lane_batches, solve_lanes
@@ -18,6 +21,25 @@ from jaxgrasp.solver._status import LaneStatus
 from jaxgrasp.solver._dense import eigh as serial_eigh, solve as dense_solve
 from jaxgrasp.solver._rows import over_rows, put_rows
 from jaxgrasp.solver._solver import kkt_tol
+
+# For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
+from jaxgrasp.solver._direction import eigen_direction, ldl_direction
+from jaxgrasp.solver._solver import (
+    as_problem,
+    augmented_lagrangian,
+    first_order,
+    init,
+    initial_multiplier,
+    lagrangian_hessian,
+    line_search,
+    merit,
+    penalty_terms,
+    phi_hessian,
+    propose,
+    step,
+    tolerances,
+    violation_slope,
+)
 
 __all__ = [
     "Problem",

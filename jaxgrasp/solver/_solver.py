@@ -100,7 +100,7 @@ class SolverOptions:
         rho0: initial penalty. At 1 rather than 10 the first wave of a boundary
             problem's starts settles more problems and converging lanes take fewer steps;
             infeasible lanes take a few more, started a decade further from the penalty
-            that shows the violation's floor (``experiments/initial_penalty.py``, the
+            that shows the violation's floor (``experiments/solver_steps/initial_penalty.py``, the
             benchmark's mixed set). Larger values stiffen phi and lengthen every lane.
         rho_growth: factor by which the penalty grows when the violation stalls (more
             where ``stall_growth_max`` allows, below).
@@ -214,7 +214,7 @@ class SolverState:
     complementarity: Any
 
 
-def _penalty_terms(gx, lam, nu, rho, eq_mask):
+def penalty_terms(gx, lam, nu, rho, eq_mask):
     """``(h, shifted, weights)`` of phi at constraint values ``gx`` ``(m,)``: the equality
     ``h``, ``shifted = max(0, lam - rho g)`` over the inequalities (0 at the equality) and
     ``weights = d phi / d g`` ``(m,)`` (``nu + rho h`` at the equality, ``-shifted``
@@ -227,7 +227,7 @@ def _penalty_terms(gx, lam, nu, rho, eq_mask):
 
 def _phi_of(fx, gx, lam, nu, rho, eq_mask):
     """phi from the objective ``fx`` ``()`` and the constraints ``gx`` ``(m,)``."""
-    h, shifted, _ = _penalty_terms(gx, lam, nu, rho, eq_mask)
+    h, shifted, _ = penalty_terms(gx, lam, nu, rho, eq_mask)
     return fx + nu * h + 0.5 * rho * h * h + jnp.sum(shifted**2 - lam**2) / (2.0 * rho)
 
 
@@ -285,7 +285,7 @@ def as_problem(problem) -> Problem:
     return problem if isinstance(problem, Problem) else Problem(problem)
 
 
-def _first_order(problem: Problem, x) -> FirstOrder:
+def first_order(problem: Problem, x) -> FirstOrder:
     if problem.first_order is not None:
         return problem.first_order(x)
     fx, gx = problem.fg(x)
@@ -293,7 +293,7 @@ def _first_order(problem: Problem, x) -> FirstOrder:
     return FirstOrder(fx, gx, grad_f, jac)
 
 
-def _lagrangian_hessian(problem: Problem, d: FirstOrder, x, weights, gauss_newton=None):
+def lagrangian_hessian(problem: Problem, d: FirstOrder, x, weights, gauss_newton=None):
     """``(n, n)`` Hessian of ``f + weights . g`` at ``x`` (weights held fixed), plus
     ``J^T diag(gauss_newton) J`` where ``gauss_newton`` ``(m,)`` is given (``J = d.jac``)."""
     weights = jax.lax.stop_gradient(weights)
@@ -352,18 +352,18 @@ def kkt_tol(dtype, o: SolverOptions) -> float:
     return max(o.tol, 1e3 * float(jnp.finfo(dtype).eps))
 
 
-def _tolerances(dtype, o: SolverOptions):
+def tolerances(dtype, o: SolverOptions):
     """``(tol, infeasible_tol, rounding)`` for ``dtype``: the options' values, raised to
     what the precision can reach (float32: tol ~1.2e-4, infeasible_tol ~1.2e-3)."""
     eps = float(jnp.finfo(dtype).eps)
     return kkt_tol(dtype, o), max(o.infeasible_tol, 1e4 * eps), 100.0 * eps
 
 
-def _phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
+def phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
     """``(n, n)`` exact Hessian of phi at ``s.x``: ``hess(f + w . g)`` with the weights
     ``w = d phi / d g`` held fixed, plus ``rho J^T D J`` with ``D`` selecting the equality
     and the inequalities whose shifted multiplier is positive (where phi's penalty is
-    quadratic in ``g``), both from the problem's :func:`_lagrangian_hessian`. This equals
+    quadratic in ``g``), both from the problem's :func:`lagrangian_hessian`. This equals
     ``jax.hessian`` of phi (to rounding) with a smaller traced graph and less work.
 
     The problem forms the second term with the first: a structured problem folds it into
@@ -371,9 +371,9 @@ def _phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
     block). Formed here as a product of the whole ``(m, n)`` Jacobian, XLA's CPU backend
     fused the rows' mask into that product and, at some row counts (five contacts),
     recomputed it for every entry of the ``n x n`` result."""
-    _, shifted, weights = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
+    _, shifted, weights = penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
     quadratic = ((s.eq_mask > 0) | (shifted > 0)).astype(d.jac.dtype)
-    return _lagrangian_hessian(problem, d, s.x, weights, s.rho * quadratic)
+    return lagrangian_hessian(problem, d, s.x, weights, s.rho * quadratic)
 
 
 def _newton_direction(hmat, gphi, needed, o: SolverOptions):
@@ -425,7 +425,7 @@ def line_search(merit_of, trials: Trial, o: SolverOptions):
     feasible lane whose Newton direction crosses nearly active boundaries it does not yet
     penalise lowers its merit only by a very short step, while a lane far from
     feasibility that cannot lower its merit is left to the infeasibility test."""
-    tol, _, rounding = _tolerances(trials.p.dtype, o)
+    tol, _, rounding = tolerances(trials.p.dtype, o)
     return ladder_search(merit_of, trials.state.x, trials.p, trials.phi0, trials.slope, trials.newton,
                          o.line_search_steps, rounding, deeper=trials.state.feasibility <= tol)
 
@@ -436,14 +436,14 @@ def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, floor, o: Solv
     before it: converged (stationarity within :func:`_stationarity_tol` of the rounding
     ``floor``, feasibility and complementarity within tol), infeasible, or not converged
     (yet)."""
-    tol, infeasible_tol, _ = _tolerances(s.x.dtype, o)
+    tol, infeasible_tol, _ = tolerances(s.x.dtype, o)
     converged = (stat <= _stationarity_tol(s, floor, o)) & (viol <= tol) & (comp <= tol)
     at_max = s.rho >= o.rho_max
     # Infeasible: the violation stays above infeasible_tol at a point where the
     # violation measure v = |h|^2/2 + sum min(g_i, 0)^2/2 is stationary (a local
     # minimiser of the violation, which no penalty can push further), or it stalls at
     # the largest penalty. grad v = J^T r, r the violated part of g.
-    stationary_violation = _violation_slope(s, d) <= o.infeasible_stationarity * viol
+    stationary_violation = violation_slope(s, d) <= o.infeasible_stationarity * viol
     infeasible = (viol > infeasible_tol) & (
         stationary_violation | (at_max & (viol >= 0.5 * s.prev_viol))
     )
@@ -454,7 +454,7 @@ def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, floor, o: Solv
     )
 
 
-def _violation_slope(s: SolverState, d: FirstOrder):
+def violation_slope(s: SolverState, d: FirstOrder):
     """``()`` ``|grad v|_inf`` at ``s.x`` (``d``: the problem there), ``v = |h|^2/2 + sum
     min(g_i, 0)^2/2`` the violation measure: ``grad v = J^T r``, ``r`` the violated part of
     ``g``."""
@@ -475,7 +475,7 @@ def _penalty_growth(s: SolverState, d: FirstOrder, viol, o: SolverOptions):
     ``stall_growth_max``) skips those solves. The gate (far, stalled, and a ratio already
     small) keeps lanes that end converged on their usual path: where they stall far from
     feasibility the ratio is of order one."""
-    ratio = _violation_slope(s, d) / jnp.maximum(viol, 1e-300)
+    ratio = violation_slope(s, d) / jnp.maximum(viol, 1e-300)
     predicted = ratio / (PREDICT_MARGIN * o.infeasible_stationarity)
     near = (viol > FAR_VIOLATION) & (ratio <= NEAR_STATIONARY)
     return jnp.where(near, jnp.clip(predicted, o.rho_growth, max(o.stall_growth_max, o.rho_growth)), o.rho_growth)
@@ -529,7 +529,7 @@ def _inner_done(s: SolverState, d: FirstOrder, floor, o: SolverOptions):
     """``(gphi, done)``: the ``(n,)`` gradient of phi at ``s.x`` (``d``: the problem there;
     ``floor``: :func:`_rounding_floor`) and whether the inner solve is done (``()`` bool:
     stationary enough, or ``max_inner`` Newton steps taken)."""
-    _, _, weights = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
+    _, _, weights = penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
     gphi = d.grad_f + contract("mi,m->i", d.jac, weights)
     return gphi, (jnp.max(jnp.abs(gphi)) <= _inner_tol(s, floor, o)) | (s.inner >= o.max_inner)
 
@@ -569,7 +569,7 @@ def _rounding_floor(s: SolverState, d: FirstOrder):
     budget in others (the test ``test_boundaries_through_the_equilibrium`` holds it).
     Computed once per loop step, from the multipliers before its update (the rows where
     phi is quadratic barely change in an update)."""
-    _, shifted, _ = _penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
+    _, shifted, _ = penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
     quadratic = (s.eq_mask > 0) | (shifted > 0)
     a = jnp.abs(d.jac)
     u = ROUNDING_ULPS * float(jnp.finfo(s.x.dtype).eps) * jnp.abs(s.x)
@@ -581,11 +581,11 @@ def _stationarity_tol(s: SolverState, floor, o: SolverOptions):
     or, where phi is so stiff that its gradient at the floating-point point nearest its
     minimiser cannot reach tol, that gradient's rounding floor ``s.rho * floor``
     (:func:`_rounding_floor`), at most :data:`MAX_STATIONARITY_TOL` tol."""
-    tol, _, _ = _tolerances(s.x.dtype, o)
+    tol, _, _ = tolerances(s.x.dtype, o)
     return jnp.clip(s.rho * floor, tol, MAX_STATIONARITY_TOL * tol)
 
 
-def _initial_multiplier(s: SolverState, d: FirstOrder) -> SolverState:
+def initial_multiplier(s: SolverState, d: FirstOrder) -> SolverState:
     """``s`` with a ``NaN`` equality multiplier before the first step (``nu0`` NaN in
     :func:`init`) replaced by its least-squares estimate at ``s.x``: the ``nu`` that best
     solves ``grad f + nu grad h = 0`` (``d``: the problem there; 0 without an equality)."""
@@ -602,11 +602,11 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
     """A lane's loop step up to its line search: a multiplier update where the inner solve
     is done, then, where the (updated) inner solve is not, the Newton direction on phi.
 
-    Stages, in order: :func:`_first_order` (the problem and its Jacobian at ``s.x``,
+    Stages, in order: :func:`first_order` (the problem and its Jacobian at ``s.x``,
     shared by every later stage: the update does not move ``x``);
-    :func:`_initial_multiplier` (at the first step); :func:`_rounding_floor`; :func:`_inner_done`;
+    :func:`initial_multiplier` (at the first step); :func:`_rounding_floor`; :func:`_inner_done`;
     :func:`_multiplier_update` (status from :func:`_lane_status`); :func:`_inner_done`
-    again; :func:`_phi_hessian` and :func:`_newton_direction`.
+    again; :func:`phi_hessian` and :func:`_newton_direction`.
     """
     # A multiplier update, where the inner solve is done, then a Newton step where the
     # (updated) inner solve is not: the sequence of updates and the step count of a lane
@@ -614,8 +614,8 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
     # computed for every lane) a lane no longer spends a whole loop step on an update.
     problem = as_problem(problem)
     is_running = running(s, o)
-    d = _first_order(problem, s.x)
-    s = _initial_multiplier(s, d)
+    d = first_order(problem, s.x)
+    s = initial_multiplier(s, d)
     floor = _rounding_floor(s, d)
     gphi, inner_done = _inner_done(s, d, floor, o)
     update = is_running & inner_done
@@ -628,7 +628,7 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
     # said "not done" and second "done" took neither and stepped no more, its queue never
     # ending (a 7-contact grasp of the 100k benchmark set hung `jaxgrasp batch`).
     newton = is_running & running(s1, o) & (~inner_done1 | ~update)
-    p = _newton_direction(_phi_hessian(problem, s1, d), gphi1, newton, o)
+    p = _newton_direction(phi_hessian(problem, s1, d), gphi1, newton, o)
     phi0 = _phi_of(d.fx, d.gx, s1.lam, s1.nu, s1.rho, s1.eq_mask)
     return Trial(state=s1, newton=newton, p=p, phi0=phi0, slope=contract("i,i->", gphi1, p), fx=d.fx)
 

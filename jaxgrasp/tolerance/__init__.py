@@ -10,6 +10,9 @@ it over many grasps, compiled and sharded, is :mod:`jaxgrasp.engine`'s job.
 "For jaxgrasp's other packages" are what the library's other packages use from here
 (they import from this face, never from its private modules); they are not in
 ``__all__`` and not promised to users.
+The names imported below the comment "For the studies in experiments/" are the
+instruments the lab's scripts use (stages, internals); they are not in ``__all__`` and not
+promised to users either.
 """
 
 from jaxgrasp.tolerance._envelope import envelope_energy, soft_minimum
@@ -26,6 +29,10 @@ from jaxgrasp.tolerance._settle import needs_settling
 from jaxgrasp.tolerance._stages import depend_on, finish_problems, settled_equilibrium, solve_stage, unsolved
 from jaxgrasp.tolerance._starts import LaneStarts, boundary_starts, equilibrium_starts
 from jaxgrasp.tolerance._verdict import split_temperature
+
+# For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
+from jaxgrasp.tolerance._problems import constraints, lane_problem, objective, objective_and_constraints, problem_data
+from jaxgrasp.tolerance._stages import SAME_POINT, first_wave_lanes, rest_needed
 
 __all__ = [
     "EvaluateOptions",

@@ -43,7 +43,7 @@ class EvaluateOptions:
             ``VALUE_MARGIN`` (30) times the grasp's least (the boundaries that could set
             the value). Lanes left out carry ``LaneStatus.NO_START``. ``None`` runs
             every start at once. Measured on the benchmark's mixed set in
-            ``experiments/first_wave.py``.
+            ``experiments/first_wave/first_wave.py``.
         smooth_min_temperature: ``None`` (default) for the paper's hard minimum over
             boundaries. A temperature ``T > 0`` in J replaces it by the soft minimum
 

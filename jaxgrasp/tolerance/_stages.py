@@ -154,7 +154,7 @@ def rest_needed(status, objective, first, num_starts: int, u0, at_eq=None):
     Why two: on the benchmark's mixed set every boundary minimum that some start reached
     was reached by at least four of the twenty, and in its stable grasps no problem that
     the first wave settled had a lower minimum or a feasible point among its other starts
-    (``experiments/first_wave.py``). In its unstable grasps (value 0, where no boundary
+    (``experiments/first_wave/first_wave.py``). In its unstable grasps (value 0, where no boundary
     but one at ``u0`` can set it) 11 of the 2821 settled problems had."""
     agree, near = first_wave_verdict(status, objective, first, num_starts, u0, at_eq)
     return jnp.repeat(~(agree & ~near), num_starts, axis=-1)

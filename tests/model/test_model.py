@@ -589,8 +589,8 @@ def _program_derivatives(data, z, weights, gauss_newton):
     from jaxgrasp.solver import _solver as S
 
     def both(problem):
-        d = S._first_order(problem, z)
-        return d.fx, d.gx, d.grad_f, d.jac, S._lagrangian_hessian(problem, d, z, weights, gauss_newton)
+        d = S.first_order(problem, z)
+        return d.fx, d.gx, d.grad_f, d.jac, S.lagrangian_hessian(problem, d, z, weights, gauss_newton)
 
     return both(P.lane_problem(data)), both(S.Problem(lambda z: P.objective_and_constraints(z, data)))
 
@@ -625,7 +625,7 @@ def _phi_hessians(data, z, lam, nu, rho, eq_mask):
     s = S.init(z, eq_mask, nu, True, S.SolverOptions())
     s = dataclasses.replace(s, lam=lam, rho=rho)
     phi = lambda z: S.augmented_lagrangian(problem.fg, z, lam, nu, rho, eq_mask)  # noqa: E731
-    return S._phi_hessian(problem, s, S._first_order(problem, z)), jax.hessian(phi)(z)
+    return S.phi_hessian(problem, s, S.first_order(problem, z)), jax.hessian(phi)(z)
 
 
 @pytest.mark.slow  # compiles autodiff of the model
