@@ -21,6 +21,7 @@ every page is in the site's navigation.
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import logging
 import os
 import re
@@ -151,6 +152,54 @@ def test_site_uses_material_and_mkdocstrings_strictly():
     config = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
     assert "name: material" in config and "- mkdocstrings:" in config and "strict: true" in config
 
+
+# Fields whose type cannot be named where they are held: trimesh is imported when a mesh is
+# used (not by `import jaxgrasp`); Hand's module imports the one HandGrasp lives in.
+UNTYPED_FIELDS = {"MeshGrasp.mesh", "HandGrasp.mesh", "HandGrasp.hand"}
+
+
+def test_api_reference_attributes_have_real_types():
+    # the Attributes tables show a field's annotation: ``Any`` told a reader nothing
+    text = (DOCS / "api.md").read_text(encoding="utf-8")
+    untyped = set()
+    for path in re.findall(r"^::: (jaxgrasp(?:\.\w+)+)\s*$", text, flags=re.MULTILINE):
+        module, _, name = path.rpartition(".")
+        obj = getattr(importlib.import_module(module), name)
+        if isinstance(obj, type):
+            untyped |= {f"{obj.__name__}.{field}" for field, annotation in vars(obj).get("__annotations__", {}).items()
+                        if annotation in ("Any", "typing.Any")}
+    assert untyped == UNTYPED_FIELDS
+
+
+# A Sphinx role (:func:`x`) is text to mkdocstrings: the page shows ":func:" before the name's
+# code span. Cross-references are written in autorefs' syntax, [`x`][jaxgrasp.x].
+LITERAL_ROLE = re.compile(r":(?:py:)?(?:func|meth|class|mod|attr|data|exc|obj|const|ref|term|doc):(?=`|<code)")
+
+
+def literal_roles(html: str) -> list[str]:
+    """The Sphinx roles a built page shows as text, each with the text around it."""
+    return [html[max(m.start() - 40, 0) : m.end() + 40] for m in LITERAL_ROLE.finditer(html)]
+
+
+def test_literal_roles_finds_roles_as_markdown_renders_them():
+    html = '<p>see :func:<code>evaluate</code> and :py:class:`Grasp`; <a href="#x"><code>plan</code></a>: done</p>'
+    found = literal_roles(html)
+    assert len(found) == 2 and ":func:<code>evaluate" in found[0] and ":py:class:`Grasp" in found[1]
+    assert literal_roles('<p>ratio 1:2, <code>a:b</code>, "func:" in text</p>') == []
+
+
+@pytest.mark.slow
+def test_site_builds_strictly_with_no_literal_roles(tmp_path):
+    pytest.importorskip("mkdocs", reason="the docs extra: pip install -e '.[docs]'")
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    pages = {p.relative_to(tmp_path).as_posix(): p.read_text(encoding="utf-8") for p in tmp_path.rglob("*.html")}
+    roles = {name: found for name, html in pages.items() if (found := literal_roles(html))}
+    assert roles == {}, f"Sphinx roles shown as text (write [`name`][jaxgrasp.name]): {roles}"
+    # the docstrings' cross-references are links between the API reference's entries (the
+    # type annotations alone make 75; with the docstrings' roles as text the page had no more)
+    assert pages["api/index.html"].count('class="autorefs autorefs-internal"') >= 150
 
 # ----------------------------------------------------------------------------- running the blocks
 @pytest.fixture

@@ -38,7 +38,6 @@ edge lies (``t1_i``), so a rotated grasp agrees to about ``1 - cos(pi / cone_edg
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
 
 import numpy as np
 
@@ -66,9 +65,9 @@ class EpsilonResult:
         torsion: whether each contact also carries its torsion (soft fingers).
     """
 
-    value: Any
-    force_closure: Any
-    torque_scale: Any
+    value: np.ndarray
+    force_closure: np.ndarray
+    torque_scale: np.ndarray
     cone_edges: int
     torsion: bool
 

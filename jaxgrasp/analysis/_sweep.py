@@ -120,11 +120,11 @@ class SweepResult(SummaryNames):
     """
 
     axes: dict
-    value: Any
-    status: Any
-    limiting_kind: Any
-    limiting_contact: Any
-    equilibrium_energy: Any
+    value: np.ndarray
+    status: np.ndarray
+    limiting_kind: np.ndarray
+    limiting_contact: np.ndarray
+    equilibrium_energy: np.ndarray
     compile_seconds: float = 0.0
     run_seconds: float = 0.0
     devices: int = 1

@@ -186,7 +186,7 @@ class TuneResult:
     message: str
     start_value: float
     clipped: tuple = ()
-    mesh_grasp: Any = None
+    mesh_grasp: MeshGrasp | None = None
 
     @property
     def converged(self) -> bool:

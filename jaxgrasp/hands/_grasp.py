@@ -58,12 +58,12 @@ class Material:
         center_of_mass: ``(3,)`` m, mesh frame.
     """
 
-    young_modulus: Any
-    friction: Any
-    max_force: Any
-    mass: Any
-    gravity: Any
-    center_of_mass: Any
+    young_modulus: jax.Array
+    friction: jax.Array
+    max_force: jax.Array
+    mass: jax.Array
+    gravity: jax.Array
+    center_of_mass: jax.Array
 
 
 def material(num_fingertips: int, mesh, young_modulus, friction, max_force, mass=None, density=None,
@@ -145,14 +145,14 @@ class HandGrasp:
     """
 
     grasp: Grasp
-    active: Any
-    tilt: Any
-    centers: Any
+    active: jax.Array
+    tilt: jax.Array
+    centers: jax.Array
     mesh: Any
-    center_of_mass: Any
-    object_pose: Any
-    qpos: Any
-    wrist: Any
+    center_of_mass: jax.Array
+    object_pose: jax.Array
+    qpos: jax.Array
+    wrist: jax.Array
     hand: Any
     status: str
 

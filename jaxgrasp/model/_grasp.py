@@ -13,7 +13,6 @@ contact surface along the normal.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -62,16 +61,16 @@ class Grasp:
     Any field may carry extra leading batch axes for ``jax.vmap``.
     """
 
-    positions: Any
-    normals: Any
-    initial_deformation: Any
-    radius: Any
-    young_modulus: Any
-    friction: Any
-    max_force: Any
-    mass: Any
-    gravity: Any
-    active: Any = None
+    positions: jax.Array | np.ndarray
+    normals: jax.Array | np.ndarray
+    initial_deformation: jax.Array | np.ndarray
+    radius: jax.Array | np.ndarray
+    young_modulus: jax.Array | np.ndarray
+    friction: jax.Array | np.ndarray
+    max_force: jax.Array | np.ndarray
+    mass: jax.Array | np.ndarray
+    gravity: jax.Array | np.ndarray
+    active: jax.Array | np.ndarray | None = None
 
     @property
     def num_contacts(self) -> int:

@@ -6,7 +6,6 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
-from typing import Any
 
 import numpy as np
 
@@ -74,15 +73,15 @@ class Trial:
     max_rotation_rad: float
     slipped_contact: int | None
     slip_time_s: float | None
-    time_s: Any
-    displacement_m: Any
-    rotation_rad: Any
-    max_sliding_m: Any
+    time_s: np.ndarray
+    displacement_m: np.ndarray
+    rotation_rad: np.ndarray
+    max_sliding_m: np.ndarray
     axis: str | None = None
     scale: float | None = None
     direction: str | None = None
     kinetic_energy_J: float | None = None
-    initial_velocity: Any = None
+    initial_velocity: np.ndarray | None = None
 
     @property
     def label(self) -> str:
@@ -141,8 +140,8 @@ class SimulationResult:
     hold: Trial | None
     six_axis: tuple
     kicks: tuple
-    settled_normal_force_N: Any
-    model_normal_force_N: Any
+    settled_normal_force_N: np.ndarray
+    model_normal_force_N: np.ndarray
     parameters: dict
 
     @property

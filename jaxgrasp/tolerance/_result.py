@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
 
 import jax
 import numpy as np
@@ -82,21 +81,21 @@ class Evaluation:
             equilibrium lies on: its minimiser is the equilibrium, not solved again).
     """
 
-    value: Any
-    status: Any
-    limiting_kind: Any
-    limiting_contact: Any
-    equilibrium_energy: Any
-    equilibrium_translation: Any
-    equilibrium_rotation: Any
-    boundary_energy: Any
-    boundary_translation: Any
-    boundary_rotation: Any
-    boundary_status: Any
-    equilibrium_status: Any
-    equilibrium_margins: Any
-    kkt: Any
-    steps: Any
+    value: jax.Array | np.ndarray
+    status: jax.Array | np.ndarray
+    limiting_kind: jax.Array | np.ndarray
+    limiting_contact: jax.Array | np.ndarray
+    equilibrium_energy: jax.Array | np.ndarray
+    equilibrium_translation: jax.Array | np.ndarray
+    equilibrium_rotation: jax.Array | np.ndarray
+    boundary_energy: jax.Array | np.ndarray
+    boundary_translation: jax.Array | np.ndarray
+    boundary_rotation: jax.Array | np.ndarray
+    boundary_status: jax.Array | np.ndarray
+    equilibrium_status: jax.Array | np.ndarray
+    equilibrium_margins: jax.Array | np.ndarray
+    kkt: jax.Array | np.ndarray
+    steps: jax.Array | np.ndarray
 
     @property
     def status_name(self) -> str:
