@@ -3,21 +3,21 @@
 The names here (``jaxgrasp.__all__``) are the public API. The implementation lives in
 packages, each importing only from those before it in this list:
 
-* :mod:`jaxgrasp.base`: what the solver and the model share: named integer codes, contractions;
-* :mod:`jaxgrasp.solver`: a generic augmented-Lagrangian solver and its lane queue;
-* :mod:`jaxgrasp.storage`: files written whole or not at all, folder locks, private folders;
-* :mod:`jaxgrasp.model`: grasp fields, :class:`Grasp`, the potential field (eq. 3-21);
-* :mod:`jaxgrasp.surface`: meshes in JAX (:class:`~jaxgrasp.surface.Surface`), the contact rules;
-* :mod:`jaxgrasp.presets`: the paper's two grasps (Sec. VII);
-* :mod:`jaxgrasp.io`: grasp files, datasets, meshes;
-* :mod:`jaxgrasp.tolerance`: the method (eq. 1): problems, starts, settling, verdict;
-* :mod:`jaxgrasp.engine`: :func:`evaluate` and :func:`evaluate_batch`, compiled stages,
+* `jaxgrasp.base`: what the solver and the model share: named integer codes, contractions;
+* `jaxgrasp.solver`: a generic augmented-Lagrangian solver and its lane queue;
+* `jaxgrasp.storage`: files written whole or not at all, folder locks, private folders;
+* `jaxgrasp.model`: grasp fields, [`Grasp`][jaxgrasp.Grasp], the potential field (eq. 3-21);
+* `jaxgrasp.surface`: meshes in JAX ([`Surface`][jaxgrasp.surface.Surface]), the contact rules;
+* [`jaxgrasp.presets`][jaxgrasp.presets]: the paper's two grasps (Sec. VII);
+* `jaxgrasp.io`: grasp files, datasets, meshes;
+* `jaxgrasp.tolerance`: the method (eq. 1): problems, starts, settling, verdict;
+* `jaxgrasp.engine`: [`evaluate`][jaxgrasp.evaluate] and [`evaluate_batch`][jaxgrasp.evaluate_batch], compiled stages,
   the executable store, checkpoints;
-* :mod:`jaxgrasp.analysis`: :func:`sweep`, :func:`tune`, :func:`epsilon`, :func:`robust`;
-* :mod:`jaxgrasp.planning`: :func:`plan`, the best grasps on a mesh;
-* :mod:`jaxgrasp.hands`: :class:`Hand` from MJCF (the ``hands`` extra), :func:`tune_hand`;
-* :mod:`jaxgrasp.simulation`: :func:`simulate`, the grasp in MuJoCo (extra ``jaxgrasp[sim]``);
-* :mod:`jaxgrasp.plots` and :mod:`jaxgrasp.cli` (the ``jaxgrasp`` command).
+* `jaxgrasp.analysis`: [`sweep`][jaxgrasp.sweep], [`tune`][jaxgrasp.tune], [`epsilon`][jaxgrasp.epsilon], [`robust`][jaxgrasp.robust];
+* `jaxgrasp.planning`: [`plan`][jaxgrasp.plan], the best grasps on a mesh;
+* `jaxgrasp.hands`: [`Hand`][jaxgrasp.Hand] from MJCF (the ``hands`` extra), [`tune_hand`][jaxgrasp.tune_hand];
+* `jaxgrasp.simulation`: [`simulate`][jaxgrasp.simulate], the grasp in MuJoCo (extra ``jaxgrasp[sim]``);
+* `jaxgrasp.plots` and `jaxgrasp.cli` (the ``jaxgrasp`` command).
 
 The top level holds what a user calls and holds for the method itself, plus each
 feature's entry points. One rule chooses its names: *the functions a user calls to
@@ -25,16 +25,16 @@ build, check, evaluate and store grasps, one or many, and to set up the process,
 types passed in and returned and the error raised; and each feature's entry function (or
 class)*. A
 feature's own types (its results, statuses, uncertainty model), internals
-(:class:`~jaxgrasp.solver.LaneStatus`, :class:`~jaxgrasp.surface.Surface`) and
-dict-level twins (:func:`jaxgrasp.io.grasp_from_dict`) live on the feature's package
+([`LaneStatus`][jaxgrasp.solver.LaneStatus], [`Surface`][jaxgrasp.surface.Surface]) and
+dict-level twins ([`jaxgrasp.io.grasp_from_dict`][jaxgrasp.io.grasp_from_dict]) live on the feature's package
 face: ``jaxgrasp.analysis.SweepResult``, ``jaxgrasp.planning.PlanResult``,
 ``jaxgrasp.hands.HandTuneResult``, ``jaxgrasp.simulation.SimulationResult``.
 
 Importing jaxgrasp turns on JAX's 64-bit mode (``jax_enable_x64``) for the whole process,
 so that results are float64 without the user touching JAX's configuration, also where the
-user's own ``jit``/``vmap``/``grad`` trace :func:`evaluate`. JAX fixes dtypes when it
+user's own ``jit``/``vmap``/``grad`` trace [`evaluate`][jaxgrasp.evaluate]. JAX fixes dtypes when it
 traces, in the caller's mode: with x64 on only inside jaxgrasp's own calls, the user's
-``jax.jit`` and ``jax.grad`` of :func:`evaluate` would mix float32 and float64 and fail,
+``jax.jit`` and ``jax.grad`` of [`evaluate`][jaxgrasp.evaluate] would mix float32 and float64 and fail,
 and the user's own arrays would be float32. Set the environment variable
 ``JAX_ENABLE_X64`` (to ``0`` or ``1``) before importing to keep JAX's own setting: with
 ``JAX_ENABLE_X64=0`` jaxgrasp computes in float32. Every public function takes and
@@ -43,11 +43,11 @@ returns SI units (m, Pa, N, kg, J, rad).
 That is the import's only process-wide change: it imports JAX and nothing else of
 jaxgrasp. The names below are loaded when first used (PEP 562 ``__getattr__``), so that
 the ``jaxgrasp`` command, whose ``--version``, ``--help`` and argument errors need no
-JAX, imports this package cheaply: in the command (:func:`jaxgrasp._startup.is_command_line`)
+JAX, imports this package cheaply: in the command (`jaxgrasp._startup.is_command_line`)
 the import does not even load JAX, and the command turns float64 on itself before it
 loads the library. Everything else jaxgrasp sets for the process (the CPU device
 count, the executable store on disk, where its messages go) is chosen at its first
-use or by :func:`configure`; the guide's page "Process-wide settings"
+use or by [`configure`][jaxgrasp.configure]; the guide's page "Process-wide settings"
 (``docs/guide/caching.md``) lists each and when.
 
 Quick start::
@@ -160,7 +160,7 @@ def _choose_cpu_devices() -> None:
     """At the first use of a top-level name: ask JAX for one CPU device per core
     (``jaxgrasp.engine.configure_cpu_devices``), before the program's first jaxgrasp array
     makes JAX start its devices, so that a script's batches run on every core without a
-    call of :func:`configure`. Sets a JAX option only: no file, no handler. Where JAX runs
+    call of [`configure`][jaxgrasp.configure]. Sets a JAX option only: no file, no handler. Where JAX runs
     already, or the user chose the count, it changes nothing."""
     global _DEVICES_CHOSEN
     if _DEVICES_CHOSEN or _startup.is_command_line(list(getattr(_sys, "orig_argv", []))):

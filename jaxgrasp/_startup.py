@@ -1,12 +1,12 @@
 """What happens when jaxgrasp starts: float64 for a library user, Ctrl-C for the command.
 
-Nothing here imports more than Python's own start-up modules, except :func:`enable_x64`
+Nothing here imports more than Python's own start-up modules, except `enable_x64`
 (which imports JAX when it is called).
 
-* ``import jaxgrasp`` calls :func:`enable_x64` unless the process is the ``jaxgrasp``
-  command (:func:`is_command_line`): the only process-wide setting of the import.
-* The command (:func:`jaxgrasp.cli.main`) calls :func:`install_if_command_line` before it
-  loads JAX, then :func:`enable_x64`. Its own handling (:mod:`jaxgrasp.cli._interrupt`)
+* ``import jaxgrasp`` calls `enable_x64` unless the process is the ``jaxgrasp``
+  command (`is_command_line`): the only process-wide setting of the import.
+* The command (`jaxgrasp.cli.main`) calls `install_if_command_line` before it
+  loads JAX, then `enable_x64`. Its own handling (`jaxgrasp.cli._interrupt`)
   begins only once the library is loaded, which takes a while; a Ctrl-C before that
   would unwind the import and print Python's multi-line ``KeyboardInterrupt`` traceback.
   So in the ``jaxgrasp`` command only (the console script, ``python -m jaxgrasp`` or
@@ -26,11 +26,11 @@ __all__ = ["EXIT", "X64_ENV_VAR", "enable_x64", "is_command_line", "install_if_c
 
 EXIT = {signal.SIGINT: (130, "interrupted"), signal.SIGTERM: (143, "terminated")}
 """The signals the ``jaxgrasp`` command handles: signal -> (exit status, 128 + the signal
-number as a shell reports it; the word of its one line). :mod:`jaxgrasp.cli._interrupt`
+number as a shell reports it; the word of its one line). `jaxgrasp.cli._interrupt`
 uses the same table once the command runs."""
 
 X64_ENV_VAR = "JAX_ENABLE_X64"
-"""JAX's own switch of 64-bit mode: where it is set (to anything), :func:`enable_x64`
+"""JAX's own switch of 64-bit mode: where it is set (to anything), `enable_x64`
 leaves JAX's setting alone."""
 
 _COMMAND = "jaxgrasp"
@@ -77,7 +77,7 @@ def install_if_command_line() -> bool:
 
 def enable_x64(environ=os.environ) -> bool:
     """Turn on JAX's 64-bit mode (``jax_enable_x64``) for the process, unless the user
-    chose with ``JAX_ENABLE_X64`` (:data:`X64_ENV_VAR`); whether it was turned on here.
+    chose with ``JAX_ENABLE_X64`` (`X64_ENV_VAR`); whether it was turned on here.
     Imports JAX; starts none of its backends."""
     if X64_ENV_VAR in environ:  # an explicit choice of the user's stands
         return False

@@ -501,5 +501,5 @@ def test_package_docstring_and_developers_guide_list_the_layers_in_order():
     layout = guide.split("## Layout", 1)[1].split("\n## ", 1)[0]
     face = (ROOT / "__init__.py").read_text(encoding="utf-8").split('"""', 2)[1]
     for text in (layout, face):
-        listed = re.findall(r"^[-*] (?::mod:)?`jaxgrasp\.(\w+)`", text, flags=re.MULTILINE)
+        listed = re.findall(r"^[-*] \[?`jaxgrasp\.(\w+)`", text, flags=re.MULTILINE)
         assert listed == [layer for layer in LAYERS[1:] if layer != "cli"], listed

@@ -7,7 +7,7 @@ Convention (``docs/guide/epsilon.md`` states it too). For each active contact ``
   approximated by ``m = cone_edges`` edges
   ``f_ij = -n_i + mu_i (cos(2 pi j / m) t1_i + sin(2 pi j / m) t2_i)``, ``j = 0..m-1``,
   with ``t1_i, t2_i`` an orthonormal basis of the contact's tangent plane
-  (:func:`tangent_basis`);
+  (`tangent_basis`);
 * each edge gives the wrench ``w_ij = (f_ij, (p_i x f_ij) / lam)``, where the torque scale
   ``lam`` (m) is the largest distance of an active contact from the centre of mass;
 * with ``torsion=True`` (soft fingers) each contact adds the two wrenches
@@ -25,7 +25,7 @@ Convention (``docs/guide/epsilon.md`` states it too). For each active contact ``
 The metric depends on the contacts' geometry and friction only (and, with torsion, on
 the fingertip radius and initial deformation), not on Young's modulus, the squeeze force,
 the mass or gravity: that is where it and the energy tolerance part (``docs/guide/epsilon.md``).
-Friction is at most :data:`~jaxgrasp.model._validation.MAX_FRICTION` (1e3, validation):
+Friction is at most `MAX_FRICTION` (1e3, validation):
 the wrenches' tangential parts grow as ``mu`` and the torsion as ``mu^2``, and at
 ``mu = 1e7`` they swamp the unit normal forces that bound the hull, so that qhull's float64
 lost the value (1 fell to 0). Up to the bound the value is within round-off of the closed
@@ -87,7 +87,7 @@ def wrenches(fields: dict, *, cone_edges: int = 8, torsion: bool = True) -> tupl
     """The wrenches of one grasp's active contacts (see the module doc) and ``lam`` (m).
 
     Args:
-        fields: one grasp's fields (:meth:`Grasp.to_numpy`, SI units; ``active`` optional).
+        fields: one grasp's fields ([`Grasp.to_numpy`][jaxgrasp.Grasp.to_numpy], SI units; ``active`` optional).
 
     Returns:
         ``(W, lam)``: ``W`` of shape ``(K, 6)``, ``K = n_active * (cone_edges + 2 * torsion)``,
@@ -118,7 +118,7 @@ def wrenches(fields: dict, *, cone_edges: int = 8, torsion: bool = True) -> tupl
 
 def prefetch_qhull() -> None:
     """Start importing SciPy's qhull in a background thread (returns at once;
-    :func:`jaxgrasp.engine._prefetch.prefetch`): a caller that will need :func:`epsilon`
+    `jaxgrasp.engine._prefetch.prefetch`): a caller that will need [`epsilon`][jaxgrasp.epsilon]
     after a compile or the load of a stored executable has ``scipy.spatial`` imported
     during that wait rather than after it."""
     from jaxgrasp.engine import prefetch
@@ -150,15 +150,15 @@ def _hull_distance(w: np.ndarray) -> float:
 
 def epsilon(grasp: Grasp, /, *, cone_edges: int = 8, torsion: bool = True) -> EpsilonResult:
     """The Ferrari-Canny epsilon (Q1) of a grasp or of a batch of grasps (leading axis
-    ``B``, e.g. :func:`jaxgrasp.stack`), with the convention of the module doc.
+    ``B``, e.g. [`jaxgrasp.stack`][jaxgrasp.stack]), with the convention of the module doc.
 
     Args:
-        grasp: a :class:`~jaxgrasp.Grasp` (SI units); its inactive contacts are left out.
+        grasp: a [`Grasp`][jaxgrasp.Grasp] (SI units); its inactive contacts are left out.
         cone_edges: edges of the polygon inscribed in each friction cone (>= 3).
         torsion: add each soft fingertip's torsion about its normal (eq. 9, 10).
 
     Returns:
-        An :class:`EpsilonResult`, ``()`` arrays for one grasp, ``(B,)`` for a batch.
+        An [`EpsilonResult`][jaxgrasp.analysis.EpsilonResult], ``()`` arrays for one grasp, ``(B,)`` for a batch.
 
     Raises:
         GraspValueError: an invalid grasp (one line, naming the grasp of a batch) or

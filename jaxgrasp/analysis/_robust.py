@@ -8,20 +8,20 @@ stiffness, squeeze, placement, mass and gravity, by Monte Carlo through the engi
     r = jaxgrasp.robust(grasp, jaxgrasp.analysis.Uncertainty(friction=0.1), samples=64, seed=0)
     r.p_stable, r.p_stable_stderr, r.value_mean, r.quantiles   # -, -, J, (2,) J
 
-Each grasp's ``S`` perturbed copies (:mod:`jaxgrasp.analysis._uncertainty`) are stacked
+Each grasp's ``S`` perturbed copies (`jaxgrasp.analysis._uncertainty`) are stacked
 into one batched grasp with those of every other grasp of the same contact count and
-evaluated by :func:`jaxgrasp.evaluate_batch`: one compiled evaluator for all samples of
+evaluated by [`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch]: one compiled evaluator for all samples of
 all grasps of a contact count, cut into the engine's chunks. The nominal grasps (one
 grasp is a list of one: no path of its own) are evaluated by the same runner in a batch
 of their own with the samples' chunk, so by their samples' program; that program's
-numbers equal :func:`jaxgrasp.evaluate`'s within rounding (the energies to about
+numbers equal [`jaxgrasp.evaluate`][jaxgrasp.evaluate]'s within rounding (the energies to about
 ``1e-15`` of themselves: ``tests/engine/test_single_vs_batch.py``).
 
 The statistics of a grasp are over its samples whose evaluation settled (status
 ``stable``, ``unstable`` or ``infeasible``): ``p_stable`` is the fraction of them that
 are stable, ``p_stable_stderr`` its binomial standard error ``sqrt(p (1 - p) / n)``,
 ``value_mean`` and the quantiles are over their values (J, 0 for a sample that is not
-stable, eq. 1). A ``not_converged`` sample is left out and counted (:class:`RobustStatus`).
+stable, eq. 1). A ``not_converged`` sample is left out and counted ([`RobustStatus`][jaxgrasp.analysis.RobustStatus]).
 """
 
 from __future__ import annotations
@@ -42,17 +42,17 @@ __all__ = ["robust", "robust_batch", "perturbed", "RobustResult", "RobustBatch",
            "quantile_name"]
 
 DEFAULT_QUANTILES = (0.05, 0.5)
-"""The quantile levels of the value that :func:`robust` reports by default (the 0.05 quantile and the median)."""
+"""The quantile levels of the value that [`robust`][jaxgrasp.robust] reports by default (the 0.05 quantile and the median)."""
 
 MESH_FACES = 256
-"""A mesh's faces are padded to a power of two times this (:meth:`jaxgrasp.surface.Surface.padded`),
+"""A mesh's faces are padded to a power of two times this ([`jaxgrasp.surface.Surface.padded`][jaxgrasp.surface.Surface.padded]),
 so that the closest-point search of meshes of similar size is compiled once."""
 
 _SETTLED = (GraspStatus.STABLE, GraspStatus.UNSTABLE, GraspStatus.INFEASIBLE)
 
 
 class RobustStatus(Coded):
-    """What :func:`jaxgrasp.robust` could estimate for a grasp."""
+    """What [`jaxgrasp.robust`][jaxgrasp.robust] could estimate for a grasp."""
 
     ESTIMATED = 0, "every sample's evaluation settled: the statistics are over all samples"
     PARTLY_CONVERGED = 1, (
@@ -71,10 +71,10 @@ def quantile_name(level: float) -> str:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class RobustResult:
-    """The robust evaluation of one grasp (:func:`jaxgrasp.robust`), SI units.
+    """The robust evaluation of one grasp ([`jaxgrasp.robust`][jaxgrasp.robust]), SI units.
 
     Attributes:
-        status: a :class:`RobustStatus` (:attr:`status_name` its name).
+        status: a [`RobustStatus`][jaxgrasp.analysis.RobustStatus] ([`status_name`][jaxgrasp.analysis.RobustResult.status_name] its name).
         p_stable: fraction of the settled samples that are stable (NaN without any).
         p_stable_stderr: its standard error ``sqrt(p (1 - p) / n)``, ``n`` settled samples.
         value_mean: mean value of the settled samples, J (0 for a sample that is not stable).
@@ -82,12 +82,12 @@ class RobustResult:
         quantiles: ``(Q,)`` J, the value's quantiles over the settled samples (NumPy's
             linear interpolation).
         values: ``(S,)`` J, each sample's value (eq. 1).
-        statuses: ``(S,)`` int, each sample's :class:`~jaxgrasp.GraspStatus`.
+        statuses: ``(S,)`` int, each sample's [`GraspStatus`][jaxgrasp.GraspStatus].
         converged: the settled samples ``n``.
-        nominal: the :class:`~jaxgrasp.Evaluation` of the unperturbed grasp.
+        nominal: the [`Evaluation`][jaxgrasp.Evaluation] of the unperturbed grasp.
         clipped: sampled numbers clipped into their valid range, by field
             (``friction``, ``initial_deformation``, ``mass``).
-        uncertainty: the :class:`~jaxgrasp.analysis.Uncertainty` sampled.
+        uncertainty: the [`Uncertainty`][jaxgrasp.analysis.Uncertainty] sampled.
         samples: ``S``.
         seed: the seed of the draws.
     """
@@ -109,11 +109,11 @@ class RobustResult:
 
     @property
     def status_name(self) -> str:
-        """The name of :attr:`status` (``'estimated'``)."""
+        """The name of `status` (``'estimated'``)."""
         return self.status.label
 
     def quantile(self, level: float) -> float:
-        """The quantile of one of :attr:`quantile_levels`, J."""
+        """The quantile of one of `quantile_levels`, J."""
         for q, v in zip(self.quantile_levels, self.quantiles):
             if abs(q - float(level)) < 1e-12:
                 return float(v)
@@ -139,19 +139,19 @@ class RobustResult:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class RobustBatch:
-    """The robust evaluation of ``G`` grasps (:func:`jaxgrasp.robust_batch`), in input
-    order: the fields of :class:`RobustResult` with a leading ``G`` axis; ``rb[i]`` is
-    grasp ``i``'s :class:`RobustResult`.
+    """The robust evaluation of ``G`` grasps ([`jaxgrasp.robust_batch`][jaxgrasp.robust_batch]), in input
+    order: the fields of [`RobustResult`][jaxgrasp.analysis.RobustResult] with a leading ``G`` axis; ``rb[i]`` is
+    grasp ``i``'s [`RobustResult`][jaxgrasp.analysis.RobustResult].
 
     Attributes:
-        status: ``(G,)`` :class:`RobustStatus` codes.
+        status: ``(G,)`` [`RobustStatus`][jaxgrasp.analysis.RobustStatus] codes.
         p_stable, p_stable_stderr, value_mean: ``(G,)`` (-, -, J).
         quantile_levels: ``(Q,)``; quantiles: ``(G, Q)`` J.
-        values: ``(G, S)`` J; statuses: ``(G, S)`` :class:`~jaxgrasp.GraspStatus` codes.
+        values: ``(G, S)`` J; statuses: ``(G, S)`` [`GraspStatus`][jaxgrasp.GraspStatus] codes.
         converged: ``(G,)`` settled samples.
-        nominal: the :class:`~jaxgrasp.BatchResult` of the unperturbed grasps.
+        nominal: the [`BatchResult`][jaxgrasp.BatchResult] of the unperturbed grasps.
         clipped: ``(G,)`` counts by field.
-        uncertainty, samples, seed: as :class:`RobustResult`.
+        uncertainty, samples, seed: as [`RobustResult`][jaxgrasp.analysis.RobustResult].
     """
 
     status: np.ndarray
@@ -173,7 +173,7 @@ class RobustBatch:
         return len(self.status)
 
     def __getitem__(self, i: int) -> RobustResult:
-        """Grasp ``i``'s :class:`RobustResult` (its nominal evaluation's contacts numbered as in the batch)."""
+        """Grasp ``i``'s [`RobustResult`][jaxgrasp.analysis.RobustResult] (its nominal evaluation's contacts numbered as in the batch)."""
         return RobustResult(
             status=RobustStatus(int(self.status[i])), p_stable=float(self.p_stable[i]),
             p_stable_stderr=float(self.p_stable_stderr[i]), value_mean=float(self.value_mean[i]),
@@ -185,7 +185,7 @@ class RobustBatch:
 
     @property
     def status_names(self) -> np.ndarray:
-        """``(G,)`` the names of :attr:`status`."""
+        """``(G,)`` the names of `status`."""
         return RobustStatus.names_of(self.status)
 
     def columns(self) -> dict[str, np.ndarray]:
@@ -196,7 +196,7 @@ class RobustBatch:
         return out
 
     def rank(self, by: str = "value_mean") -> np.ndarray:
-        """Grasp indices, best first, by a column of :meth:`columns` (highest first; ties
+        """Grasp indices, best first, by a column of [`columns`][jaxgrasp.analysis.RobustBatch.columns] (highest first; ties
         broken by ``value_mean``, then input order; NaN last), e.g. ``"p_stable"`` or
         ``"value_q05"``."""
         cols = self.columns()
@@ -219,18 +219,18 @@ def robust(grasp, uncertainty: Uncertainty, samples: int = 256, seed: int = 0, *
     """The robust evaluation of a grasp: its value over ``samples`` perturbed copies.
 
     Args:
-        grasp: a :class:`~jaxgrasp.Grasp` or a :class:`~jaxgrasp.MeshGrasp` (its contact
+        grasp: a [`Grasp`][jaxgrasp.Grasp] or a [`MeshGrasp`][jaxgrasp.MeshGrasp] (its contact
             moves follow the mesh); or a list of them, or one batched grasp, which is
-            :func:`robust_batch`.
-        uncertainty: the :class:`~jaxgrasp.analysis.Uncertainty` of each source (SI units).
+            [`robust_batch`][jaxgrasp.robust_batch].
+        uncertainty: the [`Uncertainty`][jaxgrasp.analysis.Uncertainty] of each source (SI units).
         samples: perturbed copies per grasp, ``>= 2``.
         seed: the seed of the draws (the same seed, the same samples; see
-            :mod:`jaxgrasp.analysis._uncertainty`).
+            `jaxgrasp.analysis._uncertainty`).
         quantiles: levels in ``[0, 1]`` of the value's quantiles (default 0.05 and 0.5).
-        options, chunk_size, progress: as :func:`jaxgrasp.evaluate_batch` (of the samples).
+        options, chunk_size, progress: as [`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch] (of the samples).
 
     Returns:
-        A :class:`RobustResult` for one grasp; a :class:`RobustBatch` for a list or a
+        A [`RobustResult`][jaxgrasp.analysis.RobustResult] for one grasp; a [`RobustBatch`][jaxgrasp.analysis.RobustBatch] for a list or a
         batched grasp.
 
     Raises:
@@ -250,20 +250,20 @@ def robust_batch(grasps, uncertainty: Uncertainty, samples: int = 256, seed: int
     copy of every grasp of a contact count through one compiled evaluator.
 
     Args:
-        grasps: a sequence of :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp`
+        grasps: a sequence of [`Grasp`][jaxgrasp.Grasp] or [`MeshGrasp`][jaxgrasp.MeshGrasp]
             (any contact counts), or one batched grasp (leading axis ``G``, a mask allowed,
-            e.g. :func:`jaxgrasp.stack`).
+            e.g. [`jaxgrasp.stack`][jaxgrasp.stack]).
         uncertainty, samples, seed, quantiles, options, chunk_size, progress: as
-            :func:`robust`. Every grasp sees the same draws (common random numbers), so a
+            [`robust`][jaxgrasp.robust]. Every grasp sees the same draws (common random numbers), so a
             grasp's result does not depend on the others in the list.
-        devices: as :func:`jaxgrasp.evaluate_batch` (default ``jax.devices()``, every
+        devices: as [`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch] (default ``jax.devices()``, every
             host's after ``jax.distributed.initialize()``).
 
     Returns:
-        A :class:`RobustBatch`, grasps in input order.
+        A [`RobustBatch`][jaxgrasp.analysis.RobustBatch], grasps in input order.
 
     Raises:
-        GraspValueError: as :func:`robust`; an invalid grasp names its index.
+        GraspValueError: as [`robust`][jaxgrasp.robust]; an invalid grasp names its index.
     """
     levels = _check_call(uncertainty, samples, seed, quantiles)
     groups, nominal_input = _groups(grasps)
@@ -283,14 +283,14 @@ def robust_batch(grasps, uncertainty: Uncertainty, samples: int = 256, seed: int
 
 
 def perturbed(grasp, uncertainty: Uncertainty, samples: int = 256, seed: int = 0) -> Grasp:
-    """The perturbed copies of ``grasp`` that :func:`robust` evaluates, for a look at them.
+    """The perturbed copies of ``grasp`` that [`robust`][jaxgrasp.robust] evaluates, for a look at them.
 
     Args:
-        grasp: a :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp` (one grasp).
-        uncertainty, samples, seed: as :func:`robust`.
+        grasp: a [`Grasp`][jaxgrasp.Grasp] or [`MeshGrasp`][jaxgrasp.MeshGrasp] (one grasp).
+        uncertainty, samples, seed: as [`robust`][jaxgrasp.robust].
 
     Returns:
-        One batched :class:`~jaxgrasp.Grasp` of ``samples`` copies (``positions (S, N, 3)``
+        One batched [`Grasp`][jaxgrasp.Grasp] of ``samples`` copies (``positions (S, N, 3)``
         m, model frame), sample ``k`` at index ``k``.
     """
     _check_call(uncertainty, samples, seed, ())
@@ -327,8 +327,8 @@ def _check_call(uncertainty, samples, seed, quantiles) -> tuple:
 def _groups(grasps) -> tuple[list, Any]:
     """``([(rows, fields, project), ...], nominal_input)``: the grasps by contact count
     (a batched grasp is one group, its mask kept), each group's input rows, fields
-    (:meth:`~jaxgrasp.Grasp.to_numpy_batch`) and mesh projection (``None`` without a
-    mesh grasp); and what :func:`jaxgrasp.evaluate_batch` takes for the nominal grasps."""
+    ([`to_numpy_batch`][jaxgrasp.Grasp.to_numpy_batch]) and mesh projection (``None`` without a
+    mesh grasp); and what [`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch] takes for the nominal grasps."""
     if isinstance(grasps, Grasp) and np.ndim(grasps.positions) == 3:
         if grasps.active is not None and bool(np.all(grasps.active)):  # every contact there: the unmasked program
             grasps = grasps.replace(active=None)
@@ -353,7 +353,7 @@ def _groups(grasps) -> tuple[list, Any]:
 def _nominal(grasps, options: EvaluateOptions, chunk_size, samples: int, devices=None) -> BatchResult:
     """The evaluation of the unperturbed grasps (a list or a batched grasp; one grasp is a
     list of one) by the batch runner in the chunks of the samples
-    (:func:`~jaxgrasp.engine._batch.evaluate_in_chunks`), so that the nominal batch needs
+    (`evaluate_in_chunks`), so that the nominal batch needs
     no program of its own and each nominal grasp is evaluated by the program of its
     samples (zero uncertainty: the samples' values are the nominal value bit for bit)."""
     g = np.shape(grasps.positions)[0] if isinstance(grasps, Grasp) else len(grasps)
@@ -364,7 +364,7 @@ def _nominal(grasps, options: EvaluateOptions, chunk_size, samples: int, devices
 def _mesh_projection(meshes: list, normals: np.ndarray) -> Callable:
     """``project(positions (G, S, N, 3)) -> (positions, normals)``: each mesh grasp's moved
     contacts onto its mesh (the closest surface point, the face's outward normal there,
-    :class:`jaxgrasp.surface.Surface`); a plain grasp's kept, with its normals."""
+    [`jaxgrasp.surface.Surface`][jaxgrasp.surface.Surface]); a plain grasp's kept, with its normals."""
 
     def project(moved: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pos = moved.copy()
@@ -381,7 +381,7 @@ def _mesh_projection(meshes: list, normals: np.ndarray) -> Callable:
 
 
 def _summarise(values, statuses, levels, nominal, clipped, uncertainty, samples, seed) -> RobustBatch:
-    """The statistics of every grasp's samples (the module's doc), as a :class:`RobustBatch`."""
+    """The statistics of every grasp's samples (the module's doc), as a [`RobustBatch`][jaxgrasp.analysis.RobustBatch]."""
     g = values.shape[0]
     settled = np.isin(statuses, _SETTLED)
     n = settled.sum(axis=1)

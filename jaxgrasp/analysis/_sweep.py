@@ -12,9 +12,9 @@
     result.to_csv("sweep.csv")  # one row per grid point, SI units in the column names
 
 A sweep is a grid of grasps for the engine's one batch runner
-(:func:`~jaxgrasp.engine._runner.run_batch`, shared with :func:`jaxgrasp.evaluate_batch`),
+(`run_batch`, shared with [`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch]),
 a source whose points are made a chunk at a time: the grid points are cut into chunks whose size is a bucket
-(1, 4, 16 or 64 points per CPU device; :func:`~jaxgrasp.engine._plan.plan_chunks`), each
+(1, 4, 16 or 64 points per CPU device; `plan_chunks`), each
 evaluated by the compiled pipeline; the last chunk is padded to the same size, so one
 sweep compiles once, and a later sweep or batch of grasps with the same number of
 contacts and options, in the same bucket, reuses that compilation. Memory is bounded by
@@ -27,7 +27,7 @@ device count), so one call uses every GPU of a machine, or every device of sever
 after ``jax.distributed.initialize()``. Results are gathered to the host.
 
 The compiled evaluator is memoised in the process and, where the caches are on
-(:func:`jaxgrasp.engine.enable_compilation_cache`; the CLI turns them on), kept in the executable
+([`jaxgrasp.engine.enable_compilation_cache`][jaxgrasp.engine.enable_compilation_cache]; the CLI turns them on), kept in the executable
 store on disk, so that a later process neither traces nor compiles it.
 """
 
@@ -68,13 +68,13 @@ __all__ = [
 ]
 
 PARAMETERS: dict[str, Field] = {name: FIELD[name] for name in SWEEPABLE}
-"""Sweepable parameters: name -> its :class:`jaxgrasp.model._fields.Field` (``.unit`` SI unit,
+"""Sweepable parameters: name -> its `jaxgrasp.model._fields.Field` (``.unit`` SI unit,
 ``.per_contact``, ``.rule`` and ``.allows(x)`` its allowed range).
 
 A per-contact parameter is set to the same value at every contact of a grid point."""
 
 MAX_GRID_POINTS = 10_000_000
-"""The most grid points one :func:`sweep` takes. Its result arrays hold 5 numbers of 8 bytes
+"""The most grid points one [`sweep`][jaxgrasp.sweep] takes. Its result arrays hold 5 numbers of 8 bytes
 per point (0.4 GB at the cap), ``jaxgrasp sweep``'s CSV about 100 bytes per point (1 GB)
 and its grid of axis values 8 bytes per point and axis, all in memory at the end; and a
 2-core CPU needs a day or more for that many points. A larger grid (three axes of 465
@@ -98,15 +98,15 @@ class SweepResult(SummaryNames):
     """Evaluation of a grasp over a parameter grid (SI units); a JAX pytree.
 
     Every array is shaped like the grid, ``(len(ax1), len(ax2), ...)``, in the order the
-    axes were given to :func:`sweep`.
+    axes were given to [`sweep`][jaxgrasp.sweep].
 
     Attributes:
         axes: dict parameter name -> 1-D float64 array of its grid values (SI units), in
             the order given.
         value: evaluation value ``Delta U_min``, J (0 where unstable or infeasible).
-        status: :class:`~jaxgrasp.tolerance._status.GraspStatus` codes (``STABLE`` ...
+        status: [`GraspStatus`][jaxgrasp.GraspStatus] codes (``STABLE`` ...
             ``NOT_CONVERGED``; names ``GraspStatus.labels()``).
-        limiting_kind: :class:`~jaxgrasp.model._codes.BoundaryKind` codes (0 slip, 1 max_force),
+        limiting_kind: [`BoundaryKind`][jaxgrasp.model.BoundaryKind] codes (0 slip, 1 max_force),
             -1 none (names ``BoundaryKind.labels()``).
         limiting_contact: 0-based contact of the limiting boundary, -1 none.
         equilibrium_energy: ``min U`` over the equilibrium region, J.
@@ -174,7 +174,7 @@ class SweepResult(SummaryNames):
         Not-converged points are skipped unless every point along the axis is one.
 
         Returns:
-            ``(reduced, argmax)``: a :class:`SweepResult` without axis ``name`` whose
+            ``(reduced, argmax)``: a [`SweepResult`][jaxgrasp.analysis.SweepResult] without axis ``name`` whose
             entries are those of the maximising grid point, and the maximising value of
             parameter ``name`` at every remaining grid point.
         """
@@ -202,7 +202,7 @@ class SweepResult(SummaryNames):
         """Write a tidy CSV to ``path``: one row per grid point (C order: last axis fastest).
 
         ``path`` is written atomically (a temporary file renamed into place, see
-        :mod:`jaxgrasp.storage`): a failure leaves the previous file as it was. A binary
+        `jaxgrasp.storage`): a failure leaves the previous file as it was. A binary
         file object is written to directly.
 
         Columns: each axis with its SI unit (``young_modulus_Pa``, ``initial_deformation_m``,
@@ -241,9 +241,9 @@ class SweepResult(SummaryNames):
         result arrays, ``status_names``, ``kind_names``, the timings, ``devices`` and the
         ``extra`` arrays by name (e.g. ``epsilon``).
 
-        Read it back with :meth:`from_npz`. No pickled objects (``allow_pickle=False``).
+        Read it back with [`from_npz`][jaxgrasp.analysis.SweepResult.from_npz]. No pickled objects (``allow_pickle=False``).
         ``path`` gets the suffix ``.npz`` if it has none (as ``np.savez``) and is written
-        atomically (see :meth:`to_csv`); a binary file object is written to directly.
+        atomically (see [`to_csv`][jaxgrasp.analysis.SweepResult.to_csv]); a binary file object is written to directly.
         """
         arrays = {
             "axis_names": np.asarray(self.names, dtype=str),
@@ -265,7 +265,7 @@ class SweepResult(SummaryNames):
 
     @classmethod
     def from_npz(cls, path) -> "SweepResult":
-        """Read a file written by :meth:`to_npz`."""
+        """Read a file written by [`to_npz`][jaxgrasp.analysis.SweepResult.to_npz]."""
         with np.load(path, allow_pickle=False) as z:
             names = [str(n) for n in z["axis_names"]]
             return cls(
@@ -309,12 +309,12 @@ jax.tree_util.register_pytree_node(SweepResult, _flatten, _unflatten)
 def _check_axes(fields: dict[str, np.ndarray], axes: Mapping[str, Any]) -> dict[str, np.ndarray]:
     """Validate the axes of a grid over the grasp ``fields`` (SI units); one-line errors.
 
-    Each axis is checked on its own (:func:`_check_axis`); then every grid point must be a
-    grasp :func:`jaxgrasp.evaluate` accepts. The rules of
-    :func:`~jaxgrasp.model._validation.check_grasp_inputs` are monotone in each swept
+    Each axis is checked on its own (`_check_axis`); then every grid point must be a
+    grasp [`jaxgrasp.evaluate`][jaxgrasp.evaluate] accepts. The rules of
+    `check_grasp_inputs` are monotone in each swept
     parameter, so the grid's corners (each axis at its smallest or largest value, at most
     ``2^6 = 64`` grasps) break a rule wherever any grid point does
-    (:func:`~jaxgrasp.model._validation.check_corners` says why); nothing grid-sized is made.
+    (`check_corners` says why); nothing grid-sized is made.
     """
     out = {name: _check_axis(name, values) for name, values in axes.items()}
     ends = {name: (np.min(a), np.max(a)) for name, a in out.items()}
@@ -363,30 +363,30 @@ def sweep(
     """Evaluate ``grasp`` at every point of the Cartesian grid of ``axes``.
 
     Args:
-        grasp: the base :class:`~jaxgrasp.Grasp` (SI units); parameters not swept keep
+        grasp: the base [`Grasp`][jaxgrasp.Grasp] (SI units); parameters not swept keep
             its values.
-        options: :class:`~jaxgrasp.EvaluateOptions` for every evaluation.
-        chunk_size, progress, on_chunk, devices: as :func:`jaxgrasp.evaluate_batch`, for
+        options: [`EvaluateOptions`][jaxgrasp.EvaluateOptions] for every evaluation.
+        chunk_size, progress, on_chunk, devices: as [`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch], for
             the grid points in C order (last axis fastest); ``on_chunk``'s results are
-            the :data:`~jaxgrasp.tolerance._result.SUMMARY_FIELDS`.
+            the `SUMMARY_FIELDS`.
         checkpoint: optional path of a file that keeps the finished points while the
-            sweep runs (:class:`~jaxgrasp.engine._checkpoint.SweepCheckpoint`, written
+            sweep runs (`SweepCheckpoint`, written
             atomically; ``jaxgrasp sweep`` keeps ``sweep.partial.npz`` in ``--out``).
-        **axes: ``name=values`` for any of :data:`PARAMETERS` (``young_modulus`` Pa,
+        **axes: ``name=values`` for any of `PARAMETERS` (``young_modulus`` Pa,
             ``initial_deformation`` m, ``mass`` kg, ``friction``, ``max_force`` N,
             ``radius`` m); ``values`` is a number or a 1-D sequence. Per-contact
             parameters are set at every contact at once. The grid's axes follow the
             keyword order.
 
     Returns:
-        A :class:`SweepResult` whose arrays have shape ``(len(ax1), len(ax2), ...)``;
-        every entry equals :func:`jaxgrasp.evaluate` of that grid point's grasp.
+        A [`SweepResult`][jaxgrasp.analysis.SweepResult] whose arrays have shape ``(len(ax1), len(ax2), ...)``;
+        every entry equals [`jaxgrasp.evaluate`][jaxgrasp.evaluate] of that grid point's grasp.
 
     Raises:
         GraspValueError: before anything is compiled, for an invalid base grasp, an unknown
             parameter name, an empty, non-numeric, non-finite or out-of-range axis, a grid
-            point :func:`jaxgrasp.evaluate` rejects (:func:`~jaxgrasp.model._validation.check_corners`),
-            or a grid of more than :data:`MAX_GRID_POINTS` points; the message is one line.
+            point [`jaxgrasp.evaluate`][jaxgrasp.evaluate] rejects (`check_corners`),
+            or a grid of more than `MAX_GRID_POINTS` points; the message is one line.
     """
     base, axes = _check_inputs(grasp, chunk_size, axes)
     grid = _Grid(_own_fields(grasp, base), axes)
@@ -409,7 +409,7 @@ def sweep(
 
 @dataclasses.dataclass(frozen=True)
 class _Grid:
-    """The points of a grid as a :class:`~jaxgrasp.engine._runner.GraspSource`: point ``k``
+    """The points of a grid as a `GraspSource`: point ``k``
     (C order, last axis fastest) is the grasp ``own`` (its own fields, SI units) with each
     axis of ``axes`` at its value there."""
 
@@ -448,12 +448,12 @@ def _also(first: Callable, then: Callable | None) -> Callable:
 
 
 def grid_grasp(grasp: Grasp, /, **axes) -> Grasp:
-    """Every grid point of ``sweep(grasp, **axes)`` as one batched :class:`Grasp` (leading
+    """Every grid point of ``sweep(grasp, **axes)`` as one batched [`Grasp`][jaxgrasp.Grasp] (leading
     axis: the points in C order, last axis fastest), e.g. to compute another metric on the
     same grid (``jaxgrasp.epsilon(grid_grasp(...))``).
 
     Raises:
-        GraspValueError: as :func:`sweep` (one line).
+        GraspValueError: as [`sweep`][jaxgrasp.sweep] (one line).
     """
     base, checked = _check_inputs(grasp, None, axes)
     total = int(math.prod(a.size for a in checked.values()))
@@ -468,13 +468,13 @@ def _own_fields(grasp: Grasp, base: dict[str, np.ndarray]) -> dict[str, np.ndarr
 
 
 def check_inputs(grasp: Grasp, /, *, chunk_size: int | None = None, **axes) -> None:
-    """Raise what :func:`sweep` would raise for these arguments, computing nothing.
+    """Raise what [`sweep`][jaxgrasp.sweep] would raise for these arguments, computing nothing.
 
     For a caller that must reject bad input before it prepares anything else (the
     ``jaxgrasp sweep`` command checks its output folder only after this).
 
     Raises:
-        GraspValueError: as :func:`sweep` (one line).
+        GraspValueError: as [`sweep`][jaxgrasp.sweep] (one line).
     """
     _check_inputs(grasp, chunk_size, axes)
 
@@ -506,7 +506,7 @@ def _check_inputs(grasp, chunk_size, axes) -> tuple[dict[str, np.ndarray], dict[
 
 
 def _point_fields(own: dict, axes: dict, idx: np.ndarray) -> dict[str, np.ndarray]:
-    """The :class:`Grasp` fields of grid points ``idx`` ``(K,)`` (C order), each with a
+    """The [`Grasp`][jaxgrasp.Grasp] fields of grid points ``idx`` ``(K,)`` (C order), each with a
     leading axis ``K``."""
     shape = tuple(a.size for a in axes.values())
     n_contacts = own["positions"].shape[0]

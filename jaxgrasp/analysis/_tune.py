@@ -9,16 +9,16 @@
     res.params["initial_deformation"]   # m, the tuned (shared) deformation
     res.grasp                           # the tuned grasp
 
-The value's gradient comes from the envelope theorem (see :func:`jaxgrasp.evaluate`), so
+The value's gradient comes from the envelope theorem (see [`jaxgrasp.evaluate`][jaxgrasp.evaluate]), so
 one gradient costs about one evaluation. Every chosen parameter is mapped to ``[0, 1]``
 within its bounds (positions: to offsets within the contact's face;
-:mod:`jaxgrasp.analysis._tune_spec`) and the negative value, divided by the starting
+`jaxgrasp.analysis._tune_spec`) and the negative value, divided by the starting
 value, is minimised with a box-constrained quasi-Newton method (SciPy's L-BFGS-B by
 default; ``method="jaxopt_lbfgsb"`` uses ``jaxopt.LBFGSB``, ``method="projected_gradient"``
-``jaxopt.ProjectedGradient``; :mod:`jaxgrasp.analysis._tune_drivers`). This module holds
-:func:`tune`, the objective and :class:`TuneResult`. The value and its gradient are
+``jaxopt.ProjectedGradient``; `jaxgrasp.analysis._tune_drivers`). This module holds
+[`tune`][jaxgrasp.tune], the objective and [`TuneResult`][jaxgrasp.analysis.TuneResult]. The value and its gradient are
 compiled once per parameter selection, number of contacts and
-:class:`~jaxgrasp.EvaluateOptions`, and reused by later calls (other grasps, bounds,
+[`EvaluateOptions`][jaxgrasp.EvaluateOptions], and reused by later calls (other grasps, bounds,
 starts, temperatures) and, through the executable store, by later processes.
 
 The value is a minimum over boundaries, so it has kinks where the limiting boundary
@@ -90,7 +90,7 @@ def _moved_contacts(base: Grasp, offsets, data) -> dict:
     """Contact positions (and, on a mesh, normals) after in-plane ``offsets (N, 2)`` m.
 
     Without a surface each contact moves in its tangent plane, its normal fixed. With one
-    (``data["surface"]``, a :class:`~jaxgrasp.surface.Surface` in the grasp's frame) the
+    (``data["surface"]``, a [`Surface`][jaxgrasp.surface.Surface] in the grasp's frame) the
     moved point is put back on the surface at its closest point and takes the normal of the
     face there: the contact slides along the surface, across faces, and its normal follows.
     """
@@ -106,7 +106,7 @@ def _compiled(specs: tuple[ParamSpec, ...], options: EvaluateOptions) -> StoredF
     """``vg(u, data) -> ((objective, Evaluation), grad)``, one per key: the objective is
     minus the value (J) over ``data["value_scale"]``, 0 where not finite. Compiled once
     per shape of ``data`` (the grasp, bounds, face bases and, on a mesh, the surface) and
-    kept in the executable store (:class:`~jaxgrasp.engine._compile.StoredFunction`): a
+    kept in the executable store (`StoredFunction`): a
     second process tuning the same parameters of a grasp with as many contacts loads it."""
 
     vg = value_and_grad_builder(lambda u, data: (_apply(specs, u, data), None), options,
@@ -128,7 +128,7 @@ def _compiled(specs: tuple[ParamSpec, ...], options: EvaluateOptions) -> StoredF
 
 @dataclasses.dataclass(frozen=True)
 class TuneResult:
-    """Outcome of :func:`tune` (SI units).
+    """Outcome of [`tune`][jaxgrasp.tune] (SI units).
 
     Attributes:
         grasp: the tuned grasp (the best iterate found).
@@ -137,14 +137,14 @@ class TuneResult:
             where ``clipped`` names parameters, the grasp with them clipped into the bounds.
         history: ``(iterations + 1,)`` value at the search's start and after each iteration, J.
         history_status: ``(iterations + 1,)`` evaluation status at those iterates
-            (:class:`~jaxgrasp.GraspStatus` codes).
+            ([`GraspStatus`][jaxgrasp.GraspStatus] codes).
         params: tuned values by parameter label (``"initial_deformation"``,
             ``"initial_deformation:shared"``, ``"positions"`` ...): per-contact ``(N,)``,
             shared ``()``, ``"positions"`` the ``(N, 3)`` contact positions (m).
         initial_params: the same at the start.
         bounds: ``(lo, hi)`` by label as used (``"positions"``: in-face offsets, m).
-        evaluation: the :class:`~jaxgrasp.Evaluation` of ``grasp``.
-        status: a :class:`~jaxgrasp.analysis._tune_status.TuneStatus`, equal to its string;
+        evaluation: the [`Evaluation`][jaxgrasp.Evaluation] of ``grasp``.
+        status: a [`TuneStatus`][jaxgrasp.analysis.TuneStatus], equal to its string;
             ``grasp`` is usable after each (the best found): ``"converged"`` (projected
             gradient below ``tol``: a maximum), ``"stalled"`` (no relative improvement
             above ``ftol`` in ``patience`` iterations: typically a maximum on a kink,
@@ -165,7 +165,7 @@ class TuneResult:
             differed set to their mean). ``gain`` is measured from it.
         clipped: labels of the parameters whose start lay outside the bounds and was
             clipped into them (``()`` when none).
-        mesh_grasp: where a :class:`~jaxgrasp.MeshGrasp` was tuned, the tuned one (its
+        mesh_grasp: where a [`MeshGrasp`][jaxgrasp.MeshGrasp] was tuned, the tuned one (its
             mesh and centre of mass, ``grasp``); else ``None``.
     """
 
@@ -232,23 +232,23 @@ def tune(
 
     Args:
         grasp: the starting grasp (must be stable: value > 0), or a
-            :class:`~jaxgrasp.MeshGrasp`: then ``positions`` move along the mesh's surface.
-        params: parameter names from :data:`~jaxgrasp.model._fields.TUNABLE` (see
-            :func:`~jaxgrasp.analysis._tune_spec.parse_param`): a per-contact field, one
+            [`MeshGrasp`][jaxgrasp.MeshGrasp]: then ``positions`` move along the mesh's surface.
+        params: parameter names from `TUNABLE` (see
+            `parse_param`): a per-contact field, one
             value per contact or, with ``:shared``, one for every contact; ``positions``
             (each contact moves in its tangent plane, normal fixed; on a mesh grasp it
             slides along the surface, across faces, and its normal is the outward normal
-            of the face it lies on: :class:`~jaxgrasp.surface.Surface`); ``mass``.
+            of the face it lies on: [`Surface`][jaxgrasp.surface.Surface]); ``mass``.
         bounds: by parameter name (with or without ``:shared``): ``(lo, hi)`` in SI
             units, scalars or one per contact; for ``positions`` the half-width in m (a
             number, one per contact, or ``(N, 2)``). Only ``initial_deformation`` has a
-            default (:func:`~jaxgrasp.analysis._tune_spec.default_bounds`). A start outside
-            its bounds is clipped into them: :attr:`TuneResult.clipped` names it, and
+            default (`default_bounds`). A start outside
+            its bounds is clipped into them: `TuneResult.clipped` names it, and
             ``start_value`` and ``gain`` stay those of the grasp as given.
         maxiter: largest number of optimiser iterations.
-        options: :class:`~jaxgrasp.EvaluateOptions` of every evaluation (e.g. a
+        options: [`EvaluateOptions`][jaxgrasp.EvaluateOptions] of every evaluation (e.g. a
             ``smooth_min_temperature`` to smooth the kinks).
-        method: one of :data:`~jaxgrasp.analysis._tune_drivers.METHODS`.
+        method: one of `METHODS`.
         tol: stop when the projected gradient of the normalised objective (the value
             divided by the starting value, parameters scaled to ``[0, 1]``) is below this.
         ftol, patience: stop (``stalled``) when the best value has not improved by more
@@ -257,7 +257,7 @@ def tune(
             iteration (for progress output).
 
     Returns:
-        A :class:`TuneResult`; ``result.grasp`` is the best grasp found.
+        A [`TuneResult`][jaxgrasp.analysis.TuneResult]; ``result.grasp`` is the best grasp found.
 
     Raises:
         GraspValueError: invalid parameters or bounds, or a start that is not stable
@@ -320,7 +320,7 @@ def _value_as_given(vg, box: ParamBox, data) -> float:
 
 
 def _checked_grasp(grasp: Grasp, method: str, maxiter) -> Grasp:
-    """The validated float64 grasp :func:`tune` starts from; one-line errors for bad calls."""
+    """The validated float64 grasp [`tune`][jaxgrasp.tune] starts from; one-line errors for bad calls."""
     if not isinstance(grasp, Grasp):
         raise GraspValueError(f"tune: expected a jaxgrasp.Grasp, got {type(grasp).__name__}")
     if np.ndim(grasp.mass) != 0:
@@ -335,7 +335,7 @@ def _checked_grasp(grasp: Grasp, method: str, maxiter) -> Grasp:
 
 def _result(specs, grasp, box: ParamBox, data, rec: SearchRecord, status, iters, evals, method, message,
             start_value) -> TuneResult:
-    """The :class:`TuneResult` of a finished search."""
+    """The [`TuneResult`][jaxgrasp.analysis.TuneResult] of a finished search."""
     v_best, u_best, ev_best = rec.best
     tuned = _apply(specs, jnp.asarray(u_best), data)
     tuned = jax.tree_util.tree_map(lambda a: jnp.asarray(np.asarray(a)), tuned)

@@ -1,7 +1,7 @@
-"""The optimisers of :func:`jaxgrasp.tune` and the record of their iterates.
+"""The optimisers of [`jaxgrasp.tune`][jaxgrasp.tune] and the record of their iterates.
 
 Every driver minimises a compiled ``vg(u, data) -> ((objective, Evaluation), grad)`` over
-the box ``[0, 1]^k`` and adds each iterate to a :class:`SearchRecord`; they
+the box ``[0, 1]^k`` and adds each iterate to a `SearchRecord`; they
 know nothing of grasps beyond the evaluation's value and status.
 """
 
@@ -42,7 +42,7 @@ class SearchRecord:
 
     @classmethod
     def start(cls, vg, box, data) -> "SearchRecord":
-        """Evaluate the start ``box.u0`` (a :class:`~jaxgrasp.analysis._tune_spec.ParamBox`);
+        """Evaluate the start ``box.u0`` (a `ParamBox`);
         a start without a positive value is an error."""
         (_, ev0), _ = vg(jnp.asarray(box.u0), data)
         v0 = float(ev0.value)
@@ -67,9 +67,9 @@ class SearchRecord:
 
 
 def run_search(method: str, vg, u0, data, rec: SearchRecord, **stop):
-    """Run the optimiser ``method`` (one of :data:`METHODS`) on ``vg`` from ``u0``;
+    """Run the optimiser ``method`` (one of `METHODS`) on ``vg`` from ``u0``;
     ``stop`` holds ``maxiter``, ``tol``, ``ftol``, ``patience`` and ``callback``
-    (:func:`jaxgrasp.tune`). Returns ``(status, iterations, evaluations)``."""
+    ([`jaxgrasp.tune`][jaxgrasp.tune]). Returns ``(status, iterations, evaluations)``."""
     if method == "scipy_lbfgsb":
         return _run_scipy(vg, u0, data, rec, **stop)
     return _run_jaxopt(_jaxopt_solver(vg, method), u0, data, rec, **stop)
@@ -112,7 +112,7 @@ def _jaxopt_solver(vg, method: str):
     gradient again, per process, never reaching the executable store. ``LBFGSB`` stays
     compiled by jaxopt (run in Python, two of its steps on the cube took three times as
     long as compiling it), and calls the compiled ``vg`` from there as a host callback
-    (:func:`_host_callback`)."""
+    (`_host_callback`)."""
     import jaxopt
 
     if method == "jaxopt_lbfgsb":
@@ -126,7 +126,7 @@ def _jaxopt_solver(vg, method: str):
 
 def _host_callback(vg):
     """``vg`` (compiled, with compiler options: not callable inside another ``jit``) as a
-    function jaxopt's compiled steps call back on the host (:func:`jax.pure_callback`):
+    function jaxopt's compiled steps call back on the host (`jax.pure_callback`):
     traced inline, the evaluation and its gradient were compiled into ``init_state`` and
     again into ``update`` (its line search), per process, none of it from the executable
     store."""
@@ -179,7 +179,7 @@ def _run_scipy(vg, u0, data, rec: SearchRecord, *, maxiter, tol, ftol, patience,
 
 
 def _scipy_status(out, iterations: int, maxiter: int) -> TuneStatus:
-    """How SciPy's L-BFGS-B run ``out`` stopped, as a :class:`TuneStatus`."""
+    """How SciPy's L-BFGS-B run ``out`` stopped, as a [`TuneStatus`][jaxgrasp.analysis.TuneStatus]."""
     if out.success:
         return TuneStatus.CONVERGED if "PROJ" in str(out.message).upper() else TuneStatus.STALLED
     if iterations >= maxiter:

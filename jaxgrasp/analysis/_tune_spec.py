@@ -1,7 +1,7 @@
-"""The parameters :func:`jaxgrasp.tune` searches over: specs, their bounds, and the box.
+"""The parameters [`jaxgrasp.tune`][jaxgrasp.tune] searches over: specs, their bounds, and the box.
 
 Every tuned parameter is mapped to ``[0, 1]`` within its bounds (positions: to offsets
-within the contact's face); :class:`ParamBox` holds the bounds and the start of every spec
+within the contact's face); `ParamBox` holds the bounds and the start of every spec
 and maps the normalised vector back to SI values.
 """
 
@@ -43,7 +43,7 @@ class ParamSpec:
 
 
 def parse_param(text: str) -> ParamSpec:
-    """The spec of one parameter name from :data:`TUNABLE`.
+    """The spec of one parameter name from `TUNABLE`.
 
     * ``initial_deformation``, ``young_modulus``, ``friction``, ``max_force``, ``radius``:
       one value per contact; append ``:shared`` (e.g. ``"initial_deformation:shared"``)
@@ -124,7 +124,7 @@ def default_bounds(grasp: Grasp, name: str):
 
 def _field_checks(name: str, lo, hi, grasp: Grasp):
     """Physical validity of one parameter's bounds against the grasp's other fields (the
-    rules of every parameter together: :func:`_check_corners`)."""
+    rules of every parameter together: `_check_corners`)."""
     a = grasp.to_numpy()
     if name == "mass":
         if np.any(lo < 0):
@@ -147,8 +147,8 @@ def _field_checks(name: str, lo, hi, grasp: Grasp):
 
 
 def _check_corners(specs, los, his, grasp: Grasp) -> None:
-    """Every iterate the box allows is a grasp :func:`jaxgrasp.evaluate` accepts: the rules
-    of :func:`~jaxgrasp.model._validation.check_grasp_inputs` (friction at most
+    """Every iterate the box allows is a grasp [`jaxgrasp.evaluate`][jaxgrasp.evaluate] accepts: the rules
+    of `check_grasp_inputs` (friction at most
     ``MAX_FRICTION``, ``young_modulus * initial_deformation^3`` at least
     ``MIN_ENERGY_SCALE`` J, a weight at most ``MAX_LOAD_RATIO`` times the initial squeeze
     ``sum pi E dr^2`` N, ``initial_deformation < radius`` m with both tuned) hold at the
@@ -157,7 +157,7 @@ def _check_corners(specs, los, his, grasp: Grasp) -> None:
     The corners are enough: each rule is monotone in each of these parameters, in the same
     direction at every contact (e.g. the squeeze grows with ``E`` and ``dr``, the weight
     with the mass), so where any point of the box breaks a rule, the corner with every
-    parameter at its worst end breaks it too (:func:`~jaxgrasp.model._validation.check_corners`).
+    parameter at its worst end breaks it too (`check_corners`).
     ``positions`` stay at the grasp's own (no rule but distinct positions involves them).
     """
     ends = {}
@@ -218,7 +218,7 @@ def _position_bounds(given, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _required_defaults(grasp: Grasp, name: str):
-    """:func:`default_bounds` of ``name``; an error where it has none."""
+    """`default_bounds` of ``name``; an error where it has none."""
     given = default_bounds(grasp, name)
     if given is None:
         raise GraspValueError(

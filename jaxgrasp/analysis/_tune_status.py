@@ -1,4 +1,4 @@
-"""How :func:`jaxgrasp.tune` stopped, as a named string status with a message."""
+"""How [`jaxgrasp.tune`][jaxgrasp.tune] stopped, as a named string status with a message."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ __all__ = ["TuneStatus"]
 
 
 class TuneStatus(enum.StrEnum):
-    """How :func:`jaxgrasp.tune` stopped. A member *is* its string (``== "converged"``).
+    """How [`jaxgrasp.tune`][jaxgrasp.tune] stopped. A member *is* its string (``== "converged"``).
 
     ``message`` is a template with ``{ftol}``, ``{patience}`` and ``{maxiter}``: why the
     search stopped, then whether its result is usable. Every status returns the best grasp
     found (its value is never below the start's), so the result is usable in every case
-    (unless :attr:`~jaxgrasp.analysis._tune.TuneResult.message` adds that the best
+    (unless `message` adds that the best
     iterate's evaluation did not converge); the statuses differ in whether it is a maximum:
 
     - ``converged``: the projected gradient vanished: a (local) maximum within the bounds.

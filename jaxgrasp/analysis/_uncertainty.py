@@ -1,8 +1,8 @@
-"""What is uncertain about a grasp, and the perturbed copies of it that :func:`jaxgrasp.robust` evaluates.
+"""What is uncertain about a grasp, and the perturbed copies of it that [`jaxgrasp.robust`][jaxgrasp.robust] evaluates.
 
-:class:`Uncertainty` names each source and its spread (SI units); :func:`parse_spec`
-reads it from one line (``friction=0.1,position=1e-3``); :func:`draw_normals` draws the
-standard normals of every sample and :func:`perturb` applies them to the fields of a
+[`Uncertainty`][jaxgrasp.analysis.Uncertainty] names each source and its spread (SI units); [`parse_spec`][jaxgrasp.analysis.parse_spec]
+reads it from one line (``friction=0.1,position=1e-3``); `draw_normals` draws the
+standard normals of every sample and `perturb` applies them to the fields of a
 batch of grasps, clipping each sampled number into the field's valid range and counting
 the clipped ones.
 
@@ -44,7 +44,7 @@ SOURCES: tuple[str, ...] = (
     "mass",
     "gravity_angle",
 )
-"""The sources of :class:`Uncertainty`, in the order of its fields (and of a spec)."""
+"""The sources of [`Uncertainty`][jaxgrasp.analysis.Uncertainty], in the order of its fields (and of a spec)."""
 
 CLIP_SOURCES: tuple[str, ...] = ("friction", "initial_deformation", "mass")
 """The fields whose samples can leave their valid range, so are clipped and counted."""
@@ -76,7 +76,7 @@ DEFORMATION_MARGIN = 1e-3
 class Uncertainty:
     """The spread of each uncertain quantity of a grasp (SI units; 0: that source is exact).
 
-    Each sample ``k`` of :func:`jaxgrasp.robust` draws independent standard normals ``z``
+    Each sample ``k`` of [`jaxgrasp.robust`][jaxgrasp.robust] draws independent standard normals ``z``
     (per sample, or per sample and fingertip) and builds a perturbed copy of the grasp:
 
     Attributes:
@@ -87,13 +87,13 @@ class Uncertainty:
             friction is then clipped to at most ``MAX_FRICTION`` (1e3; counted).
         young_modulus: relative, per fingertip: ``E_i exp(young_modulus * z_i)``.
         initial_deformation: absolute, m, per fingertip: ``dr_i + initial_deformation * z_i``,
-            clipped into ``[1e-3 r_i, (1 - 1e-3) r_i]`` (:data:`DEFORMATION_MARGIN`; the
+            clipped into ``[1e-3 r_i, (1 - 1e-3) r_i]`` (`DEFORMATION_MARGIN`; the
             interval widened to hold the nominal ``dr_i``; counted).
         position: absolute, m, per contact, tangential: the contact moves by
             ``position * (z_1 t_1 + z_2 t_2)`` in its tangent plane (``t_1, t_2`` an
             orthonormal basis of the plane orthogonal to the normal, so each tangential
             coordinate has standard deviation ``position`` and the move's length a Rayleigh
-            distribution); the normal is unchanged. For a :class:`~jaxgrasp.MeshGrasp` the
+            distribution); the normal is unchanged. For a [`MeshGrasp`][jaxgrasp.MeshGrasp] the
             moved point is projected back onto the mesh (the closest surface point) and
             takes the surface's normal there.
         mass: relative: ``m exp(mass * z)``; where the weight would exceed
@@ -104,7 +104,7 @@ class Uncertainty:
             are orthonormal and orthogonal to gravity (each tilt coordinate has standard
             deviation ``gravity_angle``); its magnitude is unchanged.
 
-    Relative spreads are at most :data:`MAX_RELATIVE_SPREAD`, angles at most ``pi``; every
+    Relative spreads are at most `MAX_RELATIVE_SPREAD`, angles at most ``pi``; every
     spread is finite and ``>= 0``.
 
     Raises:
@@ -142,14 +142,14 @@ class Uncertainty:
         return {name: getattr(self, name) for name in SOURCES}
 
     def to_spec(self) -> str:
-        """The one-line spec of the non-zero spreads (:func:`parse_spec` reads it back)."""
+        """The one-line spec of the non-zero spreads ([`parse_spec`][jaxgrasp.analysis.parse_spec] reads it back)."""
         return ",".join(f"{name}={getattr(self, name)!r}" for name in self.active) or "none"
 
 
 def parse_spec(spec: str) -> Uncertainty:
-    """An :class:`Uncertainty` from one line ``name=value,name=value`` (SI units), e.g.
+    """An [`Uncertainty`][jaxgrasp.analysis.Uncertainty] from one line ``name=value,name=value`` (SI units), e.g.
     ``friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3``; the names
-    are :data:`SOURCES` (``-`` may stand for ``_``); ``none`` is no uncertainty.
+    are `SOURCES` (``-`` may stand for ``_``); ``none`` is no uncertainty.
 
     Raises:
         GraspValueError: one line naming the part that is wrong.
@@ -176,7 +176,7 @@ def parse_spec(spec: str) -> Uncertainty:
 
 def draw_normals(uncertainty: Uncertainty, samples: int, seed: int, n_contacts: int) -> dict[str, np.ndarray]:
     """The standard normals of ``samples`` samples for each active source: ``(S, k)`` for
-    a per-grasp source, ``(S, N, k)`` for a per-contact one (``k`` of :data:`_DRAWS`).
+    a per-grasp source, ``(S, N, k)`` for a per-contact one (``k`` of `_DRAWS`).
     Contact ``j``'s draws come from the stream ``[seed, source, j]``, so they do not depend
     on ``n_contacts``, and the first ``S`` samples do not depend on ``samples``."""
     out = {}
@@ -194,15 +194,15 @@ def perturb(fields: dict[str, np.ndarray], uncertainty: Uncertainty, z: dict[str
     grasp ``g``'s sample ``k`` in row ``g * S + k`` (``active``, where present, repeated).
 
     Args:
-        fields: the grasps' fields (:meth:`~jaxgrasp.Grasp.to_numpy_batch`), SI units.
+        fields: the grasps' fields ([`to_numpy_batch`][jaxgrasp.Grasp.to_numpy_batch]), SI units.
         uncertainty: the spreads.
-        z: :func:`draw_normals` for this contact count and ``samples``.
+        z: `draw_normals` for this contact count and ``samples``.
         samples: ``S``, the copies of each grasp.
         project: ``None``, or ``project(positions) -> (positions, normals)`` that puts
             moved contacts ``(G, S, N, 3)`` back onto the grasps' surfaces (mesh grasps).
 
     Returns:
-        ``(fields, clipped)``: the perturbed fields, and for each of :data:`CLIP_SOURCES`
+        ``(fields, clipped)``: the perturbed fields, and for each of `CLIP_SOURCES`
         the ``(G,)`` count of sampled numbers clipped into their valid range.
     """
     g = fields["positions"].shape[0]

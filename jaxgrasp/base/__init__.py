@@ -1,7 +1,7 @@
 """The base the other packages build on: named integer codes and small tensor contractions.
 
-:class:`Coded` is the base of every status and kind code of jaxgrasp (an integer with a
-label and a one-line message); :func:`contract` is a small ``einsum`` written as one
+`Coded` is the base of every status and kind code of jaxgrasp (an integer with a
+label and a one-line message); `contract` is a small ``einsum`` written as one
 broadcast product and one sum, so that XLA fuses it with what surrounds it. The solver
 and the model both use them; here, below both, neither depends on the other for them.
 

@@ -1,4 +1,4 @@
-"""Named integer codes: :class:`Coded`, the base of every status and kind code of jaxgrasp.
+"""Named integer codes: `Coded`, the base of every status and kind code of jaxgrasp.
 
 Arrays carry the integer codes (so they live inside ``jit``/``vmap`` results); these
 enums give the codes names and one-line meanings. A member *is* its integer
@@ -8,16 +8,16 @@ and ``GraspStatus(int(code)).label`` is the name written to files and JSON.
 Four kinds of integer code, never to be mixed up (they share some names, not their
 numbers), each defined in the package it belongs to:
 
-* :class:`jaxgrasp.solver.LaneStatus` (:mod:`jaxgrasp.solver`): how one solver lane (one problem
+* [`jaxgrasp.solver.LaneStatus`][jaxgrasp.solver.LaneStatus] (`jaxgrasp.solver`): how one solver lane (one problem
   from one start) ended;
-* :class:`jaxgrasp.GraspStatus` (:mod:`jaxgrasp.tolerance`): what an evaluation says of
+* [`jaxgrasp.GraspStatus`][jaxgrasp.GraspStatus] (`jaxgrasp.tolerance`): what an evaluation says of
   a grasp;
-* :class:`jaxgrasp.model.BoundaryKind` (:mod:`jaxgrasp.model`): which boundary of the
+* [`jaxgrasp.model.BoundaryKind`][jaxgrasp.model.BoundaryKind] (`jaxgrasp.model`): which boundary of the
   equilibrium region (eq. 20, 21);
-* :class:`jaxgrasp.model.Constraint`: the rows of
-  :func:`jaxgrasp.model.constraint_margins`;
+* `jaxgrasp.model.Constraint`: the rows of
+  `jaxgrasp.model.constraint_margins`;
 
-and one string status, :class:`jaxgrasp.analysis.TuneStatus`: how :func:`jaxgrasp.tune` stopped
+and one string status, [`jaxgrasp.analysis.TuneStatus`][jaxgrasp.analysis.TuneStatus]: how [`jaxgrasp.tune`][jaxgrasp.tune] stopped
 (a Python loop, not an array, so its members are strings).
 """
 

@@ -4,7 +4,7 @@ The solver's and the model's lanes contract arrays of a few entries per axis (``
 ``3N x 6`` constraint Jacobian, ``4 x 6`` kinematic Jacobians). Under ``vmap`` a
 ``jnp.einsum`` or ``@`` of such arrays becomes a batched ``dot``, which XLA's CPU backend
 runs as one small matrix product per lane, each a call of its own, and which fuses with
-nothing around it. :func:`contract` computes the same contraction as an elementwise
+nothing around it. `contract` computes the same contraction as an elementwise
 product of the operands broadcast to every index, summed over the contracted ones: a loop
 that XLA fuses with the operations that make its operands and use its result, the same
 for every lane. The sum's order differs from a ``dot``'s, so results differ by rounding.

@@ -5,11 +5,11 @@ written) prints one line ``jaxgrasp: error: ...`` on stderr and exits with statu
 a traceback. A failure of the machine while writing (a full disk, an I/O error) is one
 line too, with status 1; a batch's finished chunks stay in its checkpoint for
 ``--resume``. Ctrl-C (or SIGTERM) at any moment ends the command within a second with one
-line ``jaxgrasp: interrupted ...`` and status 130 (143), see :mod:`._interrupt`.
+line ``jaxgrasp: interrupted ...`` and status 130 (143), see `_interrupt`.
 
-One module per sub-command (:mod:`._evaluate`, :mod:`._sweep`, :mod:`._batch`,
-:mod:`._tune`, :mod:`._plan`, :mod:`._show`, :mod:`._simulate`), each with ``add_parser(sub)`` and ``run(args)``; what they
-share is in :mod:`._common`. The commands parse, call the library, print and write.
+One module per sub-command (`_evaluate`, `_sweep`, `_batch`,
+`_tune`, `_plan`, `_show`, `_simulate`), each with ``add_parser(sub)`` and ``run(args)``; what they
+share is in `_common`. The commands parse, call the library, print and write.
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def _parser_and_commands() -> tuple[Parser, object]:
 def top_parser() -> Parser:
     """The ``jaxgrasp`` parser with each sub-command's name and line but none of its
     options: what ``--version``, ``--help`` and a missing or unknown command need,
-    without the library (and JAX). Its ``--help`` is :func:`build_parser`'s."""
+    without the library (and JAX). Its ``--help`` is `build_parser`'s."""
     parser, sub = _parser_and_commands()
     for name, line in COMMANDS.items():
         sub.add_parser(name, help=line, add_help=False)
@@ -111,7 +111,7 @@ def main(argv=None) -> int:
     """Run ``jaxgrasp`` with ``argv``; the exit status.
 
     The command runs in a worker thread while this (main) thread handles Ctrl-C and
-    SIGTERM (:mod:`._interrupt`): on either, the process ends within a second with status
+    SIGTERM (`_interrupt`): on either, the process ends within a second with status
     130 (143), one line ``jaxgrasp: interrupted ...`` and no temporary file left.
 
     Without ``argv`` (the installed ``jaxgrasp`` command, ``python -m jaxgrasp``) it reads
@@ -120,9 +120,9 @@ def main(argv=None) -> int:
     the interpreter's teardown. Pass ``argv`` to get the status returned instead.
 
     ``--version``, ``--help`` and a missing or unknown command are answered by
-    :func:`top_parser` before the library (and JAX) is loaded. In the ``jaxgrasp``
+    `top_parser` before the library (and JAX) is loaded. In the ``jaxgrasp``
     command, a Ctrl-C or SIGTERM while the library loads ends the process with one line
-    (:func:`jaxgrasp._startup.install_if_command_line`).
+    (`jaxgrasp._startup.install_if_command_line`).
     """
     _startup.install_if_command_line()  # first: before anything slow is loaded
     status = _answer_without_library(sys.argv[1:] if argv is None else list(argv))
@@ -134,7 +134,7 @@ def main(argv=None) -> int:
 
 
 def _answer_without_library(argv: list[str]) -> int | None:
-    """The exit status of a command line :func:`top_parser` answers alone (no command, an
+    """The exit status of a command line `top_parser` answers alone (no command, an
     unknown command or top-level option), after printing its one line; ``None`` for a
     sub-command to run. ``--version`` and ``--help`` print and raise ``SystemExit(0)``,
     as argparse does."""
@@ -179,8 +179,8 @@ def _main(argv) -> int:
 
 
 def _configure() -> None:
-    """:func:`jaxgrasp.configure` from the environment; a bad ``JAXGRASP_CPU_DEVICES`` is a
-    :class:`UsageError`."""
+    """[`jaxgrasp.configure`][jaxgrasp.configure] from the environment; a bad ``JAXGRASP_CPU_DEVICES`` is a
+    `UsageError`."""
     from jaxgrasp.engine import configure
 
     try:
@@ -190,7 +190,7 @@ def _configure() -> None:
 
 
 def _report(exc: Exception) -> int:
-    """Print the one line of an error that ended a command (:func:`_error_line`); its exit status.
+    """Print the one line of an error that ended a command (`_error_line`); its exit status.
 
     A write abandoned by an interrupt prints nothing: the command's thread reaches it
     while the main thread ends the process with the interrupt's one line, which must be
@@ -207,10 +207,10 @@ def _report(exc: Exception) -> int:
 def _error_line(exc: Exception) -> tuple[int, str]:
     """The exit status and one-line message of an error that ended a command.
 
-    A full disk (:class:`~jaxgrasp.storage.DiskFull`, or an ``OSError`` with its errno
+    A full disk (`DiskFull`, or an ``OSError`` with its errno
     that no writer turned into one) and any other ``OSError`` (the machine, not the input:
     an I/O error, a file removed meanwhile) exit 1; a full disk's line also says what
-    the command kept (:func:`~jaxgrasp.cli._notes.keeping`). The rest is bad input, exit 2.
+    the command kept (`keeping`). The rest is bad input, exit 2.
     """
     from jaxgrasp import storage
     from jaxgrasp.cli import _notes

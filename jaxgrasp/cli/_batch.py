@@ -1,15 +1,15 @@
 """``jaxgrasp batch``: evaluate and rank every grasp of a dataset file; write csv, npz and a picture.
 
-The dataset is a ``.npz`` or ``.jsonl`` file (:mod:`jaxgrasp.io._dataset`), grasps with any
+The dataset is a ``.npz`` or ``.jsonl`` file (`jaxgrasp.io._dataset`), grasps with any
 contact counts, padded to the largest and evaluated in chunks by one compiled evaluator
-(:func:`jaxgrasp.evaluate_batch`). An invalid grasp does not stop the run: its row has
+([`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch]). An invalid grasp does not stop the run: its row has
 status ``invalid`` and its one-line error (``--strict``: exit 2 before computing).
 
 Nothing finished is lost: each finished chunk is kept at once in ``DIR/results.partial``
-(:class:`jaxgrasp.cli._keepers.BatchCheckpoint`, one atomic file per chunk), so a run stopped at
+(`jaxgrasp.cli._keepers.BatchCheckpoint`, one atomic file per chunk), so a run stopped at
 any moment (Ctrl-C, SIGTERM, ``kill -9``) is finished by ``--resume`` without
 recomputing those chunks; a resumed run must read the same dataset and the same mesh files
-its rows name (:func:`resume_key`). At the end ``results.csv``, ``results.npz`` and
+its rows name (`resume_key`). At the end ``results.csv``, ``results.npz`` and
 ``results.png`` replace the previous ones as one set and the checkpoint is removed.
 """
 
@@ -50,7 +50,7 @@ OUTPUT_NAMES = ("results.csv", "results.npz", "results.png")
 """The files of one batch's output set, in ``--out``."""
 
 PARTIAL_NAME = "results.partial"
-"""The checkpoint folder of the finished chunks (:class:`jaxgrasp.cli._keepers.BatchCheckpoint`), in ``--out``."""
+"""The checkpoint folder of the finished chunks (`jaxgrasp.cli._keepers.BatchCheckpoint`), in ``--out``."""
 
 DEFAULT_TOP = 5
 """Best grasps listed in the summary (``--top``)."""
@@ -139,7 +139,7 @@ def run(args) -> int:
 
 def run_processes(args, uncertainty) -> int:
     """The command as process ``--process-id`` of ``--num-processes`` (see
-    :mod:`._batch_processes`): join the others, evaluate this process's share of the
+    `_batch_processes`): join the others, evaluate this process's share of the
     dataset on this host's devices, meet the others; process 0 writes the files in input
     order and prints the summary, the others one line."""
     from jaxgrasp.cli._hosts import join, leave
@@ -177,7 +177,7 @@ def _evaluate_share(share, n_contacts: int, counts: dict[int, int], uncertainty,
     """This process's share evaluated on its own devices, padded to the dataset's
     ``n_contacts``, each contact count at the width a run of one process gives it (from
     the dataset's ``counts``, ``{count: grasps}``), with its ``--epsilon`` and
-    ``--robust`` columns: what it sends process 0 (:func:`._batch_processes.share_blob`)."""
+    ``--robust`` columns: what it sends process 0 (`_batch_processes.share_blob`)."""
     from jaxgrasp.engine import evaluate_dataset, plan_widths
     from jaxgrasp.io import padded_set
 
@@ -280,7 +280,7 @@ def _epsilon(gset) -> dict:
 
 
 def _robust(gset, uncertainty, args, devices=None) -> dict:
-    """The ``--robust`` columns of every input row (:meth:`jaxgrasp.analysis.RobustBatch.columns`:
+    """The ``--robust`` columns of every input row ([`jaxgrasp.analysis.RobustBatch.columns`][jaxgrasp.analysis.RobustBatch.columns]:
     ``p_stable``, ``p_stable_stderr``, ``value_mean``, ``value_q05``, ``value_q50``), NaN
     for an invalid grasp; every valid grasp's samples through one compiled evaluator,
     on ``devices`` (default every device)."""
@@ -314,7 +314,7 @@ def _robust_line(columns: dict, uncertainty, args) -> str:
 
 def _timing(run, resumed: int) -> str:
     """The summary's timings of this run's evaluation (``run``: its
-    :class:`~jaxgrasp.BatchResult`, ``None`` where nothing was left), with the rows
+    [`BatchResult`][jaxgrasp.BatchResult], ``None`` where nothing was left), with the rows
     ``resumed`` from a checkpoint."""
     timing = "no chunk left to evaluate" if run is None else (
         f"compile {run.compile_seconds:.1f} s, run {run.run_seconds:.1f} s, "
@@ -324,7 +324,7 @@ def _timing(run, resumed: int) -> str:
 
 
 def _summary(result, source, wall, timing, out, written, replaced, removed, top) -> str:
-    """The summary: counts, ``timing`` (:func:`_timing`), files, then the ``top`` best
+    """The summary: counts, ``timing`` (`_timing`), files, then the ``top`` best
     grasps, one per line."""
     c = result.counts()
     counts = ", ".join(f"{k} {v}" for k, v in c.items() if v or k != "invalid")

@@ -4,10 +4,10 @@ Each process (one per host, or several on one) runs the same command with its ow
 ``--process-id``; process 0 is also the coordinator (``--coordinator HOST:PORT``, an
 address every process reaches). Process ``i`` of ``P`` reads, validates and evaluates its
 share of the dataset, the grasps ``i, i + P, i + 2P, ...``
-(:func:`~jaxgrasp.io._dataset.share_rows`), on its own devices
+(`share_rows`), on its own devices
 (``jax.local_devices()``), through the same engine as one process
-(:func:`~jaxgrasp.engine._batch.evaluate_dataset`). The processes meet twice
-(:func:`~jaxgrasp.cli._hosts.exchange`): once every share is read (the dataset's
+(`evaluate_dataset`). The processes meet twice
+(`exchange`): once every share is read (the dataset's
 largest contact count, which every share is padded to, so that every process runs the
 program one process would, but where a share of a mixed dataset holds only grasps of the
 largest count: that one runs without a contact mask, equal to round-off; the file's SHA-256, which must be the same everywhere; and
@@ -96,7 +96,7 @@ def _raise_first(failures: list[str | None], mine: BaseException | None) -> None
 def open_share(args, out, partial, held) -> tuple:
     """Read this process's share of ``args.file`` (``--strict``: none invalid); process 0
     also checks ``--out``, which must hold no unfinished run (a checkpoint folder
-    ``partial``), and takes its lock (held by ``held``, a :class:`contextlib.ExitStack`).
+    ``partial``), and takes its lock (held by ``held``, a `contextlib.ExitStack`).
     ``(share, the file's grasps)``."""
     share, total = load_share(args.file, args.process_id, args.num_processes, allowed_dirs=args.allow_dir)
     if args.strict:
@@ -116,7 +116,7 @@ def agree_on_inputs(opened, failure: BaseException | None) -> tuple[int, dict[in
     """The first meeting: every process's share read (``opened``: ``(share, total)``, or
     ``None`` with its ``failure``). Returns the dataset's largest contact count and its
     valid grasps by contact count (``{count: grasps}``, from which every process plans
-    the same widths, :func:`~jaxgrasp.engine._plan.plan_widths`); raises where any
+    the same widths, `plan_widths`); raises where any
     process failed, where the processes read different files (by SHA-256 and number of
     grasps), or where the dataset has no valid grasp."""
     facts = {"failure": None if failure is None else str(failure)}
@@ -141,9 +141,9 @@ def agree_on_inputs(opened, failure: BaseException | None) -> tuple[int, dict[in
 
 def share_blob(share, merged, run, extra: dict) -> bytes:
     """What a process sends process 0: its share's results (``merged``, the
-    :class:`~jaxgrasp.BatchResult` of its rows, ``None`` where none is valid), contact
+    [`BatchResult`][jaxgrasp.BatchResult] of its rows, ``None`` where none is valid), contact
     counts, errors, ``extra`` columns (``--epsilon``, ``--robust``) and timings (``run``:
-    the evaluation's :class:`~jaxgrasp.BatchResult`)."""
+    the evaluation's [`BatchResult`][jaxgrasp.BatchResult])."""
     arrays = {f"extra.{k}": np.asarray(v) for k, v in extra.items()}
     arrays.update(num_contacts=np.asarray(share.num_contacts, dtype=np.int64),
                   error=np.asarray([e or "" for e in share.errors], dtype=str),
@@ -155,7 +155,7 @@ def share_blob(share, merged, run, extra: dict) -> bytes:
 
 
 def gather_results(blob, failure, total: int, n_contacts: int, devices: int):
-    """The second meeting: every process's :func:`share_blob` (``None`` with its
+    """The second meeting: every process's `share_blob` (``None`` with its
     ``failure``), put together in input order. ``(BatchResult of every row, extra columns,
     timing)`` (``timing``: the longest compile and run of the processes, s, and the
     grasps evaluated); raises where any process failed."""

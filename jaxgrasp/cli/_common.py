@@ -1,8 +1,8 @@
 """What every ``jaxgrasp`` sub-command shares: one-line errors, numbers, the grasp to use.
 
-Every error in the input (bad file, bad value, bad option) is a :class:`UsageError` (or a
-:class:`~jaxgrasp.model._validation.GraspValueError`), which :func:`jaxgrasp.cli.main` prints as
-one line ``jaxgrasp: error: ...`` on stderr, exiting with :data:`EXIT_USAGE`.
+Every error in the input (bad file, bad value, bad option) is a `UsageError` (or a
+[`GraspValueError`][jaxgrasp.GraspValueError]), which `jaxgrasp.cli.main` prints as
+one line ``jaxgrasp: error: ...`` on stderr, exiting with `EXIT_USAGE`.
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ OVERRIDES = SWEEPABLE
 
 
 def parse_number(option: str, text: str, what: str = "value") -> float:
-    """``text`` as a finite float; a :class:`UsageError` naming ``option`` otherwise."""
+    """``text`` as a finite float; a `UsageError` naming ``option`` otherwise."""
     t = text.strip()
     try:
         x = float(t)
@@ -81,7 +81,7 @@ def add_grasp_source(p: argparse.ArgumentParser) -> None:
 
 def add_allow_dir(p: argparse.ArgumentParser) -> None:
     """``--allow-dir DIR`` (repeatable): a folder outside the input file's own that the
-    meshes it names may be in (:func:`jaxgrasp.io._inputs.confine`)."""
+    meshes it names may be in (`jaxgrasp.io._inputs.confine`)."""
     p.add_argument(
         "--allow-dir", action="append", default=None, metavar="DIR", dest="allow_dir",
         help=("also read meshes the input file names from DIR (repeatable); by default only "
@@ -90,7 +90,7 @@ def add_allow_dir(p: argparse.ArgumentParser) -> None:
 
 
 def add_overrides(p: argparse.ArgumentParser) -> None:
-    """``--young-modulus PA`` etc.: one number for a field of the whole grasp (:data:`OVERRIDES`)."""
+    """``--young-modulus PA`` etc.: one number for a field of the whole grasp (`OVERRIDES`)."""
     for name in OVERRIDES:
         field = FIELD[name]
         p.add_argument(field.option, dest=name, type=float, metavar=field.metavar, help=field.help)
@@ -103,7 +103,7 @@ def grasp_source(args) -> str:
 
 def grasp_notes(grasp) -> list[str]:
     """Remarks on a valid grasp that may not be what its author meant (one line each):
-    normals pointing towards the centre of mass (:func:`jaxgrasp.model._validation.inward_contacts`)."""
+    normals pointing towards the centre of mass (`jaxgrasp.model._validation.inward_contacts`)."""
     from jaxgrasp.model import inward_contacts
 
     inward = inward_contacts(grasp.positions, grasp.normals)
@@ -122,7 +122,7 @@ def grasp_notes(grasp) -> list[str]:
 
 def load_grasp(args, overrides: bool = True, keep_mesh: bool = False):
     """The grasp named on the command line (file or preset), with overrides applied; with
-    ``keep_mesh``, a file naming a mesh gives its :class:`~jaxgrasp.MeshGrasp` (the
+    ``keep_mesh``, a file naming a mesh gives its [`MeshGrasp`][jaxgrasp.MeshGrasp] (the
     overrides applied to its grasp)."""
     from jaxgrasp.io import load
     from jaxgrasp.surface import MeshGrasp
@@ -184,16 +184,16 @@ def _check_override(name: str, value: float) -> None:
 
 
 PATH_ARGUMENTS = ("file", "mesh", "out", "glb", "hand", "allow_dir")
-"""The arguments that name a file or folder: an empty one is refused (:func:`check_names`)."""
+"""The arguments that name a file or folder: an empty one is refused (`check_names`)."""
 
 
 def check_names(args) -> None:
     """Every text argument (input file, ``--out``, ``--glb`` ...) must be valid UTF-8.
 
     A file name made of bytes that are not UTF-8 (``b"\\xff"``) reaches Python as lone
-    surrogates (:func:`os.fsdecode`); it can be opened, but not printed, written into a
+    surrogates (`os.fsdecode`); it can be opened, but not printed, written into a
     CSV or drawn in a figure title, so it would fail only after all the computing. Here it
-    is a :class:`UsageError` before anything is read or computed.
+    is a `UsageError` before anything is read or computed.
     """
     for dest, value in sorted(vars(args).items()):
         for text in value if isinstance(value, (list, tuple)) else [value]:
@@ -307,7 +307,7 @@ def announce_run(command: str, source: str, count: int, noun: str, quiet: bool =
 
 LONG_EVALUATION_CONTACTS = 32
 """Grasps of more contacts than this get a line on stderr before their evaluation
-(:func:`announce_large_grasp`). The evaluation of one grasp is one compiled call without
+(`announce_large_grasp`). The evaluation of one grasp is one compiled call without
 progress of its own; its 2 N boundary problems of N contacts each cost time and memory
 that grow more than in proportion to N. The commands do not cap N: such a grasp is valid and its result
 exact, only slow, and the memory it needs depends on the machine's other work; the line
@@ -316,7 +316,7 @@ tells the user what the wait is for."""
 
 def announce_large_grasp(n_contacts: int, source: str) -> None:
     """Say on stderr what is about to be compiled and evaluated, where the grasp has more
-    than :data:`LONG_EVALUATION_CONTACTS` contacts (the one-grasp commands print nothing
+    than `LONG_EVALUATION_CONTACTS` contacts (the one-grasp commands print nothing
     else until the result)."""
     if n_contacts > LONG_EVALUATION_CONTACTS:
         say(
@@ -341,7 +341,7 @@ def add_epsilon_option(p: argparse.ArgumentParser) -> None:
 
 def epsilon_columns(grasps, shape=None) -> dict:
     """``{"epsilon": values, "force_closure": bools}`` of a batched grasp
-    (:func:`jaxgrasp.epsilon`), reshaped to ``shape`` (e.g. a sweep's grid)."""
+    ([`jaxgrasp.epsilon`][jaxgrasp.epsilon]), reshaped to ``shape`` (e.g. a sweep's grid)."""
     from jaxgrasp.analysis import epsilon
 
     eps = epsilon(grasps)
@@ -357,7 +357,7 @@ DEFAULT_ROBUST_SAMPLES = 256
 
 def add_robust_options(p: argparse.ArgumentParser) -> None:
     """``--robust SPEC``, ``--samples N`` and ``--seed N``: the robust value under uncertainty
-    (:func:`jaxgrasp.robust`)."""
+    ([`jaxgrasp.robust`][jaxgrasp.robust])."""
     p.add_argument(
         "--robust", metavar="SPEC", default=None,
         help=("also evaluate SAMPLES perturbed copies of each grasp; SPEC gives each source's spread "
@@ -370,8 +370,8 @@ def add_robust_options(p: argparse.ArgumentParser) -> None:
 
 
 def robust_uncertainty(args):
-    """The :class:`~jaxgrasp.analysis.Uncertainty` of ``--robust`` (``None`` without it), after
-    checking ``--samples`` and ``--seed``; a one-line :class:`UsageError` otherwise."""
+    """The [`Uncertainty`][jaxgrasp.analysis.Uncertainty] of ``--robust`` (``None`` without it), after
+    checking ``--samples`` and ``--seed``; a one-line `UsageError` otherwise."""
     from jaxgrasp.analysis import parse_spec
     from jaxgrasp.model import GraspValueError
 

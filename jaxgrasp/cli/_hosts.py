@@ -2,12 +2,12 @@
 
 ``jaxgrasp batch --num-processes P`` runs one process per host (or several on one host),
 each evaluating its own share of a dataset on its own devices; they meet twice, through
-:func:`exchange`: once their inputs are read (so that every process learns the largest
+`exchange`: once their inputs are read (so that every process learns the largest
 contact count and whether any failed) and once their results are in (so that process 0
 writes one file in input order). Nothing else passes between them, so a slow share does
 not hold the others up chunk by chunk.
 
-The bytes go through JAX's own collectives (:func:`jax.experimental.multihost_utils.process_allgather`,
+The bytes go through JAX's own collectives (`jax.experimental.multihost_utils.process_allgather`,
 gloo on CPU hosts), so nothing but ``jax.distributed`` needs to be set up.
 """
 
@@ -122,6 +122,6 @@ def pack(arrays: dict[str, np.ndarray]) -> bytes:
 
 
 def unpack(blob: bytes) -> dict[str, np.ndarray]:
-    """The arrays of :func:`pack`, by name (no pickles read)."""
+    """The arrays of `pack`, by name (no pickles read)."""
     with np.load(io.BytesIO(blob), allow_pickle=False) as z:
         return {k: z[k] for k in z.files}

@@ -5,17 +5,17 @@ while the main thread is inside XLA's compiler (C++, seconds at a time) a Ctrl-C
 for it; and
 an interrupt that unwinds the interpreter while XLA's threads still run ends in a
 segfault at teardown, or, inside an import, in a fatal error. Therefore
-:func:`run_interruptibly` runs the command in a worker thread (a daemon) while the main
+`run_interruptibly` runs the command in a worker thread (a daemon) while the main
 thread only waits, a short timeout at a time, so that its handlers run at once; the
 worker blocks both signals for itself and the threads it starts (XLA's), so they reach
 the main thread only. On SIGINT or SIGTERM the main thread:
 
 1. ignores further signals (a second Ctrl-C cannot cut the clean-up short);
-2. calls :func:`jaxgrasp.cli._notes.abandon`: waits at most :data:`PUBLISH_WAIT_SECONDS`
+2. calls `jaxgrasp.cli._notes.abandon`: waits at most `PUBLISH_WAIT_SECONDS`
    for a set of output files being renamed into place, removes this run's temporary
    files and lock files, and forbids later writes; then waits as long again at most
    for a compiled executable being written to the executable store
-   (:func:`jaxgrasp.engine._compile.wait_for_saves`);
+   (`jaxgrasp.engine._compile.wait_for_saves`);
 3. flushes stdout and stderr and prints one line ``jaxgrasp: interrupted``
    (``terminated`` for SIGTERM) with the notes commands left, e.g. ``; kept 128 of 369
    points in out/sweep.partial.npz``, as the process's last output;

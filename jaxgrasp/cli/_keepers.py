@@ -1,5 +1,5 @@
-"""The command's checkpoints: the engine's (:mod:`jaxgrasp.engine._checkpoint`), with the
-words the command says of them (:mod:`._notes`): what an interrupt prints, what a failed
+"""The command's checkpoints: the engine's (`jaxgrasp.engine._checkpoint`), with the
+words the command says of them (`_notes`): what an interrupt prints, what a failed
 write's error adds, and which damaged chunk files ``--resume`` skipped."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ __all__ = ["SweepKeeper", "BatchCheckpoint"]
 
 
 class SweepKeeper(engine.SweepKeeper):
-    """``jaxgrasp sweep``'s checkpoint (:class:`jaxgrasp.engine._checkpoint.SweepKeeper`):
-    a skipped write is left to an interrupt (:func:`set_last_write`), and each write
+    """``jaxgrasp sweep``'s checkpoint (`jaxgrasp.engine._checkpoint.SweepKeeper`):
+    a skipped write is left to an interrupt (`set_last_write`), and each write
     leaves the note an interrupt prints (``kept K of N points in PATH``) and what a failed
     write's error adds."""
 
@@ -26,9 +26,9 @@ class SweepKeeper(engine.SweepKeeper):
 
 
 class BatchCheckpoint(engine.BatchCheckpoint):
-    """``jaxgrasp batch``'s checkpoint (:class:`jaxgrasp.engine._checkpoint.BatchCheckpoint`)
+    """``jaxgrasp batch``'s checkpoint (`jaxgrasp.engine._checkpoint.BatchCheckpoint`)
     with the command's words: once opened, a failed write's error says the folder is kept;
-    each chunk kept leaves the note an interrupt prints; :meth:`skipped_note` names the
+    each chunk kept leaves the note an interrupt prints; `skipped_note` names the
     damaged chunk files ``--resume`` skipped."""
 
     def open(self, resume: bool):
@@ -44,7 +44,7 @@ class BatchCheckpoint(engine.BatchCheckpoint):
         )
 
     def skipped_note(self) -> str | None:
-        """One line on the chunk files the last :meth:`load` skipped (``None``: none)."""
+        """One line on the chunk files the last `load` skipped (``None``: none)."""
         if not self.skipped:
             return None
         n = len(self.skipped)

@@ -4,14 +4,14 @@ error adds, and the writes an interrupt makes first.
 The library writes files and raises errors; the words the ``jaxgrasp`` command prints
 about them are chosen here. A command leaves, while it runs:
 
-* notes (:func:`set_note`), which an interrupt prints on its one line
+* notes (`set_note`), which an interrupt prints on its one line
   (``jaxgrasp: interrupted; kept 128 of 369 points in out/sweep.partial.npz``);
-* what is kept if a later write fails (:func:`set_keeping`), which a full disk's error
-  line adds (:func:`keeping`);
-* a last write (:func:`set_last_write`), which an interrupt makes before it stops every
-  write (:func:`abandon`), e.g. a sweep's checkpoint that was skipped to save time.
+* what is kept if a later write fails (`set_keeping`), which a full disk's error
+  line adds (`keeping`);
+* a last write (`set_last_write`), which an interrupt makes before it stops every
+  write (`abandon`), e.g. a sweep's checkpoint that was skipped to save time.
 
-The command's checkpoints leave theirs through :mod:`._keepers`.
+The command's checkpoints leave theirs through `_keepers`.
 """
 
 from __future__ import annotations
@@ -30,14 +30,14 @@ _LAST_WRITES: dict[str, Callable[[], object]] = {}
 
 
 def set_note(key: str, text: str) -> None:
-    """Leave a note for an interrupt (:func:`abandon` returns them), e.g. where a sweep's
+    """Leave a note for an interrupt (`abandon` returns them), e.g. where a sweep's
     finished points are; replaces the note of the same ``key``."""
     with _LOCK:
         _NOTES[key] = text
 
 
 def set_last_write(key: str, write: Callable[[], object] | None) -> None:
-    """Leave ``write()`` for an interrupt to run first (:func:`abandon`), e.g. the
+    """Leave ``write()`` for an interrupt to run first (`abandon`), e.g. the
     checkpoint of the points a sweep finished since its last one; ``None`` withdraws the
     ``key``'s. It runs in the interrupted thread while the command's worker may still run,
     so it must read only what the worker no longer changes."""
@@ -49,7 +49,7 @@ def set_last_write(key: str, write: Callable[[], object] | None) -> None:
 
 
 def set_keeping(key: str, text: str | None) -> None:
-    """Say what is kept if a later write fails (:func:`keeping`), e.g. ``finished chunks
+    """Say what is kept if a later write fails (`keeping`), e.g. ``finished chunks
     kept in DIR, rerun with --resume``; ``None`` withdraws the ``key``'s."""
     with _LOCK:
         if text is None:
@@ -59,13 +59,13 @@ def set_keeping(key: str, text: str | None) -> None:
 
 
 def keeping() -> list[str]:
-    """What :func:`set_keeping` said is kept, oldest first (for a failed write's error)."""
+    """What `set_keeping` said is kept, oldest first (for a failed write's error)."""
     with _LOCK:
         return list(_KEEPING.values())
 
 
 def clear_notes() -> None:
-    """Forget every note, last write and :func:`keeping` (a command's notes end with it)."""
+    """Forget every note, last write and `keeping` (a command's notes end with it)."""
     with _LOCK:
         _NOTES.clear()
         _LAST_WRITES.clear()
@@ -75,13 +75,13 @@ def clear_notes() -> None:
 def abandon(timeout: float = 0.5) -> list[str]:
     """Stop every write of this process for good, for an exit on an interrupt.
 
-    First runs the last writes left with :func:`set_last_write` (a failing one is
-    skipped: its previous file stays), then :func:`jaxgrasp.storage.abandon` (waits at
+    First runs the last writes left with `set_last_write` (a failing one is
+    skipped: its previous file stays), then `jaxgrasp.storage.abandon` (waits at
     most ``timeout`` seconds for a set being renamed into place, removes this process's
     temporary files and lock files, forbids later writes).
 
     Returns:
-        The notes left with :func:`set_note`, oldest first.
+        The notes left with `set_note`, oldest first.
     """
     with _LOCK:
         last_writes = list(_LAST_WRITES.values())

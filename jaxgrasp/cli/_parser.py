@@ -1,7 +1,7 @@
 """The command line's argument parser and its one-line errors: Python's standard library only.
 
-:mod:`jaxgrasp.cli` answers ``jaxgrasp --version``, ``--help`` and a missing or unknown
-command with these alone, before it loads JAX (:func:`jaxgrasp.cli.main`).
+`jaxgrasp.cli` answers ``jaxgrasp --version``, ``--help`` and a missing or unknown
+command with these alone, before it loads JAX (`jaxgrasp.cli.main`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ class UsageError(Exception):
 
 
 class Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one :class:`UsageError` line, not usage + message.
+    """An argument parser whose errors are one `UsageError` line, not usage + message.
 
     A value that starts with a minus sign followed by a digit or a point (``-2e5``,
     ``-9.81,0,0``, ``-0.1:0.5:3``) is a value, not an option: argparse's own rule knows only

@@ -1,9 +1,9 @@
 """``jaxgrasp plan MESH --fingers N --out DIR``: the best grasps of a meshed object.
 
-Checks every option and the mesh first (:func:`jaxgrasp.planning._plan.check_plan`, the
-check :func:`jaxgrasp.plan` makes), so that bad input creates nothing; then runs
-:func:`jaxgrasp.plan` and writes, as one set into ``DIR`` (checked writable and locked
-before any computation, :func:`jaxgrasp.storage.write_set`):
+Checks every option and the mesh first (`jaxgrasp.planning._plan.check_plan`, the
+check [`jaxgrasp.plan`][jaxgrasp.plan] makes), so that bad input creates nothing; then runs
+[`jaxgrasp.plan`][jaxgrasp.plan] and writes, as one set into ``DIR`` (checked writable and locked
+before any computation, `jaxgrasp.storage.write_set`):
 
 * ``ranked.jsonl``: the ranked grasps, best first, one grasp file (JSON) per line naming the
   mesh (a dataset: ``jaxgrasp batch DIR/ranked.jsonl`` evaluates it);
@@ -29,7 +29,7 @@ from jaxgrasp import storage
 __all__ = ["add_parser", "run", "RESULT_COLUMNS", "DEFAULTS"]
 
 RESULT_COLUMNS = ("rank", "value_J", "status", "limiting_kind", "limiting_contact", "epsilon", "refined")
-"""The columns of ``results.csv``; with ``--rank robust`` also :data:`ROBUST_COLUMNS`."""
+"""The columns of ``results.csv``; with ``--rank robust`` also `ROBUST_COLUMNS`."""
 
 ROBUST_COLUMNS = ("p_stable", "value_mean_J", "value_q05_J")
 """The robust columns of ``results.csv`` (``--rank robust``)."""
@@ -92,7 +92,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    """Check every option and the mesh (:func:`jaxgrasp.planning._plan.check_plan`), then
+    """Check every option and the mesh (`jaxgrasp.planning._plan.check_plan`), then
     create and lock ``--out``, plan, write the set, print one summary line."""
     from jaxgrasp.planning import PlanProgress, check_plan, plan
 
@@ -112,7 +112,7 @@ def run(args) -> int:
 
 
 def _plan_options(args) -> dict:
-    """The keyword arguments of :func:`jaxgrasp.plan` (mesh and fingers aside), the options
+    """The keyword arguments of [`jaxgrasp.plan`][jaxgrasp.plan] (mesh and fingers aside), the options
     that are the command's own checked."""
     from jaxgrasp.surface import ContactRules
 
@@ -122,7 +122,7 @@ def _plan_options(args) -> dict:
 
 
 def _robust_options(args) -> dict:
-    """``robust`` and ``robust_samples`` of :func:`jaxgrasp.plan` (empty for ``--rank value``)."""
+    """``robust`` and ``robust_samples`` of [`jaxgrasp.plan`][jaxgrasp.plan] (empty for ``--rank value``)."""
     from jaxgrasp.analysis import parse_spec
 
     if args.rank == "value":
@@ -135,7 +135,7 @@ def _robust_options(args) -> dict:
 
 
 def _object_options(args) -> dict:
-    """The fingertip and object keyword arguments of :func:`jaxgrasp.plan`, checked."""
+    """The fingertip and object keyword arguments of [`jaxgrasp.plan`][jaxgrasp.plan], checked."""
     parts = args.gravity.split(",")
     if len(parts) != 3:
         raise UsageError(f"--gravity {args.gravity!r}: give three numbers GX,GY,GZ in m/s^2")

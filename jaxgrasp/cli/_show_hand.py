@@ -1,5 +1,5 @@
 """``jaxgrasp show --hand FILE``: the picture of a hand's grasp (its links, the object, the
-way it fails), from a hand grasp file (:mod:`jaxgrasp.hands._file`)."""
+way it fails), from a hand grasp file (`jaxgrasp.hands._file`)."""
 
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ def run_hand(args, targets) -> int:
 def _reject_overrides(args) -> None:
     """``--young-modulus`` etc. have no meaning with ``--hand``: the hand grasp file sets
     its fingertips (``[fingertip]``, their radius and squeeze from the hand's model and pose)
-    and its object (``[object]``); a one-line :class:`UsageError` naming those given."""
+    and its object (``[object]``); a one-line `UsageError` naming those given."""
     given = [FIELD[name].option for name in OVERRIDES if getattr(args, name, None) is not None]
     if given:
         raise UsageError(f"{', '.join(given)}: not used with --hand; the hand grasp file {args.hand} sets its "

@@ -66,12 +66,12 @@ OPTION_NAMES = {
     "hold_time_s": "--hold-time", "six_axis_time_s": "--six-axis-time", "kick_time_s": "--kick-time",
     "kick_scales": "--scales", "random_kicks": "--random-kicks", "friction": "--sim-friction", "timestep": "--timestep",
 }
-"""The options of :func:`jaxgrasp.simulate` this command sets, by their parameter's name."""
+"""The options of [`jaxgrasp.simulate`][jaxgrasp.simulate] this command sets, by their parameter's name."""
 
 
 def _options(args) -> dict:
-    """The options for :func:`jaxgrasp.simulate`, checked by the simulation's own rules
-    (:func:`~jaxgrasp.simulation._options.check_options`) under their option names."""
+    """The options for [`jaxgrasp.simulate`][jaxgrasp.simulate], checked by the simulation's own rules
+    (`check_options`) under their option names."""
     opts = {k: parse_number(OPTION_NAMES[k], getattr(args, k[:-2]), "time")
             for k in ("hold_time_s", "six_axis_time_s", "kick_time_s")}
     opts["kick_scales"] = _scales(args.scales)

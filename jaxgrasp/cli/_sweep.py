@@ -3,15 +3,15 @@
 Axis specs (SI units): ``start:stop:count`` (inclusive, evenly spaced; each value the
 float nearest its decimal, so ``0.1:0.5:5`` gives ``0.4``), a comma list ``0,0.1,0.2`` or
 a single number. The grid's axes follow the order they are given in, and it has at most
-:data:`~jaxgrasp.analysis._sweep.MAX_GRID_POINTS` points (checked before anything is
+`MAX_GRID_POINTS` points (checked before anything is
 allocated). With no axis at all the paper's Fig. 6 grid is swept (E 2e5..1e6 Pa x 9,
 initial deformation 1..5 mm x 41); with no grasp, preset ``cube``.
 
 The output folder is checked for writability before anything is computed and locked
-(:class:`jaxgrasp.storage.FolderLock`) for the whole run, so a second sweep into it fails
+(`jaxgrasp.storage.FolderLock`) for the whole run, so a second sweep into it fails
 at once. After each chunk the finished points are kept in ``DIR/sweep.partial.npz``
-(:class:`jaxgrasp.cli._keepers.SweepKeeper`); at the end ``sweep.npz``, ``sweep.csv`` and ``sweep.png``
-replace the previous ones as one set (:func:`jaxgrasp.storage.write_set`) and the
+(`jaxgrasp.cli._keepers.SweepKeeper`); at the end ``sweep.npz``, ``sweep.csv`` and ``sweep.png``
+replace the previous ones as one set (`jaxgrasp.storage.write_set`) and the
 checkpoint is removed.
 """
 
@@ -52,7 +52,7 @@ from jaxgrasp.model import counted
 __all__ = ["add_parser", "run", "parse_axis_spec", "AXES", "PAPER_AXES"]
 
 AXES = OVERRIDES
-"""The parameters a sweep can vary (:data:`jaxgrasp.model._fields.SWEEPABLE`), in option order."""
+"""The parameters a sweep can vary (`jaxgrasp.model._fields.SWEEPABLE`), in option order."""
 
 PAPER_AXES = {
     "young_modulus": "2e5:1e6:9",
@@ -65,7 +65,7 @@ OUTPUT_NAMES = ("sweep.npz", "sweep.csv", "sweep.png")
 """The files of one sweep's output set, in ``--out``."""
 
 PARTIAL_NAME = "sweep.partial.npz"
-"""The checkpoint of the finished points (:class:`jaxgrasp.cli._keepers.SweepKeeper`), in ``--out``."""
+"""The checkpoint of the finished points (`jaxgrasp.cli._keepers.SweepKeeper`), in ``--out``."""
 
 
 FIG6_TITLE = "Fig. 6: evaluation value for each Young's modulus and initial deformation (cube)"
@@ -76,10 +76,10 @@ def parse_axis_spec(option: str, spec: str) -> np.ndarray:
 
     Every value is the float nearest to the decimal number it stands for: ``0.1:0.5:5``
     gives ``0.4``, not ``np.linspace``'s ``0.39999999999999997``, so that the CSV shows
-    the values as typed (:func:`_decimal_range`).
+    the values as typed (`_decimal_range`).
 
     Raises:
-        UsageError: malformed spec, or a range of more than :data:`MAX_GRID_POINTS` (one
+        UsageError: malformed spec, or a range of more than `MAX_GRID_POINTS` (one
             line, naming the option), before the array is allocated.
     """
     parsed = _parse_spec(option, spec)
@@ -244,7 +244,7 @@ def run(args) -> int:
 
 def _parse_axes(args) -> tuple[dict[str, np.ndarray], bool]:
     """The axes given on the command line, in the order given, or the paper's; (axes,
-    whether the paper's). The grid's size is checked against :data:`MAX_GRID_POINTS`
+    whether the paper's). The grid's size is checked against `MAX_GRID_POINTS`
     before any axis is expanded."""
     order = getattr(args, "axis_order", None) or AXES  # AXES: a namespace not made by the parser
     given = {n: getattr(args, n) for n in order if getattr(args, n, None) is not None}

@@ -3,7 +3,7 @@
 Writes the tuned grasp to ``--out`` (``.toml`` or ``.json``) and a plot of the value over
 the iterations next to it (same name, ``.png``), and prints one summary line. The folder
 of ``--out`` is checked for writability before tuning; the grasp file and its plot then
-replace the previous ones as one set (:func:`jaxgrasp.storage.write_set`).
+replace the previous ones as one set (`jaxgrasp.storage.write_set`).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def parse_bounds(items) -> dict:
     """``["initial_deformation=0.001:0.005", "positions=0.01"]`` -> bounds dict (SI units).
 
     ``NAME=LO:HI`` gives a range (every contact), ``positions=HALF_WIDTH`` a half-width in m;
-    errors name the option and its syntax (:class:`UsageError`).
+    errors name the option and its syntax (`UsageError`).
     """
     out = {}
     for item in items or []:
@@ -70,7 +70,7 @@ def parse_bounds(items) -> dict:
 
 def check_bounds(params, bounds: dict) -> None:
     """Every ``--param`` without default bounds has ``--bounds``, and every ``--bounds`` is
-    of a ``--param`` (:class:`UsageError` naming the options; library messages would show
+    of a ``--param`` (`UsageError` naming the options; library messages would show
     Python syntax such as ``bounds={'positions': 0.01}``)."""
     from jaxgrasp.analysis import parse_param
     from jaxgrasp.model import FIELD
@@ -150,7 +150,7 @@ def run(args) -> int:
 
     Unless ``--quiet``, a first line on stderr says what is tuned, before the value and
     its gradient are compiled; then one line per iteration. The summary line names the
-    :class:`~jaxgrasp.analysis.TuneStatus` with its explanation: why the search stopped and
+    [`TuneStatus`][jaxgrasp.analysis.TuneStatus] with its explanation: why the search stopped and
     whether the tuned grasp is usable.
     """
     from jaxgrasp.analysis import tune
@@ -212,7 +212,7 @@ def _check_options(args) -> Path:
 
 
 def _progress_printer(quiet: bool):
-    """``callback(iteration, value, u)`` of :func:`jaxgrasp.tune`: one line per iteration."""
+    """``callback(iteration, value, u)`` of [`jaxgrasp.tune`][jaxgrasp.tune]: one line per iteration."""
     t0 = time.perf_counter()
 
     def progress(it, value, _u):

@@ -1,15 +1,15 @@
 """Running the method: one grasp or many, through one declared pipeline, compiled in
 stages, sharded over the devices, kept in an executable store on disk, with checkpoints.
 
-:data:`PIPELINE` is the evaluation, step by step; :func:`evaluate` runs it inline under
-the caller's trace (``jit``, ``vmap``, ``grad``), :func:`evaluate_batch` and
-:func:`evaluate_dataset` run it one compiled stage at a time over chunks of grasps cut by
-:func:`plan_chunks`, in segments by contact count (:func:`plan_segments`, each at the
-width :func:`plan_widths` gives it). :func:`solve_problems` stops it at the solved problems.
+`PIPELINE` is the evaluation, step by step; [`evaluate`][jaxgrasp.evaluate] runs it inline under
+the caller's trace (``jit``, ``vmap``, ``grad``), [`evaluate_batch`][jaxgrasp.evaluate_batch] and
+`evaluate_dataset` run it one compiled stage at a time over chunks of grasps cut by
+`plan_chunks`, in segments by contact count (`plan_segments`, each at the
+width `plan_widths` gives it). `solve_problems` stops it at the solved problems.
 
-:func:`configure` chooses the engine's process-wide settings (CPU devices, the executable
-store, messages), else its first use does (:mod:`jaxgrasp.engine._setup`); long calls
-report on the ``"jaxgrasp"`` logger (:class:`ChunkProgress`, :mod:`jaxgrasp.engine._progress`).
+[`configure`][jaxgrasp.configure] chooses the engine's process-wide settings (CPU devices, the executable
+store, messages), else its first use does (`jaxgrasp.engine._setup`); long calls
+report on the ``"jaxgrasp"`` logger (`ChunkProgress`, `jaxgrasp.engine._progress`).
 
 ``__all__`` lists the names promised to users. The names imported below the comment
 "For jaxgrasp's other packages" are what the library's other packages use from here

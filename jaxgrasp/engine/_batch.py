@@ -1,4 +1,4 @@
-"""Many grasps at once: :func:`evaluate_batch` and :func:`evaluate_dataset`.
+"""Many grasps at once: [`evaluate_batch`][jaxgrasp.evaluate_batch] and `evaluate_dataset`.
 
 ::
 
@@ -9,15 +9,15 @@
     res.rank()[:10]                          # indices of the best grasps
 
 Both are adapters over the engine's one batch runner
-(:func:`~jaxgrasp.engine._runner.run_batch`, a :class:`~jaxgrasp.engine._runner.Stacked`
+(`run_batch`, a `Stacked`
 source): the grasps are cut into segments by contact count, each run at its own width
-where that pays for its compilation (:func:`~jaxgrasp.engine._plan.plan_segments`), and
-each segment into chunks (:func:`~jaxgrasp.engine._plan.plan_chunks`), each evaluated by
-the compiled pipeline (:func:`~jaxgrasp.engine._evaluator.chunk_evaluator`, the settling
+where that pays for its compilation (`plan_segments`), and
+each segment into chunks (`plan_chunks`), each evaluated by
+the compiled pipeline (`chunk_evaluator`, the settling
 stage inline), split over every device, each device running its own work queue on its
-slice (:func:`~jaxgrasp.engine._run.run_chunks`); the last chunk is padded to the same
+slice (`run_chunks`); the last chunk is padded to the same
 size, so a set compiles once per chunk size, number of contacts and options. Memory is
-bounded by the chunk size. Each result equals :func:`jaxgrasp.evaluate`'s within the
+bounded by the chunk size. Each result equals [`jaxgrasp.evaluate`][jaxgrasp.evaluate]'s within the
 solver's precision (``tests/engine/test_single_vs_batch.py``).
 """
 
@@ -39,8 +39,8 @@ __all__ = ["evaluate_batch", "evaluate_dataset", "evaluate_in_chunks"]
 
 
 def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], tuple]:
-    """The fields of ``grasps`` (a sequence of :class:`Grasp`, one batched grasp, or a
-    :class:`~jaxgrasp.GraspSet`), each with a leading ``B`` axis (padded to the largest
+    """The fields of ``grasps`` (a sequence of [`Grasp`][jaxgrasp.Grasp], one batched grasp, or a
+    [`GraspSet`][jaxgrasp.GraspSet]), each with a leading ``B`` axis (padded to the largest
     contact count, with ``active``, where counts differ or a grasp has a mask), and each
     grasp's error (``None``: valid). Every valid grasp is validated (a set's columns were
     when they were made); an invalid one (a set's ``None``) is stood in for by the first
@@ -68,7 +68,7 @@ def _batched_fields(grasps) -> tuple[dict[str, np.ndarray], tuple]:
 
 
 def _set_fields(gset: GraspSet, rows: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """The columns of a set (:meth:`~jaxgrasp.GraspSet.columns`, not copied) with
+    """The columns of a set ([`columns`][jaxgrasp.GraspSet.columns], not copied) with
     ``active`` where the grasps of ``rows`` (default all) differ in contact count."""
     columns = gset.columns()
     if not columns.valid.any():
@@ -91,40 +91,40 @@ def evaluate_batch(
     devices=None,
 ) -> BatchResult:
     """Evaluate many grasps in chunks of compiled evaluators; every result equals
-    :func:`jaxgrasp.evaluate` of that grasp to the solver's precision (the same status and
+    [`jaxgrasp.evaluate`][jaxgrasp.evaluate] of that grasp to the solver's precision (the same status and
     limiting boundary; energies within ``1e-12`` of ``|U0|``: another program, whose
     solver takes other steps to the same minima).
 
     Grasps of different contact counts are padded to the widest (inactive contacts), in
     one compiled program; where a count has enough grasps to pay for a compilation of
     its own (tens of thousands on a CPU), its grasps run in a narrower program
-    (:func:`~jaxgrasp.engine._plan.plan_widths`), which costs a 2-contact grasp half of
+    (`plan_widths`), which costs a 2-contact grasp half of
     what it costs padded to 7. The widths depend on the batch's contact counts only; the
     results are laid out at the widest count either way.
 
     Args:
-        grasps: a sequence of :class:`~jaxgrasp.Grasp` (any contact counts: they are
-            padded with inactive contacts, :func:`jaxgrasp.stack`), one batched grasp
+        grasps: a sequence of [`Grasp`][jaxgrasp.Grasp] (any contact counts: they are
+            padded with inactive contacts, [`jaxgrasp.stack`][jaxgrasp.stack]), one batched grasp
             (leading axis ``B``; fields without it are shared by every grasp), or a
-            :class:`~jaxgrasp.GraspSet` from :func:`jaxgrasp.load_dataset`, whose invalid
+            [`GraspSet`][jaxgrasp.GraspSet] from [`jaxgrasp.load_dataset`][jaxgrasp.load_dataset], whose invalid
             grasps are not evaluated: their status is ``invalid`` and their error kept.
-        options: :class:`~jaxgrasp.EvaluateOptions` of every evaluation.
+        options: [`EvaluateOptions`][jaxgrasp.EvaluateOptions] of every evaluation.
         chunk_size: grasps per compiled call, at most (bounds memory; default 64 per CPU
             device, 1024 per accelerator); the chunk is the smallest bucket (1, 4, 16, 64,
             ... per device) that holds them, so batches of different sizes share
-            compilations (:func:`~jaxgrasp.engine._plan.plan_chunks`).
+            compilations (`plan_chunks`).
         progress: ``progress(done, total)`` after each chunk (an object with a
             ``start(plan)`` method is also told the plan before the first: a
-            :class:`~jaxgrasp.engine._plan.SegmentPlan`).
+            `SegmentPlan`).
         on_chunk: ``on_chunk(rows, results)`` after each chunk (before ``progress``):
             ``rows`` the input indices of its grasps (segments by contact count finish
-            out of input order), ``results`` each :class:`~jaxgrasp.Evaluation` field for
+            out of input order), ``results`` each [`Evaluation`][jaxgrasp.Evaluation] field for
             them (leading axis ``len(rows)``, contacts laid out as in the result).
         devices: the devices each chunk is sharded over (default ``jax.devices()``,
             which after ``jax.distributed.initialize()`` spans every host).
 
     Returns:
-        A :class:`~jaxgrasp.BatchResult`: every :class:`~jaxgrasp.Evaluation` field with
+        A [`BatchResult`][jaxgrasp.BatchResult]: every [`Evaluation`][jaxgrasp.Evaluation] field with
         a leading ``B`` axis, in input order.
 
     Raises:
@@ -138,12 +138,12 @@ def evaluate_batch(
 
 def evaluate_in_chunks(grasps, chunk: int, /, *, options: EvaluateOptions = EvaluateOptions(), devices=None,
                        progress: Callable[[int, int], Any] | None = None) -> BatchResult:
-    """:func:`evaluate_batch` of ``grasps`` in chunks of exactly ``chunk`` grasps however
-    few there are (:func:`~jaxgrasp.engine._runner.plan_source`'s ``exact_chunk``): a few
+    """[`evaluate_batch`][jaxgrasp.evaluate_batch] of ``grasps`` in chunks of exactly ``chunk`` grasps however
+    few there are (`plan_source`'s ``exact_chunk``): a few
     grasps run in the program compiled for a larger run of the same width (a robust
     evaluation's nominal grasps in its samples', a plan's candidates in one program
     whatever their number); each grasp's result is the one it has in that program.
-    ``options``, ``devices``, ``progress``: as :func:`evaluate_batch`."""
+    ``options``, ``devices``, ``progress``: as [`evaluate_batch`][jaxgrasp.evaluate_batch]."""
     check_chunk_size(chunk)
     fields, errors = _batched_fields(grasps)
     return _evaluate_fields(fields, errors, chunk, devices, options, progress, None, exact_chunk=True)
@@ -151,8 +151,8 @@ def evaluate_in_chunks(grasps, chunk: int, /, *, options: EvaluateOptions = Eval
 
 def _evaluate_fields(fields: dict[str, np.ndarray], errors, chunk_size, devices, options: EvaluateOptions,
                      progress, on_chunk, exact_chunk: bool = False) -> BatchResult:
-    """:func:`evaluate_batch` of validated fields (:func:`_batched_fields`): the rows whose
-    error is ``None`` through the runner (:func:`_run`). The result has a row for every
+    """[`evaluate_batch`][jaxgrasp.evaluate_batch] of validated fields (`_batched_fields`): the rows whose
+    error is ``None`` through the runner (`_run`). The result has a row for every
     row of ``fields``."""
     total, n_contacts = fields["positions"].shape[:2]
     rows = np.flatnonzero([e is None for e in errors])
@@ -168,9 +168,9 @@ def _evaluate_fields(fields: dict[str, np.ndarray], errors, chunk_size, devices,
 
 def _run(source: Stacked, widths, chunk_size, devices, options: EvaluateOptions, progress, on_chunk,
          exact_chunk: bool = False) -> Run:
-    """The grasps of ``source`` through :func:`~jaxgrasp.engine._runner.run_batch`, at
-    ``widths`` (default: :func:`~jaxgrasp.engine._plan.plan_widths` of their counts), the
-    settling stage inline (a set of varied grasps, :mod:`~jaxgrasp.engine._settling`);
+    """The grasps of ``source`` through `run_batch`, at
+    ``widths`` (default: `plan_widths` of their counts), the
+    settling stage inline (a set of varied grasps, `_settling`);
     ``on_chunk(rows, results)`` with the rows of ``source.fields``."""
     if widths is None:
         widths = plan_widths(grasps_by_count(source.counts()), platform(devices))
@@ -204,25 +204,25 @@ def evaluate_dataset(
     """Evaluate the valid grasps of ``dataset`` that are not ``done`` yet, and merge.
 
     Args:
-        dataset: a :class:`~jaxgrasp.GraspSet` (:func:`jaxgrasp.load_dataset`).
+        dataset: a [`GraspSet`][jaxgrasp.GraspSet] ([`jaxgrasp.load_dataset`][jaxgrasp.load_dataset]).
         done: ``(rows, results)``: input rows an earlier run finished and their
-            :class:`~jaxgrasp.Evaluation` fields (a checkpoint's,
-            :meth:`~jaxgrasp.engine._checkpoint.BatchCheckpoint.open`).
+            [`Evaluation`][jaxgrasp.Evaluation] fields (a checkpoint's,
+            `open`).
         on_chunk_rows: ``on_chunk_rows(rows, results)`` after each chunk, with its input
             rows and their results (to keep them in a checkpoint,
-            :meth:`~jaxgrasp.engine._checkpoint.BatchCheckpoint.keeper`).
-        options, chunk_size, progress, devices: as :func:`evaluate_batch`. Each chunk's
+            `keeper`).
+        options, chunk_size, progress, devices: as [`evaluate_batch`][jaxgrasp.evaluate_batch]. Each chunk's
             grasps are gathered from the dataset's columns
-            (:class:`~jaxgrasp.io._dataset.GraspColumns`) when it runs: beyond the
+            (`GraspColumns`) when it runs: beyond the
             columns, memory grows with the chunk and the results, not with a copy of
             the set.
         widths: the width each contact count runs at (default
-            :func:`~jaxgrasp.engine._plan.plan_widths` of the dataset's valid grasps'
+            `plan_widths` of the dataset's valid grasps'
             counts, all of them, done or not: so a resumed run evaluates every grasp at
             the width an uninterrupted one does, and compiles what it did).
 
     Returns:
-        ``(every row, this run)``: the :class:`~jaxgrasp.BatchResult` of every row of the
+        ``(every row, this run)``: the [`BatchResult`][jaxgrasp.BatchResult] of every row of the
         dataset (the earlier run's, this run's and the invalid ones, in input order), and
         that of the grasps evaluated now (``None`` when none was left).
     """

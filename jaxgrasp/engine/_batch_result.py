@@ -1,15 +1,15 @@
-"""The result of :func:`jaxgrasp.evaluate_batch`: every grasp's evaluation, a ranking, tables.
+"""The result of [`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch]: every grasp's evaluation, a ranking, tables.
 
-A :class:`BatchResult` holds one batched :class:`~jaxgrasp.Evaluation` (NumPy arrays
+A [`BatchResult`][jaxgrasp.BatchResult] holds one batched [`Evaluation`][jaxgrasp.Evaluation] (NumPy arrays
 with a leading axis of ``B`` grasps, in input order) and what the batch adds: each
 grasp's contact count and mask, the one-line error of an invalid grasp, timings.
 Every Evaluation field reads directly (``res.value`` is ``res.evaluation.value``);
-``res[i]`` is grasp ``i``'s own :class:`~jaxgrasp.Evaluation`.
+``res[i]`` is grasp ``i``'s own [`Evaluation`][jaxgrasp.Evaluation].
 
-Files: :meth:`BatchResult.to_csv` (one row per grasp: ``index``, ``num_contacts``,
+Files: [`BatchResult.to_csv`][jaxgrasp.BatchResult.to_csv] (one row per grasp: ``index``, ``num_contacts``,
 ``value_J``, ``status``, ``limiting_kind``, ``limiting_contact``,
-``equilibrium_energy_J``, ``error``) and :meth:`BatchResult.to_npz` (every array; read
-back with :meth:`BatchResult.from_npz`).
+``equilibrium_energy_J``, ``error``) and [`BatchResult.to_npz`][jaxgrasp.BatchResult.to_npz] (every array; read
+back with [`BatchResult.from_npz`][jaxgrasp.BatchResult.from_npz]).
 """
 
 from __future__ import annotations
@@ -38,25 +38,25 @@ CSV_COLUMNS = (
     "equilibrium_energy_J",
     "error",
 )
-"""The columns of :meth:`BatchResult.to_csv`, in order."""
+"""The columns of [`BatchResult.to_csv`][jaxgrasp.BatchResult.to_csv], in order."""
 
 _RANK_GROUP = {GraspStatus.STABLE: 0, GraspStatus.NOT_CONVERGED: 2, GraspStatus.INVALID: 3}  # others: 1
 
 
 def mark_invalid(results: dict[str, np.ndarray], rows) -> None:
-    """Set the rows ``rows`` of :class:`~jaxgrasp.Evaluation` field arrays (by name, leading
+    """Set the rows ``rows`` of [`Evaluation`][jaxgrasp.Evaluation] field arrays (by name, leading
     axis ``B``) to those of grasps that were not evaluated: NaN for floats, -1 for integer
-    codes, ``status`` :data:`~jaxgrasp.tolerance._status.GraspStatus.INVALID`."""
+    codes, ``status`` `INVALID`."""
     for a in results.values():
         a[rows] = np.nan if np.issubdtype(a.dtype, np.floating) else -1
     results["status"][rows] = GraspStatus.INVALID
 
 def assemble(parts, total: int, invalid, active: np.ndarray, errors, *, compile_seconds: float = 0.0,
              run_seconds: float = 0.0, devices: int = 1) -> "BatchResult":
-    """One :class:`BatchResult` of ``total`` grasps from ``parts``, ``(rows, results)``
+    """One [`BatchResult`][jaxgrasp.BatchResult] of ``total`` grasps from ``parts``, ``(rows, results)``
     pairs that together cover every valid row (``results``: each
-    :class:`~jaxgrasp.Evaluation` field for those rows, leading axis ``len(rows)``); the
-    rows ``invalid`` (indices or a mask) marked as not evaluated (:func:`mark_invalid`).
+    [`Evaluation`][jaxgrasp.Evaluation] field for those rows, leading axis ``len(rows)``); the
+    rows ``invalid`` (indices or a mask) marked as not evaluated (`mark_invalid`).
 
     ``active``: ``(B, N)`` each grasp's contacts; ``errors``: each grasp's error or
     ``None``; the timings (s) and device count are those of the evaluation that made the
@@ -91,14 +91,14 @@ def assemble(parts, total: int, invalid, active: np.ndarray, errors, *, compile_
 class BatchResult(SummaryNames):
     """The evaluation of ``B`` grasps, in input order (SI units).
 
-    Every :class:`~jaxgrasp.Evaluation` field is an attribute with a leading ``B`` axis
+    Every [`Evaluation`][jaxgrasp.Evaluation] field is an attribute with a leading ``B`` axis
     (``value (B,)`` J, ``status (B,)``, ``boundary_energy (B, 2, N)`` J, ...; ``N`` is
-    the batch's padded contact count, inactive contacts marked as in :class:`Evaluation`).
+    the batch's padded contact count, inactive contacts marked as in [`Evaluation`][jaxgrasp.Evaluation]).
     An invalid grasp (not evaluated) has status
-    :data:`~jaxgrasp.tolerance._status.GraspStatus.INVALID`, NaN floats and -1 codes.
+    `INVALID`, NaN floats and -1 codes.
 
     Attributes:
-        evaluation: the batched :class:`~jaxgrasp.Evaluation` (NumPy leaves).
+        evaluation: the batched [`Evaluation`][jaxgrasp.Evaluation] (NumPy leaves).
         num_contacts: ``(B,)`` active contacts of each grasp (0 for an invalid one).
         active: ``(B, N)`` bool, the contacts each grasp has (its others are padding).
         errors: ``B`` entries: ``None``, or the one-line reason a grasp is invalid.
@@ -124,7 +124,7 @@ class BatchResult(SummaryNames):
         return len(self.errors)
 
     def __getitem__(self, i: int) -> Evaluation:
-        """Grasp ``i``'s :class:`~jaxgrasp.Evaluation` (contacts numbered as in the batch)."""
+        """Grasp ``i``'s [`Evaluation`][jaxgrasp.Evaluation] (contacts numbered as in the batch)."""
         return jax.tree_util.tree_map(lambda a: a[i], self.evaluation)
 
     # ---- ranking
@@ -139,12 +139,12 @@ class BatchResult(SummaryNames):
 
     # ---- tables and files
     def rows(self, extra: Mapping[str, Any] | None = None) -> list[list]:
-        """The rows of :meth:`to_csv` (:data:`CSV_COLUMNS`, then the ``extra`` columns), in
+        """The rows of [`to_csv`][jaxgrasp.BatchResult.to_csv] (`CSV_COLUMNS`, then the ``extra`` columns), in
         input order; an invalid grasp's numbers are empty strings."""
         return list(self._rows(extra))
 
     def _rows(self, extra: Mapping[str, Any] | None = None):
-        """The rows of :meth:`rows`, one at a time (a table of a million grasps is never
+        """The rows of [`rows`][jaxgrasp.BatchResult.rows], one at a time (a table of a million grasps is never
         held as Python objects at once)."""
         value, energy = np.asarray(self.value), np.asarray(self.equilibrium_energy)
         status, kind = self.status_names, self.limiting_kind_names  # object arrays of shared names
@@ -156,7 +156,7 @@ class BatchResult(SummaryNames):
                     self.errors[i] or ""] + [fmt(a[i]) for a in extra])
 
     def to_csv(self, path, extra: Mapping[str, Any] | None = None) -> None:
-        """Write one row per grasp, in input order (:data:`CSV_COLUMNS`): ``value_J`` and
+        """Write one row per grasp, in input order (`CSV_COLUMNS`): ``value_J`` and
         ``equilibrium_energy_J`` with 17 significant digits (empty for an invalid grasp),
         ``status`` and ``limiting_kind`` by name, ``limiting_contact`` (-1 none) and
         ``error`` (empty for a valid grasp); then a column per ``extra`` entry (name ->
@@ -165,7 +165,7 @@ class BatchResult(SummaryNames):
         storage.write_to(path, storage.csv_content(CSV_COLUMNS + tuple(extra or ()), self._rows(extra)))
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """Every array of :meth:`to_npz`, by name."""
+        """Every array of [`to_npz`][jaxgrasp.BatchResult.to_npz], by name."""
         out = {f: np.asarray(getattr(self.evaluation, f)) for f in FIELDS}
         out.update(
             num_contacts=np.asarray(self.num_contacts, dtype=np.int64),
@@ -180,17 +180,17 @@ class BatchResult(SummaryNames):
         return out
 
     def to_npz(self, path, extra: Mapping[str, Any] | None = None) -> None:
-        """Write a ``.npz`` with every :class:`~jaxgrasp.Evaluation` field (leading ``B``),
+        """Write a ``.npz`` with every [`Evaluation`][jaxgrasp.Evaluation] field (leading ``B``),
         ``num_contacts``, ``active``, ``error`` (str, empty for a valid grasp),
         ``status_names``, ``kind_names``, the timings, ``devices`` and the ``extra``
         arrays by name; no pickled objects. Atomic for a path; read it back with
-        :meth:`from_npz`."""
+        [`from_npz`][jaxgrasp.BatchResult.from_npz]."""
         arrays = self.arrays() | {k: np.asarray(v) for k, v in (extra or {}).items()}
         storage.write_to(path, lambda fh: np.savez(fh, **arrays))
 
     @classmethod
     def from_arrays(cls, z: Mapping[str, np.ndarray]) -> "BatchResult":
-        """From the arrays of :meth:`arrays` (e.g. an open ``np.load``)."""
+        """From the arrays of [`arrays`][jaxgrasp.BatchResult.arrays] (e.g. an open ``np.load``)."""
         return cls(
             evaluation=Evaluation(**{f: np.array(z[f]) for f in FIELDS}),
             num_contacts=np.array(z["num_contacts"]),
@@ -203,7 +203,7 @@ class BatchResult(SummaryNames):
 
     @classmethod
     def from_npz(cls, path: str | os.PathLike) -> "BatchResult":
-        """Read a file written by :meth:`to_npz`."""
+        """Read a file written by [`to_npz`][jaxgrasp.BatchResult.to_npz]."""
         with np.load(path, allow_pickle=False) as z:
             return cls.from_arrays(z)
 

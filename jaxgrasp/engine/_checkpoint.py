@@ -1,16 +1,16 @@
 """What an interrupted command keeps: a sweep's finished grid points, a batch's finished chunks.
 
-Sweeps: :class:`SweepCheckpoint`, the file ``sweep.partial.npz``. Batches:
-:class:`BatchCheckpoint`, the folder ``results.partial`` (one file per finished chunk, so a
+Sweeps: `SweepCheckpoint`, the file ``sweep.partial.npz``. Batches:
+`BatchCheckpoint`, the folder ``results.partial`` (one file per finished chunk, so a
 checkpoint costs the same at every chunk and survives ``kill -9``).
 
 The sweep's checkpoint ``sweep.partial.npz``:
 
 ``jaxgrasp sweep --out DIR`` rewrites ``DIR/sweep.partial.npz`` (atomically, see
-:mod:`jaxgrasp.storage`) after its chunks, and deletes it once the final
+`jaxgrasp.storage`) after its chunks, and deletes it once the final
 ``sweep.npz``/``sweep.csv``/``sweep.png`` are in place; an interrupted sweep leaves it
 behind with every point finished before the last checkpoint. Read it with
-:meth:`SweepCheckpoint.load`.
+`SweepCheckpoint.load`.
 
 File format (``np.load(path)``; no pickled objects), ``format`` =
 ``"jaxgrasp-sweep-partial-1"``:
@@ -23,7 +23,7 @@ File format (``np.load(path)``; no pickled objects), ``format`` =
   the floats are NaN and the integer codes -1.
 * ``status_names``, ``kind_names``: the names of the codes.
 * ``grasp_<field>`` (float64, SI units): every field of the base
-  :class:`~jaxgrasp.Grasp` (``Grasp.to_numpy()``), so that a resumed sweep can check it
+  [`Grasp`][jaxgrasp.Grasp] (``Grasp.to_numpy()``), so that a resumed sweep can check it
   continues the same grasp.
 * ``chunk_size`` (int64): the grid points per compiled batch.
 """
@@ -79,7 +79,7 @@ class SweepCheckpoint:
     Attributes:
         axes: parameter name -> 1-D float64 grid values, in grid order.
         done: bool array shaped like the grid; True where the results are final.
-        results: result field (:data:`RESULT_FIELDS`) -> grid-shaped array; NaN (floats)
+        results: result field (`RESULT_FIELDS`) -> grid-shaped array; NaN (floats)
             or -1 (integer codes) where not ``done``.
         grasp: the base grasp's fields (``Grasp.to_numpy()``), float64, SI units.
         chunk_size: grid points per compiled batch.
@@ -134,7 +134,7 @@ class SweepCheckpoint:
 
     def save(self, file) -> None:
         """Write the checkpoint to ``file`` (a path or a binary file object); not atomic
-        by itself (the CLI writes it through :func:`jaxgrasp.storage.write_file`)."""
+        by itself (the CLI writes it through `jaxgrasp.storage.write_file`)."""
         arrays = {
             "format": np.asarray(FORMAT),
             "axis_names": np.asarray(list(self.axes), dtype=str),
@@ -191,15 +191,15 @@ while the last one's cost exceeds it); the last chunk's is always written."""
 
 
 class SweepKeeper:
-    """``on_chunk`` of :func:`jaxgrasp.sweep` that keeps the finished points in a
-    :class:`SweepCheckpoint` file at ``path``, atomically.
+    """``on_chunk`` of [`jaxgrasp.sweep`][jaxgrasp.sweep] that keeps the finished points in a
+    `SweepCheckpoint` file at ``path``, atomically.
 
-    A write is skipped while the previous one cost more than :data:`CHECKPOINT_SHARE`
-    of the time since; the skipped write is handed to :meth:`deferred` (which a caller
-    that can be interrupted keeps, to run :meth:`write` before it exits: the command
-    line's keeper, :mod:`jaxgrasp.cli`), so only a hard kill (``kill -9``) loses the
+    A write is skipped while the previous one cost more than `CHECKPOINT_SHARE`
+    of the time since; the skipped write is handed to `deferred` (which a caller
+    that can be interrupted keeps, to run `write` before it exits: the command
+    line's keeper, `jaxgrasp.cli`), so only a hard kill (``kill -9``) loses the
     points since the last write. The last chunk's is always written. Each write, once in
-    place, is passed to :meth:`kept`. Both hooks do nothing here.
+    place, is passed to `kept`. Both hooks do nothing here.
     """
 
     def __init__(self, path, grasp, axes: Mapping[str, np.ndarray], chunk: int):
@@ -238,8 +238,8 @@ class SweepKeeper:
         (``None``). Here: nothing."""
 
     def kept(self, partial: SweepCheckpoint) -> None:
-        """``partial`` is in place at :attr:`path` (called under
-        :data:`jaxgrasp.storage.PUBLISH_LOCK`). Here: nothing."""
+        """``partial`` is in place at `path` (called under
+        `jaxgrasp.storage.PUBLISH_LOCK`). Here: nothing."""
 
 
 # --------------------------------------------------------------------------- batches
@@ -257,9 +257,9 @@ BATCH_FORMAT = "jaxgrasp-batch-partial-1"
 
 
 def chunk_layout(num_contacts: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
-    """Each :class:`~jaxgrasp.Evaluation` field's shape per grasp and dtype, for grasps
+    """Each [`Evaluation`][jaxgrasp.Evaluation] field's shape per grasp and dtype, for grasps
     padded to ``num_contacts`` (``N``) contacts: what a batch checkpoint's chunk must hold
-    (the evaluator's output: float64 and int32 arrays, see :class:`~jaxgrasp.Evaluation`)."""
+    (the evaluator's output: float64 and int32 arrays, see [`Evaluation`][jaxgrasp.Evaluation])."""
     n, f8, i4 = int(num_contacts), np.dtype(np.float64), np.dtype(np.int32)
     return {
         "value": ((), f8),
@@ -297,21 +297,21 @@ class BatchCheckpoint:
 
     Layout (no pickled objects):
 
-    * ``manifest.json``: ``format`` (:data:`BATCH_FORMAT`), ``source`` (the input file),
+    * ``manifest.json``: ``format`` (`BATCH_FORMAT`), ``source`` (the input file),
       ``source_sha256`` (its bytes' SHA-256: a resumed run must read the same file),
       ``grasps`` (``B``) and ``num_contacts`` (``N``, the padded contact count);
     * ``rows-<first>.npz``, one per finished chunk, each written atomically once its
       chunk is done: ``rows`` (int64, the input indices of its grasps) and every
-      :class:`~jaxgrasp.Evaluation` field for them (leading axis ``len(rows)``, contacts
-      padded to ``N``; :func:`chunk_layout`).
+      [`Evaluation`][jaxgrasp.Evaluation] field for them (leading axis ``len(rows)``, contacts
+      padded to ``N``; `chunk_layout`).
 
     A chunk file is complete or absent, so a run killed at any moment (even ``kill -9``)
     keeps every chunk finished before it. A damaged chunk file (truncated, arrays missing
     or of other shapes or dtypes, rows out of range or held by another chunk) is skipped
-    by :meth:`load` and its rows are evaluated again (:attr:`skipped` says which).
+    by `load` and its rows are evaluated again (`skipped` says which).
 
     No link is followed: the folder, its manifest and its chunks must be real folders and
-    files (a link at the folder's path is refused, :class:`~jaxgrasp.io.OutputError`;
+    files (a link at the folder's path is refused, `OutputError`;
     a linked chunk is skipped), and only real files in it are ever deleted.
     """
 
@@ -329,10 +329,10 @@ class BatchCheckpoint:
             "num_contacts": int(num_contacts),
         }
         self.skipped: list[str] = []
-        """The chunk files the last :meth:`load` skipped, each ``NAME: reason``."""
+        """The chunk files the last `load` skipped, each ``NAME: reason``."""
 
     def check_folder(self) -> None:
-        """Raise :class:`~jaxgrasp.io.OutputError` (one line) unless the folder is absent
+        """Raise `OutputError` (one line) unless the folder is absent
         or a real folder (not a link, not a file)."""
         storage.refuse_link(self.folder, "a batch's finished chunks")
         if os.path.lexists(self.folder) and not self.folder.is_dir():
@@ -376,9 +376,9 @@ class BatchCheckpoint:
 
     def open(self, resume: bool) -> tuple[np.ndarray, dict[str, np.ndarray], bool]:
         """``(rows, results, resumed)``: with ``resume`` and a checkpoint on disk, the rows
-        it holds and their results (after :meth:`check`, whose ``ValueError`` it raises;
-        damaged chunks skipped, :attr:`skipped`); otherwise a fresh checkpoint
-        (:meth:`start`) and no rows. Stale temporary files of killed runs in the folder are
+        it holds and their results (after `check`, whose ``ValueError`` it raises;
+        damaged chunks skipped, `skipped`); otherwise a fresh checkpoint
+        (`start`) and no rows. Stale temporary files of killed runs in the folder are
         removed first.
 
         Raises:
@@ -399,8 +399,8 @@ class BatchCheckpoint:
 
     def keeper(self, before: int, total: int):
         """``on_chunk_rows(rows, results)`` for
-        :func:`~jaxgrasp.engine._batch.evaluate_dataset`: each finished chunk saved at once
-        (:meth:`save_rows`), then :meth:`kept` told how many rows are kept (``before``
+        `evaluate_dataset`: each finished chunk saved at once
+        (`save_rows`), then `kept` told how many rows are kept (``before``
         from an earlier run, of ``total`` in the dataset)."""
         count = [before]
 
@@ -416,7 +416,7 @@ class BatchCheckpoint:
 
     def chunk_files(self) -> list[Path]:
         """Every entry named like a chunk file (``rows-<first>.npz``), in order of its
-        first row; links among them too (which :meth:`load` skips)."""
+        first row; links among them too (which `load` skips)."""
         try:
             names = [e.name for e in os.scandir(self.folder) if _CHUNK_NAME.fullmatch(e.name)]
         except OSError:
@@ -425,13 +425,13 @@ class BatchCheckpoint:
 
     def load(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Every finished row: ``(rows, results)``, ``rows`` the input indices (int64) and
-        ``results`` each :class:`~jaxgrasp.Evaluation` field for them (empty when no
+        ``results`` each [`Evaluation`][jaxgrasp.Evaluation] field for them (empty when no
         chunk is finished).
 
         A chunk file that is damaged in any way (unreadable, a link, not a zip, arrays
-        missing or unknown, shapes or dtypes other than :func:`chunk_layout`'s for the
+        missing or unknown, shapes or dtypes other than `chunk_layout`'s for the
         manifest's contact count, rows out of range or held by an earlier chunk) is
-        skipped, so its rows are evaluated again; :attr:`skipped` lists them with the reason.
+        skipped, so its rows are evaluated again; `skipped` lists them with the reason.
         """
         seen = np.zeros(self.manifest["grasps"], dtype=bool)
         rows, parts, self.skipped = [], [], []

@@ -45,13 +45,13 @@ jax.monitoring.register_event_listener(_count_xla_cache_hits)
 
 
 def _compile(built, spec, quiet_xla: bool):
-    """Trace, lower and compile ``built`` (a jitted function, or a :class:`Pipeline`) for
+    """Trace, lower and compile ``built`` (a jitted function, or a `Pipeline`) for
     the arguments ``spec``. A pipeline's stages are lowered as its driver first calls
-    them (:func:`lower_stages`), each compiled in a thread of its own (XLA's compiler
+    them (`lower_stages`), each compiled in a thread of its own (XLA's compiler
     releases the GIL) while the driver goes on; the wait for those threads is not cut
     short by an interrupt (it is raised once they are done: XLA still compiling in a
     thread while the interpreter unwinds can crash the process). ``quiet_xla``: JAX's
-    persistent cache writes no entry for them (:func:`_no_xla_cache_write`)."""
+    persistent cache writes no entry for them (`_no_xla_cache_write`)."""
 
     def compile_one(lowered):
         with _no_xla_cache_write() if quiet_xla else contextlib.nullcontext():
@@ -116,7 +116,7 @@ def compiled(
         key: what makes the executable unique in this process (the memo's key).
         build: ``build()`` returns the jitted function (``jax.jit(...)`` with its
             shardings and compiler options; arrays in, arrays out), or a
-            :class:`~jaxgrasp.engine._pipeline.Pipeline` of them; called when the executable is
+            `Pipeline` of them; called when the executable is
             not in the memo (it must be cheap: nothing is traced before it is compiled).
         spec: its arguments as ``jax.ShapeDtypeStruct`` (with their shardings).
         name: prefix of its stored file.
@@ -128,7 +128,7 @@ def compiled(
 
     Returns:
         ``fn``, the compiled executable (``jax.stages.Compiled``, or a
-        :class:`~jaxgrasp.engine._pipeline.Staged`),
+        `Staged`),
         and the seconds spent building or loading it (0 on a memo hit).
     """
     hit = _MEMO.pop(key, None)
@@ -162,7 +162,7 @@ def canonical_dtype(x) -> np.dtype:
 
 class StoredFunction:
     """``fun`` (traceable: pytrees of arrays in, a pytree of arrays out) compiled once per
-    shape of its arguments through :func:`compiled`: memoised in the process and, where
+    shape of its arguments through `compiled`: memoised in the process and, where
     the executable store is on, loaded from it, so that a later process calling it on
     arguments of the same shapes neither traces nor compiles it. This is how the
     gradient-based tuners' value and gradient reach the store (the evaluators build
@@ -213,7 +213,7 @@ class StoredFunction:
 
 
 def _build(built, spec, entry: StoreEntry | None, what: str, why: str):
-    """Compile ``built`` for ``spec`` (reported once, at INFO, on :data:`LOGGER`: ``what``,
+    """Compile ``built`` for ``spec`` (reported once, at INFO, on `LOGGER`: ``what``,
     ``why`` it is compiled, and where it will be stored) and store it at ``entry``."""
     where = "it will be stored in " + str(entry.path.parent) if entry is not None else "it is not stored"
     LOGGER.info("jaxgrasp: compiling %s (%s); %s", what, why, where)
@@ -234,15 +234,15 @@ def _build(built, spec, entry: StoreEntry | None, what: str, why: str):
     return fn
 
 _SAVES: list[threading.Thread] = []
-"""Threads writing a compiled executable to the store (:func:`_save_in_background`)."""
+"""Threads writing a compiled executable to the store (`_save_in_background`)."""
 
 
 def _save_in_background(entry: StoreEntry, fn) -> None:
-    """Serialize ``fn`` now, before it first runs (:func:`serialized_stages` says why), and
-    write it to the store in a thread (:func:`save_executable`), so that the write overlaps
+    """Serialize ``fn`` now, before it first runs (`serialized_stages` says why), and
+    write it to the store in a thread (`save_executable`), so that the write overlaps
     the first run instead of delaying it. The thread is not a daemon (the interpreter
     waits for it at exit); a process that ends with ``os._exit`` (the ``jaxgrasp``
-    command) calls :func:`wait_for_saves` first."""
+    command) calls `wait_for_saves` first."""
     stages = serialized_stages(fn)
     if stages is None:
         return

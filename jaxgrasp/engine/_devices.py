@@ -1,20 +1,20 @@
 """One JAX CPU device per core, so that batches and sweeps run on every core.
 
 XLA runs one compiled executable on one CPU device, and jaxgrasp's solver loop is a long
-chain of small operations that keeps one core busy. :func:`jaxgrasp.evaluate_batch` and
-:func:`jaxgrasp.sweep` split each chunk over all devices, each device running its own
-work queue (:func:`jaxgrasp.engine._evaluator.over_devices`), so on the CPU they use as many
+chain of small operations that keeps one core busy. [`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch] and
+[`jaxgrasp.sweep`][jaxgrasp.sweep] split each chunk over all devices, each device running its own
+work queue (`jaxgrasp.engine._evaluator.over_devices`), so on the CPU they use as many
 cores as JAX has CPU devices, and JAX creates one unless told otherwise.
 
 So jaxgrasp asks JAX for one CPU device per core this process may run on
 (``jax_num_cpu_devices``) at its first use, or when the program calls
-:func:`jaxgrasp.configure` (:mod:`jaxgrasp.engine._setup`): a batch then runs on every
-core instead of one. A single :func:`jaxgrasp.evaluate` and the user's own ``jit`` run
+[`jaxgrasp.configure`][jaxgrasp.configure] (`jaxgrasp.engine._setup`): a batch then runs on every
+core instead of one. A single [`jaxgrasp.evaluate`][jaxgrasp.evaluate] and the user's own ``jit`` run
 on the first device as before.
 
 It is left alone where the choice is the user's or can no longer be made:
 
-* the environment variable ``JAXGRASP_CPU_DEVICES`` (:data:`ENV_VAR`) sets the number
+* the environment variable ``JAXGRASP_CPU_DEVICES`` (`ENV_VAR`) sets the number
   (``1``: JAX's own single device);
 * ``JAX_NUM_CPU_DEVICES``, ``jax.config.update("jax_num_cpu_devices", n)`` before the
   import, or ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS`` are kept;
@@ -44,7 +44,7 @@ def usable_cores() -> int:
 
 
 def requested_cpu_devices(environ=os.environ) -> int:
-    """``$JAXGRASP_CPU_DEVICES`` as a positive integer, else :func:`usable_cores`.
+    """``$JAXGRASP_CPU_DEVICES`` as a positive integer, else `usable_cores`.
 
     Raises:
         ValueError: one line, if the variable is set to anything but a positive integer.
@@ -71,8 +71,8 @@ def user_chose(environ=os.environ) -> bool:
 
 
 def configure_cpu_devices(environ=os.environ) -> int | None:
-    """Ask JAX for :func:`requested_cpu_devices` CPU devices; the number set, or ``None``
-    where it is left alone (see the module docstring). Called by :func:`jaxgrasp.configure`."""
+    """Ask JAX for `requested_cpu_devices` CPU devices; the number set, or ``None``
+    where it is left alone (see the module docstring). Called by [`jaxgrasp.configure`][jaxgrasp.configure]."""
     explicit = ENV_VAR in environ
     n = requested_cpu_devices(environ)  # a bad value fails even where it would not be used
     if not explicit and user_chose(environ):

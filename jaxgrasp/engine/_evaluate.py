@@ -1,23 +1,23 @@
 """Energy-tolerance evaluation of a grasp (Tsuji et al., eq. 1), batched and differentiable.
 
-:func:`evaluate` runs the engine's pipeline (:data:`~jaxgrasp.engine._stages.PIPELINE`),
+[`evaluate`][jaxgrasp.evaluate] runs the engine's pipeline (`PIPELINE`),
 which follows the paper's steps, one named function each:
 
 1. solve the equilibrium problem and every boundary problem from its starts (the
    ``equilibrium``, ``lanes``, ``settle``, ``starts`` and ``finish`` stages);
 2. keep the lowest converged start of each boundary problem
-   (:func:`~jaxgrasp.tolerance._verdict.best_starts`);
+   (`best_starts`);
 3. decide the grasp's status from the solver's outputs
-   (:func:`~jaxgrasp.tolerance._verdict.grasp_status`);
+   (`grasp_status`);
 4. the minimum energies with their envelope-theorem derivatives
-   (:func:`~jaxgrasp.tolerance._verdict.energies`);
+   (`energies`);
 5. the value: the least boundary energy above ``U0``, or a soft minimum
-   (:func:`~jaxgrasp.tolerance._verdict.value_of`);
-6. the :class:`~jaxgrasp.Evaluation` in SI units
-   (:func:`~jaxgrasp.tolerance._verdict.to_evaluation`).
+   (`value_of`);
+6. the [`Evaluation`][jaxgrasp.Evaluation] in SI units
+   (`to_evaluation`).
 
 Derivatives of ``value`` (and of every energy) are exact and cheap (envelope theorem, see
-:func:`jaxgrasp.tolerance.envelope_energy`). The derivative is that of the *selected* boundary: where two
+`jaxgrasp.tolerance.envelope_energy`). The derivative is that of the *selected* boundary: where two
 boundaries tie for the minimum (e.g. the two contacts of a symmetric grasp) ``value`` has
 a kink and the gradient is that of the one reported in ``limiting_*`` (a one-sided
 derivative).
@@ -29,7 +29,7 @@ the zero cotangent.
 
 With ``EvaluateOptions(smooth_min_temperature=T)`` the hard minimum over boundaries is
 replaced by a soft minimum (log-sum-exp, temperature ``T`` in J): see
-:class:`~jaxgrasp.EvaluateOptions`.
+[`EvaluateOptions`][jaxgrasp.EvaluateOptions].
 """
 
 from __future__ import annotations
@@ -59,30 +59,30 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
     """Evaluate the energy tolerance of ``grasp`` (eq. 1 of Tsuji et al.).
 
     Args:
-        grasp: a :class:`~jaxgrasp.Grasp` (SI units). Under ``jax.vmap``, any field may
+        grasp: a [`Grasp`][jaxgrasp.Grasp] (SI units). Under ``jax.vmap``, any field may
             carry a batch axis.
-        options: :class:`EvaluateOptions`.
+        options: [`EvaluateOptions`][jaxgrasp.EvaluateOptions].
 
     Returns:
-        An :class:`~jaxgrasp.Evaluation` (SI units) with the value in J, a status, the
+        An [`Evaluation`][jaxgrasp.Evaluation] (SI units) with the value in J, a status, the
         limiting boundary, the equilibrium and every boundary problem's minimum.
 
     Raises:
         GraspValueError: a grasp with batch axes (its fields' shapes are those of one
             grasp inside ``jax.vmap``, so a batch needs ``jax.vmap(jaxgrasp.evaluate)``
-            or :func:`jaxgrasp.sweep`); or, for a concrete grasp, invalid fields (checked
+            or [`jaxgrasp.sweep`][jaxgrasp.sweep]); or, for a concrete grasp, invalid fields (checked
             before anything is compiled).
 
     ``evaluate`` can be wrapped in ``jax.jit`` and ``jax.vmap`` and differentiated with
-    ``jax.grad``/``jax.jacfwd`` (envelope theorem, :func:`jaxgrasp.tolerance.envelope_energy`);
+    ``jax.grad``/``jax.jacfwd`` (envelope theorem, `jaxgrasp.tolerance.envelope_energy`);
     a traced grasp becomes part of the caller's computation. Validation happens outside
     traced code only: a traced grasp's values are unknown when it is traced, so an invalid
     one (a negative friction, a NaN) is evaluated as given, with a meaningless result.
-    Check traced or batched grasps with :func:`jaxgrasp.check`, which states the same
+    Check traced or batched grasps with [`jaxgrasp.check`][jaxgrasp.check], which states the same
     rules as arrays (``jnp.where(jaxgrasp.check(g).valid, value, jnp.nan)``). A concrete grasp runs an
     executable compiled once per process for its shapes and options
-    (:func:`compiled_executable`), loaded from the executable store instead where the
-    caches are on: by the settling policy :data:`~jaxgrasp.engine._settling.RETRY`, first
+    (`compiled_executable`), loaded from the executable store instead where the
+    caches are on: by the settling policy `RETRY`, first
     the one without the settling stage, then, only if a problem did not settle, the one
     with it; the result is the traced path's.
     """
@@ -104,9 +104,9 @@ def evaluate(grasp: Grasp, options: EvaluateOptions = EvaluateOptions()) -> Eval
 
 
 def evaluate_traced(grasp: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:
-    """:func:`evaluate` of a grasp inside the caller's trace (``jit``, ``vmap``), with or
+    """[`evaluate`][jaxgrasp.evaluate] of a grasp inside the caller's trace (``jit``, ``vmap``), with or
     without the settling stage (``settle``, see
-    :func:`~jaxgrasp.engine._stages.stage_functions`)."""
+    `stage_functions`)."""
     options, temperature = split_temperature(options)
     return evaluate_compiled(grasp, temperature, options, settle)
 
@@ -136,16 +136,16 @@ def _check_unbatched(grasp) -> None:
 
 
 def compiled_executable(grasp: Grasp, options: EvaluateOptions, settle: bool = True):
-    """The compiled :func:`evaluate_compiled` (with ``settle``) for grasps shaped like the
+    """The compiled `evaluate_compiled` (with ``settle``) for grasps shaped like the
     concrete ``grasp``; ``(fn, seconds)``.
 
     ``fn(temperature, *jax.tree_util.tree_leaves(grasp))`` takes the soft-minimum
     temperature (mJ, ``()`` float) and the grasp's fields (with a contact mask, ``active``
-    last) and returns every :class:`~jaxgrasp.Evaluation` field (:data:`RESULT_FIELDS`).
-    It comes from :func:`jaxgrasp.engine._compile.compiled`, as the batches' executables do:
+    last) and returns every [`Evaluation`][jaxgrasp.Evaluation] field (`RESULT_FIELDS`).
+    It comes from `jaxgrasp.engine._compile.compiled`, as the batches' executables do:
     memoised in the process and, where the executable store is on, loaded from it instead of built
     (``seconds``: the time to build it, 0 on a memo hit). Its results are those of
-    :func:`evaluate_compiled` bit for bit (the same computation).
+    `evaluate_compiled` bit for bit (the same computation).
     """
     leaves, treedef = jax.tree_util.tree_flatten(grasp)
     avals = tuple((np.shape(x), _compile.canonical_dtype(x).name) for x in leaves)
@@ -183,9 +183,9 @@ def _first(tree):
 
 @partial(jax.jit, static_argnames=("options", "settle"))
 def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions, settle: bool = True) -> Evaluation:
-    """The jitted evaluator behind :func:`evaluate` (no input validation): the pipeline
-    (:func:`~jaxgrasp.engine._stages.run_inline`) on a batch of one; ``settle`` as in
-    :func:`~jaxgrasp.engine._stages.stage_functions`.
+    """The jitted evaluator behind [`evaluate`][jaxgrasp.evaluate] (no input validation): the pipeline
+    (`run_inline`) on a batch of one; ``settle`` as in
+    `stage_functions`.
 
     ``temperature`` is the soft-minimum temperature in mJ (``0``: the hard minimum) as a
     traced argument, so tuning at any temperature shares one compilation;
@@ -195,7 +195,7 @@ def evaluate_compiled(grasp: Grasp, temperature, options: EvaluateOptions, settl
 
 
 def evaluate_batch_traced(grasps: Grasp, options: EvaluateOptions, settle: bool = True) -> Evaluation:
-    """:func:`evaluate_traced` of a batch of grasps (leading axis ``B`` on every field,
+    """`evaluate_traced` of a batch of grasps (leading axis ``B`` on every field,
     ``active`` included where given), the result with a leading ``B``: the pipeline run
     inline on the whole batch, so the solver's work queue is traced once for it."""
     return run_inline(grasps, stage_functions(options, settle))
@@ -204,5 +204,5 @@ def evaluate_batch_traced(grasps: Grasp, options: EvaluateOptions, settle: bool 
 @partial(jax.jit, static_argnames=("options", "settle"))
 def solve_problems(grasp: Grasp, options: EvaluateOptions = EvaluateOptions(), settle: bool = True) -> Problems:
     """Every problem of ``grasp`` solved, lane by lane (for diagnostics and benchmarks;
-    :func:`evaluate` is this plus the verdict): the pipeline up to its ``problems``."""
+    [`evaluate`][jaxgrasp.evaluate] is this plus the verdict): the pipeline up to its ``problems``."""
     return _first(run_inline(_one(grasp), stage_functions(options, settle), until="problems"))

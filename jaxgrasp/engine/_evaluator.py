@@ -1,6 +1,6 @@
 """The compiled chunk evaluator (the pipeline's stages, each ``jit`` over the devices,
 memoised in the process and kept in the executable store), by settling policy
-(:mod:`~jaxgrasp.engine._settling`)."""
+(`_settling`)."""
 
 from __future__ import annotations
 
@@ -24,18 +24,18 @@ __all__ = ["grasp_fields", "over_devices", "compiled_evaluator", "chunk_evaluato
            "release_chunk_evaluator"]
 
 def grasp_fields(masked: bool) -> tuple[str, ...]:
-    """The :class:`~jaxgrasp.Grasp` fields a compiled chunk takes, in order: every field
-    of :data:`jaxgrasp.model._fields.NAMES`, then ``active`` for grasps with a contact mask."""
+    """The [`Grasp`][jaxgrasp.Grasp] fields a compiled chunk takes, in order: every field
+    of `jaxgrasp.model._fields.NAMES`, then ``active`` for grasps with a contact mask."""
     return NAMES + (("active",) if masked else ())
 
 
 def over_devices(fn: Callable, sharding: NamedSharding, compiler_options=COMPILER_OPTIONS) -> Callable:
     """``jax.jit(fn)`` of a function of a chunk (leading axis on every argument and
     result), with the chunk split over the devices of ``sharding``
-    (:func:`~jaxgrasp.engine._plan.batch_sharding`), compiled with ``compiler_options``.
+    (`batch_sharding`), compiled with ``compiler_options``.
 
     Each device evaluates its own slice of the chunk (``jax.shard_map``), so each runs
-    its own work queue (:func:`jaxgrasp.solver.solve_lanes`) on its own core: the lanes
+    its own work queue (`jaxgrasp.solver.solve_lanes`) on its own core: the lanes
     are independent, nothing is exchanged. (Without ``shard_map`` XLA would partition
     the one queue that the chunk is folded into, and gather it on every device.)
     """
@@ -45,9 +45,9 @@ def over_devices(fn: Callable, sharding: NamedSharding, compiler_options=COMPILE
 
 
 def _staged(options: EvaluateOptions, sharding, masked: bool, settle: bool) -> _pipeline.Pipeline:
-    """The chunk evaluator as a :class:`~jaxgrasp.engine._pipeline.Pipeline`: the stages
-    of :func:`~jaxgrasp.engine._stages.flat_stages`, each :func:`over_devices`, driven by
-    :func:`~jaxgrasp.engine._stages.run_staged`. The evaluation stage runs once per chunk
+    """The chunk evaluator as a `Pipeline`: the stages
+    of `flat_stages`, each `over_devices`, driven by
+    `run_staged`. The evaluation stage runs once per chunk
     and briefly, so on a CPU it is compiled for latency."""
     functions = stages.flat_stages(options, grasp_fields(masked), settle)
     latency = latency_options(sharding.mesh.devices.flat[0].platform)
@@ -59,7 +59,7 @@ def _staged(options: EvaluateOptions, sharding, masked: bool, settle: bool) -> _
 
 
 def _chunk_spec(n_contacts: int, chunk: int, sharding, masked: bool) -> tuple:
-    """The :class:`~jaxgrasp.Grasp` fields of a chunk of ``chunk`` grasps, as ``ShapeDtypeStruct``."""
+    """The [`Grasp`][jaxgrasp.Grasp] fields of a chunk of ``chunk`` grasps, as ``ShapeDtypeStruct``."""
     per_field = dict(positions=(n_contacts, 3), normals=(n_contacts, 3), mass=(), gravity=(3,))
     return tuple(
         jax.ShapeDtypeStruct(
@@ -73,13 +73,13 @@ def compiled_evaluator(options: EvaluateOptions, n_contacts: int, chunk: int, de
                        settle: bool = True):
     """The chunk evaluator for ``chunk`` grasps of ``n_contacts``; ``(fn, compile seconds)``.
 
-    ``fn`` (a :class:`~jaxgrasp.engine._pipeline.Staged`) takes the
-    :class:`~jaxgrasp.Grasp` fields (:func:`grasp_fields`: with ``masked``, the contact
+    ``fn`` (a `Staged`) takes the
+    [`Grasp`][jaxgrasp.Grasp] fields (`grasp_fields`: with ``masked``, the contact
     mask ``active`` last) of a chunk, each sharded along its first axis over ``devices``
     (default ``jax.devices()``; ``chunk`` must be a multiple of their number), and
-    returns every :class:`~jaxgrasp.Evaluation` field (leading axis ``chunk``), sharded
-    the same way; ``settle`` as in :func:`~jaxgrasp.engine._stages.stage_functions`. It
-    comes from :func:`jaxgrasp.engine._compile.compiled`: memoised in the process (0
+    returns every [`Evaluation`][jaxgrasp.Evaluation] field (leading axis ``chunk``), sharded
+    the same way; ``settle`` as in `stage_functions`. It
+    comes from `jaxgrasp.engine._compile.compiled`: memoised in the process (0
     seconds on a hit) and kept in the executable store where that is turned on.
     """
     devices = tuple(jax.devices() if devices is None else devices)
@@ -106,10 +106,10 @@ def _memo_key(options: EvaluateOptions, n_contacts: int, chunk: int, devices: tu
 
 def chunk_evaluator(settle: str, options: EvaluateOptions, n_contacts: int, plan: ChunkPlan, masked: bool):
     """``(fn, compile seconds, settling)`` for the chunks of ``plan`` by the settling
-    policy ``settle`` (:mod:`~jaxgrasp.engine._settling`): for
-    :data:`~jaxgrasp.engine._settling.INLINE`, ``fn`` with the settling stage and
-    ``settling`` ``None``; for :data:`~jaxgrasp.engine._settling.RETRY`, ``fn`` without it
-    and ``settling = (get, size)`` for :func:`~jaxgrasp.engine._run.run_chunks`, ``get()``
+    policy ``settle`` (`_settling`): for
+    `INLINE`, ``fn`` with the settling stage and
+    ``settling`` ``None``; for `RETRY`, ``fn`` without it
+    and ``settling = (get, size)`` for `run_chunks`, ``get()``
     compiling (or loading) the evaluator with the stage for ``size`` grasps, one per
     device, when a chunk first needs it (the grasps that need it are few: a wider chunk
     would be padded with repeats that cost as much as they do)."""
@@ -123,8 +123,8 @@ def chunk_evaluator(settle: str, options: EvaluateOptions, n_contacts: int, plan
 
 def release_chunk_evaluator(settle: str, options: EvaluateOptions, n_contacts: int, plan: ChunkPlan,
                             masked: bool) -> None:
-    """Forget what :func:`chunk_evaluator` gave for these arguments in this process
-    (:func:`~jaxgrasp.engine._compile.forget`): a batch in segments by contact count
+    """Forget what `chunk_evaluator` gave for these arguments in this process
+    (`forget`): a batch in segments by contact count
     holds one program at a time, not one per segment."""
     inline = check_settle(settle)
     _compile.forget(_memo_key(options, n_contacts, plan.chunk, plan.devices, masked, inline))

@@ -1,8 +1,8 @@
 """The value and gradient of an evaluation along a parametrised grasp: the one builder
-behind both gradient-based tuners (:func:`jaxgrasp.tune`, :func:`jaxgrasp.tune_hand`).
+behind both gradient-based tuners ([`jaxgrasp.tune`][jaxgrasp.tune], [`jaxgrasp.tune_hand`][jaxgrasp.tune_hand]).
 
-The gradient is the envelope theorem's (:func:`jaxgrasp.tolerance.envelope_energy`,
-through :func:`~jaxgrasp.engine._evaluate.evaluate_compiled`): exact, with no
+The gradient is the envelope theorem's (`jaxgrasp.tolerance.envelope_energy`,
+through `evaluate_compiled`): exact, with no
 differentiation through the solver. Where the value is not finite (or the grasp is not one
 to count) it is 0, and so is its gradient; a non-finite gradient entry is 0.
 """
@@ -25,12 +25,12 @@ def value_and_grad_builder(grasp_of: Callable[[Any, Any], tuple[Any, Any]], opti
                            counts: Callable[[Any], Any] | None = None,
                            objective: Callable[[Any, Any], Any] | None = None) -> Callable:
     """``vg(x, data) -> ((f, (evaluation, aux)), df_dx)``, traceable (to be compiled by the
-    caller, e.g. :class:`~jaxgrasp.engine._compile.StoredFunction`).
+    caller, e.g. `StoredFunction`).
 
     Args:
-        grasp_of: ``grasp_of(x, data) -> (grasp, aux)``: the :class:`~jaxgrasp.Grasp` (SI
+        grasp_of: ``grasp_of(x, data) -> (grasp, aux)``: the [`Grasp`][jaxgrasp.Grasp] (SI
             units) at the parameters ``x`` (any shape), and anything the caller wants back.
-        options: :class:`~jaxgrasp.EvaluateOptions` of the evaluation
+        options: [`EvaluateOptions`][jaxgrasp.EvaluateOptions] of the evaluation
             (``smooth_min_temperature`` ignored: see ``temperature_of``).
         temperature_of: ``temperature_of(data)``, the soft-minimum temperature in mJ
             (``()``); default the hard minimum (0).
@@ -40,7 +40,7 @@ def value_and_grad_builder(grasp_of: Callable[[Any, Any], tuple[Any, Any]], opti
             (``()``); default the value itself.
 
     Returns:
-        ``vg``: ``f`` the objective, ``evaluation`` the :class:`~jaxgrasp.Evaluation`,
+        ``vg``: ``f`` the objective, ``evaluation`` the [`Evaluation`][jaxgrasp.Evaluation],
         ``df_dx`` shaped like ``x`` with non-finite entries 0.
     """
 

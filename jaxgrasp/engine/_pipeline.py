@@ -18,7 +18,7 @@ def _spec_of(x) -> jax.ShapeDtypeStruct:
 @dataclasses.dataclass(frozen=True)
 class Pipeline:
     """An executable as several jitted stages and the Python function that calls them: what
-    ``build`` of :func:`compiled` returns for an executable compiled in stages.
+    ``build`` of `compiled` returns for an executable compiled in stages.
 
     Attributes:
         stages: stage name -> jitted function (``jax.jit(...)`` with its shardings and
@@ -40,8 +40,8 @@ class Pipeline:
 
 
 class Staged:
-    """A compiled :class:`Pipeline`: ``Staged(stages, drive)(*args)`` runs ``drive``
-    with each stage's compiled executable (``jax.stages.Compiled``, in :attr:`stages`,
+    """A compiled `Pipeline`: ``Staged(stages, drive)(*args)`` runs ``drive``
+    with each stage's compiled executable (``jax.stages.Compiled``, in `stages`,
     by name, in the order the driver first calls them). Results between stages stay
     on the devices."""
 
@@ -57,7 +57,7 @@ def lower_stages(pipeline: Pipeline, spec: Sequence, on_lowered: Callable | None
     """Run ``pipeline``'s driver on the shapes ``spec`` (``jax.ShapeDtypeStruct``
     leaves, with their shardings), lowering each stage when it is first called; returns
     stage name -> ``jax.stages.Lowered``, in that order. ``on_lowered(name, lowered)``
-    is called at once for each (:func:`_compile` starts its XLA compilation there). A
+    is called at once for each (`_compile` starts its XLA compilation there). A
     stage called again on other shapes is a ``ValueError``."""
     lowered: dict[str, tuple] = {}  # name -> (argument specs, jax.stages.Lowered)
 

@@ -1,14 +1,14 @@
 """The chunk plan: how many grasps one compiled call evaluates, over which devices.
 
-Every batch of jaxgrasp (:func:`jaxgrasp.evaluate_batch`, :func:`jaxgrasp.sweep`, the
-``batch`` and ``sweep`` commands) is cut into chunks by :func:`plan_chunks`. A chunk's size
-is a bucket (:func:`bucket_size`), so that sets and grids of different sizes share a few
+Every batch of jaxgrasp ([`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch], [`jaxgrasp.sweep`][jaxgrasp.sweep], the
+``batch`` and ``sweep`` commands) is cut into chunks by `plan_chunks`. A chunk's size
+is a bucket (`bucket_size`), so that sets and grids of different sizes share a few
 compilations, at the price of padding lanes; the last chunk is padded to the same size.
 Memory is bounded by the chunk size.
 
 A batch of mixed contact counts is cut first into segments by count
-(:func:`plan_segments`): each segment runs at its own width where that saves more than
-its compilation costs (:func:`plan_widths`), and is then cut into chunks.
+(`plan_segments`): each segment runs at its own width where that saves more than
+its compilation costs (`plan_widths`), and is then cut into chunks.
 """
 
 from __future__ import annotations
@@ -48,10 +48,10 @@ __all__ = [
 
 BUCKET_BASE = 4
 """Chunk sizes come from the buckets ``devices * BUCKET_BASE**k`` (1, 4, 16, 64, ... per
-device; see :func:`bucket_size`), so sets and grids of different sizes share compilations."""
+device; see `bucket_size`), so sets and grids of different sizes share compilations."""
 
 DEFAULT_CHUNK_SIZE = 64
-"""Default grasps per chunk and per CPU device (see :func:`default_chunk_size`). A larger
+"""Default grasps per chunk and per CPU device (see `default_chunk_size`). A larger
 chunk costs more per grasp (the lanes of a chunk iterate until its last one converges)
 and needs more memory for XLA's temporaries, in proportion to the chunk and the contacts."""
 
@@ -60,7 +60,7 @@ ACCELERATOR_CHUNK_SIZE = 1024
 once, so it wants wide chunks (tune ``chunk_size`` on a given device)."""
 
 MIN_AUTO_CHUNK = 64
-"""The smallest chunk per device that ``auto`` picks in :func:`plan_chunks` (smaller
+"""The smallest chunk per device that ``auto`` picks in `plan_chunks` (smaller
 chunks cost more per grasp)."""
 
 AUTO_CHUNKS = 10
@@ -68,8 +68,8 @@ AUTO_CHUNKS = 10
 
 
 def default_chunk_size(devices=None) -> int:
-    """The default chunk: :data:`DEFAULT_CHUNK_SIZE` per CPU device,
-    :data:`ACCELERATOR_CHUNK_SIZE` per GPU/TPU device, times the number of ``devices``
+    """The default chunk: `DEFAULT_CHUNK_SIZE` per CPU device,
+    `ACCELERATOR_CHUNK_SIZE` per GPU/TPU device, times the number of ``devices``
     (default ``jax.devices()``)."""
     devices = tuple(jax.devices() if devices is None else devices)
     per = DEFAULT_CHUNK_SIZE if devices[0].platform == "cpu" else ACCELERATOR_CHUNK_SIZE
@@ -78,7 +78,7 @@ def default_chunk_size(devices=None) -> int:
 
 def check_chunk_size(chunk_size) -> None:
     """``chunk_size`` must be ``None`` (the default) or a positive integer; a one-line
-    :class:`~jaxgrasp.GraspValueError` otherwise."""
+    [`GraspValueError`][jaxgrasp.GraspValueError] otherwise."""
     if chunk_size is not None and (
         isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1
     ):
@@ -140,11 +140,11 @@ class ChunkPlan:
 
 def plan_chunks(total: int, chunk_size: int | None = None, devices=None, *, auto: bool = False) -> ChunkPlan:
     """The chunks of ``total`` grasps: at most ``chunk_size`` each (default
-    :func:`default_chunk_size`), as a bucket (:func:`bucket_size`) over ``devices``
+    `default_chunk_size`), as a bucket (`bucket_size`) over ``devices``
     (default ``jax.devices()``).
 
     With ``auto`` and no ``chunk_size``, the chunk is about a tenth of the run
-    (:data:`AUTO_CHUNKS` progress steps), at least :data:`MIN_AUTO_CHUNK` per device and
+    (`AUTO_CHUNKS` progress steps), at least `MIN_AUTO_CHUNK` per device and
     at most the default, so that a long sweep reports its progress.
 
     Raises:
@@ -168,10 +168,10 @@ COMPILE_CPU_SECONDS = 30.0
 """What one compilation of the batch evaluator costs, in CPU seconds of evaluation
 forgone: its wall time, spent mostly on one core, on a two-core machine that the
 evaluation keeps busy (the docs' Benchmarks page, "Datasets", has the measurements).
-What a program of a count's own must save (:func:`plan_widths`)."""
+What a program of a count's own must save (`plan_widths`)."""
 
 WIDTH_PLATFORMS = ("cpu",)
-"""Platforms where :func:`plan_widths` gives a contact count a narrower program than the
+"""Platforms where `plan_widths` gives a contact count a narrower program than the
 batch's widest. On a CPU a padded contact costs its share of every solver step; the
 saving on an accelerator, where the lanes of a step run side by side, has not been
 measured, so there every count runs at the widest."""
@@ -189,7 +189,7 @@ def grasp_cpu_seconds(count: int, width: int) -> float:
 
 def grasps_by_count(counts) -> dict[int, int]:
     """``{count: grasps}`` of the contact counts ``counts`` ``(B,)``, what
-    :func:`plan_widths` takes (0, an invalid grasp's count, left out)."""
+    `plan_widths` takes (0, an invalid grasp's count, left out)."""
     values, n = np.unique(np.asarray(counts, dtype=np.int64), return_counts=True)
     return {int(c): int(k) for c, k in zip(values, n) if c > 0}
 
@@ -200,13 +200,13 @@ def plan_widths(counts, platform: str = "cpu") -> dict[int, int]:
 
     ``counts`` maps each contact count to its number of grasps (``{2: 5000, 7: 300}``). A
     count gets a program of its own where its grasps save more CPU time there than a
-    compilation costs (:data:`COMPILE_CPU_SECONDS`; the grasps' cost
-    :func:`grasp_cpu_seconds`): by this model, from about 4300 grasps of 2 contacts in a
+    compilation costs (`COMPILE_CPU_SECONDS`; the grasps' cost
+    `grasp_cpu_seconds`): by this model, from about 4300 grasps of 2 contacts in a
     set of 7, 11,400 of 6 contacts. The others are padded to the largest count, in one
     program with a contact mask. (A program for a group of counts, padded to the group's
     largest, would need a mask too: masked programs cost more per step, which the model
     does not know; ``experiments/padding_and_segments/FINDINGS.md``.) On a platform not in
-    :data:`WIDTH_PLATFORMS`, every count runs at the widest.
+    `WIDTH_PLATFORMS`, every count runs at the widest.
 
     The widths depend only on ``counts`` and ``platform``, so a run resumed, or split
     over processes, evaluates every grasp at the width a single run does (a grasp's
@@ -234,7 +234,7 @@ class Segment:
         masked: whether the program takes a contact mask (``counts`` holds more than one
             count: the smaller counts' grasps are padded to ``width``).
         at: ``(n,)`` positions of its grasps among the batch's rows to evaluate, in order.
-        plan: its :class:`ChunkPlan`.
+        plan: its `ChunkPlan`.
     """
 
     width: int
@@ -246,10 +246,10 @@ class Segment:
 
 @dataclasses.dataclass(frozen=True)
 class SegmentPlan:
-    """A batch's grasps in :class:`Segment` s, one per width, each cut into chunks.
+    """A batch's grasps in `Segment` s, one per width, each cut into chunks.
 
     ``total``, ``chunk`` (the largest), ``n_chunks`` (of every segment), ``devices`` and
-    ``n_devices`` read as a :class:`ChunkPlan` 's (a progress report's ``start(plan)``
+    ``n_devices`` read as a `ChunkPlan` 's (a progress report's ``start(plan)``
     takes either)."""
 
     segments: tuple[Segment, ...]
@@ -282,8 +282,8 @@ class SegmentPlan:
 
 def plan_segments(counts: np.ndarray, widths, chunk_size: int | None = None, devices=None) -> SegmentPlan:
     """The segments of the grasps whose contact counts are ``counts`` ``(n,)`` (each > 0),
-    by ``widths`` (:func:`plan_widths`, of these counts or of a whole set they belong to),
-    widest first, each cut by :func:`plan_chunks` (``chunk_size``, ``devices``).
+    by ``widths`` (`plan_widths`, of these counts or of a whole set they belong to),
+    widest first, each cut by `plan_chunks` (``chunk_size``, ``devices``).
 
     Raises:
         GraspValueError: ``chunk_size`` is not a positive integer, or there is no device.

@@ -1,14 +1,14 @@
 """What long library calls say while they run: Python's ``logging``, logger ``"jaxgrasp"``.
 
 One mechanism serves the library and the ``jaxgrasp`` command: the engine's compilation
-reports (:func:`jaxgrasp.engine._compile.compiled`), the chunk lines of a batch or a sweep
-(:class:`ChunkProgress`) and the stage lines of a plan
-(:class:`jaxgrasp.planning.PlanProgress`) are records at INFO level on :data:`LOGGER` or
+reports (`jaxgrasp.engine._compile.compiled`), the chunk lines of a batch or a sweep
+(`ChunkProgress`) and the stage lines of a plan
+(`jaxgrasp.planning.PlanProgress`) are records at INFO level on `LOGGER` or
 its children; warnings (a refused cache folder) at WARNING. The command prints each record
-as one line on stderr (:func:`jaxgrasp.engine._store.log_lines_on_stderr`).
+as one line on stderr (`jaxgrasp.engine._store.log_lines_on_stderr`).
 
 A library user sees the same lines by default: at jaxgrasp's first use
-(:func:`show_by_default`), where the program has configured no logging (no handler on
+(`show_by_default`), where the program has configured no logging (no handler on
 the root logger, none on ``"jaxgrasp"``), jaxgrasp gives its logger a handler that prints
 each record as one line on stderr, and level INFO unless a level was set. Where the
 program configured logging, its configuration decides. Quiet::
@@ -30,13 +30,13 @@ from jaxgrasp.engine._store import LOGGER, _StderrLines
 __all__ = ["LOGGER", "ChunkProgress", "chunk_progress", "show_by_default"]
 
 _DEFAULT_HANDLER = _StderrLines(logging.INFO)
-"""The handler :func:`show_by_default` gives :data:`LOGGER` (once)."""
+"""The handler `show_by_default` gives `LOGGER` (once)."""
 
 
 def show_by_default() -> bool:
     """Where the program has configured no logging (no handler on the root logger or on
-    :data:`LOGGER`), print jaxgrasp's records on stderr, one line each, from INFO up
-    (unless the program set :data:`LOGGER`'s level); whether the handler was added."""
+    `LOGGER`), print jaxgrasp's records on stderr, one line each, from INFO up
+    (unless the program set `LOGGER`'s level); whether the handler was added."""
     if logging.getLogger().handlers or LOGGER.handlers:
         return False
     LOGGER.addHandler(_DEFAULT_HANDLER)
@@ -47,7 +47,7 @@ def show_by_default() -> bool:
 
 class ChunkProgress:
     """``progress`` of the engine's batches and sweeps: a record before the first chunk and
-    one per chunk on :data:`LOGGER` at INFO (``jaxgrasp: chunk 2/8 (6/24 points), elapsed
+    one per chunk on `LOGGER` at INFO (``jaxgrasp: chunk 2/8 (6/24 points), elapsed
     T s, about S s left``); the time left is estimated from the chunks after the first,
     which includes the compilation. Silent unless ``show`` and the run has more than one
     chunk (a run of one chunk says what it compiles, if it does).
@@ -66,8 +66,8 @@ class ChunkProgress:
 
     def start(self, plan) -> None:
         """The record before the first chunk (how many items, chunks and devices), from the
-        engine's :class:`~jaxgrasp.engine.ChunkPlan` or
-        :class:`~jaxgrasp.engine.SegmentPlan` (whose programs by contact count it
+        engine's `ChunkPlan` or
+        `SegmentPlan` (whose programs by contact count it
         names: the first chunk of each includes its compilation)."""
         self.chunk, self.nchunks, self.calls = plan.chunk, plan.n_chunks, 0
         self.show = self.show and plan.n_chunks > 1
@@ -100,7 +100,7 @@ class ChunkProgress:
 
 
 def chunk_progress(progress, verb: str = "evaluating", noun: str = "grasp"):
-    """``progress`` as given, or where it is ``None`` a :class:`ChunkProgress` of ``verb``
-    and ``noun``: a library call reports its chunks on :data:`LOGGER` unless the caller
+    """``progress`` as given, or where it is ``None`` a `ChunkProgress` of ``verb``
+    and ``noun``: a library call reports its chunks on `LOGGER` unless the caller
     passes a ``progress`` of its own."""
     return ChunkProgress(verb, noun) if progress is None else progress

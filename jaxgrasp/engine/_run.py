@@ -25,14 +25,14 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
     chunk - 1``, each with a leading axis of ``chunk`` (past ``total``: any valid grasp,
     e.g. the last one repeated). ``on_chunk(start, stop, results)`` (first: a checkpoint
     it writes is on disk before ``progress`` reports the chunk; ``results`` the
-    :class:`~jaxgrasp.Evaluation` fields named in ``keep`` of grasps ``start .. stop - 1``,
+    [`Evaluation`][jaxgrasp.Evaluation] fields named in ``keep`` of grasps ``start .. stop - 1``,
     leading axis ``stop - start``) and ``progress(stop, total)`` are called after each
     chunk. No device buffer outlives its chunk.
 
     ``settling = (get, size)``, where given (``fn`` being the evaluator without the
-    settling stage, :func:`~jaxgrasp.engine._evaluator.chunk_evaluator`): the settling
-    policy :data:`~jaxgrasp.engine._settling.RETRY`, the grasps of a chunk that
-    :func:`~jaxgrasp.tolerance._settle.needs_settling` evaluated again by ``get()``,
+    settling stage, `chunk_evaluator`): the settling
+    policy `RETRY`, the grasps of a chunk that
+    `needs_settling` evaluated again by ``get()``,
     ``size`` at a time, so every grasp's result is the same whatever chunk it is in.
     ``get`` is called (and compiles, its seconds counted as run time) only once a chunk
     has such grasps.
@@ -60,8 +60,8 @@ def run_chunks(fn, chunk_fields: Callable[[int], Mapping[str, np.ndarray]], name
 
 
 def _settled(res: dict, fields, names, count: int, settling, sharding) -> dict:
-    """A chunk's results ``res`` by the :data:`~jaxgrasp.engine._settling.RETRY` policy
-    (:func:`~jaxgrasp.engine._settling.settle_then_retry`): those of its first ``count``
+    """A chunk's results ``res`` by the `RETRY` policy
+    (`settle_then_retry`): those of its first ``count``
     grasps that need the settling stage evaluated again by ``settling``'s evaluator
     (``size`` at a time, padded by repeats)."""
     get, size = settling

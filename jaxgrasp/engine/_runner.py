@@ -1,17 +1,17 @@
 """The one batch runner: a source of grasp fields in, every grasp's evaluation out.
 
-Every batch of jaxgrasp runs here: :func:`jaxgrasp.evaluate_batch` and
-:func:`jaxgrasp.evaluate_dataset` (stacked grasps, a dataset's rows not done yet),
-:func:`jaxgrasp.sweep` (a grid), :func:`jaxgrasp.robust_batch` (perturbed copies) and
-:func:`jaxgrasp.plan` (candidates) are adapters that make a source and read the results.
+Every batch of jaxgrasp runs here: [`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch] and
+`jaxgrasp.evaluate_dataset` (stacked grasps, a dataset's rows not done yet),
+[`jaxgrasp.sweep`][jaxgrasp.sweep] (a grid), [`jaxgrasp.robust_batch`][jaxgrasp.robust_batch] (perturbed copies) and
+[`jaxgrasp.plan`][jaxgrasp.plan] (candidates) are adapters that make a source and read the results.
 
-A source (:class:`GraspSource`) says how many grasps it has, their contact counts and the
-fields of any of them. :func:`plan_source` cuts them into segments by contact count, each
-at its width (:func:`~jaxgrasp.engine._plan.plan_widths`), each into chunks
-(:func:`~jaxgrasp.engine._plan.plan_segments`); :func:`run_batch` gathers each chunk from
+A source (`GraspSource`) says how many grasps it has, their contact counts and the
+fields of any of them. `plan_source` cuts them into segments by contact count, each
+at its width (`plan_widths`), each into chunks
+(`plan_segments`); `run_batch` gathers each chunk from
 the source when it runs (narrowed to its segment's width,
-:mod:`~jaxgrasp.engine._widths`), evaluates it over the devices by the settling policy it
-is given (:mod:`~jaxgrasp.engine._settling`, :func:`~jaxgrasp.engine._run.run_chunks`)
+`_widths`), evaluates it over the devices by the settling policy it
+is given (`_settling`, `run_chunks`)
 and lays the results out at the source's width, in the source's order.
 """
 
@@ -43,7 +43,7 @@ __all__ = ["GraspSource", "Stacked", "Run", "plan_source", "run_batch", "start_p
 
 
 class GraspSource(Protocol):
-    """What :func:`run_batch` evaluates: ``size`` grasps of at most ``width`` contacts.
+    """What `run_batch` evaluates: ``size`` grasps of at most ``width`` contacts.
 
     Attributes:
         size: the grasps, numbered ``0 .. size - 1`` (the results' order).
@@ -57,7 +57,7 @@ class GraspSource(Protocol):
         """``(size,)`` int, each grasp's contacts (``1 .. width``)."""
 
     def gather(self, at: np.ndarray) -> dict[str, np.ndarray]:
-        """The :class:`~jaxgrasp.Grasp` fields of grasps ``at`` ``(K,)`` (each in
+        """The [`Grasp`][jaxgrasp.Grasp] fields of grasps ``at`` ``(K,)`` (each in
         ``0 .. size - 1``, repeats allowed), each with a leading axis ``K`` (SI units;
         ``active`` ``(K, N)`` where the grasps have a contact mask)."""
 
@@ -65,7 +65,7 @@ class GraspSource(Protocol):
 @dataclasses.dataclass(frozen=True)
 class Stacked:
     """The rows ``rows`` ``(size,)`` of stacked grasp ``fields`` (each ``(B, ...)``, SI
-    units, ``active`` ``(B, N)`` where there is a mask) as a :class:`GraspSource`: grasp
+    units, ``active`` ``(B, N)`` where there is a mask) as a `GraspSource`: grasp
     ``k`` is row ``rows[k]``. Only a chunk's rows are copied, when it runs."""
 
     fields: Mapping[str, np.ndarray]
@@ -90,10 +90,10 @@ class Stacked:
 
 @dataclasses.dataclass(frozen=True)
 class Run:
-    """What :func:`run_batch` gives.
+    """What `run_batch` gives.
 
     Attributes:
-        results: :class:`~jaxgrasp.Evaluation` fields by name (those asked for), each
+        results: [`Evaluation`][jaxgrasp.Evaluation] fields by name (those asked for), each
             ``(size, ...)`` in the source's order, contacts laid out at its ``width``.
         compile_seconds: time spent compiling (or loading) the programs, s.
         run_seconds: time spent evaluating the chunks, s.
@@ -108,9 +108,9 @@ class Run:
 
 def start_progress(progress, plan: ChunkPlan | SegmentPlan, verb: str = "evaluating", noun: str = "grasp"):
     """The progress report of a run: ``progress``, or where it is ``None`` the engine's
-    chunk records on the ``"jaxgrasp"`` logger (:class:`~jaxgrasp.engine.ChunkProgress`
+    chunk records on the ``"jaxgrasp"`` logger (`ChunkProgress`
     of ``verb`` and ``noun``); told the plan before the first chunk, where it asks (an
-    object with a ``start(plan)`` method, such as :class:`~jaxgrasp.engine.ChunkProgress`)."""
+    object with a ``start(plan)`` method, such as `ChunkProgress`)."""
     progress = chunk_progress(progress, verb, noun)
     start = getattr(progress, "start", None)
     if callable(start):
@@ -126,8 +126,8 @@ def platform(devices) -> str:
 def plan_source(source: GraspSource, chunk_size: int | None = None, devices=None,
                 widths: Mapping[int, int] | None = None, *, exact_chunk: bool = False) -> SegmentPlan:
     """The segments and chunks of ``source``'s grasps
-    (:func:`~jaxgrasp.engine._plan.plan_segments`) at ``widths`` (default
-    :func:`~jaxgrasp.engine._plan.plan_widths` of the source's counts, on the devices'
+    (`plan_segments`) at ``widths`` (default
+    `plan_widths` of the source's counts, on the devices'
     platform; a resumed run gives those of the whole set it belongs to).
 
     With ``exact_chunk`` every segment's chunk is ``chunk_size`` (rounded up to a multiple
@@ -150,21 +150,21 @@ def run_batch(source: GraspSource, plan: SegmentPlan, options: EvaluateOptions =
               settle: str, keep: tuple[str, ...] = RESULT_FIELDS, progress: Callable[[int, int], Any] | None = None,
               on_chunk: Callable[[np.ndarray, Mapping[str, np.ndarray]], Any] | None = None,
               results: dict[str, np.ndarray] | None = None, verb: str = "evaluating", noun: str = "grasp") -> Run:
-    """Evaluate every grasp of ``source`` by ``plan`` (:func:`plan_source`), segment after
+    """Evaluate every grasp of ``source`` by ``plan`` (`plan_source`), segment after
     segment, chunk after chunk; a grasp's result does not depend on the other grasps of
-    its chunk (each lane is its own), and is :func:`jaxgrasp.evaluate`'s within the bound
+    its chunk (each lane is its own), and is [`jaxgrasp.evaluate`][jaxgrasp.evaluate]'s within the bound
     that ``tests/engine/test_single_vs_batch.py`` states (two programs, one method).
 
     Args:
-        source: a :class:`GraspSource`.
-        plan: its :class:`~jaxgrasp.engine._plan.SegmentPlan`.
-        options: :class:`~jaxgrasp.EvaluateOptions` of every evaluation.
-        settle: the settling policy (:data:`~jaxgrasp.engine._settling.INLINE` or
-            :data:`~jaxgrasp.engine._settling.RETRY`).
-        keep: the :class:`~jaxgrasp.Evaluation` fields to keep (of :data:`RESULT_FIELDS`).
+        source: a `GraspSource`.
+        plan: its `SegmentPlan`.
+        options: [`EvaluateOptions`][jaxgrasp.EvaluateOptions] of every evaluation.
+        settle: the settling policy (`INLINE` or
+            `RETRY`).
+        keep: the [`Evaluation`][jaxgrasp.Evaluation] fields to keep (of `RESULT_FIELDS`).
         progress: ``progress(done, total)`` after each chunk (``start(plan)`` first, where
             it has one); ``None``: chunk records on the ``"jaxgrasp"`` logger, saying
-            ``verb`` and ``noun`` (:func:`start_progress`).
+            ``verb`` and ``noun`` (`start_progress`).
         on_chunk: ``on_chunk(at, results)`` after each chunk (before ``progress``): ``at``
             ``(K,)`` the source's numbers of its grasps (segments finish out of order),
             ``results`` the ``keep`` fields for them (leading axis ``K``, width ``N``).
@@ -172,7 +172,7 @@ def run_batch(source: GraspSource, plan: SegmentPlan, options: EvaluateOptions =
             caller that reads them while the run goes on); default a new one.
 
     Returns:
-        A :class:`Run`.
+        A `Run`.
     """
     progress = start_progress(progress, plan, verb, noun)  # before the compilation, which the first chunk's time includes
     outs = {} if results is None else results
@@ -197,7 +197,7 @@ def run_batch(source: GraspSource, plan: SegmentPlan, options: EvaluateOptions =
 
 
 def _segment_io(source: GraspSource, seg: Segment, keep, outs: dict, on_chunk):
-    """``(chunk_fields, finished)`` of :func:`~jaxgrasp.engine._run.run_chunks` for one
+    """``(chunk_fields, finished)`` of `run_chunks` for one
     segment: a chunk's fields gathered from ``source`` and narrowed to the segment's width,
     and its results widened back to the source's and put in ``outs`` at their grasps'
     numbers (then ``on_chunk``)."""

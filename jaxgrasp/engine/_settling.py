@@ -1,16 +1,16 @@
 """The settling policy: whether a grasp's evaluation runs the settling stage
-(:func:`~jaxgrasp.tolerance._settle.settle_stalled`,
-:func:`~jaxgrasp.tolerance._settle.settle_equilibrium`) inline, or runs without it and
+(`settle_stalled`,
+`settle_equilibrium`) inline, or runs without it and
 again with it only where a problem did not settle.
 
 Both policies give every grasp the same result: the stage changes nothing where every
-problem settled (:func:`~jaxgrasp.tolerance._settle.needs_settling`), and a grasp that
-needs it is evaluated with it either way. They differ in cost only. :data:`RETRY` spares
-the stage to the grasps that rarely need it (one grasp, the points of a grid); :data:`INLINE`
+problem settled (`needs_settling`), and a grasp that
+needs it is evaluated with it either way. They differ in cost only. `RETRY` spares
+the stage to the grasps that rarely need it (one grasp, the points of a grid); `INLINE`
 suits a set of varied grasps, where some need it in nearly every chunk, so evaluating
 them again would cost more than the stage inline, and the set compiles once.
 
-The policy is an argument of the runner (:func:`~jaxgrasp.engine._runner.run_batch`) and of
+The policy is an argument of the runner (`run_batch`) and of
 the compiled evaluators' keys, which name what a program computes (``settle``: whether it
 has the stage), never who calls it.
 """
@@ -35,7 +35,7 @@ POLICIES = (INLINE, RETRY)
 
 
 def check_settle(settle: str) -> bool:
-    """Whether the first program of policy ``settle`` (one of :data:`POLICIES`) has the
+    """Whether the first program of policy ``settle`` (one of `POLICIES`) has the
     settling stage inline; a ``ValueError`` for another policy."""
     if settle not in POLICIES:
         raise ValueError(f"settle must be one of {', '.join(POLICIES)}, got {settle!r}")
@@ -44,9 +44,9 @@ def check_settle(settle: str) -> bool:
 
 def settle_then_retry(first: Mapping[str, object], again: Callable[[np.ndarray], Mapping[str, object]],
                       count: int | None = None) -> Mapping[str, object]:
-    """:data:`RETRY`'s results: ``first`` (every :class:`~jaxgrasp.Evaluation` field by
+    """`RETRY`'s results: ``first`` (every [`Evaluation`][jaxgrasp.Evaluation] field by
     name, evaluated without the settling stage) with the grasps that
-    :func:`~jaxgrasp.tolerance._settle.needs_settling` taken from ``again``.
+    `needs_settling` taken from ``again``.
 
     ``first``'s fields have a leading axis of grasps ``(B, ...)`` (of which the first
     ``count``, default all, are real: the rest is a chunk's padding), or none for one

@@ -1,22 +1,22 @@
-"""jaxgrasp's process-wide settings beyond float64, chosen at its first use or by :func:`configure`.
+"""jaxgrasp's process-wide settings beyond float64, chosen at its first use or by [`configure`][jaxgrasp.configure].
 
 ``import jaxgrasp`` turns on float64 and changes nothing else in the process
-(:mod:`jaxgrasp`). What the engine needs of the process is chosen once, by
-:func:`configure`, which the engine calls itself (:func:`first_use`) the first time it
+(`jaxgrasp`). What the engine needs of the process is chosen once, by
+[`configure`][jaxgrasp.configure], which the engine calls itself (`first_use`) the first time it
 plans a batch or builds a compiled executable, unless the program called it before:
 
-* the number of JAX CPU devices (:func:`jaxgrasp.engine._devices.configure_cpu_devices`):
+* the number of JAX CPU devices (`jaxgrasp.engine._devices.configure_cpu_devices`):
   one per core, or ``JAXGRASP_CPU_DEVICES``, unless the program chose with JAX's own
   settings. JAX fixes its devices when it makes its first array, which a script usually
   does before jaxgrasp's first batch (a preset grasp is made of JAX arrays): there JAX's
   devices stay, a batch runs on them, and the batch's first use says so once on the
-  ``"jaxgrasp"`` logger. Call :func:`configure` before the first JAX computation to give
+  ``"jaxgrasp"`` logger. Call [`configure`][jaxgrasp.configure] before the first JAX computation to give
   batches every core.
 * the executable store in the user's cache folder
-  (:func:`jaxgrasp.engine._store.enable_from_environment`; ``JAXGRASP_CACHE_DIR`` moves or
+  (`jaxgrasp.engine._store.enable_from_environment`; ``JAXGRASP_CACHE_DIR`` moves or
   switches it off): the first compilation writes there, nothing before.
 * jaxgrasp's messages on stderr where the program has configured no logging
-  (:func:`jaxgrasp.engine._progress.show_by_default`).
+  (`jaxgrasp.engine._progress.show_by_default`).
 
 The guide's page on caching and process-wide settings (``docs/guide/caching.md``) lists
 them for users.
@@ -35,7 +35,7 @@ __all__ = ["configure", "first_use"]
 
 _LOCK = threading.Lock()
 _DONE: dict | None = None
-"""What :func:`configure` chose (its return value), once it has run."""
+"""What [`configure`][jaxgrasp.configure] chose (its return value), once it has run."""
 _LATE: list[int] = []
 """The CPU devices asked for where JAX's devices were already made (at most one entry)."""
 
@@ -80,7 +80,7 @@ def configure(*, cpu_devices: int | None = None) -> dict:
 
 
 def first_use(batch: bool = False) -> None:
-    """:func:`configure` without arguments, if it has not run; ``batch``: a batch is
+    """[`configure`][jaxgrasp.configure] without arguments, if it has not run; ``batch``: a batch is
     planned now, which says once on the ``"jaxgrasp"`` logger where JAX's devices were
     made before jaxgrasp could ask for more (the batch runs on fewer cores)."""
     if _DONE is None:

@@ -1,19 +1,19 @@
 """The evaluation pipeline, declared once, and its two runners.
 
-:data:`PIPELINE` lists the method's stages in order (Tsuji et al., eq. 1: the equilibrium
+`PIPELINE` lists the method's stages in order (Tsuji et al., eq. 1: the equilibrium
 problem, then the 2N boundary problems from starts around the equilibrium, then the
-verdict), each a :class:`Step` naming the values it reads and the value it makes. Every
+verdict), each a `Step` naming the values it reads and the value it makes. Every
 path of jaxgrasp runs this one list:
 
-* :func:`run_inline` runs it under the caller's trace (``jit``, ``vmap``, ``grad``):
-  :func:`jaxgrasp.evaluate` and :func:`jaxgrasp.tune`. The solve stage, which occurs
+* `run_inline` runs it under the caller's trace (``jit``, ``vmap``, ``grad``):
+  [`jaxgrasp.evaluate`][jaxgrasp.evaluate] and [`jaxgrasp.tune`][jaxgrasp.tune]. The solve stage, which occurs
   twice, is traced once: its occurrences are the iterations of a loop.
-* :func:`run_staged` runs it one compiled stage at a time on flat arrays (the stages of
-  :func:`flat_stages`, each compiled once, sharded over the devices and kept in the
-  executable store): :func:`jaxgrasp.evaluate_batch` and :func:`jaxgrasp.sweep`.
+* `run_staged` runs it one compiled stage at a time on flat arrays (the stages of
+  `flat_stages`, each compiled once, sharded over the devices and kept in the
+  executable store): [`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch] and [`jaxgrasp.sweep`][jaxgrasp.sweep].
 
-The stages are the method's functions (:mod:`jaxgrasp.tolerance`), bound to the options
-by :func:`stage_functions`; each takes the batch's data or parameters (:func:`inputs_of`,
+The stages are the method's functions (`jaxgrasp.tolerance`), bound to the options
+by `stage_functions`; each takes the batch's data or parameters (`inputs_of`,
 derived once from the grasps; leading axis ``B``) and the earlier values it names.
 """
 
@@ -69,14 +69,14 @@ class Step:
     """One step of the pipeline: ``output = stage(*inputs)``.
 
     Attributes:
-        stage: the stage's name (a key of :func:`stage_functions`).
-        inputs: names of the values it reads: an input of the pipeline (:data:`INPUTS`)
+        stage: the stage's name (a key of `stage_functions`).
+        inputs: names of the values it reads: an input of the pipeline (`INPUTS`)
             or an earlier step's output.
         output: the name of the value it makes.
         tree: the pytree structure of that value (to pass it between compiled stages
             as flat arrays).
         compiled_with: where the pipeline runs one compiled stage at a time
-            (:func:`run_staged`), the stage of a later step whose executable runs this
+            (`run_staged`), the stage of a later step whose executable runs this
             step first (``None``: its own executable).
     """
 
@@ -101,8 +101,8 @@ PIPELINE: tuple[Step, ...] = (
 )
 """The evaluation of a batch of grasps, step by step: the equilibrium problem's lanes,
 solved; each grasp's equilibrium (settled where asked); the boundary problems' lanes from
-starts around that equilibrium, solved; the solved :class:`~jaxgrasp.tolerance.Problems`
-(settled where asked); every :class:`~jaxgrasp.Evaluation` field (the verdict, steps 2-6
+starts around that equilibrium, solved; the solved `Problems`
+(settled where asked); every [`Evaluation`][jaxgrasp.Evaluation] field (the verdict, steps 2-6
 of the method). The equilibrium is its own step because two later steps read it: made
 once, it is traced and compiled once. Run one compiled stage at a time, it shares the
 starts stage's executable (without settling it is a mere selection, not worth a call)."""
@@ -112,7 +112,7 @@ STAGES = tuple(dict.fromkeys(s.stage for s in PIPELINE))
 
 
 def _calls() -> tuple[tuple[str, tuple[Step, ...]], ...]:
-    """:data:`PIPELINE` as :func:`run_staged` calls it: ``(executable, steps)`` pairs, a
+    """`PIPELINE` as `run_staged` calls it: ``(executable, steps)`` pairs, a
     step that is ``compiled_with`` a later stage run by that stage's next executable."""
     calls, waiting = [], []
     for step in PIPELINE:
@@ -127,10 +127,10 @@ def _calls() -> tuple[tuple[str, tuple[Step, ...]], ...]:
 
 
 CALLS = _calls()
-"""``(executable, steps)``: the calls of :func:`run_staged`, in order."""
+"""``(executable, steps)``: the calls of `run_staged`, in order."""
 
 EXECUTABLES = tuple(dict.fromkeys(name for name, _ in CALLS))
-"""The names of the executables :func:`flat_stages` makes, in the order they are first
+"""The names of the executables `flat_stages` makes, in the order they are first
 called: the stages, less those ``compiled_with`` another."""
 
 
@@ -141,25 +141,25 @@ def _outer_inputs(steps: tuple[Step, ...]) -> tuple[str, ...]:
 
 
 INPUTS = ("params", "data")
-"""The pipeline's inputs, both derived from the batch of grasps by :func:`inputs_of`."""
+"""The pipeline's inputs, both derived from the batch of grasps by `inputs_of`."""
 
 
 def inputs_of(grasps: Grasp) -> dict[str, Any]:
     """The pipeline's inputs for a batch of grasps (leading axis ``B``): ``params``, the
-    grasps in internal units (:func:`jaxgrasp.model.model_params`, differentiable: the
+    grasps in internal units (`jaxgrasp.model.model_params`, differentiable: the
     verdict's envelope derivatives go through them), and ``data``, the problems' data
-    (:func:`~jaxgrasp.tolerance._problems.batch_data`, no gradient: the solver sees none)."""
+    (`batch_data`, no gradient: the solver sees none)."""
     params = jax.vmap(model_params)(grasps)
     return {"params": params, "data": batch_data(params)}
 
 
 def stage_functions(options: EvaluateOptions, settle: bool = True, temperature=None) -> dict[str, Callable]:
-    """Each stage of :data:`PIPELINE` as a function of the values its step names (the
-    pipeline's inputs, :func:`inputs_of`, and earlier steps' outputs; leading axis ``B``).
+    """Each stage of `PIPELINE` as a function of the values its step names (the
+    pipeline's inputs, `inputs_of`, and earlier steps' outputs; leading axis ``B``).
 
     ``settle`` (static): whether the settle stage certifies a stalled equilibrium
-    (:func:`~jaxgrasp.tolerance._settle.settle_equilibrium`) and the finish stage stalled
-    boundary lanes (:func:`~jaxgrasp.tolerance._settle.settle_stalled`);
+    (`settle_equilibrium`) and the finish stage stalled
+    boundary lanes (`settle_stalled`);
     without it the stages are smaller, and equal wherever no problem ends unsettled. ``temperature``: the
     soft-minimum temperature (mJ, ``0`` for the hard minimum; traced or not); default the
     options' own.
@@ -181,7 +181,7 @@ def _call(functions: Mapping[str, Callable], step: Step, env: Mapping[str, Any])
 
 
 def _through(until: str) -> tuple[Step, ...]:
-    """The steps of :data:`PIPELINE` up to the one that makes ``until``."""
+    """The steps of `PIPELINE` up to the one that makes ``until``."""
     outputs = [s.output for s in PIPELINE]
     if until not in outputs:
         raise ValueError(f"no step of the pipeline makes {until!r}; its values are {outputs}")
@@ -189,13 +189,13 @@ def _through(until: str) -> tuple[Step, ...]:
 
 
 def run_inline(grasps: Grasp, functions: Mapping[str, Callable], until: str = "evaluation"):
-    """Run :data:`PIPELINE` on the batch ``grasps`` under the caller's trace, up to the
+    """Run `PIPELINE` on the batch ``grasps`` under the caller's trace, up to the
     value ``until``, which it returns (leading axis ``B``); ``functions`` from
-    :func:`stage_functions`.
+    `stage_functions`.
 
     The solve stage occurs once per round (a round: the steps after the previous solve,
-    the last of which makes lanes' starts, then :data:`SOLVE`); the rounds are the
-    iterations of one loop (:func:`_solved_rounds`), so the solver's loop is traced and
+    the last of which makes lanes' starts, then `SOLVE`); the rounds are the
+    iterations of one loop (`_solved_rounds`), so the solver's loop is traced and
     compiled once rather than once per round.
     """
     steps = _through(until)
@@ -268,11 +268,11 @@ def _solved_rounds(rounds, carried: set[str], functions: Mapping[str, Callable],
 
 
 def flat_stages(options: EvaluateOptions, names: tuple[str, ...], settle: bool = True) -> dict[str, Callable]:
-    """The executables of :data:`EXECUTABLES` as functions of flat arrays, for compiling
+    """The executables of `EXECUTABLES` as functions of flat arrays, for compiling
     one at a time (the executable store keeps flat executables): each runs its steps
-    (:data:`CALLS`; the stages of :func:`stage_functions`), takes the batch's
-    :class:`~jaxgrasp.Grasp` fields ``names`` (from which it derives the pipeline's inputs,
-    :func:`inputs_of`), then the leaves of each earlier value its steps read, and returns
+    (`CALLS`; the stages of `stage_functions`), takes the batch's
+    [`Grasp`][jaxgrasp.Grasp] fields ``names`` (from which it derives the pipeline's inputs,
+    `inputs_of`), then the leaves of each earlier value its steps read, and returns
     the leaves of every value its steps make, as one tuple."""
     functions = stage_functions(options, settle)
     trees = {s.output: s.tree() for s in PIPELINE}
@@ -301,11 +301,11 @@ def flat_stages(options: EvaluateOptions, names: tuple[str, ...], settle: bool =
 
 
 def run_staged(call: Callable, *fields) -> tuple:
-    """Run :data:`PIPELINE` by ``call(executable, *arrays)`` (a tuple of arrays back; the
-    executables of :func:`flat_stages`, compiled, in the order of :data:`CALLS`) on the
-    batch's :class:`~jaxgrasp.Grasp` fields: every :class:`~jaxgrasp.Evaluation` field, in
-    :data:`jaxgrasp.tolerance._result.FIELDS` order. A
-    :class:`~jaxgrasp.engine._pipeline.Pipeline`'s driver: it only passes arrays on."""
+    """Run `PIPELINE` by ``call(executable, *arrays)`` (a tuple of arrays back; the
+    executables of `flat_stages`, compiled, in the order of `CALLS`) on the
+    batch's [`Grasp`][jaxgrasp.Grasp] fields: every [`Evaluation`][jaxgrasp.Evaluation] field, in
+    `jaxgrasp.tolerance._result.FIELDS` order. A
+    `Pipeline`'s driver: it only passes arrays on."""
     env: dict[str, tuple] = {}
     for name, steps in CALLS:
         values = (a for n in _outer_inputs(steps) if n not in INPUTS for a in env[n])

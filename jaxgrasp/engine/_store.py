@@ -2,35 +2,35 @@
 
 Three layers, each skipping more of the work of building an evaluator:
 
-* the in-process memo (:func:`jaxgrasp.engine._compile.compiled`): an executable
+* the in-process memo (`jaxgrasp.engine._compile.compiled`): an executable
   compiled once is reused by every later call with the same key;
-* the executable store (:func:`set_executable_dir`): the compiled executable itself,
+* the executable store (`set_executable_dir`): the compiled executable itself,
   serialized (``jax.experimental.serialize_executable``), so that a later process neither
-  traces :func:`jaxgrasp.evaluate` in Python nor lowers nor compiles it: it loads the
+  traces [`jaxgrasp.evaluate`][jaxgrasp.evaluate] in Python nor lowers nor compiles it: it loads the
   machine code;
 * JAX's persistent compilation cache, for the user's own ``jit`` functions and
   jaxgrasp's executables that are not stored. An executable the store keeps is not
   written there as well (a second copy of the same machine code, written for nothing).
 
-The executables of :func:`jaxgrasp.evaluate` on a concrete grasp, of
-:func:`jaxgrasp.evaluate_batch`, of :func:`jaxgrasp.sweep` and the value and gradient of
-:func:`jaxgrasp.tune` and :func:`jaxgrasp.tune_hand`
-(:class:`~jaxgrasp.engine._compile.StoredFunction`) all come from
-:func:`~jaxgrasp.engine._compile.compiled`. A traced grasp (inside the caller's ``jit``,
+The executables of [`jaxgrasp.evaluate`][jaxgrasp.evaluate] on a concrete grasp, of
+[`jaxgrasp.evaluate_batch`][jaxgrasp.evaluate_batch], of [`jaxgrasp.sweep`][jaxgrasp.sweep] and the value and gradient of
+[`jaxgrasp.tune`][jaxgrasp.tune] and [`jaxgrasp.tune_hand`][jaxgrasp.tune_hand]
+(`StoredFunction`) all come from
+`compiled`. A traced grasp (inside the caller's ``jit``,
 ``vmap`` or ``grad``) is traced with the caller's function and uses none of these.
 
 Which caches are on:
 
-* jaxgrasp's first use (its first compilation or batch, or :func:`jaxgrasp.configure`)
-  turns on the executable store alone (:func:`enable_from_environment`), in the subfolder
-  ``jaxgrasp-executables`` of :func:`default_dir`: every process of a script starts warm,
+* jaxgrasp's first use (its first compilation or batch, or [`jaxgrasp.configure`][jaxgrasp.configure])
+  turns on the executable store alone (`enable_from_environment`), in the subfolder
+  ``jaxgrasp-executables`` of `default_dir`: every process of a script starts warm,
   without a change to its code; ``import jaxgrasp`` writes nothing. It does not turn on
   JAX's persistent compilation cache, which is global to the process: it would change how
   the user's own ``jit`` functions are compiled and stored, which is the user's choice.
-* :func:`enable_compilation_cache` (``jaxgrasp.engine.enable_compilation_cache()``) and the
-  ``jaxgrasp`` command turn on both: JAX's cache in :func:`default_dir`, the executables
+* [`enable_compilation_cache`][jaxgrasp.engine.enable_compilation_cache] (``jaxgrasp.engine.enable_compilation_cache()``) and the
+  ``jaxgrasp`` command turn on both: JAX's cache in `default_dir`, the executables
   in its subfolder.
-* The environment variable ``JAXGRASP_CACHE_DIR`` (:data:`ENV_VAR`) moves the folder;
+* The environment variable ``JAXGRASP_CACHE_DIR`` (`ENV_VAR`) moves the folder;
   ``JAXGRASP_CACHE_DIR=off`` switches every jaxgrasp cache off (the first use's, the
   command's and ``enable_compilation_cache()``'s; a folder passed to it explicitly is
   still used). Unset, the folder is ``$XDG_CACHE_HOME/jaxgrasp/xla``, else
@@ -46,26 +46,26 @@ code as the user. So nothing is read that another user could have written:
   cache is turned on and one warning line names the folder and why;
 * every stored file is opened without following links and checked the same way (a regular
   file, the user's, not writable by group or others) before a byte of it is unpickled;
-  otherwise it is skipped with a warning (and counted in :func:`stats`);
+  otherwise it is skipped with a warning (and counted in `stats`);
 * a stored file starts with a format line and a JSON header holding the executable's full
   key (options, shapes, versions, jaxgrasp's source digest, machine, ``XLA_FLAGS``) and the SHA-256 and
   length of its payload; a file whose key is not exactly the expected one, or whose
   payload does not match, is not unpickled: the executable is compiled again and the file
   replaced;
-* files are written as every file of jaxgrasp (:func:`jaxgrasp.storage.write_file`):
+* files are written as every file of jaxgrasp (`jaxgrasp.storage.write_file`):
   through a temporary file created exclusively (``O_EXCL``, ``O_NOFOLLOW``, here mode
   0600) under a random name in the same folder, synced, then renamed over the file
   (atomic: a reader sees the old file or the new one); a failed write removes it, and
   temporary files of dead processes (or older than
-  :data:`jaxgrasp.storage.STALE_TEMP_SECONDS`) are removed when the store is turned on
-  (:func:`jaxgrasp.storage.remove_stale_temps`). The private folders and files are
-  :func:`jaxgrasp.storage.private_folder` and :func:`jaxgrasp.storage.read_private`.
+  `jaxgrasp.storage.STALE_TEMP_SECONDS`) are removed when the store is turned on
+  (`jaxgrasp.storage.remove_stale_temps`). The private folders and files are
+  `jaxgrasp.storage.private_folder` and `jaxgrasp.storage.read_private`.
 
 Warnings and the report of each compilation go to the ``logging`` logger ``"jaxgrasp"``
-(:data:`LOGGER`): a compilation is reported at INFO level (what, why, where it is stored),
+(`LOGGER`): a compilation is reported at INFO level (what, why, where it is stored),
 which the ``jaxgrasp`` command prints on stderr. Tests and benchmarks read what the caches
-did with :func:`stats` and start afresh with
-:func:`jaxgrasp.engine._compile.clear_compiled`.
+did with `stats` and start afresh with
+`jaxgrasp.engine._compile.clear_compiled`.
 """
 
 from __future__ import annotations
@@ -114,8 +114,8 @@ __all__ = [
 
 
 ENV_VAR = "JAXGRASP_CACHE_DIR"
-"""The environment variable that moves the cache folder (:func:`default_dir`), or with the
-value :data:`OFF` switches every jaxgrasp cache off."""
+"""The environment variable that moves the cache folder (`default_dir`), or with the
+value `OFF` switches every jaxgrasp cache off."""
 
 OFF = "off"
 """The value of ``JAXGRASP_CACHE_DIR`` (any case) that switches every jaxgrasp cache off."""
@@ -128,8 +128,8 @@ LOGGER = logging.getLogger("jaxgrasp")
 
 _EXECUTABLE_DIR: Path | None = None
 _CHOSEN = False
-"""Whether the store was chosen (:func:`set_executable_dir`, directly or through
-:func:`enable_compilation_cache` or :func:`enable_from_environment`), on or off."""
+"""Whether the store was chosen (`set_executable_dir`, directly or through
+[`enable_compilation_cache`][jaxgrasp.engine.enable_compilation_cache] or `enable_from_environment`), on or off."""
 
 _STATS = {"traced": 0, "deserialized": 0, "cache_errors": 0}
 
@@ -163,11 +163,11 @@ def default_dir() -> Path | None:
 
 
 def enable_from_environment() -> Path | None:
-    """Turn on the executable store alone in :func:`default_dir`'s subfolder
+    """Turn on the executable store alone in `default_dir`'s subfolder
     ``jaxgrasp-executables`` (not JAX's own cache, see the module docstring), unless the
-    store was chosen before (:func:`set_executable_dir`, :func:`enable_compilation_cache`);
+    store was chosen before (`set_executable_dir`, [`enable_compilation_cache`][jaxgrasp.engine.enable_compilation_cache]);
     the folder of the store, or ``None`` (switched off, refused, or it cannot be created).
-    jaxgrasp's first use calls it (:func:`jaxgrasp.configure`); it starts no JAX backend."""
+    jaxgrasp's first use calls it ([`jaxgrasp.configure`][jaxgrasp.configure]); it starts no JAX backend."""
     if _CHOSEN:
         return _EXECUTABLE_DIR
     folder = default_dir()
@@ -183,9 +183,9 @@ def enable_from_environment() -> Path | None:
 def enable_compilation_cache(path=None) -> Path | None:
     """Turn on both caches on disk, so that a new process neither traces nor compiles again.
 
-    JAX's persistent compilation cache lives in ``path`` (default :func:`default_dir`; with
+    JAX's persistent compilation cache lives in ``path`` (default `default_dir`; with
     ``JAXGRASP_CACHE_DIR=off`` and no ``path``: nothing is turned on), the compiled
-    executables in its subfolder ``jaxgrasp-executables`` (:func:`set_executable_dir`).
+    executables in its subfolder ``jaxgrasp-executables`` (`set_executable_dir`).
     A folder that does not exist is created, private (0700). A folder another user owns
     or can write (or a symbolic link) turns on neither cache: one warning line says why.
     Calling it again (with the same folder) changes nothing. A folder that cannot be
@@ -350,8 +350,8 @@ class _Refused(_Unusable):
 
 
 def _read_private(path: Path) -> bytes:
-    """The bytes of ``path`` (:func:`jaxgrasp.storage.read_private`); raises
-    ``FileNotFoundError``, :class:`_Refused` or :class:`_Unusable`."""
+    """The bytes of ``path`` (`jaxgrasp.storage.read_private`); raises
+    ``FileNotFoundError``, `_Refused` or `_Unusable`."""
     try:
         return storage.read_private(path)
     except storage.NotPrivate as exc:
@@ -363,7 +363,7 @@ def _read_private(path: Path) -> bytes:
 
 
 def _encode(key: str, payload: bytes) -> bytes:
-    """A stored file: :data:`_MAGIC`, a JSON header (key, payload's length and SHA-256),
+    """A stored file: `_MAGIC`, a JSON header (key, payload's length and SHA-256),
     the payload."""
     header = {"key": key, "payload_bytes": len(payload), "payload_sha256": hashlib.sha256(payload).hexdigest()}
     return b"\n".join([_MAGIC, json.dumps(header, sort_keys=True).encode(), payload])
@@ -371,7 +371,7 @@ def _encode(key: str, payload: bytes) -> bytes:
 
 def _decode(data: bytes, key: str) -> bytes:
     """The payload of a stored file ``data`` whose header holds exactly ``key`` and whose
-    payload has the length and SHA-256 the header gives; raises :class:`_Unusable`."""
+    payload has the length and SHA-256 the header gives; raises `_Unusable`."""
     magic, _, rest = data.partition(b"\n")
     if magic != _MAGIC:
         raise _Unusable("not a stored executable of this version's format")
@@ -392,7 +392,7 @@ def _decode(data: bytes, key: str) -> bytes:
 
 def _registering(devices: Sequence):
     """A started thread that registers the CPU's LAPACK handlers for a CPU executable (see
-    :func:`_register_handlers`; join it before the executable runs), or ``None``."""
+    `_register_handlers`; join it before the executable runs), or ``None``."""
     if devices[0].platform != "cpu":
         return None
     thread = threading.Thread(target=_register_handlers, name="jaxgrasp-lapack", daemon=True)
@@ -452,7 +452,7 @@ def _load_stages(stages, spec: Sequence, devices: Sequence, n_outputs: int | Non
 def load_executable(entry: StoreEntry, spec: Sequence, devices: Sequence, n_outputs: int | None = None,
                     drive: Callable | None = None):
     """The compiled executable stored at ``entry`` (a ``jax.stages.Compiled``, or a
-    :class:`Staged` of several, called by ``drive``: :class:`Pipeline`), loaded onto
+    `Staged` of several, called by ``drive``: `Pipeline`), loaded onto
     ``devices``, if it takes ``spec`` (``jax.ShapeDtypeStruct`` leaves) and returns
     ``n_outputs`` arrays; ``(executable, None)``, or ``(None, why)`` (a phrase: missing;
     refused with a warning, as another user could have written it; built for another key;
@@ -479,7 +479,7 @@ def load_executable(entry: StoreEntry, spec: Sequence, devices: Sequence, n_outp
 
 def serialized_stages(fn) -> list | None:
     """The stages of the compiled executable ``fn`` (``jax.stages.Compiled`` or
-    :class:`Staged`) serialized, as :func:`save_executable` writes them; ``None`` where it
+    `Staged`) serialized, as `save_executable` writes them; ``None`` where it
     cannot be serialized (counted in ``stats()["cache_errors"]``).
 
     Call it before ``fn`` first runs: XLA's CPU runtime may replace parts of an executable
@@ -496,7 +496,7 @@ def serialized_stages(fn) -> list | None:
 
 
 def save_executable(entry: StoreEntry, stages: list) -> bool:
-    """Write serialized ``stages`` (:func:`serialized_stages`) to ``entry`` atomically,
+    """Write serialized ``stages`` (`serialized_stages`) to ``entry`` atomically,
     with its key and checksum; whether it was written. Never raises (an executable that
     cannot be written is built again next time, and counts in ``stats()["cache_errors"]``)."""
     try:
@@ -530,7 +530,7 @@ class _StderrLines(logging.Handler):
 
 @contextlib.contextmanager
 def log_lines_on_stderr(level: int = logging.INFO):
-    """Within the block, what :data:`LOGGER` reports at ``level`` or above is printed on
+    """Within the block, what `LOGGER` reports at ``level`` or above is printed on
     stderr, one line each (the ``jaxgrasp`` command's compilation reports and warnings)."""
     handler = _StderrLines(level)
     before = LOGGER.level

@@ -1,7 +1,7 @@
 """A chunk moved between the batch's contact width and a segment's own
-(:class:`~jaxgrasp.engine._plan.Segment`): its grasps' fields narrowed to the segment's
+(`Segment`): its grasps' fields narrowed to the segment's
 width on the way in, their results widened back to the batch's on the way out, laid out
-as the batch's program lays out an inactive contact (:class:`~jaxgrasp.Evaluation`)."""
+as the batch's program lays out an inactive contact ([`Evaluation`][jaxgrasp.Evaluation])."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def narrow(fields: Mapping[str, np.ndarray], slots: np.ndarray, masked: bool) ->
 
 
 def widen(results: Mapping[str, np.ndarray], slots: np.ndarray, n_contacts: int) -> dict[str, np.ndarray]:
-    """A chunk's :class:`~jaxgrasp.Evaluation` fields (leading axis ``B``) from a program
+    """A chunk's [`Evaluation`][jaxgrasp.Evaluation] fields (leading axis ``B``) from a program
     of ``width`` contacts, laid out for ``n_contacts >= width``: contact ``j`` of the
     segment becomes the batch's ``slots[:, j]``; the batch's other contacts hold what an
     inactive one does (boundary energy ``+inf``, the equilibrium pose, status

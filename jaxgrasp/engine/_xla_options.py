@@ -29,30 +29,30 @@ COMPILER_OPTIONS = {
   on, XLA hands small products and reductions to YNNPACK kernels, but on the solver's
   arrays (a few hundred lanes of ``6 x 6`` and ``3N x 6`` pieces) XLA's own fused loops
   do better, the more so where the Jacobian's and the Hessian's small products are
-  written to fuse (:func:`jaxgrasp.tolerance._problems._first_order`). Results change
+  written to fuse (`jaxgrasp.tolerance._problems._first_order`). Results change
   by rounding only. Older jaxlib does not know the option, so it is set only where it
   exists.
 
 Other backends ignore both options (XLA checks only that it knows their names). JAX takes compiler options only on the outermost
 ``jax.jit``: jaxgrasp passes them where it compiles an executable itself (batches,
-sweeps, tuning, :func:`jaxgrasp.evaluate` of a concrete grasp); pass them to your own
-outermost ``jax.jit`` around :func:`jaxgrasp.evaluate` to get the same."""
+sweeps, tuning, [`jaxgrasp.evaluate`][jaxgrasp.evaluate] of a concrete grasp); pass them to your own
+outermost ``jax.jit`` around [`jaxgrasp.evaluate`][jaxgrasp.evaluate] to get the same."""
 
 LATENCY_CPU_OPTIONS = {**COMPILER_OPTIONS, "xla_backend_optimization_level": 0}
 """XLA options of the CPU executables whose first result matters more than their time per
-call: the executable :func:`jaxgrasp.evaluate` compiles for one concrete grasp, and the
+call: the executable [`jaxgrasp.evaluate`][jaxgrasp.evaluate] compiles for one concrete grasp, and the
 batch engine's ``evaluation`` stage, which runs once per chunk after the solver.
 
 LLVM's optimisation passes are skipped: they take much of the compile and pay for
 themselves only over many calls; the value agrees to 2 ulp. For an executable called
 once the compile dominates. The executables that run the solver over many grasps (the batch
-engine's solver stages, tuning) keep :data:`COMPILER_OPTIONS`: there the calls dominate,
+engine's solver stages, tuning) keep `COMPILER_OPTIONS`: there the calls dominate,
 and a lower optimisation level would cost throughput. Other backends use
-:data:`COMPILER_OPTIONS` for both."""
+`COMPILER_OPTIONS` for both."""
 
 
 def latency_options(platform: str) -> dict:
     """The XLA options of an executable whose first result matters more than its time per
-    call, on a device of ``platform`` (``"cpu"``, ``"gpu"``, ...): :data:`LATENCY_CPU_OPTIONS`
-    on the CPU, :data:`COMPILER_OPTIONS` elsewhere."""
+    call, on a device of ``platform`` (``"cpu"``, ``"gpu"``, ...): `LATENCY_CPU_OPTIONS`
+    on the CPU, `COMPILER_OPTIONS` elsewhere."""
     return LATENCY_CPU_OPTIONS if platform == "cpu" else COMPILER_OPTIONS

@@ -1,8 +1,8 @@
 """Hands from MJCF: kinematics in JAX, the grasp a configuration makes, tuning its joints.
 
-:class:`Hand` (read by MuJoCo: the optional extra ``jaxgrasp[hands]``), the grasp a
-configuration makes on a mesh (:meth:`Hand.grasp` -> :class:`HandGrasp`), its value and
-gradient with respect to the joints (:func:`hand_value`), and :func:`tune_hand`, which
+[`Hand`][jaxgrasp.Hand] (read by MuJoCo: the optional extra ``jaxgrasp[hands]``), the grasp a
+configuration makes on a mesh ([`Hand.grasp`][jaxgrasp.Hand.grasp] -> [`HandGrasp`][jaxgrasp.hands.HandGrasp]), its value and
+gradient with respect to the joints ([`hand_value`][jaxgrasp.hands.hand_value]), and [`tune_hand`][jaxgrasp.tune_hand], which
 maximises the value over the joint angles with the other links kept out of the object.
 
 ``__all__`` lists the names promised to users. The names imported below the comment

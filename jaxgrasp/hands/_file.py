@@ -20,8 +20,8 @@
     max_force = 15.0                         # N
 
 The MJCF and the mesh must lie inside the file's folder after symlinks, or in one of the
-allowed folders (``--allow-dir``), as for grasp files. :func:`load_hand_grasp` gives the
-:class:`~jaxgrasp.hands.HandGrasp`; :func:`save_hand_grasp` writes one (atomically).
+allowed folders (``--allow-dir``), as for grasp files. `load_hand_grasp` gives the
+[`HandGrasp`][jaxgrasp.hands.HandGrasp]; `save_hand_grasp` writes one (atomically).
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ def _tables(path: Path) -> dict:
 
 
 def load_hand_grasp(path: str | os.PathLike, allowed_dirs=None):
-    """The :class:`~jaxgrasp.hands.HandGrasp` a hand grasp file describes (module notes).
+    """The [`HandGrasp`][jaxgrasp.hands.HandGrasp] a hand grasp file describes (module notes).
 
     Raises:
         GraspValueError: an unreadable or malformed file, a missing or unknown key, a path

@@ -1,14 +1,14 @@
 """The grasp a hand configuration makes on an object: fingertips to contacts.
 
 Each fingertip is the sphere of its radius ``r`` about its end-cap centre ``c``
-(:meth:`~jaxgrasp.Hand.fingertip_frames`). With the object's surface in its mesh frame
-(:class:`jaxgrasp.surface.Surface`), a fingertip's contact is the surface point ``p``
+([`fingertip_frames`][jaxgrasp.Hand.fingertip_frames]). With the object's surface in its mesh frame
+([`jaxgrasp.surface.Surface`][jaxgrasp.surface.Surface]), a fingertip's contact is the surface point ``p``
 closest to ``c``, its normal the outward normal of the face there, and its initial
 deformation ``dr = r - d``, ``d`` the signed distance of ``c`` (``|c - p|`` outside the
 object; the paper's ``dr``, eq. 13 at the initial state). The contact positions go into
 the model's frame (origin at the centre of mass, the mesh's axes) and the world's
-gravity into the object's axes, so the :class:`~jaxgrasp.Grasp` is the one
-:func:`jaxgrasp.evaluate` expects.
+gravity into the object's axes, so the [`Grasp`][jaxgrasp.Grasp] is the one
+[`jaxgrasp.evaluate`][jaxgrasp.evaluate] expects.
 
 Modelling choices the paper forces (Sec. III and V):
 
@@ -68,8 +68,8 @@ class Material:
 
 def material(num_fingertips: int, mesh, young_modulus, friction, max_force, mass=None, density=None,
              gravity=DEFAULT_GRAVITY, center_of_mass=None) -> Material:
-    """A checked :class:`Material` (scalars broadcast to every fingertip); the centre of
-    mass and mass from the mesh as :func:`jaxgrasp.from_mesh` has them (``mass`` or
+    """A checked `Material` (scalars broadcast to every fingertip); the centre of
+    mass and mass from the mesh as [`jaxgrasp.from_mesh`][jaxgrasp.from_mesh] has them (``mass`` or
     ``density``, kg or kg/m^3; neither: 0)."""
     from jaxgrasp.surface import mass_properties
 
@@ -95,7 +95,7 @@ def object_transform(object_pose):
 
 
 def contact_grasp(hand, qpos, wrist, object_pose, surface, mat: Material, max_tilt=DEFAULT_MAX_TILT):
-    """``(grasp, tilt, centers)`` (traceable): the :class:`~jaxgrasp.Grasp` (model frame,
+    """``(grasp, tilt, centers)`` (traceable): the [`Grasp`][jaxgrasp.Grasp] (model frame,
     ``active`` the fingertips in contact), each fingertip's tilt ``(F,)`` rad, and the
     fingertip centres ``(F, 3)`` m in the mesh frame."""
     centers, axes = hand.fingertip_frames(qpos, wrist)
@@ -128,9 +128,9 @@ class HandGrasp:
     """The grasp a hand configuration makes, with what is needed to draw it (SI units).
 
     Attributes:
-        grasp: the :class:`~jaxgrasp.Grasp`, model frame (origin at the object's centre of
+        grasp: the [`Grasp`][jaxgrasp.Grasp], model frame (origin at the object's centre of
             mass, the mesh's axes), ``active`` the fingertips in contact. Evaluate it with
-            :func:`jaxgrasp.evaluate`.
+            [`jaxgrasp.evaluate`][jaxgrasp.evaluate].
         active: ``(F,)`` bool, the fingertips that touch the object with their cap.
         tilt: ``(F,)`` rad, each fingertip's axis from the inward normal (0: the paper's
             assumption, the hemisphere's base parallel to the surface).
@@ -139,7 +139,7 @@ class HandGrasp:
         center_of_mass: ``(3,)`` m, mesh frame.
         object_pose: ``(6,)`` the mesh frame in the world (translation m, rotation vector rad).
         qpos: ``(J,)`` the configuration. wrist: ``(6,)`` the wrist pose.
-        hand: the :class:`~jaxgrasp.Hand`.
+        hand: the [`Hand`][jaxgrasp.Hand].
         status: ``"grasp"`` (at least 2 fingertips in contact) or ``"too_few_contacts"``
             (fewer: the grasp cannot be evaluated; its value would be 0).
     """
@@ -162,8 +162,8 @@ class HandGrasp:
         return int(np.sum(np.asarray(self.active)))
 
     def mesh_grasp(self):
-        """The grasp as a :class:`~jaxgrasp.MeshGrasp` (the grasp, the mesh, the centre of
-        mass): what :func:`jaxgrasp.plots.plot_grasp` and ``jaxgrasp show`` draw."""
+        """The grasp as a [`MeshGrasp`][jaxgrasp.MeshGrasp] (the grasp, the mesh, the centre of
+        mass): what `jaxgrasp.plots.plot_grasp` and ``jaxgrasp show`` draw."""
         from jaxgrasp.surface import MeshGrasp
 
         return MeshGrasp(self.grasp, self.mesh, np.asarray(self.center_of_mass), "<hand>")
@@ -192,10 +192,10 @@ def hand_grasp(hand, qpos, mesh, *, wrist=None, object_pose=None, young_modulus,
     """The grasp the configuration ``qpos`` of ``hand`` makes on the object ``mesh``.
 
     Args:
-        hand: a :class:`~jaxgrasp.Hand`.
+        hand: a [`Hand`][jaxgrasp.Hand].
         qpos: ``(J,)`` joint positions, rad (hinges) or m (slides); may be traced
             (``jax.grad`` of ``evaluate(hand.grasp(qpos, ...).grasp).value`` works).
-        mesh: ``trimesh.Trimesh`` or a mesh file (:func:`jaxgrasp.from_mesh`'s rules), in
+        mesh: ``trimesh.Trimesh`` or a mesh file ([`jaxgrasp.from_mesh`][jaxgrasp.from_mesh]'s rules), in
             ``units``; its frame is placed in the world by ``object_pose``.
         wrist: ``(6,)`` the hand's model frame in the world: translation m, rotation
             vector rad (``None``: the world's).
@@ -207,7 +207,7 @@ def hand_grasp(hand, qpos, mesh, *, wrist=None, object_pose=None, young_modulus,
         max_tilt: rad, a fingertip tilted this much or more is not a contact (module notes).
 
     Returns:
-        A :class:`HandGrasp`: the :class:`~jaxgrasp.Grasp` in the object's centre-of-mass
+        A [`HandGrasp`][jaxgrasp.hands.HandGrasp]: the [`Grasp`][jaxgrasp.Grasp] in the object's centre-of-mass
         frame (each contact at the surface point closest to its fingertip centre,
         ``dr = r - |c - p|``, the surface's outward normal there), the active mask, each
         fingertip's tilt and the mesh.

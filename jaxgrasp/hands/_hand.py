@@ -1,6 +1,6 @@
 """A hand: its kinematic tree, its fingertips, and where they are at a configuration.
 
-:class:`Hand` is built from an MJCF file by :meth:`Hand.from_mjcf`. A fingertip is the
+[`Hand`][jaxgrasp.Hand] is built from an MJCF file by [`Hand.from_mjcf`][jaxgrasp.Hand.from_mjcf]. A fingertip is the
 hemispherical end of a sphere or capsule geom: a sphere's centre, or the centre of a
 capsule's end cap (MuJoCo's capsules run along their local ``z``), with
 the geom's radius as the fingertip's radius ``r`` (the paper's hemisphere, Sec. III). The
@@ -33,11 +33,11 @@ _LINK_TYPES = (SPHERE, CAPSULE, CYLINDER, BOX)  # geoms whose penetration tune_h
 class Hand:
     """A hand model read from MJCF: kinematics in JAX, fingertips as hemispheres (SI units).
 
-    Build it with :meth:`from_mjcf`. Not a pytree: its arrays are constants of the JAX
+    Build it with [`from_mjcf`][jaxgrasp.Hand.from_mjcf]. Not a pytree: its arrays are constants of the JAX
     functions that use it (compiled once per hand).
 
     Attributes:
-        tree: the :class:`~jaxgrasp.hands._mjcf.KinematicTree`.
+        tree: the `KinematicTree`.
         fingertips: ``(F,)`` geom indices of the fingertips.
         fingertip_names: ``(F,)`` their geom names.
         radius: ``(F,)`` fingertip radius, m (the geom's radius).
@@ -45,10 +45,10 @@ class Hand:
             geom's ``z`` (a capsule's half-length, negative where the cap is at ``-z``;
             0 for a sphere).
         links: indices of the other geoms (spheres, capsules, cylinders, boxes: the
-            links kept out of the object by :func:`~jaxgrasp.tune_hand`; meshes and planes
+            links kept out of the object by [`tune_hand`][jaxgrasp.tune_hand]; meshes and planes
             are left out).
         link_points: ``(geom (P,), points (P, 3) m, radius (P,) m)``, their samples
-            (:func:`~jaxgrasp.hands._links.link_samples`).
+            (`link_samples`).
     """
 
     tree: KinematicTree
@@ -84,7 +84,7 @@ class Hand:
         """SHA-256 (hex) of the hand's content: every array, name and number of its
         kinematic tree, fingertips and link samples, but not the file it was read from,
         so that hands read from equal files have one digest wherever the files lie (the
-        key of :func:`~jaxgrasp.tune_hand`'s stored executable)."""
+        key of [`tune_hand`][jaxgrasp.tune_hand]'s stored executable)."""
         h = hashlib.sha256()
         _digest_into(h, self)
         return h.hexdigest()
@@ -128,7 +128,7 @@ class Hand:
 
     def fingertip_centers(self, qpos, wrist=None):
         """``(F, 3)`` fingertip centres (end-cap centres), m, world frame, at ``qpos``
-        ``(J,)`` and ``wrist`` ``(6,)`` (see :meth:`fingertip_frames`). Traceable and
+        ``(J,)`` and ``wrist`` ``(6,)`` (see [`fingertip_frames`][jaxgrasp.Hand.fingertip_frames]). Traceable and
         differentiable."""
         return self.fingertip_frames(qpos, wrist)[0]
 
@@ -143,12 +143,12 @@ class Hand:
 
     def link_depths(self, qpos, wrist, object_pose, surface):
         """``(P,)`` m: how deep each sample of the other links lies in the object
-        (negative: clear of it), the object's :class:`jaxgrasp.surface.Surface` in its mesh
-        frame placed by ``object_pose`` ``(6,)``; see :mod:`jaxgrasp.hands._links`. Traceable."""
+        (negative: clear of it), the object's [`jaxgrasp.surface.Surface`][jaxgrasp.surface.Surface] in its mesh
+        frame placed by ``object_pose`` ``(6,)``; see `jaxgrasp.hands._links`. Traceable."""
         return link_depths(self, qpos, wrist, object_pose, surface)
 
     def grasp(self, qpos, mesh, **kwargs):
-        """The grasp this configuration makes on ``mesh``: see :func:`~jaxgrasp.hands._grasp.hand_grasp`."""
+        """The grasp this configuration makes on ``mesh``: see `hand_grasp`."""
         from jaxgrasp.hands._grasp import hand_grasp
 
         return hand_grasp(self, qpos, mesh, **kwargs)

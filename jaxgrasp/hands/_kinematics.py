@@ -1,4 +1,4 @@
-"""Forward kinematics of a :class:`~jaxgrasp.hands._mjcf.KinematicTree` in pure JAX.
+"""Forward kinematics of a `KinematicTree` in pure JAX.
 
 The same recursion as MuJoCo's ``mj_kinematics`` for hinge and slide joints: a body's
 frame in its parent's is its fixed offset (``body_pos``, ``body_quat``) followed by its
@@ -76,7 +76,7 @@ def body_frames(tree: KinematicTree, qpos, wrist=None):
 
 def geom_frames(tree: KinematicTree, qpos, wrist=None, geoms=None):
     """``(xpos (G, 3), xmat (G, 3, 3))``: the world frames of the geoms ``geoms`` (indices;
-    ``None``: all), at ``qpos`` and ``wrist`` as in :func:`body_frames`."""
+    ``None``: all), at ``qpos`` and ``wrist`` as in `body_frames`."""
     geoms = np.arange(len(tree.geom_body)) if geoms is None else np.asarray(geoms, dtype=int)
     bx, bm = body_frames(tree, qpos, wrist)
     body = tree.geom_body[geoms]

@@ -1,13 +1,13 @@
 """The hand's other links as samples whose depth in the object can be measured.
 
 Every link that is not a fingertip (a capsule, sphere, cylinder or box geom,
-:attr:`~jaxgrasp.Hand.links`; mesh geoms are left out) is sampled: a capsule or cylinder
+`links`; mesh geoms are left out) is sampled: a capsule or cylinder
 by points on its axis (spacing at most ``radius / 2``) with its radius, a sphere by its
 centre with its radius, a box by spheres of its smallest half-size ``h`` centred on a grid
 in its mid-plane across that axis, inset by ``h`` from its edges (spacing at most
 ``h / 2``): the box with its edges rounded by ``h``.
 A sample's depth is its radius minus the signed distance of its point to the object's
-surface (:attr:`jaxgrasp.surface.SurfacePoint.signed_distance`): positive where the link
+surface (`jaxgrasp.surface.SurfacePoint.signed_distance`): positive where the link
 is inside the object. Between samples a link may go deeper than its deepest sample (an
 object's edge or corner poking between them): the samples bound the penetration only as
 finely as their spacing.
@@ -58,7 +58,7 @@ def _box_sheet(half: np.ndarray) -> np.ndarray:
 
 
 def link_depths(hand, qpos, wrist, object_pose, surface):
-    """``(P,)`` m: how deep each of the hand's link samples (:func:`link_samples`) lies in
+    """``(P,)`` m: how deep each of the hand's link samples (`link_samples`) lies in
     the object whose surface is ``surface`` (mesh frame) at ``object_pose`` ``(6,)`` (negative:
     outside); ``(1,)`` of -1 m for a hand without other links. Traceable."""
     geom, local, radius = hand.link_points

@@ -1,8 +1,8 @@
 """A hand's kinematic tree, read from an MJCF file by MuJoCo.
 
 MuJoCo parses and compiles the file (defaults, includes, ``euler``/``axisangle`` frames are
-all resolved by its compiler); :func:`read_mjcf` copies what the kinematics needs out of
-the compiled ``mujoco.MjModel`` into a :class:`KinematicTree` of NumPy arrays: for each
+all resolved by its compiler); `read_mjcf` copies what the kinematics needs out of
+the compiled ``mujoco.MjModel`` into a `KinematicTree` of NumPy arrays: for each
 body its parent, its frame in the parent's and its joints; for each joint its type, axis,
 anchor, limits and reference angle; for each geom its body, frame, type and size. MuJoCo
 is imported here only, when a hand is read, so ``import jaxgrasp`` does not need it.
@@ -27,7 +27,7 @@ SPHERE, CAPSULE, BOX, CYLINDER = 2, 3, 6, 5  # mujoco.mjtGeom
 
 
 def require_mujoco():
-    """The ``mujoco`` module, or a one-line :class:`GraspValueError` saying what to install."""
+    """The ``mujoco`` module, or a one-line [`GraspValueError`][jaxgrasp.GraspValueError] saying what to install."""
     try:
         import mujoco
     except ImportError:
@@ -47,7 +47,7 @@ class KinematicTree:
         body_quat: ``(B, 4)`` body frame orientation in the parent's, ``(w, x, y, z)``.
         body_joints: per body, the indices of its joints in order.
         body_names: ``(B,)`` names.
-        jnt_type: ``(J,)`` :data:`HINGE` or :data:`SLIDE`.
+        jnt_type: ``(J,)`` `HINGE` or `SLIDE`.
         jnt_axis: ``(J, 3)`` axis in the body frame (unit).
         jnt_pos: ``(J, 3)`` anchor in the body frame, m.
         jnt_range: ``(J, 2)`` limits, rad or m (``(-inf, inf)`` for an unlimited joint).
@@ -95,7 +95,7 @@ class KinematicTree:
 
 
 def read_mjcf(path) -> tuple[KinematicTree, object]:
-    """``(tree, model)``: the :class:`KinematicTree` of the MJCF file ``path`` and the
+    """``(tree, model)``: the `KinematicTree` of the MJCF file ``path`` and the
     compiled ``mujoco.MjModel`` it came from.
 
     Raises:
@@ -121,7 +121,7 @@ def _names(model, kind, count: int) -> tuple:
 
 
 def tree_of(model, source: str = "<MjModel>") -> KinematicTree:
-    """The :class:`KinematicTree` of a compiled ``mujoco.MjModel``."""
+    """The `KinematicTree` of a compiled ``mujoco.MjModel``."""
     import mujoco
 
     bad = [i for i, t in enumerate(model.jnt_type) if int(t) not in (HINGE, SLIDE)]

@@ -1,18 +1,18 @@
 """Tuning a hand's grasp: maximise the evaluation value over its joint angles (and wrist).
 
-:func:`tune_hand` maximises ``evaluate(hand.grasp(qpos, mesh, ...).grasp).value`` over the
+[`tune_hand`][jaxgrasp.tune_hand] maximises ``evaluate(hand.grasp(qpos, mesh, ...).grasp).value`` over the
 joint positions within their limits (optionally the wrist pose within a box around its
 start), keeping the hand's other links out of the object. The value's gradient with
 respect to ``qpos`` is the envelope theorem's gradient with respect to the grasp's fields
-(:func:`jaxgrasp.evaluate`) chained through the contact (the closest surface point moves
-within its face) and the hand's kinematics. As :func:`jaxgrasp.tune` does, the value and
-its gradient are compiled once (per hand, :class:`~jaxgrasp.EvaluateOptions` and mesh
+([`jaxgrasp.evaluate`][jaxgrasp.evaluate]) chained through the contact (the closest surface point moves
+within its face) and the hand's kinematics. As [`jaxgrasp.tune`][jaxgrasp.tune] does, the value and
+its gradient are compiled once (per hand, [`EvaluateOptions`][jaxgrasp.EvaluateOptions] and mesh
 size; kept in the executable store, so later processes load them) and SciPy's L-BFGS-B
 runs on them in the box of the joint limits scaled to ``[0, 1]``
-(:func:`jaxgrasp.analysis._tune_drivers.run_search`).
+(`jaxgrasp.analysis._tune_drivers.run_search`).
 
-Penetration: the hand's other links are sampled (:meth:`~jaxgrasp.Hand.link_depths`,
-:mod:`jaxgrasp.hands._links`), each sample's depth in the object measured by the signed
+Penetration: the hand's other links are sampled ([`link_depths`][jaxgrasp.Hand.link_depths],
+`jaxgrasp.hands._links`), each sample's depth in the object measured by the signed
 distance to the same surface the contacts use; the objective adds
 ``penetration_weight * sum(max(depth, 0)^2) / (1 mm)^2`` to minus the value over the
 start's value, and the best iterate is the one of highest value whose deepest sample is
@@ -44,8 +44,8 @@ PENETRATION_UNIT = 1e-3
 def _compiled(hand, options: EvaluateOptions, max_tilt: float):
     """``core(x, data) -> (value, dvalue_dx, penalty, dpenalty_dx, evaluation, deepest, tilt)``,
     one per key; ``x = (qpos, wrist)`` ``(J + 6,)``. Compiled once per mesh size and kept in
-    the executable store (:class:`~jaxgrasp.engine._compile.StoredFunction`), keyed by the
-    hand's content (:meth:`~jaxgrasp.Hand.digest`)."""
+    the executable store (`StoredFunction`), keyed by the
+    hand's content ([`digest`][jaxgrasp.Hand.digest])."""
     j = hand.num_joints
 
     def grasp_of(x, data):
@@ -73,13 +73,13 @@ def _compiled(hand, options: EvaluateOptions, max_tilt: float):
 
 @dataclasses.dataclass(frozen=True)
 class HandValue:
-    """The value of a hand's grasp and its gradient (SI units; :func:`hand_value`).
+    """The value of a hand's grasp and its gradient (SI units; [`hand_value`][jaxgrasp.hands.hand_value]).
 
     Attributes:
         value: J, the evaluation value (0 with fewer than 2 fingertips in contact).
         grad_qpos: ``(J,)`` J/rad (J/m for slides), its gradient with respect to ``qpos``.
         grad_wrist: ``(6,)`` its gradient with respect to the wrist pose.
-        evaluation: the :class:`~jaxgrasp.Evaluation`.
+        evaluation: the [`Evaluation`][jaxgrasp.Evaluation].
         deepest: m, the deepest penetration of the hand's other links (negative: clear).
         tilt: ``(F,)`` rad, each fingertip's tilt.
     """
@@ -110,10 +110,10 @@ def _setup(hand, mesh, kw):
 def hand_value(hand, qpos, mesh, *, wrist=None, object_pose=None, options: EvaluateOptions = EvaluateOptions(),
                max_tilt: float = DEFAULT_MAX_TILT, **fields) -> HandValue:
     """The value of the grasp ``hand.grasp(qpos, mesh, ...)`` and its gradient with respect
-    to ``qpos`` and the wrist, from the function :func:`tune_hand` compiles (so the two
+    to ``qpos`` and the wrist, from the function [`tune_hand`][jaxgrasp.tune_hand] compiles (so the two
     share one compilation). ``fields``: ``young_modulus``, ``friction``, ``max_force``,
     ``mass`` or ``density``, ``gravity``, ``center_of_mass``, ``units``, as for
-    :meth:`~jaxgrasp.Hand.grasp`."""
+    [`grasp`][jaxgrasp.Hand.grasp]."""
     data, _ = _setup(hand, mesh, dict(fields))
     data["object_pose"] = _pose(object_pose, "object_pose")
     x = jnp.concatenate([jnp.asarray(hand.check_qpos(qpos)), _pose(wrist, "wrist")])
@@ -147,18 +147,18 @@ class _Record:
 
 @dataclasses.dataclass(frozen=True)
 class HandTuneResult:
-    """Outcome of :func:`tune_hand` (SI units).
+    """Outcome of [`tune_hand`][jaxgrasp.tune_hand] (SI units).
 
     Attributes:
         qpos: ``(J,)`` the tuned joint positions (the best admissible iterate).
         wrist: ``(6,)`` the tuned wrist pose (the start's unless ``tune_wrist``).
-        grasp: the :class:`~jaxgrasp.hands.HandGrasp` there.
+        grasp: the [`HandGrasp`][jaxgrasp.hands.HandGrasp] there.
         value: its evaluation value, J. start_value: the start's, J.
         deepest: m, the deepest penetration of the other links there (negative: clear).
         start_deepest: m, the same at the start.
         history: ``(iterations + 1,)`` value at the start and after each iteration, J.
         depth_history: ``(iterations + 1,)`` deepest link penetration there, m.
-        status: a :class:`~jaxgrasp.analysis.TuneStatus` (how L-BFGS-B stopped).
+        status: a [`TuneStatus`][jaxgrasp.analysis.TuneStatus] (how L-BFGS-B stopped).
         iterations, evaluations: optimiser iterations, value-and-gradient evaluations.
         message: one line: the status's explanation.
     """
@@ -208,7 +208,7 @@ def tune_hand(hand, mesh, qpos0, wrist0=None, *, object_pose=None, tune_wrist: b
     """Maximise the evaluation value of ``hand``'s grasp on ``mesh`` over its joint angles.
 
     Args:
-        hand: a :class:`~jaxgrasp.Hand`. mesh: the object (as for :meth:`~jaxgrasp.Hand.grasp`).
+        hand: a [`Hand`][jaxgrasp.Hand]. mesh: the object (as for [`grasp`][jaxgrasp.Hand.grasp]).
         qpos0: ``(J,)`` the start, within the joint limits; its grasp must be stable.
         wrist0: ``(6,)`` the wrist pose (translation m, rotation vector rad; ``None``: 0).
         object_pose: ``(6,)`` the object's mesh frame in the world.
@@ -217,15 +217,15 @@ def tune_hand(hand, mesh, qpos0, wrist0=None, *, object_pose=None, tune_wrist: b
         max_penetration: m, the deepest link penetration an accepted iterate may have.
         maxiter, ftol, tol: L-BFGS-B's iteration limit and stopping tolerances (on minus
             the value over the start's value, variables scaled to ``[0, 1]``).
-        options: :class:`~jaxgrasp.EvaluateOptions` of every evaluation.
-        max_tilt: rad, see :meth:`~jaxgrasp.Hand.grasp`.
+        options: [`EvaluateOptions`][jaxgrasp.EvaluateOptions] of every evaluation.
+        max_tilt: rad, see [`grasp`][jaxgrasp.Hand.grasp].
         callback: ``callback(iteration, value_J, x)`` after each iteration.
         fields: ``young_modulus``, ``friction``, ``max_force``, ``mass`` or ``density``,
-            ``gravity``, ``center_of_mass``, ``units`` as for :meth:`~jaxgrasp.Hand.grasp`.
+            ``gravity``, ``center_of_mass``, ``units`` as for [`grasp`][jaxgrasp.Hand.grasp].
 
     Returns:
-        A :class:`~jaxgrasp.hands.HandTuneResult`: the configuration, its grasp, the
-        history and a :class:`~jaxgrasp.analysis.TuneStatus`.
+        A [`HandTuneResult`][jaxgrasp.hands.HandTuneResult]: the configuration, its grasp, the
+        history and a [`TuneStatus`][jaxgrasp.analysis.TuneStatus].
 
     Raises:
         GraspValueError: a start outside the limits, with value 0 (not stable: nothing
@@ -273,7 +273,7 @@ def _check_start(v0: float, ev0, deep0: float, max_penetration: float) -> None:
 
 def _objective(core, lo, hi, scale, weight: float):
     """``vg(u, data) -> ((f, (value, evaluation, deepest)), grad)`` on ``[0, 1]^(J + 6)``:
-    ``f = -value / start value + weight * penalty``, for :func:`run_search`."""
+    ``f = -value / start value + weight * penalty``, for `run_search`."""
     span = jnp.asarray(hi - lo)
 
     def vg(u, data):

@@ -1,16 +1,16 @@
 """Files in and out: grasp files, datasets and meshes.
 
-Grasp files (TOML, JSON; :func:`load`, :func:`save`), datasets of many grasps (NPZ,
-JSONL; :func:`load_dataset`, :func:`save_dataset`), grasps on an object's mesh
-(:func:`from_mesh`), and :class:`OutputError` for an output that cannot be written. All
-in SI units. Every file is written whole or not at all (:mod:`jaxgrasp.storage`).
+Grasp files (TOML, JSON; [`load`][jaxgrasp.load], [`save`][jaxgrasp.save]), datasets of many grasps (NPZ,
+JSONL; [`load_dataset`][jaxgrasp.load_dataset], [`save_dataset`][jaxgrasp.save_dataset]), grasps on an object's mesh
+([`from_mesh`][jaxgrasp.from_mesh]), and `OutputError` for an output that cannot be written. All
+in SI units. Every file is written whole or not at all (`jaxgrasp.storage`).
 
 Inputs are treated as untrusted: every file is read only if it is a regular file under
 its kind's size cap (special files such as FIFOs and ``/dev/zero`` are refused in one
 line), and a mesh named by a grasp file or a dataset line must be a mesh format (STL,
 OBJ, PLY, OFF, GLB; no archives) inside that file's folder after symlinks, unless the
 caller allows more folders (``allowed_dirs=``, ``--allow-dir``); see
-:mod:`jaxgrasp.io._inputs`.
+`jaxgrasp.io._inputs`.
 
 ``__all__`` lists the names promised to users. The names imported below the comment
 "For jaxgrasp's other packages" are what the library's other packages use from here

@@ -3,7 +3,7 @@
 Two formats, chosen by the file's suffix:
 
 ``.npz``
-    Arrays named exactly like the :class:`~jaxgrasp.Grasp` fields, with a leading axis
+    Arrays named exactly like the [`Grasp`][jaxgrasp.Grasp] fields, with a leading axis
     of ``B`` grasps padded to ``N`` contacts:
 
     ===========================  ===================================  =========
@@ -28,7 +28,7 @@ Two formats, chosen by the file's suffix:
 
 ``.jsonl``
     One grasp per line, each a JSON object in the grasp-file schema
-    (:func:`jaxgrasp.load`: ``fingertip``, ``object``, ``contacts``), any numbers of
+    ([`jaxgrasp.load`][jaxgrasp.load]: ``fingertip``, ``object``, ``contacts``), any numbers of
     contacts (an ``object.mesh`` path is relative to the dataset file). Lines end at
     ``\n`` only (a U+2028 or U+0085 inside a JSON string is part of its line, so line
     numbers are those of ``wc -l``). Blank lines are skipped; UTF-8, with or without a
@@ -36,23 +36,23 @@ Two formats, chosen by the file's suffix:
 
 A mesh a ``.jsonl`` line names must lie inside the dataset's folder after symlinks, or
 inside a folder passed in ``allowed_dirs`` (``--allow-dir``): a line naming one outside
-is an invalid grasp. Only mesh formats are read (:data:`~jaxgrasp.io._inputs.MESH_SUFFIXES`).
-The dataset must be a regular file of at most :data:`~jaxgrasp.io._inputs.MAX_DATASET_BYTES`
+is an invalid grasp. Only mesh formats are read (`MESH_SUFFIXES`).
+The dataset must be a regular file of at most `MAX_DATASET_BYTES`
 bytes; an ``.npz``'s arrays may declare at most as many bytes uncompressed, checked from
 the zip directory and each ``.npy`` header before anything is allocated.
 
-Grasps are held in columns (:class:`GraspColumns`: float64 NumPy arrays with a leading
+Grasps are held in columns (`GraspColumns`: float64 NumPy arrays with a leading
 axis of ``B`` grasps, padded to the largest contact count), about 30 numbers per contact,
 so that loading a file costs memory in proportion to its numbers, not a JAX array per
-field per grasp. ``GraspSet.grasps[i]`` builds grasp ``i``'s :class:`~jaxgrasp.Grasp`
+field per grasp. ``GraspSet.grasps[i]`` builds grasp ``i``'s [`Grasp`][jaxgrasp.Grasp]
 when asked.
 
-A grasp with an invalid value does not stop the reading: :func:`load_dataset` returns
+A grasp with an invalid value does not stop the reading: [`load_dataset`][jaxgrasp.load_dataset] returns
 every grasp in input order, ``None`` with a one-line error (naming the grasp, field and
 value) where one is invalid. A file that cannot be read as a whole (missing, wrong
 suffix, a special file, too large, a corrupt or truncated zip, an array declaring more
 than the cap, no grasps, a missing or misshapen array, an unknown array) raises
-:class:`~jaxgrasp.GraspValueError` (one line).
+[`GraspValueError`][jaxgrasp.GraspValueError] (one line).
 """
 
 from __future__ import annotations
@@ -102,7 +102,7 @@ _BOM = b"\xef\xbb\xbf"
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class GraspColumns:
-    """The grasps of a set as columns: one float64 array per :class:`~jaxgrasp.Grasp` field.
+    """The grasps of a set as columns: one float64 array per [`Grasp`][jaxgrasp.Grasp] field.
 
     Attributes:
         fields: every grasp field by name with a leading axis of ``B`` grasps, contacts
@@ -138,8 +138,8 @@ class GraspColumns:
 
 
 class _ColumnBuilder:
-    """Fills :class:`GraspColumns` row by row from checked fields
-    (:func:`~jaxgrasp.model._validation.check_grasp_inputs`), growing as rows and contacts
+    """Fills `GraspColumns` row by row from checked fields
+    (`check_grasp_inputs`), growing as rows and contacts
     come (the number of grasps and contacts of a ``.jsonl`` is known only at its end)."""
 
     def __init__(self, rows: int = 64, contacts: int = 2):
@@ -184,7 +184,7 @@ class _ColumnBuilder:
         self.size += 1
 
     def finish(self) -> GraspColumns:
-        """The columns of the rows added: padded to the largest count (see :class:`GraspColumns`)."""
+        """The columns of the rows added: padded to the largest count (see `GraspColumns`)."""
         self._grow(self.size, 1)
         b, counts = self.size, self._counts[: self.size]
         n = int(counts.max(initial=0))
@@ -203,7 +203,7 @@ class _ColumnBuilder:
 
 
 def columns_of(grasps: Sequence[Grasp | None]) -> GraspColumns:
-    """:class:`GraspColumns` of grasps in memory (``None``: an invalid one), each validated.
+    """`GraspColumns` of grasps in memory (``None``: an invalid one), each validated.
 
     Raises:
         GraspValueError: ``grasp i: ...``, the first grasp that is not valid.
@@ -223,8 +223,8 @@ def columns_of(grasps: Sequence[Grasp | None]) -> GraspColumns:
 
 
 class GraspRows(Sequence):
-    """The grasps of :class:`GraspColumns` as a read-only sequence: item ``i`` is grasp
-    ``i``'s :class:`~jaxgrasp.Grasp` (built when asked, its own contacts only), ``None``
+    """The grasps of `GraspColumns` as a read-only sequence: item ``i`` is grasp
+    ``i``'s [`Grasp`][jaxgrasp.Grasp] (built when asked, its own contacts only), ``None``
     where it is invalid."""
 
     def __init__(self, columns: GraspColumns):
@@ -250,9 +250,9 @@ class GraspSet:
     """The grasps of a dataset file, in input order.
 
     Attributes:
-        grasps: one :class:`~jaxgrasp.Grasp` per input grasp (float64, SI units; only its
+        grasps: one [`Grasp`][jaxgrasp.Grasp] per input grasp (float64, SI units; only its
             active contacts), ``None`` where the grasp is invalid. A set read from a file
-            holds a :class:`GraspRows` (built from its columns when indexed); a set made
+            holds a `GraspRows` (built from its columns when indexed); a set made
             in memory, a tuple.
         errors: ``None`` per valid grasp, the one-line reason per invalid one
             (``"grasp 3: friction = -1 must be positive"``; ``line 4`` for ``.jsonl``).
@@ -274,7 +274,7 @@ class GraspSet:
         return len(self.errors)
 
     def columns(self) -> GraspColumns:
-        """The grasps as :class:`GraspColumns` (a file's own; built and validated for a
+        """The grasps as `GraspColumns` (a file's own; built and validated for a
         set made in memory)."""
         if isinstance(self.grasps, GraspRows):
             return self.grasps.columns
@@ -295,7 +295,7 @@ class GraspSet:
         return np.asarray([0 if g is None else g.num_contacts for g in self.grasps], dtype=np.int64)
 
     def raise_if_invalid(self) -> None:
-        """Raise :class:`GraspValueError` naming the first invalid grasp and how many there are."""
+        """Raise [`GraspValueError`][jaxgrasp.GraspValueError] naming the first invalid grasp and how many there are."""
         bad = [e for e in self.errors if e is not None]
         if bad:
             more = f" (and {len(bad) - 1} more invalid grasps)" if len(bad) > 1 else ""
@@ -314,12 +314,12 @@ def load_dataset(path: str | os.PathLike, *, allowed_dirs=None) -> GraspSet:
 
     Args:
         path: the dataset file: a regular file of at most
-            :data:`~jaxgrasp.io._inputs.MAX_DATASET_BYTES` bytes.
+            `MAX_DATASET_BYTES` bytes.
         allowed_dirs: folders (paths) besides the dataset's own that the meshes its
             ``.jsonl`` lines name may be in (after symlinks); default none.
 
     Returns:
-        A :class:`GraspSet`: the grasps in input order (as columns), ``None`` and a
+        A [`GraspSet`][jaxgrasp.GraspSet]: the grasps in input order (as columns), ``None`` and a
         one-line error where a grasp is invalid (a mesh outside the allowed folders too).
 
     Raises:
@@ -338,17 +338,17 @@ def share_rows(total: int, index: int, count: int) -> np.ndarray:
 
 def load_share(path: str | os.PathLike, index: int, count: int, *, allowed_dirs=None) -> tuple[GraspSet, int]:
     """Read and validate share ``index`` of ``count`` of a dataset file: the grasps
-    :func:`share_rows` names (of one process of several, ``jaxgrasp batch
+    `share_rows` names (of one process of several, ``jaxgrasp batch
     --num-processes``); ``(its set, the file's number of grasps)``.
 
     Every line of a ``.jsonl`` is still read (to number the grasps and hash the bytes),
     but only the share's lines are parsed and validated and only the meshes they name are
     read; an ``.npz``'s arrays are read whole and the share's rows validated. Errors name
-    each grasp by its input index and line, as :func:`load_dataset` does (which is share
+    each grasp by its input index and line, as [`load_dataset`][jaxgrasp.load_dataset] does (which is share
     0 of 1). ``source_sha256`` is the whole file's.
 
     Raises:
-        GraspValueError: the file as a whole cannot be read, as :func:`load_dataset`.
+        GraspValueError: the file as a whole cannot be read, as [`load_dataset`][jaxgrasp.load_dataset].
     """
     path = Path(path)
     suffix = _suffix(path)
@@ -389,7 +389,7 @@ def padded_set(gset: GraspSet, n_contacts: int) -> GraspSet:
 
 
 def _npz_arrays(fh: BinaryIO, path: Path) -> dict[str, np.ndarray]:
-    """The arrays of an ``.npz`` file (:func:`_npz_members`), checked for names (one-line errors)."""
+    """The arrays of an ``.npz`` file (`_npz_members`), checked for names (one-line errors)."""
     try:
         arrays = _npz_members(fh, path)
     except GraspValueError:
@@ -413,7 +413,7 @@ def _size(n: float) -> str:
 def _npz_members(fh: BinaryIO, path: Path) -> dict[str, np.ndarray]:
     """Every ``NAME.npy`` member of the zip ``fh`` as an array, its size checked first: the
     sizes the zip directory declares, then each ``.npy`` header's shape times item size,
-    against :data:`~jaxgrasp.io._inputs.MAX_DATASET_BYTES`, before a byte is allocated."""
+    against `MAX_DATASET_BYTES`, before a byte is allocated."""
     arrays = {}
     with zipfile.ZipFile(fh) as zf:
         infos = zf.infolist()
@@ -484,9 +484,9 @@ def _allowed_shapes(name: str, b: int, n: int) -> tuple[tuple[int, ...], ...]:
 
 
 def _npz_grasp(arrays: dict[str, np.ndarray], i: int, n: int) -> dict[str, Any]:
-    """The keyword arguments of :meth:`Grasp.create` for grasp ``i`` (its active contacts).
+    """The keyword arguments of [`Grasp.create`][jaxgrasp.Grasp.create] for grasp ``i`` (its active contacts).
 
-    Shapes were checked by :func:`_npz_shapes`: a leading ``B`` axis is there when an
+    Shapes were checked by `_npz_shapes`: a leading ``B`` axis is there when an
     array has more axes than the field of one grasp, except that a per-contact ``(B,)``
     array holds one value per grasp."""
     keep = arrays["active"][i] if "active" in arrays else np.ones(n, dtype=bool)
@@ -506,7 +506,7 @@ def _npz_grasp(arrays: dict[str, np.ndarray], i: int, n: int) -> dict[str, Any]:
 
 def _read_npz(fh: BinaryIO, path: Path, keep: tuple[int, int] = (0, 1)) -> tuple[GraspColumns, list, str, int]:
     """``(columns, errors, sha256, B)`` of the rows of an ``.npz`` dataset that share
-    ``keep = (index, count)`` names (:func:`share_rows`)."""
+    ``keep = (index, count)`` names (`share_rows`)."""
     digest = hashlib.sha256()
     for block in iter(lambda: fh.read(1 << 20), b""):  # the size was capped when it was opened
         digest.update(block)
@@ -541,7 +541,7 @@ def _jsonl_row(line: bytes, where: str, meshes: MeshReader) -> dict[str, np.ndar
 def _read_jsonl(fh: BinaryIO, path: Path, meshes: MeshReader, keep: tuple[int, int] = (0, 1)
                 ) -> tuple[GraspColumns, list, str, int]:
     """``(columns, errors, sha256, B)`` of the grasps of a ``.jsonl`` dataset that share
-    ``keep = (index, count)`` names (:func:`share_rows`; the others' lines are counted,
+    ``keep = (index, count)`` names (`share_rows`; the others' lines are counted,
     not parsed), read one line at a time.
 
     Lines end at ``b"\\n"`` only: a binary file's lines, unlike ``str.splitlines``, which
@@ -584,7 +584,7 @@ def _read_jsonl(fh: BinaryIO, path: Path, meshes: MeshReader, keep: tuple[int, i
 
 def _as_list(grasps) -> list[Grasp]:
     """A sequence of grasps, or one batched grasp (leading axis ``B``, e.g. from
-    :func:`jaxgrasp.stack`), as a list."""
+    [`jaxgrasp.stack`][jaxgrasp.stack]), as a list."""
     if isinstance(grasps, Grasp):
         pos = np.asarray(grasps.positions)
         if pos.ndim == 2:
@@ -603,7 +603,7 @@ def _as_list(grasps) -> list[Grasp]:
 
 
 def _npz_bytes(grasps: Sequence[Grasp]) -> bytes:
-    """The ``.npz`` of ``grasps``, padded by :func:`jaxgrasp.stack` to the largest contact
+    """The ``.npz`` of ``grasps``, padded by [`jaxgrasp.stack`][jaxgrasp.stack] to the largest contact
     count (``active`` marks the real contacts, written only where some are padding)."""
     arrays = stack(grasps).to_numpy()
     active = arrays.pop("active")
@@ -621,7 +621,7 @@ def _jsonl_bytes(grasps: Sequence[Grasp]) -> bytes:
 
 
 def save_dataset(path: str | os.PathLike, grasps) -> None:
-    """Write grasps (a sequence of :class:`~jaxgrasp.Grasp` with any contact counts, or one
+    """Write grasps (a sequence of [`Grasp`][jaxgrasp.Grasp] with any contact counts, or one
     batched grasp) to a dataset file, ``.npz`` or ``.jsonl`` (see the module doc), atomically.
 
     ``load_dataset(path)`` gives the same grasps back (float64, exactly).

@@ -26,13 +26,13 @@ Format (TOML; JSON is the same structure as one object with keys ``fingertip``,
 With ``mesh``, contact positions are in metres in the mesh's own frame (its origin and
 axes, after the unit conversion), each is snapped to the surface, ``normal`` may be
 omitted (the mesh's outward normal there), and the grasp is moved to the centre-of-mass
-frame (:func:`jaxgrasp.from_mesh`); ``load(path, keep_mesh=True)`` returns the
-:class:`~jaxgrasp.MeshGrasp` with the mesh and that offset.
+frame ([`jaxgrasp.from_mesh`][jaxgrasp.from_mesh]); ``load(path, keep_mesh=True)`` returns the
+[`MeshGrasp`][jaxgrasp.MeshGrasp] with the mesh and that offset.
 
 Each fingertip key must be given in ``[fingertip]`` or in every contact. Unknown keys,
 keys given twice in one table (JSON too, not only TOML), wrong types (booleans are not
 numbers), malformed files and physically invalid values all raise
-:class:`~jaxgrasp.GraspValueError` with a one-line message prefixed by the
+[`GraspValueError`][jaxgrasp.GraspValueError] with a one-line message prefixed by the
 file name. Files are UTF-8, with or without a byte-order mark.
 """
 
@@ -58,7 +58,7 @@ __all__ = ["checked_fields", "dict_to_text", "dict_to_toml", "grasp_from_dict", 
 TOP_KEYS = ("fingertip", "object", "contacts")
 FINGERTIP_KEYS = tuple(FIELD[name].file_key for name in FINGERTIP)
 MESH_KEYS = ("mesh", "units", "density", "center_of_mass")
-"""``[object]`` keys of an object given by its mesh (:func:`jaxgrasp.from_mesh`)."""
+"""``[object]`` keys of an object given by its mesh ([`jaxgrasp.from_mesh`][jaxgrasp.from_mesh])."""
 OBJECT_KEYS = tuple(f.file_key for f in FIELDS if f.file_section == "object") + MESH_KEYS
 CONTACT_REQUIRED = tuple(f.file_key for f in FIELDS if f.file_section == "contacts")
 CONTACT_KEYS = CONTACT_REQUIRED + FINGERTIP_KEYS
@@ -124,7 +124,7 @@ def _value(field, value: Any, path: str):
 
 
 def _grasp_kwargs(data: Any) -> tuple[dict[str, Any], dict[str, Any] | None]:
-    """Turn a parsed file into keyword arguments for :meth:`Grasp.create`, and the mesh
+    """Turn a parsed file into keyword arguments for [`Grasp.create`][jaxgrasp.Grasp.create], and the mesh
     keys of ``[object]`` (``None`` when it names no mesh)."""
     if not isinstance(data, Mapping):
         raise GraspValueError(
@@ -150,7 +150,7 @@ def _grasp_kwargs(data: Any) -> tuple[dict[str, Any], dict[str, Any] | None]:
 
 
 def _mesh_keys(obj: Mapping) -> dict[str, Any] | None:
-    """The mesh keys of ``[object]`` as :func:`jaxgrasp.from_mesh` arguments, or ``None``."""
+    """The mesh keys of ``[object]`` as [`jaxgrasp.from_mesh`][jaxgrasp.from_mesh] arguments, or ``None``."""
     if "mesh" not in obj:
         extra = [k for k in MESH_KEYS if k in obj]
         if extra:
@@ -217,7 +217,7 @@ def _contact_kwargs(contacts: list, defaults: dict, optional: tuple[str, ...] = 
 
 
 def grasp_from_dict(data: Mapping, source: str = "<dict>", base=None, *, allowed_dirs=None) -> Grasp:
-    """Build a validated :class:`Grasp` from a parsed grasp file (TOML/JSON structure).
+    """Build a validated [`Grasp`][jaxgrasp.Grasp] from a parsed grasp file (TOML/JSON structure).
 
     Args:
         data: ``{"fingertip": {...}, "object": {...}, "contacts": [{...}, ...]}``, SI units.
@@ -238,12 +238,12 @@ def grasp_from_dict(data: Mapping, source: str = "<dict>", base=None, *, allowed
 
 def checked_fields(data: Mapping, source: str, meshes) -> dict[str, np.ndarray]:
     """The validated fields of parsed grasp data as float64 NumPy arrays (those of
-    :func:`~jaxgrasp.model._validation.check_grasp_inputs`: per-contact fields ``(N,)``,
-    unit normals), without building a :class:`Grasp` of JAX arrays; ``meshes``: the
-    :class:`~jaxgrasp.io._mesh.MeshReader` of the data's file.
+    `check_grasp_inputs`: per-contact fields ``(N,)``,
+    unit normals), without building a [`Grasp`][jaxgrasp.Grasp] of JAX arrays; ``meshes``: the
+    `MeshReader` of the data's file.
 
     Raises:
-        GraspValueError: as :func:`grasp_from_dict`.
+        GraspValueError: as [`grasp_from_dict`][jaxgrasp.io.grasp_from_dict].
     """
     built = _build(data, source, meshes, as_fields=True)
     if isinstance(built, dict):
@@ -253,9 +253,9 @@ def checked_fields(data: Mapping, source: str, meshes) -> dict[str, np.ndarray]:
 
 
 def _build(data: Mapping, source: str, meshes, as_fields: bool = False):
-    """The grasp of parsed file data: a :class:`MeshGrasp` where it names a mesh (read by
-    ``meshes``, a :class:`~jaxgrasp.io._mesh.MeshReader`, or ``None``: from the current
-    folder); else a :class:`Grasp`, or with ``as_fields`` its checked NumPy fields."""
+    """The grasp of parsed file data: a [`MeshGrasp`][jaxgrasp.MeshGrasp] where it names a mesh (read by
+    ``meshes``, a `MeshReader`, or ``None``: from the current
+    folder); else a [`Grasp`][jaxgrasp.Grasp], or with ``as_fields`` its checked NumPy fields."""
     try:
         kwargs, mesh = _grasp_kwargs(data)
         if mesh is None:
@@ -286,7 +286,7 @@ class _JsonObject(dict):
 
 
 def _json_object(pairs) -> _JsonObject:
-    """``object_pairs_hook`` of :func:`json.loads`: keep every object's duplicate keys
+    """``object_pairs_hook`` of `json.loads`: keep every object's duplicate keys
     (plain ``json`` silently keeps the last value; TOML rejects a repeated key)."""
     obj = _JsonObject()
     obj.duplicates = []
@@ -325,19 +325,19 @@ def _parse_json(raw: bytes) -> Any:
 
 
 def load(path: str | os.PathLike, *, keep_mesh: bool = False, allowed_dirs=None) -> Grasp | MeshGrasp:
-    """Read a grasp file (``.toml`` or ``.json``, SI units) and return a validated :class:`Grasp`.
+    """Read a grasp file (``.toml`` or ``.json``, SI units) and return a validated [`Grasp`][jaxgrasp.Grasp].
 
     UTF-8 text, with or without a byte-order mark. A key given twice in one table is an
     error in both formats. A file whose ``[object]`` names a ``mesh`` (path relative to
-    the file) gives the grasp in the centre-of-mass frame (:func:`jaxgrasp.from_mesh`);
-    with ``keep_mesh=True`` it gives its :class:`~jaxgrasp.MeshGrasp` instead (the
+    the file) gives the grasp in the centre-of-mass frame ([`jaxgrasp.from_mesh`][jaxgrasp.from_mesh]);
+    with ``keep_mesh=True`` it gives its [`MeshGrasp`][jaxgrasp.MeshGrasp] instead (the
     grasp, the mesh and the frame offset), for drawing. A file without a mesh gives its
-    :class:`Grasp` either way.
+    [`Grasp`][jaxgrasp.Grasp] either way.
 
     The mesh must lie inside the grasp file's folder after symlinks, or inside one of
     ``allowed_dirs`` (folder paths), and be a mesh format
-    (:data:`~jaxgrasp.io._inputs.MESH_SUFFIXES`). The grasp file must be a regular file
-    of at most :data:`~jaxgrasp.io._inputs.MAX_GRASP_FILE_BYTES` bytes (not a FIFO or a
+    (`MESH_SUFFIXES`). The grasp file must be a regular file
+    of at most `MAX_GRASP_FILE_BYTES` bytes (not a FIFO or a
     device), checked before it is read.
 
     Raises:
@@ -378,7 +378,7 @@ def grasp_to_dict(grasp: Grasp) -> dict[str, Any]:
     """The file structure of a single (unbatched) grasp, as plain Python floats.
 
     Per-fingertip values equal across all contacts go into ``"fingertip"``; the others
-    are written per contact. Only active contacts are written (:meth:`Grasp.compact`). ``grasp_from_dict(grasp_to_dict(g))`` reproduces ``g``.
+    are written per contact. Only active contacts are written ([`Grasp.compact`][jaxgrasp.Grasp.compact]). ``grasp_from_dict(grasp_to_dict(g))`` reproduces ``g``.
     """
     fields = grasp.compact().to_numpy()  # a file lists the contacts the grasp has
     pos = np.asarray(fields["positions"], dtype=np.float64)
@@ -454,10 +454,10 @@ def _toml_lines(table: Mapping[str, Any]) -> list[str]:
 
 
 def mesh_grasp_to_dict(mesh_grasp: MeshGrasp, mesh_name: str, mesh_positions=None) -> dict[str, Any]:
-    """The file structure of a grasp of a meshed object: :func:`grasp_to_dict` with
+    """The file structure of a grasp of a meshed object: [`grasp_to_dict`][jaxgrasp.io.grasp_to_dict] with
     ``[object] mesh = mesh_name`` (the path as the file will name it), its ``units`` and
     ``center_of_mass`` (m, mesh frame), contact positions in the mesh's frame (m) and each
-    contact's normal (so that :func:`load` gives back the same normals, also on an edge).
+    contact's normal (so that [`load`][jaxgrasp.load] gives back the same normals, also on an edge).
 
     ``mesh_positions``: ``(N, 3)`` m, the mesh-frame positions to write, where the caller
     has them (the points the grasp was made from: the file then loads to this very grasp);
@@ -473,13 +473,13 @@ def mesh_grasp_to_dict(mesh_grasp: MeshGrasp, mesh_name: str, mesh_positions=Non
 
 def to_toml(grasp: Grasp | MeshGrasp, mesh_name: str | None = None) -> str:
     """TOML text of a grasp (the fixed grasp-file structure; floats written with ``repr``);
-    a :class:`MeshGrasp` names its mesh as ``mesh_name`` (:func:`mesh_grasp_to_dict`)."""
+    a [`MeshGrasp`][jaxgrasp.MeshGrasp] names its mesh as ``mesh_name`` (`mesh_grasp_to_dict`)."""
     d = grasp_to_dict(grasp) if mesh_name is None else mesh_grasp_to_dict(grasp, mesh_name)
     return dict_to_toml(d)
 
 
 def dict_to_toml(d: Mapping[str, Any]) -> str:
-    """TOML text of a grasp file's structure (:func:`grasp_to_dict`, :func:`mesh_grasp_to_dict`)."""
+    """TOML text of a grasp file's structure ([`grasp_to_dict`][jaxgrasp.io.grasp_to_dict], `mesh_grasp_to_dict`)."""
     mesh = "mesh" in d["object"]
     frame = "positions in the mesh's frame" if mesh else "object frame at the centre of mass"
     lines = [f"# Grasp file (jaxgrasp). SI units: m, Pa, N, kg, m/s^2; {frame}."]
@@ -497,7 +497,7 @@ def dict_to_text(d: Mapping[str, Any], path: str | os.PathLike) -> str:
 
 
 def to_text(grasp: Grasp | MeshGrasp, path: str | os.PathLike, mesh_name: str | None = None) -> str:
-    """The text :func:`save` writes to ``path``: TOML or JSON by its extension."""
+    """The text [`save`][jaxgrasp.save] writes to ``path``: TOML or JSON by its extension."""
     d = grasp_to_dict(grasp) if mesh_name is None else mesh_grasp_to_dict(grasp, mesh_name)
     return dict_to_text(d, path)
 
@@ -505,13 +505,13 @@ def to_text(grasp: Grasp | MeshGrasp, path: str | os.PathLike, mesh_name: str | 
 def save(grasp: Grasp | MeshGrasp, path: str | os.PathLike, *, copy_mesh: bool = False) -> None:
     """Write a single grasp to ``path`` (``.toml`` or ``.json`` by extension, SI units).
 
-    Floats are written so that :func:`load` reproduces the grasp bit for bit (a mesh grasp:
+    Floats are written so that [`load`][jaxgrasp.load] reproduces the grasp bit for bit (a mesh grasp:
     to the rounding of moving its positions into the mesh's frame and back). The file is
-    written atomically (a temporary file renamed into place, :mod:`jaxgrasp.storage`): a
+    written atomically (a temporary file renamed into place, `jaxgrasp.storage`): a
     failure leaves the previous file as it was.
 
-    A :class:`MeshGrasp` is written with ``[object] mesh`` naming its mesh file relative to
-    ``path``'s folder (:func:`load` reads meshes inside that folder, or in its
+    A [`MeshGrasp`][jaxgrasp.MeshGrasp] is written with ``[object] mesh`` naming its mesh file relative to
+    ``path``'s folder ([`load`][jaxgrasp.load] reads meshes inside that folder, or in its
     ``allowed_dirs``). With ``copy_mesh=True`` the mesh is copied into that folder first
     (its file's bytes, or, for a mesh given as a ``trimesh.Trimesh``, an STL in metres)
     unless it is there already, so the folder holds everything the file needs.

@@ -1,20 +1,20 @@
 """Reading input files that may be hostile: size caps, no special files, meshes kept in their folder.
 
 Every file jaxgrasp reads on a user's behalf (a grasp file, a dataset, a mesh one of them
-names) is opened through :func:`open_input`, which refuses, in one line and before reading
+names) is opened through `open_input`, which refuses, in one line and before reading
 a byte:
 
 * what is not a regular file after symlinks (a FIFO, a socket, a device such as
   ``/dev/zero``, which would otherwise be read without end); the file is opened
   non-blocking, so that opening a FIFO cannot hang;
-* a file larger than its kind's cap (:data:`MAX_GRASP_FILE_BYTES`,
-  :data:`MAX_DATASET_BYTES`, :data:`MAX_MESH_BYTES`), checked on the open file and again
+* a file larger than its kind's cap (`MAX_GRASP_FILE_BYTES`,
+  `MAX_DATASET_BYTES`, `MAX_MESH_BYTES`), checked on the open file and again
   while reading (a file that grows while it is read is caught too).
 
-A mesh path written in a dataset or grasp file must resolve (:func:`os.path.realpath`,
+A mesh path written in a dataset or grasp file must resolve (`os.path.realpath`,
 after every symlink) inside the folder of the file that names it, or inside a folder the
 user allowed explicitly (``allowed_dirs=`` in Python, ``--allow-dir DIR`` on the command
-line): :func:`confine`. Only single-mesh formats are read (:data:`MESH_SUFFIXES`, checked
+line): `confine`. Only single-mesh formats are read (`MESH_SUFFIXES`, checked
 by suffix before trimesh sees the file): trimesh also unpacks archives (zip, tar) and
 follows a glTF's references to other files, and a small zip can expand to gigabytes.
 """
@@ -118,10 +118,10 @@ def _check_growth(path, total: int, cap: int, what: str) -> None:
 
 
 def read_input(path: str | os.PathLike, cap: int, what: str = "file") -> bytes:
-    """The bytes of an input file (:func:`open_input`'s checks), at most ``cap`` of them.
+    """The bytes of an input file (`open_input`'s checks), at most ``cap`` of them.
 
     Raises:
-        GraspValueError: as :func:`open_input`, or the file grew past ``cap`` while read.
+        GraspValueError: as `open_input`, or the file grew past ``cap`` while read.
     """
     with open_input(path, cap, what) as fh:
         try:
@@ -173,7 +173,7 @@ def check_mesh_suffix(name: str | os.PathLike) -> str:
     parsed as whatever a symlink leads to.
 
     Raises:
-        GraspValueError: not one of :data:`MESH_SUFFIXES`.
+        GraspValueError: not one of `MESH_SUFFIXES`.
     """
     suffix = Path(name).suffix.lower()
     if suffix not in MESH_SUFFIXES:
@@ -190,12 +190,12 @@ def confine(name: str, base: str | os.PathLike, allowed: tuple[str, ...], owner:
     Args:
         name: the mesh path as written (relative to ``base``, or absolute).
         base: the folder of the file that names it.
-        allowed: more folders meshes may be in (:func:`allowed_folders`).
+        allowed: more folders meshes may be in (`allowed_folders`).
         owner: the naming file's kind in words, for messages (``"dataset"``, ``"grasp file"``).
 
     Raises:
         GraspValueError: the path (after symlinks) leaves ``base`` and every allowed
-            folder, or its name does not end in a mesh suffix (:func:`check_mesh_suffix`).
+            folder, or its name does not end in a mesh suffix (`check_mesh_suffix`).
     """
     check_mesh_suffix(name)
     real = os.path.realpath(os.path.join(os.fspath(base), name))

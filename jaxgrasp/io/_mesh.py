@@ -1,14 +1,14 @@
 """Mesh files in: a checked mesh in metres from a file or a ``trimesh.Trimesh``, and
-:func:`from_mesh`, which reads one and builds the grasp on it.
+[`from_mesh`][jaxgrasp.from_mesh], which reads one and builds the grasp on it.
 
-:func:`load_mesh` (and :func:`read_mesh`, which also gives the bytes' SHA-256) parses a
+`load_mesh` (and `read_mesh`, which also gives the bytes' SHA-256) parses a
 mesh file (STL, OBJ, PLY, OFF, GLB) from its bytes as the format its name says, rejects a
 degenerate mesh in one line (no faces, NaN, infinite or far vertices, no area, a closed
 mesh with no volume or no inside) and turns a closed inward mesh outward;
-:class:`MeshReader` reads the meshes a grasp file or a dataset names, confined to its
-folder. :func:`from_mesh` is :func:`load_mesh` then
-:func:`jaxgrasp.surface.grasp_on_mesh`: the geometry (snapping contacts to the surface, the
-centre of mass, the frame) and :class:`~jaxgrasp.MeshGrasp` live in :mod:`jaxgrasp.surface`.
+`MeshReader` reads the meshes a grasp file or a dataset names, confined to its
+folder. [`from_mesh`][jaxgrasp.from_mesh] is `load_mesh` then
+`jaxgrasp.surface.grasp_on_mesh`: the geometry (snapping contacts to the surface, the
+centre of mass, the frame) and [`MeshGrasp`][jaxgrasp.MeshGrasp] live in `jaxgrasp.surface`.
 
 trimesh is imported when a mesh is used, so ``import jaxgrasp`` does not pay for it.
 """
@@ -34,9 +34,9 @@ def load_mesh(mesh, units: str = "m"):
 
     Args:
         mesh: ``trimesh.Trimesh`` or a path to a mesh file of one of the formats of
-            :data:`~jaxgrasp.io._inputs.MESH_SUFFIXES` (STL, OBJ, PLY, OFF, GLB; a scene of
+            `MESH_SUFFIXES` (STL, OBJ, PLY, OFF, GLB; a scene of
             several parts is joined into one mesh), at most
-            :data:`~jaxgrasp.io._inputs.MAX_MESH_BYTES` bytes, a regular file. It is parsed
+            `MAX_MESH_BYTES` bytes, a regular file. It is parsed
             from its bytes as the format its name says, so it cannot reach other files.
         units: the length unit of the vertices: ``"m"``, ``"cm"`` or ``"mm"``.
 
@@ -47,7 +47,7 @@ def load_mesh(mesh, units: str = "m"):
     Raises:
         GraspValueError: unknown units, a file that is not a mesh format, too large, not a
             regular file or unreadable, or a degenerate mesh (no faces, NaN or infinite
-            vertex coordinates, a coordinate beyond :data:`MAX_COORDINATE`, no area, a
+            vertex coordinates, a coordinate beyond `MAX_COORDINATE`, no area, a
             closed mesh enclosing no volume or with faces not consistently oriented); one
             line.
     """
@@ -67,11 +67,11 @@ def _check_units(units: str) -> None:
 
 
 def read_mesh(path: str | os.PathLike, units: str = "m", *, real: str | os.PathLike | None = None):
-    """``(mesh, sha256)``: the checked mesh (metres, :func:`load_mesh`) of the file ``path``
+    """``(mesh, sha256)``: the checked mesh (metres, `load_mesh`) of the file ``path``
     and the SHA-256 (hex) of the bytes it was parsed from.
 
     ``real``: where to read it from, when the caller has resolved ``path`` already
-    (:func:`~jaxgrasp.io._inputs.confine`); messages name ``path``.
+    (`confine`); messages name ``path``.
     """
     import trimesh
 
@@ -91,8 +91,8 @@ def read_mesh(path: str | os.PathLike, units: str = "m", *, real: str | os.PathL
 
 
 def _checked(loaded, where: str, units: str, process: bool = False):
-    """A copy of ``loaded`` in metres whose vertices passed :func:`_check_vertices` and
-    surface :func:`_check_surface`; with ``process``, its duplicate vertices merged as
+    """A copy of ``loaded`` in metres whose vertices passed `_check_vertices` and
+    surface `_check_surface`; with ``process``, its duplicate vertices merged as
     ``trimesh.load(..., process=True)`` does (in the file's units, as that does)."""
     import trimesh
 
@@ -108,7 +108,7 @@ def _checked(loaded, where: str, units: str, process: bool = False):
 
 
 def _check_vertices(vertices: np.ndarray, where: str, metres_per_unit: float) -> None:
-    """Reject NaN or infinite vertex coordinates and coordinates beyond :data:`MAX_COORDINATE`
+    """Reject NaN or infinite vertex coordinates and coordinates beyond `MAX_COORDINATE`
     (``vertices (V, 3)`` in the mesh's units, ``metres_per_unit`` <= 1)."""
     for bad, what in ((np.isnan(vertices), "NaN"), (np.isinf(vertices), "infinite")):
         if bad.any():
@@ -126,11 +126,11 @@ def _check_vertices(vertices: np.ndarray, where: str, metres_per_unit: float) ->
 
 class MeshReader:
     """Reads the meshes a grasp file or dataset names (``[object] mesh``), confined to its
-    folder (:func:`~jaxgrasp.io._inputs.confine`), and remembers what it read.
+    folder (`confine`), and remembers what it read.
 
     A dataset's rows often name the same mesh: the last few meshes read are kept (by real
     path and units, their errors too), so each is parsed once while its rows follow one
-    another. :attr:`sha256` maps every mesh file read to the SHA-256 of its bytes (the key
+    another. `sha256` maps every mesh file read to the SHA-256 of its bytes (the key
     of ``jaxgrasp batch --resume``); a file whose bytes change between two reads is an error.
 
     Args:
@@ -173,7 +173,7 @@ class MeshReader:
 
 def _check_surface(mesh, where: str) -> None:
     """Reject a mesh that has no usable surface; turn a closed inward mesh outward (in place).
-    Its vertices passed :func:`_check_vertices`, so the powers of ``scale`` below are finite."""
+    Its vertices passed `_check_vertices`, so the powers of ``scale`` below are finite."""
     scale = float(np.ptp(mesh.vertices, axis=0).max())
     if not scale > 0 or not mesh.area > 1e-12 * scale**2:
         raise GraspValueError(f"{where} has no surface area (a degenerate mesh)")
@@ -197,26 +197,26 @@ def from_mesh(
 
     Args:
         mesh: ``trimesh.Trimesh`` or mesh file path (STL, OBJ, PLY, OFF or GLB, read as
-            :func:`load_mesh` says); vertices in ``units``.
+            `load_mesh` says); vertices in ``units``.
         points: ``(N, 3)`` fingertip contact points, m, in the mesh's frame (its origin
             and axes, after the unit conversion); each is snapped to the closest surface
             point.
         initial_deformation, radius, young_modulus, friction, max_force: as in
-            :meth:`jaxgrasp.Grasp.create` (m, m, Pa, -, N; scalar or ``(N,)``).
+            [`jaxgrasp.Grasp.create`][jaxgrasp.Grasp.create] (m, m, Pa, -, N; scalar or ``(N,)``).
         mass: object mass, kg. Give ``mass`` or ``density``, not both (neither: 0).
         density: kg/m^3; mass = density x enclosed volume (watertight meshes only).
         center_of_mass: ``(3,)`` m, mesh frame; default the watertight mesh's own (uniform
             density); required for a mesh that is not watertight.
         gravity: ``(3,)`` m/s^2 in the mesh's axes (the model frame has the same axes).
         units: length unit of the mesh's vertices, ``"m"``, ``"cm"`` or ``"mm"``
-            (:data:`jaxgrasp.model._units.LENGTH_UNITS`); ``points`` stay in metres.
+            (`jaxgrasp.model._units.LENGTH_UNITS`); ``points`` stay in metres.
         normals: ``None`` (every normal from the mesh) or a length-``N`` sequence whose
             entries are ``None`` (from the mesh) or a 3-vector, mesh axes, that is used as
             given.
         tolerance: farthest a point may lie from the surface, m (default 1 mm).
 
     Returns:
-        A :class:`~jaxgrasp.MeshGrasp`: ``.grasp`` in the model frame, ``.mesh`` (m, mesh frame),
+        A [`MeshGrasp`][jaxgrasp.MeshGrasp]: ``.grasp`` in the model frame, ``.mesh`` (m, mesh frame),
         ``.center_of_mass`` (the offset).
 
     Raises:

@@ -1,10 +1,10 @@
 """The physical model of a soft-fingertip grasp: its fields, the Grasp, the potential field.
 
-The table of grasp fields and their units (:data:`FIELDS`), the :class:`Grasp` pytree and
-its validation (:class:`GraspValueError`; :func:`check`, the same rules as array code
+The table of grasp fields and their units (`FIELDS`), the [`Grasp`][jaxgrasp.Grasp] pytree and
+its validation ([`GraspValueError`][jaxgrasp.GraspValueError]; [`check`][jaxgrasp.check], the same rules as array code
 for traced and batched grasps), the conversion to internal units
-(:func:`model_params`), the potential energy and constraint margins of a grasp (Tsuji et
-al., eq. 3-21), and the model's codes (:class:`BoundaryKind`, :class:`Constraint`).
+(`model_params`), the potential energy and constraint margins of a grasp (Tsuji et
+al., eq. 3-21), and the model's codes ([`BoundaryKind`][jaxgrasp.model.BoundaryKind], `Constraint`).
 
 ``__all__`` lists the names promised to users. The names imported below the comment
 "For jaxgrasp's other packages" are what the library's other packages use from here

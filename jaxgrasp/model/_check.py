@@ -1,18 +1,18 @@
-"""The grasp rules as array code: :func:`check` works on concrete, traced and batched grasps.
+"""The grasp rules as array code: [`check`][jaxgrasp.check] works on concrete, traced and batched grasps.
 
-:func:`jaxgrasp.evaluate` validates a *concrete* grasp before anything is compiled
-(:func:`~jaxgrasp.model.check_grasp_inputs`), but a grasp built inside the caller's
+[`jaxgrasp.evaluate`][jaxgrasp.evaluate] validates a *concrete* grasp before anything is compiled
+(`check_grasp_inputs`), but a grasp built inside the caller's
 ``jit``/``vmap``/``grad`` is made of tracers whose values are unknown when the code is
 traced, so nothing there can raise: a negative friction would be evaluated as given.
-:func:`check` states the same rules in ``jax.numpy``, so it runs inside the caller's
+[`check`][jaxgrasp.check] states the same rules in ``jax.numpy``, so it runs inside the caller's
 trace and returns, per grasp, whether it is valid and the first rule it breaks::
 
     ok = jaxgrasp.check(grasps)                      # batched, jit or vmap: arrays
     value = jnp.where(ok.valid, result.value, jnp.nan)
     jaxgrasp.check(grasp).raise_if_invalid()         # concrete: a one-line ValueError
 
-The rules and their order are those of :func:`~jaxgrasp.model.check_grasp_inputs`
-(shapes are static and checked at once, with a :class:`GraspValueError`).
+The rules and their order are those of `check_grasp_inputs`
+(shapes are static and checked at once, with a [`GraspValueError`][jaxgrasp.GraspValueError]).
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ __all__ = ["check", "GraspCheck", "CheckReason"]
 
 
 class CheckReason(Coded):
-    """The first rule a grasp breaks (:attr:`GraspCheck.reason`), in the order checked."""
+    """The first rule a grasp breaks (`GraspCheck.reason`), in the order checked."""
 
     OK = 0, "every rule holds"
     NOT_FINITE = 1, "a field holds a NaN or an infinity"
@@ -65,12 +65,12 @@ class CheckReason(Coded):
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class GraspCheck:
-    """What :func:`check` found, one entry per grasp (``batch`` is the grasp's batch shape,
+    """What [`check`][jaxgrasp.check] found, one entry per grasp (``batch`` is the grasp's batch shape,
     ``()`` for one grasp).
 
     Attributes:
         valid: ``batch`` bool, the grasp breaks no rule.
-        reason: ``batch`` int32, the :class:`CheckReason` code of the first rule broken
+        reason: ``batch`` int32, the `CheckReason` code of the first rule broken
             (``0``, ``OK``, where valid).
         contact: ``batch`` int32, the first contact that breaks it (``-1`` where valid or
             where the rule is about the whole grasp: mass, gravity, the number of contacts).
@@ -87,7 +87,7 @@ class GraspCheck:
         return CheckReason.names_of(self.reason)
 
     def raise_if_invalid(self) -> GraspCheck:
-        """Raise :class:`~jaxgrasp.GraspValueError` (a ``ValueError``) with one line naming
+        """Raise [`GraspValueError`][jaxgrasp.GraspValueError] (a ``ValueError``) with one line naming
         the first invalid grasp, its rule and contact; return ``self`` where every grasp is
         valid. Needs concrete values (outside ``jit``)."""
         if any(isinstance(x, jax.core.Tracer) for x in (self.valid, self.reason, self.contact)):
@@ -104,7 +104,7 @@ class GraspCheck:
 
 def _rules(g: Grasp, n: int) -> list:
     """``(CheckReason, bad)`` in the order checked, for fields at their full shapes
-    (:func:`_broadcast`): ``bad`` of shape ``batch + (N,)`` for a rule of a contact,
+    (`_broadcast`): ``bad`` of shape ``batch + (N,)`` for a rule of a contact,
     ``batch`` for one of the whole grasp."""
     f = {name: getattr(g, name) for name in ("initial_deformation", "radius", "young_modulus", "friction", "max_force")}
     pos, nrm, mass, gravity, on = g.positions, g.normals, g.mass, g.gravity, g.active
@@ -143,17 +143,17 @@ def check(grasp: Grasp) -> GraspCheck:
     grasps and inside the caller's ``jax.jit`` and ``jax.vmap``, where nothing can raise.
 
     Args:
-        grasp: a :class:`~jaxgrasp.Grasp` (SI units) of one grasp or a batch (leading
+        grasp: a [`Grasp`][jaxgrasp.Grasp] (SI units) of one grasp or a batch (leading
             axes on ``positions`` ``(..., N, 3)``; a field without them is shared by every
             grasp, a per-contact scalar by every contact).
 
     Returns:
-        A :class:`GraspCheck` of arrays of the batch shape: ``valid``, the first broken
-        rule's :class:`CheckReason` code and the first contact breaking it. Call
+        A `GraspCheck` of arrays of the batch shape: ``valid``, the first broken
+        rule's `CheckReason` code and the first contact breaking it. Call
         ``.raise_if_invalid()`` on a concrete result for a one-line ``ValueError``.
 
     Raises:
-        GraspValueError: not a :class:`~jaxgrasp.Grasp`, or fields of the wrong shape
+        GraspValueError: not a [`Grasp`][jaxgrasp.Grasp], or fields of the wrong shape
             (shapes are static, so this holds under ``jit`` too).
     """
     if not isinstance(grasp, Grasp):
@@ -186,7 +186,7 @@ def _broadcast(g: Grasp, batch: tuple, n: int) -> Grasp:
 
 @jax.jit
 def _check_arrays(grasp: Grasp) -> GraspCheck:
-    """:func:`check` after its static checks, one compiled program per shape (the rules are
+    """[`check`][jaxgrasp.check] after its static checks, one compiled program per shape (the rules are
     some fifty small array operations: run one by one they cost more than the compile)."""
     shape = tuple(np.shape(grasp.positions))
     batch, n = shape[:-2], shape[-2]

@@ -18,7 +18,7 @@ class BoundaryKind(Coded):
     @classmethod
     def names_of(cls, codes) -> np.ndarray:
         """An array of codes as an object array of labels, same shape; ``-1``
-        (:data:`NO_BOUNDARY`) is ``'none'``."""
+        (`NO_BOUNDARY`) is ``'none'``."""
         return np.asarray(cls.labels() + ("none",), dtype=object)[np.asarray(codes)]
 
 
@@ -27,7 +27,7 @@ NO_BOUNDARY = -1
 
 
 class Constraint(Coded):
-    """Rows of the ``(3, N)`` constraint margins (:func:`jaxgrasp.model.constraint_margins`),
+    """Rows of the ``(3, N)`` constraint margins (`jaxgrasp.model.constraint_margins`),
     ``>= 0`` where satisfied."""
 
     CONTACT = 0, "the fingertip keeps touching: d / dr >= 0"

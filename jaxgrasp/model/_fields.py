@@ -1,6 +1,6 @@
 """The one table of grasp fields: name, SI unit, shape, allowed range, default, labels.
 
-Everything that names a grasp field is built from :data:`FIELDS`: the :class:`Grasp`
+Everything that names a grasp field is built from `FIELDS`: the [`Grasp`][jaxgrasp.Grasp]
 docstring's units, input validation, grasp files, sweep axes, tuning parameters, CLI
 options and plot labels. Add or change a field here, not in those places.
 
@@ -43,7 +43,7 @@ class Field:
     """One grasp field.
 
     Attributes:
-        name: the :class:`~jaxgrasp.Grasp` attribute (and sweep/tune/npz name).
+        name: the [`Grasp`][jaxgrasp.Grasp] attribute (and sweep/tune/npz name).
         unit: SI unit, ``""`` for dimensionless.
         shape: ``"points"``, ``"directions"``, ``"per_contact"``, ``"scalar"`` or ``"vector"``.
         minimum: lower bound of the allowed range, ``None`` for none (every value must be
@@ -159,7 +159,7 @@ FIELDS: tuple[Field, ...] = (
     _field("gravity", "m/s^2", "vector", None, DEFAULT_GRAVITY, "gravitational acceleration", "gravity",
            "object", "g"),
 )
-"""Every :class:`~jaxgrasp.Grasp` field, in the grasp's field order."""
+"""Every [`Grasp`][jaxgrasp.Grasp] field, in the grasp's field order."""
 
 FIELD: dict[str, Field] = {f.name: f for f in FIELDS}
 """The fields by name."""
@@ -179,4 +179,4 @@ contact at once."""
 
 TUNABLE: tuple[str, ...] = ("initial_deformation", "young_modulus", "friction", "max_force", "radius",
                             "positions", "mass")
-"""Fields :func:`jaxgrasp.tune` can optimise (positions: each contact within its face)."""
+"""Fields [`jaxgrasp.tune`][jaxgrasp.tune] can optimise (positions: each contact within its face)."""

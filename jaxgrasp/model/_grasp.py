@@ -1,6 +1,6 @@
 """The grasp: a pytree of every physical parameter, in SI units.
 
-A :class:`Grasp` holds ``N >= 2`` contacts between soft hemispherical fingertips and a
+A [`Grasp`][jaxgrasp.Grasp] holds ``N >= 2`` contacts between soft hemispherical fingertips and a
 rigid object. Every field is an array, so a grasp can be passed through ``jax.jit``,
 ``jax.vmap`` (add a leading batch axis to any field) and ``jax.grad``.
 
@@ -26,16 +26,16 @@ _PER_CONTACT = tuple(f.name for f in FIELDS if f.per_contact)  # fields with one
 
 STANDARD_GRAVITY = DEFAULT_GRAVITY
 """Default gravity vector, m/s^2, object frame: ``(0, 0, -9.81)``, standard gravity along ``-z``
-(the ``gravity`` default of :data:`jaxgrasp.model.FIELDS`)."""
+(the ``gravity`` default of `jaxgrasp.model.FIELDS`)."""
 
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Grasp:
-    """All parameters of one grasp (SI units). Build it with :meth:`Grasp.create`.
+    """All parameters of one grasp (SI units). Build it with [`Grasp.create`][jaxgrasp.Grasp.create].
 
     The fields, their units, shapes and allowed ranges are listed once, in
-    :data:`jaxgrasp.model.FIELDS`; in short:
+    `jaxgrasp.model.FIELDS`; in short:
 
     Attributes:
         positions: ``(N, 3)`` contact positions, m, object frame (origin at the centre of mass).
@@ -55,7 +55,7 @@ class Grasp:
             never limiting); its other fields must still hold valid numbers. Padding a
             grasp with inactive contacts changes none of its results, so grasps with
             different contact counts can share one batch and one compilation
-            (:func:`stack`). With a mask, ``jax.grad`` over the whole grasp needs
+            ([`stack`][jaxgrasp.stack]). With a mask, ``jax.grad`` over the whole grasp needs
             ``allow_int=True`` (the mask is not differentiable).
 
     Any field may carry extra leading batch axes for ``jax.vmap``.
@@ -173,7 +173,7 @@ class Grasp:
 
 
 def stack(grasps, num_contacts: int | None = None) -> Grasp:
-    """Stack grasps with any numbers of contacts into one batched :class:`Grasp`.
+    """Stack grasps with any numbers of contacts into one batched [`Grasp`][jaxgrasp.Grasp].
 
     Each grasp is padded to the largest contact count ``N`` with inactive contacts that
     repeat its last active contact (valid numbers, masked out), so the batch has

@@ -1,7 +1,7 @@
 """The potential field of a soft-fingertip grasp (Tsuji et al., eq. 3-21), in pure JAX.
 
-All functions here work in internal units (mm, N, N/mm^2, mJ; see :mod:`jaxgrasp.model._units`)
-on a :class:`ModelParams`, and take the object's pose change ``x = (dp, w)``:
+All functions here work in internal units (mm, N, N/mm^2, mJ; see `jaxgrasp.model._units`)
+on a `ModelParams`, and take the object's pose change ``x = (dp, w)``:
 ``dp`` (3,) translation in mm, ``w`` (3,) rotation vector in rad. They are pure,
 and compose with ``jit``, ``vmap``, ``grad`` and ``hessian``, including at ``x = 0``.
 
@@ -9,7 +9,7 @@ Constraint margins are returned *scaled* so that each is ~1 in the initial state
 ``>= 0`` means satisfied. Positive scale factors do not move the feasible set, the
 minimisers or the minimum energies; they only condition the solver. The scale factors
 depend on the parameters only through ``stop_gradient`` constants, so derivatives with
-respect to the parameters (envelope theorem, :mod:`jaxgrasp.tolerance._envelope`) see the
+respect to the parameters (envelope theorem, `jaxgrasp.tolerance._envelope`) see the
 unscaled constraints times a constant, which leaves the value's gradient exact.
 """
 
@@ -50,14 +50,14 @@ __all__ = [
 
 KINDS = BoundaryKind.labels()
 """Boundary kind names (``"slip"``, ``"max_force"``), indexed by
-:class:`~jaxgrasp.model.BoundaryKind`: the order of every ``(2, N)`` array of the library
+[`BoundaryKind`][jaxgrasp.model.BoundaryKind]: the order of every ``(2, N)`` array of the library
 (``BoundaryKind.labels()``)."""
 
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class ModelParams:
-    """A grasp in internal units (mm, N, N/mm^2). Built by :func:`model_params`."""
+    """A grasp in internal units (mm, N, N/mm^2). Built by `model_params`."""
 
     c: Any  # (N, 3) contact positions, mm
     n: Any  # (N, 3) unit outward normals
@@ -71,7 +71,7 @@ class ModelParams:
 
 
 def model_params(grasp: Grasp) -> ModelParams:
-    """Convert an SI :class:`~jaxgrasp.Grasp` to internal units, normalising normals."""
+    """Convert an SI [`Grasp`][jaxgrasp.Grasp] to internal units, normalising normals."""
     n = jnp.asarray(grasp.normals)
     n = n / jnp.linalg.norm(n, axis=-1, keepdims=True)
     on = jnp.ones(n.shape[:-1], bool) if grasp.active is None else jnp.asarray(grasp.active, bool)
@@ -145,9 +145,9 @@ def _rotation_coefficients(t2, derivatives: bool = True):
 
 
 def rotation_jacobian(w):
-    """``(3, 3, 3)`` ``dR / dw_k`` (last axis ``k``) of :func:`rotation_matrix` at ``w`` (3,),
+    """``(3, 3, 3)`` ``dR / dw_k`` (last axis ``k``) of `rotation_matrix` at ``w`` (3,),
     written out: ``dR/dw_k = 2 w_k (a1 K + b1 K^2) + a dK/dw_k + b (e_k w^T + w e_k^T -
-    2 w_k I)`` (``K = skew(w)``; coefficients from :func:`_rotation_coefficients`): a few
+    2 w_k I)`` (``K = skew(w)``; coefficients from `_rotation_coefficients`): a few
     dozen operations where forward-mode autodiff of the matrix takes hundreds."""
     eps = jnp.asarray(_LEVI_CIVITA, w.dtype)
     eye = jnp.eye(3, dtype=w.dtype)
@@ -159,7 +159,7 @@ def rotation_jacobian(w):
 
 
 def rotation_hessian_along(w, m):
-    """``(3, 3)`` Hessian in ``w`` of ``s(w) = sum_ij R(w)_ij m_ij`` (:func:`rotation_matrix`;
+    """``(3, 3)`` Hessian in ``w`` of ``s(w) = sum_ij R(w)_ij m_ij`` (`rotation_matrix`;
     ``m`` ``(3, 3)`` fixed), written out. With ``p = K : m = w . mu`` (``mu_k = dK/dw_k : m``),
     ``q = K^2 : m = w^T m w - t2 tr m``, ``g = grad q = (m + m^T) w - 2 tr(m) w`` and
     ``v = a1 mu + b1 g``: ``H = 2 (a1 p + b1 q) I + 4 (a2 p + b2 q) w w^T + 2 (w v^T + v w^T)
@@ -217,14 +217,14 @@ def potential_energy(x, p: ModelParams):
 
 
 def energy_of(x, kinematics, p: ModelParams):
-    """:func:`potential_energy` ``()`` mJ at ``x`` from the contact kinematics there
-    ``(d, cos phi, dt^2, theta)`` (:func:`contact_kinematics`)."""
+    """`potential_energy` ``()`` mJ at ``x`` from the contact kinematics there
+    ``(d, cos phi, dt^2, theta)`` (`contact_kinematics`)."""
     return jnp.sum(elastic_energies(kinematics, p)) - contract("a,a->", p.weight, x[:3])
 
 
 def elastic_energies(kinematics, p: ModelParams):
     """``(N,)`` elastic energy of each fingertip, mJ, from its kinematics ``(d, cos phi,
-    dt^2, theta)`` (:func:`contact_kinematics`); 0 for an inactive contact."""
+    dt^2, theta)`` (`contact_kinematics`); 0 for an inactive contact."""
     d, cphi, dt2, theta = kinematics
     dp = jnp.maximum(d, 0.0)
     elastic = jnp.pi * p.E * (
@@ -241,7 +241,7 @@ def energy_scale(p: ModelParams):
 def constraint_margins(x, p: ModelParams):
     """Scaled constraint margins ``(3, N)``, ``>= 0`` where satisfied.
 
-    Rows (:class:`~jaxgrasp.model.Constraint`), for each contact ``i``:
+    Rows (`Constraint`), for each contact ``i``:
 
     0. contact kept: ``d_i / dr_i``;
     1. no slip (Howe-Cutkosky with torsion, eq. 9 divided by ``(pi E d)^2`` and by
@@ -256,8 +256,8 @@ def constraint_margins(x, p: ModelParams):
 
 
 def margins_of(kinematics, p: ModelParams):
-    """:func:`constraint_margins` ``(3, N)`` from the contact kinematics ``(d, cos phi,
-    dt^2, theta)`` (:func:`contact_kinematics`)."""
+    """`constraint_margins` ``(3, N)`` from the contact kinematics ``(d, cos phi,
+    dt^2, theta)`` (`contact_kinematics`)."""
     d, cphi, dt2, theta = kinematics
     dr = jax.lax.stop_gradient(p.dr)
     mu_dr2 = jax.lax.stop_gradient((p.mu * p.dr) ** 2)
@@ -268,14 +268,14 @@ def margins_of(kinematics, p: ModelParams):
 
 
 def slip_torsion(d, theta, p: ModelParams):
-    """``(N,)`` mm^2, the torsion term of the slip margin (:func:`margins_of`, eq. 9),
+    """``(N,)`` mm^2, the torsion term of the slip margin (`margins_of`, eq. 9),
     ``(225/16) d (r - d/3)^2 theta^2 / (mu^2 (2r - d))`` for deformation ``d`` (mm) and
     torsion angle ``theta`` (rad)."""
     return (225.0 / 16.0) * d * (p.r - d / 3.0) ** 2 * theta**2 / (p.mu**2 * (2.0 * p.r - d))
 
 
 def _contact_terms(kinematics, p: ModelParams):
-    """Shared pieces of :func:`contact_gradients` and :func:`contact_hessians`."""
+    """Shared pieces of `contact_gradients` and `contact_hessians`."""
     d, cphi, dt2, theta = kinematics
     dp = jnp.maximum(d, 0.0)
     ddp = jnp.where(d > 0, 1.0, jnp.where(d < 0, 0.0, 0.5))  # d max(d, 0) / dd, as autodiff takes it
@@ -290,10 +290,10 @@ def _contact_terms(kinematics, p: ModelParams):
 
 
 def contact_gradients(kinematics, p: ModelParams):
-    """Derivatives of each contact's :func:`elastic_energies` and :func:`margins_of` with
+    """Derivatives of each contact's `elastic_energies` and `margins_of` with
     respect to its own kinematics ``q = (d, cos phi, dt^2, theta)``, written out: ``(de,
     dm)``, ``de`` ``(N, 4)`` mJ per unit of ``q``, ``dm`` ``(3, N, 4)`` (rows as
-    :func:`margins_of`); zero for an inactive contact. ``d max(d, 0) / dd`` at ``d = 0`` is
+    `margins_of`); zero for an inactive contact. ``d max(d, 0) / dd`` at ``d = 0`` is
     1/2, as JAX's autodiff takes it."""
     d, c, s, th, dp, ddp, dr, mu_dr2, k, f, f1, _, _ = _contact_terms(kinematics, p)
     a = jnp.pi * p.E
@@ -322,7 +322,7 @@ def contact_gradients(kinematics, p: ModelParams):
 
 
 def contact_hessians(kinematics, p: ModelParams):
-    """Second derivatives of each contact's :func:`elastic_energies` and :func:`margins_of`
+    """Second derivatives of each contact's `elastic_energies` and `margins_of`
     with respect to its own kinematics ``q``, written out: ``(he, hm)``, ``he`` ``(N, 4,
     4)``, ``hm`` ``(3, N, 4, 4)`` (contact and force rows are linear in ``q``: zero);
     zero for an inactive contact."""
@@ -378,12 +378,12 @@ def kinematics_jacobian(x, p: ModelParams):
     """The contact kinematics and their Jacobian in the pose change, written from the
     rotation's derivatives.
 
-    Returns ``(q, dq, geometry)``: :func:`contact_kinematics` ``q = (d, cos phi, dt^2,
+    Returns ``(q, dq, geometry)``: `contact_kinematics` ``q = (d, cos phi, dt^2,
     theta)`` of every contact as ``(N, 4)``, the Jacobian ``dq`` ``(N, 4, 6)`` with respect
     to ``x = (dp [mm], w [rad])``, and the per-contact vectors
-    :func:`kinematics_curvature` reuses. Every quantity is a polynomial of degree at most
+    `kinematics_curvature` reuses. Every quantity is a polynomial of degree at most
     two in ``u = (R - I) c + dp`` and ``R n``, so its derivatives follow from
-    ``dR/dw_k`` (``3 x 3`` each, :func:`rotation_jacobian`, once per pose rather than once
+    ``dR/dw_k`` (``3 x 3`` each, `rotation_jacobian`, once per pose rather than once
     per contact and tangent).
     """
     dtype = x.dtype
@@ -422,11 +422,11 @@ def kinematics_curvature(x, p: ModelParams, geometry, weights):
     """``(6, 6)`` ``sum_ik weights_ik d2 q_ik / dx^2``: the kinematics' second derivatives
     weighted by ``weights`` ``(N, 4)`` (one per contact and quantity of ``q``), summed
     over contacts as they are formed, so that no per-contact ``6 x 6`` Hessian is ever
-    built (``geometry`` from :func:`kinematics_jacobian` at the same ``x``).
+    built (``geometry`` from `kinematics_jacobian` at the same ``x``).
 
     With ``A_k = dR/dw_k`` and ``B_kl = d2R/dw_k dw_l``: ``theta`` is linear; ``cos phi =
     n.Rn`` and the ``B`` terms of ``d`` and ``dt^2`` add up to ``sum B_kl : M`` for one
-    ``3 x 3`` matrix ``M`` (the Hessian of ``w -> R(w) : M``, :func:`rotation_hessian_along`); the rest are products of
+    ``3 x 3`` matrix ``M`` (the Hessian of ``w -> R(w) : M``, `rotation_hessian_along`); the rest are products of
     the per-contact vectors ``A_k c``, ``A_k n``.
     """
     dtype = x.dtype

@@ -14,4 +14,4 @@ MJ_TO_J = 1.0e-3
 
 LENGTH_UNITS = {"m": 1.0, "cm": 1.0e-2, "mm": 1.0e-3}
 """Length units a mesh's vertices may be given in, and each one's size in metres
-(:func:`jaxgrasp.from_mesh`, the ``units`` key of a grasp file's ``[object]``)."""
+([`jaxgrasp.from_mesh`][jaxgrasp.from_mesh], the ``units`` key of a grasp file's ``[object]``)."""

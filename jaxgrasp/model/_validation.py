@@ -1,9 +1,9 @@
-"""Input validation for :class:`jaxgrasp.Grasp` (concrete values, SI units).
+"""Input validation for [`jaxgrasp.Grasp`][jaxgrasp.Grasp] (concrete values, SI units).
 
-:func:`check_grasp_inputs` is what :meth:`Grasp.create` calls. It converts every field to
+`check_grasp_inputs` is what [`Grasp.create`][jaxgrasp.Grasp.create] calls. It converts every field to
 a float64 NumPy array, broadcasts per-fingertip scalars to one value per contact,
 normalises the normals and checks the physical rules. Every failure raises
-:class:`GraspValueError` with a one-line message naming the field, the offending value
+[`GraspValueError`][jaxgrasp.GraspValueError] with a one-line message naming the field, the offending value
 and the rule it breaks.
 """
 
@@ -42,8 +42,8 @@ COINCIDENT_DISTANCE = 1e-12
 
 MAX_COORDINATE = 1e3
 """Largest magnitude of a contact position's coordinate (m, centre-of-mass frame), and of a
-mesh vertex's (:mod:`jaxgrasp.io._mesh`, after its units). The model tells two contacts
-apart down to :data:`COINCIDENT_DISTANCE`; float64 numbers near 1e3 are 1.1e-13 apart, fine
+mesh vertex's (`jaxgrasp.io._mesh`, after its units). The model tells two contacts
+apart down to `COINCIDENT_DISTANCE`; float64 numbers near 1e3 are 1.1e-13 apart, fine
 enough for that, while near 1e4 they are 1.8e-12 apart, too coarse. A grasped object is at
 most a few metres across, so a kilometre leaves room for a frame far from the object."""
 
@@ -51,7 +51,7 @@ MAX_FRICTION = 1e3
 """Largest static friction coefficient accepted. Real materials stay below about 10
 (soft rubber on a rough surface: 1-4); past 1e3 the friction cone is a half-space for every
 practical purpose, and its linearised edges (length ``mu``, torsion ``mu^2``) swamp the
-Ferrari-Canny hull's unit normal forces in float64 (:func:`jaxgrasp.epsilon` fell from
+Ferrari-Canny hull's unit normal forces in float64 ([`jaxgrasp.epsilon`][jaxgrasp.epsilon] fell from
 1 to 0 at ``mu = 1e7``)."""
 
 MAX_LOAD_RATIO = 1e4
@@ -65,8 +65,8 @@ on status and equilibrium (to 1e-15 m) up to a ratio of 2e4 and disagreed from 6
 paper's heavy examples are below 10), so such a grasp is rejected."""
 
 MONOTONE: tuple[str, ...] = (*PER_CONTACT, "mass")
-"""Fields in each of which every rule of :func:`check_grasp_inputs` is monotone, so that a
-box of their values is valid where its corners are (:func:`check_corners`)."""
+"""Fields in each of which every rule of `check_grasp_inputs` is monotone, so that a
+box of their values is valid where its corners are (`check_corners`)."""
 
 _UNIT_TOLERANCE = 1e-14
 """Normals within this of unit length are kept bit for bit (so validation is idempotent
@@ -157,18 +157,18 @@ def _index_name(name: str, original_ndim: int, i: int) -> str:
 def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     """Validate and normalise the fields of one grasp (concrete values only).
 
-    Keyword arguments are the :class:`Grasp` fields by name, with the units, shapes and
-    ranges of :data:`jaxgrasp.model.FIELDS`: ``positions`` ``(N, 3)`` m, each coordinate at
-    most :data:`MAX_COORDINATE` in magnitude; ``normals``
+    Keyword arguments are the [`Grasp`][jaxgrasp.Grasp] fields by name, with the units, shapes and
+    ranges of `jaxgrasp.model.FIELDS`: ``positions`` ``(N, 3)`` m, each coordinate at
+    most `MAX_COORDINATE` in magnitude; ``normals``
     ``(N, 3)`` (any non-zero length); ``initial_deformation`` m in ``(0, radius)``,
     ``radius`` m, ``young_modulus`` Pa, ``friction``, ``max_force`` N, each a scalar or
-    ``(N,)`` and ``> 0``, friction at most :data:`MAX_FRICTION`; ``mass`` kg ``>= 0`` and
+    ``(N,)`` and ``> 0``, friction at most `MAX_FRICTION`; ``mass`` kg ``>= 0`` and
     ``gravity`` ``(3,)`` m/s^2 may be left out (defaults ``0`` and ``(0, 0, -9.81)``), the
-    weight at most :data:`MAX_LOAD_RATIO` times the initial squeeze; ``active``, optional, ``None`` or ``(N,)``
+    weight at most `MAX_LOAD_RATIO` times the initial squeeze; ``active``, optional, ``None`` or ``(N,)``
     bool with at least 2 true (every contact, active or not, must hold valid values).
 
     Returns:
-        A dict with exactly the :class:`Grasp` field names: float64 arrays, per-fingertip
+        A dict with exactly the [`Grasp`][jaxgrasp.Grasp] field names: float64 arrays, per-fingertip
         fields broadcast to ``(N,)``, normals of unit length; plus ``active`` (a bool
         array) where a mask was given.
 
@@ -206,7 +206,7 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
 
 def check_batch_inputs(fields: dict[str, np.ndarray], skip=()) -> None:
     """Validate every grasp of batched fields (each with a leading axis ``B``, e.g.
-    :meth:`Grasp.to_numpy_batch`) with :func:`check_grasp_inputs`, except rows ``skip``.
+    [`Grasp.to_numpy_batch`][jaxgrasp.Grasp.to_numpy_batch]) with `check_grasp_inputs`, except rows ``skip``.
 
     Raises:
         GraspValueError: ``grasp i: ...`` naming the first invalid grasp (one line).
@@ -222,11 +222,11 @@ def check_batch_inputs(fields: dict[str, np.ndarray], skip=()) -> None:
 
 
 def check_corners(fields: Mapping[str, Any], ends: Mapping[str, tuple[Any, Any]], where: str) -> None:
-    """Validate with :func:`check_grasp_inputs` the grasp ``fields`` at every corner of the
+    """Validate with `check_grasp_inputs` the grasp ``fields`` at every corner of the
     box ``ends``: each field of ``ends`` at its lower or at its upper end, at every contact.
 
     Every point of the box is then valid too, because every rule is monotone in each field
-    of :data:`MONOTONE`, in the same direction at every contact: a range rule (``> 0``,
+    of `MONOTONE`, in the same direction at every contact: a range rule (``> 0``,
     ``>= 0``) breaks first at the lower end, ``friction <= MAX_FRICTION`` at the upper one,
     ``initial_deformation < radius`` at the upper deformation and the lower radius,
     ``E dr^3 >= MIN_ENERGY_SCALE`` at the lower modulus and deformation, and the load rule
@@ -237,8 +237,8 @@ def check_corners(fields: Mapping[str, Any], ends: Mapping[str, tuple[Any, Any]]
     normals, distinct positions, ``active``) do not depend on these fields.
 
     Args:
-        fields: the grasp's fields by name, as :func:`check_grasp_inputs` takes them (SI).
-        ends: field of :data:`MONOTONE` -> ``(lo, hi)``: scalars or per-contact ``(N,)``
+        fields: the grasp's fields by name, as `check_grasp_inputs` takes them (SI).
+        ends: field of `MONOTONE` -> ``(lo, hi)``: scalars or per-contact ``(N,)``
             arrays in its unit (m, Pa, dimensionless, N; ``mass`` kg); every value finite.
             ``2^k`` corners for ``k`` fields, fewer where ``lo`` equals ``hi``.
         where: what a corner is, for the message: ``"sweep grid point"``.
@@ -314,7 +314,7 @@ def _check_shapes(arrs: dict) -> int:
 
 
 def _check_ranges(arrs: dict) -> None:
-    """Each field with a minimum respects it (:attr:`Field.rule`)."""
+    """Each field with a minimum respects it (`Field.rule`)."""
     for field in FIELDS:
         if field.minimum is None or field.name == "initial_deformation":
             continue  # the deformation's range depends on the radius: _check_deformation
@@ -343,7 +343,7 @@ def _check_friction(arrs: dict) -> None:
 
 
 def _check_reach(pos: np.ndarray) -> None:
-    """Every contact (active or not) within :data:`MAX_COORDINATE` m of the centre of mass
+    """Every contact (active or not) within `MAX_COORDINATE` m of the centre of mass
     along each axis."""
     far = np.flatnonzero(np.any(np.abs(pos) > MAX_COORDINATE, axis=-1))
     if far.size:
@@ -355,7 +355,7 @@ def _check_reach(pos: np.ndarray) -> None:
 
 
 def _check_load(out: dict, arrs: dict, mask) -> None:
-    """The weight at most :data:`MAX_LOAD_RATIO` times the active fingertips' initial
+    """The weight at most `MAX_LOAD_RATIO` times the active fingertips' initial
     squeeze ``sum pi E dr^2`` (N)."""
     on = np.ones(out["radius"].shape, bool) if mask is None else mask
     with np.errstate(over="ignore", under="ignore"):
@@ -393,7 +393,7 @@ def _check_deformation(out: dict, arrs: dict) -> None:
 
 
 def _unit_normals(nrm: np.ndarray) -> np.ndarray:
-    """Normals divided by their norm (kept bit for bit within :data:`_UNIT_TOLERANCE`)."""
+    """Normals divided by their norm (kept bit for bit within `_UNIT_TOLERANCE`)."""
     # scaled norm: no overflow for huge components, no underflow for tiny ones
     peak = np.max(np.abs(nrm), axis=1)
     safe = np.where(peak > 0, peak, 1.0)

@@ -1,9 +1,9 @@
 """Planning: finding the grasps of a meshed object that tolerate the most energy.
 
-:func:`plan` draws candidates on the mesh, keeps those the paper's model describes (the
-contact rules of :mod:`jaxgrasp.surface`), evaluates them in batches, refines the best by
-surface-constrained gradient tuning and ranks them (:class:`PlanResult`), saying what it
-does on the ``"jaxgrasp"`` logger (:class:`PlanProgress`).
+[`plan`][jaxgrasp.plan] draws candidates on the mesh, keeps those the paper's model describes (the
+contact rules of `jaxgrasp.surface`), evaluates them in batches, refines the best by
+surface-constrained gradient tuning and ranks them ([`PlanResult`][jaxgrasp.planning.PlanResult]), saying what it
+does on the ``"jaxgrasp"`` logger (`PlanProgress`).
 
 ``__all__`` lists the names promised to users. The names imported below the comment
 "For jaxgrasp's other packages" are what the library's other packages use from here

@@ -1,22 +1,22 @@
 """Planning: the grasps of a real object that tolerate the most energy, found from its mesh.
 
-:func:`plan` runs five stages, each a function here:
+[`plan`][jaxgrasp.plan] runs five stages, each a function here:
 
-1. **draw** geometric candidates (:mod:`jaxgrasp.planning._sampling`): antipodal pairs by
+1. **draw** geometric candidates (`jaxgrasp.planning._sampling`): antipodal pairs by
    ray casting for two fingers, spread tuples from a pool of surface samples (their normals
    nearly balancing, or adding up to a push that carries the weight) for three or more, or
    plain uniform samples (``sampler="uniform"``, the baseline); each candidate gets one
    initial deformation drawn uniformly in rule 5's range;
-2. **keep** the candidates that keep every contact rule (:func:`jaxgrasp.surface.check_contacts`),
+2. **keep** the candidates that keep every contact rule ([`jaxgrasp.surface.check_contacts`][jaxgrasp.surface.check_contacts]),
    drawing more rounds until ``samples`` are valid;
-3. **evaluate** them all in batches (the engine's runner, in chunks of :data:`CHUNK`:
-   :func:`~jaxgrasp.engine._batch.evaluate_in_chunks`);
+3. **evaluate** them all in batches (the engine's runner, in chunks of `CHUNK`:
+   `evaluate_in_chunks`);
 4. **refine** the best ``refine`` by gradient tuning of positions (sliding along the surface)
-   and initial deformations (:func:`jaxgrasp.tune` of a :class:`~jaxgrasp.MeshGrasp`),
+   and initial deformations ([`jaxgrasp.tune`][jaxgrasp.tune] of a [`MeshGrasp`][jaxgrasp.MeshGrasp]),
    keeping a tuned grasp only where it still keeps every rule and settles;
 5. **rank** the settled grasps by value and give the ``top`` of them, each rebuilt exactly as
-   its grasp file will load (:func:`jaxgrasp.from_mesh` with its normals, centre of mass
-   and mass) and evaluated again by :func:`jaxgrasp.evaluate`, with its epsilon.
+   its grasp file will load ([`jaxgrasp.from_mesh`][jaxgrasp.from_mesh] with its normals, centre of mass
+   and mass) and evaluated again by [`jaxgrasp.evaluate`][jaxgrasp.evaluate], with its epsilon.
 """
 
 from __future__ import annotations
@@ -97,29 +97,29 @@ def plan(
             modulus (Pa), friction coefficient and force limit (N).
         mass, density, center_of_mass: the object's mass (kg) or density (kg/m^3), and its
             centre of mass (m, mesh frame; default the watertight mesh's), as
-            :func:`jaxgrasp.from_mesh`.
+            [`jaxgrasp.from_mesh`][jaxgrasp.from_mesh].
         gravity: ``(3,)`` m/s^2 in the mesh's axes. units: the mesh's, ``"m"``, ``"cm"``, ``"mm"``.
         samples: valid candidates to evaluate (fewer when ``_MAX_DRAWS`` draws per valid one
             asked for do not find them: the result says how many).
         top: ranked grasps to return. refine: of the best, how many to tune. seed: of every
             random draw: equal seeds give equal plans.
-        rules: the rules' tolerances (default ``ContactRules()``, :class:`~jaxgrasp.surface.ContactRules`).
-        sampler: one of :data:`SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
+        rules: the rules' tolerances (default ``ContactRules()``, [`ContactRules`][jaxgrasp.surface.ContactRules]).
+        sampler: one of `SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
         tune_maxiter: iterations of each refinement.
-        robust: an :class:`~jaxgrasp.analysis.Uncertainty`: rank the ``top`` grasps by their robust
+        robust: an [`Uncertainty`][jaxgrasp.analysis.Uncertainty]: rank the ``top`` grasps by their robust
             value instead (the mean value over ``robust_samples`` perturbed copies,
-            :func:`jaxgrasp.robust_batch`; ties in the order of their values); ``None``: by
+            [`jaxgrasp.robust_batch`][jaxgrasp.robust_batch]; ties in the order of their values); ``None``: by
             the value.
         robust_samples: perturbed copies of each ranked grasp. progress: ``progress(stage,
             done, total)`` (stage ``"draw"``, ``"evaluate"``, ``"refine"``, ``"robust"``);
-            default a :class:`~jaxgrasp.planning.PlanProgress`: records on the ``"jaxgrasp"`` logger.
+            default a `PlanProgress`: records on the ``"jaxgrasp"`` logger.
 
     Returns:
-        A :class:`~jaxgrasp.planning.PlanResult`.
+        A [`PlanResult`][jaxgrasp.planning.PlanResult].
 
     Raises:
         GraspValueError: bad arguments or mesh (one line), before anything is computed
-            (:func:`check_plan`).
+            (`check_plan`).
     """
     t0 = time.perf_counter()
     checked = check_plan(mesh, fingers, radius=radius, young_modulus=young_modulus, friction=friction,
@@ -133,8 +133,8 @@ def plan(
 
 def _planned(checked: "PlanInputs", fingers, samples, top, refine, seed, tune_maxiter, robust, robust_samples,
              progress, t0) -> PlanResult:
-    """:func:`plan` on its checked inputs: draw, evaluate, rank, refine, (robust) rank again;
-    ``t0`` the :func:`time.perf_counter` at which the plan began."""
+    """[`plan`][jaxgrasp.plan] on its checked inputs: draw, evaluate, rank, refine, (robust) rank again;
+    ``t0`` the `time.perf_counter` at which the plan began."""
     setup, sampler, rules = checked.setup, checked.sampler, checked.rules
     rng = np.random.default_rng(seed)
     pos, nrm, dr, sampled, failures = draw_valid(setup, fingers, samples, sampler, rules, rng, progress)
@@ -157,14 +157,14 @@ def _planned(checked: "PlanInputs", fingers, samples, top, refine, seed, tune_ma
 
 @dataclasses.dataclass(frozen=True)
 class PlanInputs:
-    """A plan's inputs as :func:`check_plan` found them.
+    """A plan's inputs as `check_plan` found them.
 
     Attributes:
-        sampler: the candidate generator, one of :data:`SAMPLERS` (the default resolved).
-        rules: the :class:`~jaxgrasp.surface.ContactRules`.
+        sampler: the candidate generator, one of `SAMPLERS` (the default resolved).
+        rules: the [`ContactRules`][jaxgrasp.surface.ContactRules].
         mesh: the object's ``trimesh.Trimesh``, m, mesh frame.
         center_of_mass: ``(3,)`` m, mesh frame. mass: kg.
-        setup: everything :func:`plan` computes from (internal).
+        setup: everything [`plan`][jaxgrasp.plan] computes from (internal).
     """
 
     sampler: str
@@ -191,21 +191,21 @@ def check_plan(
     rules: ContactRules | None = None, sampler: str | None = None, tune_maxiter: int = 30,
     robust: Uncertainty | None = None, robust_samples: int = 64,
 ) -> PlanInputs:
-    """Check :func:`plan`'s arguments and read its mesh, computing nothing: the one check
-    :func:`plan` makes first, for callers that must know the input is good before they
+    """Check [`plan`][jaxgrasp.plan]'s arguments and read its mesh, computing nothing: the one check
+    [`plan`][jaxgrasp.plan] makes first, for callers that must know the input is good before they
     start (``jaxgrasp plan`` checks it before it creates ``--out``).
 
-    Args: as :func:`plan` (``progress`` aside).
+    Args: as [`plan`][jaxgrasp.plan] (``progress`` aside).
 
     Returns:
-        The checked :class:`PlanInputs`.
+        The checked `PlanInputs`.
 
     Raises:
         GraspValueError: one line: a count out of range (``fingers`` 2 to 8, ``samples`` and
         ``top`` >= 1, ``refine`` and ``seed`` >= 0, ``tune_maxiter`` >= 1, ``robust_samples``
         >= 2), an unknown sampler or one that cannot make ``fingers``-finger grasps, a
         fingertip value, mass, density or gravity that is not a finite number in range, a
-        bad mesh (:func:`jaxgrasp.io._mesh.load_mesh`; not watertight without
+        bad mesh (`jaxgrasp.io._mesh.load_mesh`; not watertight without
         ``center_of_mass``), or rules that no initial deformation keeps (rule 5).
     """
     sampler = _checked_args(fingers, samples, top, refine, seed, sampler)
@@ -373,7 +373,7 @@ def grasps_of(setup: _Setup, pos, nrm, dr) -> Grasp:
 
 def _evaluate(setup: _Setup, pos, nrm, dr, progress) -> tuple[np.ndarray, np.ndarray]:
     """``(values (B,) J, statuses (B,))`` of the candidates, in chunks of exactly
-    :data:`CHUNK` (:func:`~jaxgrasp.engine._batch.evaluate_in_chunks`), so that every plan
+    `CHUNK` (`evaluate_in_chunks`), so that every plan
     of a finger count runs one compiled evaluator, whatever its number of samples."""
     ev = evaluate_in_chunks(grasps_of(setup, pos, nrm, dr), CHUNK, progress=_stage(progress, "evaluate"))
     return np.asarray(ev.value), np.asarray(ev.status)
@@ -386,7 +386,7 @@ def _ranked(values, statuses) -> np.ndarray:
 
 
 def _mesh_grasp(setup: _Setup, pos, nrm, dr) -> MeshGrasp:
-    """One candidate as its grasp file loads: :func:`jaxgrasp.from_mesh` with its normals,
+    """One candidate as its grasp file loads: [`jaxgrasp.from_mesh`][jaxgrasp.from_mesh] with its normals,
     the centre of mass and the mass given."""
     made = from_mesh(setup.mesh, pos, normals=list(nrm), initial_deformation=dr, center_of_mass=setup.com,
                      mass=setup.mass, gravity=setup.gravity, **setup.fingertip)
@@ -439,7 +439,7 @@ def _final(setup: _Setup, entries, top: int) -> dict:
 
 
 def _robust_ranked(ranked: dict, uncertainty: Uncertainty, samples: int, seed: int, progress) -> dict:
-    """``ranked`` reordered by the robust value (:func:`jaxgrasp.robust_batch`), best first,
+    """``ranked`` reordered by the robust value ([`jaxgrasp.robust_batch`][jaxgrasp.robust_batch]), best first,
     with its columns (``p_stable``, ``value_mean``, quantiles) under ``"robust"``."""
     rb = robust_batch(list(ranked["grasps"]), uncertainty, samples, seed, progress=_stage(progress, "robust"))
     order = rb.rank("value_mean")

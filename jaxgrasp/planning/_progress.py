@@ -1,4 +1,4 @@
-"""What :func:`jaxgrasp.plan` says while it runs: a record per stage on the ``"jaxgrasp"`` logger."""
+"""What [`jaxgrasp.plan`][jaxgrasp.plan] says while it runs: a record per stage on the ``"jaxgrasp"`` logger."""
 
 from __future__ import annotations
 
@@ -8,17 +8,17 @@ import time
 __all__ = ["PlanProgress"]
 
 LOGGER = logging.getLogger("jaxgrasp")
-"""The logger of every jaxgrasp message (:mod:`jaxgrasp.engine._progress`)."""
+"""The logger of every jaxgrasp message (`jaxgrasp.engine._progress`)."""
 
 
 class PlanProgress:
-    """``progress(stage, done, total)`` of :func:`jaxgrasp.plan`: an INFO record on the
+    """``progress(stage, done, total)`` of [`jaxgrasp.plan`][jaxgrasp.plan]: an INFO record on the
     ``"jaxgrasp"`` logger when a stage starts, then at most one a second (``jaxgrasp: plan:
-    12/40 candidates evaluated, elapsed T s``). :func:`jaxgrasp.plan` uses one where it is
+    12/40 candidates evaluated, elapsed T s``). [`jaxgrasp.plan`][jaxgrasp.plan] uses one where it is
     given no ``progress``; the ``jaxgrasp plan`` command prints the same records.
 
     Args:
-        t0: the :func:`time.perf_counter` its elapsed times count from (default: now).
+        t0: the `time.perf_counter` its elapsed times count from (default: now).
         show: whether it reports at all (the command's ``--quiet`` clears it).
     """
 

@@ -1,4 +1,4 @@
-"""What :func:`jaxgrasp.plan` returns: ranked grasps on a mesh, their values, and how they were found."""
+"""What [`jaxgrasp.plan`][jaxgrasp.plan] returns: ranked grasps on a mesh, their values, and how they were found."""
 
 from __future__ import annotations
 
@@ -25,19 +25,19 @@ class PlanResult:
     """The ranked grasps of a plan (SI units), best first.
 
     Attributes:
-        status: a :class:`PlanStatus`.
-        grasps: ``K`` :class:`~jaxgrasp.MeshGrasp` ranked by value, best first: each one's
+        status: a [`PlanStatus`][jaxgrasp.planning.PlanStatus].
+        grasps: ``K`` [`MeshGrasp`][jaxgrasp.MeshGrasp] ranked by value, best first: each one's
             ``grasp`` in the centre-of-mass frame, ``to_mesh_frame`` for the mesh's frame.
             Only settled grasps (status stable, unstable or infeasible) are ranked.
         values: ``(K,)`` J, their evaluation values.
-        statuses: ``(K,)`` int :class:`~jaxgrasp.GraspStatus` codes.
-        limiting_kind: ``(K,)`` int :class:`~jaxgrasp.model.BoundaryKind` of the limiting boundary
+        statuses: ``(K,)`` int [`GraspStatus`][jaxgrasp.GraspStatus] codes.
+        limiting_kind: ``(K,)`` int [`BoundaryKind`][jaxgrasp.model.BoundaryKind] of the limiting boundary
             (-1 none); limiting_contact: ``(K,)`` its contact (-1 none).
-        epsilon: ``(K,)`` the Ferrari-Canny epsilon of each (:func:`jaxgrasp.epsilon`).
+        epsilon: ``(K,)`` the Ferrari-Canny epsilon of each ([`jaxgrasp.epsilon`][jaxgrasp.epsilon]).
         refined: ``(K,)`` bool, the grasp came out of surface-constrained tuning.
         mesh_positions: ``(K, N, 3)`` m, the contacts in the mesh's frame.
         sampled: geometric candidates drawn; valid: of them, those that kept every rule
-            (:mod:`jaxgrasp.surface`), all of which were evaluated.
+            (`jaxgrasp.surface`), all of which were evaluated.
         rule_failures: candidates that broke each rule, by rule name (one candidate may
             break several).
         stable: valid candidates that were stable.
@@ -48,7 +48,7 @@ class PlanResult:
         settings: the plan's settings (fingers, fingertip, object, sampler, rules, rank ...).
         robust: where the plan ranked by the robust value, ``(K,)`` arrays by column name
             (``p_stable``, ``p_stable_stderr``, ``value_mean``, ``value_q05``, ``value_q50``;
-            :meth:`jaxgrasp.analysis.RobustBatch.columns`), in rank order; else ``None``.
+            [`jaxgrasp.analysis.RobustBatch.columns`][jaxgrasp.analysis.RobustBatch.columns]), in rank order; else ``None``.
     """
 
     status: PlanStatus
@@ -74,7 +74,7 @@ class PlanResult:
 
     @property
     def best(self) -> Any:
-        """The best :class:`~jaxgrasp.MeshGrasp`, or ``None`` when nothing was ranked."""
+        """The best [`MeshGrasp`][jaxgrasp.MeshGrasp], or ``None`` when nothing was ranked."""
         return self.grasps[0] if self.grasps else None
 
     @property

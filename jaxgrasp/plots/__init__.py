@@ -1,5 +1,5 @@
 """Pictures (matplotlib, Agg backend): sweep and ranking plots, the 3-D scene of a grasp
-and the way it fails (with a hand's links: :func:`plot_hand_grasp`), the value over the
+and the way it fails (with a hand's links: `plot_hand_grasp`), the value over the
 iterations of a tuning.
 
 ``__all__`` lists the names promised to users. The names imported below the comment

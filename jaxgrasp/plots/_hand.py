@@ -1,9 +1,9 @@
 """Pictures of a hand's grasp: the hand's links with the object and the way the grasp fails.
 
-:func:`hand_scene` adds the hand's geoms (capsules, spheres, cylinders and boxes, the
+`hand_scene` adds the hand's geoms (capsules, spheres, cylinders and boxes, the
 fingertips' own capsules among them; mesh geoms are left out) near the object to the
-:class:`~jaxgrasp.plots._scene.GraspScene` of its grasp, in the object's mesh frame;
-:func:`plot_hand_grasp` draws it with :func:`~jaxgrasp.plots.draw_scene`: the object, the
+`GraspScene` of its grasp, in the object's mesh frame;
+`plot_hand_grasp` draws it with `draw_scene`: the object, the
 ghost at the least-energy pose of the limiting boundary, each active contact's fingertip
 hemisphere as the paper models it (pressed in along the normal) and the hand's links as
 they are, so that each fingertip's tilt from the paper's assumption can be seen (the
@@ -63,8 +63,8 @@ def link_meshes(hand_grasp, reach: float | None = None) -> list:
 
 
 def hand_scene(hand_grasp, result, *, magnification: float | None = None) -> GraspScene:
-    """The :class:`~jaxgrasp.plots._scene.GraspScene` of a :class:`~jaxgrasp.hands.HandGrasp`'s
-    active contacts and its :class:`~jaxgrasp.Evaluation` ``result`` (of the compacted
+    """The `GraspScene` of a [`HandGrasp`][jaxgrasp.hands.HandGrasp]'s
+    active contacts and its [`Evaluation`][jaxgrasp.Evaluation] ``result`` (of the compacted
     grasp, ``hand_grasp.grasp.compact()``), with the hand's links added as parts of role
     ``"link"``."""
     import dataclasses
@@ -87,16 +87,16 @@ def _tilt_line(hand_grasp) -> str:
 
 
 def plot_hand_grasp(hand_grasp, path=None, *, result=None, magnification=None, title=None, view=(22.0, -58.0)):
-    """A 3-D picture of a hand's grasp (a :class:`~jaxgrasp.hands.HandGrasp`): the object,
+    """A 3-D picture of a hand's grasp (a [`HandGrasp`][jaxgrasp.hands.HandGrasp]): the object,
     the hand's links, the modelled fingertips, and the object at the least-energy pose of
     the limiting boundary (the ghost, its motion magnified). Axes in mm, mesh frame.
 
     Args:
-        hand_grasp: the :class:`~jaxgrasp.hands.HandGrasp` (at least 2 active contacts).
+        hand_grasp: the [`HandGrasp`][jaxgrasp.hands.HandGrasp] (at least 2 active contacts).
         path: where to save the figure (PNG, ...); ``None`` returns it open.
-        result: the :class:`~jaxgrasp.Evaluation` of ``hand_grasp.grasp.compact()``
+        result: the [`Evaluation`][jaxgrasp.Evaluation] of ``hand_grasp.grasp.compact()``
             (default: evaluated here).
-        magnification, title, view: as for :func:`jaxgrasp.plots.plot_grasp`.
+        magnification, title, view: as for `jaxgrasp.plots.plot_grasp`.
 
     Returns:
         The matplotlib ``Figure``.

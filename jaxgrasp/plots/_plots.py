@@ -1,9 +1,9 @@
 """Plots of grasps, sweep and batch results (matplotlib, Agg backend: no display needed).
 
-:func:`plot_grasp` draws one grasp in 3-D (object, fingertips, friction cones, the
-limiting contact) with the motion that makes it fail (:mod:`jaxgrasp.plots._scene`).
+`plot_grasp` draws one grasp in 3-D (object, fingertips, friction cones, the
+limiting contact) with the motion that makes it fail (`jaxgrasp.plots._scene`).
 
-:func:`plot_ranking` draws the grasps of a :class:`~jaxgrasp.BatchResult` ranked by value
+`plot_ranking` draws the grasps of a [`BatchResult`][jaxgrasp.BatchResult] ranked by value
 (a log scale: values span decades), coloured by status, beside the count of each status.
 The sweep plots below follow these conventions:
 
@@ -95,7 +95,7 @@ def new_figure(**kwargs) -> Figure:
 def save_figure(fig, path, format: str | None = None) -> None:
     """Save ``fig`` (150 dpi, tight box) to ``path`` atomically, or into a binary file object.
 
-    A path is written as a temporary file renamed into place (:mod:`jaxgrasp.storage`),
+    A path is written as a temporary file renamed into place (`jaxgrasp.storage`),
     so a failure or an interrupt never leaves half an image. The format is ``format``,
     else the path's suffix, else matplotlib's default (``png``; its suffix is then added,
     as ``savefig`` does).
@@ -120,7 +120,7 @@ def _save(fig, path):
 def _draw_curve(ax, x, value, status, kind, *, color, linestyle, label):
     """One curve with the status conventions of this module (value in J, x in display units).
 
-    Returns the x of the infeasible points (for :func:`_infeasible_band`)."""
+    Returns the x of the infeasible points (for `_infeasible_band`)."""
     value = np.asarray(value, dtype=float)
     status = np.asarray(status)
     kind = np.asarray(kind)
@@ -220,7 +220,7 @@ def plot_sweep(result, path=None, *, x=None, curves=None, panels=None, title=Non
     Any further axes become more panels (one per combination, at most ``max_panels``).
 
     Args:
-        result: a :class:`~jaxgrasp.analysis.SweepResult`.
+        result: a [`SweepResult`][jaxgrasp.analysis.SweepResult].
         path: where to save the figure (PNG, ...); ``None`` returns it open.
         title: figure title, drawn as written (a ``$`` is a dollar sign, not mathtext).
 
@@ -274,8 +274,8 @@ def plot_sweep(result, path=None, *, x=None, curves=None, panels=None, title=Non
 
 
 def _draw_panel(ax, result, arrs, xs, x, curves, n_curves, panel_names, pidx):
-    """One panel of :func:`plot_sweep`: a curve per value of ``curves`` at panel index
-    ``pidx``; returns the infeasible points per curve for :func:`_infeasible_band`."""
+    """One panel of `plot_sweep`: a curve per value of ``curves`` at panel index
+    ``pidx``; returns the infeasible points per curve for `_infeasible_band`."""
     cmap = matplotlib.colormaps.get_cmap("viridis")
     band = []
     for c in range(n_curves):
@@ -307,7 +307,7 @@ def plot_max_over(result, path=None, *, over="initial_deformation", x=None, curv
     Top panel: ``max over <over>`` of the value against ``x`` (default
     ``young_modulus``), one curve per value of ``curves`` (default ``mass`` if swept, else
     the remaining axis). Bottom panel: the maximising value of ``over`` (e.g. the optimal
-    initial deformation). Status conventions as in :func:`plot_sweep`, for the maximising
+    initial deformation). Status conventions as in `plot_sweep`, for the maximising
     point.
     """
     reduced, arg = result.max_over(over)
@@ -315,10 +315,10 @@ def plot_max_over(result, path=None, *, over="initial_deformation", x=None, curv
 
 
 def plot_max(reduced, best, path=None, *, over="initial_deformation", x=None, curves=None, title=None):
-    """Like :func:`plot_max_over`, from an already reduced result.
+    """Like `plot_max_over`, from an already reduced result.
 
     Args:
-        reduced: a :class:`~jaxgrasp.analysis.SweepResult` of the maximising points (one or
+        reduced: a [`SweepResult`][jaxgrasp.analysis.SweepResult] of the maximising points (one or
             two axes), e.g. the first output of ``SweepResult.max_over``.
         best: the maximising value of parameter ``over`` at each of its points (SI).
     """
@@ -378,11 +378,11 @@ STATUS_COLORS = {
     "not_converged": "0.55",
     "invalid": "k",
 }
-"""The colour of each grasp status in :func:`plot_ranking`."""
+"""The colour of each grasp status in `plot_ranking`."""
 
 
 def plot_ranking(result, path=None, *, top: int = 5, title=None):
-    """The grasps of a :class:`~jaxgrasp.BatchResult` ranked by value, and their statuses.
+    """The grasps of a [`BatchResult`][jaxgrasp.BatchResult] ranked by value, and their statuses.
 
     Left: the value (mJ, log scale) of every stable grasp, best first, points with their
     value set by a force limit marked with triangles; not_converged grasps (untrusted
@@ -446,14 +446,14 @@ def plot_grasp(grasp, path=None, *, result=None, magnification=None, title=None,
     hemisphere pressed into its contact, its outward normal and friction cone, the
     limiting contact's fingertip in red, and the object moved by the least-energy pose of
     the limiting boundary as an orange ghost, the motion magnified by the factor the
-    title states (:func:`jaxgrasp.plots.grasp_scene`). Axes in mm, the mesh's frame.
+    title states (`jaxgrasp.plots.grasp_scene`). Axes in mm, the mesh's frame.
 
     Args:
-        grasp: a :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp` (one grasp).
+        grasp: a [`Grasp`][jaxgrasp.Grasp] or [`MeshGrasp`][jaxgrasp.MeshGrasp] (one grasp).
         path: where to save the figure (PNG, ...); ``None`` returns it open.
-        result: its :class:`~jaxgrasp.Evaluation` (default: evaluated here).
+        result: its [`Evaluation`][jaxgrasp.Evaluation] (default: evaluated here).
         magnification: the ghost's motion factor (default: a round one, see
-            :func:`jaxgrasp.plots._scene.nice_magnification`).
+            `jaxgrasp.plots._scene.nice_magnification`).
         title: first title line, drawn as written (default: the status, value and limiting boundary).
         view: ``(elevation, azimuth)`` of the camera, degrees.
 
@@ -472,7 +472,7 @@ def plot_grasp(grasp, path=None, *, result=None, magnification=None, title=None,
 
 
 def draw_scene(scene, *, title=None, view=(22.0, -58.0)):
-    """The figure of a :class:`~jaxgrasp.plots._scene.GraspScene` (see :func:`plot_grasp`)."""
+    """The figure of a `GraspScene` (see `plot_grasp`)."""
     from matplotlib.patches import Patch
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 

@@ -1,6 +1,6 @@
 """The 3-D scene of a grasp and the way it fails: the geometry the picture and the GLB share.
 
-:func:`grasp_scene` builds, in the mesh's frame (m), triangle meshes of
+`grasp_scene` builds, in the mesh's frame (m), triangle meshes of
 
 * the object: its mesh, or, for a grasp without one, the convex hull of a disc of the
   fingertip's radius in each contact's tangent plane (a stand-in that shows where the
@@ -15,8 +15,8 @@
   object (the forces a fingertip can press on it without slipping);
 * each normal: an arrow from the contact along the outward normal.
 
-:func:`jaxgrasp.plots.plot_grasp` draws it with matplotlib and
-:meth:`GraspScene.to_trimesh` exports it (``jaxgrasp show --glb``).
+`jaxgrasp.plots.plot_grasp` draws it with matplotlib and
+`GraspScene.to_trimesh` exports it (``jaxgrasp show --glb``).
 """
 
 from __future__ import annotations
@@ -115,14 +115,14 @@ class GraspScene:
 
 
 def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspScene:
-    """The scene of ``grasp`` (a :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp`)
-    and its :class:`~jaxgrasp.Evaluation` ``result``.
+    """The scene of ``grasp`` (a [`Grasp`][jaxgrasp.Grasp] or [`MeshGrasp`][jaxgrasp.MeshGrasp])
+    and its [`Evaluation`][jaxgrasp.Evaluation] ``result``.
 
     Args:
         magnification: factor applied to the limiting pose (translation and rotation
             vector) for the ghost; default: a round number (1, 2 or 5 times a power of
             ten, at least 1) that moves the object's farthest point by about 0.15 of its
-            size (:func:`nice_magnification`).
+            size (`nice_magnification`).
     """
     from jaxgrasp.surface import MeshGrasp
     from jaxgrasp.model import KINDS
@@ -177,7 +177,7 @@ def pose_points(points, com, translation, rotation) -> np.ndarray:
     """Mesh-frame points ``(..., 3)`` m of the object moved by the pose change
     ``(translation (3,) m, rotation (3,) rad rotation vector)`` about its centre of mass
     ``com (3,)``: ``com + R (p - com) + translation``, with ``R`` from
-    :func:`jaxgrasp.model._potential.rotation_matrix` (the model's own convention)."""
+    `jaxgrasp.model._potential.rotation_matrix` (the model's own convention)."""
     import jax.numpy as jnp
 
     from jaxgrasp.model import rotation_matrix

@@ -1,4 +1,4 @@
-"""The plot of :func:`jaxgrasp.simulate`'s trials: displacement and rotation over time."""
+"""The plot of [`jaxgrasp.simulate`][jaxgrasp.simulate]'s trials: displacement and rotation over time."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ def plot_trials(result):
     """A figure with one row per kind of trial (hold, six-axis, kicks) and two columns: the
     object's displacement from the trial's start (mm) and its rotation (degrees) over time
     (s), one line per trial, dashed where the trial failed. ``result``: a
-    :class:`~jaxgrasp.simulation.SimulationResult` that was simulated."""
+    [`SimulationResult`][jaxgrasp.simulation.SimulationResult] that was simulated."""
     import matplotlib.pyplot as plt
 
     groups = [("hold", [result.hold] if result.hold is not None else []), ("six-axis", list(result.six_axis)),

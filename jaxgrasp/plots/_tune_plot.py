@@ -1,4 +1,4 @@
-"""The value over the iterations of :func:`jaxgrasp.tune`."""
+"""The value over the iterations of [`jaxgrasp.tune`][jaxgrasp.tune]."""
 
 from __future__ import annotations
 
@@ -15,11 +15,11 @@ __all__ = ["plot_history"]
 
 
 def plot_history(result: TuneResult, path=None, *, title: str | None = None):
-    """Plot the value over the iterations of :func:`jaxgrasp.tune` (mJ); save to ``path`` if given.
+    """Plot the value over the iterations of [`jaxgrasp.tune`][jaxgrasp.tune] (mJ); save to ``path`` if given.
 
     Returns the matplotlib ``Figure`` (Agg canvas; no display needed). The best value
     so far is drawn as a line, each iterate as a dot (open where its evaluation did not
-    converge). A ``path`` is written atomically (:func:`~jaxgrasp.plots.save_figure`):
+    converge). A ``path`` is written atomically (`save_figure`):
     never half an image.
     """
     fig = Figure(figsize=(6.0, 4.0))

@@ -1,11 +1,11 @@
 """A second opinion from a physics engine: the grasp in MuJoCo (optional extra ``jaxgrasp[sim]``).
 
-:func:`simulate` builds the grasp as a MuJoCo scene with the paper's fingertips calibrated
-into it (:mod:`._scene`), holds it under gravity, disturbs it along six axes and kicks it
-with kinetic energies that are multiples of the evaluation value (:mod:`._trials`), and
-returns a :class:`SimulationResult` (:mod:`._result`); its options are checked before
-anything is evaluated (:mod:`._options`). MuJoCo is imported only when
-:func:`simulate` runs.
+[`simulate`][jaxgrasp.simulate] builds the grasp as a MuJoCo scene with the paper's fingertips calibrated
+into it (`_scene`), holds it under gravity, disturbs it along six axes and kicks it
+with kinetic energies that are multiples of the evaluation value (`_trials`), and
+returns a [`SimulationResult`][jaxgrasp.simulation.SimulationResult] (`_result`); its options are checked before
+anything is evaluated (`_options`). MuJoCo is imported only when
+[`simulate`][jaxgrasp.simulate] runs.
 
 ``__all__`` lists the names promised to users. The names imported below the comment
 "For jaxgrasp's other packages" are what the library's other packages use from here

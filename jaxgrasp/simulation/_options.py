@@ -1,18 +1,18 @@
-"""The options of :func:`~jaxgrasp.simulation.simulate`, checked in one place before any evaluation.
+"""The options of [`simulate`][jaxgrasp.simulate], checked in one place before any evaluation.
 
-:func:`check_options` is what ``jaxgrasp.simulate`` and ``jaxgrasp simulate`` both call
-before they evaluate the grasp; its one-line :class:`~jaxgrasp.GraspValueError` names each
+`check_options` is what ``jaxgrasp.simulate`` and ``jaxgrasp simulate`` both call
+before they evaluate the grasp; its one-line [`GraspValueError`][jaxgrasp.GraspValueError] names each
 option as ``names`` spells it (the command passes its ``--options``). Beyond sign and
 finiteness it holds a run to three rules:
 
-* a given timestep is at most :data:`TIMESTEP_FRACTION` (1/100) of the shortest trial
+* a given timestep is at most `TIMESTEP_FRACTION` (1/100) of the shortest trial
   (hold, six-axis, and kick where kick scales are given), so that every trial is at least
   100 steps;
-* the trials add up to at most :data:`MAX_SIMULATED_S` of simulated time: the hold, six
+* the trials add up to at most `MAX_SIMULATED_S` of simulated time: the hold, six
   six-axis trials and ``len(kick_scales) * (random_kicks + 1)`` kicks (one least-energy kick
   per scale counted);
-* they take at most :data:`MAX_STEPS` MuJoCo steps, their time / timestep. With the
-  automatic timestep the count is known once the scene is built: :func:`check_steps` runs
+* they take at most `MAX_STEPS` MuJoCo steps, their time / timestep. With the
+  automatic timestep the count is known once the scene is built: `check_steps` runs
   then, before any trial.
 
 The two caps keep one run of a few contacts to minutes on one core, not hours.
@@ -55,7 +55,7 @@ MAX_STEPS = 2_000_000
 
 def check_number(name: str, value, lo: float = 0.0, strict: bool = True) -> float:
     """``value`` as a finite float above ``lo`` (``strict``) or at least ``lo``; a one-line
-    :class:`~jaxgrasp.GraspValueError` naming ``name`` otherwise."""
+    [`GraspValueError`][jaxgrasp.GraspValueError] naming ``name`` otherwise."""
     try:
         x = float(value)
     except (TypeError, ValueError):
@@ -67,11 +67,11 @@ def check_number(name: str, value, lo: float = 0.0, strict: bool = True) -> floa
 
 def check_options(*, kick_scales, random_kicks, friction=None, timestep=None, nominal_mass=None,
                   damping_ratio=None, names: Mapping[str, str] | None = None, **durations) -> dict:
-    """:func:`~jaxgrasp.simulation.simulate`'s options, checked, as the dict it runs on.
+    """[`simulate`][jaxgrasp.simulate]'s options, checked, as the dict it runs on.
 
     ``friction`` and ``timestep`` ``None``: the grasp's and the automatic one;
     ``nominal_mass`` and ``damping_ratio`` ``None``: not given (not in the result);
-    ``durations``: any of :data:`DEFAULTS`, the others their defaults. ``names`` maps a
+    ``durations``: any of `DEFAULTS`, the others their defaults. ``names`` maps a
     parameter (``hold_time_s``) to the name messages use (``--hold-time``).
 
     Raises:
@@ -135,7 +135,7 @@ def _check_simulated_time(opts, label) -> None:
 
 
 def check_steps(opts, timestep: float, label=None) -> None:
-    """At most :data:`MAX_STEPS` steps of ``timestep`` s for the trials of ``opts`` (the
+    """At most `MAX_STEPS` steps of ``timestep`` s for the trials of ``opts`` (the
     checked options; ``opts["timestep"]`` ``None``: ``timestep`` is the automatic one)."""
     label = label or (lambda k: k)
     total = simulated_time(opts)

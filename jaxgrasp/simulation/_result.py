@@ -1,5 +1,5 @@
-"""The results of :func:`jaxgrasp.simulate`: one :class:`Trial` per simulated test and the
-:class:`SimulationResult` that gathers them, frozen dataclasses in SI units."""
+"""The results of [`jaxgrasp.simulate`][jaxgrasp.simulate]: one [`Trial`][jaxgrasp.simulation.Trial] per simulated test and the
+[`SimulationResult`][jaxgrasp.simulation.SimulationResult] that gathers them, frozen dataclasses in SI units."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ DIRECTIONS = ("least_energy", "random")
 
 
 class SimulationStatus(enum.IntEnum):
-    """Whether :func:`jaxgrasp.simulate` ran the simulator, and if not, why.
+    """Whether [`jaxgrasp.simulate`][jaxgrasp.simulate] ran the simulator, and if not, why.
 
     ``SIMULATED``: the grasp was simulated (its trials are in the result). The others name
     the evaluation's status that kept it out of the simulator: ``UNSTABLE`` and
@@ -115,15 +115,15 @@ class Trial:
 
 @dataclasses.dataclass(frozen=True)
 class SimulationResult:
-    """The grasp in MuJoCo: its calibration and the trials (:func:`jaxgrasp.simulate`).
+    """The grasp in MuJoCo: its calibration and the trials ([`jaxgrasp.simulate`][jaxgrasp.simulate]).
 
     Attributes:
-        status: a :class:`SimulationStatus` code (``status_name`` for its name).
+        status: a [`SimulationStatus`][jaxgrasp.simulation.SimulationStatus] code (``status_name`` for its name).
         grasp_status: the evaluation's status name (``'stable'``, ...).
         value: the evaluation value, J (eq. 1).
         reason: why the grasp was not simulated (the evaluation's explanation), or ``""``.
         hold: the hold trial (``None`` when not simulated).
-        six_axis: the six disturbance trials, in the order of :data:`AXES`.
+        six_axis: the six disturbance trials, in the order of `AXES`.
         kicks: the energy kicks, for each scale: the least-energy direction, then the random ones.
         settled_normal_force_N: ``(N,)`` each fingertip's normal force in the simulator at
             the end of the hold (mean over its last quarter), N (``nan`` when not simulated).

@@ -2,7 +2,7 @@
 
 The object is a free body whose frame is the model frame (origin at the centre of mass,
 the grasp's axes); it starts at jaxgrasp's equilibrium pose. Its shape is its mesh (a
-:class:`~jaxgrasp.MeshGrasp`, moved into the model frame) or, for a plain grasp, the
+[`MeshGrasp`][jaxgrasp.MeshGrasp], moved into the model frame) or, for a plain grasp, the
 convex hull of a disc of the fingertip's radius in each contact's tangent plane (the body
 ``jaxgrasp show`` draws). MuJoCo collides with a mesh's convex hull; a contact whose
 surface there does not lie where the grasp says (a dent of a non-convex mesh, or a disc
@@ -43,13 +43,13 @@ IMPEDANCE = 0.01
 
 SURFACE_DEPTH_TOL = 0.05
 """A collision surface is the grasp's at a contact if MuJoCo's overlap there is ``dr``
-within this fraction of ``dr``, and its normal within :data:`SURFACE_ANGLE_TOL`."""
+within this fraction of ``dr``, and its normal within `SURFACE_ANGLE_TOL`."""
 
 MAX_TIMESTEP = 1e-3
-"""The longest timestep :func:`auto_timestep` gives, s."""
+"""The longest timestep `auto_timestep` gives, s."""
 
 SURFACE_ANGLE_TOL = 0.05
-"""rad, see :data:`SURFACE_DEPTH_TOL`."""
+"""rad, see `SURFACE_DEPTH_TOL`."""
 
 
 def load_mujoco():
@@ -138,7 +138,7 @@ def calibrate(c: Contacts, dp, w) -> dict:
 
 def object_shape(grasp_like) -> tuple[np.ndarray, np.ndarray, str]:
     """``(vertices (V, 3) m model frame, faces (F, 3), kind)`` of the object: the
-    :class:`~jaxgrasp.MeshGrasp`'s mesh moved to the centre of mass (``"mesh"``), or the
+    [`MeshGrasp`][jaxgrasp.MeshGrasp]'s mesh moved to the centre of mass (``"mesh"``), or the
     convex hull of a disc of the fingertip's radius in each contact's tangent plane (``"hull"``)."""
     import trimesh
 
@@ -242,7 +242,7 @@ def scene_xml(c: Contacts, cal: dict, shape, planes, *, mass, gravity, inertia, 
 def _surfaces_off(mujoco, model, c: Contacts, qpos) -> list[int]:
     """The contacts whose collision surface in ``model`` (every pair with the object's
     geom) is not the grasp's: no contact, or overlap or normal off by more than the
-    tolerances (:data:`SURFACE_DEPTH_TOL`, :data:`SURFACE_ANGLE_TOL`)."""
+    tolerances (`SURFACE_DEPTH_TOL`, `SURFACE_ANGLE_TOL`)."""
     data = mujoco.MjData(model)
     data.qpos[:] = qpos
     mujoco.mj_forward(model, data)
@@ -285,10 +285,10 @@ def model_d(c: Contacts, i: int, qpos) -> float:
 
 def auto_timestep(K, mass: float, inertia, c: Contacts, damping_ratio: float) -> float:
     """A timestep, s, that resolves the fastest contact mode and keeps the contact dampers
-    stable: the least of ``0.08 / omega``, ``0.5 d / b_max`` and :data:`MAX_TIMESTEP`. ``omega^2`` is the
+    stable: the least of ``0.08 / omega``, ``0.5 d / b_max`` and `MAX_TIMESTEP`. ``omega^2`` is the
     largest eigenvalue of ``M^-1 H`` (``H = sum K_i J_i^T J_i``, ``J_i = (n_i, p_i x n_i)``,
     ``M = diag(m, m, m, I)``); ``b_max`` the largest ``b_i = 2 zeta sqrt(K_i / m)`` of
-    ``solref`` and ``d`` the impedance (:data:`IMPEDANCE`): with a small ``d`` MuJoCo's
+    ``solref`` and ``d`` the impedance (`IMPEDANCE`): with a small ``d`` MuJoCo's
     step is stable only for ``b dt`` below about ``d``, beyond which the object chatters
     at the step's own frequency (found by halving the step on random grasps)."""
     jac = np.concatenate([c.n, np.cross(c.p, c.n)], axis=1)  # (N, 6)

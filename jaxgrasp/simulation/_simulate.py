@@ -1,4 +1,4 @@
-""":func:`simulate`: a grasp in MuJoCo, held, disturbed along six axes and kicked.
+"""[`simulate`][jaxgrasp.simulate]: a grasp in MuJoCo, held, disturbed along six axes and kicked.
 
 * hold: ``hold_time_s`` under gravity from the equilibrium pose; success if the object
   moves less than ``hold_tolerance_m`` and turns less than ``hold_tolerance_rad``; its end
@@ -10,7 +10,7 @@
   (15 degrees);
 * energy kicks: the object's initial velocity with kinetic energy ``s * value`` for each
   ``s`` of ``kick_scales``, along the least-energy boundary's direction (from the
-  equilibrium to :attr:`~jaxgrasp.Evaluation.boundary_translation` and ``_rotation`` of
+  equilibrium to `boundary_translation` and ``_rotation`` of
   the limiting boundary) and ``random_kicks`` random directions; success if no contact
   slides more than its slip threshold within ``kick_time_s`` (no kicks where the value is 0).
 """
@@ -42,7 +42,7 @@ def simulate(
 ) -> SimulationResult:
     """A second opinion from MuJoCo: the grasp held, disturbed and kicked in a physics engine.
 
-    The scene (:mod:`jaxgrasp.simulation._scene`): the object (its mesh, or the contacts'
+    The scene (`jaxgrasp.simulation._scene`): the object (its mesh, or the contacts'
     hull) at jaxgrasp's equilibrium pose, each fingertip a sphere fixed at ``p_i + (r -
     dr_i) n_i``, condim 4, elliptic cones, friction ``mu`` and ``mu e_i`` (eq. 9, 10), normal
     springs through eq. 4 at ``dr`` and at the equilibrium, gravity. The trials (module
@@ -51,8 +51,8 @@ def simulate(
     least-energy boundary's direction and random ones (success: no contact slips).
 
     Args:
-        grasp: a :class:`~jaxgrasp.Grasp` or :class:`~jaxgrasp.MeshGrasp` (SI units).
-        evaluation: its :class:`~jaxgrasp.Evaluation` (default: :func:`jaxgrasp.evaluate`).
+        grasp: a [`Grasp`][jaxgrasp.Grasp] or [`MeshGrasp`][jaxgrasp.MeshGrasp] (SI units).
+        evaluation: its [`Evaluation`][jaxgrasp.Evaluation] (default: [`jaxgrasp.evaluate`][jaxgrasp.evaluate]).
         friction: the simulator's friction coefficient instead of the grasp's (a what-if).
         nominal_mass: kg, the simulated mass of a weightless grasp (mass 0: no gravity).
         damping_ratio: of each contact's normal spring against the object's mass (light:
@@ -66,11 +66,11 @@ def simulate(
         slip_threshold: m, the sliding that counts as a slip (default per contact
             ``mu_i d_i / 2``: the tangential deformation at which the paper's fingertip
             starts to slip without torsion, eq. 6 and 9).
-        **durations: any of :data:`~jaxgrasp.simulation.DEFAULTS` (s, m, rad, m/s^2); all trials
+        **durations: any of `DEFAULTS` (s, m, rad, m/s^2); all trials
             together at most ``_options.MAX_SIMULATED_S`` and ``_options.MAX_STEPS`` steps.
 
     Returns:
-        A :class:`~jaxgrasp.simulation.SimulationResult`; its ``parameters`` hold every
+        A [`SimulationResult`][jaxgrasp.simulation.SimulationResult]; its ``parameters`` hold every
         parameter, the timestep and the calibration.
 
     Raises:
@@ -106,7 +106,7 @@ def _one_grasp(grasp):
 
 
 def _skip_status(evaluation, simulate_unstable: bool):
-    """The :class:`SimulationStatus` that keeps the grasp out of the simulator, or ``None``."""
+    """The [`SimulationStatus`][jaxgrasp.simulation.SimulationStatus] that keeps the grasp out of the simulator, or ``None``."""
     name = evaluation.status_name
     if name == "stable":
         return None

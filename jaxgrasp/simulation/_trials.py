@@ -122,7 +122,7 @@ class Runner:
         return trial, state, settled
 
     def six_axis(self, state, accel: float, duration: float, tol_m: float, tol_rad: float) -> list[Trial]:
-        """Six trials from ``state``: a force ``m * accel`` along each of :data:`AXES`."""
+        """Six trials from ``state``: a force ``m * accel`` along each of `AXES`."""
         out = []
         for k, axis in enumerate(AXES):
             f = np.zeros(3)

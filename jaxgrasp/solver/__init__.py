@@ -1,8 +1,8 @@
 """A batched augmented-Lagrangian solver for small smooth constrained problems.
 
-It knows nothing of grasps: a :class:`Problem` is an objective with equality and
-inequality rows; :func:`solve` runs one lane of it, :func:`solve_lanes` many lanes as a
-work queue. Its statuses are :class:`LaneStatus` (a :class:`jaxgrasp.base.Coded`).
+It knows nothing of grasps: a `Problem` is an objective with equality and
+inequality rows; `solve` runs one lane of it, `solve_lanes` many lanes as a
+work queue. Its statuses are [`LaneStatus`][jaxgrasp.solver.LaneStatus] (a `jaxgrasp.base.Coded`).
 
 ``__all__`` lists the names promised to users. The names imported below the comment
 "For jaxgrasp's other packages" are what the library's other packages use from here

@@ -4,19 +4,19 @@ On the CPU, ``jnp.linalg.solve`` or ``jnp.linalg.eigh`` of a batch of matrices c
 of jaxlib's LAPACK kernels (``lapack_dgetrf_ffi``, ``lapack_dsyevd_ffi``), which splits a
 large enough batch over XLA's intra-op thread pool and waits for the pieces. The batch
 engine runs one executable per device on that same pool (one device per core,
-:mod:`jaxgrasp.engine._devices`): when every device is inside such a kernel at once,
+`jaxgrasp.engine._devices`): when every device is inside such a kernel at once,
 every pool thread waits for pieces that no thread is left to run, and the process hangs,
 using no CPU (a deadlock, not a slowdown: it happened with as many devices as cores, in
 the settling stage's batched polish and in the start frames of a large chunk).
 
-* :func:`solve`: the systems solved here are tiny (at most ``6 + 3N`` unknowns), so
+* `solve`: the systems solved here are tiny (at most ``6 + 3N`` unknowns), so
   Gaussian elimination written out in XLA (Golub & Van Loan, Sec. 3.4, partial
   pivoting) is cheap and never leaves the device's own thread.
-* :func:`eigh`: ``jnp.linalg.eigh`` that, under ``vmap`` on the CPU, calls LAPACK on one
+* `eigh`: ``jnp.linalg.eigh`` that, under ``vmap`` on the CPU, calls LAPACK on one
   matrix at a time (``lax.map``): a batch of one is never split (other backends get the
   batched solver). Meant for a few matrices per grasp, whose count grows with the batch.
   (The solver's own ``eigh``, on every loop step, runs on gathered blocks of
-  :data:`jaxgrasp.solver._direction.EIGH_BLOCK` lanes, a batch far below any that was
+  `jaxgrasp.solver._direction.EIGH_BLOCK` lanes, a batch far below any that was
   seen to split.)
 """
 

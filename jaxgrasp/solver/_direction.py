@@ -13,9 +13,9 @@ Where ``H`` is safely positive definite (``tr(H) tr(H^-1) <= 1e10``, which impli
 ``e_min >= 1e-10 e_max``, so the floor and the mirror change nothing) that direction is
 the plain Newton step ``-H^-1 g``, which an ``LDL^T`` factorisation without pivoting gives
 at a fraction of ``eigh``'s cost (written out entry by entry, so that under ``vmap`` every
-operation is one vector operation over the lanes). Under ``vmap`` (:func:`newton_direction`
+operation is one vector operation over the lanes). Under ``vmap`` (`newton_direction`
 is a ``custom_vmap``) every lane takes the factorisation, and ``eigh`` runs only on the
-lanes that fail the test, gathered in blocks of :data:`EIGH_BLOCK`: on grasp grids a
+lanes that fail the test, gathered in blocks of `EIGH_BLOCK`: on grasp grids a
 minority of the Newton lanes of a loop step are indefinite, and lanes that take no
 Newton step this loop step (``needed`` false) take no ``eigh``. A batch of at most one
 block (a single grasp's few slots) takes ``eigh`` on every lane: a smaller executable,
@@ -53,7 +53,7 @@ def ldl_direction(hmat, g):
     pivoting, and ``ok`` ``()`` bool, true where every pivot is positive and
     ``tr(H) tr(H^-1) <= CONDITION_BOUND``: then ``hmat`` is positive definite with
     ``e_min >= FLOOR e_max`` (``e_max <= tr H``, ``1 / e_min <= tr H^-1``), so ``p`` is
-    :func:`eigen_direction`'s direction (to rounding). Where ``ok`` is false ``p`` is
+    `eigen_direction`'s direction (to rounding). Where ``ok`` is false ``p`` is
     meaningless (a pivot near zero can overflow it).
 
     Written entry by entry (``n`` is small and static): under ``vmap`` each line is one
@@ -99,7 +99,7 @@ def newton_direction(hmat, g, needed):
     """``(n,)`` Newton direction of the module docstring for the symmetric Hessian ``hmat``
     ``(n, n)`` and the gradient ``g`` ``(n,)``; ``needed`` ``()`` bool: where false the
     direction is not used and may be anything, even not finite (under ``vmap`` such lanes
-    cost no ``eigh``). One lane: :func:`eigen_direction`."""
+    cost no ``eigh``). One lane: `eigen_direction`."""
     del needed
     return eigen_direction(hmat, g)
 
@@ -122,8 +122,8 @@ def _newton_direction_batched(axis_size, in_batched, hmat, g, needed):
 
 def _eigh_where(hmat, g, use, p):
     """``p`` ``(B, n)`` with the rows where ``use`` ``(B,)`` replaced by
-    :func:`eigen_direction`, computed in gathered blocks of :data:`EIGH_BLOCK` rows
-    (:func:`jaxgrasp.solver._rows.over_rows`: none where there are none)."""
+    `eigen_direction`, computed in gathered blocks of `EIGH_BLOCK` rows
+    (`jaxgrasp.solver._rows.over_rows`: none where there are none)."""
 
     def update(rows, valid, p):
         return put_rows(p, rows, valid, jax.vmap(eigen_direction)(hmat[rows], g[rows]))

@@ -1,13 +1,13 @@
 """A work queue that runs many lanes of the solver, finished lanes handing their slot on.
 
-:func:`solve_lanes` gives each lane what :func:`jaxgrasp.solver._solver.solve` gives it, but
+`solve_lanes` gives each lane what `jaxgrasp.solver._solver.solve` gives it, but
 advances only a few slots per loop step instead of every lane in lockstep; under
 ``jax.vmap`` it folds the batch axis into its lanes (``custom_vmap``), so the lanes of
 every grasp of a batch share one queue. It drives the solver through its pieces
-:func:`~jaxgrasp.solver._solver.init`, the parts of :func:`~jaxgrasp.solver._solver.step`
-(:func:`~jaxgrasp.solver._solver.propose`, one :func:`~jaxgrasp.solver._solver.line_search` over every
-slot, :func:`~jaxgrasp.solver._solver.accept`), :func:`~jaxgrasp.solver._solver.running` and
-:func:`~jaxgrasp.solver._solver.to_result`.
+`init`, the parts of `step`
+(`propose`, one `line_search` over every
+slot, `accept`), `running` and
+`to_result`.
 
 Lanes of one ``vmap`` advance in lockstep, so a plain batched loop costs ``L * max(steps)``
 lane-steps although most lanes finish early (or never start). The queue keeps
@@ -34,7 +34,7 @@ __all__ = ["solve_lanes", "solve_lane_batches", "Held"]
 
 
 class Held(NamedTuple):
-    """Lanes a queue holds back until its ``release`` frees them (:func:`solve_lanes`),
+    """Lanes a queue holds back until its ``release`` frees them (`solve_lanes`),
     each field with leading axis ``L``.
 
     Attributes:
@@ -65,33 +65,33 @@ def solve_lanes(
     """Solve a batch of lanes with early exit of finished lanes (leading axis ``L``).
 
     A work queue keeps ``W = min(ceil(slot_fraction * L), max_slots)`` slots busy (see the
-    module docstring); each lane's result is what :func:`jaxgrasp.solver._solver.solve`
+    module docstring); each lane's result is what `jaxgrasp.solver._solver.solve`
     gives. Under ``jax.vmap`` the batch axis is folded into the lane axis
-    (:func:`_queue_over_lanes`), so ``problem`` must take every lane-dependent quantity
+    (`_queue_over_lanes`), so ``problem`` must take every lane-dependent quantity
     through ``theta`` (it must not close over traced values).
 
     Args:
         problem: ``theta_lane -> Problem`` (or ``-> fg``, see
-            :func:`~jaxgrasp.solver._solver.as_problem`): the lane's problem.
+            `as_problem`): the lane's problem.
         theta: pytree of per-lane problem data, leading axis ``L`` (may be empty).
         x0: ``(L, n)`` starting points.
         eq_mask: ``(L, m)`` one-hot equality selectors (rows of zeros: no equality).
         nu0: ``(L,)`` initial equality multipliers (``NaN``: the least-squares estimate
-            at ``x0``, see :func:`~jaxgrasp.solver._solver.init`).
+            at ``x0``, see `init`).
         active: ``(L,)`` bool; inactive lanes end at once with status
             ``LaneStatus.NO_START``.
-        options: :class:`~jaxgrasp.solver._solver.SolverOptions`.
+        options: [`SolverOptions`][jaxgrasp.SolverOptions].
         rank: ``(L,)`` int or ``None`` (all 0): the queue loads lanes in increasing rank,
             in lane order within a rank. Results do not depend on it (each lane's
             computation is its own); the time does: lanes expected to take many steps
             ranked first finish while others still fill the slots, instead of running
             alone at the end of the queue with the other slots idle.
-        held: :class:`Held` lanes (default none), run only where ``release`` frees them:
+        held: `Held` lanes (default none), run only where ``release`` frees them:
             a second wave that shares the queue with the first, so that the slots the
             first wave's last lanes leave idle take the second's.
         release: ``release(status, objective, complete, aux) -> (L,) bool`` (static),
             called once before the first step and then at most every
-            :data:`RELEASE_EVERY` loop steps while some group has completed since the
+            `RELEASE_EVERY` loop steps while some group has completed since the
             last call (at once where no lane waits): ``status`` ``(L,)`` and
             ``objective`` ``(L,)`` are every lane's as far as it ran (final for finished
             lanes; ``objective`` meaningful for converged ones), ``complete`` ``(L,)``
@@ -101,7 +101,7 @@ def solve_lanes(
             those freed at one call); a held lane never freed ends ``NO_START``.
 
     Returns:
-        :class:`~jaxgrasp.solver._solver.SolverResult` with leading axis ``L``.
+        `SolverResult` with leading axis ``L``.
     """
     rank = jnp.zeros(jnp.shape(active), jnp.int32) if rank is None else jnp.asarray(rank, jnp.int32)
     if held is None:
@@ -113,7 +113,7 @@ def solve_lanes(
 
 def _queue_over_lanes(problem: Callable, options: SolverOptions, release: Callable | None = None):
     """``run(theta, x0, eq_mask, nu0, active, rank, held) -> SolverResult``:
-    :func:`_solve_lanes` as a ``custom_vmap`` whose batching rule folds the batch axis
+    `_solve_lanes` as a ``custom_vmap`` whose batching rule folds the batch axis
     into the lane axis.
 
     Under ``jax.vmap`` (e.g. one call per grasp, vmapped over grasps) all ``B * L`` lanes
@@ -153,14 +153,14 @@ def solve_lane_batches(
     held: Held | None = None,
     release: Callable | None = None,
 ) -> SolverResult:
-    """:func:`solve_lanes` of ``B`` batches of ``L`` lanes (every argument with leading
+    """`solve_lanes` of ``B`` batches of ``L`` lanes (every argument with leading
     axes ``(B, L)``), all ``B * L`` lanes in one queue; the result has leading axes
     ``(B, L)``. Each batch's ``held.group`` ids are its own (``release`` sees them
     flattened, batch after batch).
 
-    This is what :func:`solve_lanes` does under ``jax.vmap`` (its batching rule calls it),
+    This is what `solve_lanes` does under ``jax.vmap`` (its batching rule calls it),
     called directly: a caller that holds a batch, such as
-    :func:`jaxgrasp.tolerance._stages.solve_stage`, gets the same lanes while the queue is
+    `jaxgrasp.tolerance._stages.solve_stage`, gets the same lanes while the queue is
     traced once, where ``vmap`` traces it once for one batch (``custom_vmap`` builds a
     jaxpr of the function it wraps) and again folded.
     """
@@ -309,7 +309,7 @@ def _advance(problem, release, lanes: _Lanes, o: SolverOptions, q: _Queue) -> _Q
 
 
 def _solve_lanes(problem, theta, x0, eq_mask, nu0, active, rank, held: Held, release, o: SolverOptions) -> SolverResult:
-    """:func:`solve_lanes` on one flat batch of ``L`` lanes: the queue loop.
+    """`solve_lanes` on one flat batch of ``L`` lanes: the queue loop.
 
     One loop of ``W`` slots to the end. A second, narrower loop for the last long lanes
     once the queue is empty would copy the whole solver step into the executable again,

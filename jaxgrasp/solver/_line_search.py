@@ -15,10 +15,10 @@ Almost every Newton step takes the full length, but in a batch of a hundred lane
 lane nearly always walks the whole ladder (a converged lane whose merit cannot fall
 below its rounding), and a batched loop over the ladder runs as long as its slowest lane.
 So the full length is tried for every lane, and only the lanes that fail it walk the rest,
-gathered in blocks of :data:`LADDER_BLOCK` lanes whose remaining lengths are all
+gathered in blocks of `LADDER_BLOCK` lanes whose remaining lengths are all
 evaluated at once: the cost follows the number of such lanes (none: no block at all),
 and each lane's step is what a walk of its own ladder would give. A batch of at most
-one block (a single grasp's few slots, one lane of :func:`jaxgrasp.solver.solve`) walks
+one block (a single grasp's few slots, one lane of `jaxgrasp.solver.solve`) walks
 each lane's ladder lazily instead: a smaller executable, and the same steps.
 """
 
@@ -98,7 +98,7 @@ def line_search(merit, x, p, phi0, slope, needs_step, steps: int, rounding: floa
 def _walk(merit, alphas, steps, x, p, phi0, slope, slack, needs_step, deeper, lane):
     """One lane's ladder, then (where ``deeper``) its deeper one, walked lazily (a while
     loop that stops at the first length passing Armijo's test, or at the end of the first
-    ladder where a length lowered the merit): ``(x_new, improve)`` as :func:`line_search`
+    ladder where a length lowered the merit): ``(x_new, improve)`` as `line_search`
     gives them. ``alphas`` holds both ladders, ``steps`` lengths each."""
 
     def cond(c):
@@ -136,7 +136,7 @@ def _block_values(values, x, p, rows, lengths):
 def _rest_of_ladder(values, x, p, phi0, slope, slack, t0, rest, alphas, idx, improve):
     """``(idx, improve)`` ``(B,)`` with the lanes where ``rest`` is true decided on the
     whole ladder: every length past the first, evaluated in gathered blocks of
-    :data:`LADDER_BLOCK` lanes (:func:`jaxgrasp.solver._rows.over_rows`)."""
+    `LADDER_BLOCK` lanes (`jaxgrasp.solver._rows.over_rows`)."""
     more = alphas[1:]  # (steps - 1,)
 
     def update(rows, valid, c):
@@ -158,7 +158,7 @@ def _deeper_ladder(values, x, p, phi0, slope, slack, deep, deeper, idx, improve,
     passes Armijo's test with ``-slack``, else the lowest merit below ``phi0 - slack``:
     so short a step must lower the merit by more than its rounding, or a lane at its
     rounding floor would wander by rounding noise. ``idx`` counts from the start of the
-    first ladder (``offset`` lengths). Gathered in blocks of :data:`LADDER_BLOCK` lanes,
+    first ladder (``offset`` lengths). Gathered in blocks of `LADDER_BLOCK` lanes,
     none where no lane needs it."""
 
     def update(rows, valid, c):

@@ -1,10 +1,10 @@
 """Work on the rows of a batch that need it, gathered in fixed-size blocks.
 
 Under ``vmap`` a branch taken by a few lanes costs as much as one taken by all of them.
-:func:`over_rows` instead runs a computation on the rows where a mask is true, ``block``
+`over_rows` instead runs a computation on the rows where a mask is true, ``block``
 rows at a time, in as many blocks as there are such rows (none where there are none):
-the shapes stay static, the cost follows the count. :mod:`jaxgrasp.solver._direction` uses it for
-``eigh``, :mod:`jaxgrasp.solver._line_search` for the ladder past the full step.
+the shapes stay static, the cost follows the count. `jaxgrasp.solver._direction` uses it for
+``eigh``, `jaxgrasp.solver._line_search` for the ladder past the full step.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ def over_rows(use, block: int, update, carry):
     """Fold ``update(rows, valid, carry) -> carry`` over the rows where ``use`` ``(B,)``
     is true, ``block`` at a time (static; at most ``B``): ``rows`` ``(block,)`` uint32 are
     row indices, ``valid`` ``(block,)`` bool is false on the padding rows of the last
-    block (which repeat a real row: write with :func:`put_rows`)."""
+    block (which repeat a real row: write with `put_rows`)."""
     size = use.shape[0]
     block = min(block, size)
     num_blocks = -(-size // block)

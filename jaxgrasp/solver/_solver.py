@@ -17,33 +17,33 @@ so every step is a descent direction) and a backtracking line search evaluated o
 ladder of step lengths; then ``lam <- max(0, lam - rho g)``, ``nu <- nu + rho h``, and
 ``rho`` grows when the violation does not fall fast enough (on a lane with an equality:
 after an inner solve that finished, i.e. reached its tolerance or no step could lower
-phi, or while the violation is still above :data:`FAR_VIOLATION`, or once the lane has
+phi, or while the violation is still above `FAR_VIOLATION`, or once the lane has
 taken ``grow_penalty_after`` steps), by ``rho_growth``, or at once to where the
 infeasibility test is expected to pass where the violation stalls far from feasibility at
-a nearly stationary point of the violation measure (:func:`_penalty_growth`). The inner
+a nearly stationary point of the violation measure (`_penalty_growth`). The inner
 and outer loops are
 flattened into one ``lax.while_loop`` whose body does a multiplier update where the inner
 solve is done and then a Newton step where the (updated) inner solve is not, so lanes that
 need different iteration counts do not wait on nested loops. ``steps`` counts both kinds.
 
-Derivatives: a problem is a :class:`Problem`, ``fg(x) = (f, g)`` in one call. Each step
-takes the problem's first-order data once (:class:`FirstOrder`: ``f``, ``g``, ``grad f``
+Derivatives: a problem is a `Problem`, ``fg(x) = (f, g)`` in one call. Each step
+takes the problem's first-order data once (`FirstOrder`: ``f``, ``g``, ``grad f``
 and the Jacobian ``J`` of ``g``; by default one forward-mode pass); every gradient it needs
 is then ``grad f + J^T w`` for some weights ``w`` (phi's before and after the multiplier
 update, the violation's), and phi's Hessian is ``hess(f + w . g) + rho J^T D J``. A
 problem with structure may supply its own first-order data and Lagrangian Hessian
-(:mod:`jaxgrasp.tolerance._problems` does, from the contact kinematics); otherwise autodiff.
+(`jaxgrasp.tolerance._problems` does, from the contact kinematics); otherwise autodiff.
 
 Each lane ends with a status and its KKT residuals at ``(x, lam, nu)``:
 stationarity ``|grad f + nu grad h - sum lam grad g|_inf``, feasibility
 ``max(|h|, max(-g_i, 0))`` and complementarity ``max |lam_i g_i|``.
 
-:func:`solve` runs one lane; its pieces :func:`init`, :func:`step` (itself
-:func:`propose`, :func:`line_search` and :func:`accept`), :func:`running` and
-:func:`to_result` are public so that the work queue of :func:`jaxgrasp.solver.solve_lanes`, which runs
+`solve` runs one lane; its pieces `init`, `step` (itself
+`propose`, `line_search` and `accept`), `running` and
+`to_result` are public so that the work queue of `jaxgrasp.solver.solve_lanes`, which runs
 many lanes with early exit, can drive them: it runs one line search over all its slots.
-The direction is :func:`jaxgrasp.solver._direction.newton_direction` and the ladder
-:func:`jaxgrasp.solver._line_search.line_search`; under ``vmap`` each pays for ``eigh`` and for
+The direction is `jaxgrasp.solver._direction.newton_direction` and the ladder
+`jaxgrasp.solver._line_search.line_search`; under ``vmap`` each pays for ``eigh`` and for
 step lengths past the first only on the lanes that need them.
 """
 
@@ -84,15 +84,15 @@ __all__ = [
 
 @dataclasses.dataclass(frozen=True)
 class SolverOptions:
-    """Static settings of the solver's lanes (:func:`jaxgrasp.solver.solve`,
-    :func:`jaxgrasp.solver.solve_lanes`; hashable; all quantities in the scaled units).
+    """Static settings of the solver's lanes (`jaxgrasp.solver.solve`,
+    `jaxgrasp.solver.solve_lanes`; hashable; all quantities in the scaled units).
 
     Attributes:
         tol: KKT tolerance on stationarity, feasibility and complementarity (float64;
             in lower precision it is raised to ``1e3 * eps`` of the dtype). Where phi is
             so stiff that one ulp of ``x`` moves its gradient by more, stationarity is
-            held to that rounding floor instead, at most :data:`MAX_STATIONARITY_TOL`
-            times tol (:func:`_stationarity_tol`).
+            held to that rounding floor instead, at most `MAX_STATIONARITY_TOL`
+            times tol (`_stationarity_tol`).
         max_steps: budget of loop steps (Newton steps plus multiplier updates) per lane.
         max_inner: Newton steps before a multiplier update is forced.
         inner_tol_factor: inner solves stop at stationarity
@@ -112,8 +112,8 @@ class SolverOptions:
         max_step: largest Newton step (inf-norm, scaled variables).
         line_search_steps: number of step lengths ``1, 1/2, 1/4, ...`` tried per Newton step;
             a feasible lane that none of them lets lower its merit tries as many again,
-            ``2^-line_search_steps, ...`` (:mod:`jaxgrasp.solver._line_search`).
-        slot_fraction: :func:`jaxgrasp.solver.solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
+            ``2^-line_search_steps, ...`` (`jaxgrasp.solver._line_search`).
+        slot_fraction: `jaxgrasp.solver.solve_lanes` keeps ``ceil(slot_fraction * lanes)`` lanes in
             flight (finished lanes hand their slot to the next), at most ``max_slots``.
         max_slots: upper bound on those slots. A loop step over a few hundred lanes keeps
             its working set in the CPU caches; over thousands it spills to main memory
@@ -121,15 +121,15 @@ class SolverOptions:
         grow_penalty_after: loop steps after which a lane with an equality grows its
             penalty whenever its violation stalls, as a lane without one does (before, not after
             an inner solve cut short at ``max_inner`` while the violation is below
-            :data:`FAR_VIOLATION`; see :func:`_multiplier_update`). A lane still running
+            `FAR_VIOLATION`; see `_multiplier_update`). A lane still running
             then is crawling: with the growth it ends converged, or infeasible at
             ``rho_max``, instead of unsettled at ``max_steps``.
         stall_growth_max: largest factor by which the penalty grows at one update where
-            the violation stalls above :data:`FAR_VIOLATION` at a point where the
+            the violation stalls above `FAR_VIOLATION` at a point where the
             violation measure is already nearly stationary (its gradient at most
-            :data:`NEAR_STATIONARY` times the violation): there the factor is the one
+            `NEAR_STATIONARY` times the violation): there the factor is the one
             after which the ``infeasible_stationarity`` test is expected to pass
-            (:func:`_penalty_growth`), at least ``rho_growth``. ``rho_growth`` itself
+            (`_penalty_growth`), at least ``rho_growth``. ``rho_growth`` itself
             restores the fixed growth.
     """
 
@@ -160,7 +160,7 @@ class SolverResult:
         lam: ``(m,)`` inequality multipliers, ``>= 0`` (zero at the equality's index).
         nu: ``()`` equality multiplier (0 when there is no equality).
         objective: ``()`` ``f(x)``.
-        status: ``()`` int32 :class:`~jaxgrasp.solver.LaneStatus` (``NO_START`` for an
+        status: ``()`` int32 [`LaneStatus`][jaxgrasp.solver.LaneStatus] (``NO_START`` for an
             inactive lane).
         stationarity, feasibility, complementarity: ``()`` KKT residuals at ``(x, lam, nu)``.
         steps: ``()`` int32, Newton steps plus multiplier updates taken.
@@ -194,7 +194,7 @@ class SolverState:
         prev_viol: ``()`` constraint violation at the last multiplier update (``inf`` before
             the first).
         steps: ``()`` int32, Newton steps plus multiplier updates taken.
-        status: ``()`` int32 :class:`~jaxgrasp.solver.LaneStatus`, ``NOT_CONVERGED``
+        status: ``()`` int32 [`LaneStatus`][jaxgrasp.solver.LaneStatus], ``NOT_CONVERGED``
             while running.
         stationarity, feasibility, complementarity: ``()`` KKT residuals at the last
             multiplier update (``inf`` before the first).
@@ -244,7 +244,7 @@ def augmented_lagrangian(fg, x, lam, nu, rho, eq_mask):
 class FirstOrder:
     """A problem at one point: ``fx`` ``()``, ``gx`` ``(m,)``, ``grad_f`` ``(n,)``, the
     constraint Jacobian ``jac`` ``(m, n)``, and ``aux``: whatever the problem's
-    :attr:`Problem.lagrangian_hessian` reuses (``None`` for the autodiff default). Every
+    `Problem.lagrangian_hessian` reuses (``None`` for the autodiff default). Every
     gradient a step needs is a product with ``jac``: phi's before and after the multiplier
     update and the violation's, with no reverse pass."""
 
@@ -271,7 +271,7 @@ class Problem:
             Jacobian of ``g``; phi's penalty contributes it), given the ``first_order`` at
             ``x``; or ``None``: ``jax.hessian`` of ``f + w . g`` plus that term from
             ``FirstOrder.jac``. A problem with structure supplies both
-            (:mod:`jaxgrasp.tolerance._problems` writes them from the contact kinematics'
+            (`jaxgrasp.tolerance._problems` writes them from the contact kinematics'
             derivatives, cheaper than autodiff's nested passes).
     """
 
@@ -281,7 +281,7 @@ class Problem:
 
 
 def as_problem(problem) -> Problem:
-    """``problem`` itself, or a :class:`Problem` of the plain ``fg`` callable (autodiff)."""
+    """``problem`` itself, or a `Problem` of the plain ``fg`` callable (autodiff)."""
     return problem if isinstance(problem, Problem) else Problem(problem)
 
 
@@ -309,7 +309,7 @@ def lagrangian_hessian(problem: Problem, d: FirstOrder, x, weights, gauss_newton
 
 
 def init(x0, eq_mask, nu0, active, o: SolverOptions) -> SolverState:
-    """The state of a lane before its first step (arguments as :func:`solve`)."""
+    """The state of a lane before its first step (arguments as `solve`)."""
     x0 = jnp.asarray(x0)
     dtype = x0.dtype
     eq_mask = jnp.asarray(eq_mask, dtype)
@@ -332,17 +332,17 @@ def init(x0, eq_mask, nu0, active, o: SolverOptions) -> SolverState:
 FAR_VIOLATION = 1e-2
 """A violation (scaled constraint units) above which the penalty of a lane with an
 equality grows whenever the violation stalls, even after an inner solve cut short at
-``max_inner`` Newton steps (:func:`_multiplier_update`)."""
+``max_inner`` Newton steps (`_multiplier_update`)."""
 
 
 NEAR_STATIONARY = 1e-2
-"""A lane whose violation stalls above :data:`FAR_VIOLATION` where the violation
+"""A lane whose violation stalls above `FAR_VIOLATION` where the violation
 measure's gradient (inf-norm) is at most this times the violation grows its penalty by
-more than ``rho_growth`` (:func:`_penalty_growth`). Lanes that end converged stall far
+more than ``rho_growth`` (`_penalty_growth`). Lanes that end converged stall far
 from feasibility only where that gradient is of the order of the violation."""
 
 PREDICT_MARGIN = 0.1
-""":func:`_penalty_growth` aims the violation measure's gradient at this fraction of the
+"""`_penalty_growth` aims the violation measure's gradient at this fraction of the
 ``infeasible_stationarity`` bound."""
 
 
@@ -363,11 +363,11 @@ def phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
     """``(n, n)`` exact Hessian of phi at ``s.x``: ``hess(f + w . g)`` with the weights
     ``w = d phi / d g`` held fixed, plus ``rho J^T D J`` with ``D`` selecting the equality
     and the inequalities whose shifted multiplier is positive (where phi's penalty is
-    quadratic in ``g``), both from the problem's :func:`lagrangian_hessian`. This equals
+    quadratic in ``g``), both from the problem's `lagrangian_hessian`. This equals
     ``jax.hessian`` of phi (to rounding) with a smaller traced graph and less work.
 
     The problem forms the second term with the first: a structured problem folds it into
-    its per-row pieces (:mod:`jaxgrasp.tolerance._problems`: each contact's ``4 x 4``
+    its per-row pieces (`jaxgrasp.tolerance._problems`: each contact's ``4 x 4``
     block). Formed here as a product of the whole ``(m, n)`` Jacobian, XLA's CPU backend
     fused the rows' mask into that product and, at some row counts (five contacts),
     recomputed it for every entry of the ``n x n`` result."""
@@ -378,7 +378,7 @@ def phi_hessian(problem: Problem, s: SolverState, d: FirstOrder):
 
 def _newton_direction(hmat, gphi, needed, o: SolverOptions):
     """``(n,)`` Newton direction for the Hessian ``hmat`` ``(n, n)`` and gradient ``gphi``,
-    a descent direction (:func:`jaxgrasp.solver._direction.newton_direction`: eigenvalues mirrored
+    a descent direction (`jaxgrasp.solver._direction.newton_direction`: eigenvalues mirrored
     and floored at ``1e-10`` of the largest), capped at ``max_step`` (inf-norm). ``needed``
     ``()`` bool: whether the lane takes this step (under ``vmap`` the lanes that do not
     cost no eigendecomposition)."""
@@ -389,7 +389,7 @@ def _newton_direction(hmat, gphi, needed, o: SolverOptions):
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Trial:
-    """A lane's loop step up to its line search (:func:`propose`; leading batch axes
+    """A lane's loop step up to its line search (`propose`; leading batch axes
     under ``vmap``).
 
     Attributes:
@@ -418,8 +418,8 @@ def merit(problem, s: SolverState, x):
 
 def line_search(merit_of, trials: Trial, o: SolverOptions):
     """``(x_new, improve)`` ``(B, n)``, ``(B,)``: the backtracking line search
-    (:func:`jaxgrasp.solver._line_search.line_search`) of a batch of ``B`` lanes' trials (leading
-    axis ``B``); ``merit_of(x, lane)`` is lane ``lane``'s :func:`merit` at ``x``.
+    (`jaxgrasp.solver._line_search.line_search`) of a batch of ``B`` lanes' trials (leading
+    axis ``B``); ``merit_of(x, lane)`` is lane ``lane``'s `merit` at ``x``.
 
     Only lanes feasible at their last multiplier update may walk the deeper ladder: a
     feasible lane whose Newton direction crosses nearly active boundaries it does not yet
@@ -431,9 +431,9 @@ def line_search(merit_of, trials: Trial, o: SolverOptions):
 
 
 def _lane_status(s: SolverState, d: FirstOrder, stat, viol, comp, floor, o: SolverOptions):
-    """``()`` :class:`~jaxgrasp.solver.LaneStatus` after a multiplier update, from the KKT
+    """``()`` [`LaneStatus`][jaxgrasp.solver.LaneStatus] after a multiplier update, from the KKT
     residuals ``stat``, ``viol``, ``comp`` at ``s.x`` and the violation ``s.prev_viol``
-    before it: converged (stationarity within :func:`_stationarity_tol` of the rounding
+    before it: converged (stationarity within `_stationarity_tol` of the rounding
     ``floor``, feasibility and complementarity within tol), infeasible, or not converged
     (yet)."""
     tol, infeasible_tol, _ = tolerances(s.x.dtype, o)
@@ -464,14 +464,14 @@ def violation_slope(s: SolverState, d: FirstOrder):
 
 def _penalty_growth(s: SolverState, d: FirstOrder, viol, o: SolverOptions):
     """``()`` the factor by which a stalled lane's penalty grows at this update: ``rho_growth``,
-    or more where the violation ``viol`` stalls above :data:`FAR_VIOLATION` at a nearly
+    or more where the violation ``viol`` stalls above `FAR_VIOLATION` at a nearly
     stationary point of the violation measure (``d``: the problem at ``s.x``).
 
     WHY: on an infeasible problem the inner minimiser of phi sits at ``grad v ~ -grad f /
     rho`` from a stationary point of ``v``, so ``|grad v| / viol`` falls in proportion to
     ``1 / rho`` once the violation has stalled; the ``infeasible_stationarity`` test then
     passes only after several tenfold growths, one inner solve each. Growing at once by
-    the factor that takes the ratio to :data:`PREDICT_MARGIN` times the bound (at most
+    the factor that takes the ratio to `PREDICT_MARGIN` times the bound (at most
     ``stall_growth_max``) skips those solves. The gate (far, stalled, and a ratio already
     small) keeps lanes that end converged on their usual path: where they stall far from
     feasibility the ratio is of order one."""
@@ -484,7 +484,7 @@ def _penalty_growth(s: SolverState, d: FirstOrder, viol, o: SolverOptions):
 def _multiplier_update(s: SolverState, d: FirstOrder, gphi, floor, o: SolverOptions) -> SolverState:
     """The multiplier and penalty update ending an inner solve, with the lane's new status
     and KKT residuals (``d``: the problem at ``s.x``; ``gphi``: ``(n,)`` gradient of phi
-    there; ``floor``: :func:`_rounding_floor` there)."""
+    there; ``floor``: `_rounding_floor` there)."""
     gx = d.gx
     is_eq = s.eq_mask > 0
     h = jnp.sum(s.eq_mask * gx)
@@ -527,7 +527,7 @@ def _multiplier_update(s: SolverState, d: FirstOrder, gphi, floor, o: SolverOpti
 
 def _inner_done(s: SolverState, d: FirstOrder, floor, o: SolverOptions):
     """``(gphi, done)``: the ``(n,)`` gradient of phi at ``s.x`` (``d``: the problem there;
-    ``floor``: :func:`_rounding_floor`) and whether the inner solve is done (``()`` bool:
+    ``floor``: `_rounding_floor`) and whether the inner solve is done (``()`` bool:
     stationary enough, or ``max_inner`` Newton steps taken)."""
     _, _, weights = penalty_terms(d.gx, s.lam, s.nu, s.rho, s.eq_mask)
     gphi = d.grad_f + contract("mi,m->i", d.jac, weights)
@@ -536,21 +536,21 @@ def _inner_done(s: SolverState, d: FirstOrder, floor, o: SolverOptions):
 
 def _inner_tol(s: SolverState, floor, o: SolverOptions):
     """``()`` the stationarity ``|grad phi|_inf`` at which the inner solve of ``s`` is done
-    (``floor``: :func:`_rounding_floor` at ``s.x``).
+    (``floor``: `_rounding_floor` at ``s.x``).
 
     Inexact inner solves: while the violation is large, a rough minimiser of phi is enough
-    to update the multipliers; the tolerance tightens to :func:`_stationarity_tol` as the
+    to update the multipliers; the tolerance tightens to `_stationarity_tol` as the
     violation vanishes."""
     return jnp.maximum(_stationarity_tol(s, floor, o), o.inner_tol_factor * jnp.minimum(s.prev_viol, 1.0))
 
 
 ROUNDING_ULPS = 10.0
 """How many units in the last place of ``x`` the stationarity floor of
-:func:`_rounding_floor` allows for (a Newton step lands within a few of phi's minimiser,
+`_rounding_floor` allows for (a Newton step lands within a few of phi's minimiser,
 and ``g`` itself carries rounding)."""
 
 MAX_STATIONARITY_TOL = 10.0
-"""The most, in multiples of tol, that :func:`_stationarity_tol` raises the stationarity
+"""The most, in multiples of tol, that `_stationarity_tol` raises the stationarity
 tolerance to: a point whose stationarity is 10 tol is as good a minimiser to the energy's
 precision (its energy error is of order stationarity squared over curvature), and a lane
 that needs more is crawling, not at rounding."""
@@ -580,14 +580,14 @@ def _stationarity_tol(s: SolverState, floor, o: SolverOptions):
     """``()`` the stationarity ``|grad phi|_inf`` that counts as converged for ``s``: tol,
     or, where phi is so stiff that its gradient at the floating-point point nearest its
     minimiser cannot reach tol, that gradient's rounding floor ``s.rho * floor``
-    (:func:`_rounding_floor`), at most :data:`MAX_STATIONARITY_TOL` tol."""
+    (`_rounding_floor`), at most `MAX_STATIONARITY_TOL` tol."""
     tol, _, _ = tolerances(s.x.dtype, o)
     return jnp.clip(s.rho * floor, tol, MAX_STATIONARITY_TOL * tol)
 
 
 def initial_multiplier(s: SolverState, d: FirstOrder) -> SolverState:
     """``s`` with a ``NaN`` equality multiplier before the first step (``nu0`` NaN in
-    :func:`init`) replaced by its least-squares estimate at ``s.x``: the ``nu`` that best
+    `init`) replaced by its least-squares estimate at ``s.x``: the ``nu`` that best
     solves ``grad f + nu grad h = 0`` (``d``: the problem there; 0 without an equality)."""
     grad_h = contract("m,mi->i", s.eq_mask, d.jac)
     estimate = -contract("i,i->", d.grad_f, grad_h) / jnp.maximum(contract("i,i->", grad_h, grad_h), 1e-300)
@@ -602,11 +602,11 @@ def propose(problem, s: SolverState, o: SolverOptions) -> Trial:
     """A lane's loop step up to its line search: a multiplier update where the inner solve
     is done, then, where the (updated) inner solve is not, the Newton direction on phi.
 
-    Stages, in order: :func:`first_order` (the problem and its Jacobian at ``s.x``,
+    Stages, in order: `first_order` (the problem and its Jacobian at ``s.x``,
     shared by every later stage: the update does not move ``x``);
-    :func:`initial_multiplier` (at the first step); :func:`_rounding_floor`; :func:`_inner_done`;
-    :func:`_multiplier_update` (status from :func:`_lane_status`); :func:`_inner_done`
-    again; :func:`phi_hessian` and :func:`_newton_direction`.
+    `initial_multiplier` (at the first step); `_rounding_floor`; `_inner_done`;
+    `_multiplier_update` (status from `_lane_status`); `_inner_done`
+    again; `phi_hessian` and `_newton_direction`.
     """
     # A multiplier update, where the inner solve is done, then a Newton step where the
     # (updated) inner solve is not: the sequence of updates and the step count of a lane
@@ -644,14 +644,14 @@ def accept(t: Trial, x_new, improve, o: SolverOptions) -> SolverState:
 
 
 def step(problem, s: SolverState, o: SolverOptions) -> SolverState:
-    """One loop step of one lane: :func:`propose`, the line search, :func:`accept`. A
-    finished lane is returned unchanged. (:func:`jaxgrasp.solver.solve_lanes` runs the same
+    """One loop step of one lane: `propose`, the line search, `accept`. A
+    finished lane is returned unchanged. (`jaxgrasp.solver.solve_lanes` runs the same
     three for many lanes, with one line search over all of them.)
 
     Args:
-        problem: a :class:`Problem`, or its ``fg`` alone (:func:`as_problem`).
+        problem: a `Problem`, or its ``fg`` alone (`as_problem`).
         s: the lane's state.
-        o: :class:`SolverOptions`.
+        o: [`SolverOptions`][jaxgrasp.SolverOptions].
     """
     problem = as_problem(problem)
     t = propose(problem, s, o)
@@ -666,7 +666,7 @@ def running(s: SolverState, o: SolverOptions):
 
 
 def to_result(problem, s: SolverState) -> SolverResult:
-    """The :class:`SolverResult` of a lane's final state (``problem`` as in :func:`solve`)."""
+    """The `SolverResult` of a lane's final state (``problem`` as in `solve`)."""
     return SolverResult(
         x=s.x,
         lam=s.lam,
@@ -688,12 +688,12 @@ def solve(
     options: SolverOptions = SolverOptions(),
     active=True,
 ) -> SolverResult:
-    """Solve one lane (``vmap`` it for many, or use :func:`jaxgrasp.solver.solve_lanes`).
+    """Solve one lane (``vmap`` it for many, or use `jaxgrasp.solver.solve_lanes`).
 
     ``init``, then ``step`` while ``running``, then ``to_result``.
 
     Args:
-        problem: a :class:`Problem`, or just its ``fg``: objective and constraint margins,
+        problem: a `Problem`, or just its ``fg``: objective and constraint margins,
             ``(n,) -> ((), (m,))``, feasible where the margins are ``>= 0`` (one function,
             so that the two share their work), differentiated by autodiff.
         x0: ``(n,)`` starting point.
@@ -701,7 +701,7 @@ def solve(
         nu0: initial equality multiplier, or ``NaN``: its least-squares estimate at
             ``x0`` (``grad f + nu0 grad h = 0`` in the least-squares sense), computed at
             the lane's first step from the derivatives that step takes anyway.
-        options: :class:`SolverOptions`.
+        options: [`SolverOptions`][jaxgrasp.SolverOptions].
         active: ``False`` skips the lane (it ends at once with status ``LaneStatus.NO_START``).
     """
     s = init(x0, eq_mask, nu0, active, options)

@@ -1,5 +1,5 @@
-"""The solver's own status, :class:`LaneStatus`: how one lane ended (a :class:`Coded`
-of :mod:`jaxgrasp.base`, where the kinds of integer code of jaxgrasp are listed)."""
+"""The solver's own status, [`LaneStatus`][jaxgrasp.solver.LaneStatus]: how one lane ended (a `Coded`
+of `jaxgrasp.base`, where the kinds of integer code of jaxgrasp are listed)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ __all__ = ["LaneStatus"]
 
 
 class LaneStatus(Coded):
-    """How one lane of :func:`jaxgrasp.solver.solve` (one problem from one start) ended."""
+    """How one lane of `jaxgrasp.solver.solve` (one problem from one start) ended."""
 
     CONVERGED = 0, "KKT conditions hold within tolerance"
     INFEASIBLE = 1, "the constraint violation stagnated above infeasible_tol: no feasible point"

@@ -1,21 +1,21 @@
 """Storage: files written whole or not at all, folder locks, stale temporary files, and
 files of jaxgrasp's own read without following links.
 
-One layer under every writer: output files (:mod:`jaxgrasp.io`, :mod:`jaxgrasp.plots`,
-the command line), checkpoints (:mod:`jaxgrasp.engine`) and the executable store
-(:mod:`jaxgrasp.engine`, which serialises executables on top of these files). It imports
+One layer under every writer: output files (`jaxgrasp.io`, `jaxgrasp.plots`,
+the command line), checkpoints (`jaxgrasp.engine`) and the executable store
+(`jaxgrasp.engine`, which serialises executables on top of these files). It imports
 nothing of jaxgrasp.
 
-* Atomic files (:mod:`._files`): :func:`write_set` (several files, all or none),
-  :func:`write_file`, :func:`write_to`; each member a temporary file in its destination
-  folder, synced, then renamed into place. :func:`check_writable` before long work,
-  :func:`remove_stale_temps` (one age, :data:`STALE_TEMP_SECONDS`), :func:`abandon` on an
-  interrupt. Errors: :class:`OutputError`, :class:`DiskFull`, :class:`FolderBusy`,
-  :class:`Abandoned`.
-* Own files (:mod:`._own`): :class:`FolderLock` (one writer per folder),
-  :func:`refuse_link`, :func:`read_own`; private folders and files for what is loaded
-  and run (:func:`make_private`, :func:`private_folder`, :func:`read_private`).
-* CSV tables (:mod:`._csv`): :func:`csv_content`, :func:`csv_cell`.
+* Atomic files (`_files`): `write_set` (several files, all or none),
+  `write_file`, `write_to`; each member a temporary file in its destination
+  folder, synced, then renamed into place. `check_writable` before long work,
+  `remove_stale_temps` (one age, `STALE_TEMP_SECONDS`), `abandon` on an
+  interrupt. Errors: `OutputError`, `DiskFull`, `FolderBusy`,
+  `Abandoned`.
+* Own files (`_own`): `FolderLock` (one writer per folder),
+  `refuse_link`, `read_own`; private folders and files for what is loaded
+  and run (`make_private`, `private_folder`, `read_private`).
+* CSV tables (`_csv`): `csv_content`, `csv_cell`.
 """
 
 from jaxgrasp.storage._csv import csv_cell, csv_content

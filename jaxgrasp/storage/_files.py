@@ -1,25 +1,25 @@
 """Files that are whole or absent: written aside, synced, renamed into place as one set.
 
 Every file jaxgrasp writes (outputs, checkpoints, stored executables) goes through
-:func:`write_set` (or :func:`write_file`, a set of one). Each member is first written to
+`write_set` (or `write_file`, a set of one). Each member is first written to
 a temporary file in its destination folder (``NAME.<pid>-<token>.tmp``, created
 exclusively and never through a link), flushed and ``fsync``-ed; only when every member
 is complete are they renamed over their destinations (``os.replace``), all under one
-process-wide lock (:data:`PUBLISH_LOCK`). So a reader, or a run that stops half-way,
+process-wide lock (`PUBLISH_LOCK`). So a reader, or a run that stops half-way,
 sees either the previous set or the new one, never a new file beside an old one; a
 failure while writing removes the temporary files and leaves the previous set as it was.
 
 The rest serves writers that may be interrupted or killed:
 
-* :func:`check_writable`: can files be created in a folder? Asked before any long
+* `check_writable`: can files be created in a folder? Asked before any long
   computation, without creating anything.
-* :func:`remove_stale_temps`: the temporary files killed processes left in a folder
-  (their process gone, or older than :data:`STALE_TEMP_SECONDS`).
-* :func:`abandon`: on an interrupt, wait for a rename phase in progress (at most a
+* `remove_stale_temps`: the temporary files killed processes left in a folder
+  (their process gone, or older than `STALE_TEMP_SECONDS`).
+* `abandon`: on an interrupt, wait for a rename phase in progress (at most a
   moment), delete this process's temporary files and the lock files it holds
-  (:class:`~jaxgrasp.storage.FolderLock`), and forbid every later write.
+  (`FolderLock`), and forbid every later write.
 
-A full disk (``ENOSPC``, ``EDQUOT``, ``EFBIG``) while writing is a :class:`DiskFull`
+A full disk (``ENOSPC``, ``EDQUOT``, ``EFBIG``) while writing is a `DiskFull`
 naming the file, its temporary file removed.
 """
 
@@ -62,7 +62,7 @@ STALE_TEMP_SECONDS = 3600.0
 runs (pids are reused)."""
 
 NO_SPACE = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
-"""``errno`` values of a write that failed for want of space: a :class:`DiskFull`."""
+"""``errno`` values of a write that failed for want of space: a `DiskFull`."""
 
 NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)  # 0 where the platform lacks it (Windows: no symlinks by default)
 
@@ -76,7 +76,7 @@ _STORE_TEMP_NAMES = (
 """Names the executable store's temporary files had in earlier versions (full match)."""
 
 PUBLISH_LOCK = threading.Lock()
-"""Held while a set of files is renamed into place (and forever after :func:`abandon`)."""
+"""Held while a set of files is renamed into place (and forever after `abandon`)."""
 
 Content = Union[bytes, Callable[[BinaryIO], object]]
 """What a member of a set holds: its bytes, or ``write(fh)`` writing them to a binary file."""
@@ -92,7 +92,7 @@ class OutputError(Exception):
 
 
 class FolderBusy(OutputError):
-    """Another process holds the :class:`~jaxgrasp.storage.FolderLock` of the folder;
+    """Another process holds the `FolderLock` of the folder;
     ``.pid`` is its pid (``None`` when its lock file does not say)."""
 
     def __init__(self, message: str, pid: int | None):
@@ -101,12 +101,12 @@ class FolderBusy(OutputError):
 
 
 class Abandoned(OutputError):
-    """A write tried after :func:`abandon` stopped every write of the process (an
+    """A write tried after `abandon` stopped every write of the process (an
     interrupt, whose handler says what was kept)."""
 
 
 class DiskFull(OutputError):
-    """A write failed for want of space (``errno`` in :data:`NO_SPACE`); ``.path`` is the
+    """A write failed for want of space (``errno`` in `NO_SPACE`); ``.path`` is the
     file being written. Its temporary file is removed; what was published stays."""
 
     def __init__(self, path, exc: OSError):
@@ -116,7 +116,7 @@ class DiskFull(OutputError):
 
 
 def no_space(exc: BaseException, path) -> BaseException:
-    """``exc`` as a :class:`DiskFull` of ``path`` where it, or an exception it was raised
+    """``exc`` as a `DiskFull` of ``path`` where it, or an exception it was raised
     from or while handling (a writer's clean-up failing in turn), is a want of space;
     else ``exc`` itself."""
     cause: BaseException | None = exc
@@ -150,7 +150,7 @@ def check_writable(folder) -> Path:
     permission bits.
 
     Returns:
-        ``folder`` as a :class:`~pathlib.Path`.
+        ``folder`` as a `Path`.
 
     Raises:
         OutputError: (one line) ``folder`` or an ancestor is a regular file, or no file
@@ -185,7 +185,7 @@ def _create_temp(dest: Path, mode: int) -> tuple[int, Path]:
     The name has a random token and is created exclusively, never through a link
     (``O_CREAT | O_EXCL | O_NOFOLLOW``): where something has that name already (a link
     planted there too) another token is drawn. Registration and creation happen under
-    one lock, so :func:`abandon` removes every temporary file that exists, and none is
+    one lock, so `abandon` removes every temporary file that exists, and none is
     created after it.
     """
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
@@ -274,7 +274,7 @@ def write_set(
             binary file object. The destination folders must exist.
         remove: paths deleted in the same rename phase (e.g. a member of the previous
             set that the new set no longer has); missing ones are ignored.
-        on_publish: called once the set is in place, still under :data:`PUBLISH_LOCK`
+        on_publish: called once the set is in place, still under `PUBLISH_LOCK`
             (so an interrupt sees the state before or after both).
         mode: the new files' permission bits, less the umask (``0o600``: the user's alone).
 
@@ -282,10 +282,10 @@ def write_set(
         The destinations that replaced an existing file.
 
     Raises:
-        DiskFull: no space for a member (an :class:`OutputError` naming it); nothing was
+        DiskFull: no space for a member (an `OutputError` naming it); nothing was
             replaced, and every temporary file is gone.
         OSError or whatever a ``write`` raises: likewise.
-        Abandoned: writing was abandoned (:func:`abandon`).
+        Abandoned: writing was abandoned (`abandon`).
     """
     staged: list[tuple[Path, Path]] = []
     try:
@@ -322,7 +322,7 @@ def _publish(staged, remove, on_publish) -> list[Path]:
 
 
 def write_file(path, content: Content, *, mode: int = 0o666) -> bool:
-    """Write one file atomically (:func:`write_set` of one member).
+    """Write one file atomically (`write_set` of one member).
 
     Returns:
         Whether it replaced an existing file.
@@ -332,7 +332,7 @@ def write_file(path, content: Content, *, mode: int = 0o666) -> bool:
 
 def write_to(target, content: Content) -> None:
     """Write ``content`` (bytes, or ``write(fh)``) into ``target``: a binary file object
-    directly, or the file at path ``target`` atomically (:func:`write_file`)."""
+    directly, or the file at path ``target`` atomically (`write_file`)."""
     if hasattr(target, "write"):
         target.write(content) if isinstance(content, bytes) else content(target)
     else:
@@ -346,7 +346,7 @@ def remove_stale_temps(folder, *, earlier_store_names: bool = False) -> int:
     """Remove the temporary files killed runs left in ``folder``; how many.
 
     A temporary file is stale where its name has jaxgrasp's pattern (``NAME.<pid>-<token>.tmp``)
-    and its process no longer runs or it is older than :data:`STALE_TEMP_SECONDS`; this
+    and its process no longer runs or it is older than `STALE_TEMP_SECONDS`; this
     process's own temporary files are never stale. With ``earlier_store_names`` (a folder
     of the executable store) the names its temporary files had in earlier versions
     (``.NAME.PID.RANDOM.tmp``, ``NAME.tmpPID``) count too; elsewhere they could be the
@@ -394,14 +394,14 @@ def _pid_runs(pid: int) -> bool:
 
 def register_lock(lock) -> None:
     """Record that this process holds ``lock`` (an object whose ``_drop()`` removes its
-    lock file and releases it), so that :func:`abandon` releases it."""
+    lock file and releases it), so that `abandon` releases it."""
     with REGISTRY:
         _LOCKS.add(lock)
 
 
 def release_lock(lock) -> None:
     """Release ``lock`` (``lock._drop()``) and forget it, under the registry's lock, so
-    that :func:`abandon` never releases it a second time."""
+    that `abandon` never releases it a second time."""
     with REGISTRY:
         _LOCKS.discard(lock)
         lock._drop()
@@ -411,9 +411,9 @@ def abandon(timeout: float = 0.5) -> None:
     """Stop every write of this process for good, for an exit on an interrupt.
 
     Waits at most ``timeout`` seconds for a rename phase in progress (so a set is never
-    published half), then keeps :data:`PUBLISH_LOCK` (nothing is published after this),
+    published half), then keeps `PUBLISH_LOCK` (nothing is published after this),
     deletes every temporary file and lock file of this process and makes later writes
-    raise :class:`Abandoned`. Meant to be followed by ``os._exit``.
+    raise `Abandoned`. Meant to be followed by ``os._exit``.
     """
     global _ABANDONED
     PUBLISH_LOCK.acquire(timeout=timeout)  # never released

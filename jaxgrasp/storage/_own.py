@@ -1,15 +1,15 @@
 """Files and folders of jaxgrasp's own, never reached through a link: lock files,
 checkpoints, and the private folders and files of the executable store.
 
-* :func:`refuse_link`, :func:`read_own`: a file jaxgrasp keeps (a lock file, a
+* `refuse_link`, `read_own`: a file jaxgrasp keeps (a lock file, a
   checkpoint) is opened without following a link and must be a regular file with one
-  name (a link there is refused, :class:`~jaxgrasp.storage.OutputError`).
-* :class:`FolderLock`: one writer per folder (a lock file ``.jaxgrasp.lock`` held with
+  name (a link there is refused, `OutputError`).
+* `FolderLock`: one writer per folder (a lock file ``.jaxgrasp.lock`` held with
   ``flock`` and holding the writer's pid); taking it also removes the stale temporary
-  files of killed runs (:func:`~jaxgrasp.storage.remove_stale_temps`).
-* :func:`private_folder`, :func:`read_private`: a folder or file that only this user can
+  files of killed runs (`remove_stale_temps`).
+* `private_folder`, `read_private`: a folder or file that only this user can
   have written (owned by the user, not writable by group or others, not a link), for
-  what is loaded and run (the executable store's pickles); :func:`make_private` creates
+  what is loaded and run (the executable store's pickles); `make_private` creates
   folders that are (mode 0700, every level).
 """
 
@@ -42,7 +42,7 @@ __all__ = [
 ]
 
 LOCK_NAME = ".jaxgrasp.lock"
-"""Name of the lock file :class:`FolderLock` keeps in the folder it guards."""
+"""Name of the lock file `FolderLock` keeps in the folder it guards."""
 
 _LOCK_TRIES = 100  # lock files replaced under us before giving up (each: a holder that just left)
 
@@ -51,7 +51,7 @@ _LOCK_TRIES = 100  # lock files replaced under us before giving up (each: a hold
 
 
 def refuse_link(path, what: str = "jaxgrasp's file") -> None:
-    """Raise :class:`~jaxgrasp.storage.OutputError` (one line) if ``path`` is a symbolic
+    """Raise `OutputError` (one line) if ``path`` is a symbolic
     link: jaxgrasp writes ``what`` there and never writes, reads or deletes through a link
     it did not make."""
     if os.path.islink(path):
@@ -127,10 +127,10 @@ class FolderLock:
     anything but a file with one name (a hard link could name a file elsewhere), at its
     path is refused, since taking the lock truncates the file.
 
-    Use as a context manager (or :meth:`acquire`, which does nothing where the lock is
-    already held, and :meth:`release`); :meth:`acquire` creates ``folder`` if needed and,
+    Use as a context manager (or `acquire`, which does nothing where the lock is
+    already held, and `release`); `acquire` creates ``folder`` if needed and,
     once the lock is held, removes the folder's stale temporary files
-    (:func:`~jaxgrasp.storage.remove_stale_temps`).
+    (`remove_stale_temps`).
     """
 
     def __init__(self, folder):
@@ -144,7 +144,7 @@ class FolderLock:
         Raises:
             FolderBusy: another process (or another lock of this one) holds it.
             OutputError: a link or other non-file at the lock file's path (one line);
-                :class:`~jaxgrasp.storage.DiskFull` where there is no space for it.
+                `DiskFull` where there is no space for it.
             OSError: the folder or the lock file cannot be created.
         """
         if self._fd is not None:
@@ -170,7 +170,7 @@ class FolderLock:
         return self
 
     def _open_locked(self, fcntl) -> int:
-        """The lock file's descriptor, ``flock``-ed (see :meth:`acquire`)."""
+        """The lock file's descriptor, ``flock``-ed (see `acquire`)."""
         for _ in range(_LOCK_TRIES):
             fd = _open_own(self.path, os.O_RDWR | os.O_CREAT)
             try:
@@ -266,7 +266,7 @@ def _not_private(st: os.stat_result, kind: str) -> str | None:
 
 def private_folder(folder: Path, create: bool) -> str | None:
     """Why ``folder`` must not hold what is loaded and run; ``None`` where it may. With
-    ``create``, a missing folder is created private (:func:`make_private`); without, a
+    ``create``, a missing folder is created private (`make_private`); without, a
     missing one may be used (nothing to read; it is created when the first file is
     written)."""
     try:

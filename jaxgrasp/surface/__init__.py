@@ -1,12 +1,12 @@
 """Object surfaces in JAX: closest points, normals and the rules a fingertip contact on a mesh keeps.
 
-:class:`Surface` is a triangle mesh as arrays (``jit``, ``vmap`` and ``grad`` pass through
-it); :meth:`Surface.closest` puts points on the surface with the outward normal of the face
-there (:class:`SurfacePoint`). :func:`check_contacts` checks contacts against the rules that
-make the paper's planar-contact model apply (:class:`ContactRules`, :class:`RuleCheck`).
-A grasp on a mesh is a :class:`MeshGrasp`: its contacts snapped to the surface, the centre
-of mass and the frame (:func:`jaxgrasp.from_mesh` reads a mesh file and builds one).
-:func:`closest_on_triangles` is the one closest-point rule, in JAX (traced) or NumPy.
+[`Surface`][jaxgrasp.surface.Surface] is a triangle mesh as arrays (``jit``, ``vmap`` and ``grad`` pass through
+it); [`Surface.closest`][jaxgrasp.surface.Surface.closest] puts points on the surface with the outward normal of the face
+there (`SurfacePoint`). [`check_contacts`][jaxgrasp.surface.check_contacts] checks contacts against the rules that
+make the paper's planar-contact model apply ([`ContactRules`][jaxgrasp.surface.ContactRules], [`RuleCheck`][jaxgrasp.surface.RuleCheck]).
+A grasp on a mesh is a [`MeshGrasp`][jaxgrasp.MeshGrasp]: its contacts snapped to the surface, the centre
+of mass and the frame ([`jaxgrasp.from_mesh`][jaxgrasp.from_mesh] reads a mesh file and builds one).
+`closest_on_triangles` is the one closest-point rule, in JAX (traced) or NumPy.
 
 ``__all__`` lists the names promised to users. The names imported below the comment
 "For jaxgrasp's other packages" are what the library's other packages use from here

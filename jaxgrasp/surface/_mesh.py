@@ -1,24 +1,24 @@
 """A grasp on a triangle mesh: contacts snapped to the surface, the centre of mass, the frame.
 
-:func:`grasp_on_mesh` turns a checked mesh (a ``trimesh.Trimesh`` in metres, as
-:func:`jaxgrasp.io.load_mesh` reads it; :func:`jaxgrasp.from_mesh` reads and builds in one
-call) and fingertip contact points given in the mesh's own frame into a :class:`MeshGrasp`:
+`grasp_on_mesh` turns a checked mesh (a ``trimesh.Trimesh`` in metres, as
+`jaxgrasp.io.load_mesh` reads it; [`jaxgrasp.from_mesh`][jaxgrasp.from_mesh] reads and builds in one
+call) and fingertip contact points given in the mesh's own frame into a [`MeshGrasp`][jaxgrasp.MeshGrasp]:
 
-* each point is snapped to the closest point of the surface (:func:`snap_to_surface`: an
-  exact closest point over every triangle, by :func:`~jaxgrasp.surface.closest_on_triangles`
+* each point is snapped to the closest point of the surface (`snap_to_surface`: an
+  exact closest point over every triangle, by `closest_on_triangles`
   run in NumPy; trimesh's own ``closest_point`` needs the optional ``rtree``); the outward
   normal of the face there is the contact normal;
 * the centre of mass is the mesh's (a watertight mesh of uniform density) or the one
-  given; the mass is given, or ``density`` times the enclosed volume (:func:`mass_properties`);
+  given; the mass is given, or ``density`` times the enclosed volume (`mass_properties`);
 * positions are moved into the model's frame (origin at the centre of mass, the mesh's
-  axes), and :class:`MeshGrasp` keeps the offset beside the grasp.
+  axes), and [`MeshGrasp`][jaxgrasp.MeshGrasp] keeps the offset beside the grasp.
 
-Design (the one way the library keeps a grasp's mesh): the :class:`~jaxgrasp.Grasp`
+Design (the one way the library keeps a grasp's mesh): the [`Grasp`][jaxgrasp.Grasp]
 pytree is left exactly as for any other grasp, so ``evaluate``, ``sweep``, ``tune``,
 ``evaluate_batch`` and their compiled executables and caches see nothing new. The mesh and the
-frame offset live beside it in :class:`MeshGrasp`, a small frozen object that is not a
+frame offset live beside it in [`MeshGrasp`][jaxgrasp.MeshGrasp], a small frozen object that is not a
 pytree and never enters ``jit``: evaluate ``mesh_grasp.grasp``; draw with
-``mesh_grasp.mesh`` and ``mesh_grasp.to_mesh_frame``. :func:`jaxgrasp.load` with
+``mesh_grasp.mesh`` and ``mesh_grasp.to_mesh_frame``. [`jaxgrasp.load`][jaxgrasp.load] with
 ``keep_mesh=True`` and ``jaxgrasp show`` use it.
 
 Nothing here imports trimesh: the mesh arrives as an object and is only read.
@@ -49,18 +49,18 @@ the normals of the faces meeting there are averaged."""
 class MeshGrasp:
     """A grasp made from a mesh, with the mesh and where the model's frame sits in it.
 
-    Not a pytree: pass :attr:`grasp` to :func:`jaxgrasp.evaluate` (and the other entry
+    Not a pytree: pass `grasp` to [`jaxgrasp.evaluate`][jaxgrasp.evaluate] (and the other entry
     points); the rest is for drawing results in the mesh's frame.
 
     Attributes:
-        grasp: the :class:`~jaxgrasp.Grasp`, model frame: origin at the centre of mass,
+        grasp: the [`Grasp`][jaxgrasp.Grasp], model frame: origin at the centre of mass,
             axes of the mesh (SI units).
         mesh: the ``trimesh.Trimesh`` in metres, in the mesh's own frame, faces outward.
         center_of_mass: ``(3,)`` m, the centre of mass in the mesh's frame: a model-frame
             point ``p`` is ``p + center_of_mass`` in the mesh's frame.
         source: where the mesh came from (a path, or ``"<trimesh>"``).
         units: the length unit of the mesh file's vertices (``"m"``, ``"cm"``, ``"mm"``);
-            :attr:`mesh` is in metres whatever it is.
+            `mesh` is in metres whatever it is.
     """
 
     grasp: Grasp
@@ -83,19 +83,19 @@ def grasp_on_mesh(
     mass=None, density=None, center_of_mass=None, gravity=DEFAULT_GRAVITY,
     normals=None, tolerance: float = DEFAULT_TOLERANCE, source: str = "<trimesh>", units: str = "m",
 ) -> MeshGrasp:
-    """The :class:`MeshGrasp` of fingertips touching the checked mesh ``mesh`` at ``points``.
+    """The [`MeshGrasp`][jaxgrasp.MeshGrasp] of fingertips touching the checked mesh ``mesh`` at ``points``.
 
     Args:
         mesh: ``trimesh.Trimesh`` in metres, checked and faces outward, as
-            :func:`jaxgrasp.io.load_mesh` returns it.
+            `jaxgrasp.io.load_mesh` returns it.
         source, units: where the mesh came from and the length unit of its file's
-            vertices, kept in the :class:`MeshGrasp`.
+            vertices, kept in the [`MeshGrasp`][jaxgrasp.MeshGrasp].
         points, initial_deformation, radius, young_modulus, friction, max_force, mass,
             density, center_of_mass, gravity, normals, tolerance: as in
-            :func:`jaxgrasp.from_mesh` (SI units; ``points (N, 3)`` m, the mesh's frame).
+            [`jaxgrasp.from_mesh`][jaxgrasp.from_mesh] (SI units; ``points (N, 3)`` m, the mesh's frame).
 
     Raises:
-        GraspValueError: one line, as :func:`jaxgrasp.from_mesh` says (a point off the
+        GraspValueError: one line, as [`jaxgrasp.from_mesh`][jaxgrasp.from_mesh] says (a point off the
             surface or on a sharp edge, mass and density both given, a mesh that is not
             watertight without ``center_of_mass``, an invalid grasp value).
     """
@@ -111,7 +111,7 @@ def grasp_on_mesh(
 
 def _contacts(surface, pts, normals, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
     """``(positions (N, 3) m, normals (N, 3))`` of the contacts, mesh frame: ``pts`` snapped
-    to the surface (:func:`snap_to_surface`), each normal the one given in ``normals``
+    to the surface (`snap_to_surface`), each normal the one given in ``normals``
     (``None`` or a length-``N`` sequence of ``None`` or 3-vectors) or else the surface's."""
     given = [None] * len(pts) if normals is None else list(normals)
     if len(given) != len(pts):
@@ -168,7 +168,7 @@ def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE, need_
 
     Returns:
         ``(closest (N, 3) m, normals (N, 3))``: the normal of the face the closest point
-        lies on; where it lies on faces meeting at less than :data:`SHARP_EDGE_DEG`
+        lies on; where it lies on faces meeting at less than `SHARP_EDGE_DEG`
         (a tessellated curved surface), their mean normal.
 
     Raises:
@@ -213,14 +213,14 @@ _UNIT_MISTAKES = (
     (1e3, 'the contacts lie on the mesh 1000 times larger, as if its vertices were in mm: set units = "mm"'),
     (1e2, 'the contacts lie on the mesh 100 times larger, as if its vertices were in cm: set units = "cm"'),
 )
-"""Unit mistakes :func:`snap_to_surface` recognises: ``(factor, what to say)`` where every
+"""Unit mistakes `snap_to_surface` recognises: ``(factor, what to say)`` where every
 contact point times ``factor`` lies on the surface (points typed in mm or cm; a mesh whose
 ``units`` do not match its vertices, which scales the mesh instead)."""
 
 
 def _unit_hint(tri: np.ndarray, points, tolerance: float) -> str:
     """What to say of contacts off the surface: the unit mistake that would put every one
-    of them on it (:data:`_UNIT_MISTAKES`), or the general question."""
+    of them on it (`_UNIT_MISTAKES`), or the general question."""
     pts = np.asarray(points, dtype=np.float64)
     for factor, text in _UNIT_MISTAKES:
         near = [

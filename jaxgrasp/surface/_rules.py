@@ -114,7 +114,7 @@ def check_contacts(surface: Surface, positions, normals, dr, radius, young_modul
     """Check one grasp's contacts against the rules (traceable; ``vmap`` it for many).
 
     Args:
-        surface: the object's :class:`Surface`, in the frame of ``positions``.
+        surface: the object's [`Surface`][jaxgrasp.surface.Surface], in the frame of ``positions``.
         positions: ``(N, 3)`` m contact points.
         normals: ``(N, 3)`` outward contact normals (unit or not).
         dr: ``(N,)`` m initial deformations.
@@ -122,7 +122,7 @@ def check_contacts(surface: Surface, positions, normals, dr, radius, young_modul
             force limit N (scalars broadcast).
 
     Returns:
-        A :class:`RuleCheck` of the grasp.
+        A [`RuleCheck`][jaxgrasp.surface.RuleCheck] of the grasp.
     """
     n = normals / jnp.linalg.norm(normals, axis=-1, keepdims=True)
     shape = dr.shape

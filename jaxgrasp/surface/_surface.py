@@ -1,23 +1,23 @@
 """A triangle mesh as JAX arrays: the exact closest surface point, its face and outward normal.
 
-:class:`Surface` holds a mesh's triangles and their outward unit normals, so that contact
+[`Surface`][jaxgrasp.surface.Surface] holds a mesh's triangles and their outward unit normals, so that contact
 points can be put on the surface inside ``jit``, ``vmap`` and ``grad``:
-:meth:`Surface.closest` maps any points to the closest surface point, the face it lies on
-and that face's normal (a :class:`SurfacePoint`).
+[`Surface.closest`][jaxgrasp.surface.Surface.closest] maps any points to the closest surface point, the face it lies on
+and that face's normal (a `SurfacePoint`).
 
 Behaviour a caller relies on:
 
 * **Closest point.** Exact over every face, by the triangle's Voronoi regions (Ericson,
-  *Real-Time Collision Detection*, Sec. 5.1.5): :func:`closest_on_triangles`, the one rule
+  *Real-Time Collision Detection*, Sec. 5.1.5): `closest_on_triangles`, the one rule
   of jaxgrasp, which the host code that snaps a mesh grasp's contacts runs in NumPy
-  (:mod:`jaxgrasp.surface._mesh`; the tests check one library against the other).
+  (`jaxgrasp.surface._mesh`; the tests check one library against the other).
   Cost ``O(points x faces)``.
 * **Normal.** The outward normal of the face the point lies on: piecewise constant on the
   surface, as the paper's planar contact surface needs (the model's normal is the face's,
   Sec. V). Where the closest point lies on an edge or a vertex (several faces tie), the
   face whose plane is farthest from the query point along its normal is chosen: for a
   query point outside a convex edge that is the face that point "sees" most squarely, and
-  the sign of :attr:`SurfacePoint.signed_distance` is right inside and outside a closed mesh.
+  the sign of `SurfacePoint.signed_distance` is right inside and outside a closed mesh.
 * **Derivatives.** Within a face the closest point is the orthogonal projection onto the
   face's plane: its derivative with respect to the query point is the projection onto the
   plane (the tangential part of a move), and the normal's derivative is zero. On an edge the
@@ -38,7 +38,7 @@ from jaxgrasp.model import GraspValueError
 __all__ = ["Surface", "SurfacePoint", "closest_on_triangles", "PAD_FACES"]
 
 PAD_FACES = 256
-"""Face counts are padded to this times a power of two by :meth:`Surface.padded`, so that
+"""Face counts are padded to this times a power of two by [`Surface.padded`][jaxgrasp.surface.Surface.padded], so that
 meshes of similar size share one compiled shape."""
 
 _TIE = 1e-12
@@ -54,7 +54,7 @@ class SurfacePoint:
     Attributes:
         point: ``(..., 3)`` m, the closest surface point.
         normal: ``(..., 3)`` outward unit normal of the face it lies on.
-        face: ``(...)`` int32, the index of that face in :attr:`Surface.triangles`.
+        face: ``(...)`` int32, the index of that face in `Surface.triangles`.
         distance: ``(...)`` m, distance from the query point to ``point``.
         signed_distance: ``(...)`` m, ``distance`` with the sign of the query point's side of
             that face: negative inside a closed mesh.
@@ -70,7 +70,7 @@ class SurfacePoint:
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Surface:
-    """A triangle mesh in JAX (m): build it with :meth:`from_trimesh` or :meth:`create`.
+    """A triangle mesh in JAX (m): build it with [`from_trimesh`][jaxgrasp.surface.Surface.from_trimesh] or [`create`][jaxgrasp.surface.Surface.create].
 
     Attributes:
         triangles: ``(F, 3, 3)`` m, the corners of each face, counter-clockwise seen from
@@ -110,7 +110,7 @@ class Surface:
     @classmethod
     def from_trimesh(cls, mesh, pad_to: int | None = None) -> "Surface":
         """The surface of a ``trimesh.Trimesh`` (its vertices in m, faces outward, e.g.
-        ``trimesh.load(path)`` of a watertight mesh in metres); ``pad_to``: see :meth:`padded`."""
+        ``trimesh.load(path)`` of a watertight mesh in metres); ``pad_to``: see [`padded`][jaxgrasp.surface.Surface.padded]."""
         surface = cls.create(mesh.vertices, mesh.faces)
         return surface if pad_to is None else surface.padded(pad_to)
 
@@ -149,7 +149,7 @@ class Surface:
         """The closest surface point to each of ``points (..., 3)`` m (traceable).
 
         Returns:
-            A :class:`SurfacePoint` of shape ``(...)`` (see the module's notes on edges,
+            A `SurfacePoint` of shape ``(...)`` (see the module's notes on edges,
             vertices and derivatives).
         """
         pts = jnp.asarray(points, jnp.float64)
@@ -166,13 +166,13 @@ class Surface:
 
 @jax.jit
 def _closest_many(surface: Surface, points) -> SurfacePoint:
-    """:func:`_closest_one` of each of ``points (P, 3)`` (compiled once per shape when
+    """`_closest_one` of each of ``points (P, 3)`` (compiled once per shape when
     called eagerly; inlined where it is traced)."""
     return jax.vmap(lambda p: _closest_one(surface, p))(points)
 
 
 def _closest_one(surface: Surface, p) -> SurfacePoint:
-    """The :class:`SurfacePoint` of one query point ``p (3,)``."""
+    """The `SurfacePoint` of one query point ``p (3,)``."""
     tri, normals = surface.triangles, surface.normals
     q = jax.lax.stop_gradient(closest_on_triangles(jax.lax.stop_gradient(p), tri))  # (F, 3): picks the face
     d2 = jnp.sum((q - p) ** 2, axis=-1)
@@ -197,7 +197,7 @@ def closest_on_triangles(p, tri, xp=jnp):
 
     ``xp`` is the array library: ``jax.numpy`` (the default: traceable, differentiable) or
     ``numpy``, for the host code that snaps a mesh grasp's contacts
-    (:func:`~jaxgrasp.surface.grasp_on_mesh`, once per grasp of a dataset or a plan), where
+    (`grasp_on_mesh`, once per grasp of a dataset or a plan), where
     dispatching each operation to JAX would cost more than the arithmetic. One rule, run
     by either library; the tests hold the two to each other.
     """

@@ -3,8 +3,8 @@
 The 1 + 2N problems of a grasp (the equilibrium, and a slip and a force-limit boundary
 per contact; Sec. VI), their starts, settling of stalled lanes, the verdict (value,
 status, limiting boundary), the minimum energies with their envelope-theorem
-derivatives, and the :class:`Evaluation` result with its :class:`GraspStatus`. Running
-it over many grasps, compiled and sharded, is :mod:`jaxgrasp.engine`'s job.
+derivatives, and the [`Evaluation`][jaxgrasp.Evaluation] result with its [`GraspStatus`][jaxgrasp.GraspStatus]. Running
+it over many grasps, compiled and sharded, is `jaxgrasp.engine`'s job.
 
 ``__all__`` lists the names promised to users. The names imported below the comment
 "For jaxgrasp's other packages" are what the library's other packages use from here

@@ -1,7 +1,7 @@
 """Minimum energies with their exact derivative (envelope theorem), and the soft minimum.
 
 The solver runs on ``stop_gradient`` parameters and its iterations are never
-differentiated. Each minimum energy is instead passed through :func:`envelope_energy`, a
+differentiated. Each minimum energy is instead passed through `envelope_energy`, a
 ``jax.custom_jvp`` function whose value is the solver's ``U*`` and whose tangent is
 ``dL/dtheta . dtheta`` at the fixed solution ``(z*, lam*, nu*)``: by the envelope theorem
 that is the derivative of ``min_z U(z; theta)`` at a regular KKT point. ``jax.grad``,
@@ -34,7 +34,7 @@ def envelope_energy(params, z, lam, nu, eq_mask, objective):
     Tangents of ``z``, ``lam``, ``nu``, ``eq_mask`` and ``objective`` are ignored: they
     are the solver's outputs, which are never differentiated. Works under ``jax.grad``,
     ``jax.jacfwd``, ``jax.jvp`` and ``jax.vmap`` (``params`` is a
-    :class:`jaxgrasp.model.ModelParams`).
+    `jaxgrasp.model.ModelParams`).
     """
     return energy_scale(params) * objective
 

@@ -13,12 +13,12 @@ __all__ = ["EvaluateOptions"]
 
 @dataclasses.dataclass(frozen=True)
 class EvaluateOptions:
-    """Static settings of :func:`jaxgrasp.evaluate` (hashable, so it can be a ``jit`` static argument).
+    """Static settings of [`jaxgrasp.evaluate`][jaxgrasp.evaluate] (hashable, so it can be a ``jit`` static argument).
 
     Attributes:
-        solver: settings of the augmented-Lagrangian solver (:class:`jaxgrasp.SolverOptions`).
+        solver: settings of the augmented-Lagrangian solver ([`jaxgrasp.SolverOptions`][jaxgrasp.SolverOptions]).
         num_random_starts: random start directions per boundary problem, on top of the 12
-            half-axes of the start frame (:func:`jaxgrasp.tolerance._starts.start_frame`: the
+            half-axes of the start frame (`jaxgrasp.tolerance._starts.start_frame`: the
             grasp's modes of motion, so that the starts do not depend on the world
             frame or the contact numbering the grasp is written in).
         seed: seed of those random directions (fixed, so results are reproducible).
@@ -36,7 +36,7 @@ class EvaluateOptions:
         first_wave: how many starts of each boundary problem run first (its starts
             ``0 .. first_wave - 1``: the first half-axes of the start frame); the others
             run only where those leave the problem open
-            (:func:`jaxgrasp.tolerance._stages.rest_needed`): every other start runs too
+            (`jaxgrasp.tolerance._stages.rest_needed`): every other start runs too
             unless at least two of the first converged to one minimum and none ended
             otherwise, or at least two proved the boundary infeasible and none ended
             otherwise, and in any case where the problem's first minimum is within
@@ -95,7 +95,7 @@ class EvaluateOptions:
 
     def directions(self) -> np.ndarray:
         """``(12 + num_random_starts, 6)`` unit start directions: coefficients in the start
-        frame (:func:`jaxgrasp.tolerance._starts.start_frame`) of the scaled pose space, its 12
+        frame (`jaxgrasp.tolerance._starts.start_frame`) of the scaled pose space, its 12
         half-axes first, then the seeded random ones."""
         axes = np.concatenate([np.eye(6), -np.eye(6)])
         rng = np.random.default_rng(self.seed)

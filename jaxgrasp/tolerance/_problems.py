@@ -1,5 +1,5 @@
 """The 1 + 2N problems of a grasp (eq. 1; Sec. VI), their derivatives, and the
-:class:`Problems` type that holds them solved.
+`Problems` type that holds them solved.
 
 * the *equilibrium* problem ``U0 = min U`` subject to every contact, friction and
   force-limit constraint, solved from the initial grasping state;
@@ -7,18 +7,18 @@
   a *max_force* problem (force limit of ``j`` as an equality, eq. 21), each with every
   other constraint kept.
 
-Every problem has the same scaled objective and constraints (:func:`objective`,
-:func:`constraints`), in the scaled pose ``z = (dp [mm], lever * w [mm])`` so that
+Every problem has the same scaled objective and constraints (`objective`,
+`constraints`), in the scaled pose ``z = (dp [mm], lever * w [mm])`` so that
 rotations and translations move the contacts by comparable amounts, with the energy
 divided by the initial elastic energy. A boundary problem is one equality row of the
 same constraint vector (``eq_mask``), so every problem of every grasp runs as a lane of
-one :func:`jaxgrasp.solver.solve_lanes` call. :func:`lane_problem` gives the solver the
+one `jaxgrasp.solver.solve_lanes` call. `lane_problem` gives the solver the
 first and second derivatives written from the contact kinematics
-(:func:`jaxgrasp.model._potential.kinematics_jacobian`) instead of autodiff.
+(`jaxgrasp.model._potential.kinematics_jacobian`) instead of autodiff.
 
-The starts of the boundary problems are found in :mod:`jaxgrasp.tolerance._starts`,
-stalled lanes are settled in :mod:`jaxgrasp.tolerance._settle`, and
-the engine's pipeline (:data:`jaxgrasp.engine.PIPELINE`) runs the whole sequence.
+The starts of the boundary problems are found in `jaxgrasp.tolerance._starts`,
+stalled lanes are settled in `jaxgrasp.tolerance._settle`, and
+the engine's pipeline (`jaxgrasp.engine.PIPELINE`) runs the whole sequence.
 """
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ class ProblemData:
     """What the problems of one grasp depend on (a pytree; one per lane under ``solve_lanes``).
 
     Attributes:
-        params: the grasp in internal units (:class:`jaxgrasp.model.ModelParams`).
+        params: the grasp in internal units (`jaxgrasp.model.ModelParams`).
         lever: ``()`` mm, the length that scales rotations in ``z`` (no gradient).
         scale: ``()`` mJ, the energy scale dividing the objective (no gradient).
     """
@@ -96,14 +96,14 @@ def objective(z, data: ProblemData):
 
 
 def constraints(z, data: ProblemData):
-    """Scaled constraint margins ``(3N,)``, rows of :func:`jaxgrasp.model.constraint_margins`
+    """Scaled constraint margins ``(3N,)``, rows of `jaxgrasp.model.constraint_margins`
     flattened (index ``row * N + contact``), ``>= 0`` where satisfied."""
     return constraint_margins(to_pose(z, data.lever), data.params).reshape(-1)
 
 
 def objective_and_constraints(z, data: ProblemData):
     """``(objective(z, data), constraints(z, data))`` from one evaluation of the contact
-    kinematics: the function the solver's lanes run (:func:`jaxgrasp.solver.solve`'s ``fg``)."""
+    kinematics: the function the solver's lanes run (`jaxgrasp.solver.solve`'s ``fg``)."""
     energy, margins = energy_and_margins(to_pose(z, data.lever), data.params)
     return energy / data.scale, margins.reshape(-1)
 
@@ -116,9 +116,9 @@ def _pose_scale(data: ProblemData, dtype):
 
 def _first_order(z, data: ProblemData) -> FirstOrder:
     """The problem at ``z`` with its gradient and constraint Jacobian, from the contact
-    kinematics' Jacobian (:func:`jaxgrasp.model._potential.kinematics_jacobian`) and each contact's
-    derivatives in its own kinematics (:func:`jaxgrasp.model._potential.contact_gradients`), both
-    kept in ``aux`` for :func:`_lagrangian_hessian`."""
+    kinematics' Jacobian (`jaxgrasp.model._potential.kinematics_jacobian`) and each contact's
+    derivatives in its own kinematics (`jaxgrasp.model._potential.contact_gradients`), both
+    kept in ``aux`` for `_lagrangian_hessian`."""
     p = data.params
     x = to_pose(z, data.lever)
     q, dq, geometry = kinematics_jacobian(x, p)
@@ -135,9 +135,9 @@ def _lagrangian_hessian(d: FirstOrder, z, weights, gauss_newton, data: ProblemDa
     """``(6, 6)`` Hessian in ``z`` of ``f + weights . g`` (``weights`` ``(3N,)`` fixed) plus
     ``J^T diag(gauss_newton) J`` (``gauss_newton`` ``(3N,)``, ``J`` the constraints'
     Jacobian in ``z``), from the kinematics' derivatives in ``d.aux``
-    (:func:`kinematic_hessian`), with ``psi_i`` contact ``i``'s share of the function of
+    (`kinematic_hessian`), with ``psi_i`` contact ``i``'s share of the function of
     its own kinematics and its ``4 x 4`` Hessian
-    :func:`jaxgrasp.model._potential.contact_hessians`, written out.
+    `jaxgrasp.model._potential.contact_hessians`, written out.
 
     Row ``(r, i)`` of ``J`` is ``dm_ri . dq_i`` (times the pose scale), so the
     Gauss-Newton term is contact ``i``'s ``dq_i^T (sum_r gn_ri dm_ri dm_ri^T) dq_i``: a
@@ -157,9 +157,9 @@ def kinematic_hessian(z, data: ProblemData, dq, geometry, gq, hq):
     contact's own kinematics ``q_i = (d, cos phi, dt^2, theta)``, from their gradients
     ``gq`` ``(N, 4)`` and Hessians ``hq`` ``(N, 4, 4)`` in ``q_i`` and the kinematics'
     Jacobian ``dq`` ``(N, 4, 6)`` and ``geometry`` at ``z``
-    (:func:`jaxgrasp.model._potential.kinematics_jacobian`): ``sum_i dq_i^T H_i dq_i +
+    (`jaxgrasp.model._potential.kinematics_jacobian`): ``sum_i dq_i^T H_i dq_i +
     sum_ik (d psi_i / d q_ik) d2q_ik``, the second sum
-    :func:`jaxgrasp.model._potential.kinematics_curvature`."""
+    `jaxgrasp.model._potential.kinematics_curvature`."""
     hd = contract("nkl,nlj->nkj", hq, dq)  # (N, 4, 6): H_i dq_i
     hx = contract("njm,njl->ml", dq, hd) + kinematics_curvature(to_pose(z, data.lever), data.params, geometry, gq)
     scale = _pose_scale(data, z.dtype)
@@ -191,13 +191,13 @@ class Problems:
     contacts and ``D`` starts per boundary problem (``EvaluateOptions.num_starts``):
 
     Attributes:
-        equilibrium: :class:`jaxgrasp.solver.SolverResult` of the equilibrium problem.
-        boundary: :class:`jaxgrasp.solver.SolverResult` with a leading lane axis
+        equilibrium: `jaxgrasp.solver.SolverResult` of the equilibrium problem.
+        boundary: `jaxgrasp.solver.SolverResult` with a leading lane axis
             ``(2N * D,)``: lane ``b * D + s`` is start ``s`` of boundary problem
             ``b = kind * N + contact``.
         start: ``(2N * D, 6)`` starting points of the boundary lanes.
         found: ``(2N * D,)`` whether the start search crossed the boundary (lanes where it
-            did not carry status :attr:`jaxgrasp.solver.LaneStatus.NO_START`, as do found lanes
+            did not carry status `jaxgrasp.solver.LaneStatus.NO_START`, as do found lanes
             of a problem that its first wave of starts settled:
             ``EvaluateOptions.first_wave``).
         constraint_index: ``(2N * D,)`` index ``k`` of the equality in the flattened
@@ -219,7 +219,7 @@ class Problems:
 
 
 def problems_treedef():
-    """The pytree structure of :class:`Problems` (it depends on no shape), to rebuild one
+    """The pytree structure of `Problems` (it depends on no shape), to rebuild one
     from its leaves, in ``jax.tree_util`` order."""
     lanes = SolverResult(*(0,) * len(dataclasses.fields(SolverResult)))
     return jax.tree_util.tree_structure(
@@ -235,7 +235,7 @@ def _lane_equalities(n: int, num_starts: int):
 
 
 def batch_data(p: ModelParams) -> ProblemData:
-    """:func:`problem_data` of a batch of grasps ``p`` (leading axis ``B``), with no
+    """`problem_data` of a batch of grasps ``p`` (leading axis ``B``), with no
     gradient: the solver sees none."""
     return jax.vmap(problem_data)(jax.lax.stop_gradient(p))
 

@@ -1,4 +1,4 @@
-"""The result of :func:`jaxgrasp.evaluate`: a pytree of named arrays, in SI units."""
+"""The result of [`jaxgrasp.evaluate`][jaxgrasp.evaluate]: a pytree of named arrays, in SI units."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ NOT_CONVERGED = GraspStatus.NOT_CONVERGED
 INVALID = GraspStatus.INVALID  # a dataset row that was not evaluated; evaluate() never gives it
 
 STATUS_NAMES = GraspStatus.labels()
-"""Grasp status names, indexed by the :class:`~jaxgrasp.GraspStatus` codes
+"""Grasp status names, indexed by the [`GraspStatus`][jaxgrasp.GraspStatus] codes
 (``GraspStatus.labels()``)."""
 
 
@@ -43,17 +43,17 @@ class Evaluation:
     """Energy-tolerance evaluation of one grasp (SI units; add leading axes under ``vmap``).
 
     ``N`` is the number of contacts; every ``(2, N, ...)`` array is indexed
-    ``[kind, contact]`` by :class:`~jaxgrasp.model.BoundaryKind`: 0 = ``slip`` (eq. 20),
+    ``[kind, contact]`` by [`BoundaryKind`][jaxgrasp.model.BoundaryKind]: 0 = ``slip`` (eq. 20),
     1 = ``max_force`` (eq. 21).
 
     Attributes:
         value: ``()`` evaluation value ``Delta U_min`` of eq. 1, J: the least energy that
             brings the object from its equilibrium to a boundary of the equilibrium region.
             0 when ``status`` is unstable or infeasible.
-        status: ``()`` int, a :class:`~jaxgrasp.GraspStatus` code: ``STABLE``,
+        status: ``()`` int, a [`GraspStatus`][jaxgrasp.GraspStatus] code: ``STABLE``,
             ``UNSTABLE``, ``INFEASIBLE`` or ``NOT_CONVERGED`` (names:
-            ``GraspStatus.labels()``, or :attr:`status_name`).
-        limiting_kind: ``()`` int, :class:`~jaxgrasp.model.BoundaryKind` of the boundary
+            ``GraspStatus.labels()``, or [`status_name`][jaxgrasp.Evaluation.status_name]).
+        limiting_kind: ``()`` int, [`BoundaryKind`][jaxgrasp.model.BoundaryKind] of the boundary
             that sets ``value`` (0 slip, 1 max_force), -1 (``NO_BOUNDARY``) when there is none.
         limiting_contact: ``()`` int, 0-based contact of that boundary, -1 when none.
         equilibrium_energy: ``()`` J, ``min U`` over the equilibrium region (energy zero
@@ -65,15 +65,15 @@ class Evaluation:
         boundary_translation: ``(2, N, 3)`` m, pose of each boundary minimum (the
             equilibrium pose where the boundary cannot be reached).
         boundary_rotation: ``(2, N, 3)`` rad, likewise.
-        boundary_status: ``(2, N)`` int, :class:`~jaxgrasp.solver.LaneStatus` of each
+        boundary_status: ``(2, N)`` int, [`LaneStatus`][jaxgrasp.solver.LaneStatus] of each
             boundary problem (converged; infeasible = unreachable; not converged; no start
             because the equilibrium problem did not converge).
-        equilibrium_status: ``()`` int, :class:`~jaxgrasp.solver.LaneStatus` of the equilibrium
+        equilibrium_status: ``()`` int, [`LaneStatus`][jaxgrasp.solver.LaneStatus] of the equilibrium
             problem.
         equilibrium_margins: ``(3, N)`` scaled constraint margins at the equilibrium (or,
             for an infeasible grasp, at the least-violating pose found), rows: contact
             kept ``d / dr``, no slip, force below its limit; ``>= 0`` where satisfied
-            (:func:`jaxgrasp.model.constraint_margins`).
+            (`jaxgrasp.model.constraint_margins`).
         kkt: ``(1 + 2N, 3)`` KKT residuals (stationarity, feasibility, complementarity,
             in the solver's scaled units) of the equilibrium problem (row 0) and of the
             kept start of each boundary problem (rows ``1 + kind * N + contact``).
@@ -210,10 +210,10 @@ class Evaluation:
 
 
 FIELDS = tuple(f.name for f in dataclasses.fields(Evaluation))
-"""Every array of an :class:`Evaluation`, in field order."""
+"""Every array of an [`Evaluation`][jaxgrasp.Evaluation], in field order."""
 
 EVALUATION_TREE = jax.tree_util.tree_structure(Evaluation(*(0,) * len(FIELDS)))
-"""The pytree structure of an :class:`Evaluation` (it depends on no shape): to rebuild one
+"""The pytree structure of an [`Evaluation`][jaxgrasp.Evaluation] (it depends on no shape): to rebuild one
 from its leaves, or to declare a compiled function's output tree."""
 
 SUMMARY_FIELDS = ("value", "status", "limiting_kind", "limiting_contact", "equilibrium_energy")
@@ -223,7 +223,7 @@ tables): value (J), status, limiting kind and contact, equilibrium energy (J).""
 
 class SummaryNames:
     """Names and counts of the codes of a result with ``status`` and ``limiting_kind``
-    arrays of any shape (:class:`jaxgrasp.analysis.SweepResult`, :class:`jaxgrasp.BatchResult`)."""
+    arrays of any shape ([`jaxgrasp.analysis.SweepResult`][jaxgrasp.analysis.SweepResult], [`jaxgrasp.BatchResult`][jaxgrasp.BatchResult])."""
 
     @property
     def status_names(self) -> np.ndarray:
@@ -262,10 +262,10 @@ def _energies_above_equilibrium(a) -> np.ndarray:
     result: ``>= 0``, anything below 0 set to 0, ``nan`` where a boundary is unreachable.
 
     Below 0 by round-off: a fingertip released at the equilibrium has an energy of
-    round-off size. Below 0 by more (:func:`_below_equilibrium`): the equilibrium the
+    round-off size. Below 0 by more (`_below_equilibrium`): the equilibrium the
     solver found is a local minimum of the region and a boundary point lies lower, which
     the verdict calls unstable (no energy is needed to reach that boundary) and
-    :meth:`Evaluation.explain` says so.
+    [`Evaluation.explain`][jaxgrasp.Evaluation.explain] says so.
     """
     be = np.asarray(a.boundary_energy, dtype=np.float64)
     finite = np.isfinite(be)
@@ -278,7 +278,7 @@ def _below_equilibrium(a) -> tuple[int, int, float] | None:
     equilibrium energy by more than round-off, or ``None``.
 
     The energy scale is the largest magnitude among the equilibrium energy and the
-    reachable boundary energies; round-off is :data:`_ROUND_OFF` of it, or ``1e3``
+    reachable boundary energies; round-off is `_ROUND_OFF` of it, or ``1e3``
     epsilons of the result's dtype where larger.
     """
     be = np.asarray(a.boundary_energy, dtype=np.float64)
@@ -298,7 +298,7 @@ def _below_equilibrium(a) -> tuple[int, int, float] | None:
 # ----------------------------------------------------------------------------- explain
 _RELEASED = 1e-3
 """A fingertip whose deformation at the equilibrium is below this fraction of its initial
-deformation counts as released (no longer pressing) in :meth:`Evaluation.explain`."""
+deformation counts as released (no longer pressing) in [`Evaluation.explain`][jaxgrasp.Evaluation.explain]."""
 
 
 def _boundary_phrase(kind: int, contact: int) -> str:
@@ -457,5 +457,5 @@ _EXPLAIN = {
 
 
 def _explain(a, tol: float) -> str:
-    """The text of :meth:`Evaluation.explain` for a NumPy-leaved, unbatched result."""
+    """The text of [`Evaluation.explain`][jaxgrasp.Evaluation.explain] for a NumPy-leaved, unbatched result."""
     return _EXPLAIN[GraspStatus(int(a.status))](a, tol)

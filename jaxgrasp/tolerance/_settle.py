@@ -70,13 +70,13 @@ both within this (scaled margins), and the lane's violation too."""
 _POLISH_STEPS = 8
 
 LM_FLOOR = 1e-8
-"""The polish's damping relative to its Jacobian's size (:func:`_levenberg_marquardt_step`):
+"""The polish's damping relative to its Jacobian's size (`_levenberg_marquardt_step`):
 ``sqrt(eps)`` of float64, so that ``mu`` is above the rounding of ``J^T J`` (``eps |J|^2``)
 and singular values below ``LM_FLOOR |J|_F`` count as null."""
 
 SETTLE_BLOCK = 8
-"""Lanes polished per block of the settling (:func:`settle_stalled`,
-:func:`settle_equilibrium`), gathered over the batch."""
+"""Lanes polished per block of the settling (`settle_stalled`,
+`settle_equilibrium`), gathered over the batch."""
 
 
 def _tangential(z, data: ProblemData, j):
@@ -110,9 +110,9 @@ def _relaxed_problem(z, data: ProblemData, v, relaxed_rows, cone):
     ``(3N,)`` (every row of each released contact) replaced by that contact's pyramid rows
     ``P_kj = (mu_j d_j / (2 cos^2 phi_j) + v_jk . u_j) / dr_j`` (``v``: the ``(N, 3, 3)``
     face directions of each contact; row ``k * N + j`` holds ``P_kj``), and where ``cone``
-    ``()`` every other slip row in its cone form (:func:`_cone_margins`). One evaluation of
+    ``()`` every other slip row in its cone form (`_cone_margins`). One evaluation of
     the contact kinematics serves every row. Its derivatives are written out
-    (:func:`_relaxed_derivatives`)."""
+    (`_relaxed_derivatives`)."""
     p = data.params
     n = p.c.shape[0]
     x = to_pose(z, data.lever)
@@ -127,13 +127,13 @@ def _relaxed_problem(z, data: ProblemData, v, relaxed_rows, cone):
 
 
 def _slope_row(q, p):
-    """``(N,)`` the part of each pyramid row (:func:`_relaxed_problem`) in the contact's
+    """``(N,)`` the part of each pyramid row (`_relaxed_problem`) in the contact's
     own kinematics ``q`` ``(N, 4)``, ``mu d / (2 cos^2 phi dr)``."""
     return p.mu * q[:, 0] / (2.0 * q[:, 1] ** 2) / jax.lax.stop_gradient(p.dr)
 
 
 def _cone_margins(kinematics, u, p):
-    """``(N,)`` :func:`_cone_row` at the contact kinematics ``(d, cos phi, dt^2, theta)``
+    """``(N,)`` `_cone_row` at the contact kinematics ``(d, cos phi, dt^2, theta)``
     and displacements ``u`` ``(N, 3)``, mm, with ``dt^2`` taken as ``|t|^2`` of the vector
     ``t = u - (u . n) n``."""
     t = u - jnp.sum(u * p.n, axis=-1, keepdims=True) * p.n
@@ -144,7 +144,7 @@ def _cone_row(q, p):
     """``(N,)`` the slip margins in cone form, ``(mu d / cos^2 phi - sqrt(4 |t|^2 + K d
     theta^2)) / dr``, from each contact's kinematics ``q`` ``(N, 4)`` with ``dt^2 = |t|^2``
     (``t = u - (u . n) n`` the tangential displacement, mm; ``K d theta^2`` the torsion
-    term, :func:`~jaxgrasp.model._potential.slip_torsion`): where ``d >= 0`` the
+    term, `slip_torsion`): where ``d >= 0`` the
     same region as the squared margin ``(mu^2 d^2 / cos^4 phi - 4 dt^2 - K d theta^2) /
     (mu dr)^2``, but with a gradient of order 1 up to the cone's apex, where the squared
     margin's vanishes with ``d``. A fingertip held on its cone a few tenths of a micrometre
@@ -171,16 +171,16 @@ def _per_contact_derivatives(row, q):
 
 
 def _relaxed_derivatives(z, lam, data: ProblemData, v, relaxed_rows, cone):
-    """``(grad_f (6,), jac (3N, 6), hess (6, 6))`` of :func:`_relaxed_problem` at scaled
+    """``(grad_f (6,), jac (3N, 6), hess (6, 6))`` of `_relaxed_problem` at scaled
     pose ``z``: the objective's gradient, the constraints' Jacobian and the Hessian of the
     Lagrangian ``f - lam . g`` (``lam`` ``(3N,)``), written out from the contact
     kinematics' derivatives as the lanes' are
-    (:func:`~jaxgrasp.tolerance._problems.lane_problem`). Every row is a function of its
-    contact's kinematics ``q_j`` (the problem's own rows, :func:`_slope_row`,
-    :func:`_cone_row`) plus, for a pyramid row, ``v_jk . u_j / dr_j``, linear in the
+    (`lane_problem`). Every row is a function of its
+    contact's kinematics ``q_j`` (the problem's own rows, `_slope_row`,
+    `_cone_row`) plus, for a pyramid row, ``v_jk . u_j / dr_j``, linear in the
     contact's displacement ``u_j = (R - I) c_j + dp``: ``d u_j / dx = [I | dR/dw_k c_j]``,
     and the second derivatives of ``sum_j m_j . u_j`` are those of ``R : sum_j m_j c_j^T``
-    (:func:`~jaxgrasp.model._potential.rotation_hessian_along`). Autodiff of the relaxed
+    (`rotation_hessian_along`). Autodiff of the relaxed
     problem (``jacfwd`` of its ``grad``) gives the same to rounding
     (``tests/tolerance/test_settle_derivatives.py``) from more code to trace."""
     p = data.params
@@ -213,8 +213,8 @@ def _polish(data: ProblemData, z0, k, released, warm, cone, o: SolverOptions):
     the active set fixed at the stalled point ``z0``: on the relaxation at every contact
     ``released`` ``(N,)`` (none: the problem itself), from the multipliers 0, or where
     ``warm`` ``()`` from the active rows' least-squares multipliers at ``z0``
-    (:func:`_kkt_newton`); where ``cone`` ``()``, with the other slip rows in cone form
-    (:func:`_cone_row`), and a contact held on its cone not held at ``d = 0`` as well
+    (`_kkt_newton`); where ``cone`` ``()``, with the other slip rows in cone form
+    (`_cone_row`), and a contact held on its cone not held at ``d = 0`` as well
     (the cone holds ``d >= 0``; holding both pins the apex).
 
     Returns ``(z, lam_rel, ok, (stat, feas, comp))``: ``lam_rel`` ``(3N,)`` multipliers
@@ -257,11 +257,11 @@ def _polish(data: ProblemData, z0, k, released, warm, cone, o: SolverOptions):
 
 
 def _polish_released(data: ProblemData, z0, k, released, o: SolverOptions):
-    """:func:`_polish` relaxing the first contact ``released`` ``(N,)``, and where that
+    """`_polish` relaxing the first contact ``released`` ``(N,)``, and where that
     gives no certificate, every released contact; each from the multipliers 0 and, where
     neither of those certifies, from least-squares multipliers; where none of those
     certifies, from least-squares multipliers with the slip rows in cone form, relaxing
-    the first released contact, then the others. Returns :func:`_polish`'s tuple, the
+    the first released contact, then the others. Returns `_polish`'s tuple, the
     ``(N,)`` contacts relaxed in the answer and whether it is in cone form.
 
     Several fingertips can let go at once (a four-finger grasp hanging on two of them):
@@ -288,7 +288,7 @@ def _polish_released(data: ProblemData, z0, k, released, o: SolverOptions):
 
 
 def _kkt_newton(problem, active, z0, warm):
-    """:data:`_POLISH_STEPS` damped Newton steps (:func:`_levenberg_marquardt_step`) on
+    """`_POLISH_STEPS` damped Newton steps (`_levenberg_marquardt_step`) on
     the KKT equations of ``problem`` (``(z, lam) -> (g (3N,), grad f (6,), J (3N, 6),
     Hessian of f - lam . g (6, 6))``) with the rows ``active`` ``(3N,)``
     held at ``g = 0`` and the others at ``lam = 0``, from ``(z0, lam = 0)``, or where
@@ -340,15 +340,15 @@ def _levenberg_marquardt_step(jac, r):
     by ``1 / (2 sqrt(mu))``, and where ``s^2 >> mu`` the step is Newton's. (A damping
     ``|r|^2`` as in Yamashita & Fukushima's method is too strong here: the polish starts
     at ``lam = 0``, far from the multipliers, and would crawl.) No LAPACK: see
-    :mod:`jaxgrasp.solver._dense`."""
+    `jaxgrasp.solver._dense`."""
     mu = (LM_FLOOR**2) * jnp.sum(jac * jac)
     normal = jac.T @ jac + mu * jnp.eye(jac.shape[0], dtype=jac.dtype)
     return dense_solve(normal, jac.T @ r)
 
 
 def _polish_candidates(lanes: SolverResult, found, num_starts: int):
-    """``(2N, D)`` bool: the lanes :func:`settle_stalled` may polish, those that stalled
-    (``NOT_CONVERGED``) at a point feasible within :data:`RELEASED_TOL`, of problems
+    """``(2N, D)`` bool: the lanes `settle_stalled` may polish, those that stalled
+    (``NOT_CONVERGED``) at a point feasible within `RELEASED_TOL`, of problems
     that no start settled (a settled problem keeps its answer: a stalled lane of one can
     sit far from the converged ones, e.g. at a large rotation)."""
     stalled = found & (lanes.status == LaneStatus.NOT_CONVERGED) & (lanes.feasibility <= RELEASED_TOL)
@@ -358,8 +358,8 @@ def _polish_candidates(lanes: SolverResult, found, num_starts: int):
 
 def _lanes_to_polish(lanes: SolverResult, found, num_starts: int):
     """``(pick (2N,), wanted (2N,))`` of one grasp (``lanes`` and ``found`` with leading
-    axis ``2N * D``): for each boundary problem the lane :func:`settle_stalled` polishes,
-    its lowest-energy candidate (:func:`_polish_candidates`), and whether it has one."""
+    axis ``2N * D``): for each boundary problem the lane `settle_stalled` polishes,
+    its lowest-energy candidate (`_polish_candidates`), and whether it has one."""
     candidate = _polish_candidates(lanes, found, num_starts)  # (2N, D)
     best = jnp.argmin(jnp.where(candidate, lanes.objective.reshape(-1, num_starts), jnp.inf), axis=1)
     return jnp.arange(candidate.shape[0]) * num_starts + best, jnp.any(candidate, axis=1)
@@ -370,29 +370,29 @@ def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_st
 
     For each boundary problem of each grasp of the batch that no start settled, the
     lowest-energy lane that ended ``NOT_CONVERGED`` with its violation within
-    :data:`RELEASED_TOL` is polished (:func:`_polished_lane`): Newton's method on the KKT
-    equations, its active set (margins within :data:`RELEASED_TOL`, and the equality)
+    `RELEASED_TOL` is polished (`_polished_lane`): Newton's method on the KKT
+    equations, its active set (margins within `RELEASED_TOL`, and the equality)
     fixed, on the relaxation above at the contacts released there
-    (:func:`_released_contacts`), else on the problem itself (bounded multipliers, but an
+    (`_released_contacts`), else on the problem itself (bounded multipliers, but an
     inner solve that stalled, e.g. at the largest penalty). Where that gives a KKT point
     within ``tol`` (inequality multipliers ``>= 0``) that is feasible for the original
     problem, the lane becomes ``CONVERGED`` there, with the polish's KKT residuals and
-    the relaxation's multipliers mapped back (:func:`_original_multipliers`). Every other
+    the relaxation's multipliers mapped back (`_original_multipliers`). Every other
     lane is returned unchanged; a lane that converged is never touched.
 
-    The problems to polish are gathered over the whole batch, :data:`SETTLE_BLOCK` at a
-    time (:func:`jaxgrasp.solver._rows.over_rows`): stalls are rare, so a batch pays for
+    The problems to polish are gathered over the whole batch, `SETTLE_BLOCK` at a
+    time (`jaxgrasp.solver._rows.over_rows`): stalls are rare, so a batch pays for
     the problems that need it, however they fall on its grasps (with four fingertips a
     released contact can stall three or four force-limit problems of one grasp at once,
     issue 42), and the polish is batched once, not per grasp and again per problem.
 
     Args:
-        data: the batch's :class:`ProblemData`, leading axis ``B``.
+        data: the batch's `ProblemData`, leading axis ``B``.
         lanes: the boundary lanes, leading axes ``(B, 2N * D)``.
         lane_k: ``(2N * D,)`` equality row of each lane.
         found: ``(B, 2N * D)`` the lanes that were started.
         num_starts: ``D``.
-        o: the :class:`~jaxgrasp.solver._solver.SolverOptions` the lanes were solved with.
+        o: the [`SolverOptions`][jaxgrasp.SolverOptions] the lanes were solved with.
     """
     b = found.shape[0]
     pick, wanted = jax.vmap(lambda lane, f: _lanes_to_polish(lane, f, num_starts))(lanes, found)  # (B, 2N)
@@ -412,15 +412,15 @@ def settle_stalled(data: ProblemData, lanes: SolverResult, lane_k, found, num_st
 
 
 NO_EQUALITY = -1
-"""The equality row of the equilibrium problem for :func:`_polish`: none."""
+"""The equality row of the equilibrium problem for `_polish`: none."""
 
 
 def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) -> SolverResult:
     """Certify equilibria that stalled at a feasible point: each grasp's equilibrium lane of
     a batch (leading axis ``B`` on ``data`` and ``eq``) that ended ``NOT_CONVERGED`` with
-    its violation within :data:`RELEASED_TOL` is polished as :func:`settle_stalled`
-    polishes a boundary lane (:func:`_polished_lane`, no equality), in gathered blocks of
-    :data:`SETTLE_BLOCK` grasps, and becomes ``CONVERGED`` where that certifies it; every
+    its violation within `RELEASED_TOL` is polished as `settle_stalled`
+    polishes a boundary lane (`_polished_lane`, no equality), in gathered blocks of
+    `SETTLE_BLOCK` grasps, and becomes ``CONVERGED`` where that certifies it; every
     other equilibrium is returned as it is.
 
     Why: on grasps of real objects the equilibrium often lets go of a fingertip (the
@@ -431,7 +431,7 @@ def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) ->
     and the augmented Lagrangian crawls at its largest penalty with a violation of
     1e-8..2e-8 until its step budget runs out (issue 42). The pyramid relaxation of the
     released contact is regular at that apex and certifies it exactly where the cone
-    does (:func:`_pyramid_basis`)."""
+    does (`_pyramid_basis`)."""
     need = (eq.status == LaneStatus.NOT_CONVERGED) & (eq.feasibility <= RELEASED_TOL)
     k = jnp.asarray(NO_EQUALITY, jnp.int32)
 
@@ -446,10 +446,10 @@ def settle_equilibrium(data: ProblemData, eq: SolverResult, o: SolverOptions) ->
 
 def _polished_lane(data: ProblemData, x, k, steps, o: SolverOptions):
     """``(new, ok)``: the lane that stalled at scaled pose ``x`` ``(6,)`` of the problem
-    with equality row ``k`` (:data:`NO_EQUALITY`: the equilibrium) after ``steps``,
-    polished (:func:`_polish_released`, relaxing the contacts released at ``x``): the
-    :class:`SolverResult` of one lane, ``CONVERGED`` at the polished point, with the
-    multipliers mapped back to the original rows (:func:`_original_multipliers`; for the
+    with equality row ``k`` (`NO_EQUALITY`: the equilibrium) after ``steps``,
+    polished (`_polish_released`, relaxing the contacts released at ``x``): the
+    `SolverResult` of one lane, ``CONVERGED`` at the polished point, with the
+    multipliers mapped back to the original rows (`_original_multipliers`; for the
     equilibrium ``nu`` is 0), and whether it certifies that point."""
     released = _released_contacts(data, x, k)
     z, lam_rel, ok, (stat, feas, comp), relaxed, cone = _polish_released(data, x, k, released, o)
@@ -471,7 +471,7 @@ def _polished_lane(data: ProblemData, x, k, steps, o: SolverOptions):
 def _released_contacts(data: ProblemData, x, k):
     """``(N,)`` bool: the contacts released at the scaled pose ``x`` ``(6,)`` of the
     problem with equality row ``k`` (contact and slip margins within
-    :data:`RELEASED_TOL`, active, their force row not ``k``)."""
+    `RELEASED_TOL`, active, their force row not ``k``)."""
     n = data.params.c.shape[0]
     g = constraints(x, data).reshape(3, n)
     released = (g[0] <= RELEASED_TOL) & (g[1] <= RELEASED_TOL) & data.params.on
@@ -510,9 +510,9 @@ def _original_multipliers(data: ProblemData, z, lam_rel, k, released, cone):
 
 def needs_settling(boundary_status, equilibrium_status=None) -> np.ndarray:
     """``(...)`` bool: whether an evaluation with this ``boundary_status`` ``(..., 2, N)``
-    and ``equilibrium_status`` ``(...)`` (:class:`~jaxgrasp.Evaluation` fields, host-side)
+    and ``equilibrium_status`` ``(...)`` ([`Evaluation`][jaxgrasp.Evaluation] fields, host-side)
     has a boundary problem that no start settled or an equilibrium that did not settle,
-    the only cases in which :func:`settle_stalled` and :func:`settle_equilibrium` can
+    the only cases in which `settle_stalled` and `settle_equilibrium` can
     change anything."""
     out = np.any(np.asarray(boundary_status) == LaneStatus.NOT_CONVERGED, axis=(-2, -1))
     if equilibrium_status is not None:

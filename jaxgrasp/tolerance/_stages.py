@@ -1,6 +1,6 @@
 """The method's solve and finish stages: a batch's lanes solved in one work queue, the
-solved :class:`~jaxgrasp.tolerance.Problems` assembled (the pipeline that runs them is
-:mod:`jaxgrasp.engine`'s)."""
+solved `Problems` assembled (the pipeline that runs them is
+`jaxgrasp.engine`'s)."""
 
 from __future__ import annotations
 
@@ -40,8 +40,8 @@ __all__ = [
 def settled_equilibrium(data: ProblemData, eq_lanes: SolverResult, options: EvaluateOptions,
                         settle: bool = True) -> SolverResult:
     """Each grasp's equilibrium (leading axis ``B``) from the lanes of the equilibrium stage
-    (:func:`equilibrium_of`), with ``settle`` (static) certified where it stalled
-    (:func:`~jaxgrasp.tolerance._settle.settle_equilibrium`): the pipeline's settle stage.
+    (`equilibrium_of`), with ``settle`` (static) certified where it stalled
+    (`settle_equilibrium`): the pipeline's settle stage.
     The starts stage and the finish stage both read its result, so the boundary problems
     start from the settled equilibrium, which is computed (traced, compiled) once."""
     eq = equilibrium_of(eq_lanes)
@@ -50,7 +50,7 @@ def settled_equilibrium(data: ProblemData, eq_lanes: SolverResult, options: Eval
 
 def solve_stage(data: ProblemData, starts: LaneStarts, options: EvaluateOptions) -> SolverResult:
     """The solve stage: the lanes ``starts`` of a batch ``data`` solved, every grasp's
-    lanes in one work queue (:func:`jaxgrasp.solver.solve_lane_batches`); leading axes
+    lanes in one work queue (`jaxgrasp.solver.solve_lane_batches`); leading axes
     ``(B, L)``.
 
     Each lane gets its grasp's data as its theta (not closed over): the queue then runs
@@ -60,9 +60,9 @@ def solve_stage(data: ProblemData, starts: LaneStarts, options: EvaluateOptions)
     with the other slots idle. The equilibrium stage has one lane per grasp.
 
     With ``options.first_wave`` the lanes run in two waves through the same queue: each
-    boundary problem's first starts (:func:`first_wave_lanes`) are loaded at once, the
-    other starts are held (:class:`~jaxgrasp.solver.Held`, one group per problem) and
-    those of the problems the first wave leaves open (:func:`rest_needed`) are freed as
+    boundary problem's first starts (`first_wave_lanes`) are loaded at once, the
+    other starts are held (`Held`, one group per problem) and
+    those of the problems the first wave leaves open (`rest_needed`) are freed as
     the queue runs: a problem whose first starts disagree as soon as they have ended, one
     near the value once the grasp's whole first wave has; a lane of a problem the first
     wave settled ends ``NO_START``."""
@@ -112,7 +112,7 @@ def depend_on(tree, *others):
 
 VALUE_MARGIN = 30.0
 """A boundary problem whose first-wave minimum (above ``U0``) is at most this many times
-the grasp's least runs every start whatever its first wave found (:func:`rest_needed`):
+the grasp's least runs every start whatever its first wave found (`rest_needed`):
 a start the first wave left out could change the value only through a minimum more than
 this many times below one that its first wave found from two directions. The widest
 such gap seen on the benchmark's set was 21x (in an unstable grasp, where it could not
@@ -121,7 +121,7 @@ matter)."""
 SAME_POINT = 1e-9
 """Converged lanes of the first wave whose energies (scaled) lie within this fraction of
 the lowest one's magnitude (at least 1) reached one minimum (the solver settles each to
-1e-10; lanes at one minimum end some 3e-10 apart): :func:`rest_needed`."""
+1e-10; lanes at one minimum end some 3e-10 apart): `rest_needed`."""
 
 
 def first_wave_lanes(n: int, options: EvaluateOptions):
@@ -136,18 +136,18 @@ def first_wave_lanes(n: int, options: EvaluateOptions):
 
 def rest_needed(status, objective, first, num_starts: int, u0, at_eq=None):
     """``(..., 2N * D)`` bool: the lanes of the boundary problems that the first wave
-    (``first``, :func:`first_wave_lanes`) leaves open, from the lanes' ``status`` and
+    (``first``, `first_wave_lanes`) leaves open, from the lanes' ``status`` and
     ``objective`` ``(..., 2N * D)`` (those of the first wave final); ``u0`` ``(...)`` the
     equilibrium's energy, ``at_eq`` ``(..., 2N * D)`` (default none) the lanes of
     problems the equilibrium solves (not run: their minimum is ``u0``, the value 0).
 
     A problem is settled by its first wave where every lane of it that ran ended alike:
-    at least two converged and every converged energy is within :data:`SAME_POINT` of
+    at least two converged and every converged energy is within `SAME_POINT` of
     the lowest (one minimum, found from two directions), or at least two proved the
     boundary infeasible; a lane that stalled (``NOT_CONVERGED``), converged and infeasible
     lanes together, or two minima leave it open, and so does a first wave of fewer than
     two lanes. And a problem whose first-wave minimum could set the value is never
-    settled by it: one at most :data:`VALUE_MARGIN` times the grasp's least first-wave
+    settled by it: one at most `VALUE_MARGIN` times the grasp's least first-wave
     minimum above ``u0`` runs every start, so the value and the boundaries near it are
     those of every start at once.
 
@@ -162,9 +162,9 @@ def rest_needed(status, objective, first, num_starts: int, u0, at_eq=None):
 
 def first_wave_verdict(status, objective, first, num_starts: int, u0, at_eq=None):
     """``(agree, near)``, each ``(..., 2N)`` bool, per boundary problem (arguments as
-    :func:`rest_needed`, which is ``~(agree & ~near)`` per lane): whether its first-wave
+    `rest_needed`, which is ``~(agree & ~near)`` per lane): whether its first-wave
     lanes agree (one minimum from two, or two proofs of infeasibility, nothing else), and
-    whether its first-wave minimum lies within :data:`VALUE_MARGIN` times the grasp's least
+    whether its first-wave minimum lies within `VALUE_MARGIN` times the grasp's least
     (``near`` reads every problem of the grasp; ``agree`` only the problem's own lanes)."""
     shape = status.shape[:-1] + (-1, num_starts)
     status = status.reshape(shape)
@@ -193,11 +193,11 @@ def first_wave_verdict(status, objective, first, num_starts: int, u0, at_eq=None
 
 def finish_problems(data: ProblemData, eq: SolverResult, lanes: SolverResult, starts: LaneStarts,
                     options: EvaluateOptions, settle: bool = True) -> Problems:
-    """The finish stage: the :class:`Problems` of a batch ``data``
+    """The finish stage: the `Problems` of a batch ``data``
     from its equilibria ``eq`` (leading axis ``B``), its boundary lanes ``lanes`` as
     solved from ``starts`` (leading axes ``(B, L)``): lanes ``at_eq`` get the
-    equilibrium's solution (:func:`_at_equilibrium`), and with ``settle`` (static)
-    :func:`settle_stalled` certifies stalled ones."""
+    equilibrium's solution (`_at_equilibrium`), and with ``settle`` (static)
+    `settle_stalled` certifies stalled ones."""
     b, n = data.params.c.shape[:2]
     num_lanes = _num_lanes(data, options)
     lane_k = _lane_equalities(n, options.num_starts)
@@ -218,8 +218,8 @@ def finish_problems(data: ProblemData, eq: SolverResult, lanes: SolverResult, st
 
 
 def unsolved(starts: LaneStarts) -> SolverResult:
-    """The :class:`~jaxgrasp.solver.SolverResult` of lanes ``starts`` not yet solved:
-    zeros, shaped as :func:`solve_stage` returns them (leading axes ``(B, L)``)."""
+    """The `SolverResult` of lanes ``starts`` not yet solved:
+    zeros, shaped as `solve_stage` returns them (leading axes ``(B, L)``)."""
     zero = lambda a, dtype=None: jnp.zeros(a.shape, a.dtype if dtype is None else dtype)  # noqa: E731
     return SolverResult(
         x=zero(starts.x0),

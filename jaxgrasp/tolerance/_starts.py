@@ -61,7 +61,7 @@ def _ray_start(gk, z0, v, t_grid, crossing_steps):
 
 
 def _ray_step(gk, z0, v, t_grid, ts, i, c):
-    """Iteration ``i`` of :func:`_ray_start`'s loop: ``gk`` at ``ts[i]`` (the origin, then
+    """Iteration ``i`` of `_ray_start`'s loop: ``gk`` at ``ts[i]`` (the origin, then
     the grid) while ``i <= len(t_grid)``, else at the next regula falsi point. The carry
     ``c`` is ``(lo, hi, g_lo, g_hi, side, crossed, g0, g1)``: the bracket ``[lo, hi]``
     along the ray and ``gk``'s (Illinois-halved) values at its ends, the end that moved
@@ -98,14 +98,14 @@ def _ray_step(gk, z0, v, t_grid, ts, i, c):
     return lo, hi, g_lo, g_hi, side, crossed | first, g0, g1
 
 FRAME_TIE = 1e-6
-""":func:`start_frame` takes eigenvalues of the grasp's stiffness closer than this (relative
+"""`start_frame` takes eigenvalues of the grasp's stiffness closer than this (relative
 to the largest) as one eigenspace, and a reference sum that cancels to within this of its
 terms' lengths as none."""
 
 _FRAME_SPAN = 0.3  # a reference vector joins an eigenspace's basis if its residual is longer
 
 FRAME_BITS = 20
-""":func:`start_frame`'s entries are multiples of ``2^-FRAME_BITS`` (about 1e-6)."""
+"""`start_frame`'s entries are multiples of ``2^-FRAME_BITS`` (about 1e-6)."""
 
 
 def start_frame(data: ProblemData):
@@ -113,19 +113,19 @@ def start_frame(data: ProblemData):
     space ``z`` of the grasp ``data``.
 
     The columns are the eigenvectors of the grasp's stiffness in its initial state
-    (:func:`_stiffness`): the object's modes of motion in the grasp, softest first, from
+    (`_stiffness`): the object's modes of motion in the grasp, softest first, from
     the grasp's fields alone, so that no derivative of the model is traced (the energy's
     own Hessian at the equilibrium served as well, at the price of the model's second
     derivative in the executable). Their signs, and the basis of an eigenspace of equal
-    eigenvalues (within :data:`FRAME_TIE`, as in every symmetric grasp), come from
-    reference vectors (:func:`_frame_references`) projected onto the eigenspace and
-    orthonormalised in order (:func:`_eigenspace_bases`).
+    eigenvalues (within `FRAME_TIE`, as in every symmetric grasp), come from
+    reference vectors (`_frame_references`) projected onto the eigenspace and
+    orthonormalised in order (`_eigenspace_bases`).
 
     Rotating or mirroring the world frame maps the pose space by an orthogonal ``T``
     (``dp -> R dp``, ``w -> det(R) R w``), the stiffness to ``T K T^T`` and each reference
     vector to ``T`` times it (``c x n`` and ``w`` are both axial); renumbering the
     contacts changes none of them. So the frame turns with the grasp, and start
-    directions written in it (:meth:`EvaluateOptions.directions`) are the same physical
+    directions written in it ([`EvaluateOptions.directions`][jaxgrasp.EvaluateOptions.directions]) are the same physical
     motions in any world frame and numbering, wherever the references fix the signs and
     the eigenspaces are single. Coordinate axes were not: a mirror image of a 5-finger
     grasp missed its slip boundary's lowest point from every one of the 20 starts
@@ -163,10 +163,10 @@ def _stiffness(data: ProblemData):
 
 
 def _frame_references(data: ProblemData, k):
-    """``(9, 6)`` the reference vectors of :func:`start_frame`, in order: the weight
+    """``(9, 6)`` the reference vectors of `start_frame`, in order: the weight
     ``(m g, 0)``, the sum of the fingertips' normal wrenches ``k_i (n_i, c_i x n_i)`` and
-    of their positions ``k_i (c_i, 0)`` (``k`` ``(N,)`` from :func:`_stiffness`; unit
-    length, or zero where a sum cancels to within :data:`FRAME_TIE` of its terms' lengths,
+    of their positions ``k_i (c_i, 0)`` (``k`` ``(N,)`` from `_stiffness`; unit
+    length, or zero where a sum cancels to within `FRAME_TIE` of its terms' lengths,
     as by symmetry), then the six coordinate axes."""
     p = data.params
     dtype = p.c.dtype
@@ -186,10 +186,10 @@ def _frame_references(data: ProblemData, k):
 def _eigenspace_bases(evals, vecs, refs):
     """``(basis, rank)``: Gram-Schmidt of the reference vectors ``refs`` ``(9, 6)`` in the
     eigenspace of every column of ``vecs`` ``(6, 6)`` (eigenvalues ``evals`` ``(6,)``,
-    ascending; runs of gaps within :data:`FRAME_TIE` are one eigenspace). ``basis``
+    ascending; runs of gaps within `FRAME_TIE` are one eigenspace). ``basis``
     ``(6, 6, 6)`` ``[column, slot, :]`` is each column's eigenspace basis in the order
     the references filled it, ``rank`` ``(6,)`` the slot of each column in its eigenspace.
-    A reference sum joins a basis where its residual is longer than :data:`FRAME_TIE`, a
+    A reference sum joins a basis where its residual is longer than `FRAME_TIE`, a
     coordinate axis where it is longer than 0.3, which completes every basis: six unit
     vectors whose residuals were all at most 0.3 cannot leave an eigenspace dimension
     uncovered."""
@@ -222,8 +222,8 @@ def _eigenspace_bases(evals, vecs, refs):
 def _lane_rays(data: ProblemData, options: EvaluateOptions):
     """The ray of every boundary lane of the grasp ``data``: ``(k, v, t_grid)``, leading
     axis ``2N * D``: ``k`` the lane's equality row in the ``(3N,)`` constraints (slip rows,
-    then force rows), ``v`` ``(6,)`` its direction (:meth:`EvaluateOptions.directions`
-    in the :func:`start_frame`), ``t_grid`` ``(ray_points,)`` mm, the points the ray
+    then force rows), ``v`` ``(6,)`` its direction ([`EvaluateOptions.directions`][jaxgrasp.EvaluateOptions.directions]
+    in the `start_frame`), ``t_grid`` ``(ray_points,)`` mm, the points the ray
     brackets its crossing on."""
     n = data.params.c.shape[0]
     dtype = data.params.c.dtype
@@ -253,15 +253,15 @@ def _contact_data(data: ProblemData, j) -> ProblemData:
 
 def _ray_lane(data: ProblemData, z_eq, k, v, t_grid, options: EvaluateOptions):
     """Start of one boundary lane (its grasp ``data``, ray ``k, v, t_grid`` from
-    :func:`_lane_rays`): ``(z0, found, nu0, g_eq)``: ``z0`` the crossing of constraint
+    `_lane_rays`): ``(z0, found, nu0, g_eq)``: ``z0`` the crossing of constraint
     ``k`` along ``v`` from ``z_eq`` (``z_eq`` itself where the equilibrium is already on
     it), ``nu0`` ``NaN``: the solver starts the equality multiplier at its least-squares
-    estimate there (:func:`~jaxgrasp.solver._solver.init`, from its first step's derivatives, so
+    estimate there (`init`, from its first step's derivatives, so
     that no other copy of them is compiled); ``g_eq`` constraint ``k``'s margin at
     ``z_eq``.
 
     Row ``k = row * N + j`` of the constraints is contact ``j``'s alone, so the ray
-    evaluates that contact's kinematics only (:func:`_contact_data`): of a 7-contact
+    evaluates that contact's kinematics only (`_contact_data`): of a 7-contact
     grasp, one seventh of the model in each of its steps."""
     n = data.params.c.shape[0]
     one = _contact_data(data, k % n)
@@ -298,11 +298,11 @@ class LaneStarts:
         nu0: ``(B, L)`` initial equality multipliers (``NaN``: the solver's estimate).
         active: ``(B, L)`` bool, the lanes to solve.
         at_eq: ``(B, L)`` bool, boundary lanes whose problem the equilibrium already
-            solves (:func:`_at_equilibrium`; not ``active``).
+            solves (`_at_equilibrium`; not ``active``).
         g_eq: ``(B, L)`` each lane's equality margin at the equilibrium.
         u0: ``(B,)`` the equilibrium's energy (scaled; 0 in the equilibrium stage): the
             first wave of starts measures boundary energies above it
-            (:func:`jaxgrasp.tolerance._stages.rest_needed`).
+            (`jaxgrasp.tolerance._stages.rest_needed`).
     """
 
     x0: Any
@@ -315,8 +315,8 @@ class LaneStarts:
 
 
 def equilibrium_starts(data: ProblemData, options: EvaluateOptions) -> LaneStarts:
-    """The equilibrium stage of :data:`jaxgrasp.engine.PIPELINE`: the lanes of the equilibrium problem of a
-    batch ``data`` (:func:`_equilibrium_lanes`: lane 0 of each grasp from its initial
+    """The equilibrium stage of `jaxgrasp.engine.PIPELINE`: the lanes of the equilibrium problem of a
+    batch ``data`` (`_equilibrium_lanes`: lane 0 of each grasp from its initial
     grasping state, the others inactive)."""
     num_lanes = _num_lanes(data, options)
     z0, masks, nu0, active = jax.vmap(lambda d: _equilibrium_lanes(d, num_lanes))(data)
@@ -332,9 +332,9 @@ def equilibrium_of(lanes: SolverResult) -> SolverResult:
 
 
 def boundary_starts(data: ProblemData, eq: SolverResult, options: EvaluateOptions) -> LaneStarts:
-    """The starts stage of :data:`jaxgrasp.engine.PIPELINE`: the lanes of every boundary problem of a
+    """The starts stage of `jaxgrasp.engine.PIPELINE`: the lanes of every boundary problem of a
     batch ``data`` from its equilibria ``eq`` (leading axis ``B``): each lane's ray
-    (:func:`_lane_rays`) walked to its crossing (:func:`_ray_lane`). Without a converged
+    (`_lane_rays`) walked to its crossing (`_ray_lane`). Without a converged
     equilibrium there is nothing to start from: every lane is skipped; an inactive
     contact has no boundary problems; an equilibrium on a boundary (to the solver's
     tolerance) is that problem's minimiser: its lanes are ``at_eq``, not solved."""

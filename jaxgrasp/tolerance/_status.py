@@ -8,7 +8,7 @@ __all__ = ["GraspStatus"]
 
 
 class GraspStatus(Coded):
-    """What :func:`jaxgrasp.evaluate` says of a grasp."""
+    """What [`jaxgrasp.evaluate`][jaxgrasp.evaluate] says of a grasp."""
 
     STABLE = 0, "the equilibrium lies inside the equilibrium region: value > 0"
     UNSTABLE = 1, (

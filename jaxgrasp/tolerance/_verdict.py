@@ -4,16 +4,16 @@ An evaluation of a grasp follows the paper (Sec. III, VI) in six steps, one name
 each:
 
 1. solve the equilibrium problem and every boundary problem from its starts (the
-   stages of :data:`jaxgrasp.engine.PIPELINE` before its ``evaluation``);
-2. keep the lowest converged start of each boundary problem (:func:`best_starts`);
-3. decide the grasp's status from the solver's outputs (:func:`grasp_status`; Sec. III-B);
-4. the minimum energies with their envelope-theorem derivatives (:func:`energies`,
-   :mod:`jaxgrasp.tolerance._envelope`);
+   stages of `jaxgrasp.engine.PIPELINE` before its ``evaluation``);
+2. keep the lowest converged start of each boundary problem (`best_starts`);
+3. decide the grasp's status from the solver's outputs (`grasp_status`; Sec. III-B);
+4. the minimum energies with their envelope-theorem derivatives (`energies`,
+   `jaxgrasp.tolerance._envelope`);
 5. the value, eq. 1: the least boundary energy above ``U0``, or a soft minimum
-   (:func:`value_of`);
-6. the :class:`~jaxgrasp.Evaluation` in SI units (:func:`to_evaluation`).
+   (`value_of`);
+6. the [`Evaluation`][jaxgrasp.Evaluation] in SI units (`to_evaluation`).
 
-This module does steps 2-6 (:func:`evaluation_of` for one grasp, :func:`evaluations_of`
+This module does steps 2-6 (`evaluation_of` for one grasp, `evaluations_of`
 for a batch); the engine runs step 1 before them.
 """
 
@@ -64,9 +64,9 @@ def split_temperature(options: EvaluateOptions):
 
 
 def evaluations_of(p: ModelParams, progs: Problems, temperature, options: EvaluateOptions) -> Evaluation:
-    """Steps 2-6 for a batch of grasps ``p`` (:func:`jaxgrasp.model.model_params` of each,
+    """Steps 2-6 for a batch of grasps ``p`` (`jaxgrasp.model.model_params` of each,
     leading axis ``B``): their evaluations from their solved problems ``progs``
-    (:class:`~jaxgrasp.tolerance._problems.Problems` with the same leading axis;
+    (`Problems` with the same leading axis;
     ``temperature``: mJ, ``0`` for the hard minimum)."""
     return jax.vmap(lambda p, progs: evaluation_of(p, progs, temperature, options))(p, progs)
 
@@ -86,7 +86,7 @@ def evaluation_of(p: ModelParams, progs: Problems, temperature, options: Evaluat
 @dataclasses.dataclass(frozen=True)
 class Boundaries:
     """Each boundary problem at its lowest converged start (``B = 2N`` problems,
-    ``b = kind * N + contact``; scaled units as in :class:`~jaxgrasp.tolerance._problems.Problems`).
+    ``b = kind * N + contact``; scaled units as in `Problems`).
 
     Attributes:
         pick: ``(B,)`` lane index of the kept start.
@@ -94,7 +94,7 @@ class Boundaries:
         lam, nu: ``(B, 3N)``, ``(B,)`` its multipliers.
         objective: ``(B,)`` its scaled energy (the equilibrium's where not reached).
         reached: ``(B,)`` some start converged.
-        status: ``(B,)`` :class:`~jaxgrasp.solver.LaneStatus` of the problem: converged
+        status: ``(B,)`` [`LaneStatus`][jaxgrasp.solver.LaneStatus] of the problem: converged
             (reached), infeasible (every start infeasible or not started), not converged,
             or no start (the equilibrium did not converge).
         estimate: ``(B,)`` lowest scaled energy of a feasible start that did not converge
@@ -116,7 +116,7 @@ SAME_MINIMUM = 3e-10
 (relative) of the lowest one's reached the same minimum: the solver stops at feasibility
 and complementarity of 1e-10, and at stationarity of 1e-10 (or up to 1e-9 where phi is
 too stiff to reach it, which moves the energy only at second order), so lanes at one
-minimum end about that far apart. :func:`best_starts` reports the first of them by
+minimum end about that far apart. `best_starts` reports the first of them by
 start, so the reported lane (its energy, pose and steps) does not depend on the rounding
 of the executable it ran in (a single grasp, a batch, a grasp padded with inactive
 contacts); the energy is at most this much above the lowest lane's."""
@@ -125,7 +125,7 @@ contacts); the energy is at most this much above the lowest lane's."""
 def best_starts(progs: Problems, num_starts: int, boundary_tol: float) -> Boundaries:
     """Keep the lowest converged start of each boundary problem (a missed lower point
     would overstate stability; of lanes at the same minimum, within
-    :data:`SAME_MINIMUM`, the first by start), and classify the problems that no start
+    `SAME_MINIMUM`, the first by start), and classify the problems that no start
     settled."""
     eq, lanes = progs.equilibrium, progs.boundary
     shape = (-1, num_starts)  # (2N, D)
@@ -174,9 +174,9 @@ class Verdict:
     """The grasp's status and what decided it (no derivative).
 
     Attributes:
-        status: ``()`` :class:`~jaxgrasp.GraspStatus` code.
+        status: ``()`` [`GraspStatus`][jaxgrasp.GraspStatus] code.
         limit: ``()`` index ``b`` of the lowest reached boundary problem (0 if none); of
-            boundaries tied within :data:`TIE_TOL` of the value, the first.
+            boundaries tied within `TIE_TOL` of the value, the first.
         any_reached: ``()`` some boundary problem was reached.
         keep_value: ``()`` the value is reported (stable or not converged).
         margins: ``(3, N)`` scaled constraint margins at the equilibrium.
@@ -193,7 +193,7 @@ def limiting_index(objective, reached, equilibrium):
     """``()`` index of the limiting boundary problem: the least ``objective`` ``(B,)``
     among the ``reached`` ones (scaled energies; ``equilibrium``: the equilibrium's).
 
-    Boundaries within the solver's accuracy of the least (:data:`TIE_TOL` of the value,
+    Boundaries within the solver's accuracy of the least (`TIE_TOL` of the value,
     ``least - equilibrium``) are a tie, which goes to the first in (kind, contact) order:
     symmetric contacts then give the same limiting boundary whatever the rounding
     (padding, batching, platform). 0 where none is reached."""
@@ -324,7 +324,7 @@ def _kkt(r):
 
 
 def to_evaluation(progs: Problems, best: Boundaries, verdict: Verdict, value, u_eq, u_b) -> Evaluation:
-    """Pack the results in SI units (J, m, rad) as an :class:`~jaxgrasp.Evaluation`."""
+    """Pack the results in SI units (J, m, rad) as an [`Evaluation`][jaxgrasp.Evaluation]."""
     eq, lanes = progs.equilibrium, progs.boundary
     n = verdict.margins.shape[-1]
     has_limit = verdict.keep_value & verdict.any_reached
