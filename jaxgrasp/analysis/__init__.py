@@ -1,10 +1,9 @@
 """Analyses built on the engine: parameter sweeps, gradient tuning, the Ferrari-Canny epsilon,
 the robust value under uncertainty.
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages, not promised (the faces' convention: ``docs/development.md``,
+"Layout").
 """
 
 from jaxgrasp.analysis._epsilon import EpsilonResult, epsilon

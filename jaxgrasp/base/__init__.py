@@ -5,10 +5,9 @@ label and a one-line message); `contract` is a small ``einsum`` written as one
 broadcast product and one sum, so that XLA fuses it with what surrounds it. The solver
 and the model both use them; here, below both, neither depends on the other for them.
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages, not promised (the faces' convention: ``docs/development.md``,
+"Layout").
 """
 
 from jaxgrasp.base._codes import Coded

@@ -11,12 +11,9 @@ width `plan_widths` gives it). `solve_problems` stops it at the solved problems.
 store, messages), else its first use does (`jaxgrasp.engine._setup`); long calls
 report on the ``"jaxgrasp"`` logger (`ChunkProgress`, `jaxgrasp.engine._progress`).
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users. The names imported below the comment "For the
-studies in experiments/" are the instruments the lab's scripts use (stages, internals);
-they are not in ``__all__`` and not promised to users either.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages and for the studies in ``experiments/``, not promised (the
+faces' convention: ``docs/development.md``, "Layout").
 """
 
 from jaxgrasp.engine._batch import evaluate_batch, evaluate_dataset

@@ -5,10 +5,9 @@ configuration makes on a mesh ([`Hand.grasp`][jaxgrasp.Hand.grasp] -> [`HandGras
 gradient with respect to the joints ([`hand_value`][jaxgrasp.hands.hand_value]), and [`tune_hand`][jaxgrasp.tune_hand], which
 maximises the value over the joint angles with the other links kept out of the object.
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages, not promised (the faces' convention: ``docs/development.md``,
+"Layout").
 """
 
 from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp

@@ -12,10 +12,9 @@ OBJ, PLY, OFF, GLB; no archives) inside that file's folder after symlinks, unles
 caller allows more folders (``allowed_dirs=``, ``--allow-dir``); see
 `jaxgrasp.io._inputs`.
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages, not promised (the faces' convention: ``docs/development.md``,
+"Layout").
 """
 
 from jaxgrasp.io._dataset import GraspSet, load_dataset, save_dataset

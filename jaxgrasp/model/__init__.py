@@ -6,10 +6,9 @@ for traced and batched grasps), the conversion to internal units
 (`model_params`), the potential energy and constraint margins of a grasp (Tsuji et
 al., eq. 3-21), and the model's codes ([`BoundaryKind`][jaxgrasp.model.BoundaryKind], `Constraint`).
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages, not promised (the faces' convention: ``docs/development.md``,
+"Layout").
 """
 
 from jaxgrasp.model._check import CheckReason, GraspCheck, check

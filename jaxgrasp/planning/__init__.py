@@ -5,13 +5,9 @@ contact rules of `jaxgrasp.surface`), evaluates them in batches, refines the bes
 surface-constrained gradient tuning and ranks them ([`PlanResult`][jaxgrasp.planning.PlanResult]), saying what it
 does on the ``"jaxgrasp"`` logger (`PlanProgress`).
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
-The names imported below the comment "For the studies in experiments/" are the
-instruments the lab's scripts use (stages, internals); they are not in ``__all__`` and not
-promised to users either.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages and for the studies in ``experiments/``, not promised (the
+faces' convention: ``docs/development.md``, "Layout").
 """
 
 from jaxgrasp.planning._plan import SAMPLERS, plan

@@ -2,13 +2,9 @@
 and the way it fails (with a hand's links: `plot_hand_grasp`), the value over the
 iterations of a tuning.
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
-The names imported below the comment "For the studies in experiments/" are the
-instruments the lab's scripts use (stages, internals); they are not in ``__all__`` and not
-promised to users either.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages and for the studies in ``experiments/``, not promised (the
+faces' convention: ``docs/development.md``, "Layout").
 """
 
 from jaxgrasp.plots._plots import draw_scene, plot_grasp, plot_max, plot_max_over, plot_ranking, plot_sweep, save_figure

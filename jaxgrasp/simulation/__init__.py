@@ -7,10 +7,9 @@ returns a [`SimulationResult`][jaxgrasp.simulation.SimulationResult] (`_result`)
 anything is evaluated (`_options`). MuJoCo is imported only when
 [`simulate`][jaxgrasp.simulate] runs.
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages, not promised (the faces' convention: ``docs/development.md``,
+"Layout").
 """
 
 from jaxgrasp.simulation._options import DEFAULTS

@@ -4,13 +4,9 @@ It knows nothing of grasps: a `Problem` is an objective with equality and
 inequality rows; `solve` runs one lane of it, `solve_lanes` many lanes as a
 work queue. Its statuses are [`LaneStatus`][jaxgrasp.solver.LaneStatus] (a `jaxgrasp.base.Coded`).
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
-The names imported below the comment "For the studies in experiments/" are the
-instruments the lab's scripts use (stages, internals); they are not in ``__all__`` and not
-promised to users either.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages and for the studies in ``experiments/``, not promised (the
+faces' convention: ``docs/development.md``, "Layout").
 """
 
 from jaxgrasp.solver._lanes import Held, solve_lane_batches, solve_lanes

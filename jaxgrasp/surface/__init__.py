@@ -8,10 +8,9 @@ A grasp on a mesh is a [`MeshGrasp`][jaxgrasp.MeshGrasp]: its contacts snapped t
 of mass and the frame ([`jaxgrasp.from_mesh`][jaxgrasp.from_mesh] reads a mesh file and builds one).
 `closest_on_triangles` is the one closest-point rule, in JAX (traced) or NumPy.
 
-``__all__`` lists the names promised to users. The names imported below the comment
-"For jaxgrasp's other packages" are what the library's other packages use from here
-(they import from this face, never from its private modules); they are not in
-``__all__`` and not promised to users.
+``__all__`` lists the names promised to users; the names imported below it are for
+jaxgrasp's other packages, not promised (the faces' convention: ``docs/development.md``,
+"Layout").
 """
 
 from jaxgrasp.surface._mesh import MeshGrasp
