@@ -72,7 +72,9 @@ def configure(*, cpu_devices: int | None = None) -> dict:
         n = _devices.configure_cpu_devices(env)
         if n is None and not _devices.user_chose() and (_DONE is None or _DONE["cpu_devices"] != wanted):
             _LATE[:] = [wanted]
-        store = _store.enable_from_environment()
+        chosen, store = _store.chosen_dir()  # a store the program chose stays
+        if not chosen:
+            store = _store.enable_from_environment()
         _progress.show_by_default()
         _DONE = {"cpu_devices": n if n is not None else (_DONE or {}).get("cpu_devices"),
                  "executable_store": store}

@@ -101,6 +101,7 @@ __all__ = [
     "discard",
     "enable_compilation_cache",
     "enable_from_environment",
+    "chosen_dir",
     "executable_dir",
     "executable_entry",
     "load_executable",
@@ -162,14 +163,19 @@ def default_dir() -> Path | None:
     return home / ".cache" / "jaxgrasp" / "xla" if home.is_absolute() else None  # HOME="": not the working folder
 
 
+def chosen_dir() -> tuple[bool, Path | None]:
+    """``(chosen, folder)``: whether the program chose the store already (`set_executable_dir`,
+    directly or through [`enable_compilation_cache`][jaxgrasp.engine.enable_compilation_cache]
+    or `enable_from_environment`), and its folder (``None``: off). jaxgrasp's first use
+    ([`jaxgrasp.configure`][jaxgrasp.configure]) keeps such a choice."""
+    return _CHOSEN, _EXECUTABLE_DIR
+
+
 def enable_from_environment() -> Path | None:
     """Turn on the executable store alone in `default_dir`'s subfolder
-    ``jaxgrasp-executables`` (not JAX's own cache, see the module docstring), unless the
-    store was chosen before (`set_executable_dir`, [`enable_compilation_cache`][jaxgrasp.engine.enable_compilation_cache]);
-    the folder of the store, or ``None`` (switched off, refused, or it cannot be created).
-    jaxgrasp's first use calls it ([`jaxgrasp.configure`][jaxgrasp.configure]); it starts no JAX backend."""
-    if _CHOSEN:
-        return _EXECUTABLE_DIR
+    ``jaxgrasp-executables`` (not JAX's own cache, see the module docstring); the folder
+    of the store, or ``None`` (switched off, refused, or it cannot be created). It starts
+    no JAX backend."""
     folder = default_dir()
     if folder is None:
         return None

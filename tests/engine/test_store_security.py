@@ -301,6 +301,21 @@ def test_environment_moves_or_switches_off(tmp_path, monkeypatch):
         store.set_executable_dir(saved)
 
 
+def test_first_use_keeps_the_store_the_program_chose(tmp_path, monkeypatch):
+    """``jaxgrasp.configure`` (jaxgrasp's first use) reads ``JAXGRASP_CACHE_DIR`` only where
+    the program has not chosen a store: a folder set before stays."""
+    from jaxgrasp.engine import configure
+
+    saved = store.executable_dir()
+    try:
+        monkeypatch.setenv(store.ENV_VAR, str(tmp_path / "from-env"))
+        store.set_executable_dir(tmp_path / "mine")
+        assert configure()["executable_store"] == tmp_path / "mine" == store.executable_dir()
+        assert not (tmp_path / "from-env").exists()
+    finally:
+        store.set_executable_dir(saved)
+
+
 def test_log_lines_go_to_stderr_in_the_command(capsys):
     """What the command prints of the ``jaxgrasp`` logger: INFO lines, one line each, only
     inside the block."""
