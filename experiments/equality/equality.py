@@ -294,6 +294,10 @@ def record(outdir: Path, only) -> None:
 
     import jaxgrasp
 
+    # JAX's devices as every tree makes them by default: before issue 64 the import asked
+    # for one CPU device per core; since, jaxgrasp.configure() (or the first use) does. The
+    # count changes a chunk's per-device shape, and with it rounding.
+    getattr(jaxgrasp, "configure", lambda: None)()
     outdir.mkdir(parents=True, exist_ok=True)
     meta = {"jaxgrasp_file": jaxgrasp.__file__, "jax": jax.__version__, "devices": len(jax.devices()),
             "backend": jax.default_backend(), "x64": bool(jax.config.jax_enable_x64),
