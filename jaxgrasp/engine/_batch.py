@@ -169,11 +169,9 @@ def _evaluate_fields(fields: dict[str, np.ndarray], errors, chunk_size, devices,
 def _run(source: Stacked, widths, chunk_size, devices, options: EvaluateOptions, progress, on_chunk,
          exact_chunk: bool = False) -> Run:
     """The grasps of ``source`` through `run_batch`, at
-    ``widths`` (default: `plan_widths` of their counts), the
+    ``widths`` (``None``: `plan_source`'s default, `plan_widths` of their counts), the
     settling stage inline (a set of varied grasps, `_settling`);
     ``on_chunk(rows, results)`` with the rows of ``source.fields``."""
-    if widths is None:
-        widths = plan_widths(grasps_by_count(source.counts()), platform(devices))
     plan = plan_source(source, chunk_size, devices, widths, exact_chunk=exact_chunk)
     rows_of = None if on_chunk is None else (lambda at, results: on_chunk(source.rows[at], results))
     return run_batch(source, plan, options, settle=INLINE, progress=progress, on_chunk=rows_of)

@@ -22,7 +22,7 @@ import pytest
 
 import jaxgrasp
 from jaxgrasp import Grasp, evaluate_batch
-from jaxgrasp.engine import _batch as batch_module
+from jaxgrasp.engine import _runner as runner_module
 from jaxgrasp.engine import _compile, _store
 from jaxgrasp.engine._batch import evaluate_dataset
 from jaxgrasp.engine._plan import (
@@ -122,7 +122,7 @@ def padded_and_segmented():
     padded = evaluate_batch(grasps, chunk_size=2)  # test_batch.py's program
     chunks, reports = [], []
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(batch_module, "plan_widths", lambda counts, platform: FORCED)
+        mp.setattr(runner_module, "plan_widths", lambda counts, platform: FORCED)
         segmented = evaluate_batch(grasps, chunk_size=2, on_chunk=lambda rows, res: chunks.append((rows, res)),
                                    progress=lambda done, total: reports.append((done, total)))
     held = {key[2:4] + key[6:7] for key in _compile._MEMO if key[0] == "chunk"}  # (contacts, chunk, masked)
