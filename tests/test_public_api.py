@@ -50,6 +50,7 @@ MOVED_TO_FACES = {
 """Names that left the top level in issue 64 (a feature's own types, internals, dict-level
 twins, a cache switch), and the package face that holds each."""
 RESULT_TYPES = {
+    "jaxgrasp.solver": ("SolverResult",),
     "jaxgrasp.tolerance": ("Evaluation",),
     "jaxgrasp.engine": ("BatchResult",),
     "jaxgrasp.analysis": ("SweepResult", "TuneResult", "EpsilonResult", "RobustResult", "RobustBatch"),
@@ -526,3 +527,26 @@ def test_results_convention_details(tmp_path):
     tuned = built["TuneResult"][0]
     assert tuned.status_name == "stalled" and type(tuned.status_name) is str and tuned.status.label == "stalled"
     assert built["Evaluation"][0].summary().splitlines()[0] == "stable: value 8.794010e-05 J; limited by slip of contact 0"
+
+
+@pytest.mark.slow
+def test_real_results_follow_the_convention():
+    """The same convention on what the entry points return (the cube: the 2-contact
+    programs, the batch one in chunks of 4 as ``tests/analysis/test_robust.py``'s)."""
+    from jaxgrasp.analysis import Uncertainty
+
+    cube = jaxgrasp.presets.cube()
+    squeezed = cube.replace(initial_deformation=np.full(2, 5e-3))  # infeasible
+    robust = jaxgrasp.robust_batch([cube, squeezed], Uncertainty(friction=0.1), samples=2, chunk_size=4)
+    real = {
+        "Evaluation": [jaxgrasp.evaluate(cube), jaxgrasp.evaluate(squeezed)],
+        "BatchResult": [jaxgrasp.evaluate_batch([cube, squeezed], chunk_size=4)],
+        "SweepResult": [jaxgrasp.sweep(cube, young_modulus=[2e5, 6e5], chunk_size=4)],
+        "RobustBatch": [robust],
+        "RobustResult": [robust[0], robust[1]],
+        "TuneResult": [jaxgrasp.tune(cube, ["initial_deformation:shared"], maxiter=2)],
+        "EpsilonResult": [jaxgrasp.epsilon(cube)],
+    }
+    offenders = [line for name, rs in real.items() for r in rs for line in convention_offenders(name, r)]
+    _fail_if("departures from the results' convention", offenders)
+    assert real["Evaluation"][1].status_name == "infeasible" and robust[1].status_name == "estimated"

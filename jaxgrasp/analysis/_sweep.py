@@ -146,6 +146,12 @@ class SweepResult(SummaryNames):
         """Number of grid points."""
         return int(np.prod(self.shape, dtype=np.int64))
 
+    @property
+    def elapsed_s(self) -> float:
+        """Wall time of the evaluation, s: ``compile_seconds + run_seconds`` (derived from
+        them, so a file that keeps the two keeps it)."""
+        return float(self.compile_seconds) + float(self.run_seconds)
+
     def grid(self) -> dict[str, np.ndarray]:
         """Each axis' value at every grid point: dict name -> array shaped like the grid."""
         mesh = np.meshgrid(*self.axes.values(), indexing="ij") if self.axes else []

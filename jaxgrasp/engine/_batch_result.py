@@ -124,6 +124,12 @@ class BatchResult(SummaryNames):
     def __len__(self) -> int:
         return len(self.errors)
 
+    @property
+    def elapsed_s(self) -> float:
+        """Wall time of the evaluation, s: ``compile_seconds + run_seconds`` (derived from
+        them, so a file that keeps the two keeps it)."""
+        return float(self.compile_seconds) + float(self.run_seconds)
+
     def __getitem__(self, i: int) -> Evaluation:
         """Grasp ``i``'s [`Evaluation`][jaxgrasp.Evaluation] (contacts numbered as in the batch)."""
         return jax.tree_util.tree_map(lambda a: a[i], self.evaluation)

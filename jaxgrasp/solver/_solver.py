@@ -167,15 +167,15 @@ class SolverResult:
         steps: ``()`` int32, Newton steps plus multiplier updates taken.
     """
 
-    x: Any
-    lam: Any
-    nu: Any
-    objective: Any
-    status: Any
-    stationarity: Any
-    feasibility: Any
-    complementarity: Any
-    steps: Any
+    x: jax.Array | np.ndarray
+    lam: jax.Array | np.ndarray
+    nu: jax.Array | np.ndarray
+    objective: jax.Array | np.ndarray
+    status: jax.Array | np.ndarray
+    stationarity: jax.Array | np.ndarray
+    feasibility: jax.Array | np.ndarray
+    complementarity: jax.Array | np.ndarray
+    steps: jax.Array | np.ndarray
 
     @property
     def status_name(self) -> str:

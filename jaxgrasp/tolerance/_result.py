@@ -250,14 +250,7 @@ tables): value (J), status, limiting kind and contact, equilibrium energy (J).""
 class SummaryNames:
     """Names and counts of the codes of a result with ``status`` and ``limiting_kind``
     arrays of any shape ([`jaxgrasp.analysis.SweepResult`][jaxgrasp.analysis.SweepResult], [`jaxgrasp.BatchResult`][jaxgrasp.BatchResult]),
-    its wall time from ``compile_seconds`` and ``run_seconds``, and the entries of its
-    ``to_dict``."""
-
-    @property
-    def elapsed_s(self) -> float:
-        """Wall time of the evaluation, s: ``compile_seconds + run_seconds`` (derived from
-        them, so files that keep the two keep it)."""
-        return float(self.compile_seconds) + float(self.run_seconds)
+    and the entries and timing line of its ``to_dict`` and ``summary``."""
 
     @property
     def status_names(self) -> np.ndarray:
