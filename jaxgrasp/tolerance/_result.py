@@ -283,7 +283,7 @@ class SummaryNames:
         }
 
     def _timing_line(self) -> str:
-        """``compile 1.2 s, run 3.4 s (elapsed 4.6 s) on 1 device``."""
+        """The timings' line of ``summary``: compile, run and elapsed seconds, and the devices."""
         devices = f"{self.devices} device{'s' if self.devices != 1 else ''}"
         return (f"compile {self.compile_seconds:.1f} s, run {self.run_seconds:.1f} s "
                 f"(elapsed {self.elapsed_s:.1f} s) on {devices}")
