@@ -12,8 +12,11 @@ rule once.
 from __future__ import annotations
 
 import ast
+import dataclasses
+import enum
 import importlib
 import inspect
+import json
 import pkgutil
 import sys
 import textwrap
@@ -21,6 +24,7 @@ import tomllib
 import types
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import jaxgrasp
@@ -46,6 +50,7 @@ MOVED_TO_FACES = {
 """Names that left the top level in issue 64 (a feature's own types, internals, dict-level
 twins, a cache switch), and the package face that holds each."""
 RESULT_TYPES = {
+    "jaxgrasp.solver": ("SolverResult",),
     "jaxgrasp.tolerance": ("Evaluation",),
     "jaxgrasp.engine": ("BatchResult",),
     "jaxgrasp.analysis": ("SweepResult", "TuneResult", "EpsilonResult", "RobustResult", "RobustBatch"),
@@ -311,3 +316,237 @@ def test_checks_find_planted_offenders(tmp_path, monkeypatch):
     finally:
         for name in [m for m in sys.modules if m == "fakeapi" or m.startswith("fakeapi.")]:
             del sys.modules[name]
+
+
+# ----------------------------------------------------------------------------- results alike (issue 64)
+# docs/getting-started.md, "What every result holds": one convention for every result type.
+PYTREE_RESULTS = ("Evaluation", "SolverResult")
+"""Results that pass through ``jit`` and ``vmap``: ``status`` is an integer array there."""
+BATCHED_RESULTS = ("BatchResult", "SweepResult", "RobustBatch")
+"""Results with a leading axis of entries, each a single result's members: codes and names
+by entry (``status``, ``status_names``), ``value`` by entry."""
+WITHOUT_STATUS = ("EpsilonResult",)
+"""Results without an outcome code (epsilon's outcome is ``force_closure``)."""
+WITHOUT_VALUE = ("SolverResult",)
+"""Results without a headline value (the solver's objective is in its scaled units)."""
+TIMED = ("BatchResult", "SweepResult", "PlanResult")
+"""Results that time their own run: ``elapsed_s``."""
+TUNED = ("TuneResult", "HandTuneResult")
+"""Results of a tuning: ``start_value``, the value before it."""
+
+
+def result_types() -> dict[str, type]:
+    """Every result type on a package face: the classes of the faces' ``__all__`` whose name
+    ends in ``Result``, ``Evaluation``, ``RobustBatch`` and those `RESULT_TYPES` lists."""
+    import_everything(jaxgrasp)
+    out = {}
+    for package in subpackages(jaxgrasp):
+        for name in getattr(package, "__all__", ()):
+            obj = getattr(package, name, None)
+            listed = name in RESULT_TYPES.get(package.__name__, ())
+            if isinstance(obj, type) and (name.endswith("Result") or name in ("Evaluation", "RobustBatch") or listed):
+                out[name] = obj
+    return out
+
+
+def _cube_evaluation(value: float = 8.794009946243486e-05, status: int = 0):
+    """One grasp's `Evaluation` of two contacts, with the numbers of the cube's (no compilation)."""
+    u0 = 3.3510321638291125e-03
+    return jaxgrasp.Evaluation(
+        value=np.float64(value), status=np.int32(status), limiting_kind=np.int32(0), limiting_contact=np.int32(0),
+        equilibrium_energy=np.float64(u0), equilibrium_translation=np.zeros(3), equilibrium_rotation=np.zeros(3),
+        boundary_energy=np.array([[u0 + value, u0 + value], [u0 + 2e-3, np.inf]]),
+        boundary_translation=np.zeros((2, 2, 3)), boundary_rotation=np.zeros((2, 2, 3)),
+        boundary_status=np.array([[0, 0], [0, 1]], dtype=np.int32), equilibrium_status=np.int32(0),
+        equilibrium_margins=np.full((3, 2), 0.5), kkt=np.zeros((5, 3)), steps=np.arange(5, dtype=np.int32),
+    )
+
+
+def built_results(tmp_path) -> dict[str, list]:
+    """Instances of every result type, built without compiling anything: from their fields
+    (the numbers of the cube's evaluation) or by cheap calls (`epsilon`, indexing a batch,
+    a file's round trip)."""
+    import jax
+
+    from jaxgrasp.analysis import (EpsilonResult, RobustBatch, RobustStatus, SweepResult, TuneResult, TuneStatus,
+                                   Uncertainty)
+    from jaxgrasp.engine import BatchResult
+    from jaxgrasp.hands import HandTuneResult, HandValue
+    from jaxgrasp.planning import PlanResult, PlanStatus
+    from jaxgrasp.simulation import SimulationResult, SimulationStatus, Trial
+    from jaxgrasp.solver import SolverResult
+
+    cube = jaxgrasp.presets.cube()
+    ev, bad = _cube_evaluation(), _cube_evaluation(value=np.nan, status=jaxgrasp.GraspStatus.INVALID)
+    stacked = jax.tree_util.tree_map(lambda *a: np.stack(a), ev, bad, _cube_evaluation(0.0, 1))
+    batch = BatchResult(evaluation=stacked, num_contacts=np.array([2, 0, 2]), active=np.ones((3, 2), bool),
+                        errors=(None, "friction = -1 must be >= 0", None), compile_seconds=1.5, run_seconds=0.25)
+    sweep = SweepResult(axes={"young_modulus": np.array([2e5, 6e5])}, value=np.array([8.8e-5, 2.6e-4]),
+                        status=np.array([0, 0], np.int32), limiting_kind=np.array([0, 1], np.int32),
+                        limiting_contact=np.array([0, 1], np.int32), equilibrium_energy=np.array([3e-3, 3e-3]),
+                        compile_seconds=2.0, run_seconds=0.5)
+    sweep.to_npz(tmp_path / "sweep.npz")
+    nominal = BatchResult(evaluation=jax.tree_util.tree_map(lambda a: a[[0, 2]], stacked), num_contacts=np.array([2, 2]),
+                          active=np.ones((2, 2), bool), errors=(None, None))
+    statuses = np.array([[0, 0, 3], [1, 3, 0]])
+    robust = RobustBatch(
+        status=np.array([RobustStatus.PARTLY_CONVERGED] * 2), p_stable=np.array([1.0, 0.5]),
+        p_stable_stderr=np.array([0.0, 0.5]), value_mean=np.array([8.7e-5, 4.4e-5]), quantile_levels=(0.05, 0.5),
+        quantiles=np.array([[8.4e-5, 8.7e-5], [0.0, 4.4e-5]]), values=np.where(statuses == 0, 8.7e-5, 0.0),
+        statuses=statuses, converged=np.array([2, 2]), nominal=nominal, clipped={"friction": np.array([0, 1])},
+        uncertainty=Uncertainty(friction=0.1), samples=3, seed=0)
+    tuned = TuneResult(
+        grasp=cube, value=9.6e-4, initial_value=8.8e-5, history=np.array([8.8e-5, 9.6e-4]),
+        history_status=np.array([0, 0]), params={"initial_deformation:shared": np.float64(3e-3)},
+        initial_params={"initial_deformation:shared": np.float64(2e-3)},
+        bounds={"initial_deformation:shared": (np.float64(2.5e-4), np.float64(5e-3))}, evaluation=ev,
+        status=TuneStatus.STALLED, iterations=1, evaluations=3, not_converged_evaluations=0, method="scipy_lbfgsb",
+        message=TuneStatus.STALLED.message, start_value=8.8e-5)
+    hand_tuned = HandTuneResult(
+        qpos=np.zeros(4), wrist=np.zeros(6), grasp=None, value=2e-4, start_value=1e-4, deepest=-1e-3,
+        start_deepest=-1e-3, history=np.array([1e-4, 2e-4]), depth_history=np.array([-1e-3, -1e-3]),
+        status=TuneStatus.CONVERGED, iterations=1, evaluations=2, message="the projected gradient vanished")
+    hand_value = HandValue(value=1e-4, grad_qpos=np.zeros(4), grad_wrist=np.zeros(6), evaluation=ev,
+                           deepest=-1e-3, tilt=np.zeros(2))
+    plan = PlanResult(
+        status=PlanStatus.FOUND, grasps=(jaxgrasp.MeshGrasp(cube, None, np.zeros(3)),), values=np.array([8.8e-5]),
+        statuses=np.array([0]), limiting_kind=np.array([0]), limiting_contact=np.array([0]),
+        epsilon=np.array([0.026]), refined=np.array([False]), mesh_positions=np.zeros((1, 2, 3)), sampled=10,
+        valid=4, rule_failures={"flatness": 6}, stable=1, dropped=0, refine_tried=0, refine_kept=0, seed=0,
+        elapsed_s=1.25, settings={"fingers": 2, "gravity": np.array([0.0, 0.0, -9.81])})
+    hold = Trial(kind="hold", success=True, max_displacement_m=1e-4, max_rotation_rad=1e-3, slipped_contact=None,
+                 slip_time_s=None, time_s=np.array([0.0, 0.5]), displacement_m=np.array([0.0, 1e-4]),
+                 rotation_rad=np.array([0.0, 1e-3]), max_sliding_m=np.zeros(2))
+    simulated = SimulationResult(
+        status=SimulationStatus.SIMULATED, grasp_status="stable", value=8.8e-5, reason="", hold=hold,
+        six_axis=(dataclasses.replace(hold, kind="six_axis", axis="+x", success=False),), kicks=(),
+        settled_normal_force_N=np.array([2.0, np.nan]), model_normal_force_N=np.array([2.0, 2.0]),
+        parameters={"timestep_s": 1e-3})
+    not_simulated = SimulationResult(  # a bare int, as before: taken as its SimulationStatus
+        status=1, grasp_status="unstable", value=0.0, reason="unstable: ...", hold=None, six_axis=(), kicks=(),
+        settled_normal_force_N=np.full(2, np.nan), model_normal_force_N=np.full(2, np.nan), parameters={})
+    lane = SolverResult(x=np.zeros(6), lam=np.zeros(4), nu=np.float64(0.0), objective=np.float64(-1.5),
+                        status=np.int32(0), stationarity=np.float64(1e-10), feasibility=np.float64(0.0),
+                        complementarity=np.float64(np.inf), steps=np.int32(12))
+    return {
+        "Evaluation": [ev, batch[1]],
+        "BatchResult": [batch, BatchResult.from_arrays(batch.arrays())],
+        "SweepResult": [sweep, SweepResult.from_npz(tmp_path / "sweep.npz"), sweep.max_over("young_modulus")[0]],
+        "TuneResult": [tuned],
+        "HandTuneResult": [hand_tuned],
+        "HandValue": [hand_value],
+        "RobustBatch": [robust],
+        "RobustResult": [robust[0], robust[1]],
+        "PlanResult": [plan, dataclasses.replace(plan, status=PlanStatus.NO_VALID, grasps=(), values=np.zeros(0))],
+        "SimulationResult": [simulated, not_simulated],
+        "EpsilonResult": [jaxgrasp.epsilon(cube), EpsilonResult(np.array([0.1, -0.2]), np.array([True, False]),
+                                                                np.array([0.05, 0.05]), 8, True)],
+        "SolverResult": [lane],
+    }
+
+
+def convention_offenders(name: str, r) -> list[str]:
+    """What ``r``, an instance of result type ``name``, lacks of the convention."""
+    out = []
+    say = lambda what: out.append(f"{name}: {what}")  # noqa: E731
+    if name in BATCHED_RESULTS:
+        codes, names = np.asarray(r.status), np.asarray(r.status_names)
+        if not np.issubdtype(codes.dtype, np.integer) or names.shape != codes.shape:
+            say(f"status {codes.dtype} {codes.shape} and status_names {names.shape}: codes and names by entry")
+        if not all(type(x) is str for x in names.ravel().tolist()):
+            say("status_names are not all str")
+        if np.shape(r.value) != codes.shape:
+            say(f"value {np.shape(r.value)} is not by entry, as status {codes.shape}")
+    elif name not in WITHOUT_STATUS:
+        if name in PYTREE_RESULTS:
+            ok = np.shape(r.status) == () and np.issubdtype(np.asarray(r.status).dtype, np.integer)
+        else:
+            ok = isinstance(r.status, enum.Enum) and r.status_name == r.status.label
+        if not ok:
+            say(f"status {r.status!r} is not a named code")
+        if type(r.status_name) is not str:
+            say(f"status_name {r.status_name!r} is not a str")
+    if name not in WITHOUT_VALUE and name not in BATCHED_RESULTS and np.ndim(r.value) != 0:
+        if name != "EpsilonResult":  # one grasp's or a batch's, as its arrays
+            say(f"value of shape {np.shape(r.value)}, not one number")
+    if name in WITHOUT_VALUE and hasattr(r, "value"):
+        say("a value, though listed as without one")
+    if name in TIMED:
+        if type(r.elapsed_s) is not float or not r.elapsed_s >= 0.0:
+            say(f"elapsed_s {r.elapsed_s!r} is not seconds as a float")
+        if hasattr(r, "compile_seconds") and r.elapsed_s != r.compile_seconds + r.run_seconds:
+            say("elapsed_s is not compile_seconds + run_seconds")
+    if name in TUNED and not (isinstance(r.start_value, float) and r.gain == r.value / r.start_value):
+        say("no start_value (J) with gain = value / start_value")
+    text = r.summary()
+    if not (isinstance(text, str) and text.strip()):
+        say("summary() is not text")
+    d = r.to_dict()
+    try:
+        json.dumps(d, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        say(f"json.dumps(to_dict()) fails: {exc}")
+    if name not in WITHOUT_STATUS:
+        written = d.get("status", d.get("robust_status"))
+        wanted = r.status_names.tolist() if name in BATCHED_RESULTS else r.status_name
+        if written != wanted:
+            say(f"to_dict() writes status {written!r}, not its name(s) {wanted!r}")
+    return out
+
+
+def test_every_result_follows_the_convention(tmp_path):
+    types_ = result_types()
+    built = built_results(tmp_path)
+    missing = sorted(set(types_) - set(built))
+    assert not missing, f"result types on a face with no instance in built_results(): {missing}"
+    offenders = [f"{name} (unknown to result_types)" for name in sorted(set(built) - set(types_))]
+    for name, instances in built.items():
+        for r in instances:
+            assert type(r) is types_.get(name, type(r)), (name, type(r))
+            offenders += convention_offenders(name, r)
+    _fail_if("departures from the results' convention", offenders)
+
+
+def test_results_convention_details(tmp_path):
+    """What the convention fixes beyond names: the numbers it derives, and how a file keeps them."""
+    from jaxgrasp.simulation import SimulationStatus
+
+    built = built_results(tmp_path)
+    batch, again = built["BatchResult"][:2]
+    assert batch.elapsed_s == again.elapsed_s == 1.75  # from the npz arrays' two timings
+    assert built["SweepResult"][1].elapsed_s == 2.5
+    assert batch.to_dict()["value"][1] is None and batch.to_dict()["status"][1] == "invalid"
+    robust = built["RobustBatch"][0]
+    assert robust.value.tolist() == [8.794009946243486e-05, 0.0] and robust[0].value == float(robust.nominal.value[0])
+    plan, empty = built["PlanResult"]
+    assert plan.value == 8.8e-5 and empty.value == 0.0 and not hasattr(plan, "best_value")
+    assert json.loads(json.dumps(plan.to_dict()))["ranked"][0]["value_J"] == 8.8e-5
+    simulated, not_simulated = built["SimulationResult"]
+    assert not_simulated.status is SimulationStatus.UNSTABLE and int(not_simulated.status) == 1
+    assert simulated.to_dict()["status"] == "simulated" and "value_J" in simulated.to_dict()
+    tuned = built["TuneResult"][0]
+    assert tuned.status_name == "stalled" and type(tuned.status_name) is str and tuned.status.label == "stalled"
+    assert built["Evaluation"][0].summary().splitlines()[0] == "stable: value 8.794010e-05 J; limited by slip of contact 0"
+
+
+@pytest.mark.slow
+def test_real_results_follow_the_convention():
+    """The same convention on what the entry points return (the cube: the 2-contact
+    programs, the batch one in chunks of 4 as ``tests/analysis/test_robust.py``'s)."""
+    from jaxgrasp.analysis import Uncertainty
+
+    cube = jaxgrasp.presets.cube()
+    squeezed = cube.replace(initial_deformation=np.full(2, 5e-3))  # infeasible
+    robust = jaxgrasp.robust_batch([cube, squeezed], Uncertainty(friction=0.1), samples=2, chunk_size=4)
+    real = {
+        "Evaluation": [jaxgrasp.evaluate(cube), jaxgrasp.evaluate(squeezed)],
+        "BatchResult": [jaxgrasp.evaluate_batch([cube, squeezed], chunk_size=4)],
+        "SweepResult": [jaxgrasp.sweep(cube, young_modulus=[2e5, 6e5], chunk_size=4)],
+        "RobustBatch": [robust],
+        "RobustResult": [robust[0], robust[1]],
+        "TuneResult": [jaxgrasp.tune(cube, ["initial_deformation:shared"], maxiter=2)],
+        "EpsilonResult": [jaxgrasp.epsilon(cube)],
+    }
+    offenders = [line for name, rs in real.items() for r in rs for line in convention_offenders(name, r)]
+    _fail_if("departures from the results' convention", offenders)
+    assert real["Evaluation"][1].status_name == "infeasible" and robust[1].status_name == "estimated"

@@ -70,9 +70,9 @@ def one_case(path: Path, fingers: int, random_count: int, seed: int) -> dict:
     rand = jaxgrasp.plan(path, fingers, seed=seed + 1000, sampler="uniform", refine=0, samples=random_count,
                          top=1, **TIP, **OBJECT)
     t_rand = time.perf_counter() - t0
-    ratio = planned.best_value / rand.best_value if rand.best_value > 0 else (np.inf if planned.best_value > 0 else 1.0)
+    ratio = planned.value / rand.value if rand.value > 0 else (np.inf if planned.value > 0 else 1.0)
     return dict(
-        object=path.stem, fingers=fingers, plan_value=planned.best_value, random_value=rand.best_value,
+        object=path.stem, fingers=fingers, plan_value=planned.value, random_value=rand.value,
         ratio=float(ratio), plan_s=t_plan, random_s=t_rand, plan_valid=planned.valid, plan_sampled=planned.sampled,
         random_valid=rand.valid, random_sampled=rand.sampled, plan_dropped=planned.dropped, random_dropped=rand.dropped,
         plan_stable=planned.stable, random_stable=rand.stable, refine_kept=planned.refine_kept,

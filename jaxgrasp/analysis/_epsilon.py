@@ -54,6 +54,9 @@ offsets carry round-off of about 1e-15 on wrenches of length ~1."""
 class EpsilonResult:
     """The Ferrari-Canny epsilon of one grasp (``()`` arrays) or of a batch (``(B,)``).
 
+    Its ``value`` is the metric, dimensionless, not an energy in J; it has no status
+    (``force_closure`` is its yes-or-no outcome).
+
     Attributes:
         value: signed distance from the origin to the wrench hull's boundary
             (dimensionless: forces per unit normal force, torques divided by ``lam``);
@@ -70,6 +73,32 @@ class EpsilonResult:
     torque_scale: np.ndarray
     cone_edges: int
     torsion: bool
+
+    def summary(self) -> str:
+        """One line: force closure or not and the value (one grasp), or how many of a
+        batch are force closure and the range of their values."""
+        how = f"{self.cone_edges} cone edges, {'soft fingers' if self.torsion else 'point contacts'}"
+        value = np.asarray(self.value, dtype=np.float64)
+        if value.ndim == 0:
+            closure = "force closure" if bool(self.force_closure) else "not force closure"
+            return (f"{closure}: epsilon {float(value):.6e} ({how}; torque scale "
+                    f"{float(self.torque_scale):.4g} m)")
+        if value.size == 0:
+            return f"0 grasps ({how})"
+        return (f"{value.size} grasps, {int(np.sum(self.force_closure))} force closure: epsilon "
+                f"{float(np.min(value)):.6e} to {float(np.max(value)):.6e} ({how})")
+
+    def to_dict(self) -> dict:
+        """As plain Python (JSON-ready): ``value`` (dimensionless), ``force_closure`` and
+        ``torque_scale`` (m), numbers for one grasp, lists for a batch; ``cone_edges``
+        and ``torsion``."""
+        return {
+            "value": np.asarray(self.value, dtype=np.float64).tolist(),
+            "force_closure": np.asarray(self.force_closure, dtype=bool).tolist(),
+            "torque_scale": np.asarray(self.torque_scale, dtype=np.float64).tolist(),
+            "cone_edges": int(self.cone_edges),
+            "torsion": bool(self.torsion),
+        }
 
 
 def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -73,6 +73,10 @@ def quantile_name(level: float) -> str:
 class RobustResult:
     """The robust evaluation of one grasp ([`jaxgrasp.robust`][jaxgrasp.robust]), SI units.
 
+    Its [`value`][jaxgrasp.analysis.RobustResult.value] is the nominal (unperturbed)
+    grasp's value, J, as [`jaxgrasp.evaluate`][jaxgrasp.evaluate] gives it; the statistics
+    over the samples have names of their own (``value_mean``, ``quantiles``).
+
     Attributes:
         status: a [`RobustStatus`][jaxgrasp.analysis.RobustStatus] ([`status_name`][jaxgrasp.analysis.RobustResult.status_name] its name).
         p_stable: fraction of the settled samples that are stable (NaN without any).
@@ -112,6 +116,23 @@ class RobustResult:
         """The name of `status` (``'estimated'``)."""
         return self.status.label
 
+    @property
+    def value(self) -> float:
+        """The nominal grasp's evaluation value, J (``nominal.value``; NaN for an invalid
+        grasp): the grasp's own value beside the statistics of its perturbed copies."""
+        return float(np.asarray(self.nominal.value))
+
+    def summary(self) -> str:
+        """Two lines: the status and the nominal value, then the statistics over the
+        settled samples (``n/a`` where there are none)."""
+        num = lambda x, f: "n/a" if not np.isfinite(x) else format(x, f)  # noqa: E731
+        qs = ", ".join(f"{quantile_name(q)[len('value_'):]} {num(v, '.6e')} J"
+                       for q, v in zip(self.quantile_levels, self.quantiles))
+        return (f"{self.status_name}: nominal value {num(self.value, '.6e')} J; {self.converged} of {self.samples} "
+                f"samples settled (seed {self.seed})\n"
+                f"p_stable {num(self.p_stable, '.4f')} +- {num(self.p_stable_stderr, '.4f')}, "
+                f"value_mean {num(self.value_mean, '.6e')} J" + (f", {qs}" if qs else ""))
+
     def quantile(self, level: float) -> float:
         """The quantile of one of `quantile_levels`, J."""
         for q, v in zip(self.quantile_levels, self.quantiles):
@@ -123,7 +144,10 @@ class RobustResult:
         """The statistics as plain Python (JSON: NaN as ``None``): ``robust_status``,
         ``p_stable``, ``p_stable_stderr``, ``value_mean``, one ``value_qNN`` per level,
         ``samples``, ``converged``, ``seed``, ``uncertainty`` and ``clipped``; the
-        per-sample arrays and the nominal evaluation are not in it."""
+        per-sample arrays and the nominal evaluation (and so ``value``) are not in it.
+        Its status is ``robust_status``, not ``status``, because ``jaxgrasp evaluate
+        --robust --json`` writes these entries beside the nominal evaluation's own
+        ``status`` and ``value``."""
         num = lambda x: None if not np.isfinite(x) else float(x)  # noqa: E731
         out = {
             "robust_status": self.status_name,
@@ -143,8 +167,12 @@ class RobustBatch:
     order: the fields of [`RobustResult`][jaxgrasp.analysis.RobustResult] with a leading ``G`` axis; ``rb[i]`` is
     grasp ``i``'s [`RobustResult`][jaxgrasp.analysis.RobustResult].
 
+    Its [`value`][jaxgrasp.analysis.RobustBatch.value] is ``(G,)`` the nominal grasps'
+    values, J, as [`RobustResult.value`][jaxgrasp.analysis.RobustResult.value] is one.
+
     Attributes:
-        status: ``(G,)`` [`RobustStatus`][jaxgrasp.analysis.RobustStatus] codes.
+        status: ``(G,)`` [`RobustStatus`][jaxgrasp.analysis.RobustStatus] codes
+            ([`status_names`][jaxgrasp.analysis.RobustBatch.status_names] their names).
         p_stable, p_stable_stderr, value_mean: ``(G,)`` (-, -, J).
         quantile_levels: ``(Q,)``; quantiles: ``(G, Q)`` J.
         values: ``(G, S)`` J; statuses: ``(G, S)`` [`GraspStatus`][jaxgrasp.GraspStatus] codes.
@@ -187,6 +215,38 @@ class RobustBatch:
     def status_names(self) -> np.ndarray:
         """``(G,)`` the names of `status`."""
         return RobustStatus.names_of(self.status)
+
+    @property
+    def value(self) -> np.ndarray:
+        """``(G,)`` J, the nominal grasps' evaluation values (``nominal.value``; NaN for an
+        invalid grasp)."""
+        return np.asarray(self.nominal.value)
+
+    def summary(self) -> str:
+        """Two lines: the grasps by status, then the best by ``value_mean`` (J) with its
+        ``p_stable``."""
+        counts = ", ".join(f"{k} {v}" for k, v in RobustStatus.count(self.status).items() if v)
+        head = f"{len(self)} grasps x {self.samples} samples (seed {self.seed}): {counts}"
+        best = int(self.rank()[0]) if len(self) else None
+        if best is None or not np.isfinite(self.value_mean[best]):
+            return head + "\nno estimate"
+        return (head + f"\nbest by value_mean: grasp {best}, value_mean {float(self.value_mean[best]):.6e} J, "
+                f"p_stable {float(self.p_stable[best]):.4f}, nominal value {float(self.value[best]):.6e} J")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The statistics as plain Python (JSON: NaN as ``None``), one list entry per
+        grasp in input order: ``status`` by name, ``value`` (the nominal values, J), the
+        [`columns`][jaxgrasp.analysis.RobustBatch.columns] (``p_stable``,
+        ``p_stable_stderr``, ``value_mean``, one ``value_qNN`` per level), ``converged``
+        and ``clipped`` by field; then ``samples``, ``seed`` and ``uncertainty``. The
+        per-sample arrays are not in it."""
+        num = lambda a: np.where(np.isfinite(a), a, None).tolist()  # noqa: E731
+        out: dict[str, Any] = {"status": self.status_names.tolist(), "value": num(np.asarray(self.value, np.float64))}
+        out.update({k: num(np.asarray(v, np.float64)) for k, v in self.columns().items()})
+        out.update(converged=np.asarray(self.converged).tolist(),
+                   clipped={k: np.asarray(v).tolist() for k, v in self.clipped.items()},
+                   samples=self.samples, seed=self.seed, uncertainty=self.uncertainty.to_dict())
+        return out
 
     def columns(self) -> dict[str, np.ndarray]:
         """``(G,)`` arrays by column name: ``p_stable``, ``p_stable_stderr``, ``value_mean``,

@@ -111,8 +111,9 @@ class SweepResult(SummaryNames):
         limiting_contact: 0-based contact of the limiting boundary, -1 none.
         equilibrium_energy: ``min U`` over the equilibrium region, J.
         compile_seconds: time spent compiling the batched evaluator in this sweep (0 when
-            a compilation was reused). Static (not a pytree leaf).
-        run_seconds: time spent evaluating the chunks. Static (not a pytree leaf).
+            a compilation was reused), s. Static (not a pytree leaf).
+        run_seconds: time spent evaluating the chunks, s. Static (not a pytree leaf).
+            Their sum is [`elapsed_s`][jaxgrasp.analysis.SweepResult.elapsed_s].
         devices: number of devices the batch was sharded over. Static (not a pytree leaf).
 
     As a pytree, the leaves are the axis arrays (in grid order) and the five result
@@ -144,6 +145,12 @@ class SweepResult(SummaryNames):
     def size(self) -> int:
         """Number of grid points."""
         return int(np.prod(self.shape, dtype=np.int64))
+
+    @property
+    def elapsed_s(self) -> float:
+        """Wall time of the evaluation, s: ``compile_seconds + run_seconds`` (derived from
+        them, so a file that keeps the two keeps it)."""
+        return float(self.compile_seconds) + float(self.run_seconds)
 
     def grid(self) -> dict[str, np.ndarray]:
         """Each axis' value at every grid point: dict name -> array shaped like the grid."""
@@ -197,7 +204,33 @@ class SweepResult(SummaryNames):
         )
         return reduced, np.asarray(self.axes[name])[arg]
 
-    # ---- files
+    # ---- text and files
+    def summary(self) -> str:
+        """Three lines: the grid and its points by status, the best point (value, J, and
+        its parameters, SI), then the timings."""
+        axes = ", ".join(f"{n} [{len(a)}]" for n, a in self.axes.items()) or "no axes"
+        counts = ", ".join(f"{k} {v}" for k, v in self.counts().items() if v) or "none"
+        best = self.best()
+        if best is None:
+            where = "no trusted point"
+        else:
+            at = ", ".join(f"{n} = {best[n]:.6g}" for n in self.axes)
+            where = f"best value {best['value']:.6e} J ({best['status']})" + (f" at {at}" if at else "")
+        return f"sweep over {axes}: {self.size} points, {counts}\n{where}\n{self._timing_line()}"
+
+    def to_dict(self) -> dict:
+        """The sweep as plain Python (JSON-ready): ``axes`` (name -> list of grid values,
+        SI), the five result arrays as nested lists shaped like the grid (``value`` and
+        ``equilibrium_energy`` in J, ``status`` and ``limiting_kind`` by name,
+        ``limiting_contact``), ``counts`` by status, ``best`` ([`best`][jaxgrasp.analysis.SweepResult.best],
+        its ``index`` a list), ``compile_seconds``, ``run_seconds``, ``elapsed_s`` (s) and
+        ``devices``."""
+        best = self.best()
+        if best is not None:
+            best = {**best, "index": list(best["index"])}
+        axes = {n: np.asarray(a, dtype=np.float64).tolist() for n, a in self.axes.items()}
+        return {"axes": axes, **self._summary_dict(), "best": best}
+
     def to_csv(self, path, extra: Mapping[str, Any] | None = None) -> None:
         """Write a tidy CSV to ``path``: one row per grid point (C order: last axis fastest).
 

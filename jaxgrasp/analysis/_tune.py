@@ -133,8 +133,9 @@ class TuneResult:
     Attributes:
         grasp: the tuned grasp (the best iterate found).
         value: its evaluation value, J (smoothed if the options ask for it).
-        initial_value: the value where the search started, J: the grasp as given, or,
-            where ``clipped`` names parameters, the grasp with them clipped into the bounds.
+        initial_value: the value where the search started, J (``history[0]``): the grasp
+            as given, or, where ``clipped`` names parameters, the grasp with them clipped
+            into the bounds. Not the value before tuning: that is ``start_value``.
         history: ``(iterations + 1,)`` value at the search's start and after each iteration, J.
         history_status: ``(iterations + 1,)`` evaluation status at those iterates
             ([`GraspStatus`][jaxgrasp.GraspStatus] codes).
@@ -144,7 +145,8 @@ class TuneResult:
         initial_params: the same at the start.
         bounds: ``(lo, hi)`` by label as used (``"positions"``: in-face offsets, m).
         evaluation: the [`Evaluation`][jaxgrasp.Evaluation] of ``grasp``.
-        status: a [`TuneStatus`][jaxgrasp.analysis.TuneStatus], equal to its string;
+        status: a [`TuneStatus`][jaxgrasp.analysis.TuneStatus], equal to its string
+            ([`status_name`][jaxgrasp.analysis.TuneResult.status_name] as a plain ``str``);
             ``grasp`` is usable after each (the best found): ``"converged"`` (projected
             gradient below ``tol``: a maximum), ``"stalled"`` (no relative improvement
             above ``ftol`` in ``patience`` iterations: typically a maximum on a kink,
@@ -160,8 +162,8 @@ class TuneResult:
             (``status.message`` with its numbers), then any note: a start clipped into
             the bounds, not-converged iterates, a best iterate whose evaluation did not
             converge (then its value is not to be trusted).
-        start_value: the value of the grasp as given, J: ``initial_value`` unless the
-            start was moved (``clipped``, or a ``:shared`` parameter whose contacts
+        start_value: the value before tuning, J: the grasp as given's, the value every
+            result of a tuning names so. ``initial_value`` unless the start was moved (``clipped``, or a ``:shared`` parameter whose contacts
             differed set to their mean). ``gain`` is measured from it.
         clipped: labels of the parameters whose start lay outside the bounds and was
             clipped into them (``()`` when none).
@@ -187,6 +189,11 @@ class TuneResult:
     start_value: float
     clipped: tuple = ()
     mesh_grasp: MeshGrasp | None = None
+
+    @property
+    def status_name(self) -> str:
+        """The name of ``status`` (``'converged'``), a plain ``str``."""
+        return TuneStatus(self.status).label
 
     @property
     def converged(self) -> bool:
@@ -218,6 +225,34 @@ class TuneResult:
             f"(x{self.gain:.4f}) in {counted(self.iterations, 'iteration')}, {self.status}: {self.message}"
             + (f"; {note}" if note else "")
         )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The tuning as plain Python (JSON-ready; ``None`` for a number that is not
+        finite): ``value``, ``start_value``, ``initial_value`` (J), ``gain``, ``status``
+        by name, ``converged``, ``message``, the counts, ``method``, ``clipped``,
+        ``params`` and ``initial_params`` by label (SI, lists), ``bounds`` by label
+        (``[lo, hi]``), ``history`` (J), ``history_status`` by name and ``evaluation``
+        (the tuned grasp's [`Evaluation.to_dict`][jaxgrasp.Evaluation.to_dict])."""
+        return {
+            "value": _json(self.value), "start_value": _json(self.start_value),
+            "initial_value": _json(self.initial_value), "gain": _json(self.gain),
+            "status": self.status_name, "converged": self.converged, "message": self.message,
+            "iterations": int(self.iterations), "evaluations": int(self.evaluations),
+            "not_converged_evaluations": int(self.not_converged_evaluations), "method": self.method,
+            "clipped": list(self.clipped),
+            "params": {k: _json(v) for k, v in self.params.items()},
+            "initial_params": {k: _json(v) for k, v in self.initial_params.items()},
+            "bounds": {k: [_json(lo), _json(hi)] for k, (lo, hi) in self.bounds.items()},
+            "history": _json(self.history),
+            "history_status": GraspStatus.names_of(self.history_status).tolist(),
+            "evaluation": self.evaluation.to_dict(),
+        }
+
+
+def _json(x):
+    """A number or an array as (nested) Python floats, ``None`` where not finite."""
+    a = np.asarray(x, dtype=np.float64)
+    return np.where(np.isfinite(a), a, None).tolist()
 
 
 # ----------------------------------------------------------------------------- tune

@@ -47,6 +47,12 @@ class TuneStatus(enum.StrEnum):
     )
 
     @property
+    def label(self) -> str:
+        """The status's name, its string (``'converged'``), as
+        [`Coded.label`][jaxgrasp.base.Coded.label] is for the integer codes."""
+        return self.value
+
+    @property
     def converged(self) -> bool:
         """The search ended at a (local) maximum: converged or stalled."""
         return self in (TuneStatus.CONVERGED, TuneStatus.STALLED)

@@ -51,8 +51,9 @@ class Coded(enum.IntEnum):
 
     @classmethod
     def names_of(cls, codes) -> np.ndarray:
-        """An array of codes as an object array of labels, same shape."""
-        return np.asarray(cls.labels(), dtype=object)[np.asarray(codes)]
+        """An array of codes as an object array of labels, same shape (a ``()`` array for
+        one code, not a bare ``str``, so that ``names[()]`` and ``.tolist()`` work alike)."""
+        return np.asarray(np.asarray(cls.labels(), dtype=object)[np.asarray(codes)], dtype=object)
 
     @classmethod
     def count(cls, codes) -> dict[str, int]:

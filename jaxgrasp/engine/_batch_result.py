@@ -102,8 +102,9 @@ class BatchResult(SummaryNames):
         num_contacts: ``(B,)`` active contacts of each grasp (0 for an invalid one).
         active: ``(B, N)`` bool, the contacts each grasp has (its others are padding).
         errors: ``B`` entries: ``None``, or the one-line reason a grasp is invalid.
-        compile_seconds: time spent compiling (0 when a compilation was reused).
-        run_seconds: time spent evaluating the chunks.
+        compile_seconds: time spent compiling (0 when a compilation was reused), s.
+        run_seconds: time spent evaluating the chunks, s. Their sum is
+            [`elapsed_s`][jaxgrasp.BatchResult.elapsed_s].
         devices: number of devices the batch was sharded over.
     """
 
@@ -123,6 +124,12 @@ class BatchResult(SummaryNames):
     def __len__(self) -> int:
         return len(self.errors)
 
+    @property
+    def elapsed_s(self) -> float:
+        """Wall time of the evaluation, s: ``compile_seconds + run_seconds`` (derived from
+        them, so a file that keeps the two keeps it)."""
+        return float(self.compile_seconds) + float(self.run_seconds)
+
     def __getitem__(self, i: int) -> Evaluation:
         """Grasp ``i``'s [`Evaluation`][jaxgrasp.Evaluation] (contacts numbered as in the batch)."""
         return jax.tree_util.tree_map(lambda a: a[i], self.evaluation)
@@ -137,7 +144,28 @@ class BatchResult(SummaryNames):
         value = np.nan_to_num(np.asarray(self.value, dtype=np.float64), nan=-np.inf)
         return np.lexsort((np.arange(len(self)), -value, group))
 
-    # ---- tables and files
+    # ---- text, tables and files
+    def summary(self) -> str:
+        """Two lines: the grasps by status and the best one's value (J), then the timings."""
+        counts = ", ".join(f"{k} {v}" for k, v in self.counts().items() if v) or "none"
+        order = self.rank()
+        best = ""
+        if len(order) and int(self.status[order[0]]) == GraspStatus.STABLE:
+            best = f"; best value {float(self.value[order[0]]):.6e} J (grasp {int(order[0])})"
+        return f"{len(self)} grasps: {counts}{best}\n{self._timing_line()}"
+
+    def to_dict(self) -> dict:
+        """The batch as plain Python (JSON-ready): per grasp, in input order, ``value`` and
+        ``equilibrium_energy`` (J; ``None`` for an invalid grasp), ``status`` and
+        ``limiting_kind`` by name, ``limiting_contact``, ``num_contacts`` and ``errors``
+        (``None`` for a valid grasp); then ``counts`` by status, ``compile_seconds``,
+        ``run_seconds``, ``elapsed_s`` (s) and ``devices``. The columns of
+        [`to_csv`][jaxgrasp.BatchResult.to_csv] as lists; the per-boundary arrays are in
+        [`to_npz`][jaxgrasp.BatchResult.to_npz]."""
+        out = self._summary_dict()
+        out.update(num_contacts=np.asarray(self.num_contacts).tolist(), errors=list(self.errors))
+        return out
+
     def rows(self, extra: Mapping[str, Any] | None = None) -> list[list]:
         """The rows of [`to_csv`][jaxgrasp.BatchResult.to_csv] (`CSV_COLUMNS`, then the ``extra`` columns), in
         input order; an invalid grasp's numbers are empty strings."""

@@ -91,6 +91,36 @@ class HandValue:
     deepest: float
     tilt: np.ndarray
 
+    @property
+    def status(self) -> GraspStatus:
+        """The evaluation's status, a [`GraspStatus`][jaxgrasp.GraspStatus]."""
+        return GraspStatus(int(np.asarray(self.evaluation.status)))
+
+    @property
+    def status_name(self) -> str:
+        """The name of ``status`` (``'stable'``, ...)."""
+        return self.status.label
+
+    def summary(self) -> str:
+        """One line: the status, the value (J), the gradient's size and the deepest link."""
+        grad = float(np.linalg.norm(np.concatenate([np.ravel(self.grad_qpos), np.ravel(self.grad_wrist)])))
+        return (f"{self.status_name}: value {self.value:.6e} J, gradient norm {grad:.3e}, deepest link "
+                f"penetration {self.deepest * 1e3:.3f} mm")
+
+    def to_dict(self) -> dict:
+        """As plain Python (JSON-ready, ``None`` where not finite): ``value`` (J),
+        ``status`` by name, ``grad_qpos``, ``grad_wrist``, ``deepest`` (m), ``tilt``
+        (rad) and ``evaluation`` ([`Evaluation.to_dict`][jaxgrasp.Evaluation.to_dict])."""
+        return {"value": _json(self.value), "status": self.status_name, "grad_qpos": _json(self.grad_qpos),
+                "grad_wrist": _json(self.grad_wrist), "deepest": _json(self.deepest), "tilt": _json(self.tilt),
+                "evaluation": self.evaluation.to_dict()}
+
+
+def _json(x):
+    """A number or an array as (nested) Python floats, ``None`` where not finite."""
+    a = np.asarray(x, dtype=np.float64)
+    return np.where(np.isfinite(a), a, None).tolist()
+
 
 def _setup(hand, mesh, kw):
     """``(data, mesh)``: the objective's data for a mesh and the grasp fields ``kw``."""
@@ -153,12 +183,14 @@ class HandTuneResult:
         qpos: ``(J,)`` the tuned joint positions (the best admissible iterate).
         wrist: ``(6,)`` the tuned wrist pose (the start's unless ``tune_wrist``).
         grasp: the [`HandGrasp`][jaxgrasp.hands.HandGrasp] there.
-        value: its evaluation value, J. start_value: the start's, J.
+        value: its evaluation value, J. start_value: the start's (the value before
+            tuning), J.
         deepest: m, the deepest penetration of the other links there (negative: clear).
         start_deepest: m, the same at the start.
         history: ``(iterations + 1,)`` value at the start and after each iteration, J.
         depth_history: ``(iterations + 1,)`` deepest link penetration there, m.
-        status: a [`TuneStatus`][jaxgrasp.analysis.TuneStatus] (how L-BFGS-B stopped).
+        status: a [`TuneStatus`][jaxgrasp.analysis.TuneStatus] (how L-BFGS-B stopped;
+            [`status_name`][jaxgrasp.hands.HandTuneResult.status_name] its name).
         iterations, evaluations: optimiser iterations, value-and-gradient evaluations.
         message: one line: the status's explanation.
     """
@@ -186,6 +218,30 @@ class HandTuneResult:
         """One line: value before -> after, the gain, the deepest link penetration, the status."""
         return (f"hand tuned: {self.start_value:.6e} J -> {self.value:.6e} J (x{self.gain:.4f}), deepest link "
                 f"penetration {self.deepest * 1e3:.3f} mm, {self.iterations} iterations, {self.status}: {self.message}")
+
+    @property
+    def status_name(self) -> str:
+        """The name of ``status`` (``'converged'``), a plain ``str``."""
+        return TuneStatus(self.status).label
+
+    @property
+    def converged(self) -> bool:
+        """``status`` is ``"converged"`` or ``"stalled"``, as [`TuneResult.converged`][jaxgrasp.analysis.TuneResult.converged]."""
+        return TuneStatus(self.status).converged
+
+    def to_dict(self) -> dict:
+        """The tuning as plain Python (JSON-ready, ``None`` where not finite): ``qpos``,
+        ``wrist``, ``value`` and ``start_value`` (J), ``gain``, ``deepest`` and
+        ``start_deepest`` (m), ``history`` (J), ``depth_history`` (m), ``status`` by name,
+        ``converged``, ``iterations``, ``evaluations``, ``message``; the tuned grasp is
+        the configuration (``qpos``, ``wrist``), not repeated."""
+        return {
+            "qpos": _json(self.qpos), "wrist": _json(self.wrist), "value": _json(self.value),
+            "start_value": _json(self.start_value), "gain": _json(self.gain), "deepest": _json(self.deepest),
+            "start_deepest": _json(self.start_deepest), "history": _json(self.history),
+            "depth_history": _json(self.depth_history), "status": self.status_name, "converged": self.converged,
+            "iterations": int(self.iterations), "evaluations": int(self.evaluations), "message": self.message,
+        }
 
 
 def _bounds(hand, q0, w0, tune_wrist: bool, wrist_bounds):

@@ -17,9 +17,9 @@ class BoundaryKind(Coded):
 
     @classmethod
     def names_of(cls, codes) -> np.ndarray:
-        """An array of codes as an object array of labels, same shape; ``-1``
-        (`NO_BOUNDARY`) is ``'none'``."""
-        return np.asarray(cls.labels() + ("none",), dtype=object)[np.asarray(codes)]
+        """An array of codes as an object array of labels, same shape (``()`` for one
+        code); ``-1`` (`NO_BOUNDARY`) is ``'none'``."""
+        return np.asarray(np.asarray(cls.labels() + ("none",), dtype=object)[np.asarray(codes)], dtype=object)
 
 
 NO_BOUNDARY = -1

@@ -24,8 +24,12 @@ class PlanStatus(Coded):
 class PlanResult:
     """The ranked grasps of a plan (SI units), best first.
 
+    Its [`value`][jaxgrasp.planning.PlanResult.value] is the best grasp's value, J;
+    ``values`` and ``statuses`` are every ranked grasp's.
+
     Attributes:
-        status: a [`PlanStatus`][jaxgrasp.planning.PlanStatus].
+        status: a [`PlanStatus`][jaxgrasp.planning.PlanStatus] ([`status_name`][jaxgrasp.planning.PlanResult.status_name]
+            its name).
         grasps: ``K`` [`MeshGrasp`][jaxgrasp.MeshGrasp] ranked by value, best first: each one's
             ``grasp`` in the centre-of-mass frame, ``to_mesh_frame`` for the mesh's frame.
             Only settled grasps (status stable, unstable or infeasible) are ranked.
@@ -78,15 +82,20 @@ class PlanResult:
         return self.grasps[0] if self.grasps else None
 
     @property
-    def best_value(self) -> float:
-        """The best value, J (0 when nothing was ranked)."""
+    def value(self) -> float:
+        """The best grasp's value, J (``values[0]``; 0 when nothing was ranked)."""
         return float(self.values[0]) if len(self.values) else 0.0
+
+    @property
+    def status_name(self) -> str:
+        """The name of ``status`` (``'found'``, ``'none_stable'``, ``'no_valid'``)."""
+        return PlanStatus(self.status).label
 
     def summary(self) -> str:
         """One line: what was found, from how many candidates, in what time."""
         dropped = f", {self.dropped} not settled and left out" if self.dropped else ""
         return (
-            f"{self.status.label}: best value {self.best_value:.6e} J; {self.valid} valid of {self.sampled} candidates "
+            f"{self.status.label}: best value {self.value:.6e} J; {self.valid} valid of {self.sampled} candidates "
             f"evaluated, {self.stable} stable{dropped}; {self.refine_kept} of {self.refine_tried} refined by tuning "
             f"improved; {self.elapsed_s:.1f} s"
         )
@@ -115,3 +124,31 @@ class PlanResult:
                                value_mean_J=float(self.robust["value_mean"][i]),
                                value_q05_J=float(self.robust["value_q05"][i]))
         return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """The plan as plain Python (JSON-ready; ``None`` for a number that is not
+        finite): ``status`` by name, ``value`` (the best, J), ``ranked`` (one entry of
+        [`rows`][jaxgrasp.planning.PlanResult.rows] per grasp, best first, with its
+        ``mesh_positions``, m), the candidate counts, ``rule_failures``, ``seed``,
+        ``elapsed_s`` (s) and ``settings``. The grasps themselves are in the command's
+        ``ranked.jsonl``."""
+        finite = lambda v: None if isinstance(v, float) and not np.isfinite(v) else v  # noqa: E731
+        ranked = [{**{k: finite(v) for k, v in row.items()}, "mesh_positions": np.asarray(p, np.float64).tolist()}
+                  for row, p in zip(self.rows(), self.mesh_positions)]
+        counts = dict(sampled=self.sampled, valid=self.valid, stable=self.stable, dropped=self.dropped,
+                      refine_tried=self.refine_tried, refine_kept=self.refine_kept)
+        return {"status": self.status_name, "value": self.value, "ranked": ranked,
+                **{k: int(v) for k, v in counts.items()},
+                "rule_failures": {k: int(v) for k, v in self.rule_failures.items()}, "seed": int(self.seed),
+                "elapsed_s": float(self.elapsed_s), "settings": _plain(self.settings)}
+
+
+def _plain(x):
+    """``x`` with NumPy numbers and arrays as Python ones (settings are JSON-ready otherwise)."""
+    if isinstance(x, dict):
+        return {k: _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, (np.ndarray, np.generic)):
+        return x.tolist()
+    return x

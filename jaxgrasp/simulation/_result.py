@@ -4,10 +4,11 @@
 from __future__ import annotations
 
 import dataclasses
-import enum
 import math
 
 import numpy as np
+
+from jaxgrasp.base import Coded
 
 __all__ = ["AXES", "DIRECTIONS", "SimulationResult", "SimulationStatus", "Trial"]
 
@@ -18,7 +19,7 @@ DIRECTIONS = ("least_energy", "random")
 """The kinds of energy-kick direction."""
 
 
-class SimulationStatus(enum.IntEnum):
+class SimulationStatus(Coded):
     """Whether [`jaxgrasp.simulate`][jaxgrasp.simulate] ran the simulator, and if not, why.
 
     ``SIMULATED``: the grasp was simulated (its trials are in the result). The others name
@@ -27,15 +28,13 @@ class SimulationStatus(enum.IntEnum):
     (never: there is no equilibrium pose to start from and calibrate at).
     """
 
-    SIMULATED = 0
-    UNSTABLE = 1
-    INFEASIBLE = 2
-    NOT_CONVERGED = 3
-
-    @property
-    def label(self) -> str:
-        """The status's name, lower case (``'simulated'``, ...)."""
-        return self.name.lower()
+    SIMULATED = 0, "the grasp was simulated: its trials are in the result"
+    UNSTABLE = 1, "the evaluation found the grasp unstable: not simulated (simulate_unstable=True simulates it)"
+    INFEASIBLE = 2, "the evaluation found no equilibrium: nothing to start from or calibrate at, never simulated"
+    NOT_CONVERGED = 3, (
+        "the evaluation did not converge: not simulated (simulate_unstable=True simulates it where its "
+        "equilibrium settled)"
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,7 +117,8 @@ class SimulationResult:
     """The grasp in MuJoCo: its calibration and the trials ([`jaxgrasp.simulate`][jaxgrasp.simulate]).
 
     Attributes:
-        status: a [`SimulationStatus`][jaxgrasp.simulation.SimulationStatus] code (``status_name`` for its name).
+        status: a [`SimulationStatus`][jaxgrasp.simulation.SimulationStatus] (an integer given
+            here is taken as its member; [`status_name`][jaxgrasp.simulation.SimulationResult.status_name] its name).
         grasp_status: the evaluation's status name (``'stable'``, ...).
         value: the evaluation value, J (eq. 1).
         reason: why the grasp was not simulated (the evaluation's explanation), or ``""``.
@@ -133,7 +133,7 @@ class SimulationResult:
             friction, tolerances), SI units; the key ``units`` names them.
     """
 
-    status: int
+    status: SimulationStatus
     grasp_status: str
     value: float
     reason: str
@@ -144,10 +144,13 @@ class SimulationResult:
     model_normal_force_N: np.ndarray
     parameters: dict
 
+    def __post_init__(self):
+        object.__setattr__(self, "status", SimulationStatus(int(self.status)))
+
     @property
     def status_name(self) -> str:
         """The name of ``status``: ``'simulated'``, ``'unstable'``, ``'infeasible'`` or ``'not_converged'``."""
-        return SimulationStatus(self.status).label
+        return self.status.label
 
     @property
     def simulated(self) -> bool:
@@ -159,8 +162,24 @@ class SimulationResult:
         """All six disturbances withstood (``None`` when not simulated)."""
         return all(t.success for t in self.six_axis) if self.six_axis else None
 
+    def summary(self) -> str:
+        """A few lines: the status and the evaluation's, the value (J), then each trial
+        (hold, the six disturbances, the kicks) withstood or not, or why the grasp was not
+        simulated."""
+        head = f"{self.status_name} (evaluation {self.grasp_status}): value {self.value:.6e} J"
+        if not self.simulated:
+            return f"{head}\nnot simulated: {self.reason}"
+        ok = lambda t: "held" if t.success else "failed"  # noqa: E731
+        lines = [head, f"hold: {ok(self.hold)}, moved {self.hold.max_displacement_m * 1e3:.3f} mm"]
+        if self.six_axis:
+            lines.append("six-axis: " + ", ".join(f"{t.label} {ok(t)}" for t in self.six_axis))
+        if self.kicks:
+            lines.append("kicks: " + ", ".join(f"{t.label} {'no slip' if t.success else 'slipped'}" for t in self.kicks))
+        return "\n".join(lines)
+
     def to_dict(self) -> dict:
-        """``results.json``'s content: every field, JSON-ready (``null`` for ``nan``)."""
+        """``results.json``'s content: every field, JSON-ready (``null`` for ``nan``);
+        the value's key is ``value_J`` there (the file's units in its names)."""
         num = lambda a: [float(x) if math.isfinite(float(x)) else None for x in np.asarray(a)]
         return {
             "status": self.status_name,

@@ -120,7 +120,7 @@ def _skip_status(evaluation, simulate_unstable: bool):
 def _not_simulated(plain, evaluation, status, opts) -> SimulationResult:
     n = plain.num_contacts
     return SimulationResult(
-        status=int(status), grasp_status=evaluation.status_name, value=float(np.asarray(evaluation.value)),
+        status=status, grasp_status=evaluation.status_name, value=float(np.asarray(evaluation.value)),
         reason=evaluation.explain(), hold=None, six_axis=(), kicks=(), settled_normal_force_N=np.full(n, np.nan),
         model_normal_force_N=np.full(n, np.nan), parameters={k: v for k, v in opts.items()},
     )
@@ -160,7 +160,7 @@ def _simulated(grasp, plain, evaluation, opts, seed, slip_threshold) -> Simulati
         for kind, direction in _directions(runner, state, evaluation, opts["random_kicks"], seed, scene):
             kicks.append(runner.kick(state, direction, s * value, opts["kick_time_s"], s, kind))
     return SimulationResult(
-        status=int(SimulationStatus.SIMULATED), grasp_status=evaluation.status_name, value=value, reason="",
+        status=SimulationStatus.SIMULATED, grasp_status=evaluation.status_name, value=value, reason="",
         hold=hold, six_axis=tuple(six), kicks=tuple(kicks), settled_normal_force_N=settled,
         model_normal_force_N=cal["f_eq"], parameters=_parameters(opts, scene, thresholds),
     )

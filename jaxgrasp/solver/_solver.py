@@ -54,6 +54,7 @@ from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrasp.base import contract
 from jaxgrasp.solver._direction import newton_direction
@@ -166,15 +167,61 @@ class SolverResult:
         steps: ``()`` int32, Newton steps plus multiplier updates taken.
     """
 
-    x: Any
-    lam: Any
-    nu: Any
-    objective: Any
-    status: Any
-    stationarity: Any
-    feasibility: Any
-    complementarity: Any
-    steps: Any
+    x: jax.Array | np.ndarray
+    lam: jax.Array | np.ndarray
+    nu: jax.Array | np.ndarray
+    objective: jax.Array | np.ndarray
+    status: jax.Array | np.ndarray
+    stationarity: jax.Array | np.ndarray
+    feasibility: jax.Array | np.ndarray
+    complementarity: jax.Array | np.ndarray
+    steps: jax.Array | np.ndarray
+
+    @property
+    def status_name(self) -> str:
+        """Name of ``status`` for one lane (a ``()`` status): ``'converged'``, ...
+
+        Raises:
+            ValueError: a batched result; its names are
+                [`status_names`][jaxgrasp.solver.SolverResult.status_names].
+        """
+        if np.shape(self.status) != ():
+            raise ValueError(f"status_name is one lane's, but status has shape {np.shape(self.status)}: "
+                             "use status_names")
+        return LaneStatus(int(self.status)).label
+
+    @property
+    def status_names(self) -> np.ndarray:
+        """``status`` as an array of names, same shape (one lane's or a batch's)."""
+        return LaneStatus.names_of(self.status)
+
+    def summary(self) -> str:
+        """One line on one lane: its status, objective, steps and KKT residuals (the
+        solver's scaled units)."""
+        return (f"{self.status_name}: objective {float(self.objective):.6e} after {int(self.steps)} steps; KKT "
+                f"residuals stationarity {float(self.stationarity):.2e}, feasibility {float(self.feasibility):.2e}, "
+                f"complementarity {float(self.complementarity):.2e}")
+
+    def to_dict(self) -> dict:
+        """One lane's result as plain Python (JSON-ready): ``x``, ``lam`` as lists, the
+        numbers as floats (``None`` where not finite), ``status`` by name.
+
+        Raises:
+            ValueError: a batched result (index it first).
+        """
+        name = self.status_name
+        num = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731
+        return {
+            "status": name,
+            "objective": num(self.objective),
+            "x": [num(v) for v in np.asarray(self.x, dtype=np.float64).reshape(-1)],
+            "lam": [num(v) for v in np.asarray(self.lam, dtype=np.float64).reshape(-1)],
+            "nu": num(self.nu),
+            "stationarity": num(self.stationarity),
+            "feasibility": num(self.feasibility),
+            "complementarity": num(self.complementarity),
+            "steps": int(self.steps),
+        }
 
 
 @jax.tree_util.register_dataclass

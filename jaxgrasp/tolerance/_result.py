@@ -52,7 +52,10 @@ class Evaluation:
             0 when ``status`` is unstable or infeasible.
         status: ``()`` int, a [`GraspStatus`][jaxgrasp.GraspStatus] code: ``STABLE``,
             ``UNSTABLE``, ``INFEASIBLE`` or ``NOT_CONVERGED`` (names:
-            ``GraspStatus.labels()``, or [`status_name`][jaxgrasp.Evaluation.status_name]).
+            ``GraspStatus.labels()``, or [`status_name`][jaxgrasp.Evaluation.status_name],
+            [`status_names`][jaxgrasp.Evaluation.status_names] under ``vmap``). An integer
+            array, not a [`GraspStatus`][jaxgrasp.GraspStatus] member, so that it passes
+            through ``jit`` and ``vmap``.
         limiting_kind: ``()`` int, [`BoundaryKind`][jaxgrasp.model.BoundaryKind] of the boundary
             that sets ``value`` (0 slip, 1 max_force), -1 (``NO_BOUNDARY``) when there is none.
         limiting_contact: ``()`` int, 0-based contact of that boundary, -1 when none.
@@ -113,6 +116,12 @@ class Evaluation:
             )
         return GraspStatus(int(self.status)).label
 
+    @property
+    def status_names(self) -> np.ndarray:
+        """``status`` as an array of names (``'stable'``, ...), same shape: a batched
+        result's (under ``vmap``) as well as one grasp's (a ``()`` array)."""
+        return GraspStatus.names_of(self.status)
+
     def tolerates(self, kinetic_energy, potential_energy=None):
         """Stable-grasp condition with kinetic energy, eq. 2: ``U + K < min U + value``.
 
@@ -154,8 +163,25 @@ class Evaluation:
             raise ValueError("explain() takes one grasp's result; index a batched result first")
         return _explain(a, tol)
 
+    def summary(self) -> str:
+        """Two lines on an unbatched, concrete result: the status, the value (J) and the
+        limiting boundary, then [`explain`][jaxgrasp.Evaluation.explain]'s sentence.
+
+        Raises:
+            ValueError: a batched result.
+        """
+        a = jax.tree_util.tree_map(np.asarray, self)
+        if a.value.ndim != 0:
+            raise ValueError("summary() takes one grasp's result; index a batched result first")
+        kind = int(a.limiting_kind)
+        limit = (f"limited by {_boundary_phrase(kind, int(a.limiting_contact))}" if kind != NO_BOUNDARY
+                 else "no limiting boundary")
+        head = f"{GraspStatus(int(a.status)).label}: value {float(a.value):.6e} J; {limit}"
+        return head + "\n" + _explain(a, 1e-8)
+
     def to_dict(self) -> dict:
-        """A JSON-ready summary of an unbatched result (``None`` for unreachable boundaries).
+        """A JSON-ready summary of an unbatched result (``None`` for unreachable boundaries,
+        and for the numbers and codes of an ``invalid`` grasp, a batch's row never evaluated).
 
         Each entry of ``boundaries`` gives the boundary's minimum energy twice, in J:
         ``energy``, absolute (on the scale of ``equilibrium_energy``), and
@@ -181,18 +207,18 @@ class Evaluation:
                         "contact": j,
                         "energy": e if math.isfinite(e) else None,
                         "energy_above_equilibrium": float(above[kind, j]) if math.isfinite(e) else None,
-                        "status": LaneStatus(int(a.boundary_status[kind, j])).label,
-                        "translation": a.boundary_translation[kind, j].tolist(),
-                        "rotation": a.boundary_rotation[kind, j].tolist(),
+                        "status": _lane_label(int(a.boundary_status[kind, j])),
+                        "translation": _json_floats(a.boundary_translation[kind, j]),
+                        "rotation": _json_floats(a.boundary_rotation[kind, j]),
                     }
                 )
         kind = int(a.limiting_kind)
         return {
-            "value": float(a.value),
+            "value": _json_floats(a.value),
             "status": GraspStatus(int(a.status)).label,
-            "equilibrium_energy": float(a.equilibrium_energy),
-            "equilibrium_translation": a.equilibrium_translation.tolist(),
-            "equilibrium_rotation": a.equilibrium_rotation.tolist(),
+            "equilibrium_energy": _json_floats(a.equilibrium_energy),
+            "equilibrium_translation": _json_floats(a.equilibrium_translation),
+            "equilibrium_rotation": _json_floats(a.equilibrium_rotation),
             "limiting": (
                 {"kind": BoundaryKind(kind).label, "contact": int(a.limiting_contact)}
                 if kind != NO_BOUNDARY
@@ -223,7 +249,8 @@ tables): value (J), status, limiting kind and contact, equilibrium energy (J).""
 
 class SummaryNames:
     """Names and counts of the codes of a result with ``status`` and ``limiting_kind``
-    arrays of any shape ([`jaxgrasp.analysis.SweepResult`][jaxgrasp.analysis.SweepResult], [`jaxgrasp.BatchResult`][jaxgrasp.BatchResult])."""
+    arrays of any shape ([`jaxgrasp.analysis.SweepResult`][jaxgrasp.analysis.SweepResult], [`jaxgrasp.BatchResult`][jaxgrasp.BatchResult]),
+    and the entries and timing line of its ``to_dict`` and ``summary``."""
 
     @property
     def status_names(self) -> np.ndarray:
@@ -238,6 +265,39 @@ class SummaryNames:
     def counts(self) -> dict[str, int]:
         """Number of entries of each status, by name."""
         return GraspStatus.count(self.status)
+
+    def _summary_dict(self) -> dict:
+        """The five summary arrays (`SUMMARY_FIELDS`) as nested lists, codes by name and
+        floats ``None`` where not finite, then ``counts``, the timings (s) and ``devices``."""
+        return {
+            "value": _json_floats(self.value),
+            "status": self.status_names.tolist(),
+            "limiting_kind": self.limiting_kind_names.tolist(),
+            "limiting_contact": np.asarray(self.limiting_contact).tolist(),
+            "equilibrium_energy": _json_floats(self.equilibrium_energy),
+            "counts": self.counts(),
+            "compile_seconds": float(self.compile_seconds),
+            "run_seconds": float(self.run_seconds),
+            "elapsed_s": self.elapsed_s,
+            "devices": int(self.devices),
+        }
+
+    def _timing_line(self) -> str:
+        """The timings' line of ``summary``: compile, run and elapsed seconds, and the devices."""
+        devices = f"{self.devices} device{'s' if self.devices != 1 else ''}"
+        return (f"compile {self.compile_seconds:.1f} s, run {self.run_seconds:.1f} s "
+                f"(elapsed {self.elapsed_s:.1f} s) on {devices}")
+
+
+def _lane_label(code: int) -> str | None:
+    """A [`LaneStatus`][jaxgrasp.solver.LaneStatus] code's name; ``None`` for -1 (an invalid grasp's)."""
+    return LaneStatus(code).label if code >= 0 else None
+
+
+def _json_floats(a) -> list | float | None:
+    """An array of floats as (nested) Python floats, ``None`` where not finite (NaN, inf)."""
+    a = np.asarray(a, dtype=np.float64)
+    return np.where(np.isfinite(a), a, None).tolist()
 
 
 def _check_energy(name: str, value, nonnegative: bool) -> None:
@@ -448,11 +508,16 @@ def _explain_not_converged(a, tol: float) -> str:
     )
 
 
+def _explain_invalid(a, tol: float) -> str:
+    return "invalid: the grasp's input is invalid, so it was not evaluated (its batch's errors say why); value NaN."
+
+
 _EXPLAIN = {
     GraspStatus.STABLE: _explain_stable,
     GraspStatus.UNSTABLE: _explain_unstable,
     GraspStatus.INFEASIBLE: _explain_infeasible,
     GraspStatus.NOT_CONVERGED: _explain_not_converged,
+    GraspStatus.INVALID: _explain_invalid,
 }
 
 
