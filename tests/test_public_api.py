@@ -24,6 +24,7 @@ from pathlib import Path
 import pytest
 
 import jaxgrasp
+from jaxgrasp import _startup
 
 MAX_PUBLIC_NAMES = 30
 """Issue 34's bound, restored in issue 64 by one rule (``jaxgrasp``'s docstring)."""
@@ -196,16 +197,39 @@ def test_every_result_type_is_on_a_face_and_in_the_api_reference():
 
 
 def test_the_face_loads_each_name_from_its_package_when_first_used():
-    """``jaxgrasp.__getattr__`` finds each name of ``__all__`` on the package face
-    ``_HOMES`` names, and the static imports for tools (``if TYPE_CHECKING:``) say the same."""
-    homes = {name: face for face, names in jaxgrasp._HOMES.items() for name in names}
-    assert sorted([*homes, "presets"]) == sorted(jaxgrasp.__all__)
-    tree = ast.parse((REPO / "jaxgrasp" / "__init__.py").read_text())
-    guarded = next(n for n in tree.body if isinstance(n, ast.If) and ast.unparse(n.test) == "TYPE_CHECKING")
-    static = {alias.name: node.module for node in guarded.body for alias in node.names}
-    assert static == {**homes, "presets": "jaxgrasp"}
+    """``jaxgrasp.__getattr__`` finds each name of ``__all__`` on the package face that the
+    static imports for tools (``if TYPE_CHECKING:``) name, a face, not a private module;
+    ``presets`` is a module of its own."""
+    homes = {name: module for name, (module, _) in jaxgrasp._LAZY.items()}
+    assert sorted(homes) == sorted(jaxgrasp.__all__)
+    assert homes.pop("presets") == "jaxgrasp.presets"
+    faces = {f"jaxgrasp.{p.parent.name}" for p in (REPO / "jaxgrasp").glob("*/__init__.py")}
+    assert set(homes.values()) <= faces, set(homes.values()) - faces
     for name, face in homes.items():
         assert getattr(jaxgrasp, name) is getattr(importlib.import_module(face), name), name
+
+
+def test_lazy_names_reads_the_type_checking_block():
+    source = textwrap.dedent(
+        """
+        from typing import TYPE_CHECKING
+        from pkg import _startup
+
+        if TYPE_CHECKING:  # the face's names
+            from pkg.face._a import A, b as renamed
+            from pkg import sub
+
+            # for other packages
+            from pkg.other import C
+        """
+    )
+    assert _startup.lazy_names("pkg", source) == {
+        "A": ("pkg.face._a", "A"), "renamed": ("pkg.face._a", "b"), "sub": ("pkg.sub", ""), "C": ("pkg.other", "C"),
+    }
+    for bad, why in [("import pkg.face._a", "only 'from jaxgrasp"), ("from ._a import A", "only 'from jaxgrasp"),
+                     ("from pkg._a import A\n    from pkg._b import A", "'A' imported twice")]:
+        with pytest.raises(ValueError, match=why):
+            _startup.lazy_names("pkg", f"if TYPE_CHECKING:\n    {bad}\n")
 
 
 def test_the_package_and_its_subpackages_have_a_face(packages):
