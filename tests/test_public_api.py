@@ -209,6 +209,31 @@ def test_the_face_loads_each_name_from_its_package_when_first_used():
         assert getattr(jaxgrasp, name) is getattr(importlib.import_module(face), name), name
 
 
+def test_every_face_loads_its_names_from_its_static_imports(packages):
+    """Every package face (and the top level) lists its names once, as the imports of its
+    ``if TYPE_CHECKING:`` block that type checkers and the API reference read;
+    `jaxgrasp._startup.attach` reads the same block, and each name is the object its
+    module holds. A name of ``__all__`` is in that block or defined in the face."""
+    offenders = []
+    for face in [jaxgrasp, *packages]:
+        source = Path(face.__file__).read_text(encoding="utf-8")
+        if getattr(face, "_LAZY", None) != _startup.lazy_names(face.__name__, source):
+            offenders.append(f"{face.__name__}: _LAZY is not what its TYPE_CHECKING block imports")
+            continue
+        for name, (module, attr) in face._LAZY.items():
+            target = importlib.import_module(module)
+            if getattr(face, name) is not (getattr(target, attr) if attr else target):
+                offenders.append(f"{face.__name__}.{name}: not {module}.{attr}")
+        own = {n for n, v in vars(face).items() if getattr(v, "__module__", face.__name__) == face.__name__}
+        offenders += [f"{face.__name__}.{n}: in __all__, neither imported under TYPE_CHECKING nor defined there"
+                      for n in face.__all__ if n not in face._LAZY and n not in own and n not in _EAGER.get(face.__name__, ())]
+    _fail_if("faces whose names are not loaded from their static imports", offenders)
+
+
+_EAGER = {"jaxgrasp.cli": ("COMMANDS", "UsageError", "EXIT_USAGE", "parse_number")}
+"""Names a face imports at run time (the command's parser needs them at once, without JAX)."""
+
+
 def test_lazy_names_reads_the_type_checking_block():
     source = textwrap.dedent(
         """
