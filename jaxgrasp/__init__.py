@@ -116,7 +116,7 @@ __all__ = [
     "tune_hand",
 ]
 
-_load, _dir, _LAZY = _startup.attach(__name__, __file__)  # _LAZY: each name -> (its package face, the name)
+_load, _dir, _LAZY = _startup.attach(__name__)  # _LAZY: each name -> (its package face, the name)
 
 _SUBMODULES = ("solver", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "planning",
                "hands", "simulation", "plots", "cli")

@@ -125,18 +125,21 @@ def lazy_names(name: str, source: str) -> dict[str, tuple[str, str]]:
     return names
 
 
-def attach(name: str, path: str) -> tuple[Callable[[str], object], Callable[[], list[str]], dict[str, tuple[str, str]]]:
-    """``__getattr__`` and ``__dir__`` for the package face ``name`` (its file ``path``),
-    and its `lazy_names`: a face ends with
-    ``__getattr__, __dir__, _LAZY = attach(__name__, __file__)`` (PEP 562).
+def attach(name: str) -> tuple[Callable[[str], object], Callable[[], list[str]], dict[str, tuple[str, str]]]:
+    """``__getattr__`` and ``__dir__`` for the package face ``name``, being imported, and its
+    `lazy_names` (read from its source through its loader): a face ends with
+    ``__getattr__, __dir__, _LAZY = _startup.attach(__name__)`` (PEP 562).
 
     The first use of a name imports the module it comes from and keeps the value in the
     face, where later uses (and a test's replacement) find it; ``from jaxgrasp.model import
     FIELD`` loads ``jaxgrasp.model._fields`` alone. Any other name that is not a dunder is
     tried as a submodule (``jaxgrasp.engine._plan``), as an eager face had imported them all.
     """
-    with open(path, encoding="utf-8") as fh:
-        lazy = lazy_names(name, fh.read())
+    spec = sys.modules[name].__spec__
+    source = spec.loader.get_source(name) if spec is not None and spec.loader is not None else None
+    if source is None:  # an installation without its .py files
+        raise ImportError(f"{name}: its source is needed to know the names it loads when first used", name=name)
+    lazy = lazy_names(name, source)
 
     def __getattr__(attr: str):
         if attr in lazy:

@@ -44,4 +44,4 @@ __all__ = [
     "RobustStatus",
 ]
 
-__getattr__, __dir__, _LAZY = _startup.attach(__name__, __file__)
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

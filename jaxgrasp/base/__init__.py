@@ -22,4 +22,4 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
 
 __all__ = ["Coded"]
 
-__getattr__, __dir__, _LAZY = _startup.attach(__name__, __file__)
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

@@ -52,7 +52,7 @@ EXIT_STATUS_HELP = (
 )
 """The epilog of ``jaxgrasp --help``."""
 
-__getattr__, __dir__, _LAZY = _startup.attach(__name__, __file__)
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)
 
 
 def build_parser() -> Parser:

@@ -74,4 +74,4 @@ __all__ = [
     "COMPILER_OPTIONS",
 ]
 
-__getattr__, __dir__, _LAZY = _startup.attach(__name__, __file__)
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

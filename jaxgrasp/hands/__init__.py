@@ -37,4 +37,4 @@ __all__ = [
     "DEFAULT_MAX_TILT",
 ]
 
-__getattr__, __dir__, _LAZY = _startup.attach(__name__, __file__)
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

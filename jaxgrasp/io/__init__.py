@@ -45,4 +45,4 @@ __all__ = [
     "OutputError",
 ]
 
-__getattr__, __dir__, _LAZY = _startup.attach(__name__, __file__)
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

@@ -75,4 +75,4 @@ __all__ = [
     "NO_BOUNDARY",
 ]
 
-__getattr__, __dir__, _LAZY = _startup.attach(__name__, __file__)
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

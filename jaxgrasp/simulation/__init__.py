@@ -28,4 +28,4 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
 
 __all__ = ["AXES", "DEFAULTS", "DIRECTIONS", "SimulationResult", "SimulationStatus", "Trial", "simulate"]
 
-__getattr__, __dir__, _LAZY = _startup.attach(__name__, __file__)
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

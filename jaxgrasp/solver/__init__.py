@@ -54,4 +54,4 @@ __all__ = [
     "LaneStatus",
 ]
 
-__getattr__, __dir__, _LAZY = _startup.attach(__name__, __file__)
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

@@ -46,4 +46,4 @@ __all__ = [
     "MeshGrasp",
 ]
 
-__getattr__, __dir__, _LAZY = _startup.attach(__name__, __file__)
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)
