@@ -41,11 +41,12 @@ and the user's own arrays would be float32. Set the environment variable
 returns SI units (m, Pa, N, kg, J, rad).
 
 That is the import's only process-wide change: it imports JAX and nothing else of
-jaxgrasp. The names below are loaded when first used (PEP 562 ``__getattr__``), so that
-the ``jaxgrasp`` command, whose ``--version``, ``--help`` and argument errors need no
-JAX, imports this package cheaply: in the command (`jaxgrasp._startup.is_command_line`)
-the import does not even load JAX, and the command turns float64 on itself before it
-loads the library. Everything else jaxgrasp sets for the process (the CPU device
+jaxgrasp. The names below are loaded when first used (PEP 562 ``__getattr__``,
+`jaxgrasp._startup.attach`), as every package face's are, so that the ``jaxgrasp``
+command, whose ``--version``, ``--help`` and argument errors need no JAX, reads its
+command line cheaply: in the command (`jaxgrasp._startup.is_command_line`) the import
+does not even load JAX, and the command turns float64 on itself once its command line is
+read, before it loads the library. Everything else jaxgrasp sets for the process (the CPU device
 count, the executable store on disk, where its messages go) is chosen at its first
 use or by [`configure`][jaxgrasp.configure]; the guide's page "Process-wide settings"
 (``docs/guide/caching.md``) lists each and when.
@@ -58,7 +59,6 @@ Quick start::
     result.value, result.status_name   # J, 'stable'
 """
 
-import importlib as _importlib
 import sys as _sys
 from typing import TYPE_CHECKING
 
@@ -67,16 +67,16 @@ from jaxgrasp import _startup
 if not _startup.is_command_line(list(getattr(_sys, "orig_argv", []))):
     _startup.enable_x64()  # before any array exists: the user's own arrays are float64 too
 
-if TYPE_CHECKING:  # for static tools (type checkers, the API reference); at run time: __getattr__
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its package face when first used
     from jaxgrasp import presets
     from jaxgrasp.analysis import epsilon, robust, robust_batch, sweep, tune
     from jaxgrasp.engine import BatchResult, configure, evaluate, evaluate_batch
-    from jaxgrasp.hands import Hand, tune_hand
+    from jaxgrasp.hands import Hand, tune_hand  # mujoco is imported when a hand is read
     from jaxgrasp.io import GraspSet, from_mesh, load, load_dataset, save, save_dataset
     from jaxgrasp.surface import MeshGrasp
     from jaxgrasp.model import Grasp, GraspValueError, check, stack
     from jaxgrasp.planning import plan
-    from jaxgrasp.simulation import simulate
+    from jaxgrasp.simulation import simulate  # mujoco is imported when it runs
     from jaxgrasp.solver import SolverOptions
     from jaxgrasp.tolerance import EvaluateOptions, Evaluation, GraspStatus
 
@@ -116,22 +116,7 @@ __all__ = [
     "tune_hand",
 ]
 
-_HOMES = {
-    "jaxgrasp.model": ("Grasp", "stack", "check", "GraspValueError"),
-    "jaxgrasp.tolerance": ("EvaluateOptions", "Evaluation", "GraspStatus"),
-    "jaxgrasp.solver": ("SolverOptions",),
-    "jaxgrasp.io": ("load", "save", "from_mesh", "load_dataset", "save_dataset", "GraspSet"),
-    "jaxgrasp.surface": ("MeshGrasp",),
-    "jaxgrasp.engine": ("evaluate", "evaluate_batch", "BatchResult", "configure"),
-    "jaxgrasp.analysis": ("sweep", "tune", "epsilon", "robust", "robust_batch"),
-    "jaxgrasp.planning": ("plan",),
-    "jaxgrasp.simulation": ("simulate",),  # mujoco is imported when it runs
-    "jaxgrasp.hands": ("Hand", "tune_hand"),  # mujoco is imported when a hand is read
-}
-"""The package face each top-level name comes from (``presets`` is a module of its own)."""
-
-_HOME = {name: package for package, names in _HOMES.items() for name in names}
-
+_load, _dir, _LAZY = _startup.attach(__name__)  # _LAZY: each name -> (its package face, the name)
 
 _SUBMODULES = ("solver", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "planning",
                "hands", "simulation", "plots", "cli")
@@ -143,14 +128,10 @@ def __getattr__(name: str):
     if name == "__version__":
         globals()[name] = _version()
         return globals()[name]
-    if name not in _HOME and name not in _SUBMODULES:
+    if name not in _LAZY and name not in _SUBMODULES:
         raise AttributeError(f"module 'jaxgrasp' has no attribute {name!r}")
     _choose_cpu_devices()
-    if name in _SUBMODULES:
-        return _importlib.import_module(f"jaxgrasp.{name}")  # which binds jaxgrasp.<name> too
-    value = getattr(_importlib.import_module(_HOME[name]), name)
-    globals()[name] = value  # later uses find it here
-    return value
+    return _load(name)  # kept here for later uses
 
 
 _DEVICES_CHOSEN = False
@@ -175,7 +156,7 @@ def _choose_cpu_devices() -> None:
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__) | set(_SUBMODULES) | {"__version__"})
+    return sorted(set(_dir()) | set(_SUBMODULES) | {"__version__"})
 
 
 def _version() -> str:

@@ -13,8 +13,12 @@ of the paper's sweeps (E = 2e5 Pa of 2e5 to 1e6, Figs. 6 and 7) at 2 mm, weightl
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-from jaxgrasp.model import STANDARD_GRAVITY, Grasp
+from jaxgrasp.model import STANDARD_GRAVITY  # loads jaxgrasp.model._fields alone: PRESETS needs no JAX
+
+if TYPE_CHECKING:
+    from jaxgrasp.model import Grasp
 
 __all__ = ["cube", "prism", "PRESETS", "FINGERTIP_RADIUS", "FRICTION", "MAX_FORCE", "SIDE"]
 
@@ -86,6 +90,8 @@ def prism(
 
 def _paper_grasp(positions, normals, young_modulus, initial_deformation, mass, gravity) -> Grasp:
     """A grasp with the paper's fingertips (radius, friction, force limit)."""
+    from jaxgrasp.model import Grasp  # here: the names of this module need no JAX
+
     return Grasp.create(
         positions=positions,
         normals=normals,

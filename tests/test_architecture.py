@@ -486,6 +486,29 @@ def test_checks_find_planted_offenders(tmp_path):
     assert found[1].startswith("pkg/cli/_d.py:1: 'BENCHMARK', '.log', 'grasps/s' in"), found
 
 
+def test_imports_for_static_tools_are_edges_too(tmp_path):
+    # The faces import their names under ``if TYPE_CHECKING:`` (jaxgrasp._startup.attach
+    # loads them from there when first used): those imports are edges, checked as any other.
+    for rel, text in {
+        "__init__.py": "",
+        "model/__init__.py": "",
+        "model/_b.py": "",
+        "solver/__init__.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pkg.engine import g\n",
+        "engine/__init__.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pkg.model._b import x\n",
+    }.items():
+        path = tmp_path / "pkg" / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    src = read_source(tmp_path / "pkg")
+    up = upward_import_offenders(src)
+    assert len(up) == 1 and up[0].startswith("pkg/solver/__init__.py:3: pkg.solver (solver) imports pkg.engine"), up
+    assert private_import_offenders(src) == [
+        "pkg/engine/__init__.py:3: pkg.engine imports pkg.model._b, a private module of pkg.model; import from pkg.model"
+    ]
+    faces = {e.target for e in import_edges(SOURCE) if e.source == "jaxgrasp.model"}
+    assert {"jaxgrasp.model._fields", "jaxgrasp.model._grasp", "jaxgrasp._startup"} <= faces, faces
+
+
 def test_layers_cover_the_planned_packages():
     # the order of issue 34, with the surfaces (36), planning (36), hands (37) and physics
     # check (38) packages, the base below the solver and the model, and storage under every

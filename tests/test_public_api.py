@@ -28,6 +28,7 @@ import numpy as np
 import pytest
 
 import jaxgrasp
+from jaxgrasp import _startup
 
 MAX_PUBLIC_NAMES = 30
 """Issue 34's bound, restored in issue 64 by one rule (``jaxgrasp``'s docstring)."""
@@ -201,16 +202,64 @@ def test_every_result_type_is_on_a_face_and_in_the_api_reference():
 
 
 def test_the_face_loads_each_name_from_its_package_when_first_used():
-    """``jaxgrasp.__getattr__`` finds each name of ``__all__`` on the package face
-    ``_HOMES`` names, and the static imports for tools (``if TYPE_CHECKING:``) say the same."""
-    homes = {name: face for face, names in jaxgrasp._HOMES.items() for name in names}
-    assert sorted([*homes, "presets"]) == sorted(jaxgrasp.__all__)
-    tree = ast.parse((REPO / "jaxgrasp" / "__init__.py").read_text())
-    guarded = next(n for n in tree.body if isinstance(n, ast.If) and ast.unparse(n.test) == "TYPE_CHECKING")
-    static = {alias.name: node.module for node in guarded.body for alias in node.names}
-    assert static == {**homes, "presets": "jaxgrasp"}
+    """``jaxgrasp.__getattr__`` finds each name of ``__all__`` on the package face that the
+    static imports for tools (``if TYPE_CHECKING:``) name, a face, not a private module;
+    ``presets`` is a module of its own."""
+    homes = {name: module for name, (module, _) in jaxgrasp._LAZY.items()}
+    assert sorted(homes) == sorted(jaxgrasp.__all__)
+    assert homes.pop("presets") == "jaxgrasp.presets"
+    faces = {f"jaxgrasp.{p.parent.name}" for p in (REPO / "jaxgrasp").glob("*/__init__.py")}
+    assert set(homes.values()) <= faces, set(homes.values()) - faces
     for name, face in homes.items():
         assert getattr(jaxgrasp, name) is getattr(importlib.import_module(face), name), name
+
+
+def test_every_face_loads_its_names_from_its_static_imports(packages):
+    """Every package face (and the top level) lists its names once, as the imports of its
+    ``if TYPE_CHECKING:`` block that type checkers and the API reference read;
+    `jaxgrasp._startup.attach` reads the same block, and each name is the object its
+    module holds. A name of ``__all__`` is in that block or defined in the face."""
+    offenders = []
+    for face in [jaxgrasp, *packages]:
+        source = Path(face.__file__).read_text(encoding="utf-8")
+        if getattr(face, "_LAZY", None) != _startup.lazy_names(face.__name__, source):
+            offenders.append(f"{face.__name__}: _LAZY is not what its TYPE_CHECKING block imports")
+            continue
+        for name, (module, attr) in face._LAZY.items():
+            target = importlib.import_module(module)
+            if getattr(face, name) is not (getattr(target, attr) if attr else target):
+                offenders.append(f"{face.__name__}.{name}: not {module}.{attr}")
+        own = {n for n, v in vars(face).items() if getattr(v, "__module__", face.__name__) == face.__name__}
+        offenders += [f"{face.__name__}.{n}: in __all__, neither imported under TYPE_CHECKING nor defined there"
+                      for n in face.__all__ if n not in face._LAZY and n not in own and n not in _EAGER.get(face.__name__, ())]
+    _fail_if("faces whose names are not loaded from their static imports", offenders)
+
+
+_EAGER = {"jaxgrasp.cli": ("COMMANDS", "UsageError", "EXIT_USAGE", "parse_number")}
+"""Names a face imports at run time (the command's parser needs them at once, without JAX)."""
+
+
+def test_lazy_names_reads_the_type_checking_block():
+    source = textwrap.dedent(
+        """
+        from typing import TYPE_CHECKING
+        from pkg import _startup
+
+        if TYPE_CHECKING:  # the face's names
+            from pkg.face._a import A, b as renamed
+            from pkg import sub
+
+            # for other packages
+            from pkg.other import C
+        """
+    )
+    assert _startup.lazy_names("pkg", source) == {
+        "A": ("pkg.face._a", "A"), "renamed": ("pkg.face._a", "b"), "sub": ("pkg.sub", ""), "C": ("pkg.other", "C"),
+    }
+    for bad, why in [("import pkg.face._a", "only 'from jaxgrasp"), ("from ._a import A", "only 'from jaxgrasp"),
+                     ("from pkg._a import A\n    from pkg._b import A", "'A' imported twice")]:
+        with pytest.raises(ValueError, match=why):
+            _startup.lazy_names("pkg", f"if TYPE_CHECKING:\n    {bad}\n")
 
 
 def test_the_package_and_its_subpackages_have_a_face(packages):

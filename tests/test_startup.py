@@ -1,7 +1,8 @@
 """Issue 64, item 3: ``import jaxgrasp`` turns on float64 and changes nothing else in the
-process; the ``jaxgrasp`` command answers ``--version``, ``--help`` and a missing or
-unknown command without loading JAX. Item 5: long library calls say what they do on the
-``"jaxgrasp"`` logger, visible by default, quiet by one documented switch.
+process; the ``jaxgrasp`` command answers ``--version``, ``--help`` (its own and every
+sub-command's) and every argument error without loading JAX, and a package face loads
+none of its modules until one of its names is used. Item 5: long library calls say what
+they do on the ``"jaxgrasp"`` logger, visible by default, quiet by one documented switch.
 
 The import and the command run in fresh subprocesses (what a process imports and writes
 is the point); the messages are read in this process with ``caplog``, and once in a
@@ -117,16 +118,143 @@ def test_command_answers_without_jax(argv, status, stream, text):
     assert not [m for m in imported if m.split(".")[0] in ("jax", "jaxlib", "numpy")], imported
 
 
-def test_top_level_help_is_the_full_parsers():
-    """The help :func:`jaxgrasp.cli.top_parser` prints without the library is the full
-    parser's, word for word (each sub-command's line is written twice: in
-    ``cli.COMMANDS`` and in its module)."""
-    assert cli.top_parser().format_help() == cli.build_parser().format_help()
+def test_the_sub_commands_are_commands():
+    """``jaxgrasp --help`` lists the sub-commands of ``cli.COMMANDS``, in its order, each with
+    its line (written once, there)."""
+    parser = cli.build_parser()
+    (sub,) = [a for a in parser._actions if a.dest == "command"]
+    assert list(sub.choices) == list(cli.COMMANDS)
+    assert {a.dest: a.help for a in sub._choices_actions} == cli.COMMANDS
+    text = " ".join(parser.format_help().split())
+    assert all(f"{name} {line}" in text for name, line in cli.COMMANDS.items())
+
+
+def _run_as_command(tmp_path: Path, code: str, *args: str) -> dict:
+    """Run ``code`` the way the ``jaxgrasp`` console script runs (a file named ``jaxgrasp``:
+    `jaxgrasp._startup.is_command_line`, so ``import jaxgrasp`` loads no JAX), with the
+    repository first on ``sys.path`` and ``args``; the JSON object it prints last."""
+    script = tmp_path / "jaxgrasp"
+    script.write_text(f"import sys\nsys.path.insert(0, {str(ROOT)!r})\n" + code)
+    proc = _python([str(script), *args])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(proc.stdout.splitlines()[-1])
+
+
+COMMAND_PROBE = textwrap.dedent(
+    """
+    import contextlib, io, json
+    from jaxgrasp.cli import main
+
+    answers = []
+    for argv in json.loads(sys.argv[1]):
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                status = main(argv)
+            except SystemExit as exc:  # --help ends as argparse ends it
+                status = exc.code
+        heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("jax", "jaxlib", "numpy"))
+        answers.append({"status": status, "stdout": out.getvalue(), "stderr": err.getvalue(), "heavy": heavy[:5]})
+    print(json.dumps(answers))
+    """
+)
+
+BAD_ARGUMENTS = {
+    # per sub-command: an unknown option, a missing option value, an invalid choice, a value
+    # its type= rejects; each answered with one line, as before
+    "evaluate": [
+        (["--bogus"], "unrecognized arguments: --bogus (see 'jaxgrasp --help')"),
+        (["--young-modulus"], "argument --young-modulus: expected one argument (see 'jaxgrasp evaluate --help')"),
+        (["--preset", "nope"],
+         "argument --preset: invalid choice: 'nope' (choose from 'cube', 'prism') (see 'jaxgrasp evaluate --help')"),
+        (["--young-modulus", "x"], "argument --young-modulus: invalid float value: 'x' (see 'jaxgrasp evaluate --help')"),
+    ],
+    "sweep": [
+        (["--bogus"], "unrecognized arguments: --bogus (see 'jaxgrasp --help')"),
+        (["--out"], "argument --out: expected one argument (see 'jaxgrasp sweep --help')"),
+        (["--preset", "nope"],
+         "argument --preset: invalid choice: 'nope' (choose from 'cube', 'prism') (see 'jaxgrasp sweep --help')"),
+        (["--young-modulus", "x"], "--young-modulus: value 'x' is not a number"),  # an axis spec
+        (["--mass", "0:1:20000000"],
+         "--mass: range '0:1:20000000' has 20,000,000 points, more than a whole grid may have (10,000,000); split the sweep"),
+    ],
+    "batch": [
+        (["set.npz", "--bogus"], "unrecognized arguments: --bogus (see 'jaxgrasp --help')"),
+        ([], "the following arguments are required: file (see 'jaxgrasp batch --help')"),
+        (["set.npz", "--top", "x"], "argument --top: invalid int value: 'x' (see 'jaxgrasp batch --help')"),
+    ],
+    "tune": [
+        (["--bogus"], "unrecognized arguments: --bogus (see 'jaxgrasp --help')"),
+        (["--param"], "argument --param: expected one argument (see 'jaxgrasp tune --help')"),
+        (["--method", "nope"], ("argument --method: invalid choice: 'nope' (choose from 'scipy_lbfgsb', "
+                                "'jaxopt_lbfgsb', 'projected_gradient') (see 'jaxgrasp tune --help')")),
+        (["--maxiter", "x"], "argument --maxiter: invalid int value: 'x' (see 'jaxgrasp tune --help')"),
+    ],
+    "plan": [
+        (["part.stl", "--bogus"], "unrecognized arguments: --bogus (see 'jaxgrasp --help')"),
+        (["part.stl", "--units"], "argument --units: expected one argument (see 'jaxgrasp plan --help')"),
+        (["part.stl", "--sampler", "nope"], ("argument --sampler: invalid choice: 'nope' (choose from 'antipodal', "
+                                             "'spread', 'uniform') (see 'jaxgrasp plan --help')")),
+        (["part.stl", "--fingers", "x"], "argument --fingers: invalid int value: 'x' (see 'jaxgrasp plan --help')"),
+    ],
+    "show": [
+        (["--bogus"], "unrecognized arguments: --bogus (see 'jaxgrasp --help')"),
+        (["--glb"], "argument --glb: expected one argument (see 'jaxgrasp show --help')"),
+        (["--preset", "nope"],
+         "argument --preset: invalid choice: 'nope' (choose from 'cube', 'prism') (see 'jaxgrasp show --help')"),
+        (["--magnification", "x"], "argument --magnification: invalid float value: 'x' (see 'jaxgrasp show --help')"),
+    ],
+    "simulate": [
+        (["--bogus"], "unrecognized arguments: --bogus (see 'jaxgrasp --help')"),
+        (["--scales"], "argument --scales: expected one argument (see 'jaxgrasp simulate --help')"),
+        (["--preset", "nope"],
+         "argument --preset: invalid choice: 'nope' (choose from 'cube', 'prism') (see 'jaxgrasp simulate --help')"),
+        (["--random-kicks", "x"], "argument --random-kicks: invalid int value: 'x' (see 'jaxgrasp simulate --help')"),
+    ],
+}
+"""Argument errors of each sub-command and the line after ``jaxgrasp: error: `` of each."""
+
+
+def test_every_sub_command_answers_help_and_argument_errors_without_jax(tmp_path):
+    """Each sub-command's ``--help`` (status 0) and its argument errors (one line, status 2),
+    through `jaxgrasp.cli.main` in the command's own process: not one module of JAX or
+    NumPy loaded, before or after."""
+    assert list(BAD_ARGUMENTS) == list(cli.COMMANDS)
+    cases = [([name, "--help"], 0, None) for name in cli.COMMANDS]
+    cases += [([name, *argv], 2, line) for name, bad in BAD_ARGUMENTS.items() for argv, line in bad]
+    answers = _run_as_command(tmp_path, COMMAND_PROBE, json.dumps([argv for argv, _, _ in cases]))
+    for (argv, status, line), got in zip(cases, answers, strict=True):
+        assert got["heavy"] == [], (argv, got["heavy"])
+        assert got["status"] == status, (argv, got)
+        if line is None:
+            assert got["stdout"].startswith(f"usage: jaxgrasp {argv[0]} [-h]") and got["stderr"] == "", (argv, got)
+        else:
+            assert got["stderr"] == f"jaxgrasp: error: {line}\n" and got["stdout"] == "", (argv, got)
+
+
+FACES_PROBE = textwrap.dedent(
+    """
+    import importlib, json
+    faces = json.loads(sys.argv[1])
+    for face in faces:
+        importlib.import_module(face)
+    print(json.dumps(sorted(m for m in sys.modules if m.split(".")[0] in ("jaxgrasp", "jax", "jaxlib", "numpy"))))
+    """
+)
+
+
+def test_a_package_face_loads_no_module_until_a_name_is_used(tmp_path):
+    """Importing every package face (``import jaxgrasp.engine`` ...) loads none of their
+    modules: each name is loaded when first used (`jaxgrasp._startup.attach`)."""
+    faces = sorted(f"jaxgrasp.{p.parent.name}" for p in (ROOT / "jaxgrasp").glob("*/__init__.py"))
+    faces.remove("jaxgrasp.cli")  # it loads its parser, without JAX: the test above
+    loaded = _run_as_command(tmp_path, FACES_PROBE, json.dumps(faces))
+    assert loaded == sorted(["jaxgrasp", "jaxgrasp._startup", *faces]), loaded
 
 
 def test_a_sub_command_error_is_still_one_line(capsys):
-    """A sub-command's options need the library (their fields and defaults): its error is
-    the same one line as before."""
+    """In a process where jaxgrasp is loaded already (a program calling `jaxgrasp.cli.main`),
+    an argument error is the same one line."""
     assert cli.main(["evaluate", "--bogus"]) == 2
     assert capsys.readouterr().err == "jaxgrasp: error: unrecognized arguments: --bogus (see 'jaxgrasp --help')\n"
 

@@ -6,18 +6,24 @@ jaxgrasp's other packages, not promised (the faces' convention: ``docs/developme
 "Layout").
 """
 
-from jaxgrasp.analysis._epsilon import EpsilonResult, epsilon
-from jaxgrasp.analysis._robust import RobustBatch, RobustResult, RobustStatus, perturbed, robust, robust_batch
-from jaxgrasp.analysis._sweep import PARAMETERS, SweepResult, sweep
-from jaxgrasp.analysis._tune import TuneResult, tune
-from jaxgrasp.analysis._tune_status import TuneStatus
-from jaxgrasp.analysis._uncertainty import Uncertainty, parse_spec
+from typing import TYPE_CHECKING
 
-# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.analysis._epsilon import prefetch_qhull
-from jaxgrasp.analysis._sweep import MAX_GRID_POINTS, check_inputs, grid_grasp
-from jaxgrasp.analysis._tune_drivers import METHODS, run_search
-from jaxgrasp.analysis._tune_spec import parse_param
+from jaxgrasp import _startup
+
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.analysis._epsilon import EpsilonResult, epsilon
+    from jaxgrasp.analysis._robust import RobustBatch, RobustResult, RobustStatus, perturbed, robust, robust_batch
+    from jaxgrasp.analysis._sweep import PARAMETERS, SweepResult, sweep
+    from jaxgrasp.analysis._tune import TuneResult, tune
+    from jaxgrasp.analysis._tune_status import TuneStatus
+    from jaxgrasp.analysis._uncertainty import Uncertainty, parse_spec
+
+    # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.analysis._epsilon import prefetch_qhull
+    from jaxgrasp.analysis._limits import MAX_GRID_POINTS, METHODS
+    from jaxgrasp.analysis._sweep import check_inputs, grid_grasp
+    from jaxgrasp.analysis._tune_drivers import run_search
+    from jaxgrasp.analysis._tune_spec import parse_param
 
 __all__ = [
     "sweep",
@@ -37,3 +43,5 @@ __all__ = [
     "RobustBatch",
     "RobustStatus",
 ]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

@@ -42,6 +42,7 @@ import jax
 import numpy as np
 
 from jaxgrasp import storage
+from jaxgrasp.analysis._limits import MAX_GRID_POINTS
 from jaxgrasp.engine import RETRY, SweepKeeper, check_chunk_size, plan_source, run_batch
 from jaxgrasp.model import (
     FIELD,
@@ -63,7 +64,6 @@ __all__ = [
     "grid_grasp",
     "SweepResult",
     "PARAMETERS",
-    "MAX_GRID_POINTS",
     "column_name",
 ]
 
@@ -72,13 +72,6 @@ PARAMETERS: dict[str, Field] = {name: FIELD[name] for name in SWEEPABLE}
 ``.per_contact``, ``.rule`` and ``.allows(x)`` its allowed range).
 
 A per-contact parameter is set to the same value at every contact of a grid point."""
-
-MAX_GRID_POINTS = 10_000_000
-"""The most grid points one [`sweep`][jaxgrasp.sweep] takes. Its result arrays hold 5 numbers of 8 bytes
-per point (0.4 GB at the cap), ``jaxgrasp sweep``'s CSV about 100 bytes per point (1 GB)
-and its grid of axis values 8 bytes per point and axis, all in memory at the end; and a
-2-core CPU needs a day or more for that many points. A larger grid (three axes of 465
-points: 1e8) is refused before anything is allocated; split it into several sweeps."""
 
 _RESULT_FIELDS = SUMMARY_FIELDS
 _RESULT_UNITS = {"value": "J", "equilibrium_energy": "J"}

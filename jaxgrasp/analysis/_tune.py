@@ -41,7 +41,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.analysis._tune_drivers import METHODS, SearchRecord, run_search
+from jaxgrasp.analysis._limits import METHODS
+from jaxgrasp.analysis._tune_drivers import SearchRecord, run_search
 from jaxgrasp.analysis._tune_spec import (
     ParamBox,
     ParamSpec,

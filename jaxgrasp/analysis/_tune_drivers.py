@@ -18,14 +18,7 @@ from jaxgrasp.analysis._tune_status import TuneStatus
 from jaxgrasp.model import GraspValueError
 from jaxgrasp.tolerance import GraspStatus
 
-__all__ = ["METHODS", "SearchRecord", "run_search"]
-
-METHODS = ("scipy_lbfgsb", "jaxopt_lbfgsb", "projected_gradient")
-"""Optimisers, all on the same compiled value and envelope gradient: SciPy's L-BFGS-B
-(default; ``scipy.optimize.minimize``), ``jaxopt.LBFGSB`` and ``jaxopt.ProjectedGradient``
-with ``projection_box``. At a maximum on a kink (the cube's shared deformation)
-``jaxopt.LBFGSB`` takes short steps and compiles its update separately, and projected
-gradient oscillates around the kink; SciPy's L-BFGS-B is the default."""
+__all__ = ["SearchRecord", "run_search"]
 
 
 class SearchRecord:
@@ -67,7 +60,7 @@ class SearchRecord:
 
 
 def run_search(method: str, vg, u0, data, rec: SearchRecord, **stop):
-    """Run the optimiser ``method`` (one of `METHODS`) on ``vg`` from ``u0``;
+    """Run the optimiser ``method`` (one of `jaxgrasp.analysis._limits.METHODS`) on ``vg`` from ``u0``;
     ``stop`` holds ``maxiter``, ``tol``, ``ftol``, ``patience`` and ``callback``
     ([`jaxgrasp.tune`][jaxgrasp.tune]). Returns ``(status, iterations, evaluations)``."""
     if method == "scipy_lbfgsb":

@@ -10,9 +10,16 @@ jaxgrasp's other packages, not promised (the faces' convention: ``docs/developme
 "Layout").
 """
 
-from jaxgrasp.base._codes import Coded
+from typing import TYPE_CHECKING
 
-# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.base._contract import contract
+from jaxgrasp import _startup
+
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.base._codes import Coded
+
+    # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.base._contract import contract
 
 __all__ = ["Coded"]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

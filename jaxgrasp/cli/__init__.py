@@ -7,18 +7,27 @@ line too, with status 1; a batch's finished chunks stay in its checkpoint for
 ``--resume``. Ctrl-C (or SIGTERM) at any moment ends the command within a second with one
 line ``jaxgrasp: interrupted ...`` and status 130 (143), see `_interrupt`.
 
-One module per sub-command (`_evaluate`, `_sweep`, `_batch`,
-`_tune`, `_plan`, `_show`, `_simulate`), each with ``add_parser(sub)`` and ``run(args)``; what they
-share is in `_common`. The commands parse, call the library, print and write.
+One module per sub-command (`_evaluate`, `_sweep`, `_batch`, `_tune`, `_plan`, `_show`,
+`_simulate`), each with ``run(args)``; what they share is in `_common`. Their arguments
+are defined in `_arguments`, without JAX: `main` parses the whole command line before it
+loads the library, so that ``--help``, ``--version`` and every argument error are
+answered at once. The commands parse, call the library, print and write.
 """
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import sys
+from typing import TYPE_CHECKING
 
 from jaxgrasp import _startup
+from jaxgrasp.cli._arguments import COMMANDS, add_commands, parse_number
 from jaxgrasp.cli._parser import EXIT_USAGE, Parser, UsageError
+
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded when first used; these load JAX
+    from jaxgrasp.cli._common import load_grasp
+    from jaxgrasp.engine import enable_compilation_cache
 
 __all__ = [
     "main",
@@ -33,19 +42,6 @@ __all__ = [
     "enable_compilation_cache",
 ]
 
-COMMANDS = {
-    "evaluate": "evaluate one grasp and print a summary",
-    "sweep": "evaluate a grasp over a grid of parameters (npz, csv, png)",
-    "batch": "evaluate and rank every grasp of a dataset file (csv, npz, png)",
-    "tune": "maximise the value over chosen parameters; write the tuned grasp and a plot",
-    "plan": "find the best grasps on a meshed object; write them ranked, the best's file and picture",
-    "show": "draw one grasp in 3-D with the motion that makes it fail (png; --glb for a 3-D viewer)",
-    "simulate": "hold, disturb and kick the grasp in MuJoCo (needs jaxgrasp[sim]); results.json and a plot",
-}
-"""The sub-commands, in the order of ``jaxgrasp --help``, each with its line there. Its
-module ``jaxgrasp.cli._<name>`` gives the same line to ``add_parser`` (a test compares
-the two ``--help`` texts); here it answers ``--help`` without loading the library."""
-
 EXIT_ENVIRONMENT = 1
 """Exit status of a command the machine failed: no space left on the device, an I/O error."""
 
@@ -56,43 +52,16 @@ EXIT_STATUS_HELP = (
 )
 """The epilog of ``jaxgrasp --help``."""
 
-_LAZY = {"parse_number": "jaxgrasp.cli._common", "load_grasp": "jaxgrasp.cli._common",
-         "enable_compilation_cache": "jaxgrasp.engine"}
-"""Names of this face that load the library (and JAX), loaded when first used."""
-
-
-def __getattr__(name: str):
-    if name not in _LAZY:
-        raise AttributeError(f"module 'jaxgrasp.cli' has no attribute {name!r}")
-    value = getattr(importlib.import_module(_LAZY[name]), name)
-    globals()[name] = value  # later uses (and a test's replacement) find it here
-    return value
-
-
-def _parser_and_commands() -> tuple[Parser, object]:
-    """The ``jaxgrasp`` parser without its sub-commands, and its sub-parsers' action."""
-    # the docstring's first line without its reStructuredText markup
-    parser = Parser(prog="jaxgrasp", description=__doc__.splitlines()[0].replace("``", ""), epilog=EXIT_STATUS_HELP)
-    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
-    return parser, parser.add_subparsers(dest="command", parser_class=Parser)
-
-
-def top_parser() -> Parser:
-    """The ``jaxgrasp`` parser with each sub-command's name and line but none of its
-    options: what ``--version``, ``--help`` and a missing or unknown command need,
-    without the library (and JAX). Its ``--help`` is `build_parser`'s."""
-    parser, sub = _parser_and_commands()
-    for name, line in COMMANDS.items():
-        sub.add_parser(name, help=line, add_help=False)
-    return parser
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)
 
 
 def build_parser() -> Parser:
-    """The ``jaxgrasp`` argument parser with every sub-command (it loads the library)."""
-    _startup.enable_x64()  # before the library is loaded: in the command, the import did not
-    parser, sub = _parser_and_commands()
-    for name in COMMANDS:
-        importlib.import_module(f"jaxgrasp.cli._{name}").add_parser(sub)
+    """The ``jaxgrasp`` argument parser with every sub-command (`COMMANDS`); it loads neither
+    the library nor JAX."""
+    # the docstring's first line without its reStructuredText markup
+    parser = Parser(prog="jaxgrasp", description=__doc__.splitlines()[0].replace("``", ""), epilog=EXIT_STATUS_HELP)
+    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
+    add_commands(parser.add_subparsers(dest="command", parser_class=Parser))
     return parser
 
 
@@ -119,56 +88,49 @@ def main(argv=None) -> int:
     once (``os._exit``, after flushing stdout and stderr), so that no interrupt lands in
     the interpreter's teardown. Pass ``argv`` to get the status returned instead.
 
-    ``--version``, ``--help`` and a missing or unknown command are answered by
-    `top_parser` before the library (and JAX) is loaded. In the ``jaxgrasp``
-    command, a Ctrl-C or SIGTERM while the library loads ends the process with one line
-    (`jaxgrasp._startup.install_if_command_line`).
+    The whole command line is parsed (`build_parser`) before the library (and JAX) is
+    loaded: ``--version``, ``--help`` (``SystemExit(0)``, as argparse raises it) and every
+    argument error are answered at once, an error as one line with exit status 2. In the
+    ``jaxgrasp`` command, a Ctrl-C or SIGTERM while the library loads ends the process
+    with one line (`jaxgrasp._startup.install_if_command_line`).
     """
     _startup.install_if_command_line()  # first: before anything slow is loaded
-    status = _answer_without_library(sys.argv[1:] if argv is None else list(argv))
-    if status is not None:
-        return status
-    from jaxgrasp.cli._interrupt import run_interruptibly
-
-    return run_interruptibly(lambda: _main(argv), end_process=argv is None)
-
-
-def _answer_without_library(argv: list[str]) -> int | None:
-    """The exit status of a command line `top_parser` answers alone (no command, an
-    unknown command or top-level option), after printing its one line; ``None`` for a
-    sub-command to run. ``--version`` and ``--help`` print and raise ``SystemExit(0)``,
-    as argparse does."""
     try:
-        args, rest = top_parser().parse_known_args(argv)
+        args = _parse(sys.argv[1:] if argv is None else list(argv))
     except UsageError as exc:
         print(f"jaxgrasp: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    _startup.enable_x64()  # before the library is loaded: in the command, the import did not
+    from jaxgrasp.cli._interrupt import run_interruptibly  # the first module that loads the library
+
+    return run_interruptibly(lambda: _main(args), end_process=argv is None)
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    """The command line ``argv`` parsed; a `UsageError` where it is wrong or names no command."""
+    args = build_parser().parse_args(argv)
     if args.command is None:
-        line = (f"unrecognized arguments: {' '.join(rest)} (see 'jaxgrasp --help')" if rest else
-                "choose a command: evaluate, sweep, batch, tune, plan, show or simulate (see 'jaxgrasp --help')")
-        print(f"jaxgrasp: error: {line}", file=sys.stderr)
-        return EXIT_USAGE
-    return None
+        raise UsageError("choose a command: evaluate, sweep, batch, tune, plan, show or simulate "
+                         "(see 'jaxgrasp --help')")
+    return args
 
 
-def _main(argv) -> int:
-    """Parse ``argv`` and run its command; input errors as one line, exit status 2; a
-    failure of the machine (a full disk, an I/O error) as one line, exit status 1."""
+def _main(args: argparse.Namespace) -> int:
+    """Load the library and run the command of ``args``; input errors as one line, exit
+    status 2; a failure of the machine (a full disk, an I/O error) as one line, exit status 1."""
     from jaxgrasp.cli._notes import clear_notes
     from jaxgrasp.engine import log_lines_on_stderr, wait_for_saves
     from jaxgrasp.model import GraspValueError
     from jaxgrasp.storage import OutputError
 
-    parser = build_parser()
     try:
-        args = parser.parse_args(argv)  # a command is given: main answered the command line without one
         from jaxgrasp.cli._common import check_names
 
         check_names(args)  # a name that is not UTF-8 would fail only when printed, after the work
         with log_lines_on_stderr():  # "jaxgrasp: compiling ...", chunks, cache warnings, one line each
             _configure()  # before the command makes its first array: a batch runs on every core
             sys.modules[__name__].enable_compilation_cache()  # looked up here, so that tests can replace it
-            return args.func(args)
+            return importlib.import_module(f"jaxgrasp.cli._{args.command}").run(args)
     except (UsageError, GraspValueError, OutputError) as exc:
         return _report(exc)
     except OSError as exc:  # the machine, not the input: a full disk, an I/O error

@@ -29,9 +29,6 @@ from jaxgrasp.cli import _notes
 from jaxgrasp.cli._common import (
     ChunkProgress,
     UsageError,
-    add_allow_dir,
-    add_epsilon_option,
-    add_robust_options,
     announce_run,
     check_chunk_size,
     check_out,
@@ -44,53 +41,13 @@ from jaxgrasp.cli._common import (
 from jaxgrasp.engine import prefetch
 from jaxgrasp.model import counted
 
-__all__ = ["add_parser", "run", "resume_key", "OUTPUT_NAMES", "PARTIAL_NAME", "DEFAULT_TOP"]
+__all__ = ["run", "resume_key", "OUTPUT_NAMES", "PARTIAL_NAME"]
 
 OUTPUT_NAMES = ("results.csv", "results.npz", "results.png")
 """The files of one batch's output set, in ``--out``."""
 
 PARTIAL_NAME = "results.partial"
 """The checkpoint folder of the finished chunks (`jaxgrasp.cli._keepers.BatchCheckpoint`), in ``--out``."""
-
-DEFAULT_TOP = 5
-"""Best grasps listed in the summary (``--top``)."""
-
-
-def add_parser(sub) -> None:
-    """Add the ``batch`` command to the ``jaxgrasp`` sub-parsers."""
-    sp = sub.add_parser(
-        "batch",
-        help="evaluate and rank every grasp of a dataset file (csv, npz, png)",
-        description=(
-            "Evaluate every grasp of a dataset file (.npz arrays named like the grasp fields, "
-            "or .jsonl with one grasp-file JSON object per line; SI units; any contact counts) "
-            "and rank them. Writes DIR/results.csv (one row per grasp in input order), "
-            "DIR/results.npz (every result array) and DIR/results.png (the ranking) as one set. "
-            "Finished chunks are kept in DIR/results.partial until then: an interrupted run "
-            "is finished by the same command with --resume."
-        ),
-        epilog="Example: jaxgrasp batch grasps.jsonl --out ranked/ --top 10",
-    )
-    sp.add_argument("file", help="dataset file (.npz or .jsonl)")
-    sp.add_argument("--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)")
-    sp.add_argument(
-        "--chunk-size",
-        type=int,
-        default=None,
-        metavar="N",
-        help="grasps per compiled batch (default 64 per CPU device, 1024 per GPU)",
-    )
-    sp.add_argument("--top", type=int, default=DEFAULT_TOP, metavar="K", help=f"list the K best grasps (default {DEFAULT_TOP})")
-    sp.add_argument("--strict", action="store_true", help="any invalid grasp: exit 2 before computing")
-    sp.add_argument("--resume", action="store_true", help="finish an interrupted run into the same DIR")
-    sp.add_argument("--no-plot", action="store_true", help="do not write results.png")
-    add_allow_dir(sp)
-    add_epsilon_option(sp)
-    add_robust_options(sp)
-    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    processes.add_process_options(sp)
-    sp.set_defaults(func=run)
-
 
 # --------------------------------------------------------------------------- the command
 

@@ -35,20 +35,8 @@ from jaxgrasp.engine import grasps_by_count
 from jaxgrasp.io import load_share, share_rows
 from jaxgrasp.tolerance import FIELDS, Evaluation
 
-__all__ = ["add_process_options", "check_process_options", "attempt", "open_share", "agree_on_inputs",
+__all__ = ["check_process_options", "attempt", "open_share", "agree_on_inputs",
            "share_blob", "gather_results"]
-
-
-def add_process_options(sp) -> None:
-    """Add ``--coordinator``, ``--num-processes`` and ``--process-id`` to ``sp``."""
-    g = sp.add_argument_group(
-        "several processes",
-        "run one process per host, each with the same command and its own --process-id; "
-        "each evaluates its share of the dataset and process 0 writes DIR (no --resume)",
-    )
-    g.add_argument("--coordinator", metavar="HOST:PORT", help="process 0's address, which every process reaches")
-    g.add_argument("--num-processes", type=int, metavar="P", help="how many processes run the batch")
-    g.add_argument("--process-id", type=int, metavar="I", help="this process's index, 0 .. P-1")
 
 
 def check_process_options(args) -> bool:

@@ -1,4 +1,5 @@
-"""What every ``jaxgrasp`` sub-command shares: one-line errors, numbers, the grasp to use.
+"""What the ``jaxgrasp`` sub-commands share when they run: one-line errors, the grasp to use,
+output folders, progress lines. Their arguments are defined in `jaxgrasp.cli._arguments`.
 
 Every error in the input (bad file, bad value, bad option) is a `UsageError` (or a
 [`GraspValueError`][jaxgrasp.GraspValueError]), which `jaxgrasp.cli.main` prints as
@@ -7,28 +8,23 @@ one line ``jaxgrasp: error: ...`` on stderr, exiting with `EXIT_USAGE`.
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
 from pathlib import Path
 
 from jaxgrasp import storage
+from jaxgrasp.cli._arguments import OVERRIDES
 from jaxgrasp.cli._parser import EXIT_USAGE, Parser, UsageError
 from jaxgrasp.engine import ChunkProgress
-from jaxgrasp.model import FIELD, SWEEPABLE, counted
+from jaxgrasp.model import FIELD, counted
 from jaxgrasp.presets import PRESETS
 
 __all__ = [
     "EXIT_USAGE",
     "UsageError",
     "Parser",
-    "parse_number",
     "check_chunk_size",
-    "OVERRIDES",
-    "add_grasp_source",
-    "add_allow_dir",
-    "add_overrides",
     "grasp_source",
     "grasp_notes",
     "load_grasp",
@@ -38,62 +34,19 @@ __all__ = [
     "write_picture",
     "ChunkProgress",
     "say",
-    "add_epsilon_option",
     "epsilon_columns",
     "check_names",
     "LONG_EVALUATION_CONTACTS",
     "announce_large_grasp",
     "announce_run",
-    "add_robust_options",
     "robust_uncertainty",
-    "DEFAULT_ROBUST_SAMPLES",
 ]
-
-OVERRIDES = SWEEPABLE
-"""Fields one number sets for the whole grasp (every contact at once), in option order:
-``jaxgrasp evaluate --young-modulus PA ...`` and the sweep's axes."""
-
-
-def parse_number(option: str, text: str, what: str = "value") -> float:
-    """``text`` as a finite float; a `UsageError` naming ``option`` otherwise."""
-    t = text.strip()
-    try:
-        x = float(t)
-    except ValueError:
-        raise UsageError(f"{option}: {what} {t!r} is not a number") from None
-    if not math.isfinite(x):
-        raise UsageError(f"{option}: {what} {t!r} must be finite")
-    return x
 
 
 def check_chunk_size(value: int | None) -> None:
     """``--chunk-size`` must be at least 1 (``None``: the default)."""
     if value is not None and value < 1:
         raise UsageError(f"--chunk-size must be >= 1, got {value}")
-
-
-def add_grasp_source(p: argparse.ArgumentParser) -> None:
-    """The grasp to use: a positional ``file`` or ``--preset NAME``; ``--allow-dir``."""
-    p.add_argument("file", nargs="?", help="grasp file (.toml or .json, SI units)")
-    p.add_argument("--preset", choices=list(PRESETS), help="one of the paper's grasps instead of a file")
-    add_allow_dir(p)
-
-
-def add_allow_dir(p: argparse.ArgumentParser) -> None:
-    """``--allow-dir DIR`` (repeatable): a folder outside the input file's own that the
-    meshes it names may be in (`jaxgrasp.io._inputs.confine`)."""
-    p.add_argument(
-        "--allow-dir", action="append", default=None, metavar="DIR", dest="allow_dir",
-        help=("also read meshes the input file names from DIR (repeatable); by default only "
-              "meshes inside the input file's own folder are read"),
-    )
-
-
-def add_overrides(p: argparse.ArgumentParser) -> None:
-    """``--young-modulus PA`` etc.: one number for a field of the whole grasp (`OVERRIDES`)."""
-    for name in OVERRIDES:
-        field = FIELD[name]
-        p.add_argument(field.option, dest=name, type=float, metavar=field.metavar, help=field.help)
 
 
 def grasp_source(args) -> str:
@@ -330,15 +283,6 @@ def announce_large_grasp(n_contacts: int, source: str) -> None:
 # --------------------------------------------------------------------------- epsilon column
 
 
-def add_epsilon_option(p: argparse.ArgumentParser) -> None:
-    """``--epsilon``: add the Ferrari-Canny metric's columns to a command's tables."""
-    p.add_argument(
-        "--epsilon",
-        action="store_true",
-        help="add columns epsilon and force_closure (Ferrari-Canny metric, 8 cone edges, soft fingers)",
-    )
-
-
 def epsilon_columns(grasps, shape=None) -> dict:
     """``{"epsilon": values, "force_closure": bools}`` of a batched grasp
     ([`jaxgrasp.epsilon`][jaxgrasp.epsilon]), reshaped to ``shape`` (e.g. a sweep's grid)."""
@@ -350,23 +294,6 @@ def epsilon_columns(grasps, shape=None) -> dict:
 
 
 # --------------------------------------------------------------------------- robust options
-
-DEFAULT_ROBUST_SAMPLES = 256
-"""Perturbed copies per grasp of ``--robust`` (``--samples``)."""
-
-
-def add_robust_options(p: argparse.ArgumentParser) -> None:
-    """``--robust SPEC``, ``--samples N`` and ``--seed N``: the robust value under uncertainty
-    ([`jaxgrasp.robust`][jaxgrasp.robust])."""
-    p.add_argument(
-        "--robust", metavar="SPEC", default=None,
-        help=("also evaluate SAMPLES perturbed copies of each grasp; SPEC gives each source's spread "
-              "in SI units, e.g. friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3 "
-              "(also friction_per_fingertip, mass, gravity_angle; see jaxgrasp.analysis.Uncertainty)"),
-    )
-    p.add_argument("--samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
-                   help=f"perturbed copies per grasp with --robust (default {DEFAULT_ROBUST_SAMPLES})")
-    p.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the --robust draws (default 0)")
 
 
 def robust_uncertainty(args):

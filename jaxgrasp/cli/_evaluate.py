@@ -5,9 +5,6 @@ from __future__ import annotations
 import json
 
 from jaxgrasp.cli._common import (
-    add_grasp_source,
-    add_overrides,
-    add_robust_options,
     announce_large_grasp,
     check_chunk_size,
     grasp_notes,
@@ -16,19 +13,7 @@ from jaxgrasp.cli._common import (
     robust_uncertainty,
 )
 
-__all__ = ["add_parser", "run", "format_summary"]
-
-
-def add_parser(sub) -> None:
-    """Add the ``evaluate`` command to the ``jaxgrasp`` sub-parsers."""
-    p = sub.add_parser("evaluate", help="evaluate one grasp and print a summary")
-    add_grasp_source(p)
-    add_overrides(p)
-    p.add_argument("--json", action="store_true", help="print a JSON object instead")
-    add_robust_options(p)
-    p.add_argument("--chunk-size", type=int, default=None, metavar="N",
-                   help="perturbed grasps per compiled batch with --robust (default 64 per CPU device, 1024 per GPU)")
-    p.set_defaults(func=run)
+__all__ = ["run", "format_summary"]
 
 
 def run(args) -> int:

@@ -1,7 +1,7 @@
 """The command line's argument parser and its one-line errors: Python's standard library only.
 
-`jaxgrasp.cli` answers ``jaxgrasp --version``, ``--help`` and a missing or unknown
-command with these alone, before it loads JAX (`jaxgrasp.cli.main`).
+With the sub-commands' arguments (`jaxgrasp.cli._arguments`), `jaxgrasp.cli.main` answers
+``--version``, every ``--help`` and every argument error with these, before it loads JAX.
 """
 
 from __future__ import annotations

@@ -23,72 +23,17 @@ import math
 import time
 from pathlib import Path
 
-from jaxgrasp.cli._common import UsageError, check_out, lock_out, parse_number, replaced_text, say
+from jaxgrasp.cli._arguments import DEFAULT_ROBUST, PLAN_DEFAULTS, parse_number
+from jaxgrasp.cli._common import UsageError, check_out, lock_out, replaced_text, say
 from jaxgrasp import storage
 
-__all__ = ["add_parser", "run", "RESULT_COLUMNS", "DEFAULTS"]
+__all__ = ["run", "RESULT_COLUMNS"]
 
 RESULT_COLUMNS = ("rank", "value_J", "status", "limiting_kind", "limiting_contact", "epsilon", "refined")
 """The columns of ``results.csv``; with ``--rank robust`` also `ROBUST_COLUMNS`."""
 
 ROBUST_COLUMNS = ("p_stable", "value_mean_J", "value_q05_J")
 """The robust columns of ``results.csv`` (``--rank robust``)."""
-
-DEFAULT_ROBUST = "friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3"
-"""The uncertainty ``--rank robust`` assumes without ``--robust SPEC``."""
-
-DEFAULTS = dict(fingers=2, radius=0.01, young_modulus=3e5, friction=0.8, max_force=15.0, density=500.0)
-"""Defaults of the command's fingertip and object options (SI units): a 10 mm silicone-like
-fingertip on a light plastic-like object."""
-
-
-def add_parser(sub) -> None:
-    """Add the ``plan`` command to the ``jaxgrasp`` sub-parsers."""
-    from jaxgrasp.planning import SAMPLERS
-
-    sp = sub.add_parser(
-        "plan",
-        help="find the best grasps on a meshed object; write them ranked, the best's file and picture",
-        description=(
-            "Draw candidate grasps on the object's mesh, keep those the model describes (flat contact "
-            "patch, fingertips apart, one contact each, deformation in range), evaluate them, refine the "
-            "best by gradient tuning along the surface, and write them ranked into --out."
-        ),
-        epilog="Example: jaxgrasp plan part.obj --units mm --fingers 3 --out plan-part",
-    )
-    d = DEFAULTS
-    sp.add_argument("mesh", help="the object's mesh file (STL, OBJ, PLY, OFF or GLB)")
-    sp.add_argument("--fingers", type=int, default=d["fingers"], metavar="N", help="fingertips, 2 to 8 (default 2)")
-    sp.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="the mesh's length unit (default m)")
-    for opt, key, unit in (("--radius", "radius", "m"), ("--young-modulus", "young_modulus", "Pa"),
-                           ("--friction", "friction", ""), ("--max-force", "max_force", "N")):
-        sp.add_argument(opt, dest=key, type=float, default=d[key], metavar=unit.upper() or "MU",
-                        help=f"every fingertip's {key.replace('_', ' ')}" + (f", {unit}" if unit else "")
-                        + f" (default {d[key]:g})")
-    mass = sp.add_mutually_exclusive_group()
-    mass.add_argument("--density", type=float, default=None, metavar="KG_M3",
-                      help=f"object density, kg/m^3; mass = density x volume (default {d['density']:g})")
-    mass.add_argument("--mass", type=float, default=None, metavar="KG", help="object mass, kg")
-    sp.add_argument("--gravity", default="0,0,-9.81", metavar="GX,GY,GZ",
-                    help="gravity in the mesh's axes, m/s^2 (default 0,0,-9.81)")
-    sp.add_argument("--samples", type=int, default=150, metavar="N", help="valid candidates to evaluate (default 150)")
-    sp.add_argument("--top", type=int, default=10, metavar="K", help="ranked grasps to write (default 10)")
-    sp.add_argument("--refine", type=int, default=3, metavar="K", help="best candidates to tune (default 3)")
-    sp.add_argument("--seed", type=int, default=0, help="seed of the random draws (default 0)")
-    sp.add_argument("--sampler", choices=SAMPLERS, default=None,
-                    help="candidate generator (default antipodal for 2 fingers, spread for more)")
-    sp.add_argument("--flatness", type=float, default=25.0, metavar="DEG",
-                    help="largest angle between the contact normal and a face under the fingertip (default 25)")
-    sp.add_argument("--rank", choices=("value", "robust"), default="value",
-                    help="rank by the value, or by the robust value (the mean over perturbed copies) (default value)")
-    sp.add_argument("--robust", default=None, metavar="SPEC",
-                    help=f"the uncertainty of --rank robust, as for evaluate --robust (default {DEFAULT_ROBUST})")
-    sp.add_argument("--robust-samples", type=int, default=64, metavar="S",
-                    help="perturbed copies per ranked grasp for --rank robust (default 64)")
-    sp.add_argument("--out", default="plan", metavar="DIR", help="output folder (default ./plan)")
-    sp.add_argument("--no-plot", action="store_true", help="do not write best.png")
-    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    sp.set_defaults(func=run)
 
 
 def run(args) -> int:
@@ -148,7 +93,7 @@ def _object_options(args) -> dict:
     if args.mass is not None:
         mass = dict(mass=args.mass)
     else:
-        mass = dict(density=DEFAULTS["density"] if args.density is None else args.density)
+        mass = dict(density=PLAN_DEFAULTS["density"] if args.density is None else args.density)
     return dict(radius=args.radius, young_modulus=args.young_modulus, friction=args.friction,
                 max_force=args.max_force, gravity=gravity, units=args.units, **mass)
 

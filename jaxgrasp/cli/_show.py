@@ -5,53 +5,14 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from jaxgrasp.cli._common import (
-    UsageError,
-    add_grasp_source,
-    add_overrides,
-    announce_large_grasp,
-    grasp_source,
-    load_grasp,
-    write_picture,
-)
+from jaxgrasp.cli._arguments import MAGNIFICATION_RANGE
+from jaxgrasp.cli._common import UsageError, announce_large_grasp, grasp_source, load_grasp, write_picture
 from jaxgrasp import storage
 
-__all__ = ["add_parser", "run", "PICTURE_SUFFIXES", "MAGNIFICATION_RANGE"]
+__all__ = ["run", "PICTURE_SUFFIXES", "MAGNIFICATION_RANGE"]
 
 PICTURE_SUFFIXES = (".png", ".pdf", ".svg")
 """The picture formats ``--out`` may name."""
-
-MAGNIFICATION_RANGE = (1e-3, 1e12)
-"""The ``--magnification`` factors ``show`` accepts, inclusive. Below 1e-3 the ghost cannot
-be told from the object at any picture size; above 1e12 the motion drawn is float64's
-rounding of the pose (about 1e-16 of the object's size) magnified into view, not the
-motion, and factors near 1e300 overflow the coordinates to infinity."""
-
-
-def add_parser(sub) -> None:
-    """Add the ``show`` command to the ``jaxgrasp`` sub-parsers."""
-    p = sub.add_parser(
-        "show",
-        help="draw one grasp in 3-D with the motion that makes it fail (png; --glb for a 3-D viewer)",
-        description=(
-            "Evaluate one grasp and draw it in 3-D: the object (its mesh, or the contacts' hull), "
-            "each fingertip pressed into its contact with its normal and friction cone, the limiting "
-            "contact in red, and the object at the least-energy pose of the limiting boundary as a "
-            "ghost, the motion magnified by the factor the title states. --glb writes the same "
-            "scene as a GLB file for any 3-D viewer."
-        ),
-    )
-    add_grasp_source(p)
-    add_overrides(p)
-    p.add_argument("--out", default="grasp.png", metavar="FILE", help="the picture, .png, .pdf or .svg (default grasp.png)")
-    p.add_argument("--glb", metavar="FILE", help="also write the scene as a GLB file (.glb)")
-    p.add_argument("--magnification", type=float, metavar="X",
-                   help=(f"factor the ghost's motion is magnified by, {MAGNIFICATION_RANGE[0]:g} to "
-                         f"{MAGNIFICATION_RANGE[1]:g} (default: a round one that makes it visible)"))
-    p.add_argument("--hand", metavar="FILE",
-                   help=("draw a hand's grasp instead: a hand grasp file (.toml, see docs/guide/hands.md), which "
-                         "sets the fingertips and the object (no --young-modulus etc. with it)"))
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:

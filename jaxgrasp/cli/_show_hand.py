@@ -3,7 +3,8 @@ way it fails), from a hand grasp file (`jaxgrasp.hands._file`)."""
 
 from __future__ import annotations
 
-from jaxgrasp.cli._common import OVERRIDES, UsageError, write_picture
+from jaxgrasp.cli._arguments import OVERRIDES
+from jaxgrasp.cli._common import UsageError, write_picture
 from jaxgrasp.model import FIELD
 
 __all__ = ["run_hand"]

@@ -5,61 +5,18 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from jaxgrasp.cli._common import (
-    UsageError,
-    add_grasp_source,
-    add_overrides,
-    check_out,
-    grasp_source,
-    load_grasp,
-    lock_out,
-    parse_number,
-    replaced_text,
-    say,
-)
+from jaxgrasp.cli._arguments import parse_number
+from jaxgrasp.cli._common import UsageError, check_out, grasp_source, load_grasp, lock_out, replaced_text, say
 from jaxgrasp import storage
-from jaxgrasp.simulation import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION, check_options
+from jaxgrasp.simulation import check_options
 
-__all__ = ["OPTION_NAMES", "PLOT", "RESULTS", "add_parser", "run"]
+__all__ = ["OPTION_NAMES", "PLOT", "RESULTS", "run"]
 
 RESULTS = "results.json"
 """The results file in ``--out``."""
 
 PLOT = "trials.png"
 """The plot of displacement and rotation over time per trial in ``--out``."""
-
-
-def add_parser(sub) -> None:
-    """Add the ``simulate`` command to the ``jaxgrasp`` sub-parsers."""
-    p = sub.add_parser(
-        "simulate",
-        help="hold, disturb and kick the grasp in MuJoCo (needs jaxgrasp[sim]); results.json and a plot",
-        description=(
-            "Evaluate one grasp, then simulate it in MuJoCo: fingertips as fixed spheres calibrated to the "
-            "paper's normal force (eq. 4), condim 4 with elliptic cones; hold under gravity, a force of "
-            "m * 10 m/s^2 along +-x, +-y, +-z (DexGraspBench), and kicks with kinetic energy s times the "
-            "value. Writes DIR/results.json and DIR/trials.png. Limits: all trials together at most "
-            f"{MAX_SIMULATED_S:g} s of simulated time and {MAX_STEPS:,} MuJoCo steps (time / timestep; a few "
-            f"minutes); a --timestep at most 1/{round(1 / TIMESTEP_FRACTION)} of the shortest trial. "
-            "Needs: pip install \"jaxgrasp[sim]\"."
-        ),
-    )
-    add_grasp_source(p)
-    add_overrides(p)
-    p.add_argument("--out", default="jaxgrasp-sim", metavar="DIR", help="output folder (default jaxgrasp-sim)")
-    p.add_argument("--hold-time", default="1.0", metavar="S", help="hold under gravity, s (default 1)")
-    p.add_argument("--six-axis-time", default="2.0", metavar="S", help="each disturbance, s (default 2)")
-    p.add_argument("--kick-time", default="0.3", metavar="S", help="each energy kick, s (default 0.3)")
-    p.add_argument("--scales", default="0.5,0.9,1.1,2", metavar="S,S,...",
-                   help="kick energies as multiples of the value (default 0.5,0.9,1.1,2)")
-    p.add_argument("--random-kicks", type=int, default=2, metavar="N", help="random kick directions per scale (default 2)")
-    p.add_argument("--sim-friction", metavar="MU", help="the simulator's friction instead of the grasp's (a what-if)")
-    p.add_argument("--timestep", metavar="S",
-                   help=(f"simulator timestep, s, at most 1/{round(1 / TIMESTEP_FRACTION)} of the shortest trial "
-                         "(default: from the contact stiffness)"))
-    p.add_argument("--simulate-unstable", action="store_true",
-                   help="also simulate an unstable grasp from its equilibrium pose")
-    p.set_defaults(func=run)
 
 
 OPTION_NAMES = {

@@ -2,9 +2,9 @@
 
 Axis specs (SI units): ``start:stop:count`` (inclusive, evenly spaced; each value the
 float nearest its decimal, so ``0.1:0.5:5`` gives ``0.4``), a comma list ``0,0.1,0.2`` or
-a single number. The grid's axes follow the order they are given in, and it has at most
-`MAX_GRID_POINTS` points (checked before anything is
-allocated). With no axis at all the paper's Fig. 6 grid is swept (E 2e5..1e6 Pa x 9,
+a single number, each checked as the command line is read
+(`jaxgrasp.cli._arguments.axis_spec`). The grid's axes follow the order they are given in,
+and it has at most `MAX_GRID_POINTS` points (checked before anything is allocated). With no axis at all the paper's Fig. 6 grid is swept (E 2e5..1e6 Pa x 9,
 initial deformation 1..5 mm x 41); with no grasp, preset ``cube``.
 
 The output folder is checked for writability before anything is computed and locked
@@ -17,7 +17,6 @@ checkpoint is removed.
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 from decimal import Decimal, Inexact, localcontext
@@ -28,12 +27,10 @@ import numpy as np
 from jaxgrasp import storage
 from jaxgrasp.analysis import MAX_GRID_POINTS
 from jaxgrasp.cli import _notes
+from jaxgrasp.cli._arguments import OVERRIDES, PAPER_AXES, axis_spec
 from jaxgrasp.cli._common import (
-    OVERRIDES,
     ChunkProgress,
     UsageError,
-    add_epsilon_option,
-    add_grasp_source,
     announce_run,
     check_chunk_size,
     check_out,
@@ -41,7 +38,6 @@ from jaxgrasp.cli._common import (
     grasp_source,
     load_grasp,
     lock_out,
-    parse_number,
     replaced_text,
 )
 from jaxgrasp.engine import prefetch
@@ -49,17 +45,10 @@ from jaxgrasp.model import NO_BOUNDARY
 from jaxgrasp.model import FIELD
 from jaxgrasp.model import counted
 
-__all__ = ["add_parser", "run", "parse_axis_spec", "AXES", "PAPER_AXES"]
+__all__ = ["run", "parse_axis_spec", "AXES", "PAPER_AXES"]
 
 AXES = OVERRIDES
 """The parameters a sweep can vary (`jaxgrasp.model._fields.SWEEPABLE`), in option order."""
-
-PAPER_AXES = {
-    "young_modulus": "2e5:1e6:9",
-    "initial_deformation": "1e-3:5e-3:41",
-}
-"""The grid of the paper's Fig. 6 (used when no axis is given)."""
-
 
 OUTPUT_NAMES = ("sweep.npz", "sweep.csv", "sweep.png")
 """The files of one sweep's output set, in ``--out``."""
@@ -90,37 +79,10 @@ def parse_axis_spec(option: str, spec: str) -> np.ndarray:
 
 def _parse_spec(option: str, spec: str) -> np.ndarray | tuple[str, str, int]:
     """A list or number as its array; a range as its checked ``(start, stop, count)`` text
-    and count, not yet expanded (its count is checked against the cap first)."""
-    text = spec.strip()
-    if not text:
-        raise UsageError(f"{option}: empty value; give START:STOP:COUNT, a comma list or a number")
-    if ":" in text:
-        return _parse_range(option, spec, text)
-    items = text.split(",")
-    if any(not s.strip() for s in items):
-        raise UsageError(f"{option}: list {spec!r} has an empty item")
-    return np.asarray([parse_number(option, s) for s in items], dtype=np.float64)
-
-
-def _parse_range(option: str, spec: str, text: str) -> tuple[str, str, int]:
-    parts = text.split(":")
-    if len(parts) != 3:
-        raise UsageError(f"{option}: range {spec!r} must be START:STOP:COUNT (e.g. 1e-3:5e-3:41)")
-    start = parse_number(option, parts[0], "start")
-    stop = parse_number(option, parts[1], "stop")
-    c = parts[2].strip()
-    try:
-        count = int(c)
-    except ValueError:
-        raise UsageError(f"{option}: count {c!r} of range {spec!r} must be a whole number") from None
-    if count < 1:
-        raise UsageError(f"{option}: range {spec!r} is empty (count {count}); the count must be >= 1")
-    if count == 1 and start != stop:
-        raise UsageError(f"{option}: range {spec!r} has count 1 but start != stop; give a single number")
-    if count > MAX_GRID_POINTS:
-        raise UsageError(f"{option}: range {spec!r} has {count:,} points, more than a whole grid may have "
-                         f"({MAX_GRID_POINTS:,}); split the sweep")
-    return parts[0].strip(), parts[1].strip(), count
+    and count, not yet expanded (its count is checked against the cap first): the parser
+    checked the spec already (`jaxgrasp.cli._arguments.axis_spec`), the paper's axes not."""
+    parsed = axis_spec(option, spec)
+    return np.asarray(parsed, dtype=np.float64) if isinstance(parsed, list) else parsed
 
 
 def _decimal_range(start: str, stop: str, count: int) -> np.ndarray:
@@ -148,62 +110,6 @@ def _decimal_range(start: str, stop: str, count: int) -> np.ndarray:
         return np.linspace(float(a), float(b), count)
     n = (first + inc * np.arange(count, dtype=np.int64)).astype(np.float64)
     return n / 10.0**digits if digits >= 0 else n * 10.0**-digits
-
-
-def add_parser(sub) -> None:
-    """Add the ``sweep`` command to the ``jaxgrasp`` sub-parsers."""
-    sp = sub.add_parser(
-        "sweep",
-        help="evaluate a grasp over a grid of parameters (npz, csv, png)",
-        description=(
-            "Evaluate a grasp over the Cartesian grid of the given parameter axes; write "
-            "DIR/sweep.npz, DIR/sweep.csv (one row per grid point, SI units) and DIR/sweep.png "
-            "as one set, replacing a previous set at once. Until then the finished points are "
-            "kept in DIR/sweep.partial.npz (what an interrupted sweep leaves); one sweep at a "
-            "time per DIR."
-        ),
-        epilog=(
-            "SPEC is START:STOP:COUNT (inclusive), a comma list or a number, in SI units; "
-            f"the grid may have at most {MAX_GRID_POINTS:,} points, in the order the axes are given. "
-            "Without a grasp: preset cube. Without any axis: the paper's Fig. 6 grid "
-            f"(--young-modulus {PAPER_AXES['young_modulus']} "
-            f"--initial-deformation {PAPER_AXES['initial_deformation']}). "
-            "Example: jaxgrasp sweep --preset prism --young-modulus 2e5:1e6:5 "
-            "--initial-deformation 1e-3:5e-3:41 --mass 0,0.1,0.2 --out out/"
-        ),
-    )
-    add_grasp_source(sp)
-    for name in AXES:
-        field = FIELD[name]
-        sp.add_argument(field.option, dest=name, metavar="SPEC", action=_AxisInOrder, help=f"{field.help} (axis spec)")
-    sp.add_argument(
-        "--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)"
-    )
-    sp.add_argument(
-        "--chunk-size",
-        type=int,
-        default=None,
-        metavar="N",
-        help=(
-            "grid points per compiled batch (default: 64 per CPU device; on a GPU about a tenth "
-            "of the grid, 64 to 1024 per device)"
-        ),
-    )
-    sp.add_argument("--no-plot", action="store_true", help="do not write sweep.png")
-    add_epsilon_option(sp)
-    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    sp.set_defaults(func=run, default_preset="cube")
-
-
-
-class _AxisInOrder(argparse.Action):
-    """Store an axis spec and remember the order the axes were given in (``args.axis_order``):
-    the grid's axes follow it, as the library's keyword order."""
-
-    def __call__(self, parser, namespace, values, option_string=None):
-        setattr(namespace, self.dest, values)
-        order = [n for n in getattr(namespace, "axis_order", None) or [] if n != self.dest]
-        namespace.axis_order = order + [self.dest]
 
 
 # --------------------------------------------------------------------------- the command

@@ -14,20 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxgrasp.cli._common import (
-    UsageError,
-    add_grasp_source,
-    add_overrides,
-    grasp_source,
-    load_grasp,
-    parse_number,
-    say,
-)
+from jaxgrasp.cli._arguments import parse_number
+from jaxgrasp.cli._common import UsageError, grasp_source, load_grasp, say
 from jaxgrasp import storage
-from jaxgrasp.model import TUNABLE
 from jaxgrasp.model import counted
 
-__all__ = ["add_parser", "run", "parse_bounds", "check_bounds"]
+__all__ = ["run", "parse_bounds", "check_bounds"]
 
 
 def parse_bounds(items) -> dict:
@@ -91,58 +83,6 @@ def check_bounds(params, bounds: dict) -> None:
         else:
             form = f"{s.name}=LO:HI ({FIELD[s.name].unit or 'dimensionless'})"
         raise UsageError(f"--param {s.label} needs --bounds {form}; only initial_deformation has default bounds")
-
-
-def add_parser(sub) -> None:
-    """Add the ``tune`` command to the ``jaxgrasp`` sub-parsers."""
-    from jaxgrasp.analysis import METHODS
-
-    sp = sub.add_parser(
-        "tune",
-        help="maximise the value over chosen parameters; write the tuned grasp and a plot",
-        description=(
-            "Maximise the evaluation value of a grasp over the chosen parameters within "
-            "bounds (gradient-based, L-BFGS-B); write the tuned grasp to --out and a plot "
-            "of the value over the iterations next to it (.png)."
-        ),
-        epilog=(
-            f"PARAM is one of {', '.join(TUNABLE)}; per-contact ones tune one value per "
-            "contact, or one shared value with the suffix ':shared' (e.g. "
-            "initial_deformation:shared). 'positions' moves each contact in its tangent plane (along the surface for a grasp file naming a mesh) "
-            "(give --bounds positions=HALF_WIDTH in m). Only initial_deformation has "
-            "default bounds. Example: jaxgrasp tune --preset cube --param "
-            "initial_deformation:shared --bounds initial_deformation=0.001:0.005 --out tuned.toml"
-        ),
-    )
-    add_grasp_source(sp)
-    add_overrides(sp)  # --young-modulus PA etc., as every other command
-    sp.add_argument(
-        "--param",
-        action="append",
-        metavar="PARAM",
-        help="a parameter to tune (repeatable; default initial_deformation)",
-    )
-    sp.add_argument(
-        "--bounds",
-        action="append",
-        metavar="NAME=LO:HI",
-        help="bounds of a parameter in SI units (repeatable); positions=HALF_WIDTH in m",
-    )
-    sp.add_argument("--maxiter", type=int, default=50, metavar="N", help="most iterations (default 50)")
-    sp.add_argument("--method", choices=METHODS, default=METHODS[0], help=f"optimiser (default {METHODS[0]})")
-    sp.add_argument(
-        "--smooth-min-temperature",
-        type=float,
-        default=None,
-        metavar="J",
-        help="tune the soft minimum over boundaries at this temperature, J (default: hard minimum)",
-    )
-    sp.add_argument(
-        "--out", default="tuned.toml", metavar="FILE", help="tuned grasp file, .toml or .json (default tuned.toml)"
-    )
-    sp.add_argument("--no-plot", action="store_true", help="do not write the .png plot")
-    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    sp.set_defaults(func=run)
 
 
 def run(args) -> int:

@@ -10,14 +10,19 @@ jaxgrasp's other packages, not promised (the faces' convention: ``docs/developme
 "Layout").
 """
 
-from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp
-from jaxgrasp.hands._hand import Hand
-from jaxgrasp.hands._links import link_samples
-from jaxgrasp.hands._mjcf import INSTALL_HINT, KinematicTree
-from jaxgrasp.hands._tune import HandTuneResult, HandValue, hand_value, tune_hand
+from typing import TYPE_CHECKING
 
-# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.hands._file import load_hand_grasp
+from jaxgrasp import _startup
+
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp
+    from jaxgrasp.hands._hand import Hand
+    from jaxgrasp.hands._links import link_samples
+    from jaxgrasp.hands._mjcf import INSTALL_HINT, KinematicTree
+    from jaxgrasp.hands._tune import HandTuneResult, HandValue, hand_value, tune_hand
+
+    # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.hands._file import load_hand_grasp
 
 __all__ = [
     "Hand",
@@ -31,3 +36,5 @@ __all__ = [
     "INSTALL_HINT",
     "DEFAULT_MAX_TILT",
 ]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

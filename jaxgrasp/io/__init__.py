@@ -17,16 +17,21 @@ jaxgrasp's other packages, not promised (the faces' convention: ``docs/developme
 "Layout").
 """
 
-from jaxgrasp.io._dataset import GraspSet, load_dataset, save_dataset
-from jaxgrasp.io._grasp_file import grasp_from_dict, grasp_to_dict, load, save
-from jaxgrasp.io._mesh import from_mesh
-from jaxgrasp.storage import OutputError
+from typing import TYPE_CHECKING
 
-# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.io._dataset import load_share, padded_set, share_rows
-from jaxgrasp.io._grasp_file import dict_to_toml, mesh_grasp_to_dict, mesh_reference, to_text
-from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, allowed_folders, confine, read_input
-from jaxgrasp.io._mesh import load_mesh
+from jaxgrasp import _startup
+
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.io._dataset import GraspSet, load_dataset, save_dataset
+    from jaxgrasp.io._grasp_file import grasp_from_dict, grasp_to_dict, load, save
+    from jaxgrasp.io._mesh import from_mesh
+    from jaxgrasp.storage import OutputError
+
+    # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.io._dataset import load_share, padded_set, share_rows
+    from jaxgrasp.io._grasp_file import dict_to_toml, mesh_grasp_to_dict, mesh_reference, to_text
+    from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, allowed_folders, confine, read_input
+    from jaxgrasp.io._mesh import load_mesh
 
 __all__ = [
     "load",
@@ -39,3 +44,5 @@ __all__ = [
     "from_mesh",
     "OutputError",
 ]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

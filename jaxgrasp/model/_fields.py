@@ -29,6 +29,7 @@ __all__ = [
     "TUNABLE",
     "DEFAULT_GRAVITY",
     "DEFAULT_MASS",
+    "STANDARD_GRAVITY",
 ]
 
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
@@ -36,6 +37,10 @@ DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 
 DEFAULT_MASS = 0.0
 """Default object mass, kg."""
+
+STANDARD_GRAVITY = DEFAULT_GRAVITY
+"""Default gravity vector, m/s^2, object frame: ``(0, 0, -9.81)``, standard gravity along ``-z``
+(the ``gravity`` default of `jaxgrasp.model.FIELDS`)."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -20,13 +20,9 @@ import numpy as np
 
 from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS, FIELDS
 
-__all__ = ["Grasp", "STANDARD_GRAVITY", "stack"]
+__all__ = ["Grasp", "stack"]
 
 _PER_CONTACT = tuple(f.name for f in FIELDS if f.per_contact)  # fields with one entry per contact
-
-STANDARD_GRAVITY = DEFAULT_GRAVITY
-"""Default gravity vector, m/s^2, object frame: ``(0, 0, -9.81)``, standard gravity along ``-z``
-(the ``gravity`` default of `jaxgrasp.model.FIELDS`)."""
 
 
 @jax.tree_util.register_dataclass

@@ -10,14 +10,22 @@ jaxgrasp's other packages and for the studies in ``experiments/``, not promised 
 faces' convention: ``docs/development.md``, "Layout").
 """
 
-from jaxgrasp.planning._plan import SAMPLERS, plan
-from jaxgrasp.planning._progress import PlanProgress
-from jaxgrasp.planning._result import PlanResult, PlanStatus
+from typing import TYPE_CHECKING
 
-# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.planning._plan import check_plan
+from jaxgrasp import _startup
 
-# For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
-from jaxgrasp.planning._plan import CHUNK, draw_valid, grasps_of, setup
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.planning._limits import SAMPLERS
+    from jaxgrasp.planning._plan import plan
+    from jaxgrasp.planning._progress import PlanProgress
+    from jaxgrasp.planning._result import PlanResult, PlanStatus
+
+    # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.planning._plan import check_plan
+
+    # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.planning._plan import CHUNK, draw_valid, grasps_of, setup
 
 __all__ = ["plan", "PlanResult", "PlanStatus", "PlanProgress", "SAMPLERS"]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

@@ -33,6 +33,7 @@ from jaxgrasp.analysis import Uncertainty, epsilon, robust_batch, tune
 from jaxgrasp.engine import evaluate, evaluate_in_chunks
 from jaxgrasp.io import from_mesh, load_mesh
 from jaxgrasp.model import DEFAULT_GRAVITY, Grasp, GraspValueError
+from jaxgrasp.planning._limits import SAMPLERS
 from jaxgrasp.planning._progress import PlanProgress
 from jaxgrasp.planning._result import PlanResult, PlanStatus
 from jaxgrasp.planning._sampling import antipodal_pairs, spread_tuples, surface_points
@@ -48,11 +49,7 @@ from jaxgrasp.surface import (
 )
 from jaxgrasp.tolerance import GraspStatus
 
-__all__ = ["plan", "check_plan", "PlanInputs", "SAMPLERS"]
-
-SAMPLERS = ("antipodal", "spread", "uniform")
-"""Candidate generators: ``antipodal`` (two fingers), ``spread`` (three or more), ``uniform``
-(independent uniform surface points: plain random sampling, the baseline)."""
+__all__ = ["plan", "check_plan", "PlanInputs"]
 
 _ROUND = 512
 """Candidates drawn and checked per round."""

@@ -7,16 +7,21 @@ jaxgrasp's other packages and for the studies in ``experiments/``, not promised 
 faces' convention: ``docs/development.md``, "Layout").
 """
 
-from jaxgrasp.plots._plots import draw_scene, plot_grasp, plot_max, plot_max_over, plot_ranking, plot_sweep, save_figure
-from jaxgrasp.plots._hand import hand_scene, plot_hand_grasp
-from jaxgrasp.plots._scene import grasp_scene
-from jaxgrasp.plots._tune_plot import plot_history
+from typing import TYPE_CHECKING
 
-# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.plots._trials_plot import plot_trials
+from jaxgrasp import _startup
 
-# For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
-from jaxgrasp.plots._plots import new_figure
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.plots._plots import draw_scene, plot_grasp, plot_max, plot_max_over, plot_ranking, plot_sweep, save_figure
+    from jaxgrasp.plots._hand import hand_scene, plot_hand_grasp
+    from jaxgrasp.plots._scene import grasp_scene
+    from jaxgrasp.plots._tune_plot import plot_history
+
+    # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.plots._trials_plot import plot_trials
+
+    # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.plots._plots import new_figure
 
 __all__ = [
     "plot_sweep",
@@ -31,3 +36,5 @@ __all__ = [
     "hand_scene",
     "plot_history",
 ]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

@@ -12,12 +12,20 @@ jaxgrasp's other packages, not promised (the faces' convention: ``docs/developme
 "Layout").
 """
 
-from jaxgrasp.simulation._options import DEFAULTS
-from jaxgrasp.simulation._result import AXES, DIRECTIONS, SimulationResult, SimulationStatus, Trial
-from jaxgrasp.simulation._simulate import simulate
+from typing import TYPE_CHECKING
 
-# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.simulation._options import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION, check_options
-from jaxgrasp.simulation._scene import load_mujoco
+from jaxgrasp import _startup
+
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.simulation._options import DEFAULTS
+    from jaxgrasp.simulation._result import AXES, DIRECTIONS, SimulationResult, SimulationStatus, Trial
+    from jaxgrasp.simulation._simulate import simulate
+
+    # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.simulation._limits import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION
+    from jaxgrasp.simulation._options import check_options
+    from jaxgrasp.simulation._scene import load_mujoco
 
 __all__ = ["AXES", "DEFAULTS", "DIRECTIONS", "SimulationResult", "SimulationStatus", "Trial", "simulate"]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

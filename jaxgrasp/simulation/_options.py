@@ -26,9 +26,9 @@ from collections.abc import Mapping
 import numpy as np
 
 from jaxgrasp.model import GraspValueError
+from jaxgrasp.simulation._limits import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION
 
-__all__ = ["DEFAULTS", "MAX_SIMULATED_S", "MAX_STEPS", "TIMESTEP_FRACTION", "check_number", "check_options",
-           "check_steps", "simulated_time"]
+__all__ = ["DEFAULTS", "check_number", "check_options", "check_steps", "simulated_time"]
 
 DEFAULTS = {
     "hold_time_s": 1.0,
@@ -42,15 +42,6 @@ DEFAULTS = {
     "sample_s": 0.005,
 }
 """The default durations and tolerances of the trials (SI units)."""
-
-TIMESTEP_FRACTION = 0.01
-"""A given timestep is at most this fraction of the shortest trial (at least 100 steps each)."""
-
-MAX_SIMULATED_S = 600.0
-"""The most simulated time (in seconds) all trials of one run may add up to."""
-
-MAX_STEPS = 2_000_000
-"""The most MuJoCo steps (simulated time / timestep) one run may take."""
 
 
 def check_number(name: str, value, lo: float = 0.0, strict: bool = True) -> float:

@@ -67,7 +67,7 @@ def simulate(
             ``mu_i d_i / 2``: the tangential deformation at which the paper's fingertip
             starts to slip without torsion, eq. 6 and 9).
         **durations: any of `DEFAULTS` (s, m, rad, m/s^2); all trials
-            together at most ``_options.MAX_SIMULATED_S`` and ``_options.MAX_STEPS`` steps.
+            together at most ``_limits.MAX_SIMULATED_S`` and ``_limits.MAX_STEPS`` steps.
 
     Returns:
         A [`SimulationResult`][jaxgrasp.simulation.SimulationResult]; its ``parameters`` hold every

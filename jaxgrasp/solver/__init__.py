@@ -9,33 +9,38 @@ jaxgrasp's other packages and for the studies in ``experiments/``, not promised 
 faces' convention: ``docs/development.md``, "Layout").
 """
 
-from jaxgrasp.solver._lanes import Held, solve_lane_batches, solve_lanes
-from jaxgrasp.solver._solver import FirstOrder, Problem, SolverOptions, SolverResult, solve
-from jaxgrasp.solver._status import LaneStatus
+from typing import TYPE_CHECKING
 
-# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.solver._dense import eigh as serial_eigh, solve as dense_solve
-from jaxgrasp.solver._rows import over_rows, put_rows
-from jaxgrasp.solver._solver import kkt_tol
+from jaxgrasp import _startup
 
-# For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
-from jaxgrasp.solver._direction import eigen_direction, ldl_direction
-from jaxgrasp.solver._solver import (
-    as_problem,
-    augmented_lagrangian,
-    first_order,
-    init,
-    initial_multiplier,
-    lagrangian_hessian,
-    line_search,
-    merit,
-    penalty_terms,
-    phi_hessian,
-    propose,
-    step,
-    tolerances,
-    violation_slope,
-)
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.solver._lanes import Held, solve_lane_batches, solve_lanes
+    from jaxgrasp.solver._solver import FirstOrder, Problem, SolverOptions, SolverResult, solve
+    from jaxgrasp.solver._status import LaneStatus
+
+    # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.solver._dense import eigh as serial_eigh, solve as dense_solve
+    from jaxgrasp.solver._rows import over_rows, put_rows
+    from jaxgrasp.solver._solver import kkt_tol
+
+    # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.solver._direction import eigen_direction, ldl_direction
+    from jaxgrasp.solver._solver import (
+        as_problem,
+        augmented_lagrangian,
+        first_order,
+        init,
+        initial_multiplier,
+        lagrangian_hessian,
+        line_search,
+        merit,
+        penalty_terms,
+        phi_hessian,
+        propose,
+        step,
+        tolerances,
+        violation_slope,
+    )
 
 __all__ = [
     "Problem",
@@ -48,3 +53,5 @@ __all__ = [
     "Held",
     "LaneStatus",
 ]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

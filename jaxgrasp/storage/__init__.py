@@ -18,34 +18,39 @@ nothing of jaxgrasp.
 * CSV tables (`_csv`): `csv_content`, `csv_cell`.
 """
 
-from jaxgrasp.storage._csv import csv_cell, csv_content
-from jaxgrasp.storage._files import (
-    NO_SPACE,
-    PUBLISH_LOCK,
-    STALE_TEMP_SECONDS,
-    TEMP_SUFFIX,
-    Abandoned,
-    Content,
-    DiskFull,
-    FolderBusy,
-    OutputError,
-    abandon,
-    check_writable,
-    remove_stale_temps,
-    write_file,
-    write_set,
-    write_to,
-)
-from jaxgrasp.storage._own import (
-    LOCK_NAME,
-    FolderLock,
-    NotPrivate,
-    make_private,
-    private_folder,
-    read_own,
-    read_private,
-    refuse_link,
-)
+from typing import TYPE_CHECKING
+
+from jaxgrasp import _startup
+
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.storage._csv import csv_cell, csv_content
+    from jaxgrasp.storage._files import (
+        NO_SPACE,
+        PUBLISH_LOCK,
+        STALE_TEMP_SECONDS,
+        TEMP_SUFFIX,
+        Abandoned,
+        Content,
+        DiskFull,
+        FolderBusy,
+        OutputError,
+        abandon,
+        check_writable,
+        remove_stale_temps,
+        write_file,
+        write_set,
+        write_to,
+    )
+    from jaxgrasp.storage._own import (
+        LOCK_NAME,
+        FolderLock,
+        NotPrivate,
+        make_private,
+        private_folder,
+        read_own,
+        read_private,
+        refuse_link,
+    )
 
 __all__ = [
     "OutputError",
@@ -74,3 +79,5 @@ __all__ = [
     "csv_cell",
     "csv_content",
 ]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

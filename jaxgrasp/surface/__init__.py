@@ -13,19 +13,24 @@ jaxgrasp's other packages, not promised (the faces' convention: ``docs/developme
 "Layout").
 """
 
-from jaxgrasp.surface._mesh import MeshGrasp
-from jaxgrasp.surface._rules import (
-    ContactRules,
-    RuleCheck,
-    check_contacts,
-    contact_radius,
-    deformation_range,
-    fingertip_centers,
-)
-from jaxgrasp.surface._surface import PAD_FACES, Surface, SurfacePoint, closest_on_triangles
+from typing import TYPE_CHECKING
 
-# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.surface._mesh import DEFAULT_TOLERANCE, grasp_on_mesh, mass_properties
+from jaxgrasp import _startup
+
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.surface._mesh import MeshGrasp
+    from jaxgrasp.surface._rules import (
+        ContactRules,
+        RuleCheck,
+        check_contacts,
+        contact_radius,
+        deformation_range,
+        fingertip_centers,
+    )
+    from jaxgrasp.surface._surface import PAD_FACES, Surface, SurfacePoint, closest_on_triangles
+
+    # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.surface._mesh import DEFAULT_TOLERANCE, grasp_on_mesh, mass_properties
 
 __all__ = [
     "Surface",
@@ -40,3 +45,5 @@ __all__ = [
     "fingertip_centers",
     "MeshGrasp",
 ]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

@@ -11,24 +11,29 @@ jaxgrasp's other packages and for the studies in ``experiments/``, not promised 
 faces' convention: ``docs/development.md``, "Layout").
 """
 
-from jaxgrasp.tolerance._envelope import envelope_energy, soft_minimum
-from jaxgrasp.tolerance._options import EvaluateOptions
-from jaxgrasp.tolerance._problems import Problems
-from jaxgrasp.tolerance._result import Evaluation
-from jaxgrasp.tolerance._status import GraspStatus
-from jaxgrasp.tolerance._verdict import evaluations_of
+from typing import TYPE_CHECKING
 
-# For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-from jaxgrasp.tolerance._problems import batch_data, problems_treedef
-from jaxgrasp.tolerance._result import EVALUATION_TREE, FIELDS, SUMMARY_FIELDS, SummaryNames
-from jaxgrasp.tolerance._settle import needs_settling
-from jaxgrasp.tolerance._stages import depend_on, finish_problems, settled_equilibrium, solve_stage, unsolved
-from jaxgrasp.tolerance._starts import LaneStarts, boundary_starts, equilibrium_starts
-from jaxgrasp.tolerance._verdict import split_temperature
+from jaxgrasp import _startup
 
-# For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
-from jaxgrasp.tolerance._problems import constraints, lane_problem, objective, objective_and_constraints, problem_data
-from jaxgrasp.tolerance._stages import SAME_POINT, first_wave_lanes, rest_needed
+if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.tolerance._envelope import envelope_energy, soft_minimum
+    from jaxgrasp.tolerance._options import EvaluateOptions
+    from jaxgrasp.tolerance._problems import Problems
+    from jaxgrasp.tolerance._result import Evaluation
+    from jaxgrasp.tolerance._status import GraspStatus
+    from jaxgrasp.tolerance._verdict import evaluations_of
+
+    # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.tolerance._problems import batch_data, problems_treedef
+    from jaxgrasp.tolerance._result import EVALUATION_TREE, FIELDS, SUMMARY_FIELDS, SummaryNames
+    from jaxgrasp.tolerance._settle import needs_settling
+    from jaxgrasp.tolerance._stages import depend_on, finish_problems, settled_equilibrium, solve_stage, unsolved
+    from jaxgrasp.tolerance._starts import LaneStarts, boundary_starts, equilibrium_starts
+    from jaxgrasp.tolerance._verdict import split_temperature
+
+    # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.tolerance._problems import constraints, lane_problem, objective, objective_and_constraints, problem_data
+    from jaxgrasp.tolerance._stages import SAME_POINT, first_wave_lanes, rest_needed
 
 __all__ = [
     "EvaluateOptions",
@@ -39,3 +44,5 @@ __all__ = [
     "envelope_energy",
     "soft_minimum",
 ]
+
+__getattr__, __dir__, _LAZY = _startup.attach(__name__)

@@ -245,18 +245,21 @@ def test_startup_handler_comes_before_every_other_import():
     """The window of Python's traceback ends where :func:`jaxgrasp.cli.main` installs the
     handler, first thing: nothing is imported before ``jaxgrasp.cli`` is (whose import
     ends before ``main`` runs) but modules of Python's own and ``jaxgrasp._startup``;
-    JAX and NumPy come after, when the sub-command loads the library."""
+    JAX and NumPy come after, when the sub-command loads the library (here to find a
+    negative modulus, which only the library's field rules refuse; ``--help`` and argument
+    errors load no JAX at all: ``tests/test_startup.py``)."""
     proc = subprocess.run(
-        [sys.executable, "-X", "importtime", "-m", "jaxgrasp", "evaluate", "--help"],
+        [sys.executable, "-X", "importtime", "-m", "jaxgrasp", "evaluate", "--preset", "cube", "--young-modulus", "-1"],
         capture_output=True, text=True, timeout=300,
     )
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    said = [ln for ln in proc.stderr.splitlines() if not ln.startswith("import time:")]
+    assert proc.returncode == 2 and said == ["jaxgrasp: error: --young-modulus -1: young_modulus must be positive (Pa)"], said
     names = [ln.rsplit("|", 1)[1].strip() for ln in proc.stderr.splitlines() if ln.startswith("import time:")]
     first = names.index("jaxgrasp.cli")
     assert names.index("jaxgrasp._startup") < first
     assert not any(n.startswith(("jax.", "jaxlib", "numpy", "importlib.metadata")) or n == "jax"
                    for n in names[:first]), names[: first + 1]
-    assert "jax" in names[first:]  # the sub-command's options come from the library
+    assert "jax" in names[first:]  # the command's run loads the library
 
 
 @pytest.mark.parametrize(

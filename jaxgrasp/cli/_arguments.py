@@ -1,0 +1,484 @@
+"""The ``jaxgrasp`` command's arguments: every sub-command's options, help and argument
+checks, without JAX.
+
+`jaxgrasp.cli.build_parser` adds the sub-commands of `COMMANDS` with `add_commands`;
+`jaxgrasp.cli.main` parses the command line with it before the library (and JAX) is
+loaded, so that ``--help``, ``--version`` and every argument error (an unknown option, a
+missing value, an invalid choice, a value ``type=`` rejects) are answered at once. This
+module imports Python's standard library and jaxgrasp's constants alone (the grasp fields,
+the presets' names, the samplers, the optimisers, the limits: each package face loads
+them from a module without JAX, `jaxgrasp._startup.attach`); the commands' modules
+``jaxgrasp.cli._<name>`` hold their ``run(args)``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from jaxgrasp.analysis import MAX_GRID_POINTS, METHODS
+from jaxgrasp.cli._parser import UsageError
+from jaxgrasp.model import FIELD, SWEEPABLE, TUNABLE
+from jaxgrasp.planning import SAMPLERS
+from jaxgrasp.presets import PRESETS
+from jaxgrasp.simulation import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION
+
+__all__ = [
+    "COMMANDS",
+    "add_commands",
+    "parse_number",
+    "OVERRIDES",
+    "add_grasp_source",
+    "add_allow_dir",
+    "add_overrides",
+    "add_epsilon_option",
+    "add_robust_options",
+    "DEFAULT_ROBUST_SAMPLES",
+    "add_process_options",
+    "axis_spec",
+    "PAPER_AXES",
+    "DEFAULT_TOP",
+    "DEFAULT_ROBUST",
+    "PLAN_DEFAULTS",
+    "MAGNIFICATION_RANGE",
+]
+
+COMMANDS = {
+    "evaluate": "evaluate one grasp and print a summary",
+    "sweep": "evaluate a grasp over a grid of parameters (npz, csv, png)",
+    "batch": "evaluate and rank every grasp of a dataset file (csv, npz, png)",
+    "tune": "maximise the value over chosen parameters; write the tuned grasp and a plot",
+    "plan": "find the best grasps on a meshed object; write them ranked, the best's file and picture",
+    "show": "draw one grasp in 3-D with the motion that makes it fail (png; --glb for a 3-D viewer)",
+    "simulate": "hold, disturb and kick the grasp in MuJoCo (needs jaxgrasp[sim]); results.json and a plot",
+}
+"""The sub-commands, in the order of ``jaxgrasp --help``, each with its line there; each
+runs ``jaxgrasp.cli._<name>.run(args)``."""
+
+
+def add_commands(sub) -> None:
+    """Add every sub-command of `COMMANDS`, in its order, to the ``jaxgrasp`` sub-parsers ``sub``."""
+    adders = {"evaluate": add_evaluate, "sweep": add_sweep, "batch": add_batch, "tune": add_tune,
+              "plan": add_plan, "show": add_show, "simulate": add_simulate}
+    for name in COMMANDS:
+        adders[name](sub)
+
+
+# --------------------------------------------------------------------------- shared arguments
+
+OVERRIDES = SWEEPABLE
+"""Fields one number sets for the whole grasp (every contact at once), in option order:
+``jaxgrasp evaluate --young-modulus PA ...`` and the sweep's axes."""
+
+
+def parse_number(option: str, text: str, what: str = "value") -> float:
+    """``text`` as a finite float; a `UsageError` naming ``option`` otherwise."""
+    t = text.strip()
+    try:
+        x = float(t)
+    except ValueError:
+        raise UsageError(f"{option}: {what} {t!r} is not a number") from None
+    if not math.isfinite(x):
+        raise UsageError(f"{option}: {what} {t!r} must be finite")
+    return x
+
+
+def add_grasp_source(p: argparse.ArgumentParser) -> None:
+    """The grasp to use: a positional ``file`` or ``--preset NAME``; ``--allow-dir``."""
+    p.add_argument("file", nargs="?", help="grasp file (.toml or .json, SI units)")
+    p.add_argument("--preset", choices=list(PRESETS), help="one of the paper's grasps instead of a file")
+    add_allow_dir(p)
+
+
+def add_allow_dir(p: argparse.ArgumentParser) -> None:
+    """``--allow-dir DIR`` (repeatable): a folder outside the input file's own that the
+    meshes it names may be in (`jaxgrasp.io._inputs.confine`)."""
+    p.add_argument(
+        "--allow-dir", action="append", default=None, metavar="DIR", dest="allow_dir",
+        help=("also read meshes the input file names from DIR (repeatable); by default only "
+              "meshes inside the input file's own folder are read"),
+    )
+
+
+def add_overrides(p: argparse.ArgumentParser) -> None:
+    """``--young-modulus PA`` etc.: one number for a field of the whole grasp (`OVERRIDES`)."""
+    for name in OVERRIDES:
+        field = FIELD[name]
+        p.add_argument(field.option, dest=name, type=float, metavar=field.metavar, help=field.help)
+
+
+def add_epsilon_option(p: argparse.ArgumentParser) -> None:
+    """``--epsilon``: add the Ferrari-Canny metric's columns to a command's tables."""
+    p.add_argument(
+        "--epsilon",
+        action="store_true",
+        help="add columns epsilon and force_closure (Ferrari-Canny metric, 8 cone edges, soft fingers)",
+    )
+
+
+DEFAULT_ROBUST_SAMPLES = 256
+"""Perturbed copies per grasp of ``--robust`` (``--samples``)."""
+
+
+def add_robust_options(p: argparse.ArgumentParser) -> None:
+    """``--robust SPEC``, ``--samples N`` and ``--seed N``: the robust value under uncertainty
+    ([`jaxgrasp.robust`][jaxgrasp.robust])."""
+    p.add_argument(
+        "--robust", metavar="SPEC", default=None,
+        help=("also evaluate SAMPLES perturbed copies of each grasp; SPEC gives each source's spread "
+              "in SI units, e.g. friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3 "
+              "(also friction_per_fingertip, mass, gravity_angle; see jaxgrasp.analysis.Uncertainty)"),
+    )
+    p.add_argument("--samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
+                   help=f"perturbed copies per grasp with --robust (default {DEFAULT_ROBUST_SAMPLES})")
+    p.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the --robust draws (default 0)")
+
+
+def add_process_options(sp) -> None:
+    """Add ``--coordinator``, ``--num-processes`` and ``--process-id`` to ``sp`` (a batch over
+    several processes, `jaxgrasp.cli._batch_processes`)."""
+    g = sp.add_argument_group(
+        "several processes",
+        "run one process per host, each with the same command and its own --process-id; "
+        "each evaluates its share of the dataset and process 0 writes DIR (no --resume)",
+    )
+    g.add_argument("--coordinator", metavar="HOST:PORT", help="process 0's address, which every process reaches")
+    g.add_argument("--num-processes", type=int, metavar="P", help="how many processes run the batch")
+    g.add_argument("--process-id", type=int, metavar="I", help="this process's index, 0 .. P-1")
+
+
+# --------------------------------------------------------------------------- sweep axes
+
+PAPER_AXES = {
+    "young_modulus": "2e5:1e6:9",
+    "initial_deformation": "1e-3:5e-3:41",
+}
+"""The grid of the paper's Fig. 6 (``jaxgrasp sweep`` without any axis)."""
+
+
+def axis_spec(option: str, spec: str) -> list[float] | tuple[str, str, int]:
+    """A sweep axis spec checked: a list or number as its floats; a range
+    ``START:STOP:COUNT`` as its ``(start, stop, count)`` text and count, not yet expanded
+    (`jaxgrasp.cli._sweep.parse_axis_spec` expands it).
+
+    Raises:
+        UsageError: malformed spec, or a range of more than `MAX_GRID_POINTS` (one
+            line, naming the option), before the array is allocated.
+    """
+    text = spec.strip()
+    if not text:
+        raise UsageError(f"{option}: empty value; give START:STOP:COUNT, a comma list or a number")
+    if ":" in text:
+        return _axis_range(option, spec, text)
+    items = text.split(",")
+    if any(not s.strip() for s in items):
+        raise UsageError(f"{option}: list {spec!r} has an empty item")
+    return [parse_number(option, s) for s in items]
+
+
+def _axis_range(option: str, spec: str, text: str) -> tuple[str, str, int]:
+    parts = text.split(":")
+    if len(parts) != 3:
+        raise UsageError(f"{option}: range {spec!r} must be START:STOP:COUNT (e.g. 1e-3:5e-3:41)")
+    start = parse_number(option, parts[0], "start")
+    stop = parse_number(option, parts[1], "stop")
+    c = parts[2].strip()
+    try:
+        count = int(c)
+    except ValueError:
+        raise UsageError(f"{option}: count {c!r} of range {spec!r} must be a whole number") from None
+    if count < 1:
+        raise UsageError(f"{option}: range {spec!r} is empty (count {count}); the count must be >= 1")
+    if count == 1 and start != stop:
+        raise UsageError(f"{option}: range {spec!r} has count 1 but start != stop; give a single number")
+    if count > MAX_GRID_POINTS:
+        raise UsageError(f"{option}: range {spec!r} has {count:,} points, more than a whole grid may have "
+                         f"({MAX_GRID_POINTS:,}); split the sweep")
+    return parts[0].strip(), parts[1].strip(), count
+
+
+class _AxisSpec:
+    """The ``type`` of a sweep axis option: its spec checked (`axis_spec`) as argparse reads
+    it, kept as typed (the sweep expands it)."""
+
+    def __init__(self, option: str):
+        self.option = option
+
+    def __call__(self, text: str) -> str:
+        axis_spec(self.option, text)  # a UsageError is the command's one line
+        return text
+
+
+class _AxisInOrder(argparse.Action):
+    """Store an axis spec and remember the order the axes were given in (``args.axis_order``):
+    the grid's axes follow it, as the library's keyword order."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        order = [n for n in getattr(namespace, "axis_order", None) or [] if n != self.dest]
+        namespace.axis_order = order + [self.dest]
+
+
+# --------------------------------------------------------------------------- the sub-commands
+
+DEFAULT_TOP = 5
+"""Best grasps listed in the summary of ``jaxgrasp batch`` (``--top``)."""
+
+DEFAULT_ROBUST = "friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3"
+"""The uncertainty ``jaxgrasp plan --rank robust`` assumes without ``--robust SPEC``."""
+
+PLAN_DEFAULTS = dict(fingers=2, radius=0.01, young_modulus=3e5, friction=0.8, max_force=15.0, density=500.0)
+"""Defaults of ``jaxgrasp plan``'s fingertip and object options (SI units): a 10 mm
+silicone-like fingertip on a light plastic-like object."""
+
+MAGNIFICATION_RANGE = (1e-3, 1e12)
+"""The ``--magnification`` factors ``jaxgrasp show`` accepts, inclusive. Below 1e-3 the ghost
+cannot be told from the object at any picture size; above 1e12 the motion drawn is
+float64's rounding of the pose (about 1e-16 of the object's size) magnified into view, not
+the motion, and factors near 1e300 overflow the coordinates to infinity."""
+
+
+def add_evaluate(sub) -> None:
+    """Add the ``evaluate`` command to the ``jaxgrasp`` sub-parsers."""
+    p = sub.add_parser("evaluate", help=COMMANDS["evaluate"])
+    add_grasp_source(p)
+    add_overrides(p)
+    p.add_argument("--json", action="store_true", help="print a JSON object instead")
+    add_robust_options(p)
+    p.add_argument("--chunk-size", type=int, default=None, metavar="N",
+                   help="perturbed grasps per compiled batch with --robust (default 64 per CPU device, 1024 per GPU)")
+
+
+def add_sweep(sub) -> None:
+    """Add the ``sweep`` command to the ``jaxgrasp`` sub-parsers."""
+    sp = sub.add_parser(
+        "sweep",
+        help=COMMANDS["sweep"],
+        description=(
+            "Evaluate a grasp over the Cartesian grid of the given parameter axes; write "
+            "DIR/sweep.npz, DIR/sweep.csv (one row per grid point, SI units) and DIR/sweep.png "
+            "as one set, replacing a previous set at once. Until then the finished points are "
+            "kept in DIR/sweep.partial.npz (what an interrupted sweep leaves); one sweep at a "
+            "time per DIR."
+        ),
+        epilog=(
+            "SPEC is START:STOP:COUNT (inclusive), a comma list or a number, in SI units; "
+            f"the grid may have at most {MAX_GRID_POINTS:,} points, in the order the axes are given. "
+            "Without a grasp: preset cube. Without any axis: the paper's Fig. 6 grid "
+            f"(--young-modulus {PAPER_AXES['young_modulus']} "
+            f"--initial-deformation {PAPER_AXES['initial_deformation']}). "
+            "Example: jaxgrasp sweep --preset prism --young-modulus 2e5:1e6:5 "
+            "--initial-deformation 1e-3:5e-3:41 --mass 0,0.1,0.2 --out out/"
+        ),
+    )
+    add_grasp_source(sp)
+    for name in OVERRIDES:  # the axes, in option order
+        field = FIELD[name]
+        sp.add_argument(field.option, dest=name, metavar="SPEC", type=_AxisSpec(field.option), action=_AxisInOrder,
+                        help=f"{field.help} (axis spec)")
+    sp.add_argument(
+        "--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)"
+    )
+    sp.add_argument(
+        "--chunk-size",
+        type=int,
+        default=None,
+        metavar="N",
+        help=(
+            "grid points per compiled batch (default: 64 per CPU device; on a GPU about a tenth "
+            "of the grid, 64 to 1024 per device)"
+        ),
+    )
+    sp.add_argument("--no-plot", action="store_true", help="do not write sweep.png")
+    add_epsilon_option(sp)
+    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    sp.set_defaults(default_preset="cube")
+
+
+def add_batch(sub) -> None:
+    """Add the ``batch`` command to the ``jaxgrasp`` sub-parsers."""
+    sp = sub.add_parser(
+        "batch",
+        help=COMMANDS["batch"],
+        description=(
+            "Evaluate every grasp of a dataset file (.npz arrays named like the grasp fields, "
+            "or .jsonl with one grasp-file JSON object per line; SI units; any contact counts) "
+            "and rank them. Writes DIR/results.csv (one row per grasp in input order), "
+            "DIR/results.npz (every result array) and DIR/results.png (the ranking) as one set. "
+            "Finished chunks are kept in DIR/results.partial until then: an interrupted run "
+            "is finished by the same command with --resume."
+        ),
+        epilog="Example: jaxgrasp batch grasps.jsonl --out ranked/ --top 10",
+    )
+    sp.add_argument("file", help="dataset file (.npz or .jsonl)")
+    sp.add_argument("--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)")
+    sp.add_argument(
+        "--chunk-size",
+        type=int,
+        default=None,
+        metavar="N",
+        help="grasps per compiled batch (default 64 per CPU device, 1024 per GPU)",
+    )
+    sp.add_argument("--top", type=int, default=DEFAULT_TOP, metavar="K", help=f"list the K best grasps (default {DEFAULT_TOP})")
+    sp.add_argument("--strict", action="store_true", help="any invalid grasp: exit 2 before computing")
+    sp.add_argument("--resume", action="store_true", help="finish an interrupted run into the same DIR")
+    sp.add_argument("--no-plot", action="store_true", help="do not write results.png")
+    add_allow_dir(sp)
+    add_epsilon_option(sp)
+    add_robust_options(sp)
+    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_process_options(sp)
+
+
+def add_tune(sub) -> None:
+    """Add the ``tune`` command to the ``jaxgrasp`` sub-parsers."""
+
+    sp = sub.add_parser(
+        "tune",
+        help=COMMANDS["tune"],
+        description=(
+            "Maximise the evaluation value of a grasp over the chosen parameters within "
+            "bounds (gradient-based, L-BFGS-B); write the tuned grasp to --out and a plot "
+            "of the value over the iterations next to it (.png)."
+        ),
+        epilog=(
+            f"PARAM is one of {', '.join(TUNABLE)}; per-contact ones tune one value per "
+            "contact, or one shared value with the suffix ':shared' (e.g. "
+            "initial_deformation:shared). 'positions' moves each contact in its tangent plane (along the surface for a grasp file naming a mesh) "
+            "(give --bounds positions=HALF_WIDTH in m). Only initial_deformation has "
+            "default bounds. Example: jaxgrasp tune --preset cube --param "
+            "initial_deformation:shared --bounds initial_deformation=0.001:0.005 --out tuned.toml"
+        ),
+    )
+    add_grasp_source(sp)
+    add_overrides(sp)  # --young-modulus PA etc., as every other command
+    sp.add_argument(
+        "--param",
+        action="append",
+        metavar="PARAM",
+        help="a parameter to tune (repeatable; default initial_deformation)",
+    )
+    sp.add_argument(
+        "--bounds",
+        action="append",
+        metavar="NAME=LO:HI",
+        help="bounds of a parameter in SI units (repeatable); positions=HALF_WIDTH in m",
+    )
+    sp.add_argument("--maxiter", type=int, default=50, metavar="N", help="most iterations (default 50)")
+    sp.add_argument("--method", choices=METHODS, default=METHODS[0], help=f"optimiser (default {METHODS[0]})")
+    sp.add_argument(
+        "--smooth-min-temperature",
+        type=float,
+        default=None,
+        metavar="J",
+        help="tune the soft minimum over boundaries at this temperature, J (default: hard minimum)",
+    )
+    sp.add_argument(
+        "--out", default="tuned.toml", metavar="FILE", help="tuned grasp file, .toml or .json (default tuned.toml)"
+    )
+    sp.add_argument("--no-plot", action="store_true", help="do not write the .png plot")
+    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def add_plan(sub) -> None:
+    """Add the ``plan`` command to the ``jaxgrasp`` sub-parsers."""
+
+    sp = sub.add_parser(
+        "plan",
+        help=COMMANDS["plan"],
+        description=(
+            "Draw candidate grasps on the object's mesh, keep those the model describes (flat contact "
+            "patch, fingertips apart, one contact each, deformation in range), evaluate them, refine the "
+            "best by gradient tuning along the surface, and write them ranked into --out."
+        ),
+        epilog="Example: jaxgrasp plan part.obj --units mm --fingers 3 --out plan-part",
+    )
+    d = PLAN_DEFAULTS
+    sp.add_argument("mesh", help="the object's mesh file (STL, OBJ, PLY, OFF or GLB)")
+    sp.add_argument("--fingers", type=int, default=d["fingers"], metavar="N", help="fingertips, 2 to 8 (default 2)")
+    sp.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="the mesh's length unit (default m)")
+    for opt, key, unit in (("--radius", "radius", "m"), ("--young-modulus", "young_modulus", "Pa"),
+                           ("--friction", "friction", ""), ("--max-force", "max_force", "N")):
+        sp.add_argument(opt, dest=key, type=float, default=d[key], metavar=unit.upper() or "MU",
+                        help=f"every fingertip's {key.replace('_', ' ')}" + (f", {unit}" if unit else "")
+                        + f" (default {d[key]:g})")
+    mass = sp.add_mutually_exclusive_group()
+    mass.add_argument("--density", type=float, default=None, metavar="KG_M3",
+                      help=f"object density, kg/m^3; mass = density x volume (default {d['density']:g})")
+    mass.add_argument("--mass", type=float, default=None, metavar="KG", help="object mass, kg")
+    sp.add_argument("--gravity", default="0,0,-9.81", metavar="GX,GY,GZ",
+                    help="gravity in the mesh's axes, m/s^2 (default 0,0,-9.81)")
+    sp.add_argument("--samples", type=int, default=150, metavar="N", help="valid candidates to evaluate (default 150)")
+    sp.add_argument("--top", type=int, default=10, metavar="K", help="ranked grasps to write (default 10)")
+    sp.add_argument("--refine", type=int, default=3, metavar="K", help="best candidates to tune (default 3)")
+    sp.add_argument("--seed", type=int, default=0, help="seed of the random draws (default 0)")
+    sp.add_argument("--sampler", choices=SAMPLERS, default=None,
+                    help="candidate generator (default antipodal for 2 fingers, spread for more)")
+    sp.add_argument("--flatness", type=float, default=25.0, metavar="DEG",
+                    help="largest angle between the contact normal and a face under the fingertip (default 25)")
+    sp.add_argument("--rank", choices=("value", "robust"), default="value",
+                    help="rank by the value, or by the robust value (the mean over perturbed copies) (default value)")
+    sp.add_argument("--robust", default=None, metavar="SPEC",
+                    help=f"the uncertainty of --rank robust, as for evaluate --robust (default {DEFAULT_ROBUST})")
+    sp.add_argument("--robust-samples", type=int, default=64, metavar="S",
+                    help="perturbed copies per ranked grasp for --rank robust (default 64)")
+    sp.add_argument("--out", default="plan", metavar="DIR", help="output folder (default ./plan)")
+    sp.add_argument("--no-plot", action="store_true", help="do not write best.png")
+    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def add_show(sub) -> None:
+    """Add the ``show`` command to the ``jaxgrasp`` sub-parsers."""
+    p = sub.add_parser(
+        "show",
+        help=COMMANDS["show"],
+        description=(
+            "Evaluate one grasp and draw it in 3-D: the object (its mesh, or the contacts' hull), "
+            "each fingertip pressed into its contact with its normal and friction cone, the limiting "
+            "contact in red, and the object at the least-energy pose of the limiting boundary as a "
+            "ghost, the motion magnified by the factor the title states. --glb writes the same "
+            "scene as a GLB file for any 3-D viewer."
+        ),
+    )
+    add_grasp_source(p)
+    add_overrides(p)
+    p.add_argument("--out", default="grasp.png", metavar="FILE", help="the picture, .png, .pdf or .svg (default grasp.png)")
+    p.add_argument("--glb", metavar="FILE", help="also write the scene as a GLB file (.glb)")
+    p.add_argument("--magnification", type=float, metavar="X",
+                   help=(f"factor the ghost's motion is magnified by, {MAGNIFICATION_RANGE[0]:g} to "
+                         f"{MAGNIFICATION_RANGE[1]:g} (default: a round one that makes it visible)"))
+    p.add_argument("--hand", metavar="FILE",
+                   help=("draw a hand's grasp instead: a hand grasp file (.toml, see docs/guide/hands.md), which "
+                         "sets the fingertips and the object (no --young-modulus etc. with it)"))
+
+
+def add_simulate(sub) -> None:
+    """Add the ``simulate`` command to the ``jaxgrasp`` sub-parsers."""
+    p = sub.add_parser(
+        "simulate",
+        help=COMMANDS["simulate"],
+        description=(
+            "Evaluate one grasp, then simulate it in MuJoCo: fingertips as fixed spheres calibrated to the "
+            "paper's normal force (eq. 4), condim 4 with elliptic cones; hold under gravity, a force of "
+            "m * 10 m/s^2 along +-x, +-y, +-z (DexGraspBench), and kicks with kinetic energy s times the "
+            "value. Writes DIR/results.json and DIR/trials.png. Limits: all trials together at most "
+            f"{MAX_SIMULATED_S:g} s of simulated time and {MAX_STEPS:,} MuJoCo steps (time / timestep; a few "
+            f"minutes); a --timestep at most 1/{round(1 / TIMESTEP_FRACTION)} of the shortest trial. "
+            "Needs: pip install \"jaxgrasp[sim]\"."
+        ),
+    )
+    add_grasp_source(p)
+    add_overrides(p)
+    p.add_argument("--out", default="jaxgrasp-sim", metavar="DIR", help="output folder (default jaxgrasp-sim)")
+    p.add_argument("--hold-time", default="1.0", metavar="S", help="hold under gravity, s (default 1)")
+    p.add_argument("--six-axis-time", default="2.0", metavar="S", help="each disturbance, s (default 2)")
+    p.add_argument("--kick-time", default="0.3", metavar="S", help="each energy kick, s (default 0.3)")
+    p.add_argument("--scales", default="0.5,0.9,1.1,2", metavar="S,S,...",
+                   help="kick energies as multiples of the value (default 0.5,0.9,1.1,2)")
+    p.add_argument("--random-kicks", type=int, default=2, metavar="N", help="random kick directions per scale (default 2)")
+    p.add_argument("--sim-friction", metavar="MU", help="the simulator's friction instead of the grasp's (a what-if)")
+    p.add_argument("--timestep", metavar="S",
+                   help=(f"simulator timestep, s, at most 1/{round(1 / TIMESTEP_FRACTION)} of the shortest trial "
+                         "(default: from the contact stiffness)"))
+    p.add_argument("--simulate-unstable", action="store_true",
+                   help="also simulate an unstable grasp from its equilibrium pose")
