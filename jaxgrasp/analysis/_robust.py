@@ -32,7 +32,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from jaxgrasp.analysis._uncertainty import CLIP_SOURCES, Uncertainty, draw_normals, perturb
-from jaxgrasp.base import Coded
+from jaxgrasp.base import Coded, json_floats
 from jaxgrasp.engine import BatchResult, evaluate_batch, evaluate_in_chunks, plan_chunks
 from jaxgrasp.model import Grasp, GraspValueError, stack
 from jaxgrasp.surface import MeshGrasp, Surface
@@ -148,14 +148,13 @@ class RobustResult:
         Its status is ``robust_status``, not ``status``, because ``jaxgrasp evaluate
         --robust --json`` writes these entries beside the nominal evaluation's own
         ``status`` and ``value``."""
-        num = lambda x: None if not np.isfinite(x) else float(x)  # noqa: E731
         out = {
             "robust_status": self.status_name,
-            "p_stable": num(self.p_stable),
-            "p_stable_stderr": num(self.p_stable_stderr),
-            "value_mean": num(self.value_mean),
+            "p_stable": json_floats(self.p_stable),
+            "p_stable_stderr": json_floats(self.p_stable_stderr),
+            "value_mean": json_floats(self.value_mean),
         }
-        out.update({quantile_name(q): num(v) for q, v in zip(self.quantile_levels, self.quantiles)})
+        out.update({quantile_name(q): json_floats(v) for q, v in zip(self.quantile_levels, self.quantiles)})
         out.update(samples=self.samples, converged=self.converged, seed=self.seed,
                    uncertainty=self.uncertainty.to_dict(), clipped=dict(self.clipped))
         return out
@@ -240,9 +239,8 @@ class RobustBatch:
         ``p_stable_stderr``, ``value_mean``, one ``value_qNN`` per level), ``converged``
         and ``clipped`` by field; then ``samples``, ``seed`` and ``uncertainty``. The
         per-sample arrays are not in it."""
-        num = lambda a: np.where(np.isfinite(a), a, None).tolist()  # noqa: E731
-        out: dict[str, Any] = {"status": self.status_names.tolist(), "value": num(np.asarray(self.value, np.float64))}
-        out.update({k: num(np.asarray(v, np.float64)) for k, v in self.columns().items()})
+        out: dict[str, Any] = {"status": self.status_names.tolist(), "value": json_floats(self.value)}
+        out.update({k: json_floats(v) for k, v in self.columns().items()})
         out.update(converged=np.asarray(self.converged).tolist(),
                    clipped={k: np.asarray(v).tolist() for k, v in self.clipped.items()},
                    samples=self.samples, seed=self.seed, uncertainty=self.uncertainty.to_dict())

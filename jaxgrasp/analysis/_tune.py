@@ -52,6 +52,7 @@ from jaxgrasp.analysis._tune_spec import (
     param_specs,
 )
 from jaxgrasp.analysis._tune_status import TuneStatus
+from jaxgrasp.base import json_floats
 from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, value_and_grad_builder
 from jaxgrasp.model import MJ_TO_J, Grasp, GraspValueError, check_grasp_inputs, counted
 from jaxgrasp.surface import PAD_FACES, MeshGrasp, Surface
@@ -235,25 +236,21 @@ class TuneResult:
         (``[lo, hi]``), ``history`` (J), ``history_status`` by name and ``evaluation``
         (the tuned grasp's [`Evaluation.to_dict`][jaxgrasp.Evaluation.to_dict])."""
         return {
-            "value": _json(self.value), "start_value": _json(self.start_value),
-            "initial_value": _json(self.initial_value), "gain": _json(self.gain),
+            "value": json_floats(self.value), "start_value": json_floats(self.start_value),
+            "initial_value": json_floats(self.initial_value), "gain": json_floats(self.gain),
             "status": self.status_name, "converged": self.converged, "message": self.message,
             "iterations": int(self.iterations), "evaluations": int(self.evaluations),
             "not_converged_evaluations": int(self.not_converged_evaluations), "method": self.method,
             "clipped": list(self.clipped),
-            "params": {k: _json(v) for k, v in self.params.items()},
-            "initial_params": {k: _json(v) for k, v in self.initial_params.items()},
-            "bounds": {k: [_json(lo), _json(hi)] for k, (lo, hi) in self.bounds.items()},
-            "history": _json(self.history),
+            "params": {k: json_floats(v) for k, v in self.params.items()},
+            "initial_params": {k: json_floats(v) for k, v in self.initial_params.items()},
+            "bounds": {k: [json_floats(lo), json_floats(hi)] for k, (lo, hi) in self.bounds.items()},
+            "history": json_floats(self.history),
             "history_status": GraspStatus.names_of(self.history_status).tolist(),
             "evaluation": self.evaluation.to_dict(),
         }
 
 
-def _json(x):
-    """A number or an array as (nested) Python floats, ``None`` where not finite."""
-    a = np.asarray(x, dtype=np.float64)
-    return np.where(np.isfinite(a), a, None).tolist()
 
 
 # ----------------------------------------------------------------------------- tune

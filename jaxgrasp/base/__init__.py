@@ -1,4 +1,5 @@
-"""The base the other packages build on: named integer codes and small tensor contractions.
+"""The base the other packages build on: named integer codes, small tensor contractions
+and results' numbers as JSON.
 
 `Coded` is the base of every status and kind code of jaxgrasp (an integer with a
 label and a one-line message); `contract` is a small ``einsum`` written as one
@@ -19,6 +20,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
 
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
     from jaxgrasp.base._contract import contract
+    from jaxgrasp.base._json import json_floats
 
 __all__ = ["Coded"]
 

@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.analysis import TuneStatus, run_search
+from jaxgrasp.base import json_floats
 from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, value_and_grad_builder
 from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp, _pose, contact_grasp, hand_grasp, material
 from jaxgrasp.model import DEFAULT_GRAVITY, GraspValueError
@@ -111,15 +112,11 @@ class HandValue:
         """As plain Python (JSON-ready, ``None`` where not finite): ``value`` (J),
         ``status`` by name, ``grad_qpos``, ``grad_wrist``, ``deepest`` (m), ``tilt``
         (rad) and ``evaluation`` ([`Evaluation.to_dict`][jaxgrasp.Evaluation.to_dict])."""
-        return {"value": _json(self.value), "status": self.status_name, "grad_qpos": _json(self.grad_qpos),
-                "grad_wrist": _json(self.grad_wrist), "deepest": _json(self.deepest), "tilt": _json(self.tilt),
+        return {"value": json_floats(self.value), "status": self.status_name, "grad_qpos": json_floats(self.grad_qpos),
+                "grad_wrist": json_floats(self.grad_wrist), "deepest": json_floats(self.deepest), "tilt": json_floats(self.tilt),
                 "evaluation": self.evaluation.to_dict()}
 
 
-def _json(x):
-    """A number or an array as (nested) Python floats, ``None`` where not finite."""
-    a = np.asarray(x, dtype=np.float64)
-    return np.where(np.isfinite(a), a, None).tolist()
 
 
 def _setup(hand, mesh, kw):
@@ -236,10 +233,10 @@ class HandTuneResult:
         ``converged``, ``iterations``, ``evaluations``, ``message``; the tuned grasp is
         the configuration (``qpos``, ``wrist``), not repeated."""
         return {
-            "qpos": _json(self.qpos), "wrist": _json(self.wrist), "value": _json(self.value),
-            "start_value": _json(self.start_value), "gain": _json(self.gain), "deepest": _json(self.deepest),
-            "start_deepest": _json(self.start_deepest), "history": _json(self.history),
-            "depth_history": _json(self.depth_history), "status": self.status_name, "converged": self.converged,
+            "qpos": json_floats(self.qpos), "wrist": json_floats(self.wrist), "value": json_floats(self.value),
+            "start_value": json_floats(self.start_value), "gain": json_floats(self.gain), "deepest": json_floats(self.deepest),
+            "start_deepest": json_floats(self.start_deepest), "history": json_floats(self.history),
+            "depth_history": json_floats(self.depth_history), "status": self.status_name, "converged": self.converged,
             "iterations": int(self.iterations), "evaluations": int(self.evaluations), "message": self.message,
         }
 

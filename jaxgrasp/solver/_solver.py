@@ -56,7 +56,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.base import contract
+from jaxgrasp.base import contract, json_floats
 from jaxgrasp.solver._direction import newton_direction
 from jaxgrasp.solver._line_search import line_search as ladder_search
 from jaxgrasp.solver._status import LaneStatus
@@ -210,16 +210,15 @@ class SolverResult:
             ValueError: a batched result (index it first).
         """
         name = self.status_name
-        num = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731
         return {
             "status": name,
-            "objective": num(self.objective),
-            "x": [num(v) for v in np.asarray(self.x, dtype=np.float64).reshape(-1)],
-            "lam": [num(v) for v in np.asarray(self.lam, dtype=np.float64).reshape(-1)],
-            "nu": num(self.nu),
-            "stationarity": num(self.stationarity),
-            "feasibility": num(self.feasibility),
-            "complementarity": num(self.complementarity),
+            "objective": json_floats(self.objective),
+            "x": json_floats(np.reshape(self.x, -1)),
+            "lam": json_floats(np.reshape(self.lam, -1)),
+            "nu": json_floats(self.nu),
+            "stationarity": json_floats(self.stationarity),
+            "feasibility": json_floats(self.feasibility),
+            "complementarity": json_floats(self.complementarity),
             "steps": int(self.steps),
         }
 

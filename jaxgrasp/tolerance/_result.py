@@ -8,6 +8,7 @@ import math
 import jax
 import numpy as np
 
+from jaxgrasp.base import json_floats
 from jaxgrasp.model import NO_BOUNDARY, BoundaryKind, Constraint
 from jaxgrasp.solver import LaneStatus
 from jaxgrasp.tolerance._status import GraspStatus
@@ -208,17 +209,17 @@ class Evaluation:
                         "energy": e if math.isfinite(e) else None,
                         "energy_above_equilibrium": float(above[kind, j]) if math.isfinite(e) else None,
                         "status": _lane_label(int(a.boundary_status[kind, j])),
-                        "translation": _json_floats(a.boundary_translation[kind, j]),
-                        "rotation": _json_floats(a.boundary_rotation[kind, j]),
+                        "translation": json_floats(a.boundary_translation[kind, j]),
+                        "rotation": json_floats(a.boundary_rotation[kind, j]),
                     }
                 )
         kind = int(a.limiting_kind)
         return {
-            "value": _json_floats(a.value),
+            "value": json_floats(a.value),
             "status": GraspStatus(int(a.status)).label,
-            "equilibrium_energy": _json_floats(a.equilibrium_energy),
-            "equilibrium_translation": _json_floats(a.equilibrium_translation),
-            "equilibrium_rotation": _json_floats(a.equilibrium_rotation),
+            "equilibrium_energy": json_floats(a.equilibrium_energy),
+            "equilibrium_translation": json_floats(a.equilibrium_translation),
+            "equilibrium_rotation": json_floats(a.equilibrium_rotation),
             "limiting": (
                 {"kind": BoundaryKind(kind).label, "contact": int(a.limiting_contact)}
                 if kind != NO_BOUNDARY
@@ -270,11 +271,11 @@ class SummaryNames:
         """The five summary arrays (`SUMMARY_FIELDS`) as nested lists, codes by name and
         floats ``None`` where not finite, then ``counts``, the timings (s) and ``devices``."""
         return {
-            "value": _json_floats(self.value),
+            "value": json_floats(self.value),
             "status": self.status_names.tolist(),
             "limiting_kind": self.limiting_kind_names.tolist(),
             "limiting_contact": np.asarray(self.limiting_contact).tolist(),
-            "equilibrium_energy": _json_floats(self.equilibrium_energy),
+            "equilibrium_energy": json_floats(self.equilibrium_energy),
             "counts": self.counts(),
             "compile_seconds": float(self.compile_seconds),
             "run_seconds": float(self.run_seconds),
@@ -292,12 +293,6 @@ class SummaryNames:
 def _lane_label(code: int) -> str | None:
     """A [`LaneStatus`][jaxgrasp.solver.LaneStatus] code's name; ``None`` for -1 (an invalid grasp's)."""
     return LaneStatus(code).label if code >= 0 else None
-
-
-def _json_floats(a) -> list | float | None:
-    """An array of floats as (nested) Python floats, ``None`` where not finite (NaN, inf)."""
-    a = np.asarray(a, dtype=np.float64)
-    return np.where(np.isfinite(a), a, None).tolist()
 
 
 def _check_energy(name: str, value, nonnegative: bool) -> None:
