@@ -319,6 +319,18 @@ def without_compile_reports(err: str) -> str:
     return COMPILE_REPORT.sub("", err)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def first_use():
+    """jaxgrasp's first use (`jaxgrasp.engine._setup.first_use`: the CPU devices, the
+    session's store) before the first test, as the first evaluate would do it. A test that
+    sets the store and puts back what it found (``executable_dir()``) then puts back the
+    session's store: before the first use it found ``None``, "not chosen yet", and put
+    back "off", so a later module's programs were not stored for its subprocesses."""
+    from jaxgrasp.engine import _setup
+
+    _setup.first_use()
+
+
 @pytest.fixture(scope="module")
 def cache_dir(store_dir):
     """The session's cache folder (:func:`store_dir`) for ``jaxgrasp.cli.main`` (and its
