@@ -4,11 +4,10 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
-from jaxgrasp.base import Coded
+from jaxgrasp.base import Coded, json_floats
 
 __all__ = ["AXES", "DIRECTIONS", "SimulationResult", "SimulationStatus", "Trial"]
 
@@ -180,7 +179,6 @@ class SimulationResult:
     def to_dict(self) -> dict:
         """``results.json``'s content: every field, JSON-ready (``null`` for ``nan``);
         the value's key is ``value_J`` there (the file's units in its names)."""
-        num = lambda a: [float(x) if math.isfinite(float(x)) else None for x in np.asarray(a)]
         return {
             "status": self.status_name,
             "grasp_status": self.grasp_status,
@@ -190,7 +188,7 @@ class SimulationResult:
             "six_axis": [t.to_dict() for t in self.six_axis],
             "six_axis_success": self.six_axis_success,
             "kicks": [t.to_dict() for t in self.kicks],
-            "settled_normal_force_N": num(self.settled_normal_force_N),
-            "model_normal_force_N": num(self.model_normal_force_N),
+            "settled_normal_force_N": json_floats(self.settled_normal_force_N),
+            "model_normal_force_N": json_floats(self.model_normal_force_N),
             "parameters": self.parameters,
         }
