@@ -20,7 +20,9 @@
     max_force = 15.0                         # N
 
 The MJCF and the mesh must lie inside the file's folder after symlinks, or in one of the
-allowed folders (``--allow-dir``), as for grasp files. `load_hand_grasp` gives the
+allowed folders (``--allow-dir``), as for grasp files; so must every file the MJCF names
+(its includes, meshes and textures: `jaxgrasp.hands._mjcf_files`). Numbers are checked
+(``qpos``, ``wrist``, ``pose`` and the fields: one line naming the key). `load_hand_grasp` gives the
 [`HandGrasp`][jaxgrasp.hands.HandGrasp]; `save_hand_grasp` writes one (atomically).
 """
 
@@ -32,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxgrasp.io import MAX_GRASP_FILE_BYTES, allowed_folders, confine, read_input
+from jaxgrasp.io import MAX_GRASP_FILE_BYTES, allowed_folders, check_path_text, confine, read_input
 from jaxgrasp.model import GraspValueError
 
 __all__ = ["load_hand_grasp", "save_hand_grasp", "hand_grasp_toml"]
@@ -43,6 +45,7 @@ _TABLES = {"hand": ("mjcf", "fingertips", "qpos", "wrist"), "object": ("mesh", "
 
 def _confined_mjcf(name: str, base: Path, allowed: tuple, where: str) -> Path:
     """The real path of the MJCF ``name`` (relative to ``base``), inside the allowed folders."""
+    check_path_text(name, f"{where}: mjcf")
     real = os.path.realpath(os.path.join(base, name))
     folders = (os.path.realpath(base), *allowed)
     if not any(os.path.commonpath([real, f]) == f for f in folders):
@@ -66,6 +69,9 @@ def _tables(path: Path) -> dict:
     for table, key in (("hand", "mjcf"), ("hand", "fingertips"), ("hand", "qpos"), ("object", "mesh")):
         if key not in data.get(table, {}):
             raise GraspValueError(f"{path}: [{table}] {key} is missing")
+    for table, key in (("hand", "mjcf"), ("object", "mesh"), ("object", "units")):
+        if not isinstance(data[table].get(key, ""), str):
+            raise GraspValueError(f"{path}: [{table}] {key} must be a string, got {type(data[table][key]).__name__}")
     return data
 
 
@@ -82,8 +88,9 @@ def load_hand_grasp(path: str | os.PathLike, allowed_dirs=None):
     data = _tables(path)
     allowed = allowed_folders(allowed_dirs)
     hand_t, obj, tip = data["hand"], data["object"], data.get("fingertip", {})
-    hand = Hand.from_mjcf(_confined_mjcf(str(hand_t["mjcf"]), path.parent, allowed, str(path)), hand_t["fingertips"])
-    mesh = confine(str(obj["mesh"]), path.parent, allowed, "hand grasp file")
+    hand = Hand.from_mjcf(_confined_mjcf(hand_t["mjcf"], path.parent, allowed, str(path)), hand_t["fingertips"],
+                          allowed)
+    mesh = confine(obj["mesh"], path.parent, allowed, "hand grasp file")
     missing = [k for k in _TABLES["fingertip"] if k not in tip]
     if missing:
         raise GraspValueError(f"{path}: [fingertip] {missing[0]} is missing")

@@ -180,10 +180,9 @@ def _pose(value, name: str):
         return jnp.zeros(6)
     if isinstance(value, jax.core.Tracer):
         return value
-    v = np.asarray(value, dtype=np.float64)
-    if v.shape != (6,) or not np.all(np.isfinite(v)):
-        raise GraspValueError(f"{name} must be 6 finite numbers (translation m, rotation vector rad), got shape {v.shape}")
-    return jnp.asarray(v)
+    from jaxgrasp.hands._hand import finite_vector
+
+    return jnp.asarray(finite_vector(value, 6, name, "finite numbers (translation m, rotation vector rad)"))
 
 
 def hand_grasp(hand, qpos, mesh, *, wrist=None, object_pose=None, young_modulus, friction, max_force,

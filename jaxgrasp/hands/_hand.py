@@ -22,9 +22,9 @@ import numpy as np
 from jaxgrasp.hands._kinematics import body_frames, cap_offsets, geom_frames
 from jaxgrasp.hands._links import link_depths, link_samples
 from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER, SPHERE, KinematicTree, read_mjcf
-from jaxgrasp.model import GraspValueError
+from jaxgrasp.model import GraspValueError, as_float_array
 
-__all__ = ["Hand"]
+__all__ = ["Hand", "finite_vector"]
 
 _LINK_TYPES = (SPHERE, CAPSULE, CYLINDER, BOX)  # geoms whose penetration tune_hand keeps out of the object
 
@@ -60,18 +60,25 @@ class Hand:
     link_points: tuple
 
     @classmethod
-    def from_mjcf(cls, path: str | os.PathLike, fingertips: Sequence[str]) -> "Hand":
-        """Read the hand in the MJCF file ``path`` (parsed by MuJoCo), with the geoms named
+    def from_mjcf(cls, path: str | os.PathLike, fingertips: Sequence[str], allowed_dirs=None) -> "Hand":
+        """Read the hand in the MJCF file ``path`` (compiled by MuJoCo), with the geoms named
         ``fingertips`` (at least 2, each a sphere or a capsule) as its fingertips.
+
+        The files the MJCF file names (includes, meshes, textures) must lie in its folder
+        after symlinks, or in one of the folders ``allowed_dirs``; they are read by
+        jaxgrasp and checked (regular files under their caps, the model under its size
+        caps) before MuJoCo sees them (`jaxgrasp.hands._mjcf_files`).
 
         Raises:
             GraspValueError: MuJoCo missing (``pip install "jaxgrasp[hands]"``), a file
-                MuJoCo cannot compile, a free or ball joint, an unknown geom name, or a
-                fingertip geom that is not a sphere or capsule; one line.
+                outside the allowed folders or refused by the checks, a file MuJoCo cannot
+                compile, a free or ball joint, an unknown geom name, or a fingertip geom
+                that is not a sphere or capsule; one line.
         """
-        tree, _ = read_mjcf(path)
-        if isinstance(fingertips, str) or len(fingertips) < 2:
-            raise GraspValueError(f"fingertips must name at least 2 geoms, got {fingertips!r}")
+        tree, _ = read_mjcf(path, allowed_dirs)
+        if isinstance(fingertips, str) or not isinstance(fingertips, Sequence) or len(fingertips) < 2 \
+                or not all(isinstance(n, str) for n in fingertips):
+            raise GraspValueError(f"fingertips must be at least 2 geom names, got {_short(fingertips)}")
         idx = np.array([tree.geom_index(n) for n in fingertips], dtype=int)
         wrong = [n for n, g in zip(fingertips, idx) if tree.geom_type[g] not in (SPHERE, CAPSULE)]
         if wrong:
@@ -110,11 +117,9 @@ class Hand:
         return self.tree.jnt_range[:, 1]
 
     def check_qpos(self, qpos, name: str = "qpos") -> np.ndarray:
-        """A concrete ``qpos`` as a ``(J,)`` float64 array; a one-line error otherwise."""
-        q = np.asarray(qpos, dtype=np.float64)
-        if q.shape != (self.num_joints,) or not np.all(np.isfinite(q)):
-            raise GraspValueError(f"{name} must be {self.num_joints} finite joint positions, got shape {q.shape}")
-        return q
+        """A concrete ``qpos`` as a ``(J,)`` float64 array; a one-line error naming ``name``
+        otherwise (strings, nested or ragged lists, booleans, NaN, another length)."""
+        return finite_vector(qpos, self.num_joints, name, "joint positions (rad, m for slides)")
 
     def fingertip_frames(self, qpos, wrist=None):
         """``(centers (F, 3) m, axes (F, 3))`` in the world frame: each fingertip's
@@ -152,6 +157,23 @@ class Hand:
         from jaxgrasp.hands._grasp import hand_grasp
 
         return hand_grasp(self, qpos, mesh, **kwargs)
+
+
+def finite_vector(value, n: int, name: str, what: str) -> np.ndarray:
+    """``value`` as ``(n,)`` finite float64 numbers; one line naming ``name`` otherwise
+    (strings, booleans, nested or ragged lists, NaN or infinity, another length)."""
+    q = as_float_array(name, value)
+    if q.shape != (n,):
+        raise GraspValueError(f"{name} must be {n} {what}, got shape {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise GraspValueError(f"{name}[{int(np.argmin(np.isfinite(q)))}] = {q[~np.isfinite(q)][0]} must be finite")
+    return q
+
+
+def _short(value) -> str:
+    """``repr(value)``, at most 80 characters (a message echoes a user's value, not a whole file)."""
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def _digest_into(h, obj) -> None:

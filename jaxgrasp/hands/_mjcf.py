@@ -1,7 +1,9 @@
 """A hand's kinematic tree, read from an MJCF file by MuJoCo.
 
-MuJoCo parses and compiles the file (defaults, includes, ``euler``/``axisangle`` frames are
-all resolved by its compiler); `read_mjcf` copies what the kinematics needs out of
+jaxgrasp reads the file and every file it names, inside its folder and checked
+(`jaxgrasp.hands._mjcf_files`); MuJoCo compiles the checked text, given every file as
+bytes, and opens none (defaults, ``euler``/``axisangle`` frames are all resolved by its
+compiler); `read_mjcf` copies what the kinematics needs out of
 the compiled ``mujoco.MjModel`` into a `KinematicTree` of NumPy arrays: for each
 body its parent, its frame in the parent's and its joints; for each joint its type, axis,
 anchor, limits and reference angle; for each geom its body, frame, type and size. MuJoCo
@@ -94,23 +96,34 @@ class KinematicTree:
         return self.geom_names.index(name)
 
 
-def read_mjcf(path) -> tuple[KinematicTree, object]:
+def read_mjcf(path, allowed_dirs=None) -> tuple[KinematicTree, object]:
     """``(tree, model)``: the `KinematicTree` of the MJCF file ``path`` and the
     compiled ``mujoco.MjModel`` it came from.
 
+    The file and what it names (includes, meshes) are read by jaxgrasp, inside the file's
+    folder or the folders ``allowed_dirs``, and checked (`jaxgrasp.hands._mjcf_files`);
+    MuJoCo gets their checked content and opens no file.
+
     Raises:
-        GraspValueError: MuJoCo is not installed, the file cannot be compiled, or a joint
-            is neither a hinge nor a slide (free and ball joints are not supported: give
-            the hand's pose as the wrist instead), or a joint has a ``qpos`` of other size.
+        GraspValueError: MuJoCo is not installed, a file outside the allowed folders, not a
+            regular file or over its cap, a model over the size caps, the file cannot be
+            compiled, or a joint is neither a hinge nor a slide (free and ball joints are
+            not supported: give the hand's pose as the wrist instead), or a joint has a
+            ``qpos`` of other size; one line.
     """
+    from jaxgrasp.hands._mjcf_files import checked_mjcf
+    from jaxgrasp.io import allowed_folders
+
     mujoco = require_mujoco()
     where = os.fspath(path)
-    if not os.path.isfile(where):
-        raise GraspValueError(f"mjcf: no such file {where!r}")
+    xml, assets, names = checked_mjcf(where, allowed_folders(allowed_dirs))
     try:
-        model = mujoco.MjModel.from_xml_path(where)
+        model = mujoco.MjModel.from_xml_string(xml, assets)
     except Exception as exc:  # MuJoCo raises ValueError with a multi-line message
-        raise GraspValueError(f"mjcf {where!r}: MuJoCo cannot compile it ({' '.join(str(exc).split())})") from None
+        text = " ".join(str(exc).split())
+        for vfs, name in names.items():  # the names written in the file, not the ones MuJoCo was given
+            text = text.replace(vfs, name)
+        raise GraspValueError(f"mjcf {where!r}: MuJoCo cannot compile it ({text})") from None
     return tree_of(model, where), model
 
 

@@ -36,6 +36,7 @@ __all__ = [
     "MAX_MESH_BYTES",
     "MESH_SUFFIXES",
     "allowed_folders",
+    "check_path_text",
     "check_mesh_suffix",
     "confine",
     "file_sha256",
@@ -76,6 +77,19 @@ def _mib(n: int) -> str:
     return f"{n / 2**20:.4g} MiB"
 
 
+def check_path_text(name, what: str = "file name") -> str:
+    """``name`` as text (``os.fspath``), refused in one line if it holds a NUL byte, which no
+    file name can hold (Python's own error, ``embedded null byte``, would be a traceback).
+
+    Raises:
+        GraspValueError: ``name`` holds a NUL byte (``what`` names it in the message).
+    """
+    text = os.fspath(name)
+    if ("\0" if isinstance(text, str) else b"\0") in text:
+        raise GraspValueError(f"{what} {text!r} holds a NUL byte, which no file name can hold; remove it")
+    return text
+
+
 def open_input(path: str | os.PathLike, cap: int, what: str = "file") -> BinaryIO:
     """Open an input file for reading in binary, after the checks of the module doc.
 
@@ -91,7 +105,7 @@ def open_input(path: str | os.PathLike, cap: int, what: str = "file") -> BinaryI
         GraspValueError: one line starting with the path: no such file, unreadable, not a
             regular file (naming what it is), or larger than ``cap``.
     """
-    path = os.fspath(path)
+    path = check_path_text(path, what)
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
@@ -157,7 +171,7 @@ def allowed_folders(allowed_dirs: Iterable[str | os.PathLike] | None) -> tuple[s
         allowed_dirs = [allowed_dirs]
     out = []
     for d in allowed_dirs:
-        real = os.path.realpath(os.fspath(d))
+        real = os.path.realpath(check_path_text(d, "allowed folder"))
         if not os.path.isdir(real):
             raise GraspValueError(f"allowed folder {os.fspath(d)!r} is not a folder")
         out.append(real)
@@ -197,6 +211,7 @@ def confine(name: str, base: str | os.PathLike, allowed: tuple[str, ...], owner:
         GraspValueError: the path (after symlinks) leaves ``base`` and every allowed
             folder, or its name does not end in a mesh suffix (`check_mesh_suffix`).
     """
+    check_path_text(name, "mesh path")
     check_mesh_suffix(name)
     real = os.path.realpath(os.path.join(os.fspath(base), name))
     folder = os.path.realpath(os.fspath(base))
