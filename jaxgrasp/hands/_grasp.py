@@ -39,9 +39,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.hands._kinematics import wrist_transform
-from jaxgrasp.model import DEFAULT_GRAVITY, Grasp, GraspValueError, check_grasp_inputs
+from jaxgrasp.model import DEFAULT_GRAVITY, Grasp, GraspValueError, as_float_array, check_grasp_inputs
 
-__all__ = ["HandGrasp", "hand_grasp", "contact_grasp", "Material", "material", "DEFAULT_MAX_TILT"]
+__all__ = ["HandGrasp", "hand_grasp", "contact_grasp", "Material", "material", "DEFAULT_MAX_TILT", "finite_vector"]
 
 DEFAULT_MAX_TILT = 0.5 * math.pi
 """Largest fingertip tilt, rad, at which a fingertip is still a contact (the cap's edge)."""
@@ -174,14 +174,23 @@ class HandGrasp:
         return (np.asarray(points) - np.asarray(t)) @ np.asarray(rot)
 
 
+def finite_vector(value, n: int, name: str, what: str) -> np.ndarray:
+    """``value`` as ``(n,)`` finite float64 numbers; one line naming ``name`` otherwise
+    (strings, booleans, nested or ragged lists, NaN or infinity, another length)."""
+    q = as_float_array(name, value)
+    if q.shape != (n,):
+        raise GraspValueError(f"{name} must be {n} {what}, got shape {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise GraspValueError(f"{name}[{int(np.argmin(np.isfinite(q)))}] = {q[~np.isfinite(q)][0]} must be finite")
+    return q
+
+
 def _pose(value, name: str):
     """A pose ``(6,)`` float64 (``None``: zeros); a one-line error for anything else."""
     if value is None:
         return jnp.zeros(6)
     if isinstance(value, jax.core.Tracer):
         return value
-    from jaxgrasp.hands._hand import finite_vector
-
     return jnp.asarray(finite_vector(value, 6, name, "finite numbers (translation m, rotation vector rad)"))
 
 

@@ -19,12 +19,13 @@ from typing import Sequence
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrasp.hands._grasp import finite_vector
 from jaxgrasp.hands._kinematics import body_frames, cap_offsets, geom_frames
 from jaxgrasp.hands._links import link_depths, link_samples
 from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER, SPHERE, KinematicTree, read_mjcf
-from jaxgrasp.model import GraspValueError, as_float_array
+from jaxgrasp.model import GraspValueError
 
-__all__ = ["Hand", "finite_vector"]
+__all__ = ["Hand"]
 
 _LINK_TYPES = (SPHERE, CAPSULE, CYLINDER, BOX)  # geoms whose penetration tune_hand keeps out of the object
 
@@ -157,17 +158,6 @@ class Hand:
         from jaxgrasp.hands._grasp import hand_grasp
 
         return hand_grasp(self, qpos, mesh, **kwargs)
-
-
-def finite_vector(value, n: int, name: str, what: str) -> np.ndarray:
-    """``value`` as ``(n,)`` finite float64 numbers; one line naming ``name`` otherwise
-    (strings, booleans, nested or ragged lists, NaN or infinity, another length)."""
-    q = as_float_array(name, value)
-    if q.shape != (n,):
-        raise GraspValueError(f"{name} must be {n} {what}, got shape {q.shape}")
-    if not np.all(np.isfinite(q)):
-        raise GraspValueError(f"{name}[{int(np.argmin(np.isfinite(q)))}] = {q[~np.isfinite(q)][0]} must be finite")
-    return q
 
 
 def _short(value) -> str:

@@ -46,8 +46,17 @@ import xml.etree.ElementTree as ET
 from jaxgrasp.io import check_path_text, read_input
 from jaxgrasp.model import GraspValueError
 
-__all__ = ["checked_mjcf", "MAX_MJCF_BYTES", "MAX_HAND_ASSET_BYTES", "MAX_HAND_FILES_BYTES", "MAX_MJCF_DEPTH",
-           "MAX_MJCF_ELEMENTS", "MAX_MJCF_BODIES", "MAX_MJCF_USER", "MAX_BUILTIN_PARAM"]
+__all__ = [
+    "MAX_BUILTIN_PARAM",
+    "MAX_HAND_ASSET_BYTES",
+    "MAX_HAND_FILES_BYTES",
+    "MAX_MJCF_BODIES",
+    "MAX_MJCF_BYTES",
+    "MAX_MJCF_DEPTH",
+    "MAX_MJCF_ELEMENTS",
+    "MAX_MJCF_USER",
+    "checked_mjcf",
+]
 
 MAX_MJCF_BYTES = 16 * 2**20
 """Largest XML file of a hand read (the main file or an include), bytes (16 MiB)."""
@@ -62,8 +71,8 @@ MAX_MJCF_ELEMENTS = 100_000
 """Most elements of a hand, replicates multiplied out (the Shadow hand has about 600)."""
 MAX_MJCF_BODIES = 2_000
 """Most bodies of a hand, replicates and flexcomp counts multiplied out (the Shadow hand
-has 31). MuJoCo's compile time grows faster than the bodies: 0.6 s for 2,000 bodies with a
-joint each, 26 s for 10,000 (2 cores, MuJoCo 4.0)."""
+has 31; MuJoCo's compiling time grows more than linearly with the bodies, see
+``docs/guide/hands.md``)."""
 MAX_MJCF_USER = 1_000
 """Most keyframes (``<size nkey>``), user numbers per element (``nuser_*``), and numbers
 of a ``<custom><numeric size>``."""
@@ -307,9 +316,8 @@ def _limit_size(census: _Census, files: _Files) -> None:
         for key in list(el.attrib):
             if key in _SIM_MEMORY and el.tag == "size":
                 del el.attrib[key]
-            elif key in ("nkey", "size") or key.startswith("nuser_"):
-                if max(_whole(el, key, files)) > MAX_MJCF_USER:
-                    files.refuse(f"<{el.tag}> {key} is above {MAX_MJCF_USER}")
+            elif (key in ("nkey", "size") or key.startswith("nuser_")) and max(_whole(el, key, files)) > MAX_MJCF_USER:
+                files.refuse(f"<{el.tag}> {key} is above {MAX_MJCF_USER}")
 
 
 def _asset(el, src: str, meshdir: str, texturedir: str, strip: bool, files: _Files) -> None:
