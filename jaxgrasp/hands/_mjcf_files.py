@@ -60,11 +60,12 @@ __all__ = [
 
 MAX_MJCF_BYTES = 16 * 2**20
 """Largest XML file of a hand read (the main file or an include), bytes (16 MiB)."""
-MAX_HAND_ASSET_BYTES = 64 * 2**20
-"""Largest mesh, skin or flex file of a hand read, bytes (64 MiB: a binary STL of 1.3
-million triangles)."""
-MAX_HAND_FILES_BYTES = 256 * 2**20
-"""Most bytes read for one hand, all its files together (256 MiB)."""
+MAX_HAND_ASSET_BYTES = 32 * 2**20
+"""Largest mesh, skin or flex file of a hand read, bytes (32 MiB: an OBJ of about 800,000
+triangles; MuJoCo reads at most 200,000 from an STL)."""
+MAX_HAND_FILES_BYTES = 64 * 2**20
+"""Most bytes read for one hand, all its files together (64 MiB: what MuJoCo compiles
+within a minute on a slow machine, see ``docs/guide/hands.md``)."""
 MAX_MJCF_DEPTH = 100
 """Deepest nesting of elements (the Shadow hand's is 14)."""
 MAX_MJCF_ELEMENTS = 100_000
@@ -146,10 +147,11 @@ def checked_mjcf(path, allowed=()) -> tuple[str, dict, dict]:
 
 def _read(files: _Files, where: str, what: str, cap: int) -> bytes:
     """The bytes of the regular file ``where`` (`jaxgrasp.io.read_input`), counted in the total."""
-    raw = read_input(where, min(cap, MAX_HAND_FILES_BYTES - files.total + 1), what)
+    raw = read_input(where, cap, what)
     files.total += len(raw)
     if files.total > MAX_HAND_FILES_BYTES:
-        files.refuse(f"its files hold more than the {MAX_HAND_FILES_BYTES / 2**20:g} MiB read at most for a hand")
+        files.refuse(f"its files hold more than the {MAX_HAND_FILES_BYTES / 2**20:g} MiB read at most for one hand "
+                     "(all files together)")
     return raw
 
 

@@ -220,7 +220,7 @@ def test_allow_dir_allows_a_folder_outside(dirs):
         jaxgrasp.Hand.from_mjcf(path, TIPS, allowed_dirs=[shared])
 
 
-def test_over_size_files_are_refused_before_reading(dirs):
+def test_over_size_files_are_refused_before_reading(dirs, monkeypatch):
     """Sparse files over the caps (nothing of them is read: the size is the file's)."""
     hand, _ = dirs
     big = hand / "big.xml"
@@ -234,7 +234,11 @@ def test_over_size_files_are_refused_before_reading(dirs):
     (hand / "hand.xml").write_text(hand_xml(MESH.format("big.stl"), MESH_GEOM))
     with pytest.raises(GraspValueError) as info:
         jaxgrasp.Hand.from_mjcf(hand / "hand.xml", TIPS)
-    assert "more than the 64 MiB read at most" in one_line(info)
+    assert "more than the 32 MiB read at most" in one_line(info)
+    monkeypatch.setattr(_mjcf_files, "MAX_HAND_FILES_BYTES", 40_000)  # the Shadow hand's files: 78 kB
+    with pytest.raises(GraspValueError) as info:
+        jaxgrasp.Hand.from_mjcf(SHADOW, ["robot0:C_ffdistal", "robot0:C_thdistal"])
+    assert "more than the 0.038147 MiB read at most for one hand (all files together)" in one_line(info)
 
 
 def test_neutralised_bombs_still_load_at_once(dirs):
