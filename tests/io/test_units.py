@@ -20,8 +20,8 @@ import trimesh
 
 import jaxgrasp
 from jaxgrasp import GraspValueError, load_dataset
-from jaxgrasp.model import MAX_CONTACT_DISTANCE, MAX_FINGERTIP_RADIUS, MAX_OBJECT_SIZE, CheckReason
 from jaxgrasp.io import grasp_from_dict
+from jaxgrasp.model import MAX_CONTACT_DISTANCE, MAX_FINGERTIP_RADIUS, MAX_OBJECT_SIZE, CheckReason
 from jaxgrasp.planning import check_plan
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
