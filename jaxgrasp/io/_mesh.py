@@ -23,13 +23,27 @@ import os
 import numpy as np
 
 from jaxgrasp.io._inputs import MAX_MESH_BYTES, allowed_folders, check_mesh_suffix, confine, read_input
-from jaxgrasp.model import COINCIDENT_DISTANCE, DEFAULT_GRAVITY, LENGTH_UNITS, MAX_COORDINATE, GraspValueError
+from jaxgrasp.model import (
+    COINCIDENT_DISTANCE,
+    DEFAULT_GRAVITY,
+    LENGTH_UNITS,
+    MAX_COORDINATE,
+    MAX_OBJECT_SIZE,
+    GraspValueError,
+)
 from jaxgrasp.surface import DEFAULT_TOLERANCE, MeshGrasp, grasp_on_mesh
 
-__all__ = ["MeshReader", "from_mesh", "load_mesh", "read_mesh"]
+__all__ = ["MeshReader", "from_mesh", "load_mesh", "read_mesh", "PYTHON_UNITS", "FILE_UNITS"]
+
+PYTHON_UNITS = 'pass units="{}" (in a grasp or hand file: units = "{}" in [object])'
+"""How to give a mesh's units, for `load_mesh`'s message of a mesh too large to be
+grasped (`MAX_OBJECT_SIZE`): ``PYTHON_UNITS.format(unit, unit)``."""
+
+FILE_UNITS = 'add units = "{}" to [object]'
+"""The same for a mesh a grasp file or a dataset names (`MeshReader`)."""
 
 
-def load_mesh(mesh, units: str = "m"):
+def load_mesh(mesh, units: str = "m", *, how: str = PYTHON_UNITS):
     """A checked ``trimesh.Trimesh`` in metres from a ``Trimesh`` or a mesh file path.
 
     Args:
@@ -39,6 +53,8 @@ def load_mesh(mesh, units: str = "m"):
             `MAX_MESH_BYTES` bytes, a regular file. It is parsed
             from its bytes as the format its name says, so it cannot reach other files.
         units: the length unit of the vertices: ``"m"``, ``"cm"`` or ``"mm"``.
+        how: how the caller gives ``units``, for the message of a mesh too large to be
+            grasped: a format string of the unit (twice), such as `PYTHON_UNITS`.
 
     Returns:
         A new mesh, vertices in m (the input is not changed), faces turned outward when
@@ -48,17 +64,18 @@ def load_mesh(mesh, units: str = "m"):
         GraspValueError: unknown units, a file that is not a mesh format, too large, not a
             regular file or unreadable, or a degenerate mesh (no faces, NaN or infinite
             vertex coordinates, a coordinate beyond `MAX_COORDINATE`, no area, a
-            closed mesh enclosing no volume or with faces not consistently oriented); one
-            line.
+            closed mesh enclosing no volume or with faces not consistently oriented), or
+            one more than `MAX_OBJECT_SIZE` across (vertices in mm read as metres: the
+            message names the fix, ``how``); one line.
     """
     import trimesh
 
     _check_units(units)
     if isinstance(mesh, (str, os.PathLike)):
-        return read_mesh(mesh, units)[0]
+        return read_mesh(mesh, units, how=how)[0]
     if not isinstance(mesh, trimesh.Trimesh):
         raise GraspValueError(f"mesh must be a trimesh.Trimesh or a file path, got {type(mesh).__name__}")
-    return _checked(mesh, "mesh", units)
+    return _checked(mesh, "mesh", units, how=how)
 
 
 def _check_units(units: str) -> None:
@@ -66,12 +83,13 @@ def _check_units(units: str) -> None:
         raise GraspValueError(f"units = {units!r} is not a length unit; use one of {', '.join(LENGTH_UNITS)}")
 
 
-def read_mesh(path: str | os.PathLike, units: str = "m", *, real: str | os.PathLike | None = None):
+def read_mesh(path: str | os.PathLike, units: str = "m", *, real: str | os.PathLike | None = None,
+              how: str = PYTHON_UNITS):
     """``(mesh, sha256)``: the checked mesh (metres, `load_mesh`) of the file ``path``
     and the SHA-256 (hex) of the bytes it was parsed from.
 
     ``real``: where to read it from, when the caller has resolved ``path`` already
-    (`confine`); messages name ``path``.
+    (`confine`); messages name ``path``. ``how``: as for `load_mesh`.
     """
     import trimesh
 
@@ -87,13 +105,14 @@ def read_mesh(path: str | os.PathLike, units: str = "m", *, real: str | os.PathL
         loaded = trimesh.load(io.BytesIO(raw), file_type=fmt, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many kinds for unreadable files
         raise GraspValueError(f"{where}: cannot read it as a mesh ({' '.join(str(exc).split()) or type(exc).__name__})") from None
-    return _checked(loaded, where, units, process=True), hashlib.sha256(raw).hexdigest()
+    return _checked(loaded, where, units, process=True, how=how), hashlib.sha256(raw).hexdigest()
 
 
-def _checked(loaded, where: str, units: str, process: bool = False):
+def _checked(loaded, where: str, units: str, process: bool = False, how: str = PYTHON_UNITS):
     """A copy of ``loaded`` in metres whose vertices passed `_check_vertices` and
-    surface `_check_surface`; with ``process``, its duplicate vertices merged as
-    ``trimesh.load(..., process=True)`` does (in the file's units, as that does)."""
+    `_check_extent`, and surface `_check_surface`; with ``process``, its duplicate
+    vertices merged as ``trimesh.load(..., process=True)`` does (in the file's units, as
+    that does)."""
     import trimesh
 
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
@@ -103,8 +122,22 @@ def _checked(loaded, where: str, units: str, process: bool = False):
     if process:
         out.process()
     out.apply_scale(LENGTH_UNITS[units])
+    _check_extent(out, where, units, how)
     _check_surface(out, where)
     return out
+
+
+def _check_extent(mesh, where: str, units: str, how: str) -> None:
+    """Reject a mesh (in metres) more than `MAX_OBJECT_SIZE` across: no fingers grasp it, and
+    it is nearly always one whose vertices are in mm read in a larger unit; the message
+    names the fix (``how``, formatted with ``"mm"``)."""
+    size = float(np.ptp(mesh.vertices, axis=0).max())
+    if size <= MAX_OBJECT_SIZE:
+        return
+    text = f"{where} is {size:.4g} m across, larger than an object fingers grasp (at most {MAX_OBJECT_SIZE:g} m)"
+    if units == "mm":
+        raise GraspValueError(f"{text}, with its vertices in mm: is it the object, at its size?")
+    raise GraspValueError(f"{text}: if its vertices are in mm, {how.format('mm', 'mm')}")
 
 
 def _check_vertices(vertices: np.ndarray, where: str, metres_per_unit: float) -> None:
@@ -156,7 +189,7 @@ class MeshReader:
         key = (str(real), units)
         if key not in self._kept:
             try:
-                mesh, sha = read_mesh(shown, units, real=real)
+                mesh, sha = read_mesh(shown, units, real=real, how=FILE_UNITS)
                 if self.sha256.setdefault(str(real), sha) != sha:
                     raise GraspValueError(f"mesh {shown!r} changed while the {self.owner} was read")
                 self._kept[key] = mesh

@@ -40,7 +40,14 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
         rotation_matrix,
         slip_torsion,
     )
-    from jaxgrasp.model._units import LENGTH_UNITS, MJ_TO_J, M_TO_MM
+    from jaxgrasp.model._units import (
+        LENGTH_UNITS,
+        MAX_CONTACT_DISTANCE,
+        MAX_FINGERTIP_RADIUS,
+        MAX_OBJECT_SIZE,
+        MJ_TO_J,
+        M_TO_MM,
+    )
     from jaxgrasp.model._validation import (
         COINCIDENT_DISTANCE,
         MAX_COORDINATE,

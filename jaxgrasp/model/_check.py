@@ -26,6 +26,7 @@ import numpy as np
 
 from jaxgrasp.model._fields import FIELDS
 from jaxgrasp.model._grasp import Grasp
+from jaxgrasp.model._units import MAX_CONTACT_DISTANCE, MAX_FINGERTIP_RADIUS
 from jaxgrasp.model._validation import (
     COINCIDENT_DISTANCE,
     MAX_COORDINATE,
@@ -60,6 +61,10 @@ class CheckReason(Coded):
         "(sum of pi * young_modulus * initial_deformation^2 over the active contacts, N)"
     )
     FAR = 13, f"a position's coordinates must be at most {MAX_COORDINATE:g} m from the centre of mass"
+    SIZE = 14, (
+        f"radius must be at most {MAX_FINGERTIP_RADIUS:g} m and a contact at most {MAX_CONTACT_DISTANCE:g} m from "
+        "the centre of mass (larger lengths look like millimetres: write them in metres)"
+    )
 
 
 @jax.tree_util.register_dataclass
@@ -135,6 +140,7 @@ def _rules(g: Grasp, n: int) -> list:
         (CheckReason.COINCIDENT, jnp.any(close, -2)),  # the later contact of the pair
         (CheckReason.OVERLOAD, ~(weight <= MAX_LOAD_RATIO * squeeze)),
         (CheckReason.FAR, ~jnp.all(jnp.abs(pos) <= MAX_COORDINATE, -1)),
+        (CheckReason.SIZE, ~((r <= MAX_FINGERTIP_RADIUS) & (jnp.sum(pos * pos, -1) <= MAX_CONTACT_DISTANCE**2))),
     ]
 
 

@@ -16,6 +16,7 @@ import jax
 import numpy as np
 
 from jaxgrasp.model._fields import FIELD, FIELDS, NAMES, PER_CONTACT
+from jaxgrasp.model._units import LENGTH_UNITS, MAX_CONTACT_DISTANCE, MAX_FINGERTIP_RADIUS
 
 __all__ = [
     "GraspValueError",
@@ -159,9 +160,10 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
 
     Keyword arguments are the [`Grasp`][jaxgrasp.Grasp] fields by name, with the units, shapes and
     ranges of `jaxgrasp.model.FIELDS`: ``positions`` ``(N, 3)`` m, each coordinate at
-    most `MAX_COORDINATE` in magnitude; ``normals``
+    most `MAX_COORDINATE` in magnitude and at most `MAX_CONTACT_DISTANCE` from the
+    origin (the centre of mass); ``normals``
     ``(N, 3)`` (any non-zero length); ``initial_deformation`` m in ``(0, radius)``,
-    ``radius`` m, ``young_modulus`` Pa, ``friction``, ``max_force`` N, each a scalar or
+    ``radius`` m (at most `MAX_FINGERTIP_RADIUS`), ``young_modulus`` Pa, ``friction``, ``max_force`` N, each a scalar or
     ``(N,)`` and ``> 0``, friction at most `MAX_FRICTION`; ``mass`` kg ``>= 0`` and
     ``gravity`` ``(3,)`` m/s^2 may be left out (defaults ``0`` and ``(0, 0, -9.81)``), the
     weight at most `MAX_LOAD_RATIO` times the initial squeeze; ``active``, optional, ``None`` or ``(N,)``
@@ -174,7 +176,8 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
 
     Raises:
         GraspValueError: a field is unknown, missing, not numeric, has the wrong shape, is
-            not finite or breaks a physical rule; or a value is a JAX tracer (use
+            not finite or breaks a physical rule (a radius or a position too large for a
+            fingertip grasp: lengths written in mm, named as such); or a value is a JAX tracer (use
             ``Grasp(...)`` or ``grasp.replace(...)`` inside ``jit``).
     """
     active = given.pop("active", None)
@@ -199,6 +202,7 @@ def check_grasp_inputs(**given) -> dict[str, np.ndarray]:
     _check_distinct(arrs["positions"] if mask is None else arrs["positions"][mask])
     _check_load(out, arrs, mask)
     _check_reach(arrs["positions"])
+    _check_size(arrs)
     out.update(positions=arrs["positions"], mass=arrs["mass"], gravity=arrs["gravity"])
     checked = {name: out[name] for name in NAMES}
     return checked if mask is None else {**checked, "active": mask}
@@ -229,6 +233,7 @@ def check_corners(fields: Mapping[str, Any], ends: Mapping[str, tuple[Any, Any]]
     of `MONOTONE`, in the same direction at every contact: a range rule (``> 0``,
     ``>= 0``) breaks first at the lower end, ``friction <= MAX_FRICTION`` at the upper one,
     ``initial_deformation < radius`` at the upper deformation and the lower radius,
+    ``radius <= MAX_FINGERTIP_RADIUS`` at the upper radius,
     ``E dr^3 >= MIN_ENERGY_SCALE`` at the lower modulus and deformation, and the load rule
     ``mass |g| <= MAX_LOAD_RATIO sum pi E dr^2`` at the upper mass and the lower modulus
     and deformation (products and sums of non-negative floats keep that order: rounding
@@ -350,7 +355,35 @@ def _check_reach(pos: np.ndarray) -> None:
         i = int(far[0])
         raise GraspValueError(
             f"positions[{i}] = {format_value(pos[i])} m: a coordinate beyond {MAX_COORDINATE:g} m from the centre "
-            f"of mass (past it float64 no longer resolves contacts {COINCIDENT_DISTANCE:g} m apart)"
+            f"of mass (past it float64 no longer resolves contacts {COINCIDENT_DISTANCE:g} m apart); "
+            f"if it is in mm, write it in metres: {format_value(pos[i] * LENGTH_UNITS['mm'])}"
+        )
+
+
+def _check_size(arrs: dict) -> None:
+    """Every radius at most `MAX_FINGERTIP_RADIUS`, every contact (active or not) within
+    `MAX_CONTACT_DISTANCE` of the centre of mass: larger ones are lengths in mm."""
+    radius = arrs["radius"]
+    flat = np.atleast_1d(radius)
+    big = np.flatnonzero(~(flat <= MAX_FINGERTIP_RADIUS))
+    if big.size:
+        i = int(big[0])
+        label = _index_name("radius", radius.ndim, i)
+        raise GraspValueError(
+            f"{label} = {format_value(flat[i])} m is larger than any fingertip (at most {MAX_FINGERTIP_RADIUS:g} m): "
+            f"the grasp's lengths look like millimetres; write every length in metres ({label} = "
+            f"{format_value(flat[i] * LENGTH_UNITS['mm'])}; positions and initial_deformation likewise)"
+        )
+    pos = arrs["positions"]
+    with np.errstate(over="ignore"):
+        dist = np.sqrt(np.sum(pos * pos, axis=-1))
+    far = np.flatnonzero(~(dist <= MAX_CONTACT_DISTANCE))
+    if far.size:
+        i = int(far[0])
+        raise GraspValueError(
+            f"positions[{i}] = {format_value(pos[i])} m is {dist[i]:.4g} m from the centre of mass, farther than a "
+            f"fingertip grasp reaches (at most {MAX_CONTACT_DISTANCE:g} m): the positions look like millimetres; "
+            f"write them in metres ({format_value(pos[i] * LENGTH_UNITS['mm'])})"
         )
 
 
@@ -379,7 +412,7 @@ def _check_deformation(out: dict, arrs: dict) -> None:
             rlabel = _index_name("radius", arrs["radius"].ndim, i)
             raise GraspValueError(
                 f"{label} = {format_value(dr_n[i])} m must be in "
-                f"(0, {rlabel} = {format_value(radius_n[i])} m)"
+                f"(0, {rlabel} = {format_value(radius_n[i])} m)" + _mm_deformation(dr_n[i], radius_n[i])
             )
     with np.errstate(under="ignore", over="ignore"):
         energy = e_n * dr_n**3
@@ -390,6 +423,16 @@ def _check_deformation(out: dict, arrs: dict) -> None:
                 f"{format_value(e_n[i])} Pa * ({format_value(dr_n[i])} m)^3 is below "
                 f"{MIN_ENERGY_SCALE:g} J, too small to evaluate in floating point"
             )
+
+
+def _mm_deformation(dr: float, radius: float) -> str:
+    """The fix of a deformation beyond the radius that is one in mm (``2`` for 2 mm: more
+    than any fingertip's radius, `MAX_FINGERTIP_RADIUS`, but below this one's in mm),
+    else ``""``."""
+    in_m = dr * LENGTH_UNITS["mm"]
+    if dr > MAX_FINGERTIP_RADIUS and in_m < radius:
+        return f": it looks like millimetres; write it in metres ({format_value(in_m)})"
+    return ""
 
 
 def _unit_normals(nrm: np.ndarray) -> np.ndarray:

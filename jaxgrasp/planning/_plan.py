@@ -239,7 +239,7 @@ def setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_mod
     """The checked object and fingertips."""
     import os
 
-    surface_mesh = load_mesh(mesh, units)
+    surface_mesh = load_mesh(mesh, units, how='pass --units {} (Python: units="{}")')  # a mm mesh read as m: named
     if center_of_mass is None and not surface_mesh.is_watertight:
         where = f"mesh {os.fspath(mesh)!r}" if isinstance(mesh, (str, os.PathLike)) else "the mesh"
         raise GraspValueError(

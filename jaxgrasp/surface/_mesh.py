@@ -210,12 +210,15 @@ _UNIT_MISTAKES = (
            + _METRES),
     (1e-2, "the contact positions lie on the surface when read as centimetres: write them in metres"
            + _METRES),
-    (1e3, 'the contacts lie on the mesh 1000 times larger, as if its vertices were in mm: set units = "mm"'),
-    (1e2, 'the contacts lie on the mesh 100 times larger, as if its vertices were in cm: set units = "cm"'),
+    (1e3, 'the contacts lie on the mesh shrunk 1000 times, as if its vertices were in mm: '
+          'add units = "mm" to [object] (Python: units="mm"); positions stay in metres'),
+    (1e2, 'the contacts lie on the mesh shrunk 100 times, as if its vertices were in cm: '
+          'add units = "cm" to [object] (Python: units="cm"); positions stay in metres'),
 )
 """Unit mistakes `snap_to_surface` recognises: ``(factor, what to say)`` where every
 contact point times ``factor`` lies on the surface (points typed in mm or cm; a mesh whose
-``units`` do not match its vertices, which scales the mesh instead)."""
+``units`` do not match its vertices, which scales the mesh instead), the scaled points
+spread out (`_shrunk`)."""
 
 
 def _unit_hint(tri: np.ndarray, points, tolerance: float) -> str:
@@ -223,6 +226,8 @@ def _unit_hint(tri: np.ndarray, points, tolerance: float) -> str:
     of them on it (`_UNIT_MISTAKES`), or the general question."""
     pts = np.asarray(points, dtype=np.float64)
     for factor, text in _UNIT_MISTAKES:
+        if _shrunk(pts * factor, tolerance * max(factor, 1.0)):
+            continue
         near = [
             np.linalg.norm(closest_on_triangles(p * factor, tri, xp=np) - p * factor, axis=1).min()
             for p in pts
@@ -230,6 +235,15 @@ def _unit_hint(tri: np.ndarray, points, tolerance: float) -> str:
         if max(near) <= tolerance * max(factor, 1.0):
             return text
     return "is it in the mesh's frame and units?"
+
+
+def _shrunk(scaled: np.ndarray, tolerance: float) -> bool:
+    """Whether the scaled points ``(N, 3)`` lie within ``tolerance`` of each other along each
+    axis, so that they tell nothing of a unit: points in
+    metres read as mm all fall near the origin, and an origin on the surface (a mesh's
+    bottom face, as in ``examples/block.stl``) would then say that positions already in
+    metres are in mm. Only points that stay apart tell a unit."""
+    return bool(np.ptp(scaled, axis=0).max() <= tolerance)
 
 
 def _vec_mm(p) -> str:

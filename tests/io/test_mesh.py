@@ -188,7 +188,8 @@ def test_errors_are_one_line(make, kwargs, message):
     [
         (100.0, "mm", POINTS * 1e3, "when read as millimetres: write them in metres"),
         (10.0, "cm", POINTS * 1e2, "when read as centimetres: write them in metres"),
-        (100.0, "m", POINTS, 'as if its vertices were in mm: set units = "mm"'),
+        # a 4 mm cube read as metres: 4 m, under MAX_OBJECT_SIZE (a larger one is refused on its size)
+        (4.0, "m", POINTS * 0.04, 'as if its vertices were in mm: add units = "mm"'),
         (0.1, "m", POINTS + [0.01, 0.0, 0.0], "is it in the mesh's frame and units?"),  # no unit explains it
     ],
     ids=["points-in-mm", "points-in-cm", "mesh-in-mm-read-as-m", "elsewhere"],

@@ -42,6 +42,8 @@ BROKEN = {  # name: (grasp, the rule it breaks, the contact, -1 for a rule of th
     "weight beyond the bound": (CUBE.replace(mass=2 * MAX_LOAD_RATIO * SQUEEZE / 9.81), CheckReason.OVERLOAD, -1),
     "contact a kilometre away": (CUBE.replace(positions=CUBE.positions.at[1, 1].set(1.5 * MAX_COORDINATE)),
                                  CheckReason.FAR, 1),
+    "fingertip radius in mm": (CUBE.replace(radius=jnp.array([0.025, 25.0])), CheckReason.SIZE, 1),
+    "positions in mm": (CUBE.replace(positions=CUBE.positions * 1e3), CheckReason.SIZE, 0),
 }
 
 
