@@ -1,0 +1,144 @@
+"""How a picture draws a mesh: decimated for drawing, its sharp edges, its outline, its shading.
+
+The pictures draw with matplotlib, whose 3-D polygons are sorted and filled one by one in
+Python: a scanned or CAD object of a million faces would take minutes. So a picture draws
+`drawing_mesh`, the mesh decimated to at most `DRAW_FACES` faces by vertex clustering;
+every computation (contacts, closest points, the ghost's pose, the GLB) keeps the mesh
+itself. On it, the picture draws
+
+* `feature_edges`: where faces meet at more than 20 degrees, and open borders (a box's
+  edges; none on a smooth ball);
+* `silhouette_edges`: the outline as the camera sees it, the edges between a face turned
+  to the camera and one turned away (a smooth ball's rim, a bottle's sides);
+* the faces lit by a light near the camera (`shaded_colors`), both sides alike, so that
+  a smooth surface shows its curvature and the result does not depend on the faces'
+  winding.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["DRAW_FACES", "drawing_mesh", "feature_edges", "silhouette_edges", "shaded_colors", "light_direction"]
+
+DRAW_FACES = 20_000
+"""The most faces of one mesh (the object, and again its ghost) that a picture hands to
+matplotlib: a mesh with more is drawn decimated to at most this many (`drawing_mesh`).
+Enough to show a scanned object's shape at the picture's size (about 1000 pixels across),
+few enough that drawing takes seconds."""
+
+_SHARP_DEG = 20.0  # faces meeting at more than this draw their common edge
+
+
+def drawing_mesh(mesh, budget: int = DRAW_FACES):
+    """``mesh`` itself when it has at most ``budget`` faces, else a new ``trimesh.Trimesh``
+    decimated for drawing to at most ``budget`` faces.
+
+    Vertex clustering: the vertices in each cell of a cubic grid merge into one, placed
+    where it best keeps the planes of the faces around it (the least-squares point of
+    their planes, weighted by area, within the cell; Lindstrom 2000), so that a box's
+    edges and corners stay sharp; faces whose corners merged vanish. The cell grows
+    until at most ``budget`` faces are left. For drawing only: the shape moves by up to
+    a cell's diagonal.
+    """
+    import trimesh
+
+    faces = np.asarray(mesh.faces)
+    if len(faces) <= budget:
+        return mesh
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    lo = vertices.min(axis=0)
+    cell = np.sqrt(3.0 * float(mesh.area) / budget)  # a closed surface keeps about 3 A / cell^2 faces
+    while True:
+        cells, cluster, kept = _cluster(vertices, faces, lo, cell)
+        if len(kept) <= budget:
+            break
+        cell *= 1.05 * np.sqrt(len(kept) / budget)
+    points = _placed(vertices, faces, cluster, len(cells), lo + cells * cell, cell)
+    return trimesh.Trimesh(points, kept, process=False)
+
+
+def _cluster(vertices, faces, lo, cell):
+    """The occupied cells ``(K, 3)`` (integer grid indices), each vertex's cell
+    ``(V,)`` and the faces left ``(F', 3)`` between cells (no two corners in one cell, each
+    set of three corners once)."""
+    grid = np.floor((vertices - lo) / cell).astype(np.int64)
+    shape = tuple(grid.max(axis=0) + 1)
+    keys, cluster = np.unique(np.ravel_multi_index(grid.T, shape), return_inverse=True)
+    cells, cluster = np.stack(np.unravel_index(keys, shape), axis=-1), cluster.reshape(-1)
+    f = cluster[faces]
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+    s, k = np.sort(f, axis=1), np.int64(len(cells))
+    _, first = np.unique((s[:, 0] * k + s[:, 1]) * k + s[:, 2], return_index=True)
+    return cells, cluster, f[np.sort(first)]
+
+
+def _placed(vertices, faces, cluster, count, cell_lo, cell):
+    """``(K, 3)``: each cluster's point, the least-squares point of the planes of the faces
+    at its vertices (``A x = -b`` with ``A = sum w n n^T``, ``b = sum w d n``, ``w`` the
+    area), solved about the vertices' mean with small eigenvalues dropped (a flat patch
+    fixes only the normal direction) and kept inside the cell."""
+    tri = vertices[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    twice = np.linalg.norm(cross, axis=1)
+    n = cross / np.where(twice > 0, twice, 1.0)[:, None]
+    w = 0.5 * twice
+    d = -np.einsum("fi,fi->f", n, tri[:, 0])
+    owner = cluster[faces].reshape(-1)  # each face counts at the cluster of each corner
+    per = lambda x: np.bincount(owner, weights=np.repeat(x, 3), minlength=count)  # noqa: E731
+    a = np.stack([np.stack([per(w * n[:, i] * n[:, j]) for j in range(3)], -1) for i in range(3)], -2)
+    b = np.stack([per(w * d * n[:, i]) for i in range(3)], -1)
+    counts = np.bincount(cluster, minlength=count)[:, None]
+    mean = np.stack([np.bincount(cluster, weights=vertices[:, i], minlength=count) for i in range(3)], -1) / counts
+    val, vec = np.linalg.eigh(a)
+    inv = np.where(val > 1e-3 * val[:, -1:], 1.0 / np.where(val > 0, val, 1.0), 0.0)
+    rhs = -b - np.einsum("kij,kj->ki", a, mean)
+    step = np.einsum("kij,kj->ki", vec, inv * np.einsum("kji,kj->ki", vec, rhs))  # V diag(1/val) V^T rhs
+    return np.clip(mean + step, cell_lo, cell_lo + cell)
+
+
+def feature_edges(mesh, angle_deg: float = _SHARP_DEG) -> np.ndarray:
+    """``(E, 2, 3)`` m: the edges where faces meet at more than ``angle_deg``, and open
+    borders (empty for a closed smooth mesh)."""
+    import trimesh
+
+    sharp = mesh.face_adjacency_edges[mesh.face_adjacency_angles > np.radians(angle_deg)]
+    border = mesh.edges_sorted[trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1)]
+    edges = np.concatenate([sharp.reshape(-1, 2), border.reshape(-1, 2)]).astype(int)
+    return np.asarray(mesh.vertices)[edges].reshape(-1, 2, 3)
+
+
+def silhouette_edges(mesh, projection) -> np.ndarray:
+    """``(E, 2, 3)`` m: the outline of ``mesh`` seen through ``projection`` (a matplotlib 3-D
+    axes' ``get_proj()``, ``(4, 4)``): the edges whose two faces lie on the same side of
+    the edge on the screen (one faces the camera, the other away). Independent of the
+    faces' winding."""
+    from mpl_toolkits.mplot3d import proj3d
+
+    v = np.asarray(mesh.vertices)
+    xs, ys, _ = proj3d.proj_transform(v[:, 0], v[:, 1], v[:, 2], projection)
+    p = np.stack([xs, ys], axis=-1)
+    edge, other = mesh.face_adjacency_edges, mesh.face_adjacency_unshared
+    a, ab = p[edge[:, 0]], p[edge[:, 1]] - p[edge[:, 0]]
+    side = [ab[:, 0] * (p[other[:, k], 1] - a[:, 1]) - ab[:, 1] * (p[other[:, k], 0] - a[:, 0]) for k in (0, 1)]
+    return v[edge[side[0] * side[1] > 0]].reshape(-1, 2, 3)
+
+
+def light_direction(elevation: float, azimuth: float) -> np.ndarray:
+    """``(3,)`` unit vector towards the light: from the camera at ``(elevation, azimuth)``
+    (degrees, matplotlib's view) turned 30 degrees up and 30 to the side, so that faces
+    square to the camera are not all equally bright."""
+    e, a = np.radians(elevation + 30.0), np.radians(azimuth - 30.0)
+    return np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+
+
+def shaded_colors(mesh, rgba, light) -> np.ndarray:
+    """``(F, 4)``: ``rgba`` per face, its colour scaled by ``0.55 + 0.45 |n . light|``
+    (``n`` the face's unit normal: both sides lit alike); alpha kept."""
+    tri = np.asarray(mesh.triangles)
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n = cross / np.maximum(np.linalg.norm(cross, axis=1), 1e-300)[:, None]
+    k = 0.55 + 0.45 * np.abs(n @ np.asarray(light))
+    out = np.tile(np.asarray(rgba, dtype=np.float64), (len(tri), 1))
+    out[:, :3] *= k[:, None]
+    return out
