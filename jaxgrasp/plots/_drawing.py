@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DRAW_FACES", "drawing_mesh", "feature_edges", "silhouette_edges", "shaded_colors", "light_direction"]
+__all__ = ["DRAW_FACES", "drawing_mesh", "feature_edges", "silhouette_edges", "polylines", "shaded_colors",
+           "light_direction"]
 
 DRAW_FACES = 20_000
 """The most faces of one mesh (the object, and again its ghost) that a picture hands to
@@ -60,17 +61,23 @@ def drawing_mesh(mesh, budget: int = DRAW_FACES):
 
 def _cluster(vertices, faces, lo, cell):
     """The occupied cells ``(K, 3)`` (integer grid indices), each vertex's cell
-    ``(V,)`` and the faces left ``(F', 3)`` between cells (no two corners in one cell, each
-    set of three corners once)."""
+    ``(V,)`` and the faces left ``(F', 3)`` between cells: no two corners in one cell, and
+    the faces on the same three cells counted with their orientation, so that a fold
+    collapsed flat (as many faces one way as the other) vanishes and the rest leave one
+    face (the surface stays closed where it was)."""
     grid = np.floor((vertices - lo) / cell).astype(np.int64)
     shape = tuple(grid.max(axis=0) + 1)
     keys, cluster = np.unique(np.ravel_multi_index(grid.T, shape), return_inverse=True)
     cells, cluster = np.stack(np.unravel_index(keys, shape), axis=-1), cluster.reshape(-1)
     f = cluster[faces]
     f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+    turn = np.where((f < np.roll(f, -1, axis=1)).sum(axis=1) == 2, 1, -1)  # +1: the sorted corners' order
     s, k = np.sort(f, axis=1), np.int64(len(cells))
-    _, first = np.unique((s[:, 0] * k + s[:, 1]) * k + s[:, 2], return_index=True)
-    return cells, cluster, f[np.sort(first)]
+    key, first, where = np.unique((s[:, 0] * k + s[:, 1]) * k + s[:, 2], return_index=True, return_inverse=True)
+    net = np.bincount(where.reshape(-1), weights=turn, minlength=len(key))
+    s = s[first]
+    s = np.where((net > 0)[:, None], s, s[:, [0, 2, 1]])
+    return cells, cluster, s[net != 0]
 
 
 def _placed(vertices, faces, cluster, count, cell_lo, cell):
@@ -122,6 +129,32 @@ def silhouette_edges(mesh, projection) -> np.ndarray:
     a, ab = p[edge[:, 0]], p[edge[:, 1]] - p[edge[:, 0]]
     side = [ab[:, 0] * (p[other[:, k], 1] - a[:, 1]) - ab[:, 1] * (p[other[:, k], 0] - a[:, 0]) for k in (0, 1)]
     return v[edge[side[0] * side[1] > 0]].reshape(-1, 2, 3)
+
+
+def polylines(segments) -> list:
+    """``segments (E, 2, 3)`` joined end to end where they meet two by two: a list of
+    ``(k, 3)`` polylines, so that a dashed outline of many short edges keeps its dashes
+    (matplotlib starts the pattern afresh on each line)."""
+    segments = np.asarray(segments).reshape(-1, 2, 3)
+    points, ends = np.unique(segments.reshape(-1, 3), axis=0, return_inverse=True)
+    ends = np.unique(np.sort(ends.reshape(-1, 2), axis=1), axis=0)  # an edge both sharp and outline: once
+    at = [[] for _ in points]  # the segments at each point
+    for e, (a, b) in enumerate(ends.tolist()):
+        at[a].append(e)
+        at[b].append(e)
+    used, lines = np.zeros(len(ends), dtype=bool), []
+    for start in sorted(range(len(points)), key=lambda v: len(at[v]) == 2):  # open chains first, then loops
+        for e in at[start]:
+            if used[e]:
+                continue
+            path, v = [start], start
+            while e is not None:
+                used[e] = True
+                v = int(ends[e, 1] if ends[e, 0] == v else ends[e, 0])
+                path.append(v)
+                e = next((x for x in at[v] if not used[x]), None) if len(at[v]) == 2 else None
+            lines.append(points[path])
+    return lines
 
 
 def light_direction(elevation: float, azimuth: float) -> np.ndarray:

@@ -539,7 +539,7 @@ def _draw_meshes(ax, scene, view) -> None:
     outline depends on them."""
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
-    from jaxgrasp.plots._drawing import light_direction, shaded_colors, silhouette_edges
+    from jaxgrasp.plots._drawing import light_direction, polylines, shaded_colors, silhouette_edges
     from jaxgrasp.plots._scene import COLORS
 
     mm, light = 1e3, light_direction(*view)
@@ -552,13 +552,14 @@ def _draw_meshes(ax, scene, view) -> None:
                                          zorder=1), autolim=False)
     seen_in_m = ax.get_proj() @ np.diag([mm, mm, mm, 1.0])  # the axes are in mm, the meshes in m
     lines = np.concatenate([scene.object_edges, silhouette_edges(scene.part("object").drawn, seen_in_m)]) * mm
-    ax.add_collection3d(Line3DCollection(lines, colors="0.25", linewidths=0.9, zorder=2), autolim=False)
+    # autolim=False: the limits are set, and matplotlib's autolim fails on no lines (a smooth mesh has no sharp edge)
+    ax.add_collection3d(Line3DCollection(polylines(lines), colors="0.25", linewidths=0.9, zorder=2), autolim=False)
     ax.add_collection3d(Line3DCollection(scene.axes * mm, colors="0.25", linewidths=1.2, zorder=2), autolim=False)
     ghost = scene.part("ghost")
     if ghost is not None:
         dashed = np.concatenate([scene.ghost_edges, silhouette_edges(ghost.drawn, seen_in_m), scene.ghost_axes]) * mm
-        ax.add_collection3d(Line3DCollection(dashed, colors=[COLORS["ghost"][:3]], linewidths=1.4, linestyles="--",
-                                             zorder=3), autolim=False)
+        ax.add_collection3d(Line3DCollection(polylines(dashed), colors=[COLORS["ghost"][:3]], linewidths=1.4,
+                                             linestyles="--", zorder=3), autolim=False)
 
 
 def _grasp_title(scene) -> str:
