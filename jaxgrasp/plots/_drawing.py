@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DRAW_FACES", "drawing_mesh", "feature_edges", "silhouette_edges", "polylines", "shaded_colors",
+__all__ = ["DRAW_FACES", "SOURCE_NORMALS", "drawing_mesh", "feature_edges", "silhouette_edges", "polylines", "shaded_colors",
            "light_direction"]
 
 DRAW_FACES = 20_000
@@ -27,6 +27,10 @@ DRAW_FACES = 20_000
 matplotlib: a mesh with more is drawn decimated to at most this many (`drawing_mesh`).
 Enough to show a scanned object's shape at the picture's size (about 1000 pixels across),
 few enough that drawing takes seconds."""
+
+SOURCE_NORMALS = "source_normals"
+"""The face attribute of a mesh decimated by `drawing_mesh`: ``(F, 3)``, the unit normal of
+the face of the mesh itself that each face comes from."""
 
 _SHARP_DEG = 20.0  # faces meeting at more than this draw their common edge
 
@@ -51,33 +55,36 @@ def drawing_mesh(mesh, budget: int = DRAW_FACES):
     lo = vertices.min(axis=0)
     cell = np.sqrt(3.0 * float(mesh.area) / budget)  # a closed surface keeps about 3 A / cell^2 faces
     while True:
-        cells, cluster, kept = _cluster(vertices, faces, lo, cell)
+        cells, cluster, kept, source = _cluster(vertices, faces, lo, cell)
         if len(kept) <= budget:
             break
         cell *= 1.05 * np.sqrt(len(kept) / budget)
     points = _placed(vertices, faces, cluster, len(cells), lo + cells * cell, cell)
-    return trimesh.Trimesh(points, kept, process=False)
+    normals = np.asarray(mesh.face_normals)[source]
+    return trimesh.Trimesh(points, kept, process=False, face_attributes={SOURCE_NORMALS: normals})
 
 
 def _cluster(vertices, faces, lo, cell):
     """The occupied cells ``(K, 3)`` (integer grid indices), each vertex's cell
-    ``(V,)`` and the faces left ``(F', 3)`` between cells: no two corners in one cell, and
-    the faces on the same three cells counted with their orientation, so that a fold
-    collapsed flat (as many faces one way as the other) vanishes and the rest leave one
-    face (the surface stays closed where it was)."""
+    ``(V,)``, the faces left ``(F', 3)`` between cells and the index ``(F',)`` of a face of
+    ``faces`` each comes from: no two corners in one cell, and the faces on the same three
+    cells counted with their orientation, so that a fold collapsed flat (as many faces one
+    way as the other) vanishes and the rest leave one face (the surface stays closed
+    where it was)."""
     grid = np.floor((vertices - lo) / cell).astype(np.int64)
     shape = tuple(grid.max(axis=0) + 1)
     keys, cluster = np.unique(np.ravel_multi_index(grid.T, shape), return_inverse=True)
     cells, cluster = np.stack(np.unravel_index(keys, shape), axis=-1), cluster.reshape(-1)
     f = cluster[faces]
-    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+    whole = np.flatnonzero((f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2]))
+    f = f[whole]
     turn = np.where((f < np.roll(f, -1, axis=1)).sum(axis=1) == 2, 1, -1)  # +1: the sorted corners' order
     s, k = np.sort(f, axis=1), np.int64(len(cells))
     key, first, where = np.unique((s[:, 0] * k + s[:, 1]) * k + s[:, 2], return_index=True, return_inverse=True)
     net = np.bincount(where.reshape(-1), weights=turn, minlength=len(key))
     s = s[first]
     s = np.where((net > 0)[:, None], s, s[:, [0, 2, 1]])
-    return cells, cluster, s[net != 0]
+    return cells, cluster, s[net != 0], whole[first][net != 0]
 
 
 def _placed(vertices, faces, cluster, count, cell_lo, cell):
@@ -104,12 +111,23 @@ def _placed(vertices, faces, cluster, count, cell_lo, cell):
     return np.clip(mean + step, cell_lo, cell_lo + cell)
 
 
+def _normals(mesh) -> np.ndarray:
+    """``(F, 3)``: the faces' unit normals, those of the faces they come from for a mesh
+    decimated by `drawing_mesh` (clustering leaves some faces tilted across the surface)."""
+    source = mesh.face_attributes.get(SOURCE_NORMALS)
+    return np.asarray(mesh.face_normals if source is None else source)
+
+
 def feature_edges(mesh, angle_deg: float = _SHARP_DEG) -> np.ndarray:
     """``(E, 2, 3)`` m: the edges where faces meet at more than ``angle_deg``, and open
-    borders (empty for a closed smooth mesh)."""
+    borders (empty for a closed smooth mesh). For a mesh decimated by `drawing_mesh`, the
+    angle is that of the faces each drawn face comes from: a sharp edge of the object,
+    not a sliver the decimation tilted."""
     import trimesh
 
-    sharp = mesh.face_adjacency_edges[mesh.face_adjacency_angles > np.radians(angle_deg)]
+    n, pairs = _normals(mesh), mesh.face_adjacency
+    cos = np.einsum("ij,ij->i", n[pairs[:, 0]], n[pairs[:, 1]])
+    sharp = mesh.face_adjacency_edges[cos < np.cos(np.radians(angle_deg))]
     border = mesh.edges_sorted[trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1)]
     edges = np.concatenate([sharp.reshape(-1, 2), border.reshape(-1, 2)]).astype(int)
     return np.asarray(mesh.vertices)[edges].reshape(-1, 2, 3)
@@ -167,11 +185,9 @@ def light_direction(elevation: float, azimuth: float) -> np.ndarray:
 
 def shaded_colors(mesh, rgba, light) -> np.ndarray:
     """``(F, 4)``: ``rgba`` per face, its colour scaled by ``0.55 + 0.45 |n . light|``
-    (``n`` the face's unit normal: both sides lit alike); alpha kept."""
-    tri = np.asarray(mesh.triangles)
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    n = cross / np.maximum(np.linalg.norm(cross, axis=1), 1e-300)[:, None]
-    k = 0.55 + 0.45 * np.abs(n @ np.asarray(light))
-    out = np.tile(np.asarray(rgba, dtype=np.float64), (len(tri), 1))
+    (``n`` the face's unit normal, as `feature_edges` takes it: both sides lit alike);
+    alpha kept."""
+    k = 0.55 + 0.45 * np.abs(_normals(mesh) @ np.asarray(light))
+    out = np.tile(np.asarray(rgba, dtype=np.float64), (len(k), 1))
     out[:, :3] *= k[:, None]
     return out
