@@ -115,9 +115,11 @@ def test_a_mixed_mesh_draws_its_sharp_edges_and_its_outline():
     assert len(side)  # the sides' outline, which no sharp edge shows
     vertical = side[np.abs(side[:, 1, 2] - side[:, 0, 2]) > 0.09]
     assert len(vertical) == 2  # two generatrices, top to bottom
-    lines = np.concatenate([np.asarray(s) for c in fig.axes[0].collections if hasattr(c, "_segments3d")
-                            for s in c._segments3d])
-    assert np.any(np.all(np.isclose(lines, vertical[0, 0] * 1e3), axis=1))  # drawn, in mm
+    drawn = [np.asarray(line) / 1e3 for c in fig.axes[0].collections if hasattr(c, "_segments3d")
+             for line in c._segments3d]  # polylines, mm
+    steps = np.concatenate([np.stack([line[:-1], line[1:]], axis=1) for line in drawn])
+    on_side = np.all(np.isclose(np.hypot(steps[..., 0], steps[..., 1]), 0.03), axis=1)
+    assert np.sum(on_side & (np.abs(steps[:, 1, 2] - steps[:, 0, 2]) > 0.09)) == 2  # drawn, at the object's pose
 
 
 def test_the_outline_of_a_ball_is_its_rim_as_the_camera_sees_it():
