@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DRAW_FACES", "SOURCE_NORMALS", "drawing_mesh", "feature_edges", "silhouette_edges", "polylines", "shaded_colors",
-           "light_direction"]
+__all__ = ["DRAW_FACES", "SOURCE_NORMALS", "drawing_mesh", "feature_edges", "silhouette_edges", "polylines",
+           "shaded_colors", "light_direction"]
 
 DRAW_FACES = 20_000
 """The most faces of one mesh (the object, and again its ghost) that a picture hands to
@@ -53,7 +53,9 @@ def drawing_mesh(mesh, budget: int = DRAW_FACES):
         return mesh
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     lo = vertices.min(axis=0)
+    extent = float(np.ptp(vertices, axis=0).max())
     cell = np.sqrt(3.0 * float(mesh.area) / budget)  # a closed surface keeps about 3 A / cell^2 faces
+    cell = max(cell, 1e-6 * extent) or 1.0  # at most 1e6 cells along an axis: the cells' index fits int64
     while True:
         cells, cluster, kept, source = _cluster(vertices, faces, lo, cell)
         if len(kept) <= budget:
