@@ -101,7 +101,7 @@ def _placed(vertices, faces, cluster, count, cell_lo, cell):
     w = 0.5 * twice
     d = -np.einsum("fi,fi->f", n, tri[:, 0])
     owner = cluster[faces].reshape(-1)  # each face counts at the cluster of each corner
-    per = lambda x: np.bincount(owner, weights=np.repeat(x, 3), minlength=count)  # noqa: E731
+    per = lambda x: np.bincount(owner, weights=np.repeat(x, 3), minlength=count)
     a = np.stack([np.stack([per(w * n[:, i] * n[:, j]) for j in range(3)], -1) for i in range(3)], -2)
     b = np.stack([per(w * d * n[:, i]) for i in range(3)], -1)
     counts = np.bincount(cluster, minlength=count)[:, None]
