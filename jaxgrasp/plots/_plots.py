@@ -472,26 +472,22 @@ def plot_grasp(grasp, path=None, *, result=None, magnification=None, title=None,
 
 
 def draw_scene(scene, *, title=None, view=(22.0, -58.0)):
-    """The figure of a `GraspScene` (see `plot_grasp`)."""
+    """The figure of a `GraspScene` (see `plot_grasp`).
+
+    Each mesh is drawn as its ``Part.drawn`` (decimated for drawing past
+    `jaxgrasp.plots._drawing.DRAW_FACES` faces), the object, its ghost and a hand's links
+    lit from near the camera; the object's sharp edges and its outline as the camera sees
+    it are drawn as lines (solid; dashed at the ghost pose), so that a smooth object shows
+    its shape as well as a box does."""
     from matplotlib.patches import Patch
-    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     from jaxgrasp.plots._scene import COLORS
 
     mm = 1e3
     fig = new_figure(figsize=(7.6, 7.4))
     ax = fig.add_subplot(projection="3d", computed_zorder=False)
-    tris, colors = [], []
-    for p in scene.parts:
-        tris.append(np.asarray(p.mesh.triangles) * mm)
-        colors.append(np.tile(p.color, (len(p.mesh.faces), 1)))
-    ax.add_collection3d(Poly3DCollection(np.concatenate(tris), facecolors=np.concatenate(colors), linewidths=0, zorder=1))
-    ax.add_collection3d(Line3DCollection(scene.object_edges * mm, colors="0.25", linewidths=0.9, zorder=2))
-    ax.add_collection3d(Line3DCollection(scene.axes * mm, colors="0.25", linewidths=1.2, zorder=2))
-    if len(scene.ghost_edges):
-        ghost = np.concatenate([scene.ghost_edges, scene.ghost_axes]) * mm
-        ax.add_collection3d(Line3DCollection(ghost, colors=[COLORS["ghost"][:3]], linewidths=1.4, linestyles="--",
-                                             zorder=3))
+    _set_view(ax, scene, view)
+    _draw_meshes(ax, scene, view)
     for (start, end), name in zip(scene.axes * mm, "xyz"):
         ax.text(*(start + 1.08 * (end - start)), name, fontsize=8, color="0.25", ha="center", va="center", zorder=6)
     c = scene.contacts * mm
@@ -503,12 +499,6 @@ def draw_scene(scene, *, title=None, view=(22.0, -58.0)):
         above = p + scene.normals[i] * r + np.array([0.0, 0.0, 1.5 * r])  # over the fingertip
         text = f"contact {i}" + (f"\nlimiting: {scene.limiting_kind.replace('_', ' ')}" if lim else "")
         ax.text(*above, text, fontsize=8.5, color="darkred" if lim else "k", ha="center", va="bottom", zorder=6)
-    pts = np.concatenate([np.asarray(p.mesh.vertices) for p in scene.parts]) * mm
-    centre, half = (pts.max(0) + pts.min(0)) / 2, (pts.max(0) - pts.min(0)).max() / 2 * 1.02
-    for set_lim, x in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
-        set_lim(x - half, x + half)
-    ax.set_box_aspect((1, 1, 1), zoom=1.1)
-    ax.view_init(*view)
     for name, axis in zip("xyz", (ax.set_xlabel, ax.set_ylabel, ax.set_zlabel)):
         axis(f"{name} [mm]", fontsize=8, labelpad=-2)
     ax.tick_params(labelsize=7, pad=0)
@@ -519,7 +509,7 @@ def draw_scene(scene, *, title=None, view=(22.0, -58.0)):
         Patch(color=COLORS["cone"], label="friction cone (forces on the object)"),
         Line2D([], [], color=COLORS["normal"], lw=1.5, label="outward normal"),
     ]
-    if len(scene.ghost_edges):
+    if scene.part("ghost") is not None:
         handles.insert(1, Line2D([], [], color=COLORS["ghost"][:3], ls="--", lw=1.5,
                                  label=f"object at the least-energy pose on that boundary (motion x{scene.magnification:g})"))
         handles.insert(2, Line2D([], [], color="0.25", lw=1.2, label="object axes at the centre of mass"))
@@ -527,6 +517,49 @@ def draw_scene(scene, *, title=None, view=(22.0, -58.0)):
     fig.suptitle(plain_text(title) if title else _grasp_title(scene), fontsize=10.5)
     fig.subplots_adjust(left=0.0, right=1.0, top=0.93, bottom=0.15)
     return fig
+
+
+def _set_view(ax, scene, view) -> None:
+    """A cube of axes (mm) around every part, seen from ``view`` (elevation, azimuth)."""
+    bounds = np.concatenate([np.asarray(p.mesh.bounds) for p in scene.parts]) * 1e3
+    lo, hi = bounds.min(0), bounds.max(0)
+    centre, half = (hi + lo) / 2, (hi - lo).max() / 2 * 1.02
+    for set_lim, x in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
+        set_lim(x - half, x + half)
+    ax.set_box_aspect((1, 1, 1), zoom=1.1)
+    ax.view_init(*view)
+
+
+_LIT = ("object", "ghost", "link")  # parts drawn lit: the shapes; fingertips, cones, arrows keep their colour
+
+
+def _draw_meshes(ax, scene, view) -> None:
+    """Every part's drawn mesh, the object's axes, its sharp edges and outline (at the
+    ghost pose too, dashed). ``ax`` already has its limits and view (`_set_view`): the
+    outline depends on them."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
+
+    from jaxgrasp.plots._drawing import light_direction, polylines, shaded_colors, silhouette_edges
+    from jaxgrasp.plots._scene import COLORS
+
+    mm, light = 1e3, light_direction(*view)
+    tris, colors = [], []
+    for p in scene.parts:
+        tris.append(np.asarray(p.drawn.triangles) * mm)
+        lit = p.role in _LIT
+        colors.append(shaded_colors(p.drawn, p.color, light) if lit else np.tile(p.color, (len(p.drawn.faces), 1)))
+    ax.add_collection3d(Poly3DCollection(np.concatenate(tris), facecolors=np.concatenate(colors), linewidths=0,
+                                         zorder=1), autolim=False)
+    seen_in_m = ax.get_proj() @ np.diag([mm, mm, mm, 1.0])  # the axes are in mm, the meshes in m
+    lines = np.concatenate([scene.object_edges, silhouette_edges(scene.part("object").drawn, seen_in_m)]) * mm
+    # autolim=False: the limits are set, and matplotlib's autolim fails on no lines (a smooth mesh has no sharp edge)
+    ax.add_collection3d(Line3DCollection(polylines(lines), colors="0.25", linewidths=0.9, zorder=2), autolim=False)
+    ax.add_collection3d(Line3DCollection(scene.axes * mm, colors="0.25", linewidths=1.2, zorder=2), autolim=False)
+    ghost = scene.part("ghost")
+    if ghost is not None:
+        dashed = np.concatenate([scene.ghost_edges, silhouette_edges(ghost.drawn, seen_in_m), scene.ghost_axes]) * mm
+        ax.add_collection3d(Line3DCollection(polylines(dashed), colors=[COLORS["ghost"][:3]], linewidths=1.4,
+                                             linestyles="--", zorder=3), autolim=False)
 
 
 def _grasp_title(scene) -> str:

@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from jaxgrasp.plots._drawing import drawing_mesh, feature_edges
+
 __all__ = ["Part", "GraspScene", "grasp_scene", "COLORS", "pose_points", "nice_magnification"]
 
 COLORS = {
@@ -51,12 +53,21 @@ class Part:
         role: ``"object"``, ``"ghost"``, ``"fingertip"``, ``"cone"`` or ``"normal"``.
         mesh: ``trimesh.Trimesh``, m, mesh frame.
         color: RGBA, 0-1.
+        drawn: the mesh a picture draws: ``mesh`` itself, or decimated to at most
+            `jaxgrasp.plots._drawing.DRAW_FACES` faces when it has more (default: made
+            from ``mesh`` by `jaxgrasp.plots._drawing.drawing_mesh`). For drawing only:
+            the GLB and every computation use ``mesh``.
     """
 
     name: str
     role: str
     mesh: Any
     color: tuple
+    drawn: Any = None
+
+    def __post_init__(self):
+        if self.drawn is None:
+            object.__setattr__(self, "drawn", drawing_mesh(self.mesh))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -67,7 +78,8 @@ class GraspScene:
         parts: the coloured meshes (object, ghost when there is a limiting boundary, then
             per contact: fingertip, cone, normal).
         object_edges: ``(E, 2, 3)`` m, the object's feature edges (faces meeting at more
-            than 20 degrees, and open borders) for line drawings.
+            than 20 degrees, and open borders) for line drawings, on the mesh a picture
+            draws (``Part.drawn``); empty for a smooth closed object.
         ghost_edges: ``(E, 2, 3)`` m, the same edges at the ghost pose (empty without one).
         axes: ``(3, 2, 3)`` m, the object's x, y and z axes (start, end) drawn from its
             centre of mass (length a third of its size): they show a rotation that the
@@ -137,6 +149,7 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
     body = grasp.mesh if isinstance(grasp, MeshGrasp) else _contact_hull(contacts, normals, per["radius"])
     kind, contact = int(np.asarray(result.limiting_kind)), int(np.asarray(result.limiting_contact))
     parts = [Part("object", "object", body, COLORS["object"])]
+    object_edges = feature_edges(parts[0].drawn)
     ghost_edges = ghost_axes = np.zeros((0, 2, 3))
     axes = com + np.stack([np.zeros((3, 3)), np.eye(3) * float(np.ptp(body.vertices, axis=0).max()) / 3], axis=1)
     factor = 1.0
@@ -144,10 +157,11 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
         dp = np.asarray(result.boundary_translation, dtype=np.float64)[kind, contact]
         w = np.asarray(result.boundary_rotation, dtype=np.float64)[kind, contact]
         factor = magnification or nice_magnification(body.vertices, com, dp, w)
-        ghost = body.copy()
+        ghost, drawn = body.copy(), parts[0].drawn.copy()
         ghost.vertices = pose_points(body.vertices, com, factor * dp, factor * w)
-        parts.append(Part("ghost", "ghost", ghost, COLORS["ghost"]))
-        ghost_edges = _feature_edges(ghost)
+        drawn.vertices = pose_points(drawn.vertices, com, factor * dp, factor * w)
+        parts.append(Part("ghost", "ghost", ghost, COLORS["ghost"], drawn))
+        ghost_edges = pose_points(object_edges, com, factor * dp, factor * w)
         ghost_axes = pose_points(axes, com, factor * dp, factor * w)
     for i in range(n):
         c, nv, r, dr = contacts[i], normals[i], per["radius"][i], per["initial_deformation"][i]
@@ -157,7 +171,7 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
         parts.append(Part(f"normal {i}", "normal", _arrow(c, nv, 2.4 * r, 0.04 * r), COLORS["normal"]))
     return GraspScene(
         parts=tuple(parts),
-        object_edges=_feature_edges(body),
+        object_edges=object_edges,
         ghost_edges=ghost_edges,
         axes=axes,
         ghost_axes=ghost_axes,
@@ -263,13 +277,3 @@ def _contact_hull(contacts, normals, radius):
         u, v = _frame(nv)
         pts.append(c + r * (np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v))
     return trimesh.convex.convex_hull(np.concatenate(pts))
-
-
-def _feature_edges(mesh, angle_deg: float = 20.0) -> np.ndarray:
-    """``(E, 2, 3)`` m: edges where faces meet at more than ``angle_deg``, and open borders."""
-    import trimesh
-
-    sharp = mesh.face_adjacency_edges[mesh.face_adjacency_angles > np.radians(angle_deg)]
-    border = mesh.edges_sorted[trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1)]
-    edges = np.concatenate([sharp.reshape(-1, 2), border.reshape(-1, 2)]).astype(int)
-    return np.asarray(mesh.vertices)[edges]
