@@ -39,6 +39,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.engine._devices import configure_cpu_devices
     from jaxgrasp.engine._evaluate import evaluate_compiled
     from jaxgrasp.engine._gradient import value_and_grad_builder
+    from jaxgrasp.engine._limits import CHUNK_SIZE_WHAT, MAX_CHUNK_SIZE
     from jaxgrasp.engine._plan import check_chunk_size, grasps_by_count
     from jaxgrasp.engine._prefetch import prefetch
     from jaxgrasp.engine._runner import GraspSource, Stacked, plan_source, run_batch, start_progress

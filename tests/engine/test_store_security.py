@@ -295,6 +295,7 @@ def test_environment_moves_or_switches_off(tmp_path, monkeypatch):
         monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
         assert store.default_dir() == tmp_path / "xdg" / "jaxgrasp" / "xla"
         monkeypatch.delenv("XDG_CACHE_HOME")
+        (tmp_path / "home").mkdir()
         monkeypatch.setenv("HOME", str(tmp_path / "home"))
         assert store.default_dir() == tmp_path / "home" / ".cache" / "jaxgrasp" / "xla"
     finally:
