@@ -446,10 +446,10 @@ def _check_member_count(fh: BinaryIO, path: Path) -> None:
     fh.seek(max(0, size - _EOCD.size - 0xFFFF))  # the record, then a comment of at most 64 KiB
     tail = fh.read()
     fh.seek(0)
-    at = tail.rfind(b"PK\x05\x06", 0, max(0, len(tail) - _EOCD.size + 1))
+    at = tail.rfind(b"PK\x05\x06", 0, max(0, len(tail) - _EOCD.size + 4))  # the whole record fits
     if at < 0:
         return
-    entries = _EOCD.unpack_from(tail, at)[5]
+    entries = _EOCD.unpack_from(tail, at)[4]  # in the whole zip
     if entries > len(_ARRAYS):
         raise GraspValueError(f"{path}: the zip lists {entries:,} members; a dataset .npz holds at most "
                               f"{len(_ARRAYS)} arrays, one per name ({', '.join(_ARRAYS)})")
