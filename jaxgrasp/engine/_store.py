@@ -179,6 +179,17 @@ def _home() -> Path | None:
     return home
 
 
+def matplotlib_dir() -> Path | None:
+    """Where matplotlib should keep its cache and configuration (``MPLCONFIGDIR``) in a
+    process of a user without a usable home folder (`_home`): ``jaxgrasp-cache-UID/matplotlib``
+    in the temporary folder, beside `_temporary_dir`; ``None`` where the user has a home
+    folder (matplotlib's own choice is right). Without it, ``HOME=""`` puts matplotlib's
+    cache in ``/.cache/matplotlib`` (where the root user can write)."""
+    if os.environ.get("XDG_CACHE_HOME") or _home() is not None:
+        return None
+    return Path(tempfile.gettempdir()) / f"jaxgrasp-cache-{os.geteuid()}" / "matplotlib"
+
+
 def _temporary_dir() -> Path:
     """The cache folder of a user without a usable home folder: ``jaxgrasp-cache-UID/xla``
     in the temporary folder (``$TMPDIR``, else ``/tmp``...), private as every cache folder

@@ -434,3 +434,27 @@ def test_without_a_usable_home_the_cache_is_a_private_temporary_folder(tmp_path,
     finally:
         store.set_executable_dir(saved)
     assert any("no usable home folder" in m and str(want) in m for m in store._WARNED)
+
+
+def test_command_without_a_home_keeps_matplotlib_out_of_the_root(tmp_path, monkeypatch):
+    """``HOME=""``: matplotlib would keep its cache in ``/.cache/matplotlib``; the command
+    points it into the temporary folder (a given ``MPLCONFIGDIR`` stays)."""
+    import tempfile
+
+    from jaxgrasp import cli
+    from jaxgrasp.cli import _evaluate
+
+    monkeypatch.setenv("HOME", "")
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.delenv("MPLCONFIGDIR", raising=False)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    monkeypatch.setattr(cli, "enable_compilation_cache", lambda: None)  # no process-wide setting
+    monkeypatch.setattr(_evaluate, "run", lambda args: 0)
+    assert cli.main(["evaluate", "--preset", "cube"]) == 0
+    assert os.environ["MPLCONFIGDIR"] == str(tmp_path / f"jaxgrasp-cache-{os.geteuid()}" / "matplotlib")
+    monkeypatch.setenv("MPLCONFIGDIR", str(tmp_path / "mine"))
+    assert cli.main(["evaluate", "--preset", "cube"]) == 0 and os.environ["MPLCONFIGDIR"] == str(tmp_path / "mine")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.delenv("MPLCONFIGDIR")
+    assert cli.main(["evaluate", "--preset", "cube"]) == 0 and "MPLCONFIGDIR" not in os.environ
