@@ -31,8 +31,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from jaxgrasp.analysis._uncertainty import CLIP_SOURCES, Uncertainty, draw_normals, perturb
 from jaxgrasp.analysis._limits import MAX_ROBUST_SAMPLES, ROBUST_SAMPLES_WHAT
+from jaxgrasp.analysis._uncertainty import CLIP_SOURCES, Uncertainty, draw_normals, perturb
 from jaxgrasp.base import Coded, json_floats, over_limit
 from jaxgrasp.engine import BatchResult, evaluate_batch, evaluate_in_chunks, plan_chunks
 from jaxgrasp.model import Grasp, GraspValueError, stack

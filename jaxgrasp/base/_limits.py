@@ -4,6 +4,8 @@ parser (``--samples``, ``--chunk-size``, ...) and the library's functions (``sam
 
 from __future__ import annotations
 
+import math
+
 __all__ = ["over_limit", "whole_number"]
 
 
@@ -28,4 +30,4 @@ def whole_number(text: str) -> int | None:
         x = float(t)
     except ValueError:
         return None
-    return int(x) if x == x and abs(x) != float("inf") and x == int(x) else None
+    return int(x) if math.isfinite(x) and x == int(x) else None

@@ -28,7 +28,14 @@ from jaxgrasp.base import over_limit, whole_number
 from jaxgrasp.cli._parser import UsageError
 from jaxgrasp.engine import CHUNK_SIZE_WHAT, MAX_CHUNK_SIZE
 from jaxgrasp.model import FIELD, SWEEPABLE, TUNABLE
-from jaxgrasp.planning import MAX_FINGERS, MAX_PLAN_REFINE, MAX_PLAN_SAMPLES, PLAN_REFINE_WHAT, PLAN_SAMPLES_WHAT, SAMPLERS
+from jaxgrasp.planning import (
+    MAX_FINGERS,
+    MAX_PLAN_REFINE,
+    MAX_PLAN_SAMPLES,
+    PLAN_REFINE_WHAT,
+    PLAN_SAMPLES_WHAT,
+    SAMPLERS,
+)
 from jaxgrasp.presets import PRESETS
 from jaxgrasp.simulation import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION
 

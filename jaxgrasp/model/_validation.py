@@ -297,8 +297,8 @@ def _check_shapes(arrs: dict) -> int:
         raise GraspValueError(f"need at least 2 contacts, got {n}")
     if n > MAX_CONTACTS:
         raise GraspValueError(
-            f"{n} contacts, more than the {MAX_CONTACTS} one grasp may have (an evaluation's time grows as "
-            "about N^3 in its N contacts: 32 take seconds, 300 about an hour)"
+            f"{n} contacts, more than the {MAX_CONTACTS} one grasp may have (an evaluation's time grows "
+            "faster than N^2 in its N contacts: 32 take seconds, 300 tens of minutes or more)"
         )
     for field in FIELDS:
         shape = arrs[field.name].shape
