@@ -433,15 +433,19 @@ def _npz_members(fh: BinaryIO, path: Path) -> dict[str, np.ndarray]:
     return arrays
 
 
+_MAX_MEMBERS = 64
+"""The most members an ``.npz``'s zip may list (its arrays are at most one per name of
+`_ARRAYS`; a few more get the one line that names the first unknown one)."""
+
 _EOCD = struct.Struct("<4s4H2LH")
 """The zip's end-of-central-directory record: signature, disk numbers, entries on this disk
 and in all, the directory's size and offset, the comment's length."""
 
 
 def _check_member_count(fh: BinaryIO, path: Path) -> None:
-    """At most one member per array name (`_ARRAYS`), read from the zip's last record before
-    ``zipfile`` builds an object per member of its directory (a 1 GiB file could list 20
-    million members). A file without that record is left to ``zipfile`` (not a zip)."""
+    """At most `_MAX_MEMBERS` members, read from the zip's last record before ``zipfile``
+    builds an object per member of its directory (a 1 GiB file could list 20 million
+    members). A file without that record is left to ``zipfile`` (not a zip)."""
     size = fh.seek(0, os.SEEK_END)
     fh.seek(max(0, size - _EOCD.size - 0xFFFF))  # the record, then a comment of at most 64 KiB
     tail = fh.read()
@@ -450,7 +454,7 @@ def _check_member_count(fh: BinaryIO, path: Path) -> None:
     if at < 0:
         return
     entries = _EOCD.unpack_from(tail, at)[4]  # in the whole zip
-    if entries > len(_ARRAYS):
+    if entries > _MAX_MEMBERS:
         raise GraspValueError(f"{path}: the zip lists {entries:,} members; a dataset .npz holds at most "
                               f"{len(_ARRAYS)} arrays, one per name ({', '.join(_ARRAYS)})")
 
