@@ -56,6 +56,7 @@ __all__ = [
     "axis_spec",
     "PAPER_AXES",
     "DEFAULT_TOP",
+    "MAX_TOP",
     "DEFAULT_ROBUST",
     "PLAN_DEFAULTS",
     "MAGNIFICATION_RANGE",
@@ -271,6 +272,12 @@ class _AxisInOrder(argparse.Action):
 DEFAULT_TOP = 5
 """Best grasps listed in the summary of ``jaxgrasp batch`` (``--top``)."""
 
+MAX_TOP = 1_000
+"""The most best grasps ``jaxgrasp batch --top`` lists and labels in its picture: each is a
+line of the summary and a label of ``results.png``, and matplotlib places every label, so a
+``--top`` as large as a dataset of 100,000 grasps would hold up the picture; the full
+ranking is in ``results.csv``."""
+
 DEFAULT_ROBUST = "friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3"
 """The uncertainty ``jaxgrasp plan --rank robust`` assumes without ``--robust SPEC``."""
 
@@ -351,7 +358,8 @@ def add_batch(sub) -> None:
     sp.add_argument("file", help="dataset file (.npz or .jsonl)")
     sp.add_argument("--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)")
     add_chunk_size(sp, "grasps per compiled batch (default 64 per CPU device, 1024 per GPU)")
-    sp.add_argument("--top", type=int, default=DEFAULT_TOP, metavar="K", help=f"list the K best grasps (default {DEFAULT_TOP})")
+    sp.add_argument("--top", type=Count("--top", MAX_TOP, "best grasps listed (MAX_TOP: results.csv ranks them all)"),
+                    default=DEFAULT_TOP, metavar="K", help=f"list the K best grasps, at most {MAX_TOP:,} (default {DEFAULT_TOP})")
     sp.add_argument("--strict", action="store_true", help="any invalid grasp: exit 2 before computing")
     sp.add_argument("--resume", action="store_true", help="finish an interrupted run into the same DIR")
     sp.add_argument("--no-plot", action="store_true", help="do not write results.png")

@@ -262,7 +262,7 @@ LONG_EVALUATION_CONTACTS = 16
 """Grasps of more contacts than this get a line on stderr before their evaluation
 (`announce_large_grasp`). The evaluation of one grasp is one compiled call without
 progress of its own; its 2 N boundary problems of N contacts each cost time and memory
-that grow faster than N^2 (``experiments/limits/FINDINGS.md``): the line tells the user what
+that grow more than as N^2 (``experiments/limits/FINDINGS.md``): the line tells the user what
 the wait is for. Above
 `jaxgrasp.model.MAX_CONTACTS` (32) a grasp is refused."""
 

@@ -49,7 +49,7 @@ MAX_CONTACTS = 32
 refuses more, so a grasp file, a dataset row and ``Grasp.create`` all do). The paper's grasps
 have 2 to 8 fingertips; a five-fingered hand touching with its fingertips, phalanges and palm
 has about 16 contacts; 32 leaves twice that. The evaluation of one grasp solves ``2 N``
-boundary problems of ``N`` contacts each, a time that grows faster than ``N^2``
+boundary problems of ``N`` contacts each, a time that grows more than as ``N^2``
 (``experiments/limits/FINDINGS.md``: 32 contacts take seconds, 64 over a minute, 300 tens of
 minutes or more), and a batch pads every grasp to its largest count, so one row of hundreds
 of contacts would hold up the whole batch. The check also comes before the pairwise distance check,
