@@ -20,7 +20,14 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
 
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
     from jaxgrasp.analysis._epsilon import prefetch_qhull
-    from jaxgrasp.analysis._limits import MAX_GRID_POINTS, METHODS
+    from jaxgrasp.analysis._limits import (
+        MAX_GRID_POINTS,
+        MAX_ROBUST_SAMPLES,
+        MAX_TUNE_ITERATIONS,
+        METHODS,
+        ROBUST_SAMPLES_WHAT,
+        TUNE_ITERATIONS_WHAT,
+    )
     from jaxgrasp.analysis._sweep import check_inputs, grid_grasp
     from jaxgrasp.analysis._tune_drivers import run_search
     from jaxgrasp.analysis._tune_spec import parse_param

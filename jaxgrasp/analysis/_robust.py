@@ -31,8 +31,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from jaxgrasp.analysis._limits import MAX_ROBUST_SAMPLES, ROBUST_SAMPLES_WHAT
 from jaxgrasp.analysis._uncertainty import CLIP_SOURCES, Uncertainty, draw_normals, perturb
-from jaxgrasp.base import Coded, json_floats
+from jaxgrasp.base import Coded, json_floats, over_limit
 from jaxgrasp.engine import BatchResult, evaluate_batch, evaluate_in_chunks, plan_chunks
 from jaxgrasp.model import Grasp, GraspValueError, stack
 from jaxgrasp.surface import MeshGrasp, Surface
@@ -373,6 +374,9 @@ def _check_call(uncertainty, samples, seed, quantiles) -> tuple:
     for name, x, low in (("samples", samples, 2), ("seed", seed, 0)):
         if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < low:
             raise GraspValueError(f"{name} must be an integer >= {low}, got {x!r}")
+    problem = over_limit("samples", samples, MAX_ROBUST_SAMPLES, ROBUST_SAMPLES_WHAT)
+    if problem:  # before a draw: 1e12 samples asked NumPy for 29 TiB
+        raise GraspValueError(problem)
     try:
         levels = tuple(float(q) for q in quantiles)
     except (TypeError, ValueError):

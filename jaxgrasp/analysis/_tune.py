@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.analysis._limits import METHODS
+from jaxgrasp.analysis._limits import MAX_TUNE_ITERATIONS, METHODS, TUNE_ITERATIONS_WHAT
 from jaxgrasp.analysis._tune_drivers import SearchRecord, run_search
 from jaxgrasp.analysis._tune_spec import (
     ParamBox,
@@ -52,7 +52,7 @@ from jaxgrasp.analysis._tune_spec import (
     param_specs,
 )
 from jaxgrasp.analysis._tune_status import TuneStatus
-from jaxgrasp.base import json_floats
+from jaxgrasp.base import json_floats, over_limit
 from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, value_and_grad_builder
 from jaxgrasp.model import MJ_TO_J, Grasp, GraspValueError, check_grasp_inputs, counted
 from jaxgrasp.surface import PAD_FACES, MeshGrasp, Surface
@@ -363,6 +363,9 @@ def _checked_grasp(grasp: Grasp, method: str, maxiter) -> Grasp:
         raise GraspValueError(f"tune: unknown method {method!r}; choose from {', '.join(METHODS)}")
     if not (isinstance(maxiter, (int, np.integer)) and not isinstance(maxiter, bool) and maxiter >= 1):
         raise GraspValueError(f"tune: maxiter must be an integer >= 1, got {maxiter!r}")
+    problem = over_limit("tune: maxiter", maxiter, MAX_TUNE_ITERATIONS, TUNE_ITERATIONS_WHAT)
+    if problem:
+        raise GraspValueError(problem)
     return grasp
 
 

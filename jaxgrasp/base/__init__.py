@@ -21,6 +21,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
     from jaxgrasp.base._contract import contract
     from jaxgrasp.base._json import json_floats
+    from jaxgrasp.base._limits import over_limit, whole_number
 
 __all__ = ["Coded"]
 

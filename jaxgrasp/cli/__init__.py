@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from typing import TYPE_CHECKING
 
@@ -129,6 +130,7 @@ def _main(args: argparse.Namespace) -> int:
         check_names(args)  # a name that is not UTF-8 would fail only when printed, after the work
         with log_lines_on_stderr():  # "jaxgrasp: compiling ...", chunks, cache warnings, one line each
             _configure()  # before the command makes its first array: a batch runs on every core
+            _matplotlib_without_home()
             sys.modules[__name__].enable_compilation_cache()  # looked up here, so that tests can replace it
             return importlib.import_module(f"jaxgrasp.cli._{args.command}").run(args)
     except (UsageError, GraspValueError, OutputError) as exc:
@@ -138,6 +140,16 @@ def _main(args: argparse.Namespace) -> int:
     finally:
         clear_notes()
         wait_for_saves()  # the process may end with os._exit next
+
+
+def _matplotlib_without_home() -> None:
+    """Point matplotlib's cache into the temporary folder where the user has no usable home
+    folder (``HOME=""``), unless ``MPLCONFIGDIR`` says where (`jaxgrasp.engine.matplotlib_dir`)."""
+    from jaxgrasp.engine import matplotlib_dir
+
+    folder = matplotlib_dir()
+    if folder is not None and not os.environ.get("MPLCONFIGDIR"):
+        os.environ["MPLCONFIGDIR"] = str(folder)
 
 
 def _configure() -> None:

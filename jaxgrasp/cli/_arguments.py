@@ -16,10 +16,26 @@ from __future__ import annotations
 import argparse
 import math
 
-from jaxgrasp.analysis import MAX_GRID_POINTS, METHODS
+from jaxgrasp.analysis import (
+    MAX_GRID_POINTS,
+    MAX_ROBUST_SAMPLES,
+    MAX_TUNE_ITERATIONS,
+    METHODS,
+    ROBUST_SAMPLES_WHAT,
+    TUNE_ITERATIONS_WHAT,
+)
+from jaxgrasp.base import over_limit, whole_number
 from jaxgrasp.cli._parser import UsageError
+from jaxgrasp.engine import CHUNK_SIZE_WHAT, MAX_CHUNK_SIZE
 from jaxgrasp.model import FIELD, SWEEPABLE, TUNABLE
-from jaxgrasp.planning import SAMPLERS
+from jaxgrasp.planning import (
+    MAX_FINGERS,
+    MAX_PLAN_REFINE,
+    MAX_PLAN_SAMPLES,
+    PLAN_REFINE_WHAT,
+    PLAN_SAMPLES_WHAT,
+    SAMPLERS,
+)
 from jaxgrasp.presets import PRESETS
 from jaxgrasp.simulation import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION
 
@@ -31,6 +47,8 @@ __all__ = [
     "add_grasp_source",
     "add_allow_dir",
     "add_overrides",
+    "Count",
+    "add_chunk_size",
     "add_epsilon_option",
     "add_robust_options",
     "DEFAULT_ROBUST_SAMPLES",
@@ -38,6 +56,7 @@ __all__ = [
     "axis_spec",
     "PAPER_AXES",
     "DEFAULT_TOP",
+    "MAX_TOP",
     "DEFAULT_ROBUST",
     "PLAN_DEFAULTS",
     "MAGNIFICATION_RANGE",
@@ -81,6 +100,33 @@ def parse_number(option: str, text: str, what: str = "value") -> float:
     if not math.isfinite(x):
         raise UsageError(f"{option}: {what} {t!r} must be finite")
     return x
+
+
+class Count:
+    """The ``type`` of a count option (``--samples``, ``--chunk-size``, ...): a whole number,
+    also written as a float (``1e5``), at most ``limit`` where one is given; otherwise a
+    one-line error naming the option (and its cap), as argparse reads it, before anything
+    is loaded. Lower bounds are the commands' own checks."""
+
+    __name__ = "int"  # argparse's "invalid int value: 'x'" for what is not a whole number
+
+    def __init__(self, option: str, limit: int | None = None, what: str = ""):
+        self.option, self.limit, self.what = option, limit, what
+
+    def __call__(self, text: str) -> int:
+        n = whole_number(text)
+        if n is None:
+            raise ValueError(text)
+        problem = None if self.limit is None else over_limit(self.option, n, self.limit, self.what)
+        if problem:
+            raise UsageError(problem)
+        return n
+
+
+def add_chunk_size(p: argparse.ArgumentParser, help: str) -> None:
+    """``--chunk-size N``: grasps per compiled batch, at most `MAX_CHUNK_SIZE`."""
+    p.add_argument("--chunk-size", type=Count("--chunk-size", MAX_CHUNK_SIZE, CHUNK_SIZE_WHAT), default=None,
+                   metavar="N", help=f"{help}; at most {MAX_CHUNK_SIZE:,}")
 
 
 def add_grasp_source(p: argparse.ArgumentParser) -> None:
@@ -129,8 +175,10 @@ def add_robust_options(p: argparse.ArgumentParser) -> None:
               "in SI units, e.g. friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3 "
               "(also friction_per_fingertip, mass, gravity_angle; see jaxgrasp.analysis.Uncertainty)"),
     )
-    p.add_argument("--samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
-                   help=f"perturbed copies per grasp with --robust (default {DEFAULT_ROBUST_SAMPLES})")
+    p.add_argument("--samples", type=Count("--samples", MAX_ROBUST_SAMPLES, ROBUST_SAMPLES_WHAT),
+                   default=DEFAULT_ROBUST_SAMPLES, metavar="N",
+                   help=(f"perturbed copies per grasp with --robust, 2 to {MAX_ROBUST_SAMPLES:,} "
+                         f"(default {DEFAULT_ROBUST_SAMPLES})"))
     p.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the --robust draws (default 0)")
 
 
@@ -224,6 +272,12 @@ class _AxisInOrder(argparse.Action):
 DEFAULT_TOP = 5
 """Best grasps listed in the summary of ``jaxgrasp batch`` (``--top``)."""
 
+MAX_TOP = 1_000
+"""The most best grasps ``jaxgrasp batch --top`` lists and labels in its picture: each is a
+line of the summary and a label of ``results.png``, and matplotlib places every label, so a
+``--top`` as large as a dataset of 100,000 grasps would hold up the picture; the full
+ranking is in ``results.csv``."""
+
 DEFAULT_ROBUST = "friction=0.1,young_modulus=0.1,initial_deformation=2e-4,position=1e-3"
 """The uncertainty ``jaxgrasp plan --rank robust`` assumes without ``--robust SPEC``."""
 
@@ -245,8 +299,7 @@ def add_evaluate(sub) -> None:
     add_overrides(p)
     p.add_argument("--json", action="store_true", help="print a JSON object instead")
     add_robust_options(p)
-    p.add_argument("--chunk-size", type=int, default=None, metavar="N",
-                   help="perturbed grasps per compiled batch with --robust (default 64 per CPU device, 1024 per GPU)")
+    add_chunk_size(p, "perturbed grasps per compiled batch with --robust (default 64 per CPU device, 1024 per GPU)")
 
 
 def add_sweep(sub) -> None:
@@ -279,16 +332,8 @@ def add_sweep(sub) -> None:
     sp.add_argument(
         "--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)"
     )
-    sp.add_argument(
-        "--chunk-size",
-        type=int,
-        default=None,
-        metavar="N",
-        help=(
-            "grid points per compiled batch (default: 64 per CPU device; on a GPU about a tenth "
-            "of the grid, 64 to 1024 per device)"
-        ),
-    )
+    add_chunk_size(sp, "grid points per compiled batch (default: 64 per CPU device; on a GPU about a tenth "
+                       "of the grid, 64 to 1024 per device)")
     sp.add_argument("--no-plot", action="store_true", help="do not write sweep.png")
     add_epsilon_option(sp)
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -312,14 +357,9 @@ def add_batch(sub) -> None:
     )
     sp.add_argument("file", help="dataset file (.npz or .jsonl)")
     sp.add_argument("--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)")
-    sp.add_argument(
-        "--chunk-size",
-        type=int,
-        default=None,
-        metavar="N",
-        help="grasps per compiled batch (default 64 per CPU device, 1024 per GPU)",
-    )
-    sp.add_argument("--top", type=int, default=DEFAULT_TOP, metavar="K", help=f"list the K best grasps (default {DEFAULT_TOP})")
+    add_chunk_size(sp, "grasps per compiled batch (default 64 per CPU device, 1024 per GPU)")
+    sp.add_argument("--top", type=Count("--top", MAX_TOP, "best grasps listed (MAX_TOP: results.csv ranks them all)"),
+                    default=DEFAULT_TOP, metavar="K", help=f"list the K best grasps, at most {MAX_TOP:,} (default {DEFAULT_TOP})")
     sp.add_argument("--strict", action="store_true", help="any invalid grasp: exit 2 before computing")
     sp.add_argument("--resume", action="store_true", help="finish an interrupted run into the same DIR")
     sp.add_argument("--no-plot", action="store_true", help="do not write results.png")
@@ -364,7 +404,8 @@ def add_tune(sub) -> None:
         metavar="NAME=LO:HI",
         help="bounds of a parameter in SI units (repeatable); positions=HALF_WIDTH in m",
     )
-    sp.add_argument("--maxiter", type=int, default=50, metavar="N", help="most iterations (default 50)")
+    sp.add_argument("--maxiter", type=Count("--maxiter", MAX_TUNE_ITERATIONS, TUNE_ITERATIONS_WHAT), default=50,
+                    metavar="N", help=f"most iterations, at most {MAX_TUNE_ITERATIONS:,} (default 50)")
     sp.add_argument("--method", choices=METHODS, default=METHODS[0], help=f"optimiser (default {METHODS[0]})")
     sp.add_argument(
         "--smooth-min-temperature",
@@ -395,7 +436,8 @@ def add_plan(sub) -> None:
     )
     d = PLAN_DEFAULTS
     sp.add_argument("mesh", help="the object's mesh file (STL, OBJ, PLY, OFF or GLB)")
-    sp.add_argument("--fingers", type=int, default=d["fingers"], metavar="N", help="fingertips, 2 to 8 (default 2)")
+    sp.add_argument("--fingers", type=Count("--fingers", MAX_FINGERS, "fingertips"), default=d["fingers"], metavar="N",
+                    help=f"fingertips, 2 to {MAX_FINGERS} (default 2)")
     sp.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="the mesh's length unit (default m)")
     for opt, key, unit in (("--radius", "radius", "m"), ("--young-modulus", "young_modulus", "Pa"),
                            ("--friction", "friction", ""), ("--max-force", "max_force", "N")):
@@ -408,9 +450,12 @@ def add_plan(sub) -> None:
     mass.add_argument("--mass", type=float, default=None, metavar="KG", help="object mass, kg")
     sp.add_argument("--gravity", default="0,0,-9.81", metavar="GX,GY,GZ",
                     help="gravity in the mesh's axes, m/s^2 (default 0,0,-9.81)")
-    sp.add_argument("--samples", type=int, default=150, metavar="N", help="valid candidates to evaluate (default 150)")
-    sp.add_argument("--top", type=int, default=10, metavar="K", help="ranked grasps to write (default 10)")
-    sp.add_argument("--refine", type=int, default=3, metavar="K", help="best candidates to tune (default 3)")
+    sp.add_argument("--samples", type=Count("--samples", MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT), default=150, metavar="N",
+                    help=f"valid candidates to evaluate, at most {MAX_PLAN_SAMPLES:,} (default 150)")
+    sp.add_argument("--top", type=Count("--top", MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT), default=10, metavar="K",
+                    help="ranked grasps to write (default 10)")
+    sp.add_argument("--refine", type=Count("--refine", MAX_PLAN_REFINE, PLAN_REFINE_WHAT), default=3, metavar="K",
+                    help=f"best candidates to tune, at most {MAX_PLAN_REFINE:,} (default 3)")
     sp.add_argument("--seed", type=int, default=0, help="seed of the random draws (default 0)")
     sp.add_argument("--sampler", choices=SAMPLERS, default=None,
                     help="candidate generator (default antipodal for 2 fingers, spread for more)")
@@ -420,8 +465,9 @@ def add_plan(sub) -> None:
                     help="rank by the value, or by the robust value (the mean over perturbed copies) (default value)")
     sp.add_argument("--robust", default=None, metavar="SPEC",
                     help=f"the uncertainty of --rank robust, as for evaluate --robust (default {DEFAULT_ROBUST})")
-    sp.add_argument("--robust-samples", type=int, default=64, metavar="S",
-                    help="perturbed copies per ranked grasp for --rank robust (default 64)")
+    sp.add_argument("--robust-samples", type=Count("--robust-samples", MAX_ROBUST_SAMPLES, ROBUST_SAMPLES_WHAT),
+                    default=64, metavar="S",
+                    help=f"perturbed copies per ranked grasp for --rank robust, at most {MAX_ROBUST_SAMPLES:,} (default 64)")
     sp.add_argument("--out", default="plan", metavar="DIR", help="output folder (default ./plan)")
     sp.add_argument("--no-plot", action="store_true", help="do not write best.png")
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")

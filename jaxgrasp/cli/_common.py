@@ -258,13 +258,13 @@ def announce_run(command: str, source: str, count: int, noun: str, quiet: bool =
         )
 
 
-LONG_EVALUATION_CONTACTS = 32
+LONG_EVALUATION_CONTACTS = 16
 """Grasps of more contacts than this get a line on stderr before their evaluation
 (`announce_large_grasp`). The evaluation of one grasp is one compiled call without
 progress of its own; its 2 N boundary problems of N contacts each cost time and memory
-that grow more than in proportion to N. The commands do not cap N: such a grasp is valid and its result
-exact, only slow, and the memory it needs depends on the machine's other work; the line
-tells the user what the wait is for."""
+that grow more than as N^2 (``experiments/limits/FINDINGS.md``): the line tells the user what
+the wait is for. Above
+`jaxgrasp.model.MAX_CONTACTS` (32) a grasp is refused."""
 
 
 def announce_large_grasp(n_contacts: int, source: str) -> None:

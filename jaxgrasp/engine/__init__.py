@@ -39,11 +39,12 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.engine._devices import configure_cpu_devices
     from jaxgrasp.engine._evaluate import evaluate_compiled
     from jaxgrasp.engine._gradient import value_and_grad_builder
+    from jaxgrasp.engine._limits import CHUNK_SIZE_WHAT, MAX_CHUNK_SIZE
     from jaxgrasp.engine._plan import check_chunk_size, grasps_by_count
     from jaxgrasp.engine._prefetch import prefetch
     from jaxgrasp.engine._runner import GraspSource, Stacked, plan_source, run_batch, start_progress
     from jaxgrasp.engine._settling import INLINE, RETRY
-    from jaxgrasp.engine._store import enable_from_environment, log_lines_on_stderr
+    from jaxgrasp.engine._store import enable_from_environment, log_lines_on_stderr, matplotlib_dir
 
     # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
     from jaxgrasp.engine._compile import clear_compiled

@@ -21,6 +21,8 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from jaxgrasp.base import over_limit
+from jaxgrasp.engine._limits import CHUNK_SIZE_WHAT, MAX_CHUNK_SIZE
 from jaxgrasp.engine._setup import first_use
 from jaxgrasp.model import GraspValueError
 
@@ -77,12 +79,15 @@ def default_chunk_size(devices=None) -> int:
 
 
 def check_chunk_size(chunk_size) -> None:
-    """``chunk_size`` must be ``None`` (the default) or a positive integer; a one-line
-    [`GraspValueError`][jaxgrasp.GraspValueError] otherwise."""
+    """``chunk_size`` must be ``None`` (the default) or a positive integer of at most
+    `MAX_CHUNK_SIZE`; a one-line [`GraspValueError`][jaxgrasp.GraspValueError] otherwise."""
     if chunk_size is not None and (
         isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1
     ):
         raise GraspValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    problem = None if chunk_size is None else over_limit("chunk_size", chunk_size, MAX_CHUNK_SIZE, CHUNK_SIZE_WHAT)
+    if problem:
+        raise GraspValueError(problem)
 
 
 def bucket_size(chunk_size: int, total: int, n_devices: int = 1) -> int:

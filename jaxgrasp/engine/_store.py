@@ -79,6 +79,7 @@ import os
 import pickle
 import platform
 import sys
+import tempfile
 import threading
 import warnings
 from collections.abc import Callable, Hashable, Sequence
@@ -146,8 +147,9 @@ def _warn_once(message: str) -> None:
 
 def default_dir() -> Path | None:
     """The cache folder: ``$JAXGRASP_CACHE_DIR``, else ``$XDG_CACHE_HOME/jaxgrasp/xla``,
-    else ``~/.cache/jaxgrasp/xla``; ``None`` where ``JAXGRASP_CACHE_DIR=off`` or no home
-    folder is known."""
+    else ``~/.cache/jaxgrasp/xla``; without a usable home folder (`_home`), the user's
+    own folder in the temporary folder, ``jaxgrasp-cache-UID/xla`` (`_temporary_dir`);
+    ``None`` where ``JAXGRASP_CACHE_DIR=off``."""
     value = os.environ.get(ENV_VAR, "").strip()
     if value.lower() == OFF:
         return None
@@ -156,11 +158,49 @@ def default_dir() -> Path | None:
     xdg = os.environ.get("XDG_CACHE_HOME", "")
     if os.path.isabs(xdg):  # XDG: a relative value is ignored
         return Path(xdg) / "jaxgrasp" / "xla"
-    try:
-        home = Path.home()
-    except (RuntimeError, KeyError):  # no home folder
+    home = _home()
+    return home / ".cache" / "jaxgrasp" / "xla" if home is not None else _temporary_dir()
+
+
+def _home() -> Path | None:
+    """The home folder the cache may go in: ``$HOME`` (or the user's entry in the password
+    database where it is unset); ``None`` where it is empty, relative or the file system's
+    root (``HOME=""`` reads as ``/``: the cache would land in ``/.cache``), or is not an
+    existing folder (a system user's ``/nonexistent`` is not created)."""
+    value = os.environ.get("HOME")
+    if value is None:
+        try:
+            value = os.path.expanduser("~")  # the password database
+        except (RuntimeError, KeyError):  # pragma: no cover - no entry for this user
+            return None
+    home = Path(value) if value else None
+    if home is None or not home.is_absolute() or home == Path(home.anchor) or not home.is_dir():
         return None
-    return home / ".cache" / "jaxgrasp" / "xla" if home.is_absolute() else None  # HOME="": not the working folder
+    return home
+
+
+def matplotlib_dir() -> Path | None:
+    """Where matplotlib should keep its cache and configuration (``MPLCONFIGDIR``) in a
+    process of a user without a usable home folder (`_home`): ``jaxgrasp-cache-UID/matplotlib``
+    in the temporary folder, beside `_temporary_dir`; ``None`` where the user has a home
+    folder (matplotlib's own choice is right). Without it, ``HOME=""`` puts matplotlib's
+    cache in ``/.cache/matplotlib`` (where the root user can write)."""
+    if os.environ.get("XDG_CACHE_HOME") or _home() is not None:
+        return None
+    return Path(tempfile.gettempdir()) / f"jaxgrasp-cache-{os.geteuid()}" / "matplotlib"
+
+
+def _temporary_dir() -> Path:
+    """The cache folder of a user without a usable home folder: ``jaxgrasp-cache-UID/xla``
+    in the temporary folder (``$TMPDIR``, else ``/tmp``...), private as every cache folder
+    (one owned by another user, or open to others, is refused with a warning: nothing
+    planted there is loaded). Said once, at INFO level."""
+    folder = Path(tempfile.gettempdir()) / f"jaxgrasp-cache-{os.geteuid()}" / "xla"
+    message = f"jaxgrasp: no usable home folder (HOME={os.environ.get('HOME')!r}); caching compiled code in {folder}"
+    if message not in _WARNED:
+        _WARNED.add(message)
+        LOGGER.info(message)
+    return folder
 
 
 def chosen_dir() -> tuple[bool, Path | None]:
@@ -343,6 +383,13 @@ def executable_entry(name: str, key: Hashable, spec: Sequence = ()) -> StoreEntr
 _MAGIC = b"jaxgrasp-executable-4"
 """First line of a stored executable's file (a file of another format is stale)."""
 
+MAX_EXECUTABLE_BYTES = 256 * 2**20
+"""The largest stored executable read, bytes (256 MiB): a stored file is read whole, then
+its payload copied and unpickled, so a file of a few gigabytes (a sparse one costs nothing
+on disk) would take several times its size in memory. The executables jaxgrasp stores are
+a few MiB on a CPU (``experiments/limits/FINDINGS.md``); a larger file is not read, the
+executable is built again and the file replaced."""
+
 _MAX_HEADER = 1 << 20
 """Longest header line read (bytes); a longer one is damaged."""
 
@@ -359,7 +406,7 @@ def _read_private(path: Path) -> bytes:
     """The bytes of ``path`` (`jaxgrasp.storage.read_private`); raises
     ``FileNotFoundError``, `_Refused` or `_Unusable`."""
     try:
-        return storage.read_private(path)
+        return storage.read_private(path, MAX_EXECUTABLE_BYTES)
     except storage.NotPrivate as exc:
         raise _Refused(str(exc)) from None
     except FileNotFoundError:

@@ -63,6 +63,7 @@ import io
 import json
 import math
 import os
+import struct
 import zipfile
 import zlib
 from collections.abc import Mapping, Sequence
@@ -395,7 +396,7 @@ def _npz_arrays(fh: BinaryIO, path: Path) -> dict[str, np.ndarray]:
     except GraspValueError:
         raise
     except (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, ValueError, OSError, EOFError,
-            NotImplementedError, KeyError) as exc:  # not a zip, truncated, a bad member, compression unknown
+            NotImplementedError, KeyError, RuntimeError) as exc:  # not a zip, truncated, a bad member, compression unknown
         raise GraspValueError(f"{path}: not a readable .npz file ({' '.join(str(exc).split())})") from None
     unknown = sorted(set(arrays) - set(_ARRAYS))
     if unknown:
@@ -415,6 +416,7 @@ def _npz_members(fh: BinaryIO, path: Path) -> dict[str, np.ndarray]:
     sizes the zip directory declares, then each ``.npy`` header's shape times item size,
     against `MAX_DATASET_BYTES`, before a byte is allocated."""
     arrays = {}
+    _check_member_count(fh, path)
     with zipfile.ZipFile(fh) as zf:
         infos = zf.infolist()
         declared = sum(info.file_size for info in infos)
@@ -423,11 +425,50 @@ def _npz_members(fh: BinaryIO, path: Path) -> dict[str, np.ndarray]:
                 f"{path}: its arrays declare {_size(declared)} uncompressed, more than the "
                 f"{_size(MAX_DATASET_BYTES)} read at most"
             )
+        _check_members(infos, path)
         for info in infos:
             name = info.filename.removesuffix(".npy")
             with zf.open(info) as member:
                 arrays[name] = _npy_member(member, info.file_size, name, path)
     return arrays
+
+
+_MAX_MEMBERS = 64
+"""The most members an ``.npz``'s zip may list (its arrays are at most one per name of
+`_ARRAYS`; a few more get the one line that names the first unknown one)."""
+
+_EOCD = struct.Struct("<4s4H2LH")
+"""The zip's end-of-central-directory record: signature, disk numbers, entries on this disk
+and in all, the directory's size and offset, the comment's length."""
+
+
+def _check_member_count(fh: BinaryIO, path: Path) -> None:
+    """At most `_MAX_MEMBERS` members, read from the zip's last record before ``zipfile``
+    builds an object per member of its directory (a 1 GiB file could list 20 million
+    members). A file without that record is left to ``zipfile`` (not a zip)."""
+    size = fh.seek(0, os.SEEK_END)
+    fh.seek(max(0, size - _EOCD.size - 0xFFFF))  # the record, then a comment of at most 64 KiB
+    tail = fh.read()
+    fh.seek(0)
+    at = tail.rfind(b"PK\x05\x06", 0, max(0, len(tail) - _EOCD.size + 4))  # the whole record fits
+    if at < 0:
+        return
+    entries = _EOCD.unpack_from(tail, at)[4]  # in the whole zip
+    if entries > _MAX_MEMBERS:
+        raise GraspValueError(f"{path}: the zip lists {entries:,} members; a dataset .npz holds at most "
+                              f"{len(_ARRAYS)} arrays, one per name ({', '.join(_ARRAYS)})")
+
+
+def _check_members(infos: list, path: Path) -> None:
+    """Every member a ``NAME.npy`` of a known array name, not encrypted, before one is
+    decompressed (one-line errors)."""
+    for info in infos:
+        name = info.filename.removesuffix(".npy")
+        if info.flag_bits & 0x1:  # zip flag bit 0: encrypted, a password would be needed
+            raise GraspValueError(f"{path}: array {name!r} is encrypted; save the dataset with numpy.savez, "
+                                  "without a password")
+        if name not in _ARRAYS:
+            raise GraspValueError(f"{path}: unknown array {name!r}; arrays are named {', '.join(_ARRAYS)}")
 
 
 def _npy_member(member: BinaryIO, size: int, name: str, path: Path) -> np.ndarray:

@@ -34,6 +34,8 @@ __all__ = [
     "MAX_DATASET_BYTES",
     "MAX_GRASP_FILE_BYTES",
     "MAX_MESH_BYTES",
+    "MAX_MESH_DECLARED_BYTES",
+    "MAX_MESH_FACES",
     "MESH_SUFFIXES",
     "allowed_folders",
     "check_mesh_suffix",
@@ -54,6 +56,17 @@ most its arrays may declare, together, once uncompressed."""
 
 MAX_MESH_BYTES = 256 * 2**20
 """Largest mesh file read, bytes (256 MiB: a binary STL of about 5 million triangles)."""
+
+MAX_MESH_FACES = 5_000_000
+"""The most faces, and the most vertices, of a mesh read (`jaxgrasp.io._mesh.read_mesh`;
+an OBJ's counted from its lines before it is parsed): five times the million faces of the
+largest scanned objects, and about what a binary STL of `MAX_MESH_BYTES` holds. Decimate
+a finer mesh (its pictures are decimated anyway, its contacts need no finer surface)."""
+
+MAX_MESH_DECLARED_BYTES = 4 * MAX_MESH_BYTES
+"""The most bytes of geometry a GLB's accessors may declare (1 GiB): trimesh allocates an
+accessor's count even where no data stands behind it, so a small file could ask for any
+amount. A GLB's textures are never decoded (materials are skipped)."""
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb")
 """The mesh formats read, by suffix: single-file formats of one surface. Not read: archives
@@ -178,6 +191,13 @@ def allowed_folders(allowed_dirs: Iterable[str | os.PathLike] | None) -> tuple[s
     return tuple(out)
 
 
+def _shown(name) -> str:
+    """A path for a one-line message: its repr, NUL and other control bytes escaped, at
+    most 200 characters."""
+    text = repr(os.fspath(name))
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
 def _inside(path: str, folder: str) -> bool:
     return os.path.commonpath([path, folder]) == folder
 
@@ -189,6 +209,10 @@ def check_mesh_suffix(name: str | os.PathLike) -> str:
     Raises:
         GraspValueError: not one of `MESH_SUFFIXES`.
     """
+    if not isinstance(name, (str, os.PathLike)):
+        raise GraspValueError(f"mesh path must be a string, got {type(name).__name__}")
+    if "\0" in os.fsdecode(os.fspath(name)):
+        raise GraspValueError(f"mesh path {_shown(name)} holds a NUL byte, which no file name can hold")
     suffix = Path(name).suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise GraspValueError(

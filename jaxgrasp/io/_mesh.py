@@ -18,11 +18,21 @@ from __future__ import annotations
 import collections
 import hashlib
 import io
+import json
 import os
+import struct
 
 import numpy as np
 
-from jaxgrasp.io._inputs import MAX_MESH_BYTES, allowed_folders, check_mesh_suffix, confine, read_input
+from jaxgrasp.io._inputs import (
+    MAX_MESH_BYTES,
+    MAX_MESH_DECLARED_BYTES,
+    MAX_MESH_FACES,
+    allowed_folders,
+    check_mesh_suffix,
+    confine,
+    read_input,
+)
 from jaxgrasp.model import (
     COINCIDENT_DISTANCE,
     DEFAULT_GRAVITY,
@@ -101,8 +111,11 @@ def read_mesh(path: str | os.PathLike, units: str = "m", *, real: str | os.PathL
         raw = read_input(source, MAX_MESH_BYTES, "mesh")
     except GraspValueError as exc:  # "<source>: no such file" -> "mesh '<path>': no such file"
         raise GraspValueError(f"{where}: {str(exc).removeprefix(source + ': ')}") from None
+    _check_declared(raw, fmt, where)
     try:  # processed in _checked, after its vertices are checked: processing drops NaN vertices silently
-        loaded = trimesh.load(io.BytesIO(raw), file_type=fmt, force="mesh", process=False)
+        # geometry only: materials would decode every texture image (a small GLB can hold gigapixels)
+        skip = {"skip_materials": True} if fmt in ("glb", "obj") else {}
+        loaded = trimesh.load(io.BytesIO(raw), file_type=fmt, force="mesh", process=False, **skip)
     except Exception as exc:  # trimesh raises many kinds for unreadable files
         raise GraspValueError(f"{where}: cannot read it as a mesh ({' '.join(str(exc).split()) or type(exc).__name__})") from None
     return _checked(loaded, where, units, process=True, how=how), hashlib.sha256(raw).hexdigest()
@@ -117,6 +130,7 @@ def _checked(loaded, where: str, units: str, process: bool = False, how: str = P
 
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise GraspValueError(f"{where} has no faces (a degenerate mesh)")
+    _check_counts(len(loaded.faces), len(loaded.vertices), where)
     _check_vertices(np.asarray(loaded.vertices, dtype=np.float64), where, LENGTH_UNITS[units])
     out = loaded.copy()
     if process:
@@ -138,6 +152,55 @@ def _check_extent(mesh, where: str, units: str, how: str) -> None:
     if units == "mm":
         raise GraspValueError(f"{text}, with its vertices in mm: is it the object, at its size?")
     raise GraspValueError(f"{text}: if its vertices are in mm, {how.format('mm', 'mm')}")
+
+
+def _check_counts(faces: int, vertices: int, where: str, declared: str = "has") -> None:
+    """At most `MAX_MESH_FACES` faces and as many vertices (``declared``: how the
+    message says it, ``"has"`` or ``"declares"``)."""
+    for n, noun in ((faces, "faces"), (vertices, "vertices")):
+        if n > MAX_MESH_FACES:
+            raise GraspValueError(f"{where} {declared} {n:,} {noun}, more than the {MAX_MESH_FACES:,} read at most "
+                                  "(MAX_MESH_FACES); decimate it")
+
+
+_GLB_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_GLB_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+
+
+def _check_declared(raw: bytes, fmt: str, where: str) -> None:
+    """Refuse, before trimesh decodes anything, a file whose own counts say it is too large:
+    an OBJ's face and vertex lines (`_check_counts`), a GLB's accessors (what trimesh
+    allocates from them, even without data behind them, at most `MAX_MESH_DECLARED_BYTES`).
+    STL, PLY and OFF are bounded by the file's size (trimesh checks their counts against it)."""
+    if fmt == "obj":
+        _check_counts(raw.count(b"\nf ") + raw.startswith(b"f "), raw.count(b"\nv ") + raw.startswith(b"v "),
+                      where, "declares")
+    elif fmt == "glb":
+        declared = _glb_accessor_bytes(raw)
+        if declared > MAX_MESH_DECLARED_BYTES:
+            raise GraspValueError(f"{where}: its accessors declare {declared / 2**20:,.0f} MiB of geometry, more than "
+                                  f"the {MAX_MESH_DECLARED_BYTES / 2**20:,.0f} MiB read at most")
+
+
+def _glb_accessor_bytes(raw: bytes) -> int:
+    """The bytes a GLB's accessors declare (count x components x component bytes, from its
+    JSON chunk); 0 where the JSON cannot be read (trimesh then says why)."""
+    if len(raw) < 20 or raw[:4] != b"glTF":
+        return 0
+    length, kind = struct.unpack_from("<II", raw, 12)
+    if kind != 0x4E4F534A:  # "JSON"
+        return 0
+    try:
+        header = json.loads(raw[20:20 + length])
+    except (ValueError, RecursionError):
+        return 0
+    accessors = header.get("accessors") if isinstance(header, dict) else None
+    total = 0
+    for a in accessors if isinstance(accessors, list) else ():
+        count = a.get("count") if isinstance(a, dict) else None
+        if isinstance(count, int) and count > 0:
+            total += count * _GLB_COMPONENTS.get(a.get("type"), 16) * _GLB_COMPONENT_BYTES.get(a.get("componentType"), 4)
+    return total
 
 
 def _check_vertices(vertices: np.ndarray, where: str, metres_per_unit: float) -> None:

@@ -24,7 +24,15 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.model._validation import GraspValueError, check_grasp_inputs
 
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-    from jaxgrasp.model._fields import DEFAULT_GRAVITY, DEFAULT_MASS, FINGERTIP, NAMES, SWEEPABLE, TUNABLE
+    from jaxgrasp.model._fields import (
+        DEFAULT_GRAVITY,
+        DEFAULT_MASS,
+        FINGERTIP,
+        MAX_CONTACTS,
+        NAMES,
+        SWEEPABLE,
+        TUNABLE,
+    )
     from jaxgrasp.model._potential import (
         KINDS,
         contact_gradients,

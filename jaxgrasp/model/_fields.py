@@ -30,6 +30,7 @@ __all__ = [
     "DEFAULT_GRAVITY",
     "DEFAULT_MASS",
     "STANDARD_GRAVITY",
+    "MAX_CONTACTS",
 ]
 
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
@@ -41,6 +42,18 @@ DEFAULT_MASS = 0.0
 STANDARD_GRAVITY = DEFAULT_GRAVITY
 """Default gravity vector, m/s^2, object frame: ``(0, 0, -9.81)``, standard gravity along ``-z``
 (the ``gravity`` default of `jaxgrasp.model.FIELDS`)."""
+
+
+MAX_CONTACTS = 32
+"""The most contacts ``N`` one grasp may have (`jaxgrasp.model._validation.check_grasp_inputs`
+refuses more, so a grasp file, a dataset row and ``Grasp.create`` all do). The paper's grasps
+have 2 to 8 fingertips; a five-fingered hand touching with its fingertips, phalanges and palm
+has about 16 contacts; 32 leaves twice that. The evaluation of one grasp solves ``2 N``
+boundary problems of ``N`` contacts each, a time that grows more than as ``N^2``
+(``experiments/limits/FINDINGS.md``: 32 contacts take seconds, 64 over a minute, 300 tens of
+minutes or more), and a batch pads every grasp to its largest count, so one row of hundreds
+of contacts would hold up the whole batch. The check also comes before the pairwise distance check,
+whose memory grows as ``N^2`` (about 24 GB at 30,000 contacts)."""
 
 
 @dataclasses.dataclass(frozen=True)

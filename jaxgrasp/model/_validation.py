@@ -15,7 +15,7 @@ from typing import Any, Mapping
 import jax
 import numpy as np
 
-from jaxgrasp.model._fields import FIELD, FIELDS, NAMES, PER_CONTACT
+from jaxgrasp.model._fields import FIELD, FIELDS, MAX_CONTACTS, NAMES, PER_CONTACT
 from jaxgrasp.model._units import LENGTH_UNITS, MAX_CONTACT_DISTANCE, MAX_FINGERTIP_RADIUS
 
 __all__ = [
@@ -300,6 +300,11 @@ def _check_shapes(arrs: dict) -> int:
     n = pos.shape[0]
     if n < 2:
         raise GraspValueError(f"need at least 2 contacts, got {n}")
+    if n > MAX_CONTACTS:
+        raise GraspValueError(
+            f"{n} contacts, more than the {MAX_CONTACTS} one grasp may have (an evaluation's time grows "
+            "faster than N^2 in its N contacts: 32 take seconds, 300 tens of minutes or more)"
+        )
     for field in FIELDS:
         shape = arrs[field.name].shape
         if field.shape == "directions" and shape != (n, 3):

@@ -21,6 +21,13 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.planning._result import PlanResult, PlanStatus
 
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.planning._limits import (
+        MAX_FINGERS,
+        MAX_PLAN_REFINE,
+        MAX_PLAN_SAMPLES,
+        PLAN_REFINE_WHAT,
+        PLAN_SAMPLES_WHAT,
+    )
     from jaxgrasp.planning._plan import check_plan
 
     # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).

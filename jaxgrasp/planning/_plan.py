@@ -29,11 +29,28 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.analysis import Uncertainty, epsilon, robust_batch, tune
+from jaxgrasp.analysis import (
+    MAX_ROBUST_SAMPLES,
+    MAX_TUNE_ITERATIONS,
+    ROBUST_SAMPLES_WHAT,
+    TUNE_ITERATIONS_WHAT,
+    Uncertainty,
+    epsilon,
+    robust_batch,
+    tune,
+)
+from jaxgrasp.base import over_limit
 from jaxgrasp.engine import evaluate, evaluate_in_chunks
 from jaxgrasp.io import from_mesh, load_mesh
 from jaxgrasp.model import DEFAULT_GRAVITY, Grasp, GraspValueError
-from jaxgrasp.planning._limits import SAMPLERS
+from jaxgrasp.planning._limits import (
+    MAX_FINGERS,
+    MAX_PLAN_REFINE,
+    MAX_PLAN_SAMPLES,
+    PLAN_REFINE_WHAT,
+    PLAN_SAMPLES_WHAT,
+    SAMPLERS,
+)
 from jaxgrasp.planning._progress import PlanProgress
 from jaxgrasp.planning._result import PlanResult, PlanStatus
 from jaxgrasp.planning._sampling import antipodal_pairs, spread_tuples, surface_points
@@ -199,8 +216,9 @@ def check_plan(
 
     Raises:
         GraspValueError: one line: a count out of range (``fingers`` 2 to 8, ``samples`` and
-        ``top`` >= 1, ``refine`` and ``seed`` >= 0, ``tune_maxiter`` >= 1, ``robust_samples``
-        >= 2), an unknown sampler or one that cannot make ``fingers``-finger grasps, a
+        ``top`` 1 to `MAX_PLAN_SAMPLES`, ``refine`` 0 to `MAX_PLAN_REFINE`, ``seed`` >= 0,
+        ``tune_maxiter`` 1 to `MAX_TUNE_ITERATIONS`, ``robust_samples`` 2 to
+        `MAX_ROBUST_SAMPLES`), an unknown sampler or one that cannot make ``fingers``-finger grasps, a
         fingertip value, mass, density or gravity that is not a finite number in range, a
         bad mesh (`jaxgrasp.io._mesh.load_mesh`; not watertight without
         ``center_of_mass``), or rules that no initial deformation keeps (rule 5).
@@ -209,6 +227,7 @@ def check_plan(
     for name, v, lo in (("tune_maxiter", tune_maxiter, 1), ("robust_samples", robust_samples, 2)):
         if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo):
             raise GraspValueError(f"plan: {name} must be an integer >= {lo}, got {v!r}")
+    _check_caps(samples, top, refine, tune_maxiter, robust_samples)
     if robust is not None and not isinstance(robust, Uncertainty):
         raise GraspValueError(f"plan: robust must be an Uncertainty or None, got {type(robust).__name__}")
     rules = ContactRules() if rules is None else rules
@@ -225,14 +244,26 @@ def _checked_args(fingers, samples, top, refine, seed, sampler) -> str:
                         ("seed", seed, 0)):
         if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo):
             raise GraspValueError(f"plan: {name} must be an integer >= {lo}, got {v!r}")
-    if fingers > 8:
-        raise GraspValueError(f"plan: fingers = {fingers} is more than 8")
+    if fingers > MAX_FINGERS:
+        raise GraspValueError(f"plan: fingers = {fingers} is more than {MAX_FINGERS}")
     sampler = sampler or ("antipodal" if fingers == 2 else "spread")
     if sampler not in SAMPLERS:
         raise GraspValueError(f"plan: unknown sampler {sampler!r}; choose from {', '.join(SAMPLERS)}")
     if sampler == "antipodal" and fingers != 2:
         raise GraspValueError(f"plan: the antipodal sampler makes two-finger grasps, not {fingers}")
     return sampler
+
+
+def _check_caps(samples, top, refine, tune_maxiter, robust_samples) -> None:
+    """Every count at most its cap (`jaxgrasp.planning._limits`), before the mesh is read."""
+    for name, v, cap, what in (("samples", samples, MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT),
+                               ("top", top, MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT),
+                               ("refine", refine, MAX_PLAN_REFINE, PLAN_REFINE_WHAT),
+                               ("tune_maxiter", tune_maxiter, MAX_TUNE_ITERATIONS, TUNE_ITERATIONS_WHAT),
+                               ("robust_samples", robust_samples, MAX_ROBUST_SAMPLES, ROBUST_SAMPLES_WHAT)):
+        problem = over_limit(f"plan: {name}", v, cap, what)
+        if problem:
+            raise GraspValueError(problem)
 
 
 def setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force) -> _Setup:

@@ -83,10 +83,15 @@ def _open_own(path: Path, flags: int) -> int:
     return fd
 
 
-def _read_fd(fd: int) -> bytes:
-    chunks = []
+def _read_fd(fd: int, limit: int | None = None) -> bytes:
+    """The bytes of ``fd`` to its end; an ``OSError`` (``EFBIG``) past ``limit`` bytes
+    (a file that grew while it was read)."""
+    chunks, total = [], 0
     while chunk := os.read(fd, 1 << 20):
         chunks.append(chunk)
+        total += len(chunk)
+        if limit is not None and total > limit:
+            raise OSError(errno.EFBIG, f"it grew past the {limit:,} bytes read at most while it was read")
     return b"".join(chunks)
 
 
@@ -279,25 +284,32 @@ def private_folder(folder: Path, create: bool) -> str | None:
         return f"cannot be created ({exc.strerror or exc})"
 
 
-def read_private(path: Path) -> bytes:
-    """The bytes of ``path``, opened without following a link, if it is a regular file of
-    the user's that no one else can write.
+def read_private(path: Path, limit: int | None = None) -> bytes:
+    """The bytes of ``path``, opened without following a link and without blocking (a FIFO
+    would wait for a writer), if it is a regular file of the user's that no one else can
+    write, of at most ``limit`` bytes (checked on the open file before a byte is read,
+    and again while reading).
 
     Raises:
         FileNotFoundError: it is missing.
-        NotPrivate: a link, or a file another user owns or can write (nothing is read).
-        OSError: it cannot be read.
+        NotPrivate: a link, not a regular file (a FIFO, a device), or a file another user
+            owns or can write (nothing is read).
+        OSError: it cannot be read; ``EFBIG`` where it holds more than ``limit`` bytes.
     """
     try:
-        fd = os.open(path, os.O_RDONLY | NOFOLLOW | getattr(os, "O_CLOEXEC", 0))
+        fd = os.open(path, os.O_RDONLY | NOFOLLOW | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NONBLOCK", 0))
     except OSError as exc:
         if exc.errno == errno.ELOOP:
             raise NotPrivate("it is a symbolic link") from None
         raise
     try:
-        problem = _not_private(os.fstat(fd), "file")  # the file opened, not a name
+        st = os.fstat(fd)  # the file opened, not a name
+        problem = _not_private(st, "file")
         if problem is not None:
             raise NotPrivate(problem)
-        return _read_fd(fd)
+        if limit is not None and st.st_size > limit:
+            raise OSError(errno.EFBIG, f"it holds {st.st_size:,} bytes, more than the {limit:,} read at most")
+        os.set_blocking(fd, True)  # a regular file: read it as any other
+        return _read_fd(fd, limit)
     finally:
         os.close(fd)

@@ -344,3 +344,81 @@ def test_tune_command_refuses_bounds_evaluate_rejects(run_cli, no_tune_compile, 
                              "young_modulus=1e-300:1e6", "--quiet", "--out", tmp_path / "t.toml"],
                    "tune: at the bounds' corner (young_modulus = [1e-300, 1e-300] Pa)", "below 1e-150 J")
     assert list(tmp_path.iterdir()) == []
+
+
+# ----------------------------------------------------------------------------- every count bounded (issue 65)
+
+
+@pytest.mark.parametrize(
+    "argv, fragment",
+    [
+        (["plan", "part.stl", "--samples", "1e12"], "--samples must be at most 100,000 candidates per plan"),
+        (["plan", "part.stl", "--robust-samples", "1000000000000"],
+         "--robust-samples must be at most 100,000 perturbed copies per grasp"),
+        (["plan", "part.stl", "--refine", "1e6"], "--refine must be at most 1,000 refined candidates"),
+        (["plan", "part.stl", "--top", "1e12"], "--top must be at most 100,000 candidates per plan"),
+        (["plan", "part.stl", "--fingers", "9"], "--fingers must be at most 8 fingertips, got 9"),
+        (["evaluate", "--preset", "cube", "--robust", "friction=0.1", "--samples", "1e12"],
+         "--samples must be at most 100,000 perturbed copies per grasp"),
+        (["batch", "set.npz", "--robust", "friction=0.1", "--samples", "1e12"], "--samples must be at most 100,000"),
+        (["batch", "set.npz", "--chunk-size", "1e9"], "--chunk-size must be at most 65,536 grasps per compiled call"),
+        (["batch", "set.npz", "--top", "1e12"], "--top must be at most 1,000 best grasps listed"),
+        (["sweep", "--chunk-size", "1e9"], "--chunk-size must be at most 65,536"),
+        (["evaluate", "--preset", "cube", "--chunk-size", "100000"], "--chunk-size must be at most 65,536"),
+        (["tune", "--preset", "cube", "--maxiter", "1e9"], "--maxiter must be at most 10,000 iterations"),
+    ],
+)
+def test_counts_over_their_cap_are_one_line_before_anything_is_loaded(run_cli, no_compute, argv, fragment):
+    """Each count is refused by the parser (no file is read: ``part.stl`` and ``set.npz``
+    do not exist), in one line naming the option, its cap and the value."""
+    t0 = time.perf_counter()
+    err = one_line_error(run_cli, argv, fragment)
+    assert f"{fragment.split()[0]} 1e12" not in err and ", got " in err, err
+    assert no_compute == [] and time.perf_counter() - t0 < 60
+
+
+def test_counts_may_be_written_as_whole_floats():
+    from jaxgrasp.cli._arguments import Count
+
+    count = Count("--samples", 100, "samples")
+    assert count("1e2") == 100 and count(" 64 ") == 64 and count("2000.0e-2") == 20
+    for bad in ("1.5", "nan", "inf", "ten", ""):
+        with pytest.raises(ValueError):
+            count(bad)
+
+
+def test_library_counts_over_their_cap_raise_the_same_line(tmp_path):
+    """The API refuses the same counts in one line, before reading a mesh (``plan``: the
+    mesh does not exist) or drawing a sample (``robust``: 1e12 samples once asked NumPy
+    for 29 TiB)."""
+    from jaxgrasp.analysis import Uncertainty, perturbed
+    from jaxgrasp.presets import cube
+
+    tip = dict(radius=0.01, young_modulus=3e5, friction=0.8, max_force=15.0)
+    cases = [
+        (lambda: jaxgrasp.plan(tmp_path / "absent.stl", samples=10**12, **tip),
+         "plan: samples must be at most 100,000 candidates per plan"),
+        (lambda: jaxgrasp.plan(tmp_path / "absent.stl", robust_samples=10**12, **tip),
+         "plan: robust_samples must be at most 100,000 perturbed copies per grasp"),
+        (lambda: jaxgrasp.plan(tmp_path / "absent.stl", refine=10**6, **tip), "plan: refine must be at most 1,000"),
+        (lambda: jaxgrasp.plan(tmp_path / "absent.stl", tune_maxiter=10**9, **tip),
+         "plan: tune_maxiter must be at most 10,000"),
+        (lambda: jaxgrasp.robust(cube(), Uncertainty(friction=0.1), samples=10**12),
+         "samples must be at most 100,000 perturbed copies per grasp"),
+        (lambda: perturbed(cube(), Uncertainty(friction=0.1), samples=10**12), "samples must be at most 100,000"),
+        (lambda: jaxgrasp.tune(cube(), ["initial_deformation:shared"], {"initial_deformation": (1e-3, 5e-3)},
+                               maxiter=10**9), "tune: maxiter must be at most 10,000 iterations"),
+        (lambda: jaxgrasp.evaluate_batch([cube(), cube()], chunk_size=10**9),
+         "chunk_size must be at most 65,536 grasps per compiled call"),
+    ]
+    for call, fragment in cases:
+        tracemalloc.start()
+        try:
+            with pytest.raises(jaxgrasp.GraspValueError) as info:
+                call()
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        text = str(info.value)
+        assert "\n" not in text and text.startswith(fragment), text
+        assert peak < 64 * 2**20, (fragment, peak)  # refused before anything large was allocated

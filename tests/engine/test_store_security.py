@@ -295,6 +295,7 @@ def test_environment_moves_or_switches_off(tmp_path, monkeypatch):
         monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
         assert store.default_dir() == tmp_path / "xdg" / "jaxgrasp" / "xla"
         monkeypatch.delenv("XDG_CACHE_HOME")
+        (tmp_path / "home").mkdir()
         monkeypatch.setenv("HOME", str(tmp_path / "home"))
         assert store.default_dir() == tmp_path / "home" / ".cache" / "jaxgrasp" / "xla"
     finally:
@@ -342,3 +343,118 @@ def test_command_prints_the_compilation_report(monkeypatch, capsys):
     captured = capsys.readouterr()
     assert captured.err == "jaxgrasp: compiling evaluate for 2 contacts (no stored executable yet); it is not stored\n"
     assert captured.out == ""
+
+
+# ----------------------------------------------------------------------------- sizes, FIFOs, home (issue 65)
+
+
+def test_stored_file_over_the_cap_is_not_read(clean, monkeypatch, caplog):
+    """A 3 GB (sparse: no disk, no memory) file at the stored file's name was read whole
+    (killed at 6 GB): now it is refused by its size on the open file, before a byte is
+    read, and the executable rebuilt and the file replaced."""
+    want, _ = clean
+    path = _entry().path
+    os.truncate(path, 3 * 2**30)  # the user's own private file, only larger
+    reads = []
+    real_read = os.read
+
+    def read(fd, n):
+        if os.fstat(fd).st_size > store.MAX_EXECUTABLE_BYTES:
+            reads.append(n)
+            raise AssertionError("read a file over the cap")
+        return real_read(fd, n)
+
+    monkeypatch.setattr(os, "read", read)
+    with caplog.at_level(logging.INFO, logger="jaxgrasp"):
+        fn, counted = _compiled()
+    monkeypatch.undo()
+    assert reads == [] and counted == {"traced": 1, "deserialized": 0, "cache_errors": 1}
+    assert "it holds 3,221,225,472 bytes, more than the 268,435,456 read at most" in caplog.text, caplog.text
+    np.testing.assert_array_equal(_result(fn), want)
+    _assert_replaced(want)
+
+
+_FIFO_IN_STORE = """
+import json, os, sys
+import jax, jax.numpy as jnp, numpy as np
+import jaxgrasp
+from jaxgrasp.engine import _compile
+from jaxgrasp.engine import _store as store
+folder = store.set_executable_dir(sys.argv[1])
+spec = (jax.ShapeDtypeStruct((4,), jnp.float64),)
+entry = store.executable_entry("tiny", (("tiny", 2.0), 0), spec)
+os.mkfifo(entry.path)  # nobody writes to it: opening it to read would wait for ever
+fn, _ = _compile.compiled(("tiny", 2.0), lambda: jax.jit(lambda x: (jnp.sin(x) * 2.0 + 1.0,)), spec, name="tiny",
+                          store_key=("tiny", 2.0))
+_compile.wait_for_saves()
+print(json.dumps({"stats": store.stats(), "value": np.asarray(fn(np.linspace(0.0, 1.0, 4))[0]).tolist(),
+                  "regular": os.path.isfile(entry.path)}))
+"""
+
+
+def test_fifo_in_the_store_does_not_block(tmp_path):
+    """A FIFO at a stored file's name blocked the process for ever (its open waited for a
+    writer): opened without blocking, it is refused and replaced. Run in a subprocess
+    with a timeout, so that a regression fails instead of hanging the suite."""
+    import json
+    import subprocess
+    import sys
+
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "JAX_ENABLE_X64": "1"}
+    proc = subprocess.run([sys.executable, "-c", _FIFO_IN_STORE, str(tmp_path / "store")], capture_output=True,
+                          text=True, env=env, timeout=60)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert got["stats"]["traced"] == 1 and got["stats"]["cache_errors"] == 1, got
+    np.testing.assert_allclose(got["value"], np.sin(X) * 2.0 + 1.0, rtol=1e-15)
+    assert got["regular"]  # the FIFO was replaced by the stored file
+    assert "not a regular file" in proc.stderr, proc.stderr
+
+
+@pytest.mark.parametrize("home", ["", "/", "missing"])
+def test_without_a_usable_home_the_cache_is_a_private_temporary_folder(tmp_path, monkeypatch, home):
+    """``HOME=""`` reads as ``/`` (the cache landed in ``/.cache``); ``/`` itself and a home
+    that does not exist are no better: the cache goes to the user's own folder in the
+    temporary folder, created private, and one INFO line says so."""
+    import tempfile
+
+    monkeypatch.delenv(store.ENV_VAR, raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path / "missing") if home == "missing" else home)
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
+    monkeypatch.setattr(tempfile, "tempdir", None)  # gettempdir reads TMPDIR again
+    (tmp_path / "tmp").mkdir()
+    store._WARNED.clear()
+    want = tmp_path / "tmp" / f"jaxgrasp-cache-{os.geteuid()}" / "xla"
+    saved = store.executable_dir()
+    try:
+        assert store.default_dir() == want
+        assert store.enable_from_environment() == want / store.EXECUTABLE_SUBDIR
+        assert stat.S_IMODE(want.parent.stat().st_mode) == 0o700 and not (tmp_path / "missing").exists()
+    finally:
+        store.set_executable_dir(saved)
+    assert any("no usable home folder" in m and str(want) in m for m in store._WARNED)
+
+
+def test_command_without_a_home_keeps_matplotlib_out_of_the_root(tmp_path, monkeypatch):
+    """``HOME=""``: matplotlib would keep its cache in ``/.cache/matplotlib``; the command
+    points it into the temporary folder (a given ``MPLCONFIGDIR`` stays)."""
+    import tempfile
+
+    from jaxgrasp import cli
+    from jaxgrasp.cli import _evaluate
+
+    monkeypatch.setenv("HOME", "")
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.delenv("MPLCONFIGDIR", raising=False)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    monkeypatch.setattr(cli, "enable_compilation_cache", lambda: None)  # no process-wide setting
+    monkeypatch.setattr(_evaluate, "run", lambda args: 0)
+    assert cli.main(["evaluate", "--preset", "cube"]) == 0
+    assert os.environ["MPLCONFIGDIR"] == str(tmp_path / f"jaxgrasp-cache-{os.geteuid()}" / "matplotlib")
+    monkeypatch.setenv("MPLCONFIGDIR", str(tmp_path / "mine"))
+    assert cli.main(["evaluate", "--preset", "cube"]) == 0 and os.environ["MPLCONFIGDIR"] == str(tmp_path / "mine")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.delenv("MPLCONFIGDIR")
+    assert cli.main(["evaluate", "--preset", "cube"]) == 0 and "MPLCONFIGDIR" not in os.environ

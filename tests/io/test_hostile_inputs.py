@@ -14,6 +14,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import time
 import zipfile
 
 import numpy as np
@@ -321,3 +322,178 @@ def test_huge_or_nan_mesh_is_one_line_in_every_command(tmp_path, run_cli, coordi
         rc, out, err = run_cli(argv)
         assert rc == 2 and out == "" and err.count("\n") == 1 and message in err, (argv[0], err)
     assert not (tmp_path / "po").exists() and not (tmp_path / "x.png").exists()
+
+
+# --------------------------------------------------------------------------- issue 65: more bounds
+
+
+def _flag_encrypted(raw: bytes) -> bytes:
+    """The zip ``raw`` with every member flagged encrypted (general-purpose flag bit 0, in
+    its local header and its central-directory entry), its bytes otherwise as they were."""
+    out = bytearray(raw)
+    for signature, flags_at in ((b"PK\x03\x04", 6), (b"PK\x01\x02", 8)):
+        at = out.find(signature)
+        while at >= 0:
+            out[at + flags_at] |= 1
+            at = out.find(signature, at + 1)
+    return bytes(out)
+
+
+def test_npz_with_an_encrypted_member_is_one_line_exit_2(tmp_path, run_cli):
+    """zipfile raised RuntimeError ("password required") through the loader: a traceback."""
+    path = tmp_path / "locked.npz"
+    np.savez(path, **_cube_arrays(3))
+    path.write_bytes(_flag_encrypted(path.read_bytes()))
+    with pytest.raises(GraspValueError) as info:
+        load_dataset(path)
+    assert one_line(info).startswith(f"{path}: array 'positions' is encrypted; save the dataset with numpy.savez")
+    rc, out, err = run_cli(["batch", path, "--out", tmp_path / "o"])
+    assert rc == 2 and out == "" and err.count("\n") == 1 and "is encrypted" in err and "Traceback" not in err, err
+
+
+def test_npz_listing_more_members_than_arrays_is_refused_from_its_last_record(tmp_path, monkeypatch):
+    """The member count comes from the zip's end record, before zipfile builds an object
+    per member (a 1 GiB file could list 20 million)."""
+    path = tmp_path / "many.npz"
+    with zipfile.ZipFile(path, "w") as zf:
+        for i in range(65):
+            zf.writestr(f"a{i}.npy", b"")
+    monkeypatch.setattr(zipfile, "ZipFile", None)  # never reached
+    with pytest.raises(GraspValueError) as info:
+        load_dataset(path)
+    assert one_line(info).startswith(f"{path}: the zip lists 65 members; a dataset .npz holds at most 10 arrays")
+
+
+def test_npz_member_of_an_unknown_name_is_refused_before_it_is_decompressed(tmp_path, monkeypatch):
+    path = tmp_path / "extra.npz"
+    np.savez_compressed(path, **_cube_arrays(2), extra=np.zeros(3))
+    monkeypatch.setattr(zipfile.ZipFile, "open", None)  # no member is opened
+    with pytest.raises(GraspValueError) as info:
+        load_dataset(path)
+    assert one_line(info).startswith(f"{path}: unknown array 'extra'; arrays are named positions, normals")
+
+
+def _many_contacts(n: int) -> dict:
+    v = np.random.default_rng(0).normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    return {"fingertip": FINGERTIP, "contacts": [
+        {"position": (0.05 * u).tolist(), "normal": u.tolist(), "initial_deformation": 1e-3} for u in v]}
+
+
+def test_rows_of_more_contacts_than_the_cap_are_invalid_rows(tmp_path, run_cli):
+    """A 300-contact row padded an 11-row batch to 300 contacts (minutes); now it is an
+    invalid row naming the cap, and a grasp file of 33 contacts is refused in one line."""
+    from jaxgrasp.model import MAX_CONTACTS
+
+    path = tmp_path / "set.jsonl"
+    write_jsonl(path, [grasp_dict(), _many_contacts(300), _many_contacts(MAX_CONTACTS)])
+    got = load_dataset(path)
+    assert got.valid.tolist() == [True, False, True] and got.num_contacts.tolist() == [2, 0, MAX_CONTACTS]
+    assert got.errors[1].startswith(f"grasp 1 (line 2): 300 contacts, more than the {MAX_CONTACTS} one grasp may have")
+    rc, out, err = run_cli(["batch", path, "--strict", "--out", tmp_path / "o"])
+    assert rc == 2 and out == "" and err.count("\n") == 1 and "300 contacts, more than the 32" in err, err
+    big = tmp_path / "big.json"
+    big.write_text(json.dumps(_many_contacts(MAX_CONTACTS + 1)))
+    rc, out, err = run_cli(["evaluate", big])
+    assert rc == 2 and out == "" and err.count("\n") == 1 and "33 contacts, more than the 32" in err, err
+    arrays = _cube_arrays(2)
+    wide = {**arrays, "positions": np.zeros((2, 40, 3)), "normals": np.ones((2, 40, 3)),
+            "active": np.zeros((2, 40), bool)}
+    wide["positions"][:, :2], wide["normals"][:, :2], wide["active"][:, :2] = arrays["positions"], arrays["normals"], True
+    wide["initial_deformation"] = np.full(2, 0.002)
+    np.savez(tmp_path / "wide.npz", **wide)  # 40 columns, 2 active contacts a row: valid
+    assert load_dataset(tmp_path / "wide.npz").num_contacts.tolist() == [2, 2]
+
+
+def test_mesh_names_with_a_nul_byte_are_one_line(folders, tmp_path, run_cli):
+    """os.path.realpath raised ValueError ("embedded null byte") through every loader."""
+    from jaxgrasp.io import load_mesh
+
+    data, _ = folders
+    with pytest.raises(GraspValueError) as info:
+        load_mesh(str(data / "cube\x00.stl"))
+    assert "holds a NUL byte, which no file name can hold" in one_line(info)
+    path = data / "nul.json"
+    path.write_text(json.dumps(grasp_dict("cube\u0000.stl")))
+    rc, out, err = run_cli(["evaluate", path])
+    assert rc == 2 and out == "" and err.count("\n") == 1, err
+    assert err.startswith(f"jaxgrasp: error: {path}: mesh path 'cube\\x00.stl' holds a NUL byte"), err
+    rows = data / "nul.jsonl"
+    write_jsonl(rows, [grasp_dict("cube\u0000.stl"), grasp_dict("cube.stl")])
+    got = load_dataset(rows)
+    assert got.valid.tolist() == [False, True] and "holds a NUL byte" in got.errors[0], got.errors
+    with pytest.raises(GraspValueError) as info:
+        jaxgrasp.load(str(tmp_path / "a\x00.toml"))
+    assert "holds a NUL byte" in one_line(info)
+
+
+def _glb_with(update) -> bytes:
+    """A 0.1 m box as GLB, its JSON chunk changed by ``update(header)``."""
+    import struct
+
+    glb = trimesh.creation.box(extents=(0.1, 0.1, 0.1)).export(file_type="glb")
+    length, _ = struct.unpack_from("<II", glb, 12)
+    header = json.loads(glb[20:20 + length])
+    update(header)
+    text = json.dumps(header).encode()
+    text += b" " * (-len(text) % 4)
+    body = struct.pack("<II", len(text), 0x4E4F534A) + text + glb[20 + length:]
+    return b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body
+
+
+def _textured(header) -> None:
+    header["images"] = [{"uri": "data:image/png;base64,iVBORw0KGgo="}]  # a PNG signature, then nothing
+    header["textures"] = [{"source": 0}]
+    header["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
+    for mesh in header["meshes"]:
+        for primitive in mesh["primitives"]:
+            primitive["material"] = 0
+
+
+def test_glb_textures_are_never_decoded(tmp_path, monkeypatch):
+    """A 3 MB GLB with large embedded textures was killed at 7 GB: the mesh is read for its
+    geometry alone, and no image is opened."""
+    import PIL.Image
+
+    from jaxgrasp.io import load_mesh
+
+    opened = []
+    monkeypatch.setattr(PIL.Image, "open", lambda *a, **k: opened.append(a))
+    path = tmp_path / "textured.glb"
+    path.write_bytes(_glb_with(_textured))
+    mesh = load_mesh(path)
+    assert len(mesh.faces) == 12 and opened == []
+
+
+def test_glb_accessors_declaring_gigabytes_are_refused_before_decoding(tmp_path, run_cli, monkeypatch):
+    """An accessor without data is allocated by its count: a 1 KB file asked for 112 GiB."""
+    def bomb(header):
+        header["accessors"].append({"componentType": 5126, "count": 10**10, "type": "VEC3"})
+
+    path = tmp_path / "bomb.glb"
+    path.write_bytes(_glb_with(bomb))
+    monkeypatch.setattr(trimesh, "load", None)  # never reached
+    t0 = time.perf_counter()
+    rc, out, err = run_cli(["plan", path, "--out", tmp_path / "o"])
+    assert rc == 2 and out == "" and err.count("\n") == 1, err
+    assert "bomb.glb': its accessors declare 114,441 MiB of geometry, more than the 1,024 MiB read at most" in err
+    assert time.perf_counter() - t0 < 60 and not (tmp_path / "o").exists()
+
+
+def test_meshes_over_the_face_cap_are_refused(tmp_path, monkeypatch):
+    """An OBJ by its face lines, before it is parsed; any mesh by its faces once read."""
+    from jaxgrasp.io import _mesh, load_mesh
+
+    monkeypatch.setattr(_mesh, "MAX_MESH_FACES", 10)
+    box = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    box.export(tmp_path / "box.obj")
+    box.export(tmp_path / "box.stl")
+    monkeypatch.setattr(trimesh, "load", None)  # the OBJ is refused before trimesh sees it
+    with pytest.raises(GraspValueError) as info:
+        load_mesh(tmp_path / "box.obj")
+    assert one_line(info).startswith(f"mesh '{tmp_path / 'box.obj'}' declares 12 faces, more than the 10 read at most")
+    monkeypatch.undo()
+    monkeypatch.setattr(_mesh, "MAX_MESH_FACES", 10)
+    with pytest.raises(GraspValueError) as info:
+        load_mesh(tmp_path / "box.stl")
+    assert one_line(info).startswith(f"mesh '{tmp_path / 'box.stl'}' has 12 faces, more than the 10 read at most")

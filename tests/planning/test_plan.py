@@ -156,7 +156,7 @@ def bad_inputs(tmp_path_factory):
         ("notmesh.stl", [], "notmesh.stl' has no faces"),
         ("empty.stl", [], "empty.stl' has no faces"),
         ("block.stl", ["--fingers", "1"], "fingers must be an integer >= 2, got 1"),
-        ("block.stl", ["--fingers", "9"], "fingers = 9 is more than 8"),
+        ("block.stl", ["--fingers", "9"], "--fingers must be at most 8 fingertips, got 9"),
         ("block.stl", ["--samples", "0"], "samples must be an integer >= 1, got 0"),
         ("block.stl", ["--top", "0"], "top must be an integer >= 1, got 0"),
         ("block.stl", ["--refine", "-1"], "refine must be an integer >= 0, got -1"),
