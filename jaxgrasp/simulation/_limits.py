@@ -23,9 +23,9 @@ radii (the smallest fingertip's).
 MuJoCo finds contacts between steps: a surface point that moves more than a fingertip's
 radius in one step passes through the fingertip or lands deep inside it, and the contact
 force there is no longer the calibrated spring's (eq. 4) but whatever the penetration
-makes it. Beyond that the simulator does not integrate the kick; far beyond it (on the
-paper's prism at 0.1 kg, from about 40 radii per step) the contact forces overflow
-MuJoCo's limits and it resets the state, which then looks held. A kick's initial speed
+makes it. Beyond that the simulator does not integrate the kick; far beyond it the contact
+forces overflow MuJoCo's limits and it resets the state, which then looks held (the guide's
+page on simulation gives the prism's numbers). A kick's initial speed
 at its fastest contact point is ``|v| + |w| R`` (``v`` the linear velocity, ``w`` the
 angular one, ``R`` the contacts' largest distance from the centre of mass), and
 `jaxgrasp.simulation._options.check_kick_travel` refuses a scale whose kick moves that
@@ -37,7 +37,7 @@ MAX_KICK_SCALE = 1e6
 the options, before anything is evaluated (the command: before JAX is loaded).
 
 A scale of 1 is the energy that takes the grasp to its slip boundary; ``s = 10^6`` is a
-kick a thousand times faster than that one, far past any slip. The speed it gives depends
+kick of a thousand times that one's speed, far past any slip. The speed it gives depends
 on the value and the mass, known only later, so `MAX_KICK_TRAVEL` is the limit that
 decides whether a kick can be integrated; this one refuses at once the scales no grasp
 could use (``1e20``, ``1e300``: initial speeds of thousands of km/s and more)."""

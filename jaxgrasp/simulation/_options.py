@@ -17,7 +17,7 @@ finiteness it holds a run to three rules:
 * every kick scale is at most `MAX_KICK_SCALE`, and once the scene is built (its
   timestep, fingertips and mass known) no kick may carry a contact point more than
   `MAX_KICK_TRAVEL` fingertip radii in one timestep (`check_kick_travel`, before any
-  trial): a faster kick is beyond what MuJoCo integrates.
+  trial): a kick beyond that is beyond what MuJoCo integrates.
 
 The two caps keep one run of a few contacts to minutes on one core, not hours.
 """

@@ -30,7 +30,7 @@ from jaxgrasp.model import GraspValueError
 from jaxgrasp.simulation._options import check_kick_travel, check_number, check_options, check_steps
 from jaxgrasp.simulation._result import SimulationResult, SimulationStatus
 from jaxgrasp.simulation._scene import IMPEDANCE, build_scene, load_mujoco
-from jaxgrasp.simulation._trials import Runner, least_energy_direction
+from jaxgrasp.simulation._trials import Runner, least_energy_direction, warnings_recorded
 
 __all__ = ["simulate"]
 
@@ -177,18 +177,26 @@ def _simulated(grasp, plain, evaluation, opts, seed, slip_threshold) -> Simulati
     runner = Runner(scene, thresholds, opts["sample_s"])
     value = float(np.asarray(evaluation.value))
     kicks = _kicks(runner, evaluation, opts, seed, scene, value)
-    hold, state, settled = runner.hold(opts["hold_time_s"], opts["hold_tolerance_m"], opts["hold_tolerance_rad"])
-    six, done = [], []
-    if not hold.diverged:  # a diverged hold leaves no settled state for the others to start from
-        six = runner.six_axis(state, opts["disturbance_acceleration_m_s2"], opts["six_axis_time_s"],
-                              opts["six_axis_tolerance_m"], opts["six_axis_tolerance_rad"])
-        done = [runner.kick(state, d, s * value, opts["kick_time_s"], s, kind) for s, kind, d in kicks]
+    with warnings_recorded():
+        hold, six, done, settled = _trials(runner, opts, kicks, value)
     status, reason = _divergence([hold, *six, *done])
     return SimulationResult(
         status=status, grasp_status=evaluation.status_name, value=value, reason=reason,
         hold=hold, six_axis=tuple(six), kicks=tuple(done), settled_normal_force_N=settled,
         model_normal_force_N=cal["f_eq"], parameters=_parameters(opts, scene, thresholds),
     )
+
+
+def _trials(runner, opts, kicks, value):
+    """``(hold, six-axis trials, kicks, settled forces)``; where the hold diverged, no other
+    trial (it leaves no settled state to start from)."""
+    hold, state, settled = runner.hold(opts["hold_time_s"], opts["hold_tolerance_m"], opts["hold_tolerance_rad"])
+    if hold.diverged:
+        return hold, [], [], settled
+    six = runner.six_axis(state, opts["disturbance_acceleration_m_s2"], opts["six_axis_time_s"],
+                          opts["six_axis_tolerance_m"], opts["six_axis_tolerance_rad"])
+    done = [runner.kick(state, d, s * value, opts["kick_time_s"], s, kind) for s, kind, d in kicks]
+    return hold, six, done, settled
 
 
 def _divergence(trials) -> tuple[SimulationStatus, str]:

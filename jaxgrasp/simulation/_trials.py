@@ -18,6 +18,7 @@ out); the trial is reported diverged, never a success.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from typing import NamedTuple
 
@@ -27,7 +28,7 @@ from jaxgrasp.simulation._limits import DIVERGENCE_WARNINGS
 from jaxgrasp.simulation._result import AXES, Trial
 from jaxgrasp.simulation._scene import Scene, load_mujoco, rotation_matrix, rotation_matrix_of_quat
 
-__all__ = ["Runner", "rotation_angle"]
+__all__ = ["Runner", "Samples", "rotation_angle", "warnings_recorded"]
 
 _GONE_M = 0.2
 """A trial stops early once the object is this far from its start, m (it has fallen)."""
@@ -44,6 +45,21 @@ class Samples(NamedTuple):
     forces: np.ndarray  # (T - 1, N) N, normal forces (where recorded)
     warnings: dict  # MuJoCo's warnings of the run, {name: count}
     diverged: bool  # MuJoCo met a state beyond its limits (the run stopped there)
+
+
+@contextlib.contextmanager
+def warnings_recorded():
+    """While the trials run, MuJoCo's warnings are read from its counters (`Runner.warnings`)
+    and said in the result, not printed: MuJoCo's own handler would print each to stderr
+    and append it to ``MUJOCO_LOG.TXT`` in the working directory. The handler found is put
+    back after."""
+    mujoco = load_mujoco()
+    before = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda _message: None)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(before)
 
 
 def rotation_angle(r) -> float:
