@@ -416,6 +416,9 @@ class BatchCheckpoint:
         except (OSError, ValueError, storage.OutputError) as exc:
             raise ValueError(f"{path}: not a readable checkpoint ({exc})") from None
         if not isinstance(have, dict) or have.get("format") != BATCH_FORMAT:
+            if isinstance(have, dict) and str(have.get("format")).startswith("jaxgrasp-batch-partial-"):
+                raise ValueError(f"{path}: a checkpoint of another jaxgrasp ({have['format']}, not {BATCH_FORMAT}): "
+                                 "remove its folder to start afresh")
             raise ValueError(f"{path}: not a jaxgrasp batch checkpoint ({BATCH_FORMAT})")
         if have.get("source_sha256") != self.manifest["source_sha256"]:
             raise ValueError(

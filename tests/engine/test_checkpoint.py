@@ -195,6 +195,18 @@ def test_several_damaged_chunks_are_counted(checkpoint):
     assert "skipped 2 damaged chunk files" in checkpoint.skipped_note() and "their grasps" in checkpoint.skipped_note()
 
 
+def test_a_checkpoint_of_the_format_before_digests_is_refused_in_one_line(tmp_path):
+    """Its chunks have no digest: one line saying to remove it, not a silent recomputation."""
+    import json
+
+    cp = _run(tmp_path, "old", _inputs())
+    manifest = cp.folder / cp.MANIFEST
+    manifest.write_text(json.dumps({**json.loads(manifest.read_text()), "format": "jaxgrasp-batch-partial-1"}))
+    with pytest.raises(ValueError, match=r"a checkpoint of another jaxgrasp \(jaxgrasp-batch-partial-1, not "
+                                         r"jaxgrasp-batch-partial-2\): remove its folder to start afresh"):
+        cp.open(resume=True)
+
+
 def test_the_run_key_names_what_results_depend_on():
     """Other options, another width for a count, another platform: another key (so the
     chunks are evaluated again); the same run: the same key (so they are reused)."""
