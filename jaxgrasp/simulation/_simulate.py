@@ -176,8 +176,8 @@ def _simulated(grasp, plain, evaluation, opts, seed, slip_threshold) -> Simulati
                   else np.full(len(c.r), slip_threshold))
     runner = Runner(scene, thresholds, opts["sample_s"])
     value = float(np.asarray(evaluation.value))
-    kicks = _kicks(runner, evaluation, opts, seed, scene, value)
-    with warnings_recorded():
+    with warnings_recorded():  # MuJoCo's warnings are read from its counters (the trials' records)
+        kicks = _kicks(runner, evaluation, opts, seed, scene, value)
         hold, six, done, settled = _trials(runner, opts, kicks, value)
     status, reason = _divergence([hold, *six, *done])
     return SimulationResult(
