@@ -37,7 +37,7 @@ from jaxgrasp.planning import (
     SAMPLERS,
 )
 from jaxgrasp.presets import PRESETS
-from jaxgrasp.simulation import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION
+from jaxgrasp.simulation import MAX_KICK_SCALE, MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION
 
 __all__ = [
     "COMMANDS",
@@ -498,6 +498,25 @@ def add_show(sub) -> None:
                          "sets the fingertips and the object (no --young-modulus etc. with it)"))
 
 
+def _kick_scales(text: str) -> list[float]:
+    """``--scales S,S,...``: at least one scale, no empty item, each finite, ``>= 0`` and
+    at most `MAX_KICK_SCALE` (a kick beyond it is beyond what the simulator integrates;
+    `jaxgrasp.simulation._limits`); a `UsageError` naming the option otherwise."""
+    if not text.strip():
+        raise UsageError("--scales: empty value; give at least one scale, e.g. 0.5,0.9,1.1,2")
+    items = text.split(",")
+    if any(not s.strip() for s in items):
+        raise UsageError(f"--scales: list {text!r} has an empty item")
+    scales = [parse_number("--scales", s, "scale") for s in items]
+    for s in scales:
+        if s < 0:
+            raise UsageError(f"--scales must be finite and >= 0, got {s:g}")
+        if s > MAX_KICK_SCALE:
+            raise UsageError(f"--scales {s:g} is too large: a kick of {s:g} times the value is beyond what the "
+                             f"simulator integrates; at most {MAX_KICK_SCALE:g}")
+    return scales
+
+
 def add_simulate(sub) -> None:
     """Add the ``simulate`` command to the ``jaxgrasp`` sub-parsers."""
     p = sub.add_parser(
@@ -519,8 +538,9 @@ def add_simulate(sub) -> None:
     p.add_argument("--hold-time", default="1.0", metavar="S", help="hold under gravity, s (default 1)")
     p.add_argument("--six-axis-time", default="2.0", metavar="S", help="each disturbance, s (default 2)")
     p.add_argument("--kick-time", default="0.3", metavar="S", help="each energy kick, s (default 0.3)")
-    p.add_argument("--scales", default="0.5,0.9,1.1,2", metavar="S,S,...",
-                   help="kick energies as multiples of the value (default 0.5,0.9,1.1,2)")
+    p.add_argument("--scales", default="0.5,0.9,1.1,2", metavar="S,S,...", type=_kick_scales,
+                   help=(f"kick energies as multiples of the value, each 0 to {MAX_KICK_SCALE:g} "
+                         "(default 0.5,0.9,1.1,2)"))
     p.add_argument("--random-kicks", type=int, default=2, metavar="N", help="random kick directions per scale (default 2)")
     p.add_argument("--sim-friction", metavar="MU", help="the simulator's friction instead of the grasp's (a what-if)")
     p.add_argument("--timestep", metavar="S",

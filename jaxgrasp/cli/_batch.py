@@ -9,8 +9,10 @@ Nothing finished is lost: each finished chunk is kept at once in ``DIR/results.p
 (`jaxgrasp.cli._keepers.BatchCheckpoint`, one atomic file per chunk), so a run stopped at
 any moment (Ctrl-C, SIGTERM, ``kill -9``) is finished by ``--resume`` without
 recomputing those chunks; a resumed run must read the same dataset and the same mesh files
-its rows name (`resume_key`). At the end ``results.csv``, ``results.npz`` and
-``results.png`` replace the previous ones as one set and the checkpoint is removed.
+its rows name (`resume_key`), and a chunk file that is not this run's (its digest over its
+rows' inputs and the options, `batch_checkpoint`) is evaluated again, never merged. At the
+end ``results.csv``, ``results.npz`` and ``results.png`` replace the previous ones as one
+set and the checkpoint is removed.
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from jaxgrasp.cli._common import (
 from jaxgrasp.engine import prefetch
 from jaxgrasp.model import counted
 
-__all__ = ["run", "resume_key", "OUTPUT_NAMES", "PARTIAL_NAME"]
+__all__ = ["run", "resume_key", "batch_checkpoint", "OUTPUT_NAMES", "PARTIAL_NAME"]
 
 OUTPUT_NAMES = ("results.csv", "results.npz", "results.png")
 """The files of one batch's output set, in ``--out``."""
@@ -54,8 +56,7 @@ PARTIAL_NAME = "results.partial"
 
 def run(args) -> int:
     """Evaluate the dataset of the command line; write the files and print a summary."""
-    from jaxgrasp.engine import evaluate_dataset
-    from jaxgrasp.cli._keepers import BatchCheckpoint
+    from jaxgrasp.engine import evaluate_dataset, grasps_by_count, plan_widths
     from jaxgrasp.io import load_dataset
 
     _check_numbers(args)
@@ -69,19 +70,19 @@ def run(args) -> int:
         raise UsageError(f"{args.file}: no valid grasp ({len(gset)} invalid; first: {gset.errors[0]})")
     out = Path(args.out)
     check_out(out)
-    n_contacts = int(gset.num_contacts.max())
+    widths = plan_widths(grasps_by_count(gset.num_contacts), jax.devices()[0].platform)  # what evaluate_dataset picks
     if not args.no_plot:
         prefetch("jaxgrasp.plots._plots")  # matplotlib's import overlaps the compile
 
     t_start = time.perf_counter()
     with lock_out(out):
-        checkpoint = BatchCheckpoint(out / PARTIAL_NAME, args.file, resume_key(gset), len(gset), n_contacts)
+        checkpoint = batch_checkpoint(out, args.file, gset, widths)
         rows, results = _open_checkpoint(checkpoint, args.resume, len(gset))
         progress = ChunkProgress("evaluating", "grasp", show=not args.quiet)
         announce_run("batch", args.file, int(np.count_nonzero(np.delete(gset.valid, rows))), "grasp", args.quiet)
         merged, result = evaluate_dataset(
             gset, done=(rows, results), on_chunk_rows=checkpoint.keeper(rows.size, len(gset)),
-            chunk_size=args.chunk_size, progress=progress,
+            chunk_size=args.chunk_size, progress=progress, widths=widths,
         )
         wall = time.perf_counter() - t_start
         extra = _epsilon(gset) if args.epsilon else {}
@@ -161,6 +162,23 @@ def resume_key(gset) -> str:
         return gset.source_sha256
     lines = [f"dataset {gset.source_sha256}"] + [f"mesh {sha} {path}" for path, sha in sorted(gset.mesh_sha256.items())]
     return hashlib.sha256("\n".join(lines).encode("utf-8", "surrogateescape")).hexdigest()
+
+
+def batch_checkpoint(out: Path, source: str, gset, widths):
+    """The checkpoint ``jaxgrasp batch`` keeps in ``out`` for dataset ``gset`` read from
+    ``source``, run at ``widths`` (`plan_widths`) with the default options
+    (`jaxgrasp.cli._keepers.BatchCheckpoint`): each chunk's digest covers its rows' grasp
+    fields and contact counts and the run's key (`run_key`: options, widths, platform,
+    jaxgrasp's source, JAX's version), so that a chunk copied from another run is evaluated
+    again, not merged."""
+    from jaxgrasp.cli._keepers import BatchCheckpoint
+    from jaxgrasp.engine import run_key
+    from jaxgrasp.tolerance import EvaluateOptions
+
+    columns = gset.columns()
+    return BatchCheckpoint(out / PARTIAL_NAME, source, resume_key(gset), len(gset), int(gset.num_contacts.max()),
+                           inputs={**columns.fields, "counts": columns.counts},
+                           key=run_key(EvaluateOptions(), widths, jax.devices()[0].platform))
 
 
 def _check_numbers(args) -> None:

@@ -44,7 +44,8 @@ class BatchCheckpoint(engine.BatchCheckpoint):
         )
 
     def skipped_note(self) -> str | None:
-        """One line on the chunk files the last `load` skipped (``None``: none)."""
+        """One line on the chunk files the last `load` skipped (``None``: none): damaged
+        ones and other runs' (each file's reason says which)."""
         if not self.skipped:
             return None
         n = len(self.skipped)

@@ -31,7 +31,7 @@ def _options(args) -> dict:
     (`check_options`) under their option names."""
     opts = {k: parse_number(OPTION_NAMES[k], getattr(args, k[:-2]), "time")
             for k in ("hold_time_s", "six_axis_time_s", "kick_time_s")}
-    opts["kick_scales"] = _scales(args.scales)
+    opts["kick_scales"] = list(args.scales)  # parsed and bounded by the parser (`jaxgrasp.cli._arguments`)
     opts["random_kicks"] = args.random_kicks
     if args.sim_friction is not None:
         opts["friction"] = parse_number("--sim-friction", args.sim_friction, "friction")
@@ -39,16 +39,6 @@ def _options(args) -> dict:
         opts["timestep"] = parse_number("--timestep", args.timestep, "timestep")
     check_options(**opts, names=OPTION_NAMES)
     return opts | {"simulate_unstable": args.simulate_unstable}
-
-
-def _scales(text: str) -> list[float]:
-    """``--scales S,S,...``: at least one, no empty item."""
-    if not text.strip():
-        raise UsageError("--scales: empty value; give at least one scale, e.g. 0.5,0.9,1.1,2")
-    items = text.split(",")
-    if any(not s.strip() for s in items):
-        raise UsageError(f"--scales: list {text!r} has an empty item")
-    return [parse_number("--scales", s, "scale") for s in items]
 
 
 def run(args) -> int:
@@ -96,7 +86,13 @@ def _plot_bytes(result) -> bytes:
 def _summary(source: str, result) -> str:
     if not result.simulated:
         return f"simulate {source}: {result.status_name}, not simulated ({result.reason})"
-    kicks = sum(not k.success for k in result.kicks)
-    return (f"simulate {source}: value {result.value:.6e} J; hold {'held' if result.hold.success else 'failed'} "
-            f"({1e3 * result.hold.max_displacement_m:.3g} mm); six-axis "
-            f"{sum(t.success for t in result.six_axis)}/6 held; kicks with a slip {kicks}/{len(result.kicks)}")
+    line = (f"simulate {source}: value {result.value:.6e} J; hold {result.hold.outcome()} "
+            f"({1e3 * result.hold.max_displacement_m:.3g} mm)")
+    if result.six_axis:
+        line += f"; six-axis {sum(t.success for t in result.six_axis)}/6 held"
+    if result.kicks:
+        slipped = sum(k.outcome() == "failed" for k in result.kicks)
+        line += f"; kicks with a slip {slipped}/{len(result.kicks)}"
+    if result.diverged:  # never counted as held: said first-hand
+        line += f"; diverged: {result.reason}"
+    return line

@@ -34,7 +34,8 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
     from jaxgrasp.engine._batch import evaluate_in_chunks
     from jaxgrasp.engine._batch_result import assemble, mark_invalid
-    from jaxgrasp.engine._checkpoint import BATCH_FOLDER, SWEEP_FILE, BatchCheckpoint, CheckpointBusy, SweepKeeper
+    from jaxgrasp.engine._checkpoint import (BATCH_FOLDER, SWEEP_FILE, BatchCheckpoint, CheckpointBusy, SweepKeeper,
+                                             run_key)
     from jaxgrasp.engine._compile import StoredFunction, wait_for_saves
     from jaxgrasp.engine._devices import configure_cpu_devices
     from jaxgrasp.engine._evaluate import evaluate_compiled

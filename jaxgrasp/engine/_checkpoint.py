@@ -31,6 +31,7 @@ File format (``np.load(path)``; no pickled objects), ``format`` =
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import io
 import json
 import os
@@ -61,6 +62,8 @@ __all__ = [
     "SWEEP_FILE",
     "BATCH_FOLDER",
     "chunk_layout",
+    "rows_digest",
+    "run_key",
 ]
 
 SWEEP_FILE = "sweep.partial.npz"
@@ -252,7 +255,7 @@ class CheckpointBusy(Exception):
         self.folder = Path(folder)
 
 
-BATCH_FORMAT = "jaxgrasp-batch-partial-1"
+BATCH_FORMAT = "jaxgrasp-batch-partial-2"
 """The ``format`` of a batch checkpoint's ``manifest.json`` (changes when its layout does)."""
 
 
@@ -282,6 +285,41 @@ def chunk_layout(num_contacts: int) -> dict[str, tuple[tuple[int, ...], np.dtype
 
 _CHUNK_NAME = re.compile(r"rows-\d+\.npz")  # rows-<first row, 9 digits>.npz, fullmatch
 _NPY_HEADER_BYTES = 4096  # at most, per array of a chunk file (NumPy's header, padded)
+_DIGEST_BYTES = 64 * 4  # a chunk's digest: 64 hex digits as a NumPy unicode scalar
+
+
+def run_key(options, widths: Mapping[int, int], platform: str) -> str:
+    """What a batch's results depend on besides each grasp's own fields, as the text a
+    chunk's digest (`rows_digest`) starts from: the
+    [`EvaluateOptions`][jaxgrasp.EvaluateOptions] ``options``, the width each contact count
+    runs at (``widths``, `plan_widths`: a grasp's value can differ with the width by
+    rounding), the devices' ``platform`` (another program), jaxgrasp's source
+    (`source_digest`: an editable install keeps its version while its code changes) and
+    the JAX and jaxlib versions. The processor is left out: a run resumed on another
+    machine of the same platform reuses its chunks."""
+    import jax
+    import jaxlib
+
+    from jaxgrasp.engine._store import source_digest
+
+    parts = [repr(options), repr(sorted((int(c), int(w)) for c, w in dict(widths).items())), str(platform),
+             source_digest(), jax.__version__, jaxlib.__version__]
+    return "\n".join(parts)
+
+
+def rows_digest(inputs: Mapping[str, np.ndarray], rows: np.ndarray, key: str) -> str:
+    """SHA-256 (hex) of ``key`` (`run_key`), the row numbers ``rows`` and, for each array
+    of ``inputs`` (name -> ``(B, ...)``, the dataset's grasp fields by row), its name,
+    dtype, and the bytes of exactly those rows: what a chunk's results were computed
+    from. A chunk whose digest is not its rows' digest in this run is another run's."""
+    rows = np.asarray(rows, dtype=np.int64)
+    h = hashlib.sha256(key.encode("utf-8", "surrogateescape"))
+    h.update(b"\nrows\n" + rows.astype("<i8").tobytes())
+    for name in sorted(inputs):
+        a = np.ascontiguousarray(np.asarray(inputs[name])[rows])
+        h.update(f"\n{name} {a.dtype.str} {a.shape}\n".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def _reason(exc: BaseException) -> str:
@@ -301,14 +339,25 @@ class BatchCheckpoint:
       ``source_sha256`` (its bytes' SHA-256: a resumed run must read the same file),
       ``grasps`` (``B``) and ``num_contacts`` (``N``, the padded contact count);
     * ``rows-<first>.npz``, one per finished chunk, each written atomically once its
-      chunk is done: ``rows`` (int64, the input indices of its grasps) and every
+      chunk is done: ``rows`` (int64, the input indices of its grasps), ``digest`` (str,
+      `rows_digest` of those rows' inputs and the run's `run_key`) and every
       [`Evaluation`][jaxgrasp.Evaluation] field for them (leading axis ``len(rows)``, contacts
       padded to ``N``; `chunk_layout`).
 
     A chunk file is complete or absent, so a run killed at any moment (even ``kill -9``)
     keeps every chunk finished before it. A damaged chunk file (truncated, arrays missing
     or of other shapes or dtypes, rows out of range or held by another chunk) is skipped
-    by `load` and its rows are evaluated again (`skipped` says which).
+    by `load` and its rows are evaluated again (`skipped` says which); so is another
+    run's chunk, one whose digest is not that of its rows' inputs and options in this
+    run (a chunk copied from another dataset's or another version's checkpoint): it is
+    recomputed, never merged. Recomputing, not refusing the resume: the run still ends
+    with the results an uninterrupted one writes, and a stray file costs its chunk's time,
+    not the rest of the run.
+
+    ``inputs`` (name -> ``(B, ...)`` array, the dataset's grasp fields by row) and ``key``
+    (`run_key`) are what the digest covers; ``jaxgrasp batch`` gives both
+    (`jaxgrasp.cli._batch.batch_checkpoint`). Without ``inputs`` a digest covers the row
+    numbers and ``key`` alone.
 
     No link is followed: the folder, its manifest and its chunks must be real folders and
     files (a link at the folder's path is refused, `OutputError`;
@@ -319,8 +368,11 @@ class BatchCheckpoint:
     MANIFEST_LIMIT = 1 << 20
     """The most bytes a manifest may hold, read back."""
 
-    def __init__(self, folder, source: str, source_sha256: str, grasps: int, num_contacts: int):
+    def __init__(self, folder, source: str, source_sha256: str, grasps: int, num_contacts: int, *,
+                 inputs: Mapping[str, np.ndarray] | None = None, key: str = ""):
         self.folder = Path(folder)
+        self.inputs = dict(inputs or {})
+        self.key = key
         self.manifest = {
             "format": BATCH_FORMAT,
             "source": str(source),
@@ -364,6 +416,9 @@ class BatchCheckpoint:
         except (OSError, ValueError, storage.OutputError) as exc:
             raise ValueError(f"{path}: not a readable checkpoint ({exc})") from None
         if not isinstance(have, dict) or have.get("format") != BATCH_FORMAT:
+            if isinstance(have, dict) and str(have.get("format")).startswith("jaxgrasp-batch-partial-"):
+                raise ValueError(f"{path}: a checkpoint of another jaxgrasp ({have['format']}, not {BATCH_FORMAT}): "
+                                 "remove its folder to start afresh")
             raise ValueError(f"{path}: not a jaxgrasp batch checkpoint ({BATCH_FORMAT})")
         if have.get("source_sha256") != self.manifest["source_sha256"]:
             raise ValueError(
@@ -430,8 +485,9 @@ class BatchCheckpoint:
 
         A chunk file that is damaged in any way (unreadable, a link, not a zip, arrays
         missing or unknown, shapes or dtypes other than `chunk_layout`'s for the
-        manifest's contact count, rows out of range or held by an earlier chunk) is
-        skipped, so its rows are evaluated again; `skipped` lists them with the reason.
+        manifest's contact count, rows out of range or held by an earlier chunk) or is
+        another run's (its digest is not `rows_digest` of its rows here) is skipped, so
+        its rows are evaluated again; `skipped` lists them with the reason.
         """
         seen = np.zeros(self.manifest["grasps"], dtype=bool)
         rows, parts, self.skipped = [], [], []
@@ -454,15 +510,16 @@ class BatchCheckpoint:
         layout = chunk_layout(self.manifest["num_contacts"])
         total = self.manifest["grasps"]
         row_bytes = 8 + sum(int(np.prod(shape)) * dt.itemsize for shape, dt in layout.values())
-        limit = total * row_bytes + (len(layout) + 1) * _NPY_HEADER_BYTES
+        limit = total * row_bytes + _DIGEST_BYTES + (len(layout) + 2) * _NPY_HEADER_BYTES
         data = storage.read_own(path, limit)
         with zipfile.ZipFile(io.BytesIO(data)) as zf:  # compressed members: bound what they inflate to
             if sum(i.file_size for i in zf.infolist()) > limit:
                 raise ValueError(f"its arrays would take more than {limit} bytes")
         with np.load(io.BytesIO(data), allow_pickle=False) as z:
-            if set(z.files) != {"rows", *layout}:
-                raise ValueError(f"arrays {sorted(set(z.files) ^ {'rows', *layout})} missing or unknown")
+            if set(z.files) != {"rows", "digest", *layout}:
+                raise ValueError(f"arrays {sorted(set(z.files) ^ {'rows', 'digest', *layout})} missing or unknown")
             rows = np.asarray(z["rows"])
+            digest = np.asarray(z["digest"])
             part = {k: np.asarray(z[k]) for k in layout}
         if rows.dtype != np.int64 or rows.ndim != 1 or rows.size == 0:
             raise ValueError(f"rows {rows.dtype} {rows.shape}, not a 1-D int64 list")
@@ -473,11 +530,17 @@ class BatchCheckpoint:
         for k, (shape, dtype) in layout.items():
             if part[k].shape != (rows.size, *shape) or part[k].dtype != dtype:
                 raise ValueError(f"{k} {part[k].dtype} {part[k].shape}, not {dtype} {(rows.size, *shape)}")
+        if digest.shape != () or digest.dtype.kind != "U" or str(digest) != rows_digest(self.inputs, rows, self.key):
+            raise ValueError("another run's chunk: its digest is not that of these rows' inputs and options "
+                             "in this run")
         return rows, part
 
     def save_rows(self, rows: np.ndarray, results: Mapping[str, np.ndarray]) -> None:
-        """Keep one finished chunk: input ``rows`` and their ``results`` (by field), atomically."""
-        arrays = {"rows": np.asarray(rows, dtype=np.int64), **{k: np.asarray(v) for k, v in results.items()}}
+        """Keep one finished chunk: input ``rows``, their ``results`` (by field) and the
+        digest of what they were computed from (`rows_digest`), atomically."""
+        rows = np.asarray(rows, dtype=np.int64)
+        arrays = {"rows": rows, "digest": np.asarray(rows_digest(self.inputs, rows, self.key)),
+                  **{k: np.asarray(v) for k, v in results.items()}}
         storage.write_file(self.folder / f"rows-{int(arrays['rows'][0]):09d}.npz", lambda fh: np.savez(fh, **arrays))
 
     def files(self) -> list[Path]:

@@ -22,7 +22,8 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.simulation._simulate import simulate
 
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-    from jaxgrasp.simulation._limits import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION
+    from jaxgrasp.simulation._limits import (MAX_KICK_SCALE, MAX_KICK_TRAVEL, MAX_SIMULATED_S, MAX_STEPS,
+                                             TIMESTEP_FRACTION)
     from jaxgrasp.simulation._options import check_options
     from jaxgrasp.simulation._scene import load_mujoco
 

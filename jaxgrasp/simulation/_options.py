@@ -13,7 +13,11 @@ finiteness it holds a run to three rules:
   per scale counted);
 * they take at most `MAX_STEPS` MuJoCo steps, their time / timestep. With the
   automatic timestep the count is known once the scene is built: `check_steps` runs
-  then, before any trial.
+  then, before any trial;
+* every kick scale is at most `MAX_KICK_SCALE`, and once the scene is built (its
+  timestep, fingertips and mass known) no kick may carry a contact point more than
+  `MAX_KICK_TRAVEL` fingertip radii in one timestep (`check_kick_travel`, before any
+  trial): a kick beyond that is beyond what MuJoCo integrates.
 
 The two caps keep one run of a few contacts to minutes on one core, not hours.
 """
@@ -26,9 +30,9 @@ from collections.abc import Mapping
 import numpy as np
 
 from jaxgrasp.model import GraspValueError
-from jaxgrasp.simulation._limits import MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION
+from jaxgrasp.simulation._limits import MAX_KICK_SCALE, MAX_KICK_TRAVEL, MAX_SIMULATED_S, MAX_STEPS, TIMESTEP_FRACTION
 
-__all__ = ["DEFAULTS", "check_number", "check_options", "check_steps", "simulated_time"]
+__all__ = ["DEFAULTS", "check_kick_travel", "check_number", "check_options", "check_steps", "simulated_time"]
 
 DEFAULTS = {
     "hold_time_s": 1.0,
@@ -79,7 +83,7 @@ def check_options(*, kick_scales, random_kicks, friction=None, timestep=None, no
     if damping_ratio is not None:
         opts["damping_ratio"] = check_number(label("damping_ratio"), damping_ratio, strict=False)
     opts["timestep"] = None if timestep is None else check_number(label("timestep"), timestep)
-    opts["kick_scales"] = [check_number(label("kick_scales"), s, strict=False) for s in kick_scales]
+    opts["kick_scales"] = [_check_scale(label("kick_scales"), s) for s in kick_scales]
     if isinstance(random_kicks, bool) or not isinstance(random_kicks, (int, np.integer)) or random_kicks < 0:
         raise GraspValueError(f"{label('random_kicks')} must be an integer >= 0, got {random_kicks!r}")
     opts["random_kicks"] = int(random_kicks)
@@ -88,6 +92,16 @@ def check_options(*, kick_scales, random_kicks, friction=None, timestep=None, no
     if opts["timestep"] is not None:
         check_steps(opts, opts["timestep"], label)
     return opts
+
+
+def _check_scale(name: str, value) -> float:
+    """A kick scale: finite, ``>= 0`` and at most `MAX_KICK_SCALE`."""
+    s = check_number(name, value, strict=False)
+    if s > MAX_KICK_SCALE:
+        raise GraspValueError(
+            f"{name} {s:g} is too large: a kick of {s:g} times the value is beyond what the simulator "
+            f"integrates; at most {MAX_KICK_SCALE:g}")
+    return s
 
 
 def _trial_times(opts, label) -> list[tuple[str, float]]:
@@ -137,3 +151,31 @@ def check_steps(opts, timestep: float, label=None) -> None:
         raise GraspValueError(
             f"the trials need {steps:.3g} MuJoCo steps ({total:g} s at {given}); at most {MAX_STEPS:,}: "
             f"shorten the trials or give a longer {label('timestep')}")
+
+
+def check_kick_travel(kicks, timestep: float, radius: float, reach: float) -> None:
+    """Refuse a kick that moves a contact point more than `MAX_KICK_TRAVEL` fingertip
+    radii in one timestep: beyond what MuJoCo integrates (`_limits.MAX_KICK_TRAVEL`).
+
+    Args:
+        kicks: ``(scale, velocity)`` pairs, ``velocity`` ``(6,)`` the object's initial
+            linear (m/s) and angular (rad/s) velocity.
+        timestep: s.
+        radius: the smallest fingertip radius, m.
+        reach: the contacts' largest distance from the centre of mass, m.
+
+    Raises:
+        GraspValueError: one line naming the first such scale, its travel per step, the
+            limit and the largest scale that stays within it.
+    """
+    limit = MAX_KICK_TRAVEL * radius
+    for s, v in kicks:
+        v = np.asarray(v, dtype=np.float64)
+        speed = float(np.linalg.norm(v[:3]) + np.linalg.norm(v[3:]) * reach)  # m/s, the fastest contact point
+        travel = speed * timestep
+        if not travel <= limit:  # NaN too
+            largest = s * (limit / travel) ** 2 if travel > 0 and math.isfinite(travel) else 0.0
+            raise GraspValueError(
+                f"a kick of {s:g} times the value moves the contacts {travel:.3g} m in one timestep of "
+                f"{timestep:.3g} s ({speed:.3g} m/s); MuJoCo integrates at most {MAX_KICK_TRAVEL:g} fingertip "
+                f"radius ({limit:.3g} m) per step: use scales up to {largest:.3g} for this grasp")

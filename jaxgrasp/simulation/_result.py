@@ -21,8 +21,11 @@ DIRECTIONS = ("least_energy", "random")
 class SimulationStatus(Coded):
     """Whether [`jaxgrasp.simulate`][jaxgrasp.simulate] ran the simulator, and if not, why.
 
-    ``SIMULATED``: the grasp was simulated (its trials are in the result). The others name
-    the evaluation's status that kept it out of the simulator: ``UNSTABLE`` and
+    ``SIMULATED``: the grasp was simulated (its trials are in the result). ``DIVERGED``:
+    it was simulated, but in at least one trial MuJoCo met a state beyond its limits and
+    reset it; those trials say ``diverged`` and are never a success (where the hold
+    diverged, no other trial is run: there is no settled state to start from). The others
+    name the evaluation's status that kept it out of the simulator: ``UNSTABLE`` and
     ``NOT_CONVERGED`` (simulated only with ``simulate_unstable=True``) and ``INFEASIBLE``
     (never: there is no equilibrium pose to start from and calibrate at).
     """
@@ -34,6 +37,10 @@ class SimulationStatus(Coded):
         "the evaluation did not converge: not simulated (simulate_unstable=True simulates it where its "
         "equilibrium settled)"
     )
+    DIVERGED = 4, (
+        "the simulator diverged in at least one trial (a state beyond MuJoCo's limits, which it reset): those "
+        "trials are marked diverged, never held"
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,7 +51,8 @@ class Trial:
         kind: ``"hold"``, ``"six_axis"`` or ``"kick"``.
         success: hold: the object stayed within the hold tolerances; six-axis: it moved
             less than 5 cm and turned less than 15 degrees (DexGraspBench's protocol, the
-            limits in ``SimulationResult.parameters``); kick: no fingertip slipped.
+            limits in ``SimulationResult.parameters``); kick: no fingertip slipped. Never
+            where the trial ``diverged``.
         max_displacement_m: largest distance of the centre of mass from where the trial
             started, m.
         max_rotation_rad: largest rotation angle from the orientation the trial started
@@ -63,6 +71,11 @@ class Trial:
         kinetic_energy_J: kicks: the object's initial kinetic energy, J; else ``None``.
         initial_velocity: kicks: ``(6,)`` the object's initial linear velocity (m/s, world
             axes) and angular velocity (rad/s, body axes, as MuJoCo's free joint); else ``None``.
+        diverged: MuJoCo met a position, velocity or acceleration beyond its limits (or a
+            state that is not finite) and reset the state: the trial stopped there, its
+            samples end before it, and it is no success whatever the object did before.
+        simulator_warnings: MuJoCo's warnings in the trial, ``{name: count}`` (such as
+            ``{"mjWARN_BADQACC": 1}``; empty when none).
     """
 
     kind: str
@@ -80,9 +93,11 @@ class Trial:
     direction: str | None = None
     kinetic_energy_J: float | None = None
     initial_velocity: np.ndarray | None = None
+    diverged: bool = False
+    simulator_warnings: dict = dataclasses.field(default_factory=dict)
 
     @property
-    def label(self) -> str:
+    def name(self) -> str:
         """A short name: ``"hold"``, ``"+x"``, ``"least_energy s=0.5"``."""
         if self.kind == "six_axis":
             return str(self.axis)
@@ -90,10 +105,22 @@ class Trial:
             return f"{self.direction} s={self.scale:g}"
         return self.kind
 
+    @property
+    def label(self) -> str:
+        """`name`, and for a diverged trial ``" (diverged)"`` after it (the trials
+        picture's legend shows it)."""
+        return f"{self.name} (diverged)" if self.diverged else self.name
+
+    def outcome(self, held: str = "held", failed: str = "failed") -> str:
+        """``"diverged"``, else ``held`` where the trial succeeded and ``failed`` where not."""
+        return "diverged" if self.diverged else held if self.success else failed
+
     def to_dict(self) -> dict:
         """The trial as JSON-ready numbers (``None`` where a field does not apply)."""
         out = {
             "success": bool(self.success),
+            "diverged": bool(self.diverged),
+            "simulator_warnings": {str(k): int(v) for k, v in self.simulator_warnings.items()},
             "max_displacement_m": float(self.max_displacement_m),
             "max_rotation_rad": float(self.max_rotation_rad),
             "slipped_contact": None if self.slipped_contact is None else int(self.slipped_contact),
@@ -120,7 +147,8 @@ class SimulationResult:
             here is taken as its member; [`status_name`][jaxgrasp.simulation.SimulationResult.status_name] its name).
         grasp_status: the evaluation's status name (``'stable'``, ...).
         value: the evaluation value, J (eq. 1).
-        reason: why the grasp was not simulated (the evaluation's explanation), or ``""``.
+        reason: why the grasp was not simulated (the evaluation's explanation), or which
+            trials diverged and what MuJoCo said (status ``DIVERGED``), or ``""``.
         hold: the hold trial (``None`` when not simulated).
         six_axis: the six disturbance trials, in the order of `AXES`.
         kicks: the energy kicks, for each scale: the least-energy direction, then the random ones.
@@ -148,13 +176,19 @@ class SimulationResult:
 
     @property
     def status_name(self) -> str:
-        """The name of ``status``: ``'simulated'``, ``'unstable'``, ``'infeasible'`` or ``'not_converged'``."""
+        """The name of ``status``: ``'simulated'``, ``'diverged'``, ``'unstable'``, ``'infeasible'`` or
+        ``'not_converged'``."""
         return self.status.label
 
     @property
     def simulated(self) -> bool:
-        """Whether the simulator ran."""
-        return self.status == SimulationStatus.SIMULATED
+        """Whether the simulator ran (``'simulated'`` or ``'diverged'``)."""
+        return self.status in (SimulationStatus.SIMULATED, SimulationStatus.DIVERGED)
+
+    @property
+    def diverged(self) -> tuple:
+        """The trials that diverged (`Trial.diverged`), in the order hold, six-axis, kicks."""
+        return tuple(t for t in (self.hold, *self.six_axis, *self.kicks) if t is not None and t.diverged)
 
     @property
     def six_axis_success(self) -> bool | None:
@@ -168,12 +202,14 @@ class SimulationResult:
         head = f"{self.status_name} (evaluation {self.grasp_status}): value {self.value:.6e} J"
         if not self.simulated:
             return f"{head}\nnot simulated: {self.reason}"
-        ok = lambda t: "held" if t.success else "failed"  # noqa: E731
-        lines = [head, f"hold: {ok(self.hold)}, moved {self.hold.max_displacement_m * 1e3:.3f} mm"]
+        said = lambda t, *words: t.label if t.diverged else f"{t.label} {t.outcome(*words)}"  # noqa: E731
+        lines = [head, f"hold: {self.hold.outcome()}, moved {self.hold.max_displacement_m * 1e3:.3f} mm"]
+        if self.reason:
+            lines.append(self.reason)
         if self.six_axis:
-            lines.append("six-axis: " + ", ".join(f"{t.label} {ok(t)}" for t in self.six_axis))
+            lines.append("six-axis: " + ", ".join(said(t) for t in self.six_axis))
         if self.kicks:
-            lines.append("kicks: " + ", ".join(f"{t.label} {'no slip' if t.success else 'slipped'}" for t in self.kicks))
+            lines.append("kicks: " + ", ".join(said(t, "no slip", "slipped") for t in self.kicks))
         return "\n".join(lines)
 
     def to_dict(self) -> dict:

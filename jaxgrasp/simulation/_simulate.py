@@ -13,6 +13,11 @@
   equilibrium to `boundary_translation` and ``_rotation`` of
   the limiting boundary) and ``random_kicks`` random directions; success if no contact
   slides more than its slip threshold within ``kick_time_s`` (no kicks where the value is 0).
+
+Every kick's velocity is known before the first trial: a scale whose kick MuJoCo could not
+integrate (`check_kick_travel`) is refused then. A trial in which MuJoCo still met a state
+beyond its limits is reported diverged (`Trial.diverged`), the result's status
+``DIVERGED``; where the hold diverged no other trial runs (no settled state to start from).
 """
 
 from __future__ import annotations
@@ -22,10 +27,10 @@ import math
 import numpy as np
 
 from jaxgrasp.model import GraspValueError
-from jaxgrasp.simulation._options import check_number, check_options, check_steps
+from jaxgrasp.simulation._options import check_kick_travel, check_number, check_options, check_steps
 from jaxgrasp.simulation._result import SimulationResult, SimulationStatus
 from jaxgrasp.simulation._scene import IMPEDANCE, build_scene, load_mujoco
-from jaxgrasp.simulation._trials import Runner, least_energy_direction
+from jaxgrasp.simulation._trials import Runner, least_energy_direction, warnings_recorded
 
 __all__ = ["simulate"]
 
@@ -59,7 +64,10 @@ def simulate(
             the paper's model has no damping at all).
         timestep: s, at most 1/100 of the shortest trial (default: resolves the stiffest
             contact mode, at most ``_scene.MAX_TIMESTEP``).
-        kick_scales: the ``s`` of the energy kicks, each ``>= 0``.
+        kick_scales: the ``s`` of the energy kicks, each ``>= 0`` and at most
+            ``_limits.MAX_KICK_SCALE``; a scale whose kick would move the contacts more
+            than ``_limits.MAX_KICK_TRAVEL`` fingertip radii per timestep is refused once
+            the scene is built, before any trial (beyond what MuJoCo integrates).
         random_kicks: random directions per scale; ``seed`` seeds them.
         simulate_unstable: also simulate unstable and not-converged grasps (from their
             equilibrium pose); infeasible grasps are never simulated.
@@ -71,7 +79,8 @@ def simulate(
 
     Returns:
         A [`SimulationResult`][jaxgrasp.simulation.SimulationResult]; its ``parameters`` hold every
-        parameter, the timestep and the calibration.
+        parameter, the timestep and the calibration. Status ``diverged`` where MuJoCo met
+        a state beyond its limits in some trial (those trials are never a success).
 
     Raises:
         ImportError: MuJoCo is not installed (one line: ``pip install "jaxgrasp[sim]"``).
@@ -126,11 +135,11 @@ def _not_simulated(plain, evaluation, status, opts) -> SimulationResult:
     )
 
 
-def _directions(runner, state, evaluation, count: int, seed: int, scene) -> list[tuple[str, np.ndarray]]:
+def _directions(evaluation, count: int, seed: int, scene) -> list[tuple[str, np.ndarray]]:
     """The kick directions: the least-energy one (where there is a limiting boundary) and
     ``count`` random ones (rotation components scaled by the radius of gyration)."""
     out = []
-    least = least_energy_direction(state, evaluation)
+    least = least_energy_direction(evaluation)
     if least is not None:
         out.append(("least_energy", least))
     rng = np.random.default_rng(seed)
@@ -139,6 +148,21 @@ def _directions(runner, state, evaluation, count: int, seed: int, scene) -> list
         z = rng.normal(size=6)
         out.append(("random", np.concatenate([z[:3], z[3:] / gyration])))
     return out
+
+
+def _kicks(runner, evaluation, opts, seed, scene, value) -> list[tuple[float, str, np.ndarray]]:
+    """``(scale, kind, direction)`` of every kick, checked against `check_kick_travel` at
+    the start pose (a free body's kinetic energy does not depend on its pose), before any
+    trial runs."""
+    if value <= 0:  # no energy to scale: no kicks
+        return []
+    kicks = [(s, kind, d) for s in opts["kick_scales"]
+             for kind, d in _directions(evaluation, opts["random_kicks"], seed, scene)]
+    start = runner.start_state()
+    c = scene.contacts
+    check_kick_travel([(s, runner.kick_velocity(start, d, s * value)) for s, _, d in kicks], scene.timestep,
+                      float(np.min(c.r)), float(np.max(np.linalg.norm(c.p, axis=1))))
+    return kicks
 
 
 def _simulated(grasp, plain, evaluation, opts, seed, slip_threshold) -> SimulationResult:
@@ -151,19 +175,41 @@ def _simulated(grasp, plain, evaluation, opts, seed, slip_threshold) -> Simulati
     thresholds = (0.5 * c.mu * np.clip(cal["d_eq"], 0.0, None) if slip_threshold is None
                   else np.full(len(c.r), slip_threshold))
     runner = Runner(scene, thresholds, opts["sample_s"])
-    hold, state, settled = runner.hold(opts["hold_time_s"], opts["hold_tolerance_m"], opts["hold_tolerance_rad"])
-    six = runner.six_axis(state, opts["disturbance_acceleration_m_s2"], opts["six_axis_time_s"],
-                          opts["six_axis_tolerance_m"], opts["six_axis_tolerance_rad"])
     value = float(np.asarray(evaluation.value))
-    kicks = []
-    for s in opts["kick_scales"] if value > 0 else ():  # no energy to scale: no kicks
-        for kind, direction in _directions(runner, state, evaluation, opts["random_kicks"], seed, scene):
-            kicks.append(runner.kick(state, direction, s * value, opts["kick_time_s"], s, kind))
+    with warnings_recorded():  # MuJoCo's warnings are read from its counters (the trials' records)
+        kicks = _kicks(runner, evaluation, opts, seed, scene, value)
+        hold, six, done, settled = _trials(runner, opts, kicks, value)
+    status, reason = _divergence([hold, *six, *done])
     return SimulationResult(
-        status=SimulationStatus.SIMULATED, grasp_status=evaluation.status_name, value=value, reason="",
-        hold=hold, six_axis=tuple(six), kicks=tuple(kicks), settled_normal_force_N=settled,
+        status=status, grasp_status=evaluation.status_name, value=value, reason=reason,
+        hold=hold, six_axis=tuple(six), kicks=tuple(done), settled_normal_force_N=settled,
         model_normal_force_N=cal["f_eq"], parameters=_parameters(opts, scene, thresholds),
     )
+
+
+def _trials(runner, opts, kicks, value):
+    """``(hold, six-axis trials, kicks, settled forces)``; where the hold diverged, no other
+    trial (it leaves no settled state to start from)."""
+    hold, state, settled = runner.hold(opts["hold_time_s"], opts["hold_tolerance_m"], opts["hold_tolerance_rad"])
+    if hold.diverged:
+        return hold, [], [], settled
+    six = runner.six_axis(state, opts["disturbance_acceleration_m_s2"], opts["six_axis_time_s"],
+                          opts["six_axis_tolerance_m"], opts["six_axis_tolerance_rad"])
+    done = [runner.kick(state, d, s * value, opts["kick_time_s"], s, kind) for s, kind, d in kicks]
+    return hold, six, done, settled
+
+
+def _divergence(trials) -> tuple[SimulationStatus, str]:
+    """``(status, reason)`` of the simulated trials: ``DIVERGED`` and which trials, with
+    MuJoCo's warnings, where any diverged; else ``SIMULATED`` and ``""``."""
+    bad = [t for t in trials if t.diverged]
+    if not bad:
+        return SimulationStatus.SIMULATED, ""
+    said = ", ".join(f"{k} x{n}" for k, n in bad[0].simulator_warnings.items()) or "a state that is not finite"
+    rest = " (no other trial: the hold left no settled state)" if trials[0].diverged else ""
+    return SimulationStatus.DIVERGED, (
+        f"MuJoCo diverged in {len(bad)} of {len(trials)} trials (first: {bad[0].name}, {said}): its state went "
+        f"beyond the simulator's limits and was reset; those trials are not held{rest}")
 
 
 def _parameters(opts, scene, thresholds) -> dict:

@@ -8,21 +8,58 @@ torsion about the contact normal times the contact radius ``a = sqrt(r^2 - (r - 
 Fingertips are fixed in the world and MuJoCo's friction (with the no-slip solver) stores
 no tangential deformation, so any such motion is sliding; a contact slipped when it
 exceeds the contact's slip threshold.
+
+A trial diverged where MuJoCo met a position, velocity or acceleration beyond its limits
+(one of `DIVERGENCE_WARNINGS`) or the state is no longer finite: MuJoCo then resets the
+state to the model's start, which would look held. `Runner.run` reads MuJoCo's warning
+counters after every sample and stops the trial at the first such sample (leaving it
+out); the trial is reported diverged, never a success.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
+from typing import NamedTuple
 
 import numpy as np
 
+from jaxgrasp.simulation._limits import DIVERGENCE_WARNINGS
 from jaxgrasp.simulation._result import AXES, Trial
 from jaxgrasp.simulation._scene import Scene, load_mujoco, rotation_matrix, rotation_matrix_of_quat
 
-__all__ = ["Runner", "rotation_angle"]
+__all__ = ["Runner", "Samples", "rotation_angle", "warnings_recorded"]
 
 _GONE_M = 0.2
 """A trial stops early once the object is this far from its start, m (it has fallen)."""
+
+
+class Samples(NamedTuple):
+    """What one run of a trial recorded (`Runner.run`)."""
+
+    t: np.ndarray  # (T,) s, simulated time
+    disp: np.ndarray  # (T,) m, the centre of mass's distance from its start
+    rot: np.ndarray  # (T,) rad, the rotation angle from the start
+    most: np.ndarray  # (N,) m, each contact's largest sliding
+    slip: tuple | None  # (contact, time) of the first slip
+    forces: np.ndarray  # (T - 1, N) N, normal forces (where recorded)
+    warnings: dict  # MuJoCo's warnings of the run, {name: count}
+    diverged: bool  # MuJoCo met a state beyond its limits (the run stopped there)
+
+
+@contextlib.contextmanager
+def warnings_recorded():
+    """While the trials run, MuJoCo's warnings are read from its counters (`Runner.warnings`)
+    and said in the result, not printed: MuJoCo's own handler would print each to stderr
+    and append it to ``MUJOCO_LOG.TXT`` in the working directory. The handler found is put
+    back after."""
+    mujoco = load_mujoco()
+    before = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda _message: None)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(before)
 
 
 def rotation_angle(r) -> float:
@@ -70,16 +107,20 @@ class Runner:
         return np.maximum(tangential, torsion)
 
     def run(self, duration: float, force_record=None):
-        """Step ``duration`` s from the current state; ``(t, disp, rot, max_sliding, first
-        slip (contact, time) or None, forces)``; ``force_record``: also the normal forces."""
+        """Step ``duration`` s from the current state: its `Samples`; ``force_record``: also
+        the normal forces. Where it diverged (`diverged`) the run stopped before the
+        sample that saw it."""
         m, d, mj = self.model, self.data, self.mujoco
         pos0, rot0 = d.qpos[:3].copy(), rotation_matrix_of_quat(d.qpos[3:7])
         n_samples = max(1, int(math.ceil(duration / (self.every * m.opt.timestep))))
         t, disp, rot, forces = [0.0], [0.0], [0.0], []
         most = np.zeros(len(self.thresholds))
-        slip = None
+        slip, diverged = None, False
         for _ in range(n_samples):
             mj.mj_step(m, d, nstep=self.every)
+            diverged = self.diverged()
+            if diverged:  # MuJoCo reset the state (or it is not finite): nothing after this is the trial's
+                break
             pos, r = d.qpos[:3].copy(), rotation_matrix_of_quat(d.qpos[3:7] / np.linalg.norm(d.qpos[3:7]))
             t.append(float(d.time))
             disp.append(float(np.linalg.norm(pos - pos0)))
@@ -91,9 +132,27 @@ class Runner:
                 slip = (int(over[np.argmax(sl[over] / self.thresholds[over])]), float(d.time))
             if force_record:
                 forces.append(self.normal_forces())
-            if not np.all(np.isfinite(d.qpos)) or disp[-1] > _GONE_M:
+            if disp[-1] > _GONE_M:
                 break
-        return np.array(t), np.array(disp), np.array(rot), most, slip, np.array(forces)
+        return Samples(np.array(t), np.array(disp), np.array(rot), most, slip, np.array(forces), self.warnings(),
+                       diverged)
+
+    def warnings(self) -> dict[str, int]:
+        """MuJoCo's warnings since the trial's start (`_reset` clears them): ``{name:
+        count}`` of those raised, such as ``{"mjWARN_BADQACC": 1}``."""
+        out = {}
+        for name, kind in self.mujoco.mjtWarning.__members__.items():
+            if name != "mjNWARNING" and self.data.warning[int(kind)].number > 0:
+                out[name] = int(self.data.warning[int(kind)].number)
+        return out
+
+    def diverged(self) -> bool:
+        """Whether MuJoCo met a state beyond its limits since the trial's start (one of
+        `DIVERGENCE_WARNINGS`: it reset the state) or the state is not finite."""
+        d, kinds = self.data, self.mujoco.mjtWarning
+        if any(d.warning[int(getattr(kinds, name))].number > 0 for name in DIVERGENCE_WARNINGS):
+            return True
+        return not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel)))
 
     def normal_forces(self) -> np.ndarray:
         """``(N,)`` each fingertip's normal force now, N (0 where it does not touch)."""
@@ -113,13 +172,12 @@ class Runner:
     def hold(self, duration: float, tol_m: float, tol_rad: float):
         """The hold trial from the start state; ``(trial, settled state, settled forces)``."""
         self._reset(self.start_state())
-        t, disp, rot, most, slip, forces = self.run(duration, force_record=True)
+        run = self.run(duration, force_record=True)
         state = np.concatenate([self.data.qpos, self.data.qvel])
-        tail = forces[max(0, int(0.75 * len(forces))):]
-        settled = tail.mean(axis=0) if len(tail) else np.full(len(self.thresholds), np.nan)
-        ok = bool(disp.max() < tol_m and rot.max() < tol_rad and len(t) > 1 and np.all(np.isfinite(disp)))
-        trial = _trial("hold", ok, t, disp, rot, most, slip)
-        return trial, state, settled
+        tail = run.forces[max(0, int(0.75 * len(run.forces))):]
+        settled = tail.mean(axis=0) if len(tail) and not run.diverged else np.full(len(self.thresholds), np.nan)
+        ok = run.disp.max() < tol_m and run.rot.max() < tol_rad and len(run.t) > 1
+        return _trial("hold", ok, run), state, settled
 
     def six_axis(self, state, accel: float, duration: float, tol_m: float, tol_rad: float) -> list[Trial]:
         """Six trials from ``state``: a force ``m * accel`` along each of `AXES`."""
@@ -128,9 +186,9 @@ class Runner:
             f = np.zeros(3)
             f[k // 2] = (1.0 if axis[0] == "+" else -1.0) * self.scene.sim_mass * accel
             self._reset(state, force=f)
-            t, disp, rot, most, slip, _ = self.run(duration)
-            ok = bool(t[-1] >= duration - 1e-9 and disp.max() < tol_m and rot.max() < tol_rad)
-            out.append(_trial("six_axis", ok, t, disp, rot, most, slip, axis=axis))
+            run = self.run(duration)
+            ok = run.t[-1] >= duration - 1e-9 and run.disp.max() < tol_m and run.rot.max() < tol_rad
+            out.append(_trial("six_axis", ok, run, axis=axis))
         return out
 
     def kinetic_energy(self, velocity) -> float:
@@ -140,20 +198,25 @@ class Runner:
         mj.mj_mulM(m, d, mv, np.asarray(velocity, dtype=np.float64))
         return 0.5 * float(np.dot(velocity, mv))
 
+    def kick_velocity(self, state, direction, energy: float) -> np.ndarray:
+        """``(6,)`` the object's velocity along ``direction`` (free joint coordinates)
+        with kinetic energy ``energy`` J at the pose of ``state``."""
+        self._reset(state)
+        unit = self.kinetic_energy(direction)
+        return np.asarray(direction, dtype=np.float64) * math.sqrt(energy / unit)
+
     def kick(self, state, direction, energy: float, duration: float, scale: float, kind: str) -> Trial:
         """A trial from ``state`` with the object's velocity along ``direction`` (6,) (free
         joint coordinates) scaled to kinetic energy ``energy`` J; success: no slip."""
-        self._reset(state)
-        unit = self.kinetic_energy(direction)
-        v = np.asarray(direction, dtype=np.float64) * math.sqrt(energy / unit)
+        v = self.kick_velocity(state, direction, energy)
         self._reset(state, velocity=v)
         ke = self.kinetic_energy(v)
-        t, disp, rot, most, slip, _ = self.run(duration)
-        return _trial("kick", slip is None and t[-1] >= duration - 1e-9, t, disp, rot, most, slip, scale=scale,
-                      direction=kind, kinetic_energy_J=ke, initial_velocity=v)
+        run = self.run(duration)
+        return _trial("kick", run.slip is None and run.t[-1] >= duration - 1e-9, run, scale=scale, direction=kind,
+                      kinetic_energy_J=ke, initial_velocity=v)
 
 
-def least_energy_direction(state, evaluation) -> np.ndarray | None:
+def least_energy_direction(evaluation) -> np.ndarray | None:
     """``(6,)`` free-joint velocity direction from the equilibrium towards the pose of the
     least-energy boundary (translation in world axes, rotation in body axes), or ``None``."""
     kind, j = int(np.asarray(evaluation.limiting_kind)), int(np.asarray(evaluation.limiting_contact))
@@ -172,9 +235,13 @@ def least_energy_direction(state, evaluation) -> np.ndarray | None:
     return out if np.linalg.norm(out) > 0 else None
 
 
-def _trial(kind, ok, t, disp, rot, most, slip, **extra) -> Trial:
+def _trial(kind, ok, run: Samples, **extra) -> Trial:
+    """The `Trial` of one run; a diverged run is never a success."""
+    t, slip = run.t, run.slip
     return Trial(
-        kind=kind, success=bool(ok), max_displacement_m=float(np.max(disp)), max_rotation_rad=float(np.max(rot)),
-        slipped_contact=None if slip is None else slip[0], slip_time_s=None if slip is None else slip[1] - t[0],
-        time_s=t - t[0], displacement_m=disp, rotation_rad=rot, max_sliding_m=most, **extra,
+        kind=kind, success=bool(ok) and not run.diverged, max_displacement_m=float(np.max(run.disp)),
+        max_rotation_rad=float(np.max(run.rot)), slipped_contact=None if slip is None else slip[0],
+        slip_time_s=None if slip is None else slip[1] - t[0], time_s=t - t[0], displacement_m=run.disp,
+        rotation_rad=run.rot, max_sliding_m=run.most, diverged=run.diverged, simulator_warnings=dict(run.warnings),
+        **extra,
     )

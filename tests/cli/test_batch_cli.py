@@ -137,17 +137,30 @@ def test_unfinished_run_is_never_overwritten_without_resume(dataset, run_cli, tm
     assert sorted(p.name for p in (out / "results.partial").iterdir()) == ["manifest.json"]
 
 
+def _checkpoint_of(path: Path, out: Path):
+    """The checkpoint ``jaxgrasp batch path --out out`` keeps (the command's own digest
+    of rows and options), started: what a run of it leaves after its first chunks."""
+    import jax
+
+    from jaxgrasp.cli._batch import batch_checkpoint
+    from jaxgrasp.engine import grasps_by_count, plan_widths
+
+    gset = jaxgrasp.load_dataset(path)
+    widths = plan_widths(grasps_by_count(gset.num_contacts), jax.devices()[0].platform)
+    cp = batch_checkpoint(out, str(path), gset, widths)
+    out.mkdir(parents=True)
+    cp.start()
+    return cp
+
+
 def test_resume_of_a_finished_checkpoint_computes_nothing(dataset, first_run, run_cli, tmp_path):
     """A run killed after its last chunk's checkpoint, before the final files: --resume
-    writes them from the checkpoint alone (no compilation, no chunk)."""
+    writes them from the checkpoint alone (no compilation, no chunk): chunks whose digest
+    is this run's are reused."""
     out0, _, _, _ = first_run
     whole = BatchResult.from_npz(out0 / "results.npz")
     out = tmp_path / "o"
-    import hashlib
-
-    cp = BatchCheckpoint(out / "results.partial", str(dataset), hashlib.sha256(dataset.read_bytes()).hexdigest(), 5, 4)
-    out.mkdir()
-    cp.start()
+    cp = _checkpoint_of(dataset, out)
     for rows in ([0, 1], [3, 4]):
         cp.save_rows(np.array(rows), {f: getattr(whole, f)[rows] for f in FIELDS})
     rc, stdout, err = run_cli(["batch", dataset, "--out", out, "--resume"])
@@ -159,6 +172,37 @@ def test_resume_of_a_finished_checkpoint_computes_nothing(dataset, first_run, ru
         np.testing.assert_array_equal(getattr(back, f), getattr(whole, f), err_msg=f)
     assert not (out / "results.partial").exists()
 
+
+def test_a_chunk_of_another_dataset_is_evaluated_again_not_merged(dataset, first_run, run_cli, tmp_path):
+    """Issue 65, item 6: a chunk of another dataset's run (its row 0 a stiffer cube),
+    copied into this run's checkpoint, was accepted by --resume and its rows ended up in
+    results.csv. Now it is skipped with one line naming it, its rows are evaluated again
+    (2 grasps to go: rows 0 and 1; rows 3 and 4 come from this run's own chunk, not
+    evaluated), and results.csv is the uninterrupted run's, byte for byte."""
+    out0, _, _, _ = first_run
+    other = tmp_path / "other.jsonl"
+    lines = dataset.read_text().splitlines()
+    row0 = json.loads(lines[0])
+    row0["fingertip"]["young_modulus"] = 8e5
+    other.write_text("\n".join([json.dumps(row0), *lines[1:]]) + "\n")
+    rc, _, err = run_cli(["batch", other, "--out", tmp_path / "other", "--chunk-size", "2"])  # the other run, whole
+    assert rc == 0, err
+    theirs = BatchResult.from_npz(tmp_path / "other" / "results.npz")
+    ours = BatchResult.from_npz(out0 / "results.npz")
+    assert theirs.value[0] != ours.value[0]  # the chunk would change results.csv
+    their_cp = _checkpoint_of(other, tmp_path / "other-partial")
+    their_cp.save_rows(np.array([0, 1]), {f: getattr(theirs, f)[[0, 1]] for f in FIELDS})
+    out = tmp_path / "o"
+    cp = _checkpoint_of(dataset, out)
+    cp.save_rows(np.array([3, 4]), {f: getattr(ours, f)[[3, 4]] for f in FIELDS})
+    (cp.folder / "rows-000000000.npz").write_bytes((their_cp.folder / "rows-000000000.npz").read_bytes())
+    rc, stdout, err = run_cli(["batch", dataset, "--out", out, "--resume", "--chunk-size", "2", "--top", "2"])
+    assert rc == 0, err
+    assert "resuming: 2 of 5 grasps were finished" in err and "2 grasps to go" in err, err
+    assert (f"jaxgrasp: --resume: skipped 1 damaged chunk file in {cp.folder} (first: rows-000000000.npz: "
+            "ValueError: another run's chunk") in err, err
+    assert "2 resumed from the checkpoint" in stdout, stdout
+    assert (out / "results.csv").read_bytes() == (out0 / "results.csv").read_bytes()
 
 @pytest.mark.parametrize(
     "argv, message",

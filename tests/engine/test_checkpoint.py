@@ -18,7 +18,7 @@ import jaxgrasp
 from jaxgrasp import storage as outputs
 from jaxgrasp.cli import _notes
 from jaxgrasp.cli._keepers import BatchCheckpoint
-from jaxgrasp.engine._checkpoint import SweepCheckpoint, chunk_layout
+from jaxgrasp.engine._checkpoint import SweepCheckpoint, chunk_layout, rows_digest
 from jaxgrasp.tolerance._result import FIELDS
 
 GRASPS, CONTACTS = 6, 3
@@ -50,9 +50,16 @@ def _savez(**arrays) -> bytes:
     return buf.getvalue()
 
 
+def _digest(rows) -> np.ndarray:
+    """The digest the ``checkpoint`` fixture's chunk of ``rows`` carries (no inputs, no key)."""
+    return np.asarray(rows_digest({}, np.asarray(rows, dtype=np.int64), ""))
+
+
 def _chunk(rows, /, **changes) -> bytes:
-    """A chunk file's bytes for ``rows`` with arrays replaced (``None``: left out)."""
-    arrays = {"rows": np.asarray(rows, dtype=np.int64), **_results(np.clip(rows, 0, GRASPS - 1))}
+    """A chunk file's bytes for ``rows`` (with their digest: good but for ``changes``)
+    with arrays replaced (``None``: left out)."""
+    arrays = {"rows": np.asarray(rows, dtype=np.int64), "digest": _digest(rows),
+              **_results(np.clip(rows, 0, GRASPS - 1))}
     arrays.update(changes)
     return _savez(**{k: v for k, v in arrays.items() if v is not None})
 
@@ -87,6 +94,9 @@ DAMAGE = {
     "int64 status": lambda: _chunk([2, 3], status=np.zeros(2, np.int64)),
     "object array": lambda: _chunk([2, 3], steps=np.array([None, None], dtype=object)),
     "zip bomb": _compressed_bomb,
+    "digest missing": lambda: _chunk([2, 3], digest=None),
+    "digest of other rows": lambda: _chunk([2, 3], digest=_digest([4, 5])),
+    "digest not a string": lambda: _chunk([2, 3], digest=np.zeros(2)),
 }
 
 
@@ -111,11 +121,61 @@ def test_a_damaged_chunk_is_skipped_and_its_rows_left_to_compute(kind, checkpoin
 
 
 def test_good_chunks_are_all_read_and_nothing_skipped(checkpoint):
-    """The check has no false alarm: chunks as the command writes them are all kept."""
+    """The check has no false alarm: chunks as the command writes them are all kept, and
+    so is the tests' own good chunk (each of `DAMAGE` is one defect of it)."""
     checkpoint.save_rows(np.array([2, 3]), _results([2, 3]))
     rows, results = checkpoint.load()
     assert rows.tolist() == [0, 1, 2, 3, 4, 5] and checkpoint.skipped == [] and checkpoint.skipped_note() is None
     np.testing.assert_array_equal(results["steps"][:, 0], rows)
+    (checkpoint.folder / "rows-000000002.npz").write_bytes(_chunk([2, 3]))
+    assert checkpoint.load()[0].tolist() == [0, 1, 2, 3, 4, 5] and checkpoint.skipped == []
+
+
+# ----------------------------------------------------------------- another run's chunk (issue 65, item 6)
+
+def _inputs(**changed_rows) -> dict[str, np.ndarray]:
+    """A dataset's inputs by row, as ``jaxgrasp batch`` digests them (grasp fields and the
+    contact counts); ``young_modulus=(row, value)`` changes one row's modulus."""
+    rng = np.random.default_rng(65)
+    out = {"positions": rng.normal(size=(GRASPS, CONTACTS, 3)), "young_modulus": np.full((GRASPS, CONTACTS), 2e5),
+           "mass": np.zeros(GRASPS), "counts": np.full(GRASPS, CONTACTS)}
+    for name, (row, value) in changed_rows.items():
+        out[name][row] = value
+    return out
+
+
+def _run(tmp_path, name: str, inputs, key: str = "options") -> BatchCheckpoint:
+    """A fresh checkpoint of a run in its own folder ``name``."""
+    cp = BatchCheckpoint(tmp_path / name / "results.partial", "set.jsonl", "0" * 64, GRASPS, CONTACTS,
+                         inputs=inputs, key=key)
+    (tmp_path / name).mkdir()
+    cp.open(resume=False)
+    return cp
+
+
+def test_a_chunk_of_another_run_is_skipped_never_merged(tmp_path):
+    """A chunk written by another dataset's run (one of its rows differs) or by a run of
+    other options, copied into this run's folder, is skipped (its rows evaluated again),
+    with the reason; one of the same inputs and options, from any folder, is kept."""
+    this = _run(tmp_path, "this", _inputs())
+    this.save_rows(np.array([0, 1]), _results([0, 1]))
+    other_set = _run(tmp_path, "other-set", _inputs(young_modulus=(3, 6e5)))
+    other_set.save_rows(np.array([2, 3]), _results([2, 3]))
+    other_options = _run(tmp_path, "other-options", _inputs(), key="other options")
+    other_options.save_rows(np.array([4, 5]), _results([4, 5]))
+    for cp in (other_set, other_options):
+        for f in cp.chunk_files():
+            (this.folder / f.name).write_bytes(f.read_bytes())
+    rows, results = this.load()
+    assert rows.tolist() == [0, 1] and results["value"].tolist() == [0.0, 1.0]
+    assert [s.split(":")[0] for s in this.skipped] == ["rows-000000002.npz", "rows-000000004.npz"]
+    assert all("another run's chunk: its digest is not that of these rows' inputs and options" in s
+               for s in this.skipped), this.skipped
+    assert "its grasps are evaluated again" in this.skipped_note() or "their grasps" in this.skipped_note()
+    same = _run(tmp_path, "same", _inputs(young_modulus=(5, 9e5)))  # rows 2, 3 as this run's; row 5 not
+    same.save_rows(np.array([2, 3]), _results([2, 3]))
+    (this.folder / "rows-000000002.npz").write_bytes((same.folder / "rows-000000002.npz").read_bytes())
+    assert this.load()[0].tolist() == [0, 1, 2, 3]  # the digest covers exactly its own rows
 
 
 def test_layout_is_the_evaluators(checkpoint):
@@ -133,6 +193,31 @@ def test_several_damaged_chunks_are_counted(checkpoint):
     # sorted by name: rows-000000000004 (4, 5) comes before rows-000000002/3, so (3, 4) is the duplicate
     assert sorted(rows.tolist()) == [0, 1, 4, 5] and len(checkpoint.skipped) == 2
     assert "skipped 2 damaged chunk files" in checkpoint.skipped_note() and "their grasps" in checkpoint.skipped_note()
+
+
+def test_a_checkpoint_of_the_format_before_digests_is_refused_in_one_line(tmp_path):
+    """Its chunks have no digest: one line saying to remove it, not a silent recomputation."""
+    import json
+
+    cp = _run(tmp_path, "old", _inputs())
+    manifest = cp.folder / cp.MANIFEST
+    manifest.write_text(json.dumps({**json.loads(manifest.read_text()), "format": "jaxgrasp-batch-partial-1"}))
+    with pytest.raises(ValueError, match=r"a checkpoint of another jaxgrasp \(jaxgrasp-batch-partial-1, not "
+                                         r"jaxgrasp-batch-partial-2\): remove its folder to start afresh"):
+        cp.open(resume=True)
+
+
+def test_the_run_key_names_what_results_depend_on():
+    """Other options, another width for a count, another platform: another key (so the
+    chunks are evaluated again); the same run: the same key (so they are reused)."""
+    from jaxgrasp.engine import run_key
+    from jaxgrasp.tolerance import EvaluateOptions
+
+    base = run_key(EvaluateOptions(), {2: 4, 4: 4}, "cpu")
+    assert base == run_key(EvaluateOptions(), {4: 4, 2: 4}, "cpu")
+    others = [run_key(EvaluateOptions(seed=1), {2: 4, 4: 4}, "cpu"), run_key(EvaluateOptions(), {2: 2, 4: 4}, "cpu"),
+              run_key(EvaluateOptions(), {2: 4, 4: 4}, "gpu")]
+    assert len({base, *others}) == 4
 
 
 # ----------------------------------------------------------------------------- sweep

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import mujoco  # noqa: F401  (the extra jaxgrasp[sim]: CI installs it, so these tests always run there)
 import numpy as np
@@ -20,6 +21,7 @@ import jaxgrasp
 from jaxgrasp.simulation import SimulationStatus, simulate
 from jaxgrasp.simulation._scene import Contacts, calibrate
 
+ROOT = Path(__file__).resolve().parents[2]
 SHORT = dict(hold_time_s=0.2, six_axis_time_s=0.01, kick_scales=(), random_kicks=0)
 PRESETS = [jaxgrasp.presets.cube(), jaxgrasp.presets.prism(mass=0.1)]
 INFEASIBLE = jaxgrasp.presets.cube(young_modulus=1e6, initial_deformation=4e-3)  # pi E dr^2 = 50 N > 15 N
@@ -125,6 +127,7 @@ def test_results_json_and_plot(run_cli, tmp_path):
     assert "six-axis" in stdout and "results.json" in stdout and "\n" not in stdout.strip()
     data = json.loads((out / "results.json").read_text())
     assert (out / "trials.png").read_bytes()[:4] == b"\x89PNG"
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
     trials = [data["hold"], *data["six_axis"], *data["kicks"]]
     for t in trials:
         assert {"success", "max_displacement_m", "max_rotation_rad", "slipped_contact"} <= set(t)
@@ -137,6 +140,8 @@ def test_results_json_and_plot(run_cli, tmp_path):
     assert p["timestep_s"] > 0 and p["condim"] == 4 and p["cone"] == "elliptic"
     assert p["friction_torsional_m"] == pytest.approx(
         [0.5 * 8 / 15 * 0.5 * math.sqrt(0.025**2 - (0.025 - d) ** 2) for d in p["equilibrium_deformation_m"]])
+    assert data["status"] == "simulated" and "diverged" not in stdout  # ordinary kicks: nothing diverges
+    assert all(t["diverged"] is False and t["simulator_warnings"] == {} for t in trials)
 
 
 def _no_evaluation(monkeypatch):
@@ -191,6 +196,7 @@ def test_the_automatic_timestep_is_held_to_the_step_cap():
     (["--timestep", "10"], "--timestep"),
     (["--hold-time", "1e9"], "--hold-time"),
     (["--timestep", "1e-7"], "--timestep"),
+    (["--scales", "2,1e12,1e20,1e300"], "--scales 1e+12 is too large"),  # issue 65: the kicks reported held
 ])
 def test_command_checks_its_options_before_evaluating(monkeypatch, run_cli, tmp_path, argv, option):
     """Bad input: exit 2, one line naming the option (not the library's parameter), before
@@ -208,3 +214,116 @@ def test_command_checks_its_options_before_evaluating(monkeypatch, run_cli, tmp_
         bare = bare.replace(name, "")
     assert not any(param in bare for param in OPTION_NAMES), stderr  # no hold_time_s, kick_scales ...
     assert not out.exists()
+
+
+# ----------------------------------------------------------------- diverged states (issue 65, item 5)
+
+def test_a_kick_of_1e20_times_the_value_is_refused_before_evaluating(monkeypatch):
+    """The issue's kicks (1e20 and 1e300 times the value: 2e10 and 2e150 m/s) were reported
+    held: a scale above ``MAX_KICK_SCALE`` is one line naming the limit, before evaluating."""
+    from jaxgrasp.simulation._limits import MAX_KICK_SCALE
+
+    _no_evaluation(monkeypatch)
+    for scales in [(2.0, 1e20), (1e300,), (MAX_KICK_SCALE * 1.001,)]:
+        with pytest.raises(jaxgrasp.GraspValueError) as info:
+            simulate(PRESETS[1], kick_scales=scales)
+        assert "times the value is beyond what the simulator integrates; at most 1e+06" in str(info.value)
+        assert "\n" not in str(info.value)
+
+
+def test_a_kick_faster_than_a_fingertip_radius_per_step_is_refused_before_any_trial(evaluated, monkeypatch):
+    """Below ``MAX_KICK_SCALE`` the speed decides: on the prism at 0.1 kg (automatic
+    timestep 0.32 ms) a kick of 1e6 times the value moves the contacts 3.2 cm per step,
+    more than the fingertip's 2.5 cm: refused once the scene is built, before the hold, with
+    the largest scale that fits."""
+    from jaxgrasp.simulation import _trials
+
+    def no_trial(*_, **__):
+        raise AssertionError("a trial ran before the kicks were checked")
+
+    monkeypatch.setattr(_trials.Runner, "run", no_trial)
+    with pytest.raises(jaxgrasp.GraspValueError) as info:
+        simulate(PRESETS[1], evaluation=evaluated["presets"][1], kick_scales=(2.0, 1e6), **{
+            k: v for k, v in SHORT.items() if k not in ("kick_scales",)})
+    text = str(info.value)
+    assert text.startswith("a kick of 1e+06 times the value moves the contacts 0.03") and "\n" not in text, text
+    assert "at most 1 fingertip radius (0.025 m) per step: use scales up to 6." in text, text
+
+
+def test_the_travel_check_counts_rotation_at_the_contacts_reach():
+    """``|v| + |w| R`` per timestep against ``MAX_KICK_TRAVEL`` radii: exactly at the limit
+    passes, a hair above (by translation or by rotation) is refused."""
+    from jaxgrasp.simulation._options import check_kick_travel
+
+    dt, r, reach = 1e-3, 0.02, 0.05
+    check_kick_travel([(1.0, [20.0, 0, 0, 0, 0, 0]), (1.0, [0, 0, 0, 0, 0, 400.0])], dt, r, reach)
+    for v in ([20.001, 0, 0, 0, 0, 0], [10.0, 0, 0, 200.1, 0, 0], [np.nan, 0, 0, 0, 0, 0]):
+        with pytest.raises(jaxgrasp.GraspValueError, match="per step: use scales up to"):
+            check_kick_travel([(4.0, v)], dt, r, reach)
+
+
+def test_the_issues_1e20_kick_is_diverged_never_held(evaluated):
+    """The trial itself, past the option checks: MuJoCo resets the issue's 1e20 kick
+    (and a 1e12 one, also reported held before) to its start, which looked held (0.13 mm);
+    the runner reads MuJoCo's warnings and reports it diverged, never a success."""
+    from jaxgrasp.simulation._scene import build_scene
+    from jaxgrasp.simulation._simulate import _directions
+    from jaxgrasp.simulation._trials import Runner, warnings_recorded
+
+    g, ev = PRESETS[1], evaluated["presets"][1]
+    scene = build_scene(g, g, np.asarray(ev.equilibrium_translation), np.asarray(ev.equilibrium_rotation),
+                        nominal_mass=0.1, damping_ratio=0.05)
+    runner = Runner(scene, 0.5 * scene.contacts.mu * scene.calibration["d_eq"], 0.005)  # simulate's thresholds
+    start = runner.start_state()
+    value = float(ev.value)
+    directions = _directions(ev, 2, 0, scene)  # the command's: least-energy, 2 random
+    kicks = [(1e20, kind, d) for kind, d in directions] + [(1e12, kind, d) for kind, d in directions[1:]]
+    for scale, kind, direction in kicks:
+        with warnings_recorded():  # as simulate runs them: no MUJOCO_LOG.TXT in the working directory
+            kick = runner.kick(start, direction, scale * value, 0.05, scale, kind)
+        assert kick.diverged and not kick.success, (scale, kind, kick.simulator_warnings)
+        assert set(kick.simulator_warnings) & {"mjWARN_BADQACC", "mjWARN_BADQVEL", "mjWARN_BADQPOS"}
+        assert kick.label.endswith("(diverged)") and kick.to_dict()["diverged"] is True
+    calm = runner.kick(start, directions[1][1], 2.0 * value, 0.05, 2.0, "random")
+    assert not calm.diverged and calm.simulator_warnings == {} and calm.success
+
+
+BLOWS_UP = dict(hold_time_s=0.3, six_axis_time_s=0.3, kick_time_s=0.3, kick_scales=(1e-9,), random_kicks=0,
+                timestep=3e-3)
+"""A 1 ug prism on its calibrated springs with a 3 ms step (omega dt ~ 300): the springs'
+integration blows up in the hold, at a kick far below both kick limits."""
+
+
+def test_a_state_that_blows_up_below_the_limits_is_reported_diverged():
+    """Every option within its limits and the kick tiny, yet MuJoCo meets accelerations
+    beyond its limits (its warning) and resets the state: the hold is diverged, not held,
+    the result's status is ``diverged`` with the reason, and no trial starts from the
+    reset state."""
+    g = jaxgrasp.presets.prism(mass=1e-9)
+    r = simulate(g, **BLOWS_UP)
+    assert r.status == SimulationStatus.DIVERGED and r.status_name == "diverged" and r.simulated
+    assert r.hold.diverged and not r.hold.success and "mjWARN_BADQACC" in r.hold.simulator_warnings
+    assert r.six_axis == () and r.kicks == () and r.diverged == (r.hold,)
+    assert np.all(np.isnan(r.settled_normal_force_N))
+    assert r.reason.startswith("MuJoCo diverged in 1 of 1 trials (first: hold, mjWARN_BADQACC x"), r.reason
+    assert "hold: diverged" in r.summary()
+    d = r.to_dict()
+    assert d["status"] == "diverged" and d["hold"]["diverged"] is True and d["hold"]["success"] is False
+
+
+def test_the_command_says_diverged(run_cli, tmp_path, monkeypatch):
+    """``jaxgrasp simulate`` of the same: results.json's status ``diverged``, the summary
+    line says so (never 'held'), the picture is drawn; MuJoCo's own handler (which prints
+    and appends to ``MUJOCO_LOG.TXT`` in the working directory) is kept out."""
+    out = tmp_path / "sim"
+    monkeypatch.chdir(tmp_path)  # where MuJoCo's own handler would write its log
+    code, stdout, stderr = run_cli(["simulate", ROOT / "examples/prism.toml", "--mass", "1e-9", "--out", str(out),
+                                    "--hold-time", "0.3", "--six-axis-time", "0.3", "--kick-time", "0.3",
+                                    "--scales", "1e-9", "--random-kicks", "0", "--timestep", "3e-3"])
+    assert code == 0, stderr
+    assert "; hold diverged (" in stdout and "; diverged: MuJoCo diverged in 1 of 1 trials" in stdout, stdout
+    assert "held" not in stdout.replace("not held", ""), stdout
+    data = json.loads((out / "results.json").read_text())
+    assert data["status"] == "diverged" and data["hold"]["diverged"] and not data["hold"]["success"]
+    assert (out / "trials.png").read_bytes()[:4] == b"\x89PNG"
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
