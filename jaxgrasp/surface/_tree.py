@@ -250,7 +250,7 @@ def first_hits(tree: FaceTree, origins, directions) -> tuple[np.ndarray, np.ndar
             q, node = q[keep], node[keep]
             if level < tree.depth:
                 q, node = np.repeat(q, 2), (2 * node[:, None] + np.arange(2)).ravel()
-        t, face = _ray_exact(tree, o, d, q, node - tree.num_leaves)
+        q, t, face = _ray_exact(tree, o, d, q, node - tree.num_leaves)
         order = np.lexsort((face, t, q))  # per ray: the smallest t, then the smallest face
         q, t, face = q[order], t[order], face[order]
         first = np.unique(q, return_index=True)[1]
