@@ -10,9 +10,9 @@ The walks pick faces and decide, so they run on stopped gradients (``while_loop`
 reverse-mode derivative); [`Surface.closest`][jaxgrasp.surface.Surface.closest] computes the
 point again, differentiably, on the face chosen.
 
-Bounds carry a slack of round-off (`_SLACK` of the distance squared and the tie of the
-mesh's size): a node is pruned only when none of its faces can meet the test, so the
-answers are those of a brute force over every face.
+Bounds carry a slack of round-off (`_SLACK` of the distance squared, and `_FLOOR` of
+the mesh's size squared): a node is pruned only when none of its faces can meet the test,
+so the answers are those of a brute force over every face.
 """
 
 from __future__ import annotations
@@ -23,10 +23,18 @@ import jax.numpy as jnp
 from jaxgrasp.surface._tree import FaceTree
 from jaxgrasp.surface._triangles import closest_on_triangles
 
-__all__ = ["nearest_slot", "unaligned_within"]
+__all__ = ["TIE", "nearest_slot", "unaligned_within"]
 
-_SLACK = 1e-13
+_SLACK = 1e-12
 """Relative slack of a squared-distance bound (round-off of the boxes' lower bounds)."""
+
+_FLOOR = 1e-16
+"""Absolute slack of a squared-distance bound, of the mesh's size squared (the round-off
+of a box's lower bound near zero, ``2 gap eps <= _SLACK gap^2 + eps^2 / _SLACK``)."""
+
+TIE = 1e-12
+"""Relative tie in distance (of the mesh's size) between faces sharing a closest point (an
+edge or a vertex): faces within ``TIE scale`` m of the smallest distance are tied."""
 
 
 def _box_d2(boxes, node, p):
@@ -87,22 +95,25 @@ def _walk(tree: FaceTree, lower, bound, visit, acc, stop=lambda acc: jnp.bool_(F
     return jax.lax.while_loop(more, body, (state, acc))[1]
 
 
-def nearest_slot(tree: FaceTree, p, tie) -> tuple[jax.Array, jax.Array]:
+def nearest_slot(tree: FaceTree, p, scale) -> tuple[jax.Array, jax.Array]:
     """``(leaf, slot)`` int32 of the face closest to ``p (3,)`` (stopped gradients).
 
-    Among the faces whose squared distance lies within ``tie`` m^2 of the smallest (an edge
-    or a vertex), the one whose plane is farthest from ``p`` along its normal, then the
-    smallest face index: the rule of a brute force over every face.
+    Among the faces whose distance lies within ``TIE scale`` m of the smallest (an edge or
+    a vertex; ``scale`` m the mesh's size), the one whose plane is farthest from ``p``
+    along its normal, then the smallest face index: the rule of a brute force over every
+    face.
 
     One search keeps the smallest squared distance and the best of the faces tied with it
     so far. A closer face found later drops the faces no longer tied; where it was closer
-    by less than ``tie`` and the best so far dropped out, a face seen earlier might still
+    by less than the tie and the best so far dropped out, a face seen earlier might still
     be tied and is not kept: such a query (a rare near tie) is searched again with the
     final bound, by a second search that runs only where some lane needs it.
     """
-    tree, p = jax.lax.stop_gradient((tree, p))
+    tree, p, scale = jax.lax.stop_gradient((tree, p, scale))
     lower = lambda nodes: _box_d2(tree.boxes, nodes, p)  # noqa: E731
     none = jnp.iinfo(jnp.int32).max
+    tied = lambda best: (jnp.sqrt(best) + TIE * scale) ** 2  # noqa: E731  (squared distances)
+    slack = lambda limit: limit * (1.0 + _SLACK) + _FLOOR * scale**2  # noqa: E731
 
     def faces(leaf):
         q = closest_on_triangles(p, tree.leaf_triangles[leaf])
@@ -123,33 +134,34 @@ def nearest_slot(tree: FaceTree, p, tie) -> tuple[jax.Array, jax.Array]:
     def running(acc, leaf):
         d2, h, f = faces(leaf)
         best = jnp.minimum(acc[0], jnp.min(d2))
-        dropped = (acc[3] > best + tie) & (acc[0] - best <= tie)
-        acc = pick(acc, leaf, d2, h, f, best + tie)
+        dropped = (acc[3] > tied(best)) & (acc[0] <= tied(best))  # faces seen earlier may still tie
+        acc = pick(acc, leaf, d2, h, f, tied(best))
         return (best,) + acc[1:5] + (acc[5] | dropped,)
 
     start = (jnp.float64(jnp.inf), jnp.float64(-1.0), jnp.int32(none), jnp.float64(jnp.inf), jnp.zeros(2, jnp.int32),
              jnp.bool_(False))
-    acc = _walk(tree, lower, lambda acc: acc[0] * (1.0 + _SLACK) + tie, running, start)
-    limit = acc[0] + tie
+    acc = _walk(tree, lower, lambda acc: slack(tied(acc[0])), running, start)
+    limit = tied(acc[0])
 
     def final(acc, leaf):
         d2, h, f = faces(leaf)
         return pick(acc, leaf, d2, h, f, limit)
 
     again = start[:1] + (jnp.float64(-1.0), jnp.int32(none), jnp.float64(jnp.inf)) + start[4:]
-    acc = _walk(tree, lower, lambda _: limit * (1.0 + _SLACK) + tie, final, jax.tree_util.tree_map(
+    acc = _walk(tree, lower, lambda _: slack(limit), final, jax.tree_util.tree_map(
         lambda a, b: jnp.where(acc[5], a, b), again, acc), start=acc[5])
     return acc[4][0], acc[4][1]
 
 
-def unaligned_within(tree: FaceTree, p, n, radius, cos_max, tie) -> jax.Array:
+def unaligned_within(tree: FaceTree, p, n, radius, cos_max, scale) -> jax.Array:
     """``()`` bool: some face lies within ``radius`` m of ``p (3,)`` (its closest point) with
-    a normal at more than ``arccos(cos_max)`` from the unit ``n (3,)`` (``n . m < cos_max``).
+    a normal at more than ``arccos(cos_max)`` from the unit ``n (3,)`` (``n . m < cos_max``);
+    ``scale`` m, the mesh's size.
 
     Nodes farther than ``radius`` are skipped, and so are nodes whose normals' box lies
     wholly within the angle; the search ends at the first such face.
     """
-    tree, p, n = jax.lax.stop_gradient((tree, p, n))
+    tree, p, n, radius, scale = jax.lax.stop_gradient((tree, p, n, radius, scale))
 
     def lower(nodes):
         nb = tree.normal_boxes[nodes]  # the least n . m over the box bounds every face's below
@@ -162,4 +174,5 @@ def unaligned_within(tree: FaceTree, p, n, radius, cos_max, tie) -> jax.Array:
         return found | jnp.any(within & (tree.leaf_normals[leaf] @ n < cos_max))
 
     r2 = radius * radius
-    return _walk(tree, lower, lambda found: r2 * (1.0 + _SLACK) + tie, visit, jnp.bool_(False), stop=lambda f: f)
+    bound = r2 * (1.0 + _SLACK) + _FLOOR * scale**2
+    return _walk(tree, lower, lambda found: bound, visit, jnp.bool_(False), stop=lambda f: f)

@@ -20,8 +20,10 @@ Behaviour a caller relies on:
   building the tree costs ``O(faces log faces)`` once.
 * **Normal.** The outward normal of the face the point lies on: piecewise constant on the
   surface, as the paper's planar contact surface needs (the model's normal is the face's,
-  Sec. V). Where the closest point lies on an edge or a vertex (several faces tie), the
-  face whose plane is farthest from the query point along its normal is chosen: for a
+  Sec. V). Where the closest point lies on an edge or a vertex (several faces tie: their
+  distances within ``1e-12`` of the mesh's size, `jaxgrasp.surface._search.TIE`), the
+  face whose plane is farthest from the query point along its normal is chosen (then the
+  smallest face index): for a
   query point outside a convex edge that is the face that point "sees" most squarely, and
   the sign of `SurfacePoint.signed_distance` is right inside and outside a closed mesh.
 * **Derivatives.** Within a face the closest point is the orthogonal projection onto the
@@ -50,9 +52,6 @@ PAD_FACES = 256
 """Face counts are padded to this times a power of two by [`Surface.padded`][jaxgrasp.surface.Surface.padded], and
 the face tree to that many slots, so that meshes of similar size share one compiled shape."""
 
-_TIE = 1e-12
-"""Relative tie in squared distance (of the mesh's squared size) between faces sharing a
-closest point (an edge or a vertex)."""
 
 
 @jax.tree_util.register_dataclass
@@ -188,8 +187,7 @@ class Surface:
         n = jnp.broadcast_to(jnp.asarray(normals, jnp.float64), shape + (3,)).reshape(-1, 3)
         r = jnp.broadcast_to(jnp.asarray(radius, jnp.float64), shape).reshape(-1)
         cos_max = jnp.cos(jnp.deg2rad(max_angle_deg))
-        tie = _TIE * self.scale**2
-        one = lambda p, m, a: unaligned_within(self.tree, p, m, a, cos_max, tie)  # noqa: E731
+        one = lambda p, m, a: unaligned_within(self.tree, p, m, a, cos_max, self.scale)  # noqa: E731
         return jax.vmap(one)(pts.reshape(-1, 3), n, r).reshape(shape)
 
 
@@ -204,7 +202,7 @@ def _closest_one(surface: Surface, p) -> SurfacePoint:
     """The `SurfacePoint` of one query point ``p (3,)``: the face found by the tree's
     search (`nearest_slot`), the point again, differentiably, on that face."""
     tree = surface.tree
-    leaf, slot = nearest_slot(tree, p, _TIE * surface.scale**2)
+    leaf, slot = nearest_slot(tree, p, surface.scale)
     point = closest_on_triangles(p, tree.leaf_triangles[leaf, slot][None])[0]
     n = tree.leaf_normals[leaf, slot]
     diff = p - point

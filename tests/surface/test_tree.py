@@ -67,7 +67,7 @@ def _brute(surface: Surface, p):
     tri, nrm, scale = (np.asarray(x) for x in (surface.triangles, surface.normals, surface.scale))
     q = closest_on_triangles(p, tri, xp=np)
     d2 = np.sum((q - p) ** 2, axis=1)
-    tied = d2 <= d2.min() + 1e-12 * scale**2
+    tied = d2 <= (np.sqrt(d2.min()) + 1e-12 * scale) ** 2  # within 1e-12 of the mesh's size in distance
     height = np.where(tied, np.abs(np.einsum("fd,fd->f", p - q, nrm)), -1.0)
     f = int(np.argmax(height))
     d = float(np.linalg.norm(p - q[f]))
@@ -98,6 +98,22 @@ def test_closest_equals_the_brute_force_over_every_face(name, closest):
         if hit.face[i] == face:
             assert np.array_equal(hit.normal[i], normal) and abs(hit.signed_distance[i] - signed) <= 1e-12, (name, i)
     assert same >= len(pts) - 20, same
+
+
+def test_a_point_near_an_edge_stays_on_its_own_face(closest):
+    # 10 nm inside a face from its edge with a coplanar neighbour: the neighbour is 10 nm
+    # away, no tie (a tie in squared distance of 1e-12 of the size squared, 100 nm here,
+    # once took the neighbour, whichever index was smaller, and a point 10 nm off)
+    grid = trimesh.creation.box(extents=[0.1, 0.06, 0.04]).subdivide().subdivide()
+    surface = Surface.from_trimesh(grid, pad_to=PAD)
+    tri = np.asarray(surface.triangles)[: len(grid.faces)]
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    mid = 0.5 * (a + b)
+    inward = (c - mid) / np.linalg.norm(c - mid, axis=1, keepdims=True)
+    pts = (mid + 1e-8 * inward)[:QUERIES]
+    hit = closest(surface, np.concatenate([pts, np.zeros((QUERIES - len(pts), 3))]))
+    np.testing.assert_array_less(np.asarray(hit.distance)[: len(pts)], 1e-15)
+    np.testing.assert_array_equal(np.asarray(hit.face)[: len(pts)], np.arange(len(pts)))
 
 
 def test_padding_and_the_tree_change_no_answer(closest):
