@@ -132,26 +132,37 @@ def _node_boxes(lo, hi) -> np.ndarray:
 
 
 def _median_order(centroids, start) -> np.ndarray:
-    """``(F,)`` the faces in leaf order: top down, each node's faces sorted along the longest
-    side of their centroids' box and cut where its two children's leaves divide them (at
-    the median), all nodes of a level at once (one sort of ``node + position in [0, 1)``)."""
+    """``(F,)`` the faces in leaf order: top down, each node's faces split along the longest
+    side of their centroids' box where its two children's leaves divide them (at the
+    median), all nodes of a level at once (a partition of each node's row, padded)."""
     f, leaves = len(centroids), len(start) - 1
     order = np.arange(f)
     m = leaves
     while m > 1 and f > 1:
         bounds = start[::m]  # the nodes of this level: faces bounds[g] .. bounds[g + 1] - 1
-        sizes = np.diff(bounds)
-        filled = sizes > 0
-        c = centroids[order]
-        lo, hi = np.minimum.reduceat(c, bounds[:-1][filled]), np.maximum.reduceat(c, bounds[:-1][filled])
-        axis = np.argmax(hi - lo, axis=1)
-        rows = np.arange(len(axis))
-        low, span = lo[rows, axis], np.maximum((hi - lo)[rows, axis], 1e-300)
-        node = np.repeat(rows, sizes[filled])
-        x = c[np.arange(f), axis[node]]
-        order = order[np.argsort(node + 0.5 * (x - low[node]) / span[node])]
+        sizes, left = np.diff(bounds), start[m // 2 :: m][: len(bounds) - 1] - bounds[:-1]
+        order = order[_split(centroids[order], bounds, sizes, left)]
         m //= 2
     return order
+
+
+def _split(c, bounds, sizes, left) -> np.ndarray:
+    """The permutation of ``c (F, 3)`` (rows of nodes ``bounds``) that puts each node's
+    ``left`` faces of smallest centroid along its longest side first."""
+    filled = sizes > 0
+    lo, hi = np.minimum.reduceat(c, bounds[:-1][filled]), np.maximum.reduceat(c, bounds[:-1][filled])
+    axis = np.zeros(len(sizes), dtype=np.int64)
+    axis[filled] = np.argmax(hi - lo, axis=1)
+    node = np.repeat(np.arange(len(sizes)), sizes)
+    col = np.arange(len(c)) - bounds[:-1][node]
+    keys = np.full((len(sizes), int(sizes.max())), np.inf)  # a node's row, padded past its faces
+    keys[node, col] = c[np.arange(len(c)), axis[node]]
+    kth = np.unique(left[left > 0] - 1)
+    if kth.size == 0:
+        return np.arange(len(c))
+    idx = np.argpartition(keys, kth, axis=1)
+    real = idx < sizes[:, None]  # the padding sorts last in its row, past every node's left part
+    return (bounds[:-1, None] + idx)[real]
 
 
 # ------------------------------------------------------------------------- host searches
