@@ -6,7 +6,8 @@ near the surface (compiled once, then the best of three calls), the host search 
 a mesh grasp's contacts (`nearest_faces`), and, where it fits in memory, the brute force
 that ``Surface.closest`` ran before the tree (every query against every face, vmapped: the
 old code, with fewer queries as the faces grow). Prints one line per measurement with the
-load average; ``--quick`` stops at 80k faces.
+load average; then ``Surface.closest`` at 80k faces with leaves of 4 to 32 faces.
+``--quick`` stops at 80k faces.
 
     python experiments/surface_scale/benchmark.py [--quick]
 """
@@ -14,6 +15,7 @@ load average; ``--quick`` stops at 80k faces.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import resource
@@ -24,6 +26,7 @@ import time
 SUBDIVISIONS = (3, 5, 6, 8)  # icosphere faces 20 * 4^s: 1280, 20480, 81920, 1310720
 QUERIES = 1500
 BRUTE_PAIRS = 2e7  # queries x faces of one brute-force call (its (Q, F, 3) arrays, several of them)
+BRUTE_FACES = 2e5  # above this, even a few queries of the brute force take gigabytes
 
 
 def _points(n, radius, seed=0):
@@ -55,10 +58,13 @@ def one(kind: str, sub: int) -> dict:
     mesh = trimesh.creation.icosphere(subdivisions=sub, radius=0.04)
     out = {"kind": kind, "faces": len(mesh.faces)}
     tri, nrm = np.asarray(mesh.triangles), np.asarray(mesh.face_normals)
-    if kind == "index":
+    if kind == "index" or kind.startswith("leaf"):
         t = time.perf_counter()
         surface = Surface.from_trimesh(mesh)
         out["build_s"] = time.perf_counter() - t
+        if kind.startswith("leaf"):  # the same surface, its tree built with leaves of another size
+            tree = build_tree(np.asarray(surface.triangles), np.asarray(surface.normals), leaf_size=int(kind[4:]))
+            surface = dataclasses.replace(surface, tree=jax.tree_util.tree_map(jax.numpy.asarray, tree))
         pts = _points(QUERIES, 0.04)
         f = jax.jit(lambda s, p: s.closest(p))
         t = time.perf_counter()
@@ -100,18 +106,26 @@ def main() -> None:
     print(f"closest points, {QUERIES} queries near an icosphere's surface; each line a fresh process")
     for sub in subs:
         for kind in ("index", "host", "brute"):
-            if kind == "brute" and 20 * 4**sub > BRUTE_PAIRS:
-                print(f"faces {20 * 4**sub:>8}  brute  skipped: one query against every face is over the benchmark's budget")
+            if kind == "brute" and 20 * 4**sub > BRUTE_FACES:
+                print(f"faces {20 * 4**sub:>8}  brute   skipped: over {BRUTE_FACES:.0f} faces (a few queries take gigabytes)")
                 continue
             run = subprocess.run([sys.executable, __file__, "--one", kind, str(sub)], capture_output=True, text=True)
             if run.returncode != 0:
                 print(f"faces {20 * 4**sub:>8}  {kind:<5}  failed: {run.stderr.strip().splitlines()[-1]}")
                 continue
             r = json.loads(run.stdout.strip().splitlines()[-1])
-            extra = f"  build {r['build_s']:.2f} s  first call {r['first_call_s']:.1f} s" if kind == "index" else ""
-            load = " ".join(f"{x:.1f}" for x in os.getloadavg())
-            print(f"faces {r['faces']:>8}  {kind:<5}  {r['rate']:>9.0f} queries/s ({r['queries']} in {r['seconds']:.3f} s)"
-                  f"  peak RSS {r['peak_rss_mb']:>6.0f} MB{extra}  load {load}", flush=True)
+            _line(r)
+    print("leaf size, 80k faces")
+    for k in (4, 8, 16, 32):
+        run = subprocess.run([sys.executable, __file__, "--one", f"leaf{k}", "6"], capture_output=True, text=True)
+        _line(json.loads(run.stdout.strip().splitlines()[-1]))
+
+
+def _line(r: dict) -> None:
+    extra = f"  build {r['build_s']:.2f} s  first call {r['first_call_s']:.1f} s" if "build_s" in r else ""
+    load = " ".join(f"{x:.1f}" for x in os.getloadavg())
+    print(f"faces {r['faces']:>8}  {r['kind']:<6}  {r['rate']:>9.0f} queries/s ({r['queries']} in {r['seconds']:.3f} s)"
+          f"  peak RSS {r['peak_rss_mb']:>6.0f} MB{extra}  load {load}", flush=True)
 
 
 if __name__ == "__main__":

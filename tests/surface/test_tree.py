@@ -17,6 +17,7 @@ import jaxgrasp  # noqa: F401  (float64)
 from jaxgrasp.io._mesh import load_mesh
 from jaxgrasp.planning._sampling import first_hits
 from jaxgrasp.surface import Surface, build_tree, closest_on_triangles, nearest_faces
+from jaxgrasp.surface._tree import LEAF_SIZE
 
 MESH = Path(__file__).resolve().parents[2] / "examples" / "meshes" / "pybullet_000_mm.obj"
 PAD = 4096  # every surface here padded to one shape: one compilation of each search
@@ -119,7 +120,7 @@ def test_a_point_near_an_edge_stays_on_its_own_face(closest):
 def test_padding_and_the_tree_change_no_answer(closest):
     mesh = MESHES["object"]
     bare, padded = Surface.from_trimesh(mesh), Surface.from_trimesh(mesh, pad_to=PAD)
-    assert bare.tree.num_leaves == 64 and padded.tree.num_leaves == PAD // 8  # 474 faces: 60 leaves of 8, rounded up
+    assert bare.tree.num_leaves == 32 and padded.tree.num_leaves == PAD // LEAF_SIZE  # 474 faces: 30 leaves of 16, rounded up
     pts = _queries(mesh, np.random.default_rng(4))
     a, b = closest(bare, pts), closest(padded, pts)
     np.testing.assert_allclose(np.asarray(a.point), np.asarray(b.point), atol=1e-15)
@@ -131,7 +132,7 @@ def test_padding_and_the_tree_change_no_answer(closest):
     # a leaf holds between half and all of its slots' faces, once each; every face is in one leaf
     faces = np.asarray(bare.tree.leaf_faces)
     distinct = [len(set(row)) for row in faces]
-    assert min(distinct) >= 4 and sorted(set(faces.ravel())) == list(range(bare.num_faces))
+    assert min(distinct) >= LEAF_SIZE // 2 and sorted(set(faces.ravel())) == list(range(bare.num_faces))
     # a moved surface moves its tree: the same answers, moved
     offset = np.array([0.3, -0.2, 0.1])
     moved = closest(padded.translated(offset), pts + offset)
@@ -140,9 +141,9 @@ def test_padding_and_the_tree_change_no_answer(closest):
 
 
 def test_a_tiny_mesh_padded_to_many_leaves_repeats_its_faces():
-    tet = trimesh.creation.icosphere(subdivisions=0, radius=0.01)  # 20 faces, 512 leaves
+    tet = trimesh.creation.icosphere(subdivisions=0, radius=0.01)  # 20 faces, 256 leaves
     s = Surface.from_trimesh(tet, pad_to=PAD)
-    assert s.tree.num_leaves == 512 and set(np.asarray(s.tree.leaf_faces).ravel()) == set(range(20))
+    assert s.tree.num_leaves == PAD // LEAF_SIZE and set(np.asarray(s.tree.leaf_faces).ravel()) == set(range(20))
     p = np.random.default_rng(5).normal(scale=0.02, size=(50, 3))
     hit = s.closest(p)
     for i in range(len(p)):
