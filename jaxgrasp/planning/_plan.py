@@ -59,7 +59,9 @@ from jaxgrasp.surface import (
     ContactRules,
     MeshGrasp,
     RuleCheck,
+    FaceTree,
     Surface,
+    build_tree,
     check_contacts,
     deformation_range,
     mass_properties,
@@ -87,6 +89,7 @@ class _Setup:
     surface: Surface  # padded (PAD_FACES), for compiled checks
     triangles: np.ndarray  # (F, 3, 3) m, the mesh's own faces, for sampling
     face_normals: np.ndarray  # (F, 3)
+    tree: FaceTree  # of triangles, for ray casts
     com: np.ndarray
     mass: float
     gravity: np.ndarray
@@ -293,7 +296,8 @@ def setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_mod
     source = os.fspath(mesh) if isinstance(mesh, (str, os.PathLike)) else "<trimesh>"
     bare = Surface.from_trimesh(surface_mesh)
     tri, fn = np.asarray(bare.triangles), np.asarray(bare.normals)
-    return _Setup(surface_mesh, bare.padded(PAD_FACES), tri, fn, com, float(m), g, tip, source, units)
+    return _Setup(surface_mesh, bare.padded(PAD_FACES), tri, fn, build_tree(tri, fn), com, float(m), g, tip, source,
+                  units)
 
 
 def _stage(progress, name: str):
@@ -334,7 +338,7 @@ def _draw_round(setup: _Setup, fingers: int, sampler: str, rules: ContactRules, 
         one = _check(setup, rules, p[:, None], n[:, None], np.full((_ROUND, 1), lo))
         ok = one.flat[:, 0] & one.alone[:, 0]
         if sampler == "antipodal":
-            pos, nrm = antipodal_pairs(tri, fn, p[ok], n[ok], setup.fingertip["friction"])
+            pos, nrm = antipodal_pairs(setup.tree, fn, p[ok], n[ok], setup.fingertip["friction"])
         elif ok.sum() >= fingers:
             g = np.linalg.norm(setup.gravity) * setup.mass
             down = setup.gravity / np.linalg.norm(setup.gravity) if g > 0 else None

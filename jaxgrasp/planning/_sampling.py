@@ -8,11 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from jaxgrasp.surface import FaceTree, build_tree
+from jaxgrasp.surface import first_hits as tree_first_hits
+
 __all__ = ["surface_points", "first_hits", "antipodal_pairs", "spread_tuples"]
-
-_RAY_CHUNK = 256
-"""Rays tested against every face at once (bounds the ``(rays, faces)`` work arrays)."""
-
 
 def surface_points(triangles: np.ndarray, normals: np.ndarray, count: int, rng) -> tuple[np.ndarray, np.ndarray]:
     """``count`` points drawn uniformly by area on the surface, and their faces' normals.
@@ -33,37 +32,32 @@ def surface_points(triangles: np.ndarray, normals: np.ndarray, count: int, rng) 
     return points, normals[face]
 
 
-def first_hits(triangles: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def first_hits(faces, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The first face each ray ``origins + t directions`` (``t > 0``) crosses.
 
-    Möller and Trumbore's ray-triangle test (J. Graphics Tools 2(1), 1997), every face.
+    Möller and Trumbore's ray-triangle test (J. Graphics Tools 2(1), 1997) on the faces
+    whose boxes the ray enters in the mesh's face tree (``faces``: a
+    `jaxgrasp.surface.FaceTree`, or the triangles ``(F, 3, 3)`` m, whose tree is built):
+    the first hit over every face, at the cost of the faces along the ray.
 
     Returns:
         ``(t (R,) m, face (R,) int)``: ``t = inf`` and ``face = -1`` where a ray hits nothing.
     """
-    ts, faces = [np.zeros(0)], [np.zeros(0, dtype=np.int64)]  # no ray: no hit
-    a, e1, e2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
-    for lo in range(0, len(origins), _RAY_CHUNK):
-        o, d = origins[lo : lo + _RAY_CHUNK, None, :], directions[lo : lo + _RAY_CHUNK, None, :]
-        p = np.cross(d, e2)
-        det = np.einsum("rfd,fd->rf", p, e1)
-        inv = 1.0 / np.where(np.abs(det) < 1e-300, np.inf, det)
-        s = o - a
-        u = np.einsum("rfd,rfd->rf", s, p) * inv
-        q = np.cross(s, e1)
-        v = np.einsum("rfd,rfd->rf", d * np.ones_like(q), q) * inv
-        t = np.einsum("rfd,fd->rf", q, e2) * inv
-        hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & np.isfinite(inv)
-        t = np.where(hit, t, np.inf)
-        best = np.argmin(t, axis=1)
-        ts.append(t[np.arange(len(best)), best])
-        faces.append(np.where(np.isfinite(ts[-1]), best, -1))
-    return np.concatenate(ts), np.concatenate(faces)
+    return tree_first_hits(_tree(faces), origins, directions)
 
 
-def antipodal_pairs(triangles, normals, p1, n1, friction: float) -> tuple[np.ndarray, np.ndarray]:
+def _tree(faces) -> FaceTree:
+    """The face tree of ``faces`` (a tree, or triangles ``(F, 3, 3)``)."""
+    if isinstance(faces, FaceTree):
+        return faces
+    tri = np.asarray(faces, dtype=np.float64)
+    return build_tree(tri, np.zeros(tri.shape[:2]))
+
+
+def antipodal_pairs(faces, normals, p1, n1, friction: float) -> tuple[np.ndarray, np.ndarray]:
     """Two-finger candidates: from surface points ``p1 (K, 3)`` of normals ``n1 (K, 3)``, rays
-    into the object along ``-n1``.
+    into the object along ``-n1`` (``faces``: the mesh's face tree or triangles, as
+    `first_hits`; ``normals (F, 3)`` its faces' outward normals).
 
     A ray from ``p1`` into the object leaves it at ``p2`` on a face of normal ``n2``. The pair
     is antipodal when the line ``p1 p2`` (along ``n1``) lies inside the friction cone at
@@ -74,8 +68,9 @@ def antipodal_pairs(triangles, normals, p1, n1, friction: float) -> tuple[np.nda
     Returns:
         ``(positions (K', 2, 3) m, normals (K', 2, 3))``, ``K' <= K`` pairs.
     """
-    scale = float(np.ptp(triangles.reshape(-1, 3), axis=0).max())
-    t, face = first_hits(triangles, p1 - 1e-9 * scale * n1, -n1)
+    tree = _tree(faces)
+    scale = float(np.ptp(tree.boxes[1], axis=0).max())
+    t, face = first_hits(tree, p1 - 1e-9 * scale * n1, -n1)
     ok = face >= 0
     n2 = normals[np.where(ok, face, 0)]
     ok &= np.einsum("kd,kd->k", n2, -n1) >= np.cos(np.arctan(friction))

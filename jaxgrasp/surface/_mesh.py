@@ -5,8 +5,9 @@
 call) and fingertip contact points given in the mesh's own frame into a [`MeshGrasp`][jaxgrasp.MeshGrasp]:
 
 * each point is snapped to the closest point of the surface (`snap_to_surface`: an
-  exact closest point over every triangle, by `closest_on_triangles`
-  run in NumPy; trimesh's own ``closest_point`` needs the optional ``rtree``); the outward
+  exact closest point over every triangle, by `closest_on_triangles` run in NumPy on the
+  faces that the mesh's face tree finds near the point, `jaxgrasp.surface._tree`;
+  trimesh's own ``closest_point`` needs the optional ``rtree``); the outward
   normal of the face there is the contact normal;
 * the centre of mass is the mesh's (a watertight mesh of uniform density) or the one
   given; the mass is given, or ``density`` times the enclosed volume (`mass_properties`);
@@ -32,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from jaxgrasp.model import DEFAULT_GRAVITY, DEFAULT_MASS, Grasp, GraspValueError
-from jaxgrasp.surface._surface import closest_on_triangles
+from jaxgrasp.surface._tree import build_tree, nearest_faces
 
 __all__ = ["MeshGrasp", "grasp_on_mesh", "mass_properties", "snap_to_surface", "DEFAULT_TOLERANCE", "SHARP_EDGE_DEG"]
 
@@ -180,18 +181,20 @@ def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE, need_
     tri = np.asarray(surface.triangles, dtype=np.float64)[keep]
     face_normals = np.asarray(surface.face_normals, dtype=np.float64)[keep]
     scale = float(np.ptp(surface.vertices, axis=0).max())
+    tree = build_tree(tri, face_normals)
+    pts = np.asarray(points, dtype=np.float64)
+    query, face, point, dist = nearest_faces(tree, pts, margin=1e-9 * scale, scale=scale)  # sorted by query, face
+    starts = np.searchsorted(query, np.arange(len(pts) + 1))
     closest, normals = [], []
-    for i, p in enumerate(points):
-        q = closest_on_triangles(p, tri, xp=np)
-        dist = np.linalg.norm(q - p, axis=1)
-        best = float(dist.min())
+    for i, p in enumerate(pts):
+        mine = slice(starts[i], starts[i + 1])
+        best = float(dist[mine].min())
         if best > tolerance:
             raise GraspValueError(
                 f"contact {i} at {_vec_mm(p)} mm is {best * 1e3:.3g} mm from the mesh surface "
-                f"(tolerance {tolerance * 1e3:.3g} mm): " + _unit_hint(tri, points, tolerance)
+                f"(tolerance {tolerance * 1e3:.3g} mm): " + _unit_hint(tree, points, tolerance)
             )
-        near = dist <= best + 1e-9 * scale
-        ns = face_normals[near]
+        ns = face_normals[face[mine]]  # every face within 1e-9 scale of the closest distance
         angle = np.degrees(np.arccos(np.clip(ns @ ns.T, -1.0, 1.0))).max()
         if angle > SHARP_EDGE_DEG and (need_normal is None or need_normal[i]):
             raise GraspValueError(
@@ -199,7 +202,7 @@ def snap_to_surface(surface, points, tolerance: float = DEFAULT_TOLERANCE, need_
                 f"{angle:.0f} degrees, so it has no one normal: move it onto a face or give its normal"
             )
         n = ns.mean(axis=0)
-        closest.append(q[int(np.argmin(dist))])
+        closest.append(point[mine][int(np.argmin(dist[mine]))])
         normals.append(n / np.linalg.norm(n))
     return np.array(closest), np.array(normals)
 
@@ -221,17 +224,15 @@ contact point times ``factor`` lies on the surface (points typed in mm or cm; a 
 spread out (`_shrunk`)."""
 
 
-def _unit_hint(tri: np.ndarray, points, tolerance: float) -> str:
+def _unit_hint(tree, points, tolerance: float) -> str:
     """What to say of contacts off the surface: the unit mistake that would put every one
-    of them on it (`_UNIT_MISTAKES`), or the general question."""
+    of them on it (`_UNIT_MISTAKES`), or the general question (``tree``: the mesh's
+    `jaxgrasp.surface._tree.FaceTree`)."""
     pts = np.asarray(points, dtype=np.float64)
     for factor, text in _UNIT_MISTAKES:
         if _shrunk(pts * factor, tolerance * max(factor, 1.0)):
             continue
-        near = [
-            np.linalg.norm(closest_on_triangles(p * factor, tri, xp=np) - p * factor, axis=1).min()
-            for p in pts
-        ]
+        near = nearest_faces(tree, pts * factor)[3]  # each point's closest distance (its tied faces, once each)
         if max(near) <= tolerance * max(factor, 1.0):
             return text
     return "is it in the mesh's frame and units?"

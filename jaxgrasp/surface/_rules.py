@@ -20,6 +20,8 @@ contact ``(p_i, n_i, dr_i)`` of a fingertip of radius ``r`` is *valid* when:
    reaches the force limit.
 
 Everything here is traceable (``jit``/``vmap`` over candidates) and in the mesh's frame.
+Rules 1, 2 and 4 search the surface's face tree ([`Surface`][jaxgrasp.surface.Surface]):
+their cost grows with the faces near each contact, not with the mesh's face count.
 """
 
 from __future__ import annotations
@@ -130,10 +132,7 @@ def check_contacts(surface: Surface, positions, normals, dr, radius, young_modul
     hit = surface.closest(positions)
     cos_normal = jnp.cos(jnp.deg2rad(rules.normal_deg))
     on_surface = (hit.distance <= rules.on_surface) & (jnp.einsum("nd,nd->n", hit.normal, n) >= cos_normal)
-    dist = surface.face_distances(positions)  # (N, F)
-    within = dist <= contact_radius(r, dr)[:, None]
-    aligned = n @ surface.normals.T >= jnp.cos(jnp.deg2rad(rules.flatness_deg))  # (N, F)
-    flat = jnp.all(~within | aligned, axis=-1)
+    flat = ~surface.unaligned_within(positions, n, contact_radius(r, dr), rules.flatness_deg)  # the face tree's search
     c = fingertip_centers(positions, n, r, dr)
     gap = jnp.linalg.norm(c[:, None] - c[None], axis=-1) - (r[:, None] + r[None])
     apart = jnp.all(jnp.where(jnp.eye(shape[0], dtype=bool), True, gap >= 0.0), axis=-1)

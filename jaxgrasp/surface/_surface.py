@@ -11,11 +11,19 @@ Behaviour a caller relies on:
   *Real-Time Collision Detection*, Sec. 5.1.5): `closest_on_triangles`, the one rule
   of jaxgrasp, which the host code that snaps a mesh grasp's contacts runs in NumPy
   (`jaxgrasp.surface._mesh`; the tests check one library against the other).
-  Cost ``O(points x faces)``.
+  The faces are found through a bounding volume hierarchy built once by
+  [`Surface.create`][jaxgrasp.surface.Surface.create] (`jaxgrasp.surface._tree`,
+  searched in JAX by `jaxgrasp.surface._search`): a search visits the tree's nodes near
+  the query, about ``log(faces)`` of them near a surface, and skips a node only when none
+  of its faces can be the answer, so the answer is a brute force's over every face. Memory
+  is the queries times a stack and one leaf's faces, never the queries times the faces;
+  building the tree costs ``O(faces log faces)`` once.
 * **Normal.** The outward normal of the face the point lies on: piecewise constant on the
   surface, as the paper's planar contact surface needs (the model's normal is the face's,
-  Sec. V). Where the closest point lies on an edge or a vertex (several faces tie), the
-  face whose plane is farthest from the query point along its normal is chosen: for a
+  Sec. V). Where the closest point lies on an edge or a vertex (several faces tie: their
+  distances within ``1e-12`` of the mesh's size, `jaxgrasp.surface._search.TIE`), the
+  face whose plane is farthest from the query point along its normal is chosen (then the
+  smallest face index): for a
   query point outside a convex edge that is the face that point "sees" most squarely, and
   the sign of `SurfacePoint.signed_distance` is right inside and outside a closed mesh.
 * **Derivatives.** Within a face the closest point is the orthogonal projection onto the
@@ -34,16 +42,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrasp.model import GraspValueError
+from jaxgrasp.surface._search import nearest_slot, unaligned_within
+from jaxgrasp.surface._tree import LEAF_SIZE, FaceTree, build_tree
+from jaxgrasp.surface._triangles import closest_on_triangles
 
-__all__ = ["Surface", "SurfacePoint", "closest_on_triangles", "PAD_FACES"]
+__all__ = ["Surface", "SurfacePoint", "PAD_FACES"]
 
 PAD_FACES = 256
-"""Face counts are padded to this times a power of two by [`Surface.padded`][jaxgrasp.surface.Surface.padded], so that
-meshes of similar size share one compiled shape."""
+"""Face counts are padded to this times a power of two by [`Surface.padded`][jaxgrasp.surface.Surface.padded], and
+the face tree to that many slots, so that meshes of similar size share one compiled shape."""
 
-_TIE = 1e-12
-"""Relative tie in squared distance (of the mesh's squared size) between faces sharing a
-closest point (an edge or a vertex)."""
 
 
 @jax.tree_util.register_dataclass
@@ -77,16 +85,20 @@ class Surface:
             outside.
         normals: ``(F, 3)`` outward unit normal of each face.
         scale: ``()`` m, the largest side of the mesh's bounding box (sets tolerances).
+        tree: the faces in a bounding volume hierarchy (``jaxgrasp.surface._tree.FaceTree``),
+            built once by `create`: the searches of `closest` and `unaligned_within`.
     """
 
     triangles: jax.Array
     normals: jax.Array
     scale: jax.Array
+    tree: FaceTree
 
     @classmethod
-    def create(cls, vertices, faces) -> "Surface":
+    def create(cls, vertices, faces, min_faces: int = 0) -> "Surface":
         """The surface of ``vertices (V, 3)`` m and ``faces (F, 3)`` vertex indices
-        (counter-clockwise seen from outside). Faces of zero area are left out.
+        (counter-clockwise seen from outside). Faces of zero area are left out. The face
+        tree has room for at least ``min_faces`` faces (see [`padded`][jaxgrasp.surface.Surface.padded]).
 
         Raises:
             GraspValueError: no face of non-zero area, or vertices that are not finite.
@@ -104,8 +116,10 @@ class Surface:
         keep = area2 > 1e-14 * scale**2
         if not keep.any():
             raise GraspValueError("the surface has no face of non-zero area (a degenerate mesh)")
-        normals = cross[keep] / area2[keep, None]
-        return cls(triangles=jnp.asarray(tri[keep]), normals=jnp.asarray(normals), scale=jnp.float64(scale))
+        tri, normals = tri[keep], cross[keep] / area2[keep, None]
+        tree = build_tree(tri, normals, min_leaves=-(-int(min_faces) // LEAF_SIZE))
+        return cls(triangles=jnp.asarray(tri), normals=jnp.asarray(normals), scale=jnp.float64(scale),
+                   tree=jax.tree_util.tree_map(jnp.asarray, tree))
 
     @classmethod
     def from_trimesh(cls, mesh, pad_to: int | None = None) -> "Surface":
@@ -117,22 +131,27 @@ class Surface:
     def padded(self, multiple: int) -> "Surface":
         """The same surface with its face count rounded up to a power of two times
         ``multiple`` by copies of a small triangle far away (a thousand mesh sizes), which
-        is never the closest face nor within any contact radius: meshes of similar size
+        is never the closest face nor within any contact radius, and its face tree built
+        with as many slots (its leaves then hold fewer faces each): meshes of similar size
         then share one shape, so compiled functions of the surface are reused."""
         f = self.num_faces
         size = int(multiple)
         while size < f:
             size *= 2
-        if size == f:
+        if size == f and self.tree.leaf_faces.size >= size:
             return self
-        far = np.asarray(self.triangles[0, 0]) + 1e3 * float(self.scale) * np.array([1.0, 1.0, 1.0])
-        tri = far + 1e-3 * float(self.scale) * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-        pad_t = np.broadcast_to(tri, (size - f, 3, 3))
-        pad_n = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (size - f, 3))
+        real = int(np.max(np.asarray(self.tree.leaf_faces))) + 1  # the faces before any padding
+        tri, nrm = np.asarray(self.triangles)[:real], np.asarray(self.normals)[:real]
+        far = tri[0, 0] + 1e3 * float(self.scale) * np.array([1.0, 1.0, 1.0])
+        pad_t = np.broadcast_to(far + 1e-3 * float(self.scale) * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+                                (size - real, 3, 3))
+        pad_n = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (size - real, 3))
+        tree = build_tree(tri, nrm, min_leaves=-(-size // LEAF_SIZE))  # the real faces only
         return dataclasses.replace(
             self,
-            triangles=jnp.concatenate([self.triangles, jnp.asarray(pad_t)]),
-            normals=jnp.concatenate([self.normals, jnp.asarray(pad_n)]),
+            triangles=jnp.asarray(np.concatenate([tri, pad_t])),
+            normals=jnp.asarray(np.concatenate([nrm, pad_n])),
+            tree=jax.tree_util.tree_map(jnp.asarray, tree),
         )
 
     @property
@@ -143,7 +162,9 @@ class Surface:
     def translated(self, offset) -> "Surface":
         """The same surface moved by ``offset (3,)`` m (e.g. ``-center_of_mass`` for the
         grasp's centre-of-mass frame)."""
-        return dataclasses.replace(self, triangles=self.triangles + jnp.asarray(offset, jnp.float64))
+        off = jnp.asarray(offset, jnp.float64)
+        tree = dataclasses.replace(self.tree, boxes=self.tree.boxes + off, leaf_triangles=self.tree.leaf_triangles + off)
+        return dataclasses.replace(self, triangles=self.triangles + off, tree=tree)
 
     def closest(self, points) -> SurfacePoint:
         """The closest surface point to each of ``points (..., 3)`` m (traceable).
@@ -156,12 +177,18 @@ class Surface:
         hit = _closest_many(self, pts.reshape(-1, 3))
         return jax.tree_util.tree_map(lambda a: a.reshape(pts.shape[:-1] + a.shape[1:]), hit)
 
-    def face_distances(self, points) -> jax.Array:
-        """``(..., F)`` m: the distance from each of ``points (..., 3)`` to every face."""
+    def unaligned_within(self, points, normals, radius, max_angle_deg) -> jax.Array:
+        """``(...)`` bool: some face lies within ``radius (...)`` m of each of ``points (..., 3)``
+        m with its normal more than ``max_angle_deg`` degrees from the unit ``normals (..., 3)``
+        (traceable; the flat-patch rule of `jaxgrasp.surface.check_contacts`).
+        """
         pts = jnp.asarray(points, jnp.float64)
-        q = jax.vmap(lambda p: closest_on_triangles(p, self.triangles))(pts.reshape(-1, 3))
-        d = jnp.linalg.norm(q - pts.reshape(-1, 1, 3), axis=-1)
-        return d.reshape(pts.shape[:-1] + (self.num_faces,))
+        shape = pts.shape[:-1]
+        n = jnp.broadcast_to(jnp.asarray(normals, jnp.float64), shape + (3,)).reshape(-1, 3)
+        r = jnp.broadcast_to(jnp.asarray(radius, jnp.float64), shape).reshape(-1)
+        cos_max = jnp.cos(jnp.deg2rad(max_angle_deg))
+        one = lambda p, m, a: unaligned_within(self.tree, p, m, a, cos_max, self.scale)  # noqa: E731
+        return jax.vmap(one)(pts.reshape(-1, 3), n, r).reshape(shape)
 
 
 @jax.jit
@@ -172,61 +199,13 @@ def _closest_many(surface: Surface, points) -> SurfacePoint:
 
 
 def _closest_one(surface: Surface, p) -> SurfacePoint:
-    """The `SurfacePoint` of one query point ``p (3,)``."""
-    tri, normals = surface.triangles, surface.normals
-    q = jax.lax.stop_gradient(closest_on_triangles(jax.lax.stop_gradient(p), tri))  # (F, 3): picks the face
-    d2 = jnp.sum((q - p) ** 2, axis=-1)
-    best = jnp.min(d2)
-    tied = d2 <= best + _TIE * surface.scale**2
-    height = jnp.abs(jnp.einsum("fd,fd->f", jax.lax.stop_gradient(p) - q, normals))
-    face = jnp.argmax(jnp.where(tied, height, -1.0)).astype(jnp.int32)
-    point = closest_on_triangles(p, tri[face][None])[0]  # again, differentiably, on the chosen face
-    n = normals[face]
+    """The `SurfacePoint` of one query point ``p (3,)``: the face found by the tree's
+    search (`nearest_slot`), the point again, differentiably, on that face."""
+    tree = surface.tree
+    leaf, slot = nearest_slot(tree, p, surface.scale)
+    point = closest_on_triangles(p, tree.leaf_triangles[leaf, slot][None])[0]
+    n = tree.leaf_normals[leaf, slot]
     diff = p - point
     dist = jnp.sqrt(jnp.maximum(jnp.sum(diff**2), 1e-300))
     side = jnp.where(jnp.dot(diff, n) < 0.0, -1.0, 1.0)
-    return SurfacePoint(point=point, normal=n, face=face, distance=dist, signed_distance=side * dist)
-
-
-def closest_on_triangles(p, tri, xp=jnp):
-    """The closest point to ``p (3,)`` on each triangle of ``tri (F, 3, 3)``, ``(F, 3)``.
-
-    Exact, by the triangle's Voronoi regions (Ericson, *Real-Time Collision Detection*,
-    Sec. 5.1.5); denominators are guarded so that the branches not taken carry finite
-    derivatives. Triangles must have non-zero area.
-
-    ``xp`` is the array library: ``jax.numpy`` (the default: traceable, differentiable) or
-    ``numpy``, for the host code that snaps a mesh grasp's contacts
-    (`grasp_on_mesh`, once per grasp of a dataset or a plan), where
-    dispatching each operation to JAX would cost more than the arithmetic. One rule, run
-    by either library; the tests hold the two to each other.
-    """
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    ab, ac = b - a, c - a
-    d1, d2 = _dot(ab, p - a, xp), _dot(ac, p - a, xp)
-    d3, d4 = _dot(ab, p - b, xp), _dot(ac, p - b, xp)
-    d5, d6 = _dot(ab, p - c, xp), _dot(ac, p - c, xp)
-    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    denom = va + vb + vc
-    inside = a + ab * _ratio(vb, denom, xp) + ac * _ratio(vc, denom, xp)
-    regions = [  # (condition, point), in Ericson's order: the first that holds applies
-        ((d1 <= 0) & (d2 <= 0), a),
-        ((d3 >= 0) & (d4 <= d3), b),
-        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + _ratio(d1, d1 - d3, xp) * ab),
-        ((d6 >= 0) & (d5 <= d6), c),
-        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + _ratio(d2, d2 - d6, xp) * ac),
-        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), b + _ratio(d4 - d3, (d4 - d3) + (d5 - d6), xp) * (c - b)),
-    ]
-    out = inside
-    for cond, point in reversed(regions):
-        out = xp.where(cond[:, None], point, out)
-    return out
-
-
-def _dot(u, v, xp):
-    return xp.einsum("fd,fd->f", u, xp.broadcast_to(v, u.shape))
-
-
-def _ratio(num, den, xp):
-    safe = xp.where(den == 0, 1.0, den)
-    return (xp.where(den == 0, 0.0, num) / safe)[:, None]
+    return SurfacePoint(point=point, normal=n, face=tree.leaf_faces[leaf, slot], distance=dist, signed_distance=side * dist)
