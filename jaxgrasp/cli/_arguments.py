@@ -138,11 +138,13 @@ def add_grasp_source(p: argparse.ArgumentParser) -> None:
 
 def add_allow_dir(p: argparse.ArgumentParser) -> None:
     """``--allow-dir DIR`` (repeatable): a folder outside the input file's own that the
-    meshes it names may be in (`jaxgrasp.io._inputs.confine`)."""
+    meshes it names, and a hand file's includes and assets, may be in
+    (`jaxgrasp.io._inputs.confine`)."""
     p.add_argument(
         "--allow-dir", action="append", default=None, metavar="DIR", dest="allow_dir",
-        help=("also read meshes the input file names from DIR (repeatable); by default only "
-              "meshes inside the input file's own folder are read"),
+        help=("also read meshes (and a hand file's includes and assets) the input file names "
+              "from DIR (repeatable); by default only files inside the input file's own folder "
+              "are read"),
     )
 
 
