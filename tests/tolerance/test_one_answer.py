@@ -46,7 +46,7 @@ EXTREME = {
     "mass_small": dict(mass=1e-9),
     "friction_small": dict(friction=1e-6),
     "max_force_big": dict(max_force=1e9),
-    "radius_big": dict(radius=10.0),
+    "radius_big": dict(radius=10.0),  # refused as millimetres since issue 65 (MAX_FINGERTIP_RADIUS 1 m)
     "deformation_small": dict(initial_deformation=1e-9),
     "gravity_small": dict(mass=0.1, gravity=(0.0, 0.0, -1e-12)),
 }
@@ -96,9 +96,10 @@ def test_extreme_inputs_are_rejected_by_validation_and_check_alike():
         if not bool(check.valid):
             flagged[name] = str(check.reason_names)
     assert set(rejected) == set(flagged)
-    assert set(flagged.values()) == {"friction", "overload"}
+    assert set(flagged.values()) == {"friction", "overload", "size"}
+    assert {name for name, why in flagged.items() if why == "size"} == {"radius_big"}
     assert all("friction" in name for name, why in flagged.items() if why == "friction")
-    assert len(rejected) == 20 and "mass_big" in rejected and "young_modulus_small" not in rejected
+    assert len(rejected) == 21 and "mass_big" in rejected and "young_modulus_small" not in rejected  # radius_big too since issue 65
 
 
 @pytest.mark.slow  # the batch program of test_degenerate (N = 2, chunks of 4), compiled where run alone
@@ -122,19 +123,21 @@ def test_evaluate_and_evaluate_batch_give_one_answer():
     assert slips.status_name == pulled.status_name == "unstable"
     assert int(pulled.equilibrium_status) == LaneStatus.INFEASIBLE  # pulled out, yet not "infeasible"
     assert "pulls the object out" in pulled.explain()
-    assert len(grasps) == 2 + 13
+    assert len(grasps) == 2 + 12  # radius_big is refused as millimetres since issue 65
 
 
 @pytest.mark.slow  # the same programs as above (N = 2: evaluate, and the batch program's chunks of 4)
 def test_symmetric_boundary_settles_whatever_the_companions():
-    """The cube with a 10 m fingertip radius: each force-limit boundary has a circle of
+    """The cube with a 1 m fingertip radius (10 m until issue 65's size limit): each force-limit boundary has a circle of
     minima (the grasp is symmetric about the fingertips' axis), every start of it stalls,
     and the settling stage's polish certifies one. With a plain Newton step the polish's
     KKT matrix was singular along the circle, so whether it reached ``tol`` depended on
     the stalled point's last digits: ``evaluate`` said stable, a chunk of four copies of the
     same grasp not converged. Each copy, and the single evaluation, settle both boundaries
     at the same energies."""
-    grasp = jaxgrasp.Grasp.create(**cube_fields(**EXTREME["radius_big"]))
+    # 1 m, the largest radius accepted since issue 65 (10 m is refused as millimetres): with a
+    # force limit of 10 N its force-limit boundaries are reached, each again a circle of minima
+    grasp = jaxgrasp.Grasp.create(**cube_fields(radius=1.0, max_force=10.0))
     single = jaxgrasp.evaluate(grasp)
     batch = jaxgrasp.evaluate_batch([grasp] * 4, chunk_size=4)
     assert single.status_name == "stable"
