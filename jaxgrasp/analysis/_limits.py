@@ -35,8 +35,7 @@ and of each refinement of [`plan`][jaxgrasp.plan] (``tune_maxiter``). Each itera
 value and its gradient, and its history is kept; L-BFGS-B converges within a few hundred
 iterations on the paper's grasps, so the cap only ever ends a run that no longer improves."""
 
-ROBUST_SAMPLES_WHAT = ("perturbed copies per grasp (MAX_ROBUST_SAMPLES: every copy is held in memory and takes "
-                       "about 15 ms on two CPU cores)")
+ROBUST_SAMPLES_WHAT = "perturbed copies per grasp (MAX_ROBUST_SAMPLES: every copy is held in memory and evaluated)"
 """What `MAX_ROBUST_SAMPLES` counts, in its one-line refusal (`jaxgrasp.base.over_limit`)."""
 
 TUNE_ITERATIONS_WHAT = "iterations (MAX_TUNE_ITERATIONS: L-BFGS-B converges within a few hundred)"

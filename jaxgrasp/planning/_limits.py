@@ -28,8 +28,8 @@ MAX_PLAN_REFINE = 1_000
 gradient tuning of up to ``tune_maxiter`` iterations, tens of evaluations of the value and its
 gradient, so a thousand refinements are already a long run."""
 
-PLAN_SAMPLES_WHAT = ("candidates per plan (MAX_PLAN_SAMPLES: each takes about 15 ms on two CPU cores; to search "
-                     "wider, run plans with other seeds)")
+PLAN_SAMPLES_WHAT = ("candidates per plan (MAX_PLAN_SAMPLES: each is an evaluation; to search wider, run plans "
+                     "with other seeds)")
 """What `MAX_PLAN_SAMPLES` counts, in its one-line refusal (`jaxgrasp.base.over_limit`)."""
 
 PLAN_REFINE_WHAT = "refined candidates per plan (MAX_PLAN_REFINE: each is a gradient tuning)"
