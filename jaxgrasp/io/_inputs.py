@@ -99,7 +99,7 @@ def check_path_text(name, what: str = "file name") -> str:
     """
     text = os.fspath(name)
     if ("\0" if isinstance(text, str) else b"\0") in text:
-        raise GraspValueError(f"{what} {text!r} holds a NUL byte, which no file name can hold; remove it")
+        raise GraspValueError(f"{what} {_shown(text)} holds a NUL byte, which no file name can hold; remove it")
     return text
 
 
@@ -211,8 +211,7 @@ def check_mesh_suffix(name: str | os.PathLike) -> str:
     """
     if not isinstance(name, (str, os.PathLike)):
         raise GraspValueError(f"mesh path must be a string, got {type(name).__name__}")
-    if "\0" in os.fsdecode(os.fspath(name)):
-        raise GraspValueError(f"mesh path {_shown(name)} holds a NUL byte, which no file name can hold")
+    check_path_text(name, "mesh path")
     suffix = Path(name).suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise GraspValueError(
@@ -235,8 +234,7 @@ def confine(name: str, base: str | os.PathLike, allowed: tuple[str, ...], owner:
         GraspValueError: the path (after symlinks) leaves ``base`` and every allowed
             folder, or its name does not end in a mesh suffix (`check_mesh_suffix`).
     """
-    check_path_text(name, "mesh path")
-    check_mesh_suffix(name)
+    check_mesh_suffix(name)  # a NUL byte too
     real = os.path.realpath(os.path.join(os.fspath(base), name))
     folder = os.path.realpath(os.fspath(base))
     if not any(_inside(real, f) for f in (folder, *allowed)):
