@@ -426,7 +426,9 @@ def _nominal(grasps, options: EvaluateOptions, chunk_size, samples: int, devices
 def _mesh_projection(meshes: list, normals: np.ndarray) -> Callable:
     """``project(positions (G, S, N, 3)) -> (positions, normals)``: each mesh grasp's moved
     contacts onto its mesh (the closest surface point, the face's outward normal there,
-    [`jaxgrasp.surface.Surface`][jaxgrasp.surface.Surface]); a plain grasp's kept, with its normals."""
+    [`jaxgrasp.surface.Surface`][jaxgrasp.surface.Surface]); a plain grasp's kept, with its normals.
+    Each distinct mesh's surface is built once (grasps of one object share it)."""
+    surfaces = {id(mg.mesh): Surface.from_trimesh(mg.mesh, pad_to=MESH_FACES) for mg in meshes if mg is not None}
 
     def project(moved: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pos = moved.copy()
@@ -434,7 +436,7 @@ def _mesh_projection(meshes: list, normals: np.ndarray) -> Callable:
         for k, mg in enumerate(meshes):
             if mg is None:
                 continue
-            hit = Surface.from_trimesh(mg.mesh, pad_to=MESH_FACES).closest(mg.to_mesh_frame(moved[k]))
+            hit = surfaces[id(mg.mesh)].closest(mg.to_mesh_frame(moved[k]))
             pos[k] = np.asarray(hit.point) - mg.center_of_mass
             nrm[k] = np.asarray(hit.normal)
         return pos, nrm
