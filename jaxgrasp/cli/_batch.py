@@ -177,7 +177,7 @@ def batch_checkpoint(out: Path, source: str, gset, widths):
 
     columns = gset.columns()
     return BatchCheckpoint(out / PARTIAL_NAME, source, resume_key(gset), len(gset), int(gset.num_contacts.max()),
-                           inputs={**columns.fields, "counts": columns.counts},
+                           inputs={**columns.fields, "counts": columns.counts, "active": columns.active},
                            key=run_key(EvaluateOptions(), widths, jax.devices()[0].platform))
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 from jaxgrasp.cli._common import (
+    UsageError,
     announce_large_grasp,
     check_chunk_size,
     grasp_notes,
@@ -12,6 +13,7 @@ from jaxgrasp.cli._common import (
     load_grasp,
     robust_uncertainty,
 )
+from jaxgrasp.cli._hand_files import hand_fields, is_hand_file, load_hand
 
 __all__ = ["run", "format_summary"]
 
@@ -25,10 +27,15 @@ def run(args) -> int:
 
     check_chunk_size(args.chunk_size)
     uncertainty = robust_uncertainty(args)  # a bad spec is reported before anything is loaded
-    loaded = load_grasp(args, keep_mesh=uncertainty is not None)  # a mesh grasp's contacts move along its mesh
+    hand = load_hand(args) if is_hand_file(args) else None
+    if hand is not None and uncertainty is not None:
+        raise UsageError(f"--robust: not available for a hand grasp file ({args.file}) yet")
+    loaded = hand.grasp if hand is not None else load_grasp(args, keep_mesh=uncertainty is not None)
     grasp = getattr(loaded, "grasp", loaded)
     announce_large_grasp(grasp.num_contacts, grasp_source(args))
     d = evaluate(grasp).to_dict()
+    if hand is not None:  # contact k is fingertip k (jaxgrasp.cli._hand_files)
+        d["hand"] = hand_fields(hand)
     eps = epsilon(grasp)  # the Ferrari-Canny metric on the same contacts, beside the value
     d["epsilon"] = float(eps.value)
     d["force_closure"] = bool(eps.force_closure)
@@ -64,6 +71,8 @@ def format_summary(d: dict, source: str) -> str:
     if d.get("explanation"):
         lines.append(f"explanation: {d['explanation']}")
     lines += [f"note: {note}" for note in d.get("notes", [])]
+    if "hand" in d:
+        lines.append("fingertips (contact k is fingertip k): " + _fingertip_text(d["hand"]))
     lines.append(f"value: {d['value']:.6e} J   (least energy that makes a fingertip slip or overload)")
     lim = d["limiting"]
     if lim is not None:
@@ -85,6 +94,14 @@ def format_summary(d: dict, source: str) -> str:
             de = b["energy_above_equilibrium"]
             lines.append(f"  contact {b['contact']} {b['kind']:<9}: {de:.6e} J ({b['status']})")
     return "\n".join(lines)
+
+
+def _fingertip_text(h: dict) -> str:
+    """``0 robot0:C_ffdistal (dr 1.2 mm, tilt 12 deg), 1 ... (not in contact)``."""
+    parts = []
+    for k, (name, on, dr, tilt) in enumerate(zip(h["fingertips"], h["in_contact"], h["dr_m"], h["tilt_deg"])):
+        parts.append(f"{k} {name} " + (f"(dr {1e3 * dr:.3g} mm, tilt {tilt:.0f} deg)" if on else "(not in contact)"))
+    return ", ".join(parts)
 
 
 def _robust_lines(d: dict) -> list[str]:

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 from jaxgrasp import _startup
 
 if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
+    from jaxgrasp.hands._batch import HandBatch, hand_batch
+    from jaxgrasp.hands._file import load_hand_batch, load_hand_grasp
     from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp
     from jaxgrasp.hands._hand import Hand
     from jaxgrasp.hands._links import link_samples
@@ -22,11 +24,15 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.hands._tune import HandTuneResult, HandValue, hand_value, tune_hand
 
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
-    from jaxgrasp.hands._file import load_hand_grasp
+    from jaxgrasp.hands._file import is_hand_grasp_file
 
 __all__ = [
     "Hand",
     "HandGrasp",
+    "hand_batch",
+    "load_hand_grasp",
+    "load_hand_batch",
+    "HandBatch",
     "hand_value",
     "HandValue",
     "tune_hand",

@@ -5,8 +5,8 @@
     [hand]
     mjcf = "shadow/shadow_hand.xml"          # relative to this file
     fingertips = ["robot0:C_ffdistal", "robot0:C_thdistal"]
-    qpos = [0.0, ...]                        # (J,) rad (m for slides)
-    wrist = [0, 0, 0, 0, 0, 0]               # optional: translation m, rotation vector rad
+    qpos = [0.0, ...]                        # (J,) rad (m for slides); or (B, J): B configurations
+    wrist = [0, 0, 0, 0, 0, 0]               # optional: translation m, rotation vector rad; or (B, 6)
 
     [object]
     mesh = "duck.obj"                        # relative to this file
@@ -23,7 +23,9 @@ The MJCF and the mesh must lie inside the file's folder after symlinks, or in on
 allowed folders (``--allow-dir``), as for grasp files; so must every file the MJCF names
 (its includes, meshes and textures: `jaxgrasp.hands._mjcf_files`). Numbers are checked
 (``qpos``, ``wrist``, ``pose`` and the fields: one line naming the key). `load_hand_grasp` gives the
-[`HandGrasp`][jaxgrasp.hands.HandGrasp]; `save_hand_grasp` writes one (atomically).
+[`HandGrasp`][jaxgrasp.hands.HandGrasp] of a file of one configuration; `load_hand_batch` the
+[`HandBatch`][jaxgrasp.hands.HandBatch] of a file of one or many (``qpos`` ``(B, J)``: the project's own
+dataset of hand grasps, evaluated by ``jaxgrasp batch``); `save_hand_grasp` writes one (atomically).
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ import numpy as np
 from jaxgrasp.io import MAX_GRASP_FILE_BYTES, allowed_folders, check_path_text, confine, read_input
 from jaxgrasp.model import GraspValueError
 
-__all__ = ["load_hand_grasp", "save_hand_grasp", "hand_grasp_toml"]
+__all__ = ["load_hand_grasp", "load_hand_batch", "is_hand_grasp_file", "save_hand_grasp", "hand_grasp_toml"]
 
 _TABLES = {"hand": ("mjcf", "fingertips", "qpos", "wrist"), "object": ("mesh", "units", "pose", "mass", "density"),
            "fingertip": ("young_modulus", "friction", "max_force")}
@@ -75,16 +77,10 @@ def _tables(path: Path) -> dict:
     return data
 
 
-def load_hand_grasp(path: str | os.PathLike, allowed_dirs=None):
-    """The [`HandGrasp`][jaxgrasp.hands.HandGrasp] a hand grasp file describes (module notes).
-
-    Raises:
-        GraspValueError: an unreadable or malformed file, a missing or unknown key, a path
-            outside the allowed folders, or invalid values; one line naming the file.
-    """
+def _opened(path: Path, allowed_dirs):
+    """``(hand, mesh path, object table, fingertip table, hand table)`` of a hand grasp file."""
     from jaxgrasp.hands._hand import Hand
 
-    path = Path(path)
     data = _tables(path)
     allowed = allowed_folders(allowed_dirs)
     hand_t, obj, tip = data["hand"], data["object"], data.get("fingertip", {})
@@ -94,10 +90,74 @@ def load_hand_grasp(path: str | os.PathLike, allowed_dirs=None):
     missing = [k for k in _TABLES["fingertip"] if k not in tip]
     if missing:
         raise GraspValueError(f"{path}: [fingertip] {missing[0]} is missing")
+    return hand, mesh, obj, tip, hand_t
+
+
+def load_hand_grasp(path: str | os.PathLike, allowed_dirs=None):
+    """The [`HandGrasp`][jaxgrasp.hands.HandGrasp] a hand grasp file describes (module notes).
+
+    Raises:
+        GraspValueError: an unreadable or malformed file, a missing or unknown key, a path
+            outside the allowed folders, invalid values, or a file of several
+            configurations (read those with `load_hand_batch`); one line naming the file.
+    """
+    path = Path(path)
+    hand, mesh, obj, tip, hand_t = _opened(path, allowed_dirs)
+    if _stacked(hand_t["qpos"]) and len(hand_t["qpos"]) != 1:
+        raise GraspValueError(f"{path}: [hand] qpos holds {len(hand_t['qpos'])} configurations; this reads one "
+                              "(evaluate them all with jaxgrasp batch)")
+    qpos, wrist = _single(hand_t["qpos"]), _single(hand_t.get("wrist"))
     return hand.grasp(
-        hand_t["qpos"], str(mesh), wrist=hand_t.get("wrist"), object_pose=obj.get("pose"), units=obj.get("units", "m"),
+        qpos, str(mesh), wrist=wrist, object_pose=obj.get("pose"), units=obj.get("units", "m"),
         mass=obj.get("mass"), density=obj.get("density"), **{k: tip[k] for k in _TABLES["fingertip"]},
     )
+
+
+def _stacked(value) -> bool:
+    """Whether ``value`` is a list of lists of one length (several configurations; a ragged
+    one is refused by the reader of the values, in its words)."""
+    return (isinstance(value, list) and bool(value) and all(isinstance(v, list) for v in value)
+            and len({len(v) for v in value}) == 1)
+
+
+def _single(value):
+    """A list of one list (one configuration written as ``(1, n)``) as that list."""
+    return value[0] if isinstance(value, list) and len(value) == 1 and isinstance(value[0], list) else value
+
+
+def load_hand_batch(path: str | os.PathLike, allowed_dirs=None, progress=None):
+    """The [`HandBatch`][jaxgrasp.hands.HandBatch] of a hand grasp file whose ``qpos`` is one
+    configuration ``(J,)`` or several ``(B, J)`` (``wrist`` then ``(6,)`` or ``(B, 6)``):
+    the project's own dataset of hand grasps (module notes; `hand_batch`).
+
+    Raises:
+        GraspValueError: as `load_hand_grasp`; one line naming the file.
+    """
+    import hashlib
+
+    from jaxgrasp.hands._batch import hand_batch
+
+    path = Path(path)
+    hand, mesh, obj, tip, hand_t = _opened(path, allowed_dirs)
+    qpos = hand_t["qpos"] if _stacked(hand_t["qpos"]) else [hand_t["qpos"]]
+    sha = hashlib.sha256(read_input(path, MAX_GRASP_FILE_BYTES, "hand grasp file")).hexdigest()
+    return hand_batch(hand, str(mesh), qpos, wrist=hand_t.get("wrist"), object_pose=obj.get("pose"),
+                      units=obj.get("units", "m"), mass=obj.get("mass"), density=obj.get("density"),
+                      progress=progress, source=str(path), source_sha256=sha,
+                      **{k: tip[k] for k in _TABLES["fingertip"]})
+
+
+def is_hand_grasp_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` names a hand grasp file: a readable ``.toml`` file with a ``[hand]``
+    table (what the commands that take a grasp file look at to read it as a hand's)."""
+    path = Path(path)
+    if path.suffix.lower() != ".toml":
+        return False
+    try:
+        data = tomllib.loads(read_input(path, MAX_GRASP_FILE_BYTES, "grasp file").decode("utf-8-sig"))
+    except (GraspValueError, UnicodeDecodeError, ValueError):
+        return False  # the grasp-file reader says what is wrong with it
+    return isinstance(data.get("hand"), dict)
 
 
 def _toml_value(v) -> str:

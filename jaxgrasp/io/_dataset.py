@@ -113,10 +113,14 @@ class GraspColumns:
             the padding repeats its last one (valid numbers, inactive). An invalid grasp's
             row repeats the first valid grasp's, with no contact.
         counts: ``(B,)`` int64, each grasp's contacts (0 for an invalid one).
+        mask: ``(B, N)`` bool, where a grasp's contacts are not its first ``counts[i]``:
+            the contacts it has, in place (a hand's fingertips in contact, so that contact
+            ``k`` is fingertip ``k`` in every result); ``None``: the first ``counts[i]``.
     """
 
     fields: Mapping[str, np.ndarray]
     counts: np.ndarray
+    mask: np.ndarray | None = None
 
     @property
     def valid(self) -> np.ndarray:
@@ -125,7 +129,9 @@ class GraspColumns:
 
     @property
     def active(self) -> np.ndarray:
-        """``(B, N)`` bool: the contacts each grasp has (its first ``counts[i]``)."""
+        """``(B, N)`` bool: the contacts each grasp has (`mask`, else its first ``counts[i]``)."""
+        if self.mask is not None:
+            return self.mask
         return np.arange(self.fields["positions"].shape[1]) < self.counts[:, None]
 
     def grasp(self, i: int) -> Grasp | None:
@@ -135,7 +141,8 @@ class GraspColumns:
             return None
         import jax.numpy as jnp
 
-        return Grasp(**{n: jnp.asarray(a[i, :k] if FIELD[n].per_contact else a[i]) for n, a in self.fields.items()})
+        own = self.active[i]
+        return Grasp(**{n: jnp.asarray(a[i, own] if FIELD[n].per_contact else a[i]) for n, a in self.fields.items()})
 
 
 class _ColumnBuilder:
@@ -383,7 +390,9 @@ def padded_set(gset: GraspSet, n_contacts: int) -> GraspSet:
     pick = np.minimum(np.arange(n_contacts), max(n - 1, 0))
     fields = {k: (a[:, pick] if n else np.zeros((a.shape[0], n_contacts, *a.shape[2:]))) if FIELD[k].per_contact
               else a for k, a in columns.fields.items()}
-    return dataclasses.replace(gset, grasps=GraspRows(GraspColumns(fields=fields, counts=columns.counts)))
+    mask = None if columns.mask is None else np.concatenate(
+        [columns.mask, np.zeros((len(columns.mask), n_contacts - n), bool)], axis=1)  # the padding is never a contact
+    return dataclasses.replace(gset, grasps=GraspRows(GraspColumns(fields=fields, counts=columns.counts, mask=mask)))
 
 
 # ----------------------------------------------------------------------------- .npz

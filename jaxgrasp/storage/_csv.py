@@ -11,7 +11,9 @@ __all__ = ["csv_cell", "csv_content"]
 
 def csv_cell(x) -> str:
     """A number as a CSV cell: floats with 17 significant digits (they read back exactly;
-    NaN as an empty cell), booleans ``True``/``False``, integers as they are."""
+    NaN as an empty cell), booleans ``True``/``False``, integers and text as they are."""
+    if isinstance(x, str):
+        return x
     if isinstance(x, (bool, np.bool_)):
         return str(bool(x))
     if isinstance(x, (int, np.integer)):

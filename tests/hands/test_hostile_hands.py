@@ -260,7 +260,8 @@ def test_neutralised_bombs_still_load_at_once(dirs):
 @pytest.mark.parametrize("key, value, message", [
     ("qpos", '["a", "b", "c", "d", "e", "f"]', "qpos = ['a', 'b', 'c', 'd', 'e', 'f'] must be a number"),
     ("qpos", "[[0.0, 0.1], [0.2, 0.3, 0.4, 0.5]]", "qpos must be a number or an array of numbers"),
-    ("qpos", "[[0.0, 0.1, 0.2, 0.3, 0.4, 0.5]]", "qpos must be 6 joint positions (rad, m for slides), got shape (1, 6"),
+    ("qpos", "[[[0.0, 0.1, 0.2, 0.3, 0.4, 0.5]]]", "qpos must be 6 joint positions (rad, m for slides), got shape (1, 6)"),
+    ("qpos", "[[0.0, 0.1, 0.2, 0.3, 0.4, 0.5], [0.0, 0.1, 0.2, 0.3, 0.4, 0.5]]", "qpos holds 2 configurations"),
     ("qpos", "[0.0, nan, 0.0, 0.0, 0.0, 0.0]", "qpos[1] = nan must be finite"),
     ("qpos", "[0.0, 0.1]", "qpos must be 6 joint positions (rad, m for slides), got shape (2,)"),
     ("qpos", "[true, false, true, false, true, false]", "must be numeric, not boolean"),
