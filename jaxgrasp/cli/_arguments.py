@@ -357,9 +357,11 @@ def add_batch(sub) -> None:
         ),
         epilog="Example: jaxgrasp batch grasps.jsonl --out ranked/ --top 10",
     )
-    sp.add_argument("file", help="dataset file (.npz or .jsonl)")
+    sp.add_argument("file", help="dataset file (.npz or .jsonl), a hand grasp file (.toml, one or many "
+                    "configurations), or hand data in the format --format names")
     sp.add_argument("--out", default="jaxgrasp-out", metavar="DIR", help="output folder (default jaxgrasp-out)")
     add_chunk_size(sp, "grasps per compiled batch (default 64 per CPU device, 1024 per GPU)")
+    add_hand_data_options(sp)
     sp.add_argument("--top", type=Count("--top", MAX_TOP, "best grasps listed (MAX_TOP: results.csv ranks them all)"),
                     default=DEFAULT_TOP, metavar="K", help=f"list the K best grasps, at most {MAX_TOP:,} (default {DEFAULT_TOP})")
     sp.add_argument("--strict", action="store_true", help="any invalid grasp: exit 2 before computing")
@@ -370,6 +372,38 @@ def add_batch(sub) -> None:
     add_robust_options(sp)
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_process_options(sp)
+
+
+HAND_FORMATS = ("dexgraspnet", "dexgraspbench")
+"""The hand-grasp datasets of the field ``jaxgrasp batch --format`` reads (docs/guide/hands.md)."""
+
+HAND_DATA_DEFAULTS = dict(young_modulus=3e5, friction=0.8, max_force=15.0)
+"""The fingertip fields of ``jaxgrasp batch --format`` where not given (SI units), as ``plan``'s."""
+
+
+def add_hand_data_options(sp: argparse.ArgumentParser) -> None:
+    """``--format``, ``--hand``, ``--fingertips``, ``--mesh`` and the fingertip and object
+    fields of a dataset of hand configurations (``jaxgrasp batch``)."""
+    g = sp.add_argument_group("hand datasets (with --format)")
+    g.add_argument("--format", choices=HAND_FORMATS, default=None,
+                   help="FILE holds hand configurations in this dataset format: dexgraspnet (a .npy of one "
+                        "object's grasps), dexgraspbench (a .npy grasp or a folder of them)")
+    g.add_argument("--hand", metavar="FILE", default=None, help="the hand's model (MJCF .xml or URDF .urdf)")
+    g.add_argument("--fingertips", metavar="A,B,C", default=None,
+                   help="the hand's fingertips, comma-separated geom (or link) names; contact k is the k-th")
+    g.add_argument("--mesh", metavar="FILE", default=None,
+                   help="the object's mesh (dexgraspnet: required, scaled per grasp; dexgraspbench: default each "
+                        "grasp's obj_path)")
+    g.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="the mesh's length unit (default m)")
+    d = HAND_DATA_DEFAULTS
+    for opt, key, unit in (("--young-modulus", "young_modulus", "Pa"), ("--friction", "friction", ""),
+                           ("--max-force", "max_force", "N")):
+        g.add_argument(opt, dest=key, type=float, default=None, metavar=unit.upper() or "MU",
+                       help=f"every fingertip's {key.replace('_', ' ')}" + (f", {unit}" if unit else "")
+                       + f" (default {d[key]:g})")
+    mass = g.add_mutually_exclusive_group()
+    mass.add_argument("--density", type=float, default=None, metavar="KG_M3", help="object density, kg/m^3")
+    mass.add_argument("--mass", type=float, default=None, metavar="KG", help="object mass, kg (default 0: no weight)")
 
 
 def add_tune(sub) -> None:

@@ -40,6 +40,7 @@ from jaxgrasp.cli._common import (
     robust_uncertainty,
     say,
 )
+from jaxgrasp.cli._hand_batch import hand_input, load_hand_data
 from jaxgrasp.engine import prefetch
 from jaxgrasp.model import counted
 
@@ -61,14 +62,18 @@ def run(args) -> int:
 
     _check_numbers(args)
     uncertainty = robust_uncertainty(args)
+    hands = hand_input(args)
     if processes.check_process_options(args):
         return run_processes(args, uncertainty)
-    gset = load_dataset(args.file, allowed_dirs=args.allow_dir)
+    out = Path(args.out)
+    if hands:
+        check_out(out)  # before the fingertips are placed, which takes a while on a large dataset
+    hand_data = load_hand_data(args) if hands else None
+    gset = hand_data.grasps if hands else load_dataset(args.file, allowed_dirs=args.allow_dir)
     if args.strict:
         gset.raise_if_invalid()
     if not gset.valid.any():
         raise UsageError(f"{args.file}: no valid grasp ({len(gset)} invalid; first: {gset.errors[0]})")
-    out = Path(args.out)
     check_out(out)
     widths = plan_widths(grasps_by_count(gset.num_contacts), jax.devices()[0].platform)  # what evaluate_dataset picks
     if not args.no_plot:
@@ -85,7 +90,9 @@ def run(args) -> int:
             chunk_size=args.chunk_size, progress=progress, widths=widths,
         )
         wall = time.perf_counter() - t_start
-        extra = _epsilon(gset) if args.epsilon else {}
+        extra = hand_data.columns() if hands else {}  # contact k is fingertip k: their columns first
+        if args.epsilon:
+            extra.update(_epsilon(gset))
         if uncertainty is not None:
             extra.update(_robust(gset, uncertainty, args))
         written, replaced, removed = _write_outputs(merged, out, checkpoint, args, extra)

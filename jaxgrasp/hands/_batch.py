@@ -195,12 +195,15 @@ def hand_batch(hand, mesh, qpos, *, wrist=None, object_pose=None, scale=None, yo
     base = load_mesh(mesh, units)
     fn = _contacts_function(hand, max_tilt)
     out: dict[str, np.ndarray] = {}
+    done = 0
     for value in np.unique(s):  # one surface and material per scale (a dataset has a few)
         rows = np.flatnonzero(s == value)
-        part = _scaled_contacts(fn, hand, base, float(value), q[rows], w[rows], p[rows], progress, young_modulus,
+        told = None if progress is None else (lambda k, _n, before=done: progress(before + k, b))
+        part = _scaled_contacts(fn, hand, base, float(value), q[rows], w[rows], p[rows], told, young_modulus,
                                 friction, max_force, mass, density, gravity, center_of_mass)
         for k, a in part.items():
             out.setdefault(k, np.empty((b, *a.shape[1:]), dtype=a.dtype))[rows] = a
+        done += rows.size
     return _batch_of(out, hand, source, source_sha256)
 
 
