@@ -152,7 +152,8 @@ def _contacts(fn, surface, mat, q, w, p, progress) -> dict[str, np.ndarray]:
     return {k: np.concatenate([part[k] for part in parts]) for k in parts[0]}
 
 
-def hand_batch(hand, mesh, qpos, *, wrist=None, object_pose=None, scale=None, young_modulus, friction, max_force,
+def hand_batch(hand, mesh, qpos, *, wrist=None, object_pose=None, scale=None, objects=None, young_modulus, friction,
+               max_force,
                mass=None, density=None, gravity=DEFAULT_GRAVITY, center_of_mass=None, units: str = "m",
                max_tilt: float = DEFAULT_MAX_TILT, progress: Callable[[int, int], Any] | None = None,
                source: str = "<memory>", source_sha256: str | None = None) -> HandBatch:
@@ -161,12 +162,14 @@ def hand_batch(hand, mesh, qpos, *, wrist=None, object_pose=None, scale=None, yo
     Args:
         hand: a [`Hand`][jaxgrasp.Hand] with ``F`` fingertips and ``J`` joints.
         mesh: ``trimesh.Trimesh`` or a mesh file, in ``units``, its frame placed in the
-            world by ``object_pose`` and scaled by ``scale``.
+            world by ``object_pose`` and scaled by ``scale``; or a sequence of them, each
+            row's named by ``objects``.
         qpos: ``(B, J)`` joint positions, rad (m for slides).
         wrist: ``(B, 6)`` or ``(6,)`` the hand's model frame in the world: translation m,
             rotation vector rad (``None``: the world's).
         object_pose: ``(B, 6)`` or ``(6,)`` the mesh frame in the world, likewise.
         scale: ``(B,)`` or a number, > 0: the mesh scaled about its origin (``None``: 1).
+        objects: ``(B,)`` int, the index of each row's mesh where ``mesh`` is a sequence.
         young_modulus, friction, max_force: Pa, -, N, a number or one per fingertip.
         mass, density: kg or kg/m^3 (one of them; neither: 0).
         gravity: ``(3,)`` m/s^2, world frame.
@@ -182,8 +185,6 @@ def hand_batch(hand, mesh, qpos, *, wrist=None, object_pose=None, scale=None, yo
     Raises:
         GraspValueError: a malformed ``qpos``, pose, scale or field; one line naming it.
     """
-    from jaxgrasp.io import load_mesh
-
     q = np.asarray(qpos) if isinstance(qpos, np.ndarray) else qpos
     b = int(np.shape(q)[0]) if np.ndim(q) == 2 else -1
     if b < 1:
@@ -192,19 +193,35 @@ def hand_batch(hand, mesh, qpos, *, wrist=None, object_pose=None, scale=None, yo
     w = _rows(wrist, b, 6, "wrist", "finite numbers (translation m, rotation vector rad)", np.zeros(6))
     p = _rows(object_pose, b, 6, "object_pose", "finite numbers (translation m, rotation vector rad)", np.zeros(6))
     s = _scales(scale, b)
-    base = load_mesh(mesh, units)
+    meshes, which = _meshes(mesh, objects, b, units)
     fn = _contacts_function(hand, max_tilt)
     out: dict[str, np.ndarray] = {}
     done = 0
-    for value in np.unique(s):  # one surface and material per scale (a dataset has a few)
-        rows = np.flatnonzero(s == value)
+    for o, value in sorted(set(zip(which.tolist(), s.tolist()))):  # one surface and material each (a dataset has a few)
+        rows = np.flatnonzero((which == o) & (s == value))
         told = None if progress is None else (lambda k, _n, before=done: progress(before + k, b))
-        part = _scaled_contacts(fn, hand, base, float(value), q[rows], w[rows], p[rows], told, young_modulus,
+        part = _scaled_contacts(fn, hand, meshes[o], value, q[rows], w[rows], p[rows], told, young_modulus,
                                 friction, max_force, mass, density, gravity, center_of_mass)
         for k, a in part.items():
             out.setdefault(k, np.empty((b, *a.shape[1:]), dtype=a.dtype))[rows] = a
         done += rows.size
     return _batch_of(out, hand, source, source_sha256)
+
+
+def _meshes(mesh, objects, b: int, units: str) -> tuple[list, np.ndarray]:
+    """``(meshes, which (b,))``: the checked meshes in m and each row's index among them."""
+    from jaxgrasp.io import load_mesh
+
+    many = isinstance(mesh, (list, tuple))
+    if many != (objects is not None):
+        raise GraspValueError("give objects (each row's mesh index) with a sequence of meshes, and only then")
+    meshes = [load_mesh(m, units) for m in (mesh if many else [mesh])]
+    if not many:
+        return meshes, np.zeros(b, dtype=np.int64)
+    which = np.asarray(objects)
+    if which.shape != (b,) or which.dtype.kind not in "iu" or which.min() < 0 or which.max() >= len(meshes):
+        raise GraspValueError(f"objects must be ({b},) indices into the {len(meshes)} meshes")
+    return meshes, which.astype(np.int64)
 
 
 def _scaled_contacts(fn, hand, base, s: float, q, w, p, progress, young_modulus, friction, max_force, mass, density,

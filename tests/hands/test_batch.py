@@ -137,3 +137,14 @@ def test_batch_command_takes_a_hand_grasp_file_of_many_configurations(run_cli, t
         assert float(rows[i]["dr_0"]) == pytest.approx(float(hg.grasp.initial_deformation[0]), abs=1e-12)
         assert float(rows[i]["value_J"]) == pytest.approx(float(jaxgrasp.evaluate(hg.grasp).value), rel=1e-9)
     assert rows[2]["dr_0"] == "" and rows[2]["in_contact"] == "b_tip"
+
+
+def test_rows_on_several_meshes_are_each_meshs_grasps(hand, cube):
+    long = trimesh.creation.box((0.064, 0.06, 0.06))  # 2 mm nearer each fingertip along x
+    q = np.stack([Q0, Q0, Q0])
+    hb = hand_batch(hand, [cube, long], q, objects=[1, 0, 1], **FIELDS)
+    one = hand_batch(hand, cube, Q0[None], **FIELDS)
+    np.testing.assert_allclose(hb.dr[1], one.dr[0], atol=1e-15)
+    np.testing.assert_allclose(hb.dr[[0, 2]][:, 1:], one.dr[[0, 0]][:, 1:] + 0.002, atol=1e-12)
+    with pytest.raises(GraspValueError, match=r"objects must be \(3,\) indices into the 2 meshes"):
+        hand_batch(hand, [cube, long], q, objects=[0, 1, 2], **FIELDS)
