@@ -119,7 +119,8 @@ class HandPoses:
                     raise GraspValueError(f"HandPoses.{name} must have shape {shape}, got {value.shape}")
                 object.__setattr__(self, name, value)
         if len(self.objects) != b or len(self.sources) != b:
-            raise GraspValueError(f"HandPoses: {b} grasps but {len(self.objects)} objects and {len(self.sources)} sources")
+            raise GraspValueError(f"HandPoses: {b} grasps, but {len(self.objects)} objects and "
+                                  f"{len(self.sources)} sources")
 
     def __len__(self) -> int:
         return int(self.qpos.shape[0])
@@ -237,7 +238,8 @@ def _bench_grasp(path: str, joints: int) -> tuple:
     data = load_npy(path, max_bytes=MAX_GRASP_FILE_BYTES, what="DexGraspBench file")
     item = data.item() if data.dtype == object and data.shape == () else None
     if not isinstance(item, dict):
-        raise GraspValueError(f"{path}: a DexGraspBench file holds one dict, got an array of {data.dtype} of shape {data.shape}")
+        raise GraspValueError(f"{path}: a DexGraspBench file holds one dict, "
+                              f"got an array of {data.dtype} of shape {data.shape}")
     missing = [k for k in BENCH_KEYS if k not in item]
     if missing:
         raise GraspValueError(f"{path}: no {_listed(missing)}; a DexGraspBench grasp holds {', '.join(BENCH_KEYS)}")
@@ -279,7 +281,8 @@ def _bench_files(paths) -> list[str]:
             raise GraspValueError(f"{item}: more than {MAX_DEXGRASPBENCH_FILES} grasp files; read fewer at once")
         out.extend(sorted(found, key=_natural))
     if not out:
-        raise GraspValueError(f"{_listed([os.fspath(p) for p in items]) or 'no path'}: no DexGraspBench grasp file (.npy)")
+        shown = _listed([os.fspath(p) for p in items]) or "no path"
+        raise GraspValueError(f"{shown}: no DexGraspBench grasp file (.npy)")
     return out
 
 
@@ -325,9 +328,10 @@ def _as_poses(grasps, obj_path) -> HandPoses:
         raise GraspValueError("save_dexgraspbench takes a HandPoses, a HandGrasp or a list of HandGrasps")
     if obj_path is None:
         raise GraspValueError("save_dexgraspbench: a HandGrasp does not say its object's folder: pass obj_path=")
-    return HandPoses(qpos=np.stack([np.asarray(g.qpos) for g in items]), wrist=np.stack([np.asarray(g.wrist) for g in items]),
-                     object_pose=np.stack([np.asarray(g.object_pose) for g in items]), scale=np.ones(len(items)),
-                     joint_names=tuple(items[0].hand.joint_names), objects=("",) * len(items), sources=("",) * len(items))
+    stacked = {k: np.stack([np.asarray(getattr(g, k)) for g in items]) for k in ("qpos", "wrist", "object_pose")}
+    blank = ("",) * len(items)
+    return HandPoses(**stacked, scale=np.ones(len(items)), joint_names=tuple(items[0].hand.joint_names),
+                     objects=blank, sources=blank)
 
 
 def _stage(poses: HandPoses, name: str, factor: float, hand) -> np.ndarray:
@@ -382,7 +386,8 @@ def save_dexgraspbench(folder: str | os.PathLike, grasps, *, obj_path=None, hand
         OutputError: the files cannot be written (none is).
     """
     poses = _as_poses(grasps, obj_path)
-    paths = poses.objects if obj_path is None else ((obj_path,) * len(poses) if isinstance(obj_path, str) else tuple(obj_path))
+    paths = poses.objects if obj_path is None else obj_path
+    paths = (paths,) * len(poses) if isinstance(paths, str) else tuple(paths)
     if len(paths) != len(poses) or not all(isinstance(p, str) and p for p in paths):
         raise GraspValueError(f"obj_path must be a folder name, or {len(poses)} of them (one per grasp)")
     if hand is not None and tuple(hand.joint_names) != poses.joint_names:

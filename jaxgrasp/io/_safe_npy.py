@@ -246,8 +246,10 @@ class _Walk:
             if bad is not None:
                 raise _Refused(f"refuses a dict key that is not a string ({type(bad).__name__})")
             return {k: self.value(v, depth + 1) for k, v in obj.items()}
-        shown = {_Token: "the class numpy.ndarray", _DtypeRecord: "a dtype"}.get(kind, f"a value of type {kind.__name__}")
-        raise _Refused(f"refuses {shown} pickled outside an array" if kind in (_Token, _DtypeRecord) else f"refuses {shown}")
+        if kind in (_Token, _DtypeRecord):
+            shown = "the class numpy.ndarray" if kind is _Token else "a dtype"
+            raise _Refused(f"refuses {shown} pickled outside an array")
+        raise _Refused(f"refuses a value of type {kind.__name__}")
 
     def scalar(self, record: _ScalarRecord, depth: int):
         dtype = _resolve_dtype(record.dtype)
@@ -271,7 +273,8 @@ class _Walk:
             if type(data) is not bytes or len(data) != count * dtype.itemsize:
                 raise _Refused(f"refuses a pickled {dtype} array of shape {shape} whose bytes do not match it")
             flat = np.frombuffer(data, dtype=dtype, count=count)
-            return flat.reshape(shape, order=order).astype(dtype.newbyteorder("="))  # native, as NumPy's own unpickling gives it
+            native = dtype.newbyteorder("=")  # as NumPy's own unpickling gives it
+            return flat.reshape(shape, order=order).astype(native)
         if type(data) is not list or len(data) != count:
             raise _Refused(f"refuses a pickled object array of shape {shape} whose items do not match it")
         out = np.empty(count, dtype=object)
@@ -287,14 +290,15 @@ def _unpickled(payload: bytes, shape: tuple) -> np.ndarray:
         found = _Unpickler(io.BytesIO(payload)).load()
     except _Refused:
         raise
-    except Exception as exc:  # anything a malformed pickle raises: nothing but the stand-ins above has run
+    except Exception as exc:  # noqa: BLE001  anything a malformed pickle raises: nothing but the stand-ins above has run
         detail = (str(exc).splitlines() or [""])[0][:100]
         raise _Refused(f"holds a malformed or truncated pickle ({type(exc).__name__}: {detail})") from None
     if type(found) is not _ArrayRecord:
         raise _Refused(f"pickles a {type(found).__name__}, not the array its header declares")
     array = _Walk(len(payload)).array(found, 0)
     if array.dtype.kind != "O" or array.shape != shape:
-        raise _Refused(f"pickles an array of shape {array.shape}, not the object array of shape {shape} its header declares")
+        raise _Refused(f"pickles an array of shape {array.shape}, not the object array of shape {shape} "
+                       "its header declares")
     return array
 
 
@@ -326,5 +330,6 @@ def load_npy(path: str | os.PathLike, *, max_bytes: int, what: str = "file") -> 
         return _unpickled(raw[offset:], shape)
     except _Refused as exc:
         pickled = str(exc).startswith("refuses")
-        note = "; a pickled .npy is read only if it holds arrays, numbers, strings, lists, tuples and dicts" if pickled else ""
+        note = "; a pickled .npy is read only if it holds arrays, numbers, strings, lists, tuples and dicts"
+        note = note if pickled else ""
         raise GraspValueError(f"{os.fspath(path)}: the {what} {exc}{note}") from None

@@ -131,7 +131,8 @@ def test_dexgraspnet_mistakes_are_one_line(tmp_path, hand, grasps):
     refused(lambda b: b[0]["qpos"].update({"WRJTx": "0.1"}), "qpos['WRJTx'] must be a number, got str")
     refused(lambda b: b[0]["qpos"].update({"WRJTx": True}), "qpos['WRJTx'] must be a number, got bool")
     np.save(tmp_path / "numbers.npy", np.zeros((3, 4)))
-    assert "holds a list of grasps (dicts), got an array of float64" in one_line(read_dexgraspnet, tmp_path / "numbers.npy", hand)
+    text = one_line(read_dexgraspnet, tmp_path / "numbers.npy", hand)
+    assert "holds a list of grasps (dicts), got an array of float64" in text
     with pytest.raises(GraspValueError, match="must be a Hand or its joint names"):
         read_dexgraspnet(tmp_path / "numbers.npy", "robot0:FFJ3")
 
@@ -160,8 +161,8 @@ def poses(hand, grasps):
     rotvec *= (rng.uniform(0.1, 3.0, B) / np.linalg.norm(rotvec, axis=1))[:, None]  # angles below pi
     object_pose = np.concatenate([rng.uniform(-0.1, 0.1, (B, 3)), rng.normal(size=(B, 3))], axis=1)
     return HandPoses(qpos=qpos, wrist=np.concatenate([grasps[1], rotvec], axis=1), object_pose=object_pose,
-                     scale=grasps[3], joint_names=hand.joint_names, objects=tuple(f"assets/object/o{i}" for i in range(B)),
-                     sources=("",) * B)
+                     scale=grasps[3], joint_names=hand.joint_names, sources=("",) * B,
+                     objects=tuple(f"assets/object/o{i}" for i in range(B)))
 
 
 def test_dexgraspbench_round_trip(tmp_path, hand, poses):
@@ -171,8 +172,8 @@ def test_dexgraspbench_round_trip(tmp_path, hand, poses):
     for name in ("qpos", "wrist", "object_pose", "scale"):
         np.testing.assert_allclose(getattr(back, name), getattr(poses, name), rtol=0, atol=1e-12, err_msg=name)
     assert back.objects == poses.objects and back.sources == tuple(map(str, files))
-    np.testing.assert_allclose(back.pregrasp_qpos, np.clip(PREGRASP_FACTOR * poses.qpos, hand.lower, hand.upper), atol=1e-15)
-    np.testing.assert_allclose(back.squeeze_qpos, np.clip(SQUEEZE_FACTOR * poses.qpos, hand.lower, hand.upper), atol=1e-15)
+    for got, factor in ((back.pregrasp_qpos, PREGRASP_FACTOR), (back.squeeze_qpos, SQUEEZE_FACTOR)):
+        np.testing.assert_allclose(got, np.clip(factor * poses.qpos, hand.lower, hand.upper), atol=1e-15)
     np.testing.assert_allclose(back.pregrasp_wrist, poses.wrist, atol=1e-12)
     again = save_dexgraspbench(tmp_path / "again", back)  # pregrasp and squeeze written as they are
     for a, b in zip(again, files):
@@ -253,4 +254,5 @@ def test_save_dexgraspbench_takes_hand_grasps_and_refuses_what_it_cannot_write(t
     with pytest.raises(GraspValueError, match="obj_path must be a folder name, or 6 of them"):
         save_dexgraspbench(tmp_path, poses, obj_path=["a", "b"])
     with pytest.raises(GraspValueError, match="HandPoses.scale must have shape"):
-        HandPoses(poses.qpos, poses.wrist, poses.object_pose, np.ones(2), poses.joint_names, poses.objects, poses.sources)
+        HandPoses(poses.qpos, poses.wrist, poses.object_pose, np.ones(2), poses.joint_names, poses.objects,
+                  poses.sources)

@@ -95,7 +95,8 @@ KINDS = {
     "dexgraspbench-like": DEXGRASPBENCH_LIKE,
     "everything admitted": np.array({
         "list": [1, 2, (3, "x")], "strings": np.array(["ab", "c"]), "fortran": np.asfortranarray(np.ones((2, 3))),
-        "bool": np.bool_(True), "complex64": np.complex64(1 + 2j), "int16": np.int16(-3), "big-endian": np.arange(3, dtype=">i4"),
+        "bool": np.bool_(True), "complex64": np.complex64(1 + 2j), "int16": np.int16(-3),
+        "big-endian": np.arange(3, dtype=">i4"),
         "objects": objects(None, {"k": 1.5}), "str_": np.str_("hé"), "none": None, "nested": [[[{"a": [1.0]}]]],
     }, dtype=object),
 }
