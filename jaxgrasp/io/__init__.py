@@ -10,7 +10,8 @@ its kind's size cap (special files such as FIFOs and ``/dev/zero`` are refused i
 line), and a mesh named by a grasp file or a dataset line must be a mesh format (STL,
 OBJ, PLY, OFF, GLB; no archives) inside that file's folder after symlinks, unless the
 caller allows more folders (``allowed_dirs=``, ``--allow-dir``); see
-`jaxgrasp.io._inputs`.
+`jaxgrasp.io._inputs`. A ``.npy`` file that pickles objects (the field's grasp datasets)
+is read by a restricted unpickler that runs none of its code (`jaxgrasp.io._safe_npy`).
 
 ``__all__`` lists the names promised to users; the names imported below it are for
 jaxgrasp's other packages, not promised (the faces' convention: ``docs/development.md``,
@@ -32,6 +33,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.io._grasp_file import dict_to_toml, mesh_grasp_to_dict, mesh_reference, to_text
     from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, allowed_folders, check_path_text, confine, read_input
     from jaxgrasp.io._mesh import load_mesh
+    from jaxgrasp.io._safe_npy import load_npy
 
 __all__ = [
     "load",
