@@ -11,6 +11,7 @@ fingertip ``k`` of ``--fingertips``) are added to ``results.csv`` and ``results.
 from __future__ import annotations
 
 import hashlib
+import os
 import time
 
 from jaxgrasp.cli._arguments import HAND_DATA_DEFAULTS
@@ -74,11 +75,40 @@ def load_hand_data(args):
 
     hand = Hand.from_mjcf(args.hand, _fingertips(args.fingertips), args.allow_dir)
     reader = {"dexgraspnet": read_dexgraspnet, "dexgraspbench": read_dexgraspbench}[args.format]
-    poses = reader(args.file, hand.joint_names)
+    poses = reader(args.file, hand)
+    meshes, objects = _meshes(args, poses)
     fields = {k: HAND_DATA_DEFAULTS[k] if getattr(args, k) is None else getattr(args, k)
               for k in ("young_modulus", "friction", "max_force")}
-    key = hashlib.sha256("\n".join([poses.source_sha256, hand.digest(), repr(sorted(fields.items())),
-                                    repr((args.mass, args.density, args.units))]).encode()).hexdigest()
-    return hand_batch(hand, args.mesh, poses.qpos, wrist=poses.wrist, object_pose=poses.object_pose,
-                      scale=poses.scale, units=args.units, mass=args.mass, density=args.density, progress=progress,
-                      source=str(args.file), source_sha256=key, **fields)
+    key = hashlib.sha256("\n".join([_sources_sha256(poses.sources), hand.digest(), repr(sorted(fields.items())),
+                                    repr((args.mass, args.density, args.units, [str(m) for m in meshes]))]).encode())
+    return hand_batch(hand, meshes if objects is not None else meshes[0], poses.qpos, wrist=poses.wrist,
+                      object_pose=poses.object_pose, scale=poses.scale, objects=objects, units=args.units,
+                      mass=args.mass, density=args.density, progress=progress, source=str(args.file),
+                      source_sha256=key.hexdigest(), **fields)
+
+
+def _meshes(args, poses) -> tuple[list, object]:
+    """``(meshes, objects)``: ``[--mesh]`` and ``None``, or (DexGraspBench without ``--mesh``)
+    the mesh of each ``obj_path`` (``obj_path/mesh/simplified.obj``, a relative one from the
+    working folder, where DexGraspBench runs; within it or an ``--allow-dir``) and each row's index."""
+    import numpy as np
+
+    from jaxgrasp.hands import DEXGRASPBENCH_MESH
+    from jaxgrasp.io import allowed_folders, confine
+
+    if args.mesh is not None:
+        return [args.mesh], None
+    names = sorted(set(poses.objects))
+    allowed = allowed_folders(args.allow_dir)
+    meshes = [confine(os.path.join(n, DEXGRASPBENCH_MESH), os.getcwd(), allowed, "working folder") for n in names]
+    return meshes, np.searchsorted(names, poses.objects)
+
+
+def _sources_sha256(sources) -> str:
+    """SHA-256 (hex) of the bytes of the files ``sources`` name (``PATH`` or ``PATH#row``), each once."""
+    from jaxgrasp.io import MAX_GRASP_FILE_BYTES, read_input
+
+    h = hashlib.sha256()
+    for path in dict.fromkeys(str(s).rsplit("#", 1)[0] for s in sources):
+        h.update(read_input(path, 64 * MAX_GRASP_FILE_BYTES, "hand dataset"))
+    return h.hexdigest()
