@@ -125,7 +125,7 @@ CASES = {
     "hfield_file": ({"h.png": "x"}, hand_xml('<asset><hfield name="h" file="h.png" size="1 1 1 1"/></asset>'),
                     "reads a height field from a file"),
     "not_a_mesh_format": ({"m.gltf": "{}"}, hand_xml(MESH.format("m.gltf"), MESH_GEOM), "is not .stl or .obj or .msh"),
-    "urdf": ({}, '<robot name="r"><link name="a"/></robot>', "its root element is <robot>, not <mujoco>"),
+    "sdf": ({}, '<sdf version="1.6"><model name="r"/></sdf>', "its root element is <sdf>, not <mujoco>"),
     "missing_include": ({}, hand_xml(body='<include file="nope.xml"/>'), "include 'nope.xml': no such file"),
     "builtin_mesh_bomb": ({}, hand_xml('<asset><mesh name="m" builtin="supersphere" params="3000 1 1"/></asset>',
                                        MESH_GEOM), "a builtin mesh has a parameter above 200"),
@@ -266,7 +266,11 @@ def test_neutralised_bombs_still_load_at_once(dirs):
     ("qpos", "[true, false, true, false, true, false]", "must be numeric, not boolean"),
     ("wrist", '["0", 0, 0, 0, 0, 0]', "wrist = ['0', 0, 0, 0, 0, 0] must be a number"),
     ("wrist", "[[0, 0, 0], [0, 0, 0]]", "wrist must be 6 finite numbers"),
-    ("fingertips", "[1, 2]", "fingertips must be at least 2 geom names, got [1, 2]"),
+    ("fingertips", "[1, 2]", "fingertips must be at least 2 geom or link names, or {link, center, axis, radius} tables, "
+                             "got [1, 2]"),
+    ("fingertips", '["a_tip", "nope"]', "fingertips: no geom or link named 'nope'"),
+    ("fingertips", '["a_tip", {link = "b_distal", center = [0, 0], axis = [1, 0, 0], radius = 0.01}]',
+     "fingertip 'b_distal': center must be 3 finite numbers"),
     ("mjcf", '"two\\u0000finger.xml"', "holds a NUL byte"),
     ("mjcf", "3", "[hand] mjcf must be a string, got int"),
 ])
