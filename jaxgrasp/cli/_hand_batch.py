@@ -73,7 +73,7 @@ def load_hand_data(args):
         return load_hand_batch(args.file, args.allow_dir, progress=progress)
     from jaxgrasp.hands import read_dexgraspbench, read_dexgraspnet
 
-    hand = Hand.from_mjcf(args.hand, _fingertips(args.fingertips), args.allow_dir)
+    hand = Hand.from_file(args.hand, _fingertips(args.fingertips), args.allow_dir)
     reader = {"dexgraspnet": read_dexgraspnet, "dexgraspbench": read_dexgraspbench}[args.format]
     poses = reader(args.file, hand)
     meshes, objects = _meshes(args, poses)

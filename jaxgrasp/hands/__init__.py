@@ -1,6 +1,7 @@
-"""Hands from MJCF: kinematics in JAX, the grasp a configuration makes, tuning its joints.
+"""Hands from MJCF or URDF: kinematics in JAX, the grasp a configuration makes, tuning its joints.
 
-[`Hand`][jaxgrasp.Hand] (read by MuJoCo: the optional extra ``jaxgrasp[hands]``), the grasp a
+[`Hand`][jaxgrasp.Hand] (read by MuJoCo: the optional extra ``jaxgrasp[hands]``; fingertips
+as sphere or capsule geoms, or as links with a hemisphere for fingertips that are meshes), the grasp a
 configuration makes on a mesh ([`Hand.grasp`][jaxgrasp.Hand.grasp] -> [`HandGrasp`][jaxgrasp.hands.HandGrasp]), its value and
 gradient with respect to the joints ([`hand_value`][jaxgrasp.hands.hand_value]), and [`tune_hand`][jaxgrasp.tune_hand], which
 maximises the value over the joint angles with the other links kept out of the object.

@@ -3,8 +3,10 @@
 ::
 
     [hand]
-    mjcf = "shadow/shadow_hand.xml"          # relative to this file
+    model = "shadow/shadow_hand.xml"         # MJCF or URDF, relative to this file (``mjcf = `` too)
     fingertips = ["robot0:C_ffdistal", "robot0:C_thdistal"]
+    # or a hemisphere on a link, for fingertips that are meshes (m, the link's frame):
+    # fingertips = ["a_tip", {link = "b_distal", center = [0.03, 0, 0], axis = [1, 0, 0], radius = 0.01}]
     qpos = [0.0, ...]                        # (J,) rad (m for slides); or (B, J): B configurations
     wrist = [0, 0, 0, 0, 0, 0]               # optional: translation m, rotation vector rad; or (B, 6)
 
@@ -19,13 +21,18 @@
     friction = 1.0
     max_force = 15.0                         # N
 
-The MJCF and the mesh must lie inside the file's folder after symlinks, or in one of the
-allowed folders (``--allow-dir``), as for grasp files; so must every file the MJCF names
-(its includes, meshes and textures: `jaxgrasp.hands._mjcf_files`). Numbers are checked
-(``qpos``, ``wrist``, ``pose`` and the fields: one line naming the key). `load_hand_grasp` gives the
-[`HandGrasp`][jaxgrasp.hands.HandGrasp] of a file of one configuration; `load_hand_batch` the
-[`HandBatch`][jaxgrasp.hands.HandBatch] of a file of one or many (``qpos`` ``(B, J)``: the project's own
-dataset of hand grasps, evaluated by ``jaxgrasp batch``); `save_hand_grasp` writes one (atomically).
+``model`` names the hand's MJCF or URDF file (told apart by its root element, as
+[`Hand.from_file`][jaxgrasp.Hand.from_file] reads it); ``mjcf``, its name in earlier files,
+is accepted with the same meaning (one of the two). A fingertip is a geom or link name or
+an inline table ``{link, center, axis, radius}`` (`jaxgrasp.hands._fingertips`).
+The hand file and the mesh must lie inside the file's folder after symlinks, or in one of the
+allowed folders (``--allow-dir``), as for grasp files; so must every file the hand file names
+(its includes, meshes and textures: `jaxgrasp.hands._mjcf_files`, `jaxgrasp.hands._urdf_files`).
+Numbers are checked (``qpos``, ``wrist``, ``pose`` and the fields: one line naming the key).
+`load_hand_grasp` gives the [`HandGrasp`][jaxgrasp.hands.HandGrasp] of a file of one configuration;
+`load_hand_batch` the [`HandBatch`][jaxgrasp.hands.HandBatch] of a file of one or many (``qpos``
+``(B, J)``: the project's own dataset of hand grasps, evaluated by ``jaxgrasp batch``);
+`save_hand_grasp` writes one (atomically).
 """
 
 from __future__ import annotations
@@ -41,18 +48,27 @@ from jaxgrasp.model import GraspValueError
 
 __all__ = ["load_hand_grasp", "load_hand_batch", "is_hand_grasp_file", "save_hand_grasp", "hand_grasp_toml"]
 
-_TABLES = {"hand": ("mjcf", "fingertips", "qpos", "wrist"), "object": ("mesh", "units", "pose", "mass", "density"),
+_TABLES = {"hand": ("model", "mjcf", "fingertips", "qpos", "wrist"), "object": ("mesh", "units", "pose", "mass", "density"),
            "fingertip": ("young_modulus", "friction", "max_force")}
 
 
-def _confined_mjcf(name: str, base: Path, allowed: tuple, where: str) -> Path:
-    """The real path of the MJCF ``name`` (relative to ``base``), inside the allowed folders."""
-    check_path_text(name, f"{where}: mjcf")
+def _confined_model(name: str, base: Path, allowed: tuple, where: str, key: str) -> Path:
+    """The real path of the hand file ``name`` (relative to ``base``), inside the allowed folders."""
+    check_path_text(name, f"{where}: {key}")
     real = os.path.realpath(os.path.join(base, name))
     folders = (os.path.realpath(base), *allowed)
     if not any(os.path.commonpath([real, f]) == f for f in folders):
-        raise GraspValueError(f"{where}: mjcf {name!r} is outside the file's folder; pass --allow-dir DIR to allow it")
+        raise GraspValueError(f"{where}: {key} {name!r} is outside the file's folder; pass --allow-dir DIR to allow it")
     return Path(real)
+
+
+def _model_key(path: Path, hand: dict) -> str:
+    """``"model"`` or ``"mjcf"``: the [hand] key naming the hand file (exactly one)."""
+    keys = [k for k in ("model", "mjcf") if k in hand]
+    if len(keys) != 1:
+        raise GraspValueError(f"{path}: [hand] needs model = \"HAND.xml or HAND.urdf\" (or its older name mjcf), "
+                              f"{'not both' if keys else 'missing'}")
+    return keys[0]
 
 
 def _tables(path: Path) -> dict:
@@ -68,10 +84,11 @@ def _tables(path: Path) -> dict:
         unknown = sorted(set(value) - set(_TABLES[table]))
         if unknown:
             raise GraspValueError(f"{path}: unknown key {unknown[0]!r} in [{table}]; its keys: {', '.join(_TABLES[table])}")
-    for table, key in (("hand", "mjcf"), ("hand", "fingertips"), ("hand", "qpos"), ("object", "mesh")):
+    model = _model_key(path, data.get("hand", {}))
+    for table, key in (("hand", "fingertips"), ("hand", "qpos"), ("object", "mesh")):
         if key not in data.get(table, {}):
             raise GraspValueError(f"{path}: [{table}] {key} is missing")
-    for table, key in (("hand", "mjcf"), ("object", "mesh"), ("object", "units")):
+    for table, key in (("hand", model), ("object", "mesh"), ("object", "units")):
         if not isinstance(data[table].get(key, ""), str):
             raise GraspValueError(f"{path}: [{table}] {key} must be a string, got {type(data[table][key]).__name__}")
     return data
@@ -84,7 +101,8 @@ def _opened(path: Path, allowed_dirs):
     data = _tables(path)
     allowed = allowed_folders(allowed_dirs)
     hand_t, obj, tip = data["hand"], data["object"], data.get("fingertip", {})
-    hand = Hand.from_mjcf(_confined_mjcf(hand_t["mjcf"], path.parent, allowed, str(path)), hand_t["fingertips"],
+    key = _model_key(path, hand_t)
+    hand = Hand.from_file(_confined_model(hand_t[key], path.parent, allowed, str(path), key), hand_t["fingertips"],
                           allowed)
     mesh = confine(obj["mesh"], path.parent, allowed, "hand grasp file")
     missing = [k for k in _TABLES["fingertip"] if k not in tip]
@@ -161,6 +179,8 @@ def is_hand_grasp_file(path: str | os.PathLike) -> bool:
 
 
 def _toml_value(v) -> str:
+    if isinstance(v, dict):  # an inline table (a hemisphere fingertip)
+        return "{" + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + "}"
     if isinstance(v, str):
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, (list, tuple, np.ndarray)):
@@ -180,14 +200,21 @@ def hand_grasp_toml(tables: dict) -> str:
     return "\n".join(lines)
 
 
-def save_hand_grasp(path: str | os.PathLike, *, mjcf: str, fingertips, qpos, mesh: str, young_modulus, friction,
-                    max_force, wrist=None, pose=None, mass=None, density=None, units: str = "m") -> None:
-    """Write a hand grasp file (atomically); ``mjcf`` and ``mesh`` as they should be
-    written (relative to the file's folder)."""
+def save_hand_grasp(path: str | os.PathLike, *, fingertips, qpos, mesh: str, young_modulus, friction, max_force,
+                    model: str | None = None, mjcf: str | None = None, wrist=None, pose=None, mass=None, density=None,
+                    units: str = "m") -> None:
+    """Write a hand grasp file (atomically); ``model`` (MJCF or URDF; ``mjcf``: its older
+    name) and ``mesh`` as they should be written (relative to the file's folder);
+    ``fingertips`` names or ``{link, center, axis, radius}`` dicts."""
     from jaxgrasp import storage
 
+    if (model is None) == (mjcf is None):
+        raise GraspValueError("save_hand_grasp: give the hand file as model= (or mjcf=), once")
+    tips = [{k: np.asarray(t[k]).tolist() if k != "link" else t[k] for k in t} if isinstance(t, dict) else t
+            for t in fingertips]
     text = hand_grasp_toml({
-        "hand": {"mjcf": mjcf, "fingertips": list(fingertips), "qpos": np.asarray(qpos, float), "wrist": wrist},
+        "hand": {"model": model if model is not None else mjcf, "fingertips": tips, "qpos": np.asarray(qpos, float),
+                 "wrist": wrist},
         "object": {"mesh": mesh, "units": units, "pose": pose, "mass": mass, "density": density},
         "fingertip": {"young_modulus": young_modulus, "friction": friction, "max_force": max_force},
     })

@@ -230,7 +230,7 @@ def hand_grasp(hand, qpos, mesh, *, wrist=None, object_pose=None, young_modulus,
         qpos = jnp.asarray(hand.check_qpos(qpos))
     wrist, object_pose = _pose(wrist, "wrist"), _pose(object_pose, "object_pose")
     mesh = load_mesh(mesh, units)
-    mat = material(len(hand.fingertips), mesh, young_modulus, friction, max_force, mass, density, gravity, center_of_mass)
+    mat = material(hand.num_fingertips, mesh, young_modulus, friction, max_force, mass, density, gravity, center_of_mass)
     grasp, tilt, centers = contact_grasp(hand, qpos, wrist, object_pose, Surface.from_trimesh(mesh), mat, max_tilt)
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((grasp, qpos, wrist, object_pose)))
     status = "grasp" if traced or int(np.sum(np.asarray(grasp.active))) >= 2 else "too_few_contacts"

@@ -1,12 +1,11 @@
 """A hand: its kinematic tree, its fingertips, and where they are at a configuration.
 
-[`Hand`][jaxgrasp.Hand] is built from an MJCF file by [`Hand.from_mjcf`][jaxgrasp.Hand.from_mjcf]. A fingertip is the
-hemispherical end of a sphere or capsule geom: a sphere's centre, or the centre of a
-capsule's end cap (MuJoCo's capsules run along their local ``z``), with
-the geom's radius as the fingertip's radius ``r`` (the paper's hemisphere, Sec. III). The
-cap is the one at the capsule's end farther from its body's origin (the finger's last
-joint), the fingertip's axis the geom's ``z`` axis turned towards that end: the
-direction the hemisphere points.
+[`Hand`][jaxgrasp.Hand] is built from an MJCF or URDF file by [`Hand.from_file`][jaxgrasp.Hand.from_file]
+([`Hand.from_mjcf`][jaxgrasp.Hand.from_mjcf]: MJCF only). A fingertip is a hemisphere fixed to one of
+the hand's bodies (links): the end of a sphere or capsule geom, or a centre, axis and
+radius given in a link's frame for fingertips that are meshes
+(`jaxgrasp.hands._fingertips`), with its radius ``r`` (the paper's hemisphere, Sec. III)
+and its axis, the direction the hemisphere points.
 """
 
 from __future__ import annotations
@@ -19,11 +18,11 @@ from typing import Sequence
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrasp.hands._fingertips import resolve_fingertips
 from jaxgrasp.hands._grasp import finite_vector
-from jaxgrasp.hands._kinematics import body_frames, cap_offsets, geom_frames
+from jaxgrasp.hands._kinematics import body_frames, geom_frames
 from jaxgrasp.hands._links import link_depths, link_samples
-from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER, SPHERE, KinematicTree, read_mjcf
-from jaxgrasp.model import GraspValueError
+from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER, SPHERE, KinematicTree, read_model
 
 __all__ = ["Hand"]
 
@@ -32,60 +31,80 @@ _LINK_TYPES = (SPHERE, CAPSULE, CYLINDER, BOX)  # geoms whose penetration tune_h
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Hand:
-    """A hand model read from MJCF: kinematics in JAX, fingertips as hemispheres (SI units).
+    """A hand model read from MJCF or URDF: kinematics in JAX, fingertips as hemispheres (SI units).
 
-    Build it with [`from_mjcf`][jaxgrasp.Hand.from_mjcf]. Not a pytree: its arrays are constants of the JAX
+    Build it with [`from_file`][jaxgrasp.Hand.from_file]. Not a pytree: its arrays are constants of the JAX
     functions that use it (compiled once per hand).
 
     Attributes:
         tree: the `KinematicTree`.
-        fingertips: ``(F,)`` geom indices of the fingertips.
-        fingertip_names: ``(F,)`` their geom names.
-        radius: ``(F,)`` fingertip radius, m (the geom's radius).
-        cap_offset: ``(F,)`` m from the geom centre to the end-cap centre along the
-            geom's ``z`` (a capsule's half-length, negative where the cap is at ``-z``;
-            0 for a sphere).
-        links: indices of the other geoms (spheres, capsules, cylinders, boxes: the
-            links kept out of the object by [`tune_hand`][jaxgrasp.tune_hand]; meshes and planes
-            are left out).
+        fingertip_names: ``(F,)`` each fingertip's name as given (a geom's or a link's).
+        fingertip_body: ``(F,)`` index of the body each fingertip is fixed to.
+        fingertip_center: ``(F, 3)`` m, each hemisphere's centre in its body's frame.
+        fingertip_axis: ``(F, 3)`` unit, the way each points, in its body's frame.
+        radius: ``(F,)`` fingertip radius, m.
+        fingertip_geoms: ``(F,)`` tuples of the geoms that belong to each fingertip.
+        links: indices of the other geoms (spheres, capsules, cylinders, boxes not part of
+            a fingertip: the links kept out of the object by [`tune_hand`][jaxgrasp.tune_hand];
+            meshes and planes are left out).
         link_points: ``(geom (P,), points (P, 3) m, radius (P,) m)``, their samples
             (`link_samples`).
     """
 
     tree: KinematicTree
-    fingertips: np.ndarray
     fingertip_names: tuple
+    fingertip_body: np.ndarray
+    fingertip_center: np.ndarray
+    fingertip_axis: np.ndarray
     radius: np.ndarray
-    cap_offset: np.ndarray
+    fingertip_geoms: tuple
     links: np.ndarray
     link_points: tuple
 
     @classmethod
-    def from_mjcf(cls, path: str | os.PathLike, fingertips: Sequence[str], allowed_dirs=None) -> "Hand":
-        """Read the hand in the MJCF file ``path`` (compiled by MuJoCo), with the geoms named
-        ``fingertips`` (at least 2, each a sphere or a capsule) as its fingertips.
+    def from_file(cls, path: str | os.PathLike, fingertips: Sequence, allowed_dirs=None) -> "Hand":
+        """Read the hand in the MJCF or URDF file ``path`` (told apart by the root element,
+        ``<mujoco>`` or ``<robot>``; compiled by MuJoCo) with ``fingertips`` (at least 2).
 
-        The files the MJCF file names (includes, meshes, textures) must lie in its folder
-        after symlinks, or in one of the folders ``allowed_dirs``; they are read by
-        jaxgrasp and checked (regular files under their caps, the model under its size
-        caps) before MuJoCo sees them (`jaxgrasp.hands._mjcf_files`).
+        A fingertip is a geom name (a sphere or capsule), a body or link name (whose geoms
+        include exactly one sphere or capsule), or a hemisphere on a link
+        ``{"link": NAME, "center": [x, y, z], "axis": [x, y, z], "radius": r}`` (m, the
+        link's frame) for fingertips that are meshes (`jaxgrasp.hands._fingertips`).
+
+        The files the hand file names (MJCF includes and meshes, URDF collision meshes,
+        ``package://`` paths resolved as ROS does) must lie in its folder after symlinks,
+        or in one of the folders ``allowed_dirs``; they are read by jaxgrasp and checked
+        (regular files under their caps, the model under its size caps) before MuJoCo
+        sees them (`jaxgrasp.hands._mjcf_files`, `jaxgrasp.hands._urdf_files`).
 
         Raises:
             GraspValueError: MuJoCo missing (``pip install "jaxgrasp[hands]"``), a file
                 outside the allowed folders or refused by the checks, a file MuJoCo cannot
-                compile, a free or ball joint, an unknown geom name, or a fingertip geom
-                that is not a sphere or capsule; one line.
+                compile (for legacy MJCF: the element and the fix), a free, ball, floating
+                or planar joint, an unknown fingertip name, a geom fingertip that is not a
+                sphere or capsule, a bad hemisphere; one line.
         """
-        tree, _ = read_mjcf(path, allowed_dirs)
-        if isinstance(fingertips, str) or not isinstance(fingertips, Sequence) or len(fingertips) < 2 \
-                or not all(isinstance(n, str) for n in fingertips):
-            raise GraspValueError(f"fingertips must be at least 2 geom names, got {_short(fingertips)}")
-        idx = np.array([tree.geom_index(n) for n in fingertips], dtype=int)
-        wrong = [n for n, g in zip(fingertips, idx) if tree.geom_type[g] not in (SPHERE, CAPSULE)]
-        if wrong:
-            raise GraspValueError(f"fingertips: geom {wrong[0]!r} is neither a sphere nor a capsule")
-        links = np.array([g for g in range(len(tree.geom_body)) if g not in idx and tree.geom_type[g] in _LINK_TYPES], dtype=int)
-        return cls(tree, idx, tuple(fingertips), tree.geom_size[idx, 0].copy(), cap_offsets(tree, idx), links,
+        tree, _ = read_model(path, allowed_dirs)
+        return cls.of_tree(tree, fingertips)
+
+    @classmethod
+    def from_mjcf(cls, path: str | os.PathLike, fingertips: Sequence, allowed_dirs=None) -> "Hand":
+        """Read the hand in the MJCF file ``path``: [`from_file`][jaxgrasp.Hand.from_file] for MJCF
+        only (a URDF file is refused in one line)."""
+        tree, _ = read_model(path, allowed_dirs, kinds=("mjcf",))
+        return cls.of_tree(tree, fingertips)
+
+    @classmethod
+    def of_tree(cls, tree: KinematicTree, fingertips: Sequence) -> "Hand":
+        """The hand of a `KinematicTree` with ``fingertips`` (as for [`from_file`][jaxgrasp.Hand.from_file])."""
+        tips = resolve_fingertips(tree, fingertips)
+        taken = {g for t in tips for g in t.geoms}
+        links = np.array([g for g in range(len(tree.geom_body)) if g not in taken and tree.geom_type[g] in _LINK_TYPES],
+                         dtype=int)
+        return cls(tree, tuple(t.name for t in tips), np.array([t.body for t in tips], dtype=int),
+                   np.array([t.center for t in tips], dtype=np.float64).reshape(-1, 3),
+                   np.array([t.axis for t in tips], dtype=np.float64).reshape(-1, 3),
+                   np.array([t.radius for t in tips], dtype=np.float64), tuple(t.geoms for t in tips), links,
                    link_samples(tree, links))
 
     def digest(self) -> str:
@@ -122,18 +141,24 @@ class Hand:
         otherwise (strings, nested or ragged lists, booleans, NaN, another length)."""
         return finite_vector(qpos, self.num_joints, name, "joint positions (rad, m for slides)")
 
+    @property
+    def num_fingertips(self) -> int:
+        """Number of fingertips ``F``."""
+        return len(self.fingertip_names)
+
     def fingertip_frames(self, qpos, wrist=None):
         """``(centers (F, 3) m, axes (F, 3))`` in the world frame: each fingertip's
-        end-cap centre and its unit axis (the geom's ``z`` towards the cap: the way it points), at
-        joint positions ``qpos`` ``(J,)`` and the wrist pose ``(6,)`` (translation m,
-        rotation vector rad; ``None``: the model's world frame). Traceable."""
-        xpos, xmat = geom_frames(self.tree, qpos, wrist, self.fingertips)
-        z = xmat[:, :, 2]
-        axes = z * jnp.asarray(np.where(self.cap_offset < 0.0, -1.0, 1.0))[:, None]
-        return xpos + z * jnp.asarray(self.cap_offset)[:, None], axes
+        hemisphere centre and its unit axis (the way it points), at joint positions
+        ``qpos`` ``(J,)`` and the wrist pose ``(6,)`` (translation m, rotation vector rad;
+        ``None``: the model's world frame): its body's frame, then its offset in that
+        frame. Traceable."""
+        xpos, xmat = body_frames(self.tree, qpos, wrist)
+        rot = xmat[self.fingertip_body]
+        centers = xpos[self.fingertip_body] + jnp.einsum("fij,fj->fi", rot, jnp.asarray(self.fingertip_center))
+        return centers, jnp.einsum("fij,fj->fi", rot, jnp.asarray(self.fingertip_axis))
 
     def fingertip_centers(self, qpos, wrist=None):
-        """``(F, 3)`` fingertip centres (end-cap centres), m, world frame, at ``qpos``
+        """``(F, 3)`` fingertip centres (hemisphere centres), m, world frame, at ``qpos``
         ``(J,)`` and ``wrist`` ``(6,)`` (see [`fingertip_frames`][jaxgrasp.Hand.fingertip_frames]). Traceable and
         differentiable."""
         return self.fingertip_frames(qpos, wrist)[0]
@@ -158,12 +183,6 @@ class Hand:
         from jaxgrasp.hands._grasp import hand_grasp
 
         return hand_grasp(self, qpos, mesh, **kwargs)
-
-
-def _short(value) -> str:
-    """``repr(value)``, at most 80 characters (a message echoes a user's value, not a whole file)."""
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def _digest_into(h, obj) -> None:

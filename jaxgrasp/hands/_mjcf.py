@@ -1,9 +1,9 @@
-"""A hand's kinematic tree, read from an MJCF file by MuJoCo.
+"""A hand's kinematic tree, read from an MJCF or URDF file by MuJoCo.
 
 jaxgrasp reads the file and every file it names, inside its folder and checked
 (`jaxgrasp.hands._mjcf_files`); MuJoCo compiles the checked text, given every file as
 bytes, and opens none (defaults, ``euler``/``axisangle`` frames are all resolved by its
-compiler); `read_mjcf` copies what the kinematics needs out of
+compiler); `read_model` copies what the kinematics needs out of
 the compiled ``mujoco.MjModel`` into a `KinematicTree` of NumPy arrays: for each
 body its parent, its frame in the parent's and its joints; for each joint its type, axis,
 anchor, limits and reference angle; for each geom its body, frame, type and size. MuJoCo
@@ -19,7 +19,7 @@ import numpy as np
 
 from jaxgrasp.model import GraspValueError
 
-__all__ = ["KinematicTree", "read_mjcf", "require_mujoco", "INSTALL_HINT", "HINGE", "SLIDE", "SPHERE", "CAPSULE", "BOX", "CYLINDER"]
+__all__ = ["KinematicTree", "read_model", "read_mjcf", "require_mujoco", "INSTALL_HINT", "HINGE", "SLIDE", "SPHERE", "CAPSULE", "BOX", "CYLINDER"]
 
 INSTALL_HINT = 'jaxgrasp.Hand needs MuJoCo: pip install "jaxgrasp[hands]"'
 """The one line a call without the ``hands`` extra raises."""
@@ -96,35 +96,59 @@ class KinematicTree:
         return self.geom_names.index(name)
 
 
-def read_mjcf(path, allowed_dirs=None) -> tuple[KinematicTree, object]:
-    """``(tree, model)``: the `KinematicTree` of the MJCF file ``path`` and the
-    compiled ``mujoco.MjModel`` it came from.
+def read_model(path, allowed_dirs=None, kinds=("mjcf", "urdf")) -> tuple[KinematicTree, object]:
+    """``(tree, model)``: the `KinematicTree` of the hand file ``path`` (MJCF or URDF, told
+    apart by the root element, among ``kinds``) and the compiled ``mujoco.MjModel`` it came from.
 
     The file and what it names (includes, meshes) are read by jaxgrasp, inside the file's
-    folder or the folders ``allowed_dirs``, and checked (`jaxgrasp.hands._mjcf_files`);
-    MuJoCo gets their checked content and opens no file.
+    folder or the folders ``allowed_dirs``, and checked (`jaxgrasp.hands._mjcf_files`,
+    `jaxgrasp.hands._urdf_files`); MuJoCo gets their checked content and opens no file.
 
     Raises:
         GraspValueError: MuJoCo is not installed, a file outside the allowed folders, not a
             regular file or over its cap, a model over the size caps, the file cannot be
-            compiled, or a joint is neither a hinge nor a slide (free and ball joints are
-            not supported: give the hand's pose as the wrist instead), or a joint has a
-            ``qpos`` of other size; one line.
+            compiled (legacy MJCF: the element and the fix, `jaxgrasp.hands._legacy`), or a
+            joint is neither a hinge nor a slide (free and ball joints are not supported:
+            give the hand's pose as the wrist instead), or a joint has a ``qpos`` of other
+            size; one line.
     """
-    from jaxgrasp.hands._mjcf_files import checked_mjcf
+    from jaxgrasp.hands._mjcf_files import check_mjcf, open_hand_file
+    from jaxgrasp.hands._urdf_files import check_urdf
     from jaxgrasp.io import allowed_folders
 
     mujoco = require_mujoco()
     where = os.fspath(path)
-    xml, assets, names = checked_mjcf(where, allowed_folders(allowed_dirs))
+    root, files = open_hand_file(where, allowed_folders(allowed_dirs))
+    roots = {"mjcf": "mujoco", "urdf": "robot"}
+    if root.tag not in [roots[k] for k in kinds]:
+        hint = " (a URDF file: read it with Hand.from_file)" if root.tag == "robot" else ""
+        files.refuse(f"its root element is <{root.tag}>, not {' or '.join(f'<{roots[k]}>' for k in kinds)}: a hand "
+                     f"file is {' or '.join(k.upper() for k in kinds)}{hint}")
+    source = check_urdf(root, files) if root.tag == "robot" else check_mjcf(root, files)
     try:
-        model = mujoco.MjModel.from_xml_string(xml, assets)
+        model = mujoco.MjModel.from_xml_string(source.xml, source.assets)
     except Exception as exc:  # MuJoCo raises ValueError with a multi-line message
-        text = " ".join(str(exc).split())
-        for vfs, name in names.items():  # the names written in the file, not the ones MuJoCo was given
-            text = text.replace(vfs, name)
-        raise GraspValueError(f"mjcf {where!r}: MuJoCo cannot compile it ({text})") from None
-    return tree_of(model, where), model
+        raise GraspValueError(f"{source.kind} {where!r}: {_refusal(str(exc), source, mujoco.__version__)}") from None
+    return tree_of(model, where, source.kind), model
+
+
+def read_mjcf(path, allowed_dirs=None) -> tuple[KinematicTree, object]:
+    """`read_model` of an MJCF file (a URDF file is refused)."""
+    return read_model(path, allowed_dirs, kinds=("mjcf",))
+
+
+def _refusal(message: str, source, version: str) -> str:
+    """MuJoCo's refusal in jaxgrasp's words where `jaxgrasp.hands._legacy` knows it, else
+    in MuJoCo's, on one line with the hand file's own names for its assets."""
+    from jaxgrasp.hands._legacy import explain
+
+    text = " ".join(message.split())
+    ours = explain(text, source, version)
+    if ours is not None:
+        return ours
+    for vfs, name in source.names.items():  # the names written in the file, not the ones MuJoCo was given
+        text = text.replace(vfs, name)
+    return f"MuJoCo cannot compile it ({text})"
 
 
 def _names(model, kind, count: int) -> tuple:
@@ -133,16 +157,16 @@ def _names(model, kind, count: int) -> tuple:
     return tuple(mujoco.mj_id2name(model, kind, i) or "" for i in range(count))
 
 
-def tree_of(model, source: str = "<MjModel>") -> KinematicTree:
-    """The `KinematicTree` of a compiled ``mujoco.MjModel``."""
+def tree_of(model, source: str = "<MjModel>", kind: str = "mjcf") -> KinematicTree:
+    """The `KinematicTree` of a compiled ``mujoco.MjModel`` (read from the ``kind`` file ``source``)."""
     import mujoco
 
     bad = [i for i, t in enumerate(model.jnt_type) if int(t) not in (HINGE, SLIDE)]
     if bad:
         name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, bad[0])
-        raise GraspValueError(f"mjcf {source!r}: joint {name!r} is a free or ball joint; a hand needs hinge and slide joints only")
+        raise GraspValueError(f"{kind} {source!r}: joint {name!r} is a free or ball joint; a hand needs hinge and slide joints only")
     if model.nq != model.njnt or np.any(model.jnt_qposadr != np.arange(model.njnt)):
-        raise GraspValueError(f"mjcf {source!r}: qpos does not hold one entry per joint in order")
+        raise GraspValueError(f"{kind} {source!r}: qpos does not hold one entry per joint in order")
     limited = np.asarray(model.jnt_limited, dtype=bool)
     rng = np.where(limited[:, None], model.jnt_range, [-np.inf, np.inf])
     joints = [[] for _ in range(model.nbody)]

@@ -42,6 +42,7 @@ import hashlib
 import os
 import re
 import xml.etree.ElementTree as ET
+from xml.parsers import expat
 
 from jaxgrasp.io import check_path_text, read_input
 from jaxgrasp.model import GraspValueError
@@ -55,6 +56,9 @@ __all__ = [
     "MAX_MJCF_DEPTH",
     "MAX_MJCF_ELEMENTS",
     "MAX_MJCF_USER",
+    "HandSource",
+    "open_hand_file",
+    "check_mjcf",
     "checked_mjcf",
 ]
 
@@ -100,6 +104,7 @@ class _Files:
     included: set = dataclasses.field(default_factory=set)
     assets: dict = dataclasses.field(default_factory=dict)  # name given to MuJoCo -> bytes
     names: dict = dataclasses.field(default_factory=dict)  # name given to MuJoCo -> name written in the file
+    lines: dict = dataclasses.field(default_factory=dict)  # element -> (file as written, line): for messages
 
     def refuse(self, text: str):
         raise GraspValueError(f"hand file {self.given!r}: {text}")
@@ -117,23 +122,41 @@ class _Census:
     sizes: list = dataclasses.field(default_factory=list)
 
 
-def checked_mjcf(path, allowed=()) -> tuple[str, dict, dict]:
-    """``(xml, assets, names)``: the hand file ``path`` with its includes expanded and its
-    file names replaced by those of ``assets`` (``{name: bytes}``, every file MuJoCo will
-    need), after the module's checks; ``names`` maps each asset's name back to the name
-    written in the hand file (for MuJoCo's messages). ``allowed``: more folders the hand's
-    files may be in (`jaxgrasp.io.allowed_folders`, real paths).
+@dataclasses.dataclass
+class HandSource:
+    """A hand file, checked: what MuJoCo is given, and what explains its refusals.
 
-    Raises:
-        GraspValueError: a rule of the module notes broken; one line.
+    Attributes:
+        kind: ``"mjcf"`` or ``"urdf"``.
+        xml: the text MuJoCo compiles (includes expanded, file names replaced).
+        assets: ``{name: bytes}``, every file MuJoCo needs.
+        names: each asset's name -> the name written in the hand file.
+        root: the element tree of ``xml``.
+        lines: element -> ``(file as written, line)`` where it was written.
     """
+
+    kind: str
+    xml: str
+    assets: dict
+    names: dict
+    root: object
+    lines: dict
+
+
+def open_hand_file(path, allowed=()) -> tuple:
+    """``(root, files)``: the hand file ``path`` read and parsed (module notes), and the
+    record of its files to check the rest against. ``allowed``: more folders the hand's
+    files may be in (`jaxgrasp.io.allowed_folders`, real paths)."""
     given = check_path_text(path, "hand file")
     main_dir = os.path.dirname(os.path.abspath(given))
     files = _Files(given, main_dir, (main_dir, os.path.realpath(main_dir), *allowed),
                    (os.path.realpath(main_dir), *allowed))
-    root = _parse(_read(files, given, "hand file", MAX_MJCF_BYTES), given, files)
-    if root.tag != "mujoco":
-        files.refuse(f"its root element is <{root.tag}>, not <mujoco>: a hand file is MJCF")
+    return _parse(_read(files, given, "hand file", MAX_MJCF_BYTES), given, files), files
+
+
+def check_mjcf(root, files: _Files) -> HandSource:
+    """The MJCF hand file of ``root`` (`open_hand_file`) after the module's checks: its
+    includes expanded, its file names replaced by those of the assets."""
     census = _walk(root, files)
     meshdir, texturedir, strip = _compiler_dirs(census.compilers)
     _limit_size(census, files)
@@ -142,7 +165,18 @@ def checked_mjcf(path, allowed=()) -> tuple[str, dict, dict]:
     for el in census.textures:
         _flat_texture(el)
     root.append(ET.fromstring('<compiler><lengthrange mode="none"/></compiler>'))
-    return ET.tostring(root, encoding="unicode"), files.assets, files.names
+    return HandSource("mjcf", ET.tostring(root, encoding="unicode"), files.assets, files.names, root, files.lines)
+
+
+def checked_mjcf(path, allowed=()) -> tuple[str, dict, dict]:
+    """``(xml, assets, names)`` of the MJCF hand file ``path`` (module notes): its
+    includes expanded, its file names replaced by those of ``assets``; ``names`` maps each
+    asset's name back to the name written in the hand file (for MuJoCo's messages)."""
+    root, files = open_hand_file(path, allowed)
+    if root.tag != "mujoco":
+        files.refuse(f"its root element is <{root.tag}>, not <mujoco>: an MJCF file")
+    source = check_mjcf(root, files)
+    return source.xml, source.assets, source.names
 
 
 def _read(files: _Files, where: str, what: str, cap: int) -> bytes:
@@ -156,17 +190,26 @@ def _read(files: _Files, where: str, what: str, cap: int) -> bytes:
 
 
 def _parse(raw: bytes, where: str, files: _Files):
-    """The root element of the XML ``raw`` (UTF-8, no DOCTYPE or entity declarations)."""
+    """The root element of the XML ``raw`` (UTF-8, no DOCTYPE or entity declarations),
+    each element's line noted in ``files.lines``."""
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         files.refuse(f"{where!r} is not UTF-8 text")
     if _DECLARATION.search(text):
-        files.refuse(f"{where!r} declares a DOCTYPE or entities; MJCF needs neither (refused: entity bombs)")
+        files.refuse(f"{where!r} declares a DOCTYPE or entities; a hand file needs neither (refused: entity bombs)")
+    builder, parser = ET.TreeBuilder(), expat.ParserCreate("utf-8")  # no namespaces: a tag is as written
+    parser.buffer_text = True
+
+    def start(tag, attrs):
+        files.lines[builder.start(tag, attrs)] = (where, parser.CurrentLineNumber)
+
+    parser.StartElementHandler, parser.EndElementHandler, parser.CharacterDataHandler = start, builder.end, builder.data
     try:
-        return ET.fromstring(text)
-    except ET.ParseError as exc:
+        parser.Parse(text.encode("utf-8"), True)
+    except expat.ExpatError as exc:
         files.refuse(f"{where!r} is not well-formed XML ({exc})")
+    return builder.close()
 
 
 def _within(path: str, folders) -> bool:
@@ -191,7 +234,8 @@ def _find(files: _Files, candidates, name: str, kind: str):
         real = _confined(files, c, name, kind)
         if os.path.lexists(real):
             return real
-    files.refuse(f"{kind} {name!r}: no such file")
+    looked = os.path.relpath(os.path.normpath(os.path.abspath(candidates[0])), files.main_dir) if candidates else name
+    files.refuse(f"{kind} {name!r}: no such file (looked for {looked!r} from the hand file's folder)")
 
 
 def _include(el, src: str, files: _Files):
@@ -343,15 +387,23 @@ def _asset(el, src: str, meshdir: str, texturedir: str, strip: bool, files: _Fil
 
 
 def _asset_file(el, name: str, written: str, candidates, files: _Files) -> None:
-    tag, suffix = el.tag, os.path.splitext(written)[1].lower()
-    if suffix not in _MESH_SUFFIXES[tag]:
-        files.refuse(f"<{tag}> file {name!r} is not {' or '.join(_MESH_SUFFIXES[tag])}")
+    tag = el.tag
     if el.get("content_type", _CONTENT_TYPES[0]) not in _CONTENT_TYPES:
         files.refuse(f"<{tag}> content_type {el.get('content_type')[:40]!r} is not one of {', '.join(_CONTENT_TYPES)}")
-    raw = _read(files, _find(files, candidates, name, f"<{tag}> file"), f"{tag} file of the hand", MAX_HAND_ASSET_BYTES)
+    el.set("file", read_mesh(files, name, written, candidates, _MESH_SUFFIXES[tag], f"<{tag}> file"))
+
+
+def read_mesh(files: _Files, name: str, written: str, candidates, suffixes, kind: str) -> str:
+    """The name MuJoCo gets for the mesh ``name`` (as written; ``written``: after
+    ``strippath``), read from the first of ``candidates`` that exists (`_find`): a
+    name of its digest, ``files.assets`` holding its bytes."""
+    suffix = os.path.splitext(written)[1].lower()
+    if suffix not in suffixes:
+        files.refuse(f"{kind} {name!r} is not {' or '.join(suffixes)} (the mesh formats MuJoCo reads; convert it)")
+    raw = _read(files, _find(files, candidates, name, kind), "mesh file of the hand", MAX_HAND_ASSET_BYTES)
     vfs = hashlib.sha256(raw).hexdigest()[:32] + suffix  # one name per content: MuJoCo caches meshes by name
     files.assets[vfs], files.names[vfs] = raw, name
-    el.set("file", vfs)
+    return vfs
 
 
 def _flat_texture(el) -> None:

@@ -125,7 +125,7 @@ def _setup(hand, mesh, kw):
     from jaxgrasp.surface import PAD_FACES, Surface
 
     mesh = load_mesh(mesh, kw.pop("units", "m"))
-    mat = material(len(hand.fingertips), mesh, kw.pop("young_modulus"), kw.pop("friction"), kw.pop("max_force"),
+    mat = material(hand.num_fingertips, mesh, kw.pop("young_modulus"), kw.pop("friction"), kw.pop("max_force"),
                    kw.pop("mass", None), kw.pop("density", None), kw.pop("gravity", DEFAULT_GRAVITY),
                    kw.pop("center_of_mass", None))
     if kw:

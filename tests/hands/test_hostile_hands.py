@@ -125,7 +125,7 @@ CASES = {
     "hfield_file": ({"h.png": "x"}, hand_xml('<asset><hfield name="h" file="h.png" size="1 1 1 1"/></asset>'),
                     "reads a height field from a file"),
     "not_a_mesh_format": ({"m.gltf": "{}"}, hand_xml(MESH.format("m.gltf"), MESH_GEOM), "is not .stl or .obj or .msh"),
-    "urdf": ({}, '<robot name="r"><link name="a"/></robot>', "its root element is <robot>, not <mujoco>"),
+    "sdf": ({}, '<sdf version="1.6"><model name="r"/></sdf>', "its root element is <sdf>, not <mujoco>"),
     "missing_include": ({}, hand_xml(body='<include file="nope.xml"/>'), "include 'nope.xml': no such file"),
     "builtin_mesh_bomb": ({}, hand_xml('<asset><mesh name="m" builtin="supersphere" params="3000 1 1"/></asset>',
                                        MESH_GEOM), "a builtin mesh has a parameter above 200"),
@@ -267,7 +267,11 @@ def test_neutralised_bombs_still_load_at_once(dirs):
     ("qpos", "[true, false, true, false, true, false]", "must be numeric, not boolean"),
     ("wrist", '["0", 0, 0, 0, 0, 0]', "wrist = ['0', 0, 0, 0, 0, 0] must be a number"),
     ("wrist", "[[0, 0, 0], [0, 0, 0]]", "wrist must be 6 finite numbers"),
-    ("fingertips", "[1, 2]", "fingertips must be at least 2 geom names, got [1, 2]"),
+    ("fingertips", "[1, 2]", "fingertips must be at least 2 geom or link names, or {link, center, axis, radius} tables, "
+                             "got [1, 2]"),
+    ("fingertips", '["a_tip", "nope"]', "fingertips: no geom or link named 'nope'"),
+    ("fingertips", '["a_tip", {link = "b_distal", center = [0, 0], axis = [1, 0, 0], radius = 0.01}]',
+     "fingertip 'b_distal': center must be 3 finite numbers"),
     ("mjcf", '"two\\u0000finger.xml"', "holds a NUL byte"),
     ("mjcf", "3", "[hand] mjcf must be a string, got int"),
 ])
@@ -308,3 +312,135 @@ def test_shadow_hand_loads_with_its_includes_and_mesh(tmp_path):
     xml, assets, names = _mjcf_files.checked_mjcf(SHADOW)
     assert list(names.values()) == ["forearm_electric_cvx.stl"] and "include" not in xml and "meshdir" not in xml
     assert next(iter(assets.values())) == (SHADOW.parent / "forearm_electric_cvx.stl").read_bytes()
+
+
+# ----------------------------------------------------------------------------- URDF (issue 66)
+GRIPPER = REPO / "examples" / "hands" / "urdf_gripper"
+PAD_TOML = '{link = "b_pad", center = [0.01, 0, 0], axis = [1, 0, 0], radius = 0.01}'
+
+
+def gripper_urdf(mesh: str = "package://urdf_gripper/meshes/pad.stl", joint: str = "revolute", head: str = "") -> str:
+    """The example gripper's URDF naming its pad mesh ``mesh``, its joint ``a_curl`` of type
+    ``joint``, with ``head`` after ``<robot>``."""
+    text = (GRIPPER / "gripper.urdf").read_text().replace("package://urdf_gripper/meshes/pad.stl", mesh)
+    text = text.replace('<joint name="a_curl" type="revolute">', f'<joint name="a_curl" type="{joint}">')
+    return text.replace('<robot name="urdf_gripper">', '<robot name="urdf_gripper">' + head)
+
+
+# name -> (files to write in the hand folder, the URDF's text, the message's part)
+URDF_CASES = {
+    "package_escapes": ({}, gripper_urdf("package://hand/../outside/secret.stl"), OUTSIDE_RULE),
+    "package_elsewhere": ({}, gripper_urdf("package://outside/secret.stl"), "no folder named 'outside' is the URDF's"),
+    "file_url_outside": ({}, gripper_urdf("file://{outside}/secret.stl"), OUTSIDE_RULE),
+    "relative_outside": ({}, gripper_urdf("../outside/secret.stl"), OUTSIDE_RULE),
+    "mesh_symlink_out": ({"link.stl": ("symlink", "../outside/secret.stl")}, gripper_urdf("link.stl"), OUTSIDE_RULE),
+    "fifo_mesh": ({"pipe.stl": ("fifo",)}, gripper_urdf("pipe.stl"), "is a FIFO (named pipe)"),
+    "collada_collision": ({"pad.dae": "<COLLADA/>"}, gripper_urdf("pad.dae"), "is not .stl or .obj or .msh"),
+    "floating_joint": ({}, gripper_urdf(joint="floating"), "joint 'a_curl' is floating; a hand's joints are"),
+    "planar_joint": ({}, gripper_urdf(joint="planar"), "joint 'a_curl' is planar; a hand's joints are"),
+    "xacro": ({}, gripper_urdf(head='<xacro:include filename="x.xacro"/>'), "a xacro file; run xacro"),
+    "doctype": ({}, '<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "b">]>' + gripper_urdf(), "declares a DOCTYPE"),
+    "link_bomb": ({}, gripper_urdf(head="<link/>" * 2100), "more than 100000 elements or 2000 links"),
+}
+
+
+def build_urdf(case: str, hand: Path, outside: Path) -> Path:
+    files, main, _ = URDF_CASES[case]
+    (hand / "meshes").mkdir()
+    (hand / "meshes" / "pad.stl").write_bytes((GRIPPER / "meshes" / "pad.stl").read_bytes())
+    for name, content in files.items():
+        if isinstance(content, tuple) and content[0] == "fifo":
+            os.mkfifo(hand / name)
+        elif isinstance(content, tuple):
+            (hand / name).symlink_to(content[1])
+        else:
+            (hand / name).write_text(content)
+    path = hand / "hand.urdf"
+    path.write_text(main.replace("{outside}", str(outside)))
+    return path
+
+
+def urdf_grasp_file(hand: Path, fingertips: str = f'["a_tip", {PAD_TOML}]') -> Path:
+    """A hand grasp file naming ``hand.urdf`` with ``model =``."""
+    path = hand_grasp_file(hand, '"hand.urdf"', qpos="[0.001, 0.05, 0.0005, -0.1, 0.08]", fingertips=fingertips)
+    path.write_text(path.read_text().replace('mjcf = "hand.urdf"', 'model = "hand.urdf"'))
+    return path
+
+
+@pytest.mark.parametrize("case", sorted(URDF_CASES))
+def test_hostile_urdf_is_one_line(case, dirs, run_cli, tmp_path):
+    hand, outside = dirs
+    path = build_urdf(case, hand, outside)
+    start = time.monotonic()
+    with pytest.raises(GraspValueError) as info:
+        jaxgrasp.Hand.from_file(path, ["a_tip", {"link": "b_pad", "center": [0.01, 0, 0], "axis": [1, 0, 0],
+                                                 "radius": 0.01}])
+    assert URDF_CASES[case][2] in one_line(info)
+    rc, out, err = run_cli(["show", "--hand", urdf_grasp_file(hand), "--out", tmp_path / "x.png"])
+    assert rc == 2 and out == "" and err.count("\n") == 1 and URDF_CASES[case][2] in err and MARKER not in err, err
+    assert time.monotonic() - start < 60
+
+
+def test_urdf_unknown_fingertip_is_one_line(dirs, run_cli, tmp_path):
+    hand, _ = dirs
+    build_urdf("package_escapes", hand, tmp_path)
+    (hand / "hand.urdf").write_text(gripper_urdf("meshes/pad.stl"))
+    rc, out, err = run_cli(["show", "--hand", urdf_grasp_file(hand, '["a_tip", "b_tip"]'), "--out", tmp_path / "x.png"])
+    assert rc == 2 and out == "" and err.count("\n") == 1, err
+    assert "fingertips: no geom or link named 'b_tip'" in err and "its links: palm, a_base, a_proximal, a_tip" in err
+
+
+@pytest.mark.slow  # a new process (about 7 s)
+def test_the_command_refuses_an_escaping_package_path_within_60_s(dirs, tmp_path):
+    """The package path leads to a FIFO outside: opened by anyone, the command would hang."""
+    hand, outside = dirs
+    build_urdf("package_escapes", hand, outside)
+    start = time.monotonic()
+    proc = subprocess.run([sys.executable, "-m", "jaxgrasp", "show", "--hand", str(urdf_grasp_file(hand)),
+                           "--out", str(tmp_path / "x.png")], check=False, capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert proc.returncode == 2 and proc.stdout == "" and proc.stderr.count("\n") == 1, proc.stderr[-2000:]
+    assert OUTSIDE_RULE in proc.stderr and time.monotonic() - start < 60
+
+
+# ----------------------------------------------------------------------------- legacy MJCF (issue 66)
+LEGACY_TAIL = ('<actuator>\n<general name="A_gone" joint="gone"/>\n<motor joint="a_curl"/>\n</actuator>\n'
+               '<sensor>\n<jointpos name="S_gone" joint="gone"/>\n</sensor>\n</mujoco>')
+
+
+def line_of(text: str, part: str) -> int:
+    return next(i for i, line in enumerate(text.splitlines(), 1) if part in line)
+
+
+def test_legacy_mjcf_names_the_element_its_line_and_the_fix(dirs, run_cli, tmp_path):
+    """MuJoCo 3 refuses a removed attribute and an actuator or sensor of a missing joint
+    (DexGraspNet's Shadow hand has both): one line each in jaxgrasp's words, with every
+    further element to delete."""
+    hand, _ = dirs
+    text = hand_xml('\n<option apirate="200" timestep="0.002"/>').replace("</mujoco>", LEGACY_TAIL)
+    path = hand / "hand.xml"
+    path.write_text(text)
+    a, s = line_of(text, 'name="A_gone"'), line_of(text, 'name="S_gone"')
+    with pytest.raises(GraspValueError) as info:
+        jaxgrasp.Hand.from_mjcf(path, TIPS)
+    assert one_line(info) == (f"mjcf '{path}': <option apirate=\"200\"> (line {line_of(text, 'apirate')}): MuJoCo 3 "
+                              f"removed the attribute apirate; delete it; then delete the 2 elements that name joints "
+                              f"the model does not have (lines {a}, {s})")
+    path.write_text(text.replace(' apirate="200"', ""))
+    with pytest.raises(GraspValueError) as info:
+        jaxgrasp.Hand.from_file(path, TIPS)
+    assert one_line(info) == (f"mjcf '{path}': <general name=\"A_gone\"> (line {a}) names joint 'gone', which the model "
+                              "does not have; delete the actuator; and the other element that names a joint the model "
+                              f"does not have (line {s})")
+    rc, out, err = run_cli(["show", "--hand", hand_grasp_file(hand), "--out", tmp_path / "x.png"])
+    assert rc == 2 and out == "" and err.count("\n") == 1 and "<general name=\"A_gone\"> (line" in err, err
+
+
+def test_legacy_mjcf_in_an_include_names_that_file(dirs):
+    hand, _ = dirs
+    (hand / "acts.xml").write_text('<mujoco>\n<actuator>\n<position name="P" joint="wrist"/>\n</actuator>\n</mujoco>')
+    (hand / "hand.xml").write_text(hand_xml(body="").replace("</mujoco>", '<include file="acts.xml"/></mujoco>'))
+    with pytest.raises(GraspValueError) as info:
+        jaxgrasp.Hand.from_mjcf(hand / "hand.xml", TIPS)
+    assert "<position name=\"P\"> (acts.xml line 3) names joint 'wrist', which the model does not have; delete the " \
+           "actuator" in one_line(info)

@@ -29,14 +29,14 @@ mujoco = pytest.importorskip("mujoco", reason="the hands extra: pip install 'jax
 
 
 def mujoco_tips(path, hand, qpos, wrist=None):
-    """MuJoCo's fingertip centres: ``mj_kinematics`` geom frames plus the cap offset,
-    then the wrist applied in NumPy."""
+    """MuJoCo's fingertip centres: ``mj_kinematics`` body frames plus each fingertip's
+    centre in its body's frame, then the wrist applied in NumPy."""
     model = mujoco.MjModel.from_xml_path(str(path))
     data = mujoco.MjData(model)
     data.qpos[:] = qpos
     mujoco.mj_kinematics(model, data)
-    xmat = data.geom_xmat.reshape(-1, 3, 3)
-    tips = data.geom_xpos[hand.fingertips] + xmat[hand.fingertips, :, 2] * hand.cap_offset[:, None]
+    xmat = data.xmat.reshape(-1, 3, 3)[hand.fingertip_body]
+    tips = data.xpos[hand.fingertip_body] + np.einsum("fij,fj->fi", xmat, hand.fingertip_center)
     geoms = data.geom_xpos.copy()
     if wrist is not None:
         rot = np.asarray(rotation_matrix(np.asarray(wrist[3:])))
@@ -60,12 +60,14 @@ def test_fingertip_centers_equal_mujoco(path, tips):
 def test_shadow_fingertips_are_the_distal_caps():
     hand = jaxgrasp.Hand.from_mjcf(SHADOW, fingertips=SHADOW_TIPS)
     np.testing.assert_allclose(hand.radius, [0.00705] * 4 + [0.00918])  # the model's capsule radii, m
-    np.testing.assert_allclose(hand.cap_offset, [0.012] * 4 + [0.013])  # half-lengths: the +z cap, away from the joint
+    # the +z cap, away from the joint: the geom's centre on the body's z, plus the half-length (0.012 m, 0.013 m)
+    np.testing.assert_allclose(hand.fingertip_center, [[0, 0, 0.024]] * 4 + [[0, 0, 0.026]], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(hand.fingertip_axis, [[0, 0, 1]] * 5, rtol=0, atol=1e-15)
     assert hand.num_joints == 24 and len(hand.joint_names) == 24
 
 
 def test_bad_fingertip_names_one_line():
-    with pytest.raises(jaxgrasp.GraspValueError, match="no geom named 'nope'") as err:
+    with pytest.raises(jaxgrasp.GraspValueError, match="no geom or link named 'nope'") as err:
         jaxgrasp.Hand.from_mjcf(TWO_FINGER, fingertips=["a_tip", "nope"])
     assert "\n" not in str(err.value)
     with pytest.raises(jaxgrasp.GraspValueError, match="neither a sphere nor a capsule"):
