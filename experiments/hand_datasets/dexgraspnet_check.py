@@ -12,8 +12,8 @@ runs ``jaxgrasp batch`` on every object and compares its ``results.csv`` with:
 * MuJoCo's own kinematics (``mj_kinematics``) of the edited hand at each grasp's joints;
 * the wrist written out by hand: ``R = Rz(rz) Ry(ry) Rx(rx)`` (transforms3d's
   ``euler2mat`` with its default static x-y-z axes), ``p_world = R p + t``;
-* trimesh's closest points on the scaled mesh (``trimesh.proximity.closest_point``), the
-  sign from ``mesh.contains``, the normal of the closest face;
+* the closest point over every triangle of the scaled mesh (trimesh's point-triangle
+  routine, by brute force), the side and the normal of the closest face;
 * the rules of ``docs/guide/hands.md``: a fingertip is in contact when ``0 < dr < r`` and its
   tilt is below 90 degrees.
 
@@ -66,6 +66,23 @@ def euler_sxyz(rx, ry, rz) -> np.ndarray:
     return rot_z @ rot_y @ rot_x
 
 
+def brute_closest(triangles, normals, points) -> tuple[np.ndarray, np.ndarray]:
+    """``(closest point (P, 3), its face's normal (P, 3))`` of each point over every triangle
+    (trimesh's point-triangle routine, no spatial index); of faces within 1e-12 m of the
+    least distance, the one the point lies farthest in front of or behind."""
+    import trimesh
+
+    out_p, out_n = [], []
+    for c in points:
+        q = trimesh.triangles.closest_point(triangles, np.broadcast_to(c, (len(triangles), 3)))
+        d = np.linalg.norm(q - c, axis=1)
+        near = np.flatnonzero(d <= d.min() + 1e-12)
+        best = near[np.argmax(np.abs(np.einsum("ij,ij->i", c - q[near], normals[near])))]
+        out_p.append(q[best])
+        out_n.append(normals[best])
+    return np.array(out_p), np.array(out_n)
+
+
 def independent(model, grasps, mesh) -> tuple[np.ndarray, np.ndarray]:
     """``(active (B, 5), dr (B, 5) m)`` of DexGraspNet ``grasps`` on ``mesh`` (module notes)."""
     import mujoco
@@ -85,12 +102,9 @@ def independent(model, grasps, mesh) -> tuple[np.ndarray, np.ndarray]:
         z = data.geom_xmat[geoms].reshape(-1, 3, 3)[:, :, 2]
         cap = data.geom_xpos[geoms] + z * model.geom_size[geoms, 1][:, None]  # the +z end: farther from the joint
         centers, axes = cap @ rot.T + t, z @ rot.T
-        scaled = mesh.copy()
-        scaled.apply_scale(float(g["scale"]))
-        point, dist, face = trimesh.proximity.closest_point(scaled, centers)
-        inside = scaled.contains(centers)
-        signed = np.where(inside, -dist, dist)
-        normal = scaled.face_normals[face]
+        p, n = brute_closest(mesh.triangles * float(g["scale"]), mesh.face_normals, centers)
+        signed = np.einsum("ij,ij->i", centers - p, n)  # |c - p| with the side of the closest face
+        normal = n
         d = radius - signed
         cos_tilt = -np.sum(axes * normal, axis=1)
         active[i] = (d > 0) & (d < radius) & (cos_tilt > 0.0)
@@ -116,8 +130,6 @@ def main() -> int:
     ap.add_argument("--log", type=Path, default=HERE / "dexgraspnet_check.log")
     args = ap.parse_args()
     import mujoco
-    import trimesh
-
     lines = [f"# DexGraspNet sample check, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
              f"load {os.getloadavg()[0]:.2f}"]
 
@@ -133,8 +145,15 @@ def main() -> int:
         files = sorted((args.dexgraspnet / "data" / "dataset").glob("*.npy"))
         first_mesh = args.dexgraspnet / "data" / "meshdata" / files[0].stem / "coacd" / "decomposed.obj"
         bad = run_batch(files[0], src / "shadow_hand_wrist_free.xml", first_mesh, tmp / "bad")
-        log(f"unmodified hand file: exit {bad.returncode}, {len(bad.stderr.strip().splitlines())} line(s): "
+        log(f"the hand file as published: exit {bad.returncode}, {len(bad.stderr.strip().splitlines())} line(s): "
             f"{bad.stderr.strip()}")
+        only_paths = tmp / "paths_fixed"
+        shutil.copytree(src, only_paths)
+        xml = only_paths / "shadow_hand_wrist_free.xml"
+        xml.write_text(xml.read_text().replace('meshdir="./mjcf/meshes/"', 'meshdir="meshes/"'))
+        bad = run_batch(files[0], xml, first_mesh, tmp / "bad2")
+        log(f"the same with its meshdir relative to its folder: exit {bad.returncode}, "
+            f"{len(bad.stderr.strip().splitlines())} line(s): {bad.stderr.strip()}")
         totals = dict(grasps=0, two=0, three=0, mismatched=0, stable_mass0=0, stable_density=0)
         worst = 0.0
         for f in files:
