@@ -143,14 +143,11 @@ class GraspScene:
 
 def grasp_scene(grasp, result, *, magnification: float | None = None, names=None) -> GraspScene:
     """The scene of ``grasp`` (a [`Grasp`][jaxgrasp.Grasp] or [`MeshGrasp`][jaxgrasp.MeshGrasp])
-    and its [`Evaluation`][jaxgrasp.Evaluation] ``result`` (of that grasp, mask and all).
-
-    A grasp with a mask (``active``) draws its active contacts, each under its number in
-    the grasp (`GraspScene.numbers`): the number ``result`` names it by, never renumbered.
+    and its [`Evaluation`][jaxgrasp.Evaluation] ``result`` (of that grasp, mask and all): its active
+    contacts, each under its number in the grasp (`GraspScene.numbers`), never renumbered.
 
     Args:
-        names: one name per contact of the grasp (masked ones included), e.g. a hand's
-            fingertips, shown beside each contact's number; ``None``: numbers alone.
+        names: one name per contact of the grasp (masked ones too), e.g. a hand's fingertips.
         magnification: factor applied to the limiting pose (translation and rotation
             vector) for the ghost; default: a round number (1, 2 or 5 times a power of
             ten, at least 1) that moves the object's farthest point by about 0.15 of its
@@ -159,17 +156,10 @@ def grasp_scene(grasp, result, *, magnification: float | None = None, names=None
     from jaxgrasp.surface import MeshGrasp
     from jaxgrasp.model import KINDS
 
-    g = grasp.grasp if isinstance(grasp, MeshGrasp) else grasp
     com = grasp.center_of_mass if isinstance(grasp, MeshGrasp) else np.zeros(3)
-    f = {k: np.asarray(v, dtype=np.float64) for k, v in g.replace(active=None).to_numpy().items()}
-    total = f["positions"].shape[0]
-    numbers = np.arange(total) if g.active is None else np.flatnonzero(np.asarray(g.active, dtype=bool))
-    if names is not None and len(names) != total:
-        raise ValueError(f"names: {len(names)} given for a grasp of {total} contacts")
-    n = len(numbers)
-    per = {k: np.broadcast_to(f[k], (total,))[numbers] for k in ("initial_deformation", "radius", "friction")}
-    contacts = f["positions"][numbers] + com
-    normals = f["normals"][numbers] / np.linalg.norm(f["normals"][numbers], axis=1, keepdims=True)
+    numbers, per = _active_contacts(grasp.grasp if isinstance(grasp, MeshGrasp) else grasp, names)
+    contacts = per["positions"] + com
+    normals = per["normals"] / np.linalg.norm(per["normals"], axis=1, keepdims=True)
     body = grasp.mesh if isinstance(grasp, MeshGrasp) else _contact_hull(contacts, normals, per["radius"])
     kind, contact = int(np.asarray(result.limiting_kind)), int(np.asarray(result.limiting_contact))
     parts = [Part("object", "object", body, COLORS["object"])]
@@ -211,6 +201,20 @@ def grasp_scene(grasp, result, *, magnification: float | None = None, names=None
         status=result.status_name,
         has_mesh=isinstance(grasp, MeshGrasp),
     )
+
+
+def _active_contacts(g, names) -> tuple[np.ndarray, dict]:
+    """``(numbers (N,), fields)``: the numbers of the grasp ``g``'s active contacts (all of
+    them without a mask) and their fields (``positions``, ``normals`` ``(N, 3)``;
+    ``initial_deformation``, ``radius``, ``friction`` ``(N,)``), float64; ``names`` (one
+    per contact of ``g``, or ``None``) checked against the contact count."""
+    f = {k: np.asarray(v, dtype=np.float64) for k, v in g.replace(active=None).to_numpy().items()}
+    total = f["positions"].shape[0]
+    if names is not None and len(names) != total:
+        raise ValueError(f"names: {len(names)} given for a grasp of {total} contacts")
+    numbers = np.arange(total) if g.active is None else np.flatnonzero(np.asarray(g.active, dtype=bool))
+    per = {k: np.broadcast_to(f[k], (total,))[numbers] for k in ("initial_deformation", "radius", "friction")}
+    return numbers, {**per, "positions": f["positions"][numbers], "normals": f["normals"][numbers]}
 
 
 def pose_points(points, com, translation, rotation) -> np.ndarray:
