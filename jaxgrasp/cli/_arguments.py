@@ -423,7 +423,10 @@ def add_tune(sub) -> None:
             "initial_deformation:shared). 'positions' moves each contact in its tangent plane (along the surface for a grasp file naming a mesh) "
             "(give --bounds positions=HALF_WIDTH in m). Only initial_deformation has "
             "default bounds. Example: jaxgrasp tune --preset cube --param "
-            "initial_deformation:shared --bounds initial_deformation=0.001:0.005 --out tuned.toml"
+            "initial_deformation:shared --bounds initial_deformation=0.001:0.005 --out tuned.toml. "
+            "A hand grasp file (FILE with a [hand] table): its joint angles are tuned (jaxgrasp.tune_hand), "
+            "the other links kept out of the object; the tuned configuration is written as a hand grasp file. "
+            "Example: jaxgrasp tune examples/hands/two_finger/pinch.toml --out tuned_pinch.toml"
         ),
     )
     add_grasp_source(sp)
@@ -451,7 +454,13 @@ def add_tune(sub) -> None:
         help="tune the soft minimum over boundaries at this temperature, J (default: hard minimum)",
     )
     sp.add_argument(
-        "--out", default="tuned.toml", metavar="FILE", help="tuned grasp file, .toml or .json (default tuned.toml)"
+        "--tune-wrist", action="store_true",
+        help=("with a hand grasp file: also move the wrist, within 10 mm and 0.1 rad of its start "
+              "(a hand grasp file's joints are always tuned, within their limits; no --param or --bounds)"),
+    )
+    sp.add_argument(
+        "--out", default="tuned.toml", metavar="FILE",
+        help="tuned grasp file, .toml or .json; a hand grasp file's: .toml (default tuned.toml)"
     )
     sp.add_argument("--no-plot", action="store_true", help="do not write the .png plot")
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")

@@ -76,7 +76,8 @@ def format_summary(d: dict, source: str) -> str:
     lines.append(f"value: {d['value']:.6e} J   (least energy that makes a fingertip slip or overload)")
     lim = d["limiting"]
     if lim is not None:
-        lines.append(f"limiting boundary: {lim['kind']} of contact {lim['contact']}")
+        tip = f" ({d['hand']['fingertips'][lim['contact']]})" if "hand" in d else ""
+        lines.append(f"limiting boundary: {lim['kind']} of contact {lim['contact']}{tip}")
     if "epsilon" in d:  # the command adds it; Evaluation.to_dict() alone has none
         closure = "force closure" if d["force_closure"] else "not force closure"
         lines.append(f"epsilon: {d['epsilon']:.6e}   (Ferrari-Canny, 8 cone edges, soft fingers; {closure})")
@@ -87,7 +88,10 @@ def format_summary(d: dict, source: str) -> str:
     w = ", ".join(f"{v:.3e}" for v in d["equilibrium_rotation"])
     lines.append(f"equilibrium pose: translation ({t}) m, rotation ({w}) rad")
     lines.append("boundaries (energy above equilibrium, J):")
+    touching = d["hand"]["in_contact"] if "hand" in d else None
     for b in d["boundaries"]:
+        if touching is not None and not touching[b["contact"]]:
+            continue  # a fingertip not in contact has no boundary; the fingertips line says so
         if b["energy"] is None:
             lines.append(f"  contact {b['contact']} {b['kind']:<9}: not reachable ({b['status']})")
         else:

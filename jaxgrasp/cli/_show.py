@@ -7,6 +7,7 @@ from pathlib import Path
 
 from jaxgrasp.cli._arguments import MAGNIFICATION_RANGE
 from jaxgrasp.cli._common import UsageError, announce_large_grasp, grasp_source, load_grasp, write_picture
+from jaxgrasp.cli._hand_files import is_hand_file
 from jaxgrasp import storage
 
 __all__ = ["run", "PICTURE_SUFFIXES", "MAGNIFICATION_RANGE"]
@@ -22,17 +23,18 @@ def run(args) -> int:
     from jaxgrasp.plots import draw_scene, grasp_scene
 
     targets = _check_outputs(args)
-    if getattr(args, "hand", None) is not None:
+    hand = getattr(args, "hand", None)
+    if hand is not None or is_hand_file(args):  # FILE a hand grasp file draws as --hand FILE does
         from jaxgrasp.cli._show_hand import run_hand
 
-        return run_hand(args, targets)
+        return run_hand(args, targets, args.file if hand is None else hand)
     grasp = load_grasp(args, keep_mesh=True)
     plain = grasp.grasp if isinstance(grasp, MeshGrasp) else grasp
     announce_large_grasp(plain.num_contacts, grasp_source(args))
     result = evaluate(plain)
     scene = grasp_scene(grasp, result, magnification=args.magnification)
     replaced = write_picture(targets, draw_scene(scene), scene)
-    limit = (f", limited by {scene.limiting_kind} of contact {scene.limiting_contact} (ghost motion "
+    limit = (f", limited by {scene.limiting_kind} of {scene.label(scene.limiting_contact)} (ghost motion "
              f"x{scene.magnification:g})" if scene.limiting_kind else "")
     print(
         f"show {grasp_source(args)}: {scene.status}, value {scene.value:.6e} J{limit}; wrote "

@@ -1,4 +1,11 @@
-"""``jaxgrasp simulate``: the grasp in MuJoCo (``jaxgrasp[sim]``): results.json and a plot."""
+"""``jaxgrasp simulate``: the grasp in MuJoCo (``jaxgrasp[sim]``): results.json and a plot.
+
+A hand grasp file is simulated as its contacts (each fingertip a fixed sphere, as for any
+grasp; the hand's links are not in the simulation). The simulator numbers only the
+contacts it simulates, the fingertips in contact; ``results.json`` numbers them by
+fingertip (contact ``k`` is fingertip ``k``, `jaxgrasp.cli._hand_files`), ``null`` for a
+fingertip not in contact, with the fingertips' names in ``hand``.
+"""
 
 from __future__ import annotations
 
@@ -7,10 +14,11 @@ from pathlib import Path
 
 from jaxgrasp.cli._arguments import parse_number
 from jaxgrasp.cli._common import UsageError, check_out, grasp_source, load_grasp, lock_out, replaced_text, say
+from jaxgrasp.cli._hand_files import hand_fields, is_hand_file, load_hand
 from jaxgrasp import storage
 from jaxgrasp.simulation import check_options
 
-__all__ = ["OPTION_NAMES", "PLOT", "RESULTS", "run"]
+__all__ = ["OPTION_NAMES", "PLOT", "RESULTS", "run", "by_fingertip"]
 
 RESULTS = "results.json"
 """The results file in ``--out``."""
@@ -55,22 +63,69 @@ def run(args) -> int:
     out = Path(args.out)
     check_out(out)
     opts = _options(args)
-    grasp = load_grasp(args, keep_mesh=True)
-    plain = grasp.grasp if isinstance(grasp, MeshGrasp) else grasp
+    hand = load_hand(args) if is_hand_file(args) else None
+    grasp = hand.mesh_grasp() if hand is not None else load_grasp(args, keep_mesh=True)
+    plain = grasp.grasp if isinstance(grasp, MeshGrasp) else grasp  # a hand's masked: contact k is fingertip k
     source = grasp_source(args)
     say(f"jaxgrasp: simulate {source}: evaluating (compiling the evaluator or loading it from the cache)")
     evaluation = evaluate(plain)
     say(f"jaxgrasp: simulate {source}: {evaluation.status_name}, value {float(evaluation.value):.6e} J; "
         "running MuJoCo (hold, six axes, kicks)")
     result = simulate(grasp, evaluation=evaluation, **opts)
-    members = {out / RESULTS: (json.dumps(result.to_dict(), indent=1) + "\n").encode()}
+    d = result.to_dict() if hand is None else by_fingertip(result.to_dict(), hand, evaluation)
+    members = {out / RESULTS: (json.dumps(d, indent=1) + "\n").encode()}
     if result.simulated:
         members[out / PLOT] = _plot_bytes(result)
     with lock_out(out):
         replaced = storage.write_set(members, remove=[] if result.simulated else [out / PLOT])
-    print(_summary(source, result) + f"; wrote {', '.join(str(p) for p in members)}"
+    print(_summary(source, result, d.get("limiting")) + f"; wrote {', '.join(str(p) for p in members)}"
           + replaced_text([p.name for p in replaced], []))
     return 0
+
+
+_PER_CONTACT = ("settled_normal_force_N", "model_normal_force_N")
+_PER_CONTACT_PARAMETERS = ("contact_surfaces", "friction_sliding", "friction_torsional_m", "stiffness_N_m",
+                           "spring_offset_m", "damping_N_s_m", "initial_deformation_m", "initial_normal_force_N",
+                           "equilibrium_deformation_m", "slip_threshold_m")
+
+
+def by_fingertip(d: dict, hand, evaluation) -> dict:
+    """``results.json`` (``SimulationResult.to_dict()``) of a hand's grasp, numbered by
+    fingertip: the simulator's contact ``i`` (the ``i``-th fingertip in contact) becomes
+    fingertip ``k``'s entry of lists of one per fingertip (``None`` where not in contact),
+    a trial's ``slipped_contact`` ``k`` with ``slipped_fingertip`` its name; added:
+    ``limiting`` (the ``evaluation``'s limiting boundary: ``kind``, ``contact`` = fingertip
+    number, ``fingertip`` its name; ``None`` without one) and ``hand``
+    (`jaxgrasp.cli._hand_files.hand_fields`)."""
+    import numpy as np
+
+    h = hand_fields(hand)
+    tips = np.flatnonzero(h["in_contact"])  # simulated contact i is fingertip tips[i]
+
+    def spread(values):
+        if values is None or len(values) != len(tips):
+            return values  # not per contact (never expected: said rather than renumbered wrongly)
+        out = [None] * len(h["fingertips"])
+        for i, v in zip(tips, values):
+            out[i] = v
+        return out
+
+    def trial(t):
+        if t is None:
+            return None
+        k = t["slipped_contact"]
+        t = {**t, "max_sliding_m": spread(t["max_sliding_m"]),
+             "slipped_contact": None if k is None else int(tips[k])}
+        t["slipped_fingertip"] = None if k is None else h["fingertips"][int(tips[k])]
+        return t
+
+    d = {**d, **{key: spread(d[key]) for key in _PER_CONTACT}, "hold": trial(d["hold"]),
+         "six_axis": [trial(t) for t in d["six_axis"]], "kicks": [trial(t) for t in d["kicks"]]}
+    d["parameters"] = {k: spread(v) if k in _PER_CONTACT_PARAMETERS else v for k, v in d["parameters"].items()}
+    lim = evaluation.to_dict()["limiting"]  # the masked grasp's: its contact is the fingertip's number
+    d["limiting"] = None if lim is None else {**lim, "fingertip": h["fingertips"][lim["contact"]]}
+    d["hand"] = h
+    return d
 
 
 def _plot_bytes(result) -> bytes:
@@ -83,10 +138,12 @@ def _plot_bytes(result) -> bytes:
     return buf.getvalue()
 
 
-def _summary(source: str, result) -> str:
+def _summary(source: str, result, limiting: dict | None = None) -> str:
+    """One line; ``limiting`` (a hand's: kind, contact, fingertip) named after the value."""
     if not result.simulated:
         return f"simulate {source}: {result.status_name}, not simulated ({result.reason})"
-    line = (f"simulate {source}: value {result.value:.6e} J; hold {result.hold.outcome()} "
+    lim = f" (limited by {limiting['kind']} of contact {limiting['contact']} ({limiting['fingertip']}))" if limiting else ""
+    line = (f"simulate {source}: value {result.value:.6e} J{lim}; hold {result.hold.outcome()} "
             f"({1e3 * result.hold.max_displacement_m:.3g} mm)")
     if result.six_axis:
         line += f"; six-axis {sum(t.success for t in result.six_axis)}/6 held"

@@ -1,7 +1,8 @@
 """``jaxgrasp tune``: maximise a grasp's value over chosen parameters; write the tuned grasp.
 
 Writes the tuned grasp to ``--out`` (``.toml`` or ``.json``) and a plot of the value over
-the iterations next to it (same name, ``.png``), and prints one summary line. The folder
+the iterations next to it (same name, ``.png``), and prints one summary line. A hand grasp
+file is tuned in its joints (`jaxgrasp.cli._tune_hand`). The folder
 of ``--out`` is checked for writability before tuning; the grasp file and its plot then
 replace the previous ones as one set (`jaxgrasp.storage.write_set`).
 """
@@ -16,6 +17,7 @@ import numpy as np
 
 from jaxgrasp.cli._arguments import parse_number
 from jaxgrasp.cli._common import UsageError, grasp_source, load_grasp, say
+from jaxgrasp.cli._hand_files import is_hand_file
 from jaxgrasp import storage
 from jaxgrasp.model import counted
 
@@ -97,6 +99,12 @@ def run(args) -> int:
     from jaxgrasp.tolerance import EvaluateOptions
 
     out = _check_options(args)
+    if is_hand_file(args):  # the hand's joints (and wrist) are tuned: jaxgrasp.cli._tune_hand
+        from jaxgrasp.cli._tune_hand import run_hand
+
+        return run_hand(args, out)
+    if args.tune_wrist:
+        raise UsageError("--tune-wrist: only with a hand grasp file (a grasp file has no wrist)")
     bounds = parse_bounds(args.bounds)
     params = args.param or ["initial_deformation"]
     check_bounds(params, bounds)

@@ -19,6 +19,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
 
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
     from jaxgrasp.plots._trials_plot import plot_trials
+    from jaxgrasp.plots._tune_plot import plot_hand_history
 
     # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
     from jaxgrasp.plots._plots import new_figure

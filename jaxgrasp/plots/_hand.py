@@ -64,25 +64,27 @@ def link_meshes(hand_grasp, reach: float | None = None) -> list:
 
 def hand_scene(hand_grasp, result, *, magnification: float | None = None) -> GraspScene:
     """The `GraspScene` of a [`HandGrasp`][jaxgrasp.hands.HandGrasp]'s
-    active contacts and its [`Evaluation`][jaxgrasp.Evaluation] ``result`` (of the compacted
-    grasp, ``hand_grasp.grasp.compact()``), with the hand's links added as parts of role
-    ``"link"``."""
+    active contacts and its [`Evaluation`][jaxgrasp.Evaluation] ``result`` (of its grasp,
+    ``hand_grasp.grasp``, mask and all), with the hand's links added as parts of role
+    ``"link"``. Contact ``k`` is fingertip ``k`` (in the order the hand lists them,
+    touching or not) in the parts' names, the labels and the limiting contact, each
+    labelled with its fingertip's name."""
     import dataclasses
 
-    mesh_grasp = hand_grasp.mesh_grasp()
-    mesh_grasp = mesh_grasp.replace(grasp=mesh_grasp.grasp.compact())
-    scene = grasp_scene(mesh_grasp, result, magnification=magnification)
+    scene = grasp_scene(hand_grasp.mesh_grasp(), result, magnification=magnification,
+                        names=hand_grasp.hand.fingertip_names)
     links = tuple(Part(f"link {name}", "link", mesh, LINK_COLOR) for name, mesh in link_meshes(hand_grasp))
     return dataclasses.replace(scene, parts=scene.parts[:1] + links + scene.parts[1:])
 
 
 def _tilt_line(hand_grasp) -> str:
-    """``fingertip tilt from the paper's assumption: ff 12 deg, th 31 deg; off: lf``."""
+    """``fingertip tilt from the paper's assumption: 0 robot0:C_ffdistal 12 deg, 4
+    robot0:C_thdistal 31 deg; not in contact: 1, 2, 3`` (fingertip numbers = contact numbers)."""
     tilt = np.degrees(np.asarray(hand_grasp.tilt))
     active = np.asarray(hand_grasp.active)
-    names = [n.split(":")[-1] for n in hand_grasp.hand.fingertip_names]
-    on = ", ".join(f"{n} {t:.0f} deg" for n, t, a in zip(names, tilt, active) if a)
-    off = [n for n, a in zip(names, active) if not a]
+    names = hand_grasp.hand.fingertip_names
+    on = ", ".join(f"{k} {n} {t:.0f} deg" for k, (n, t, a) in enumerate(zip(names, tilt, active)) if a)
+    off = [str(k) for k, a in enumerate(active) if not a]
     return "fingertip tilt from the paper's assumption: " + on + (f"; not in contact: {', '.join(off)}" if off else "")
 
 
@@ -94,8 +96,8 @@ def plot_hand_grasp(hand_grasp, path=None, *, result=None, magnification=None, t
     Args:
         hand_grasp: the [`HandGrasp`][jaxgrasp.hands.HandGrasp] (at least 2 active contacts).
         path: where to save the figure (PNG, ...); ``None`` returns it open.
-        result: the [`Evaluation`][jaxgrasp.Evaluation] of ``hand_grasp.grasp.compact()``
-            (default: evaluated here).
+        result: the [`Evaluation`][jaxgrasp.Evaluation] of ``hand_grasp.grasp`` (its contact
+            ``k`` fingertip ``k``; default: evaluated here).
         magnification, title, view: as for `jaxgrasp.plots.plot_grasp`.
 
     Returns:
@@ -108,7 +110,7 @@ def plot_hand_grasp(hand_grasp, path=None, *, result=None, magnification=None, t
     if result is None:
         from jaxgrasp.engine import evaluate
 
-        result = evaluate(hand_grasp.grasp.compact())
+        result = evaluate(hand_grasp.grasp)
     scene = hand_scene(hand_grasp, result, magnification=magnification)
     head = plain_text(title) if title else _grasp_title(scene)
     fig = draw_scene(scene, title=head + "\n" + _tilt_line(hand_grasp), view=view)

@@ -491,13 +491,13 @@ def draw_scene(scene, *, title=None, view=(22.0, -58.0)):
     for (start, end), name in zip(scene.axes * mm, "xyz"):
         ax.text(*(start + 1.08 * (end - start)), name, fontsize=8, color="0.25", ha="center", va="center", zorder=6)
     c = scene.contacts * mm
-    for i, p in enumerate(c):
-        lim = i == scene.limiting_contact
+    for i, (p, k) in enumerate(zip(c, scene.numbers)):
+        lim = k == scene.limiting_contact
         ax.scatter(*p, s=60 if lim else 25, color=COLORS["limiting" if lim else "fingertip"][:3], depthshade=False,
                    edgecolors="k", linewidths=0.6, zorder=5)
         r = scene.radius[i] * mm
         above = p + scene.normals[i] * r + np.array([0.0, 0.0, 1.5 * r])  # over the fingertip
-        text = f"contact {i}" + (f"\nlimiting: {scene.limiting_kind.replace('_', ' ')}" if lim else "")
+        text = scene.label(k) + (f"\nlimiting: {scene.limiting_kind.replace('_', ' ')}" if lim else "")
         ax.text(*above, text, fontsize=8.5, color="darkred" if lim else "k", ha="center", va="bottom", zorder=6)
     for name, axis in zip("xyz", (ax.set_xlabel, ax.set_ylabel, ax.set_zlabel)):
         axis(f"{name} [mm]", fontsize=8, labelpad=-2)
@@ -568,5 +568,5 @@ def _grasp_title(scene) -> str:
     if scene.limiting_kind is None:
         return line + " (no limiting boundary)"
     kind = scene.limiting_kind.replace("_", " ")
-    return (f"{line}, limited by {kind} of contact {scene.limiting_contact}\n"
+    return (f"{line}, limited by {kind} of {scene.label(scene.limiting_contact)}\n"
             f"ghost: the object at the least-energy pose on that boundary, motion magnified x{scene.magnification:g}")

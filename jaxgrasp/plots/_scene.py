@@ -85,9 +85,15 @@ class GraspScene:
             centre of mass (length a third of its size): they show a rotation that the
             shape alone hides (a turn of a cylinder about its axis).
         ghost_axes: ``(3, 2, 3)`` m, the same at the ghost pose (empty without one).
-        contacts: ``(N, 3)`` m, the contact points; ``normals (N, 3)`` unit outward normals.
+        contacts: ``(N, 3)`` m, the points of the grasp's active contacts (all of them
+            without a mask); ``normals (N, 3)`` unit outward normals.
         radius: ``(N,)`` m, fingertip radii.
-        limiting_contact: the limiting boundary's contact, -1 when none.
+        numbers: ``(N,)`` int, each drawn contact's number in the grasp (its index among
+            all of the grasp's contacts, masked ones included: a hand's fingertip number),
+            which names its parts (``"fingertip 4"``) and its label.
+        names: ``(N,)`` each drawn contact's name (a hand's fingertip), or ``None``.
+        limiting_contact: the limiting boundary's contact (its number in the grasp, as
+            the evaluation's), -1 when none.
         limiting_kind: ``"slip"`` or ``"max_force"``, ``None`` when none.
         magnification: the factor the ghost's motion is magnified by.
         value: J; status: the status name; has_mesh: whether the object is a mesh.
@@ -101,12 +107,21 @@ class GraspScene:
     contacts: np.ndarray
     normals: np.ndarray
     radius: np.ndarray
+    numbers: np.ndarray
+    names: tuple | None
     limiting_contact: int
     limiting_kind: str | None
     magnification: float
     value: float
     status: str
     has_mesh: bool
+
+    def label(self, number: int) -> str:
+        """``"contact 4"``, or with a name ``"contact 4 (robot0:C_thdistal)"``: how the picture
+        and its title name the grasp's contact ``number``."""
+        i = np.flatnonzero(self.numbers == number)
+        name = self.names[int(i[0])] if self.names is not None and i.size else None
+        return f"contact {number}" + (f" ({name})" if name else "")
 
     def part(self, name: str) -> Part | None:
         """The part named ``name``, or ``None``."""
@@ -126,11 +141,13 @@ class GraspScene:
         return scene
 
 
-def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspScene:
+def grasp_scene(grasp, result, *, magnification: float | None = None, names=None) -> GraspScene:
     """The scene of ``grasp`` (a [`Grasp`][jaxgrasp.Grasp] or [`MeshGrasp`][jaxgrasp.MeshGrasp])
-    and its [`Evaluation`][jaxgrasp.Evaluation] ``result``.
+    and its [`Evaluation`][jaxgrasp.Evaluation] ``result`` (of that grasp, mask and all): its active
+    contacts, each under its number in the grasp (`GraspScene.numbers`), never renumbered.
 
     Args:
+        names: one name per contact of the grasp (masked ones too), e.g. a hand's fingertips.
         magnification: factor applied to the limiting pose (translation and rotation
             vector) for the ghost; default: a round number (1, 2 or 5 times a power of
             ten, at least 1) that moves the object's farthest point by about 0.15 of its
@@ -139,13 +156,10 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
     from jaxgrasp.surface import MeshGrasp
     from jaxgrasp.model import KINDS
 
-    g = grasp.grasp if isinstance(grasp, MeshGrasp) else grasp.compact()
     com = grasp.center_of_mass if isinstance(grasp, MeshGrasp) else np.zeros(3)
-    f = {k: np.asarray(v, dtype=np.float64) for k, v in g.to_numpy().items()}
-    n = f["positions"].shape[0]
-    per = {k: np.broadcast_to(f[k], (n,)) for k in ("initial_deformation", "radius", "friction")}
-    contacts = f["positions"] + com
-    normals = f["normals"] / np.linalg.norm(f["normals"], axis=1, keepdims=True)
+    numbers, per = _active_contacts(grasp.grasp if isinstance(grasp, MeshGrasp) else grasp, names)
+    contacts = per["positions"] + com
+    normals = per["normals"] / np.linalg.norm(per["normals"], axis=1, keepdims=True)
     body = grasp.mesh if isinstance(grasp, MeshGrasp) else _contact_hull(contacts, normals, per["radius"])
     kind, contact = int(np.asarray(result.limiting_kind)), int(np.asarray(result.limiting_contact))
     parts = [Part("object", "object", body, COLORS["object"])]
@@ -163,12 +177,12 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
         parts.append(Part("ghost", "ghost", ghost, COLORS["ghost"], drawn))
         ghost_edges = pose_points(object_edges, com, factor * dp, factor * w)
         ghost_axes = pose_points(axes, com, factor * dp, factor * w)
-    for i in range(n):
+    for i, k in enumerate(numbers):
         c, nv, r, dr = contacts[i], normals[i], per["radius"][i], per["initial_deformation"][i]
-        color = COLORS["limiting"] if i == contact else COLORS["fingertip"]
-        parts.append(Part(f"fingertip {i}", "fingertip", _hemisphere(c + (r - dr) * nv, -nv, r), color))
-        parts.append(Part(f"cone {i}", "cone", _cone(c, -nv, 0.8 * r, math.atan(per["friction"][i])), COLORS["cone"]))
-        parts.append(Part(f"normal {i}", "normal", _arrow(c, nv, 2.4 * r, 0.04 * r), COLORS["normal"]))
+        color = COLORS["limiting"] if k == contact else COLORS["fingertip"]
+        parts.append(Part(f"fingertip {k}", "fingertip", _hemisphere(c + (r - dr) * nv, -nv, r), color))
+        parts.append(Part(f"cone {k}", "cone", _cone(c, -nv, 0.8 * r, math.atan(per["friction"][i])), COLORS["cone"]))
+        parts.append(Part(f"normal {k}", "normal", _arrow(c, nv, 2.4 * r, 0.04 * r), COLORS["normal"]))
     return GraspScene(
         parts=tuple(parts),
         object_edges=object_edges,
@@ -178,6 +192,8 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
         contacts=contacts,
         normals=normals,
         radius=np.asarray(per["radius"]),
+        numbers=numbers,
+        names=None if names is None else tuple(str(names[k]) for k in numbers),
         limiting_contact=contact,
         limiting_kind=KINDS[kind] if kind >= 0 else None,
         magnification=float(factor),
@@ -185,6 +201,20 @@ def grasp_scene(grasp, result, *, magnification: float | None = None) -> GraspSc
         status=result.status_name,
         has_mesh=isinstance(grasp, MeshGrasp),
     )
+
+
+def _active_contacts(g, names) -> tuple[np.ndarray, dict]:
+    """``(numbers (N,), fields)``: the numbers of the grasp ``g``'s active contacts (all of
+    them without a mask) and their fields (``positions``, ``normals`` ``(N, 3)``;
+    ``initial_deformation``, ``radius``, ``friction`` ``(N,)``), float64; ``names`` (one
+    per contact of ``g``, or ``None``) checked against the contact count."""
+    f = {k: np.asarray(v, dtype=np.float64) for k, v in g.replace(active=None).to_numpy().items()}
+    total = f["positions"].shape[0]
+    if names is not None and len(names) != total:
+        raise ValueError(f"names: {len(names)} given for a grasp of {total} contacts")
+    numbers = np.arange(total) if g.active is None else np.flatnonzero(np.asarray(g.active, dtype=bool))
+    per = {k: np.broadcast_to(f[k], (total,))[numbers] for k in ("initial_deformation", "radius", "friction")}
+    return numbers, {**per, "positions": f["positions"][numbers], "normals": f["normals"][numbers]}
 
 
 def pose_points(points, com, translation, rotation) -> np.ndarray:

@@ -169,4 +169,4 @@ def test_show_hand_rejects_overrides(run_cli, tmp_path, overrides):
                                "--out", out, *overrides])
     assert rc == 2 and stdout == "", err
     assert err.splitlines() == [err.strip()] and err.startswith("jaxgrasp: error: --young-modulus, --friction: "), err
-    assert "--hand" in err and not out.exists()
+    assert "not used with a hand grasp file" in err and not out.exists()
