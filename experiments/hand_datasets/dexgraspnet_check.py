@@ -86,7 +86,6 @@ def brute_closest(triangles, normals, points) -> tuple[np.ndarray, np.ndarray]:
 def independent(model, grasps, mesh) -> tuple[np.ndarray, np.ndarray]:
     """``(active (B, 5), dr (B, 5) m)`` of DexGraspNet ``grasps`` on ``mesh`` (module notes)."""
     import mujoco
-    import trimesh
 
     data = mujoco.MjData(model)
     geoms = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in TIPS]
@@ -130,6 +129,8 @@ def main() -> int:
     ap.add_argument("--log", type=Path, default=HERE / "dexgraspnet_check.log")
     args = ap.parse_args()
     import mujoco
+    import trimesh
+
     lines = [f"# DexGraspNet sample check, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
              f"load {os.getloadavg()[0]:.2f}"]
 
@@ -174,7 +175,8 @@ def main() -> int:
             both = got_active & ref_active
             diff = float(np.max(np.abs(got_dr[both] - ref_dr[both]), initial=0.0))
             worst = max(worst, diff)
-            dens = run_batch(f, hand, mesh_path, tmp / (f.stem + "_density"), "--density", "500")
+            dense = run_batch(f, hand, mesh_path, tmp / (f.stem + "_density"), "--density", "500")
+            assert dense.returncode == 0, dense.stderr
             stable_density = sum(r["status"] == "stable" for r in read_csv(tmp / (f.stem + "_density") / "results.csv"))
             counts = got_active.sum(axis=1)
             stable = sum(r["status"] == "stable" for r in rows)

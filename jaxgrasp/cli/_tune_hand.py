@@ -64,7 +64,7 @@ def _check_hand_options(args, out: Path) -> None:
 
 
 def _tuned_tables(args, out: Path) -> dict:
-    """The input's tables with ``mjcf`` and ``mesh`` relative to ``out``'s folder; a
+    """The input's tables with the hand file (``model`` or ``mjcf``) and ``mesh`` relative to ``out``'s folder; a
     `UsageError` where the tuned file could not read one of them from there."""
     from jaxgrasp.io import allowed_folders
 
@@ -73,7 +73,8 @@ def _tuned_tables(args, out: Path) -> dict:
         tables = tomllib.loads(fh.read().decode("utf-8-sig"))
     there = os.path.realpath(out.parent)
     folders = (there, *allowed_folders(args.allow_dir))
-    for table, key in (("hand", "mjcf"), ("object", "mesh")):
+    model = "model" if "model" in tables["hand"] else "mjcf"  # load_hand checked that it has one of them
+    for table, key in (("hand", model), ("object", "mesh")):
         real = os.path.realpath(os.path.join(src.parent, tables[table][key]))
         if not any(os.path.commonpath([real, f]) == f for f in folders):
             raise UsageError(
