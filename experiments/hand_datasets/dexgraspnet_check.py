@@ -102,7 +102,8 @@ def independent(model, grasps, mesh) -> tuple[np.ndarray, np.ndarray]:
         cap = data.geom_xpos[geoms] + z * model.geom_size[geoms, 1][:, None]  # the +z end: farther from the joint
         centers, axes = cap @ rot.T + t, z @ rot.T
         p, n = brute_closest(mesh.triangles * float(g["scale"]), mesh.face_normals, centers)
-        signed = np.einsum("ij,ij->i", centers - p, n)  # |c - p| with the side of the closest face
+        side = np.sign(np.einsum("ij,ij->i", centers - p, n))
+        signed = side * np.linalg.norm(centers - p, axis=1)  # |c - p|, negative on the closest face's inner side
         normal = n
         d = radius - signed
         cos_tilt = -np.sum(axes * normal, axis=1)

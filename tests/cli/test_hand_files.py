@@ -168,7 +168,7 @@ def test_tune_writes_a_hand_grasp_file_that_loads(run_cli, tmp_path):
     np.testing.assert_array_equal(np.asarray(tuned.qpos), ref.qpos)
     assert f"value {ref.start_value:.6e} J -> {ref.value:.6e} J" in line and "deepest link penetration" in line
     assert out.with_suffix(".png").stat().st_size > 5_000
-    assert 'mjcf = "two_finger.xml"' in out.read_text() and 'mesh = "cube.stl"' in out.read_text()
+    assert 'model = "two_finger.xml"' in out.read_text() and 'mesh = "cube.stl"' in out.read_text()
     assert float(jaxgrasp.evaluate(tuned.grasp).value) == pytest.approx(ref.value, rel=1e-9)
 
 
