@@ -31,6 +31,7 @@ __all__ = [
     "check_out",
     "lock_out",
     "replaced_text",
+    "write_with_plot",
     "write_picture",
     "ChunkProgress",
     "say",
@@ -229,6 +230,23 @@ def write_picture(targets, fig, scene) -> list:
         return storage.write_set(members)
     except OSError as exc:
         raise UsageError(f"cannot write {', '.join(map(str, targets))}: {exc.strerror or exc}") from None
+
+
+def write_with_plot(members: dict, out: Path, figure=None) -> list[str]:
+    """Write ``members`` (path -> bytes or a writer, `jaxgrasp.storage.write_set`) and,
+    given a matplotlib ``figure``, it as a PNG beside ``out`` (same name), as one set,
+    making ``out``'s folder; the names of the previous files they replaced. An unwritable
+    folder is a one-line `UsageError`."""
+    if figure is not None:
+        from jaxgrasp.plots import save_figure
+
+        members[out.with_suffix(".png")] = lambda fh: save_figure(figure, fh, format="png")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        replaced = storage.write_set(members)
+    except OSError as exc:
+        raise UsageError(f"cannot write {str(out)!r}: {exc.strerror or exc}") from None
+    return [p.name for p in replaced]
 
 
 def replaced_text(replaced, removed) -> str:

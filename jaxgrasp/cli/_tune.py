@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxgrasp.cli._arguments import parse_number
-from jaxgrasp.cli._common import UsageError, grasp_source, load_grasp, say
+from jaxgrasp.cli._common import UsageError, grasp_source, load_grasp, say, write_with_plot
 from jaxgrasp.cli._hand_files import is_hand_file
 from jaxgrasp import storage
 from jaxgrasp.model import counted
@@ -184,17 +184,12 @@ def _write_outputs(res, out: Path, title: str | None) -> list[str]:
         members = {out: to_text(res.mesh_grasp, out, name).encode("utf-8")}
         if raw is not None:
             members[out.parent / name] = raw
+    figure = None
     if title is not None:
-        from jaxgrasp.plots import plot_history, save_figure
+        from jaxgrasp.plots import plot_history
 
-        fig = plot_history(res, title=title)
-        members[out.with_suffix(".png")] = lambda fh: save_figure(fig, fh, format="png")
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        replaced = storage.write_set(members)
-    except OSError as exc:
-        raise UsageError(f"cannot write {str(out)!r}: {exc.strerror or exc}") from None
-    return [p.name for p in replaced]
+        figure = plot_history(res, title=title)
+    return write_with_plot(members, out, figure)
 
 
 def _contacts(grasp) -> int:

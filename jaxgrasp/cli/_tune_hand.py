@@ -18,8 +18,7 @@ import tomllib
 from pathlib import Path
 
 from jaxgrasp.analysis import METHODS
-from jaxgrasp.cli._common import UsageError, say
-from jaxgrasp import storage
+from jaxgrasp.cli._common import UsageError, say, write_with_plot
 from jaxgrasp.model import counted
 
 __all__ = ["run_hand"]
@@ -102,18 +101,12 @@ def _write(tables: dict, res, out: Path, title: str | None) -> list[str]:
     the previous files they replaced."""
     from jaxgrasp.hands import hand_grasp_toml
 
-    members = {out: hand_grasp_toml(tables).encode("utf-8")}
+    figure = None
     if title is not None:
-        from jaxgrasp.plots import plot_hand_history, save_figure
+        from jaxgrasp.plots import plot_hand_history
 
-        fig = plot_hand_history(res, title=title)
-        members[out.with_suffix(".png")] = lambda fh: save_figure(fig, fh, format="png")
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        replaced = storage.write_set(members)
-    except OSError as exc:
-        raise UsageError(f"cannot write {str(out)!r}: {exc.strerror or exc}") from None
-    return [p.name for p in replaced]
+        figure = plot_hand_history(res, title=title)
+    return write_with_plot({out: hand_grasp_toml(tables).encode("utf-8")}, out, figure)
 
 
 def _summary(res, source: str, out: Path, no_plot: bool, replaced: list[str]) -> str:

@@ -133,9 +133,8 @@ CASES = {
 }
 
 
-def build(case: str, hand: Path, outside: Path) -> Path:
-    """Write the case's files into ``hand``; the main file."""
-    files, main, _ = CASES[case]
+def write_case_files(hand: Path, files: dict) -> None:
+    """A case's extra files in ``hand``: text, a FIFO (``("fifo",)``) or a symlink (``("symlink", target)``)."""
     for name, content in files.items():
         if isinstance(content, tuple) and content[0] == "fifo":
             os.mkfifo(hand / name)
@@ -143,6 +142,12 @@ def build(case: str, hand: Path, outside: Path) -> Path:
             (hand / name).symlink_to(content[1])
         else:
             (hand / name).write_text(content)
+
+
+def build(case: str, hand: Path, outside: Path) -> Path:
+    """Write the case's files into ``hand``; the main file."""
+    files, main, _ = CASES[case]
+    write_case_files(hand, files)
     path = hand / "hand.xml"
     path.write_text(main.replace("{outside}", str(outside)))
     return path
@@ -348,13 +353,7 @@ def build_urdf(case: str, hand: Path, outside: Path) -> Path:
     files, main, _ = URDF_CASES[case]
     (hand / "meshes").mkdir()
     (hand / "meshes" / "pad.stl").write_bytes((GRIPPER / "meshes" / "pad.stl").read_bytes())
-    for name, content in files.items():
-        if isinstance(content, tuple) and content[0] == "fifo":
-            os.mkfifo(hand / name)
-        elif isinstance(content, tuple):
-            (hand / name).symlink_to(content[1])
-        else:
-            (hand / name).write_text(content)
+    write_case_files(hand, files)
     path = hand / "hand.urdf"
     path.write_text(main.replace("{outside}", str(outside)))
     return path
