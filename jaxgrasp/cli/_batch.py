@@ -96,7 +96,9 @@ def run(args) -> int:
         if uncertainty is not None:
             extra.update(_robust(gset, uncertainty, args))
         written, replaced, removed = _write_outputs(merged, out, checkpoint, args, extra)
-    print(_summary(merged, args.file, wall, _timing(result, rows.size), out, written, replaced, removed, args.top))
+    names = hand_data.fingertip_names if hands else None
+    print(_summary(merged, args.file, wall, _timing(result, rows.size), out, written, replaced, removed, args.top,
+                   names))
     if uncertainty is not None:
         print(_robust_line(extra, uncertainty, args))
     return 0
@@ -305,7 +307,7 @@ def _timing(run, resumed: int) -> str:
     return timing + (f"; {resumed} resumed from the checkpoint" if resumed else "")
 
 
-def _summary(result, source, wall, timing, out, written, replaced, removed, top) -> str:
+def _summary(result, source, wall, timing, out, written, replaced, removed, top, names=None) -> str:
     """The summary: counts, ``timing`` (`_timing`), files, then the ``top`` best
     grasps, one per line."""
     c = result.counts()
@@ -317,14 +319,21 @@ def _summary(result, source, wall, timing, out, written, replaced, removed, top)
         f"wall {wall:.1f} s ({timing}); wrote {out}/{{{','.join(written)}}}"
         + replaced_text(replaced, removed)
     ]
-    lines += _top_lines(result, top)
+    lines += _top_lines(result, top, names)
     if c.get("invalid"):
         first = next(e for e in result.errors if e)
         lines.append(f"note: {counted(c['invalid'], 'invalid grasp')} not evaluated (first: {first}); see the error column")
     return "\n".join(lines)
 
 
-def _top_lines(result, top: int) -> list[str]:
+def _contact(result, i: int, names) -> str:
+    """Grasp ``i``'s limiting contact: its number, and where the contacts are a hand's
+    fingertips (``names``), the fingertip's name: ``4 (robot0:C_thdistal)``."""
+    k = int(result.limiting_contact[i])
+    return f"{k} ({names[k]})" if names is not None and 0 <= k < len(names) else str(k)
+
+
+def _top_lines(result, top: int, names=None) -> list[str]:
     """``top`` lines: rank, input index, value, contacts and limiting boundary of the best
     stable grasps."""
     from jaxgrasp.tolerance import GraspStatus
@@ -338,6 +347,6 @@ def _top_lines(result, top: int) -> list[str]:
         kind = result.limiting_kind_names[i]
         lines.append(
             f"  #{r} grasp {i:>{width}}: {float(result.value[i]):.6e} J "
-            f"({result.num_contacts[i]} contacts; limited by {kind} of contact {int(result.limiting_contact[i])})"
+            f"({result.num_contacts[i]} contacts; limited by {kind} of contact {_contact(result, i, names)})"
         )
     return [f"top {len(best)}:"] + lines if lines else []

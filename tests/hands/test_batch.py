@@ -18,6 +18,7 @@ brute force and MuJoCo in ``test_grasp.py`` and ``test_kinematics.py``):
 from __future__ import annotations
 
 import csv
+import re
 from pathlib import Path
 
 import numpy as np
@@ -128,6 +129,7 @@ def test_batch_command_takes_a_hand_grasp_file_of_many_configurations(run_cli, t
     (tmp_path / "many.toml").write_text(text)
     rc, out, err = run_cli(["batch", tmp_path / "many.toml", "--out", tmp_path / "out", "--no-plot", "--quiet"])
     assert rc == 0, err
+    assert re.search(r"#1 grasp \d: .* of contact \d \((a_tip|b_tip)\)", out), out  # the fingertip named
     rows = list(csv.DictReader(open(tmp_path / "out" / "results.csv", newline="")))
     assert [r["index"] for r in rows] == ["0", "1", "2"]
     assert [r["active"] for r in rows] == ["2", "2", "1"] and rows[2]["status"] == "invalid"
