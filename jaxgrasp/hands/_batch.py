@@ -26,13 +26,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import jax
 import numpy as np
 
 from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, contact_grasp, finite_vector, material
 from jaxgrasp.model import DEFAULT_GRAVITY, GraspValueError, as_float_array
+
+if TYPE_CHECKING:
+    from jaxgrasp.io import GraspSet
 
 __all__ = ["HandBatch", "hand_batch", "MAX_HAND_CHUNK"]
 
@@ -61,7 +64,7 @@ class HandBatch:
         fingertip_names: ``(F,)`` the fingertips' names, in order.
     """
 
-    grasps: Any
+    grasps: GraspSet
     active: np.ndarray
     dr: np.ndarray
     tilt: np.ndarray
