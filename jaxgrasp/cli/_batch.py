@@ -76,8 +76,6 @@ def run(args) -> int:
         raise UsageError(f"{args.file}: no valid grasp ({len(gset)} invalid; first: {gset.errors[0]})")
     check_out(out)
     widths = plan_widths(grasps_by_count(gset.num_contacts), jax.devices()[0].platform)  # what evaluate_dataset picks
-    if not args.no_plot:
-        prefetch("jaxgrasp.plots._plots")  # matplotlib's import overlaps the compile
 
     t_start = time.perf_counter()
     with lock_out(out):
@@ -85,6 +83,8 @@ def run(args) -> int:
         rows, results = _open_checkpoint(checkpoint, args.resume, len(gset))
         progress = ChunkProgress("evaluating", "grasp", show=not args.quiet)
         announce_run("batch", args.file, int(np.count_nonzero(np.delete(gset.valid, rows))), "grasp", args.quiet)
+        if not args.no_plot:  # after the first line, which a thread importing matplotlib would delay
+            prefetch("jaxgrasp.plots._plots")  # matplotlib's import overlaps the compile
         merged, result = evaluate_dataset(
             gset, done=(rows, results), on_chunk_rows=checkpoint.keeper(rows.size, len(gset)),
             chunk_size=args.chunk_size, progress=progress, widths=widths,
