@@ -67,7 +67,7 @@ def batch(run_cli, data, out, fmt="dexgraspnet", extra=()):
 
 
 def test_dexgraspnet_rows_are_each_configurations_grasp(run_cli, hand, dexgraspnet_file, tmp_path):
-    rc, out, err = batch(run_cli, dexgraspnet_file, tmp_path / "out")
+    rc, _, err = batch(run_cli, dexgraspnet_file, tmp_path / "out")
     assert rc == 0, err
     rows = rows_of(tmp_path / "out" / "results.csv")
     assert [r["index"] for r in rows] == ["0", "1", "2"]
@@ -107,6 +107,37 @@ def test_dexgraspbench_of_the_same_grasps_gives_the_same_rows(run_cli, hand, dex
                 assert float(a[f"dr_{k}"]) == pytest.approx(float(b[f"dr_{k}"]), abs=1e-12)
 
 
+class _Stop(Exception):
+    pass
+
+
+def test_an_interrupted_hand_batch_resumes_to_the_uninterrupted_rows(run_cli, dexgraspnet_file, tmp_path,
+                                                                      monkeypatch):
+    """A hand batch interrupted after its first chunk is kept, and ``--resume`` evaluates
+    only the rest: ``results.csv`` equals an uninterrupted run's, hand columns included."""
+    from jaxgrasp.engine._checkpoint import BatchCheckpoint
+
+    one_chunk = ["--chunk-size", "1"]
+    rc, _, err = batch(run_cli, dexgraspnet_file, tmp_path / "whole", extra=one_chunk)
+    assert rc == 0, err
+    save_rows, saved = BatchCheckpoint.save_rows, []
+
+    def save_then_stop(self, rows, results):
+        save_rows(self, rows, results)
+        saved.append(rows)
+        raise _Stop  # as a killed run after its first chunk is on disk
+
+    monkeypatch.setattr(BatchCheckpoint, "save_rows", save_then_stop)
+    with pytest.raises(_Stop):
+        batch(run_cli, dexgraspnet_file, tmp_path / "out", extra=one_chunk)
+    monkeypatch.setattr(BatchCheckpoint, "save_rows", save_rows)
+    assert len(saved) == 1 and not (tmp_path / "out" / "results.csv").exists()
+    rc, _, err = batch(run_cli, dexgraspnet_file, tmp_path / "out", extra=[*one_chunk, "--resume"])
+    assert rc == 0, err
+    assert "resuming: 2 of 3 grasps were finished" in err, err  # the invalid row and the first chunk
+    assert rows_of(tmp_path / "out" / "results.csv") == rows_of(tmp_path / "whole" / "results.csv")
+
+
 class _Boom:
     def __reduce__(self):
         import os
@@ -137,7 +168,7 @@ def test_bad_hand_datasets_are_one_line(run_cli, dexgraspnet_file, tmp_path, mon
         header = header + " " * (63 - len(header) % 64) + "\n"
         bad.write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode() + payload)
         argv = ["batch", bad, "--format", "dexgraspnet", *hand_args, "--mesh", HANDS / "cube.stl"]
-    rc, out, err = run_cli([*argv, "--out", tmp_path / "out"])
+    rc, _, err = run_cli([*argv, "--out", tmp_path / "out"])
     assert rc == 2
     lines = err.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], err
