@@ -6,8 +6,9 @@ bytes, and opens none (defaults, ``euler``/``axisangle`` frames are all resolved
 compiler); `read_model` copies what the kinematics needs out of
 the compiled ``mujoco.MjModel`` into a `KinematicTree` of NumPy arrays: for each
 body its parent, its frame in the parent's and its joints; for each joint its type, axis,
-anchor, limits and reference angle; for each geom its body, frame, type and size. MuJoCo
-is imported here only, when a hand is read, so ``import jaxgrasp`` does not need it.
+anchor, limits and reference angle; for each geom its body, frame, type and size; and the
+linear couplings of the joints (`coupling_rows`: limited fixed tendons, joint equalities).
+MuJoCo is imported here only, when a hand is read, so ``import jaxgrasp`` does not need it.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ import numpy as np
 
 from jaxgrasp.model import GraspValueError
 
-__all__ = ["KinematicTree", "read_model", "read_mjcf", "require_mujoco", "INSTALL_HINT", "HINGE", "SLIDE", "SPHERE", "CAPSULE", "BOX", "CYLINDER"]
+__all__ = ["KinematicTree", "coupling_rows", "read_model", "read_mjcf", "require_mujoco", "INSTALL_HINT", "HINGE", "SLIDE",
+           "SPHERE", "CAPSULE", "BOX", "CYLINDER"]
 
 INSTALL_HINT = 'jaxgrasp.Hand needs MuJoCo: pip install "jaxgrasp[hands]"'
 """The one line a call without the ``hands`` extra raises."""
@@ -61,6 +63,14 @@ class KinematicTree:
         geom_type: ``(G,)`` MuJoCo geom type codes.
         geom_size: ``(G, 3)`` MuJoCo geom sizes, m (capsule: radius, half-length).
         geom_names: ``(G,)`` names (``""`` where unnamed).
+        coupling_matrix: ``(C, J)`` the joints' linear couplings ``A`` (`coupling_rows`):
+            a configuration the hand can hold has ``coupling_lower <= A @ qpos <=
+            coupling_upper``; m/rad (tendon length per joint angle) for a tendon's row,
+            unitless for an equality's.
+        coupling_lower: ``(C,)`` each row's lower bound (m for a tendon, rad or m for an equality).
+        coupling_upper: ``(C,)`` its upper bound (equal to the lower one for an equality).
+        coupling_names: ``(C,)`` the tendon's or equality's name (``"tendon 3"``,
+            ``"equality 0"`` where unnamed).
         source: the file it was read from.
     """
 
@@ -81,12 +91,21 @@ class KinematicTree:
     geom_type: np.ndarray
     geom_size: np.ndarray
     geom_names: tuple
+    coupling_matrix: np.ndarray
+    coupling_lower: np.ndarray
+    coupling_upper: np.ndarray
+    coupling_names: tuple
     source: str = ""
 
     @property
     def num_joints(self) -> int:
         """Number of joints ``J`` (= the length of ``qpos``)."""
         return int(self.jnt_type.shape[0])
+
+    @property
+    def num_couplings(self) -> int:
+        """Number of coupling rows ``C``."""
+        return int(self.coupling_matrix.shape[0])
 
     def geom_index(self, name: str) -> int:
         """The index of the geom called ``name``; a one-line error naming the choices otherwise."""
@@ -181,5 +200,73 @@ def tree_of(model, source: str = "<MjModel>", kind: str = "mjcf") -> KinematicTr
         jnt_range=f(rng), qpos0=f(model.qpos0), jnt_names=_names(model, mujoco.mjtObj.mjOBJ_JOINT, model.njnt),
         geom_body=np.array(model.geom_bodyid, dtype=int), geom_pos=f(model.geom_pos), geom_quat=f(model.geom_quat),
         geom_type=np.array(model.geom_type, dtype=int), geom_size=f(model.geom_size),
-        geom_names=_names(model, mujoco.mjtObj.mjOBJ_GEOM, model.ngeom), source=source,
+        geom_names=_names(model, mujoco.mjtObj.mjOBJ_GEOM, model.ngeom), **coupling_rows(model, source, kind),
+        source=source,
     )
+
+
+def coupling_rows(model, source: str = "<MjModel>", kind: str = "mjcf") -> dict:
+    """The linear couplings of a compiled model's joints, as the `KinematicTree` fields
+    ``coupling_matrix`` ``(C, J)``, ``coupling_lower``, ``coupling_upper`` ``(C,)`` and
+    ``coupling_names``: a configuration the hand can hold has ``lower <= A @ qpos <= upper``.
+
+    The rows are, in the model's order:
+
+    * each limited fixed tendon (every wrap a joint): MuJoCo's tendon length is
+      ``sum(coef * qpos[joint])`` over its wraps (``qpos`` itself, not its offset from
+      ``qpos0``), limited to ``tendon_range``; the Shadow hand's ``T_FFJ1c`` couples FFJ0
+      and FFJ1 so. An unlimited tendon, or a spatial one (through sites and geoms), bounds
+      nothing here.
+    * then each active joint equality (``<equality><joint>``, active at the start,
+      ``eq_active0``): MuJoCo holds ``q1 - q1_0 = c0 + c1 (q2 - q2_0) + c2 (q2 - q2_0)^2 +
+      ...`` (``polycoef``, ``q_0`` the joint's ``qpos0``; ``q1 - q1_0 = c0`` without a
+      second joint), the row ``q1 - c1 q2 = c0 + q1_0 - c1 q2_0``. Equalities of other kinds
+      (connect, weld, tendon, flex) are not read.
+
+    ``qpos`` holds one entry per joint in the joints' order (`tree_of` checks it), so a
+    row's columns are the joints' indices.
+
+    Raises:
+        GraspValueError: a joint equality whose polynomial is not linear (one line).
+    """
+    import mujoco
+
+    rows, lower, upper, names = [], [], [], []
+    joint_wrap = int(mujoco.mjtWrap.mjWRAP_JOINT)
+    for t in range(model.ntendon):
+        wraps = range(int(model.tendon_adr[t]), int(model.tendon_adr[t] + model.tendon_num[t]))
+        if not model.tendon_limited[t] or any(int(model.wrap_type[w]) != joint_wrap for w in wraps):
+            continue
+        row = np.zeros(model.njnt)
+        for w in wraps:
+            row[int(model.wrap_objid[w])] += float(model.wrap_prm[w])
+        rows.append(row)
+        lower.append(float(model.tendon_range[t, 0]))
+        upper.append(float(model.tendon_range[t, 1]))
+        names.append(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_TENDON, t) or f"tendon {t}")
+    joint_eq = int(mujoco.mjtEq.mjEQ_JOINT)
+    for e in range(model.neq):
+        if int(model.eq_type[e]) != joint_eq or not model.eq_active0[e]:
+            continue
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_EQUALITY, e) or f"equality {e}"
+        j1, j2 = int(model.eq_obj1id[e]), int(model.eq_obj2id[e])
+        c = np.array(model.eq_data[e, :5], dtype=np.float64)
+        row = np.zeros(model.njnt)
+        row[j1] = 1.0
+        value = c[0] + model.qpos0[j1]
+        if j2 >= 0:  # without a second joint MuJoCo uses c0 alone
+            if np.any(c[2:] != 0.0):
+                degree = 2 + int(np.flatnonzero(c[2:])[-1])
+                raise GraspValueError(
+                    f"{kind} {source!r}: equality {name!r} couples joint "
+                    f"{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j1)!r} to a polynomial of degree {degree} "
+                    f"(polycoef {' '.join(f'{x:g}' for x in c)}): only linear couplings are supported")
+            row[j2] -= c[1]
+            value -= c[1] * model.qpos0[j2]
+        rows.append(row)
+        lower.append(float(value))
+        upper.append(float(value))
+        names.append(name)
+    return {"coupling_matrix": np.array(rows, dtype=np.float64).reshape(-1, model.njnt),
+            "coupling_lower": np.array(lower, dtype=np.float64), "coupling_upper": np.array(upper, dtype=np.float64),
+            "coupling_names": tuple(names)}
