@@ -18,6 +18,7 @@ from typing import Sequence
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrasp.hands import _couplings
 from jaxgrasp.hands._fingertips import resolve_fingertips
 from jaxgrasp.hands._grasp import finite_vector
 from jaxgrasp.hands._kinematics import body_frames, geom_frames
@@ -109,7 +110,7 @@ class Hand:
 
     def digest(self) -> str:
         """SHA-256 (hex) of the hand's content: every array, name and number of its
-        kinematic tree, fingertips and link samples, but not the file it was read from,
+        kinematic tree (its couplings included), fingertips and link samples, but not the file it was read from,
         so that hands read from equal files have one digest wherever the files lie (the
         key of [`tune_hand`][jaxgrasp.tune_hand]'s stored executable)."""
         h = hashlib.sha256()
@@ -135,6 +136,28 @@ class Hand:
     def upper(self) -> np.ndarray:
         """``(J,)`` upper joint limits, rad or m; ``inf`` if unlimited."""
         return self.tree.jnt_range[:, 1]
+
+    @property
+    def coupling_names(self) -> tuple:
+        """``(C,)`` the names of the joints' couplings (limited fixed tendons, then joint
+        equalities; `KinematicTree`'s ``coupling_*`` fields hold their rows and ranges)."""
+        return self.tree.coupling_names
+
+    def coupling_violation(self, qpos):
+        """``(..., C)`` m (a tendon's length) or rad (an equality of hinges): how far each of
+        the hand's couplings ``lower <= A @ qpos <= upper`` is outside its range at ``qpos``
+        ``(..., J)``, 0 within it. Traceable."""
+        return _couplings.coupling_violation(self.tree, qpos)
+
+    def project_joints(self, qpos, sweeps: int = _couplings.PROJECTION_SWEEPS):
+        """``(..., J)``: a configuration within the joint limits (exactly) and the couplings
+        (to the tolerance the sweeps reach: 1.4e-15 m on the Shadow hand from configurations
+        within the limits), by ``sweeps`` sweeps of alternating projections, each row's slab
+        ``[lower, upper]`` in turn then the limits (`jaxgrasp.hands._couplings`). ``qpos``
+        ``(..., J)`` itself where it is within both, its derivative there the identity; the
+        clip to the limits for a hand without couplings. Traceable, differentiable almost
+        everywhere. [`tune_hand`][jaxgrasp.tune_hand] evaluates the configuration this returns."""
+        return _couplings.project_joints(self.tree, qpos, sweeps)
 
     def check_qpos(self, qpos, name: str = "qpos") -> np.ndarray:
         """A concrete ``qpos`` as a ``(J,)`` float64 array; a one-line error naming ``name``
