@@ -11,6 +11,14 @@ size; kept in the executable store, so later processes load them) and SciPy's L-
 runs on them in the box of the joint limits scaled to ``[0, 1]``
 (`jaxgrasp.analysis._tune_drivers.run_search`).
 
+Couplings: the hand's joint couplings (limited fixed tendons, linear joint equalities;
+[`Hand.project_joints`][jaxgrasp.Hand.project_joints]) are kept by evaluating, at every
+iterate ``q`` of the search (which stays in the box of the limits), the configuration
+``project_joints(q)``, the value's gradient chained through the projection; every iterate
+evaluated, and the result, are within the limits and the couplings. The start must satisfy
+the couplings already (within `COUPLING_TOLERANCE`): one outside them is one the hand
+cannot hold, and is refused.
+
 Penetration: the hand's other links are sampled ([`link_depths`][jaxgrasp.Hand.link_depths],
 `jaxgrasp.hands._links`), each sample's depth in the object measured by the signed
 distance to the same surface the contacts use; the objective adds
@@ -32,6 +40,7 @@ import numpy as np
 from jaxgrasp.analysis import TuneStatus, run_search
 from jaxgrasp.base import json_floats
 from jaxgrasp.engine import COMPILER_OPTIONS, StoredFunction, value_and_grad_builder
+from jaxgrasp.hands._couplings import COUPLING_TOLERANCE
 from jaxgrasp.hands._grasp import DEFAULT_MAX_TILT, HandGrasp, _pose, contact_grasp, hand_grasp, material
 from jaxgrasp.model import DEFAULT_GRAVITY, GraspValueError
 from jaxgrasp.tolerance import EVALUATION_TREE, EvaluateOptions, GraspStatus
@@ -43,29 +52,36 @@ PENETRATION_UNIT = 1e-3
 
 @lru_cache(maxsize=16)
 def _compiled(hand, options: EvaluateOptions, max_tilt: float):
-    """``core(x, data) -> (value, dvalue_dx, penalty, dpenalty_dx, evaluation, deepest, tilt)``,
-    one per key; ``x = (qpos, wrist)`` ``(J + 6,)``. Compiled once per mesh size and kept in
-    the executable store (`StoredFunction`), keyed by the
-    hand's content ([`digest`][jaxgrasp.Hand.digest])."""
+    """``core(x, data) -> (value, dvalue_dx, penalty, dpenalty_dx, evaluation, deepest, tilt, qpos)``,
+    one per key; ``x = (qpos, wrist)`` ``(J + 6,)``; ``qpos`` ``(J,)`` the joints evaluated:
+    ``hand.project_joints(x[:J])`` where ``data["project"]`` is true (`tune_hand`, the
+    gradients chained through it), ``x[:J]`` itself otherwise (`hand_value`), one program
+    for both. Compiled once per mesh size and kept in the executable store
+    (`StoredFunction`), keyed by the hand's content ([`digest`][jaxgrasp.Hand.digest],
+    couplings included)."""
     j = hand.num_joints
 
+    def joints(x, data):
+        return jnp.where(data["project"], hand.project_joints(x[:j]), x[:j])
+
     def grasp_of(x, data):
-        grasp, tilt, _ = contact_grasp(hand, x[:j], x[j:], data["object_pose"], data["surface"], data["material"], max_tilt)
+        grasp, tilt, _ = contact_grasp(hand, joints(x, data), x[j:], data["object_pose"], data["surface"],
+                                       data["material"], max_tilt)
         return grasp, tilt
 
     value = value_and_grad_builder(grasp_of, options, counts=lambda grasp: jnp.sum(grasp.active) >= 2)
 
     def penalty(x, data):
-        depth = hand.link_depths(x[:j], x[j:], data["object_pose"], data["surface"])
+        depth = hand.link_depths(joints(x, data), x[j:], data["object_pose"], data["surface"])
         return jnp.sum(jnp.maximum(depth, 0.0) ** 2) / PENETRATION_UNIT**2, jnp.max(depth)
 
     def core(x, data):
         (v, (ev, tilt)), gv = value(x, data)
         (p, deepest), gp = jax.value_and_grad(penalty, has_aux=True)(x, data)
-        return v, gv, p, jnp.where(jnp.isfinite(gp), gp, 0.0), ev, deepest, tilt
+        return v, gv, p, jnp.where(jnp.isfinite(gp), gp, 0.0), ev, deepest, tilt, joints(x, data)
 
     leaf = jax.tree_util.tree_structure(0.0)
-    out_tree = jax.tree_util.treedef_tuple((leaf,) * 4 + (EVALUATION_TREE, leaf, leaf))
+    out_tree = jax.tree_util.treedef_tuple((leaf,) * 4 + (EVALUATION_TREE, leaf, leaf, leaf))
     # The hand's arrays are constants of the program: its digest stands for them.
     return StoredFunction(core, (hand.digest(), options, max_tilt), out_tree, name="tune-hand",
                           compiler_options=COMPILER_OPTIONS,
@@ -140,11 +156,14 @@ def hand_value(hand, qpos, mesh, *, wrist=None, object_pose=None, options: Evalu
     to ``qpos`` and the wrist, from the function [`tune_hand`][jaxgrasp.tune_hand] compiles (so the two
     share one compilation). ``fields``: ``young_modulus``, ``friction``, ``max_force``,
     ``mass`` or ``density``, ``gravity``, ``center_of_mass``, ``units``, as for
-    [`grasp`][jaxgrasp.Hand.grasp]."""
+    [`grasp`][jaxgrasp.Hand.grasp]. ``qpos`` is evaluated as given, within the couplings or not
+    ([`tune_hand`][jaxgrasp.tune_hand] evaluates [`project_joints`][jaxgrasp.Hand.project_joints] of its
+    iterates; the two agree, value and gradient, on a configuration within the limits and couplings)."""
     data, _ = _setup(hand, mesh, dict(fields))
     data["object_pose"] = _pose(object_pose, "object_pose")
+    data["project"] = np.bool_(False)  # the value at qpos as given, as hand.grasp(qpos) makes it
     x = jnp.concatenate([jnp.asarray(hand.check_qpos(qpos)), _pose(wrist, "wrist")])
-    v, gv, _, _, ev, deepest, tilt = _compiled(hand, options, float(max_tilt))(x, data)
+    v, gv, _, _, ev, deepest, tilt, _ = _compiled(hand, options, float(max_tilt))(x, data)
     j = hand.num_joints
     gv = np.asarray(gv)
     return HandValue(float(v), gv[:j], gv[j:], jax.tree_util.tree_map(np.asarray, ev), float(deepest), np.asarray(tilt))
@@ -161,14 +180,14 @@ class _Record:
         self.add(x0, aux)
 
     def add(self, x, aux) -> float:
-        v, ev, deepest = aux
+        v, ev, deepest, qpos = aux
         status = int(ev.status)
         self.history.append(float(v))
         self.depths.append(float(deepest))
         self.statuses.append(status)
         ok = status in (GraspStatus.STABLE, GraspStatus.NOT_CONVERGED) and float(deepest) <= self.limit
         if ok and (self.best is None or float(v) > self.best[0]):
-            self.best = (float(v), np.array(x), ev)
+            self.best = (float(v), np.array(x), ev, np.array(qpos))
         return float(v)
 
 
@@ -177,7 +196,8 @@ class HandTuneResult:
     """Outcome of [`tune_hand`][jaxgrasp.tune_hand] (SI units).
 
     Attributes:
-        qpos: ``(J,)`` the tuned joint positions (the best admissible iterate).
+        qpos: ``(J,)`` the tuned joint positions (the best admissible iterate, projected
+            within the limits and couplings: [`project_joints`][jaxgrasp.Hand.project_joints]).
         wrist: ``(6,)`` the tuned wrist pose (the start's unless ``tune_wrist``).
         grasp: the [`HandGrasp`][jaxgrasp.hands.HandGrasp] there.
         value: its evaluation value, J. start_value: the start's (the value before
@@ -262,7 +282,8 @@ def tune_hand(hand, mesh, qpos0, wrist0=None, *, object_pose=None, tune_wrist: b
 
     Args:
         hand: a [`Hand`][jaxgrasp.Hand]. mesh: the object (as for [`grasp`][jaxgrasp.Hand.grasp]).
-        qpos0: ``(J,)`` the start, within the joint limits; its grasp must be stable.
+        qpos0: ``(J,)`` the start, within the joint limits and the couplings (within
+            `COUPLING_TOLERANCE`, 1e-9 m or rad); its grasp must be stable.
         wrist0: ``(6,)`` the wrist pose (translation m, rotation vector rad; ``None``: 0).
         object_pose: ``(6,)`` the object's mesh frame in the world.
         tune_wrist: also move the wrist, within ``wrist_bounds = (m, rad)`` of ``wrist0``.
@@ -281,25 +302,28 @@ def tune_hand(hand, mesh, qpos0, wrist0=None, *, object_pose=None, tune_wrist: b
         history and a [`TuneStatus`][jaxgrasp.analysis.TuneStatus].
 
     Raises:
-        GraspValueError: a start outside the limits, with value 0 (not stable: nothing
-            to follow) or whose links penetrate deeper than ``max_penetration``; one line.
+        GraspValueError: a start outside the limits or the couplings (naming the worst
+            coupling, its value and range), with value 0 (not stable: nothing to follow) or
+            whose links penetrate deeper than ``max_penetration``; one line.
     """
     data, mesh = _setup(hand, mesh, dict(fields))
     data["object_pose"] = _pose(object_pose, "object_pose")
+    data["project"] = np.bool_(True)
     q0, w0 = hand.check_qpos(qpos0, "qpos0"), np.asarray(_pose(wrist0, "wrist0"))
     lo, hi = _bounds(hand, q0, w0, tune_wrist, wrist_bounds)
+    _check_couplings(hand, q0)
     core = _compiled(hand, options, float(max_tilt))
     x0 = np.concatenate([q0, w0])
-    v0, _, _, _, ev0, deep0, _ = core(jnp.asarray(x0), data)
+    v0, _, _, _, ev0, deep0, _, p0 = core(jnp.asarray(x0), data)
     _check_start(float(v0), ev0, float(deep0), max_penetration)
     scale = {"value": float(v0)}
     vg = _objective(core, lo, hi, scale, penetration_weight)
     u0 = np.where(hi > lo, (x0 - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0)
-    rec = _Record(u0, (float(v0), ev0, float(deep0)), max_penetration)
+    rec = _Record(u0, (float(v0), ev0, float(deep0), p0), max_penetration)
     status, iters, evals = run_search("scipy_lbfgsb", vg, u0, data, rec, maxiter=maxiter, tol=tol, ftol=ftol,
                                       patience=4, callback=callback)
-    v_best, u_best, _ = rec.best
-    x = lo + (hi - lo) * u_best
+    v_best, u_best, _, q_best = rec.best
+    x = np.concatenate([q_best, (lo + (hi - lo) * u_best)[hand.num_joints:]])  # the joints evaluated: projected
     hg = hand_grasp(hand, x[: hand.num_joints], mesh, wrist=x[hand.num_joints:], object_pose=object_pose, max_tilt=max_tilt,
                     young_modulus=data["material"].young_modulus, friction=data["material"].friction,
                     max_force=data["material"].max_force, mass=float(data["material"].mass),
@@ -308,6 +332,22 @@ def tune_hand(hand, mesh, qpos0, wrist0=None, *, object_pose=None, tune_wrist: b
     message = status.message.format(ftol=ftol, patience=4, maxiter=maxiter)
     return HandTuneResult(x[: hand.num_joints], x[hand.num_joints:], hg, v_best, float(v0), rec.depths[best], float(deep0),
                           np.asarray(rec.history), np.asarray(rec.depths), status, iters, int(evals) + 1, message)
+
+
+def _check_couplings(hand, q0: np.ndarray) -> None:
+    """A start outside the hand's couplings by more than `COUPLING_TOLERANCE` is an error
+    (one line naming the worst coupling, its value and range)."""
+    if hand.tree.num_couplings == 0:
+        return
+    violation = np.asarray(hand.coupling_violation(q0))
+    k = int(np.argmax(violation))
+    if violation[k] > COUPLING_TOLERANCE:
+        t = hand.tree
+        value = float(t.coupling_matrix[k] @ q0)
+        raise GraspValueError(
+            f"tune_hand: qpos0 is one the hand cannot hold: its coupling {t.coupling_names[k]!r} is {value:.6g}, "
+            f"outside its range [{t.coupling_lower[k]:.6g}, {t.coupling_upper[k]:.6g}] by {violation[k]:.3g} "
+            f"(Hand.project_joints gives a configuration within it)")
 
 
 def _check_start(v0: float, ev0, deep0: float, max_penetration: float) -> None:
@@ -325,15 +365,15 @@ def _check_start(v0: float, ev0, deep0: float, max_penetration: float) -> None:
 
 
 def _objective(core, lo, hi, scale, weight: float):
-    """``vg(u, data) -> ((f, (value, evaluation, deepest)), grad)`` on ``[0, 1]^(J + 6)``:
-    ``f = -value / start value + weight * penalty``, for `run_search`."""
+    """``vg(u, data) -> ((f, (value, evaluation, deepest, qpos)), grad)`` on ``[0, 1]^(J + 6)``:
+    ``f = -value / start value + weight * penalty``, ``qpos`` the joints evaluated, for `run_search`."""
     span = jnp.asarray(hi - lo)
 
     def vg(u, data):
         x = jnp.asarray(lo) + span * jnp.asarray(u)
-        v, gv, p, gp, ev, deepest, _ = core(x, data)
+        v, gv, p, gp, ev, deepest, _, qpos = core(x, data)
         f = -float(v) / scale["value"] + weight * float(p)
         g = (-np.asarray(gv) / scale["value"] + weight * np.asarray(gp)) * np.asarray(span)
-        return (jnp.float64(f), (float(v), ev, float(deepest))), jnp.asarray(g)
+        return (jnp.float64(f), (float(v), ev, float(deepest), np.asarray(qpos))), jnp.asarray(g)
 
     return vg
