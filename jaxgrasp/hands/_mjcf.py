@@ -20,8 +20,8 @@ import numpy as np
 
 from jaxgrasp.model import GraspValueError
 
-__all__ = ["KinematicTree", "coupling_rows", "read_model", "read_mjcf", "require_mujoco", "INSTALL_HINT", "HINGE", "SLIDE",
-           "SPHERE", "CAPSULE", "BOX", "CYLINDER"]
+__all__ = ["KinematicTree", "coupling_rows", "read_model", "read_mjcf", "require_mujoco", "INSTALL_HINT",
+           "HINGE", "SLIDE", "SPHERE", "CAPSULE", "BOX", "CYLINDER"]
 
 INSTALL_HINT = 'jaxgrasp.Hand needs MuJoCo: pip install "jaxgrasp[hands]"'
 """The one line a call without the ``hands`` extra raises."""
@@ -229,9 +229,18 @@ def coupling_rows(model, source: str = "<MjModel>", kind: str = "mjcf") -> dict:
     Raises:
         GraspValueError: a joint equality whose polynomial is not linear (one line).
     """
+    rows = _tendon_rows(model) + _equality_rows(model, source, kind)  # (row (J,), lower, upper, name) each
+    return {"coupling_matrix": np.array([r[0] for r in rows], dtype=np.float64).reshape(-1, model.njnt),
+            "coupling_lower": np.array([r[1] for r in rows], dtype=np.float64),
+            "coupling_upper": np.array([r[2] for r in rows], dtype=np.float64),
+            "coupling_names": tuple(r[3] for r in rows)}
+
+
+def _tendon_rows(model) -> list:
+    """``(row (J,), lower, upper, name)`` of each limited fixed tendon (`coupling_rows`)."""
     import mujoco
 
-    rows, lower, upper, names = [], [], [], []
+    out = []
     joint_wrap = int(mujoco.mjtWrap.mjWRAP_JOINT)
     for t in range(model.ntendon):
         wraps = range(int(model.tendon_adr[t]), int(model.tendon_adr[t] + model.tendon_num[t]))
@@ -240,10 +249,16 @@ def coupling_rows(model, source: str = "<MjModel>", kind: str = "mjcf") -> dict:
         row = np.zeros(model.njnt)
         for w in wraps:
             row[int(model.wrap_objid[w])] += float(model.wrap_prm[w])
-        rows.append(row)
-        lower.append(float(model.tendon_range[t, 0]))
-        upper.append(float(model.tendon_range[t, 1]))
-        names.append(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_TENDON, t) or f"tendon {t}")
+        out.append((row, float(model.tendon_range[t, 0]), float(model.tendon_range[t, 1]),
+                    mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_TENDON, t) or f"tendon {t}"))
+    return out
+
+
+def _equality_rows(model, source: str, kind: str) -> list:
+    """``(row (J,), value, value, name)`` of each active linear joint equality (`coupling_rows`)."""
+    import mujoco
+
+    out = []
     joint_eq = int(mujoco.mjtEq.mjEQ_JOINT)
     for e in range(model.neq):
         if int(model.eq_type[e]) != joint_eq or not model.eq_active0[e]:
@@ -263,10 +278,5 @@ def coupling_rows(model, source: str = "<MjModel>", kind: str = "mjcf") -> dict:
                     f"(polycoef {' '.join(f'{x:g}' for x in c)}): only linear couplings are supported")
             row[j2] -= c[1]
             value -= c[1] * model.qpos0[j2]
-        rows.append(row)
-        lower.append(float(value))
-        upper.append(float(value))
-        names.append(name)
-    return {"coupling_matrix": np.array(rows, dtype=np.float64).reshape(-1, model.njnt),
-            "coupling_lower": np.array(lower, dtype=np.float64), "coupling_upper": np.array(upper, dtype=np.float64),
-            "coupling_names": tuple(names)}
+        out.append((row, float(value), float(value), name))
+    return out
