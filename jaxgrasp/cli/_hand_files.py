@@ -18,9 +18,11 @@ __all__ = ["is_hand_file", "load_hand", "reject_overrides", "hand_fields"]
 
 def is_hand_file(args) -> bool:
     """Whether the command's input ``FILE`` is a hand grasp file."""
+    if getattr(args, "file", None) is None:  # a preset: no module to import before the first line
+        return False
     from jaxgrasp.hands import is_hand_grasp_file
 
-    return getattr(args, "file", None) is not None and is_hand_grasp_file(args.file)
+    return is_hand_grasp_file(args.file)
 
 
 def load_hand(args, path: str | None = None):
