@@ -34,6 +34,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.surface._triangles import closest_on_triangles
 
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
+    from jaxgrasp.surface._grid import GRID_POINTS_PER_AXIS, DistanceGrid, distance_grid
     from jaxgrasp.surface._mesh import DEFAULT_TOLERANCE, grasp_on_mesh, mass_properties
     from jaxgrasp.surface._tree import FaceTree, build_tree, first_hits, nearest_faces
 
