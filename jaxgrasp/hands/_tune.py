@@ -52,7 +52,7 @@ PENETRATION_UNIT = 1e-3
 
 @lru_cache(maxsize=16)
 def _compiled(hand, options: EvaluateOptions, max_tilt: float):
-    """``core(x, data) -> (value, dvalue_dx, penalty, dpenalty_dx, evaluation, deepest, tilt, qpos)``,
+    """``core(x, data) -> (value, dvalue_dx, penalty, dpenalty_dx, evaluation, deepest, tilt, qpos, in_contact)``,
     one per key; ``x = (qpos, wrist)`` ``(J + 6,)``; ``qpos`` ``(J,)`` the joints evaluated:
     ``hand.project_joints(x[:J])`` where ``data["project"]`` is true (`tune_hand`, the
     gradients chained through it), ``x[:J]`` itself otherwise (`hand_value`), one program
@@ -67,7 +67,7 @@ def _compiled(hand, options: EvaluateOptions, max_tilt: float):
     def grasp_of(x, data):
         grasp, tilt, _ = contact_grasp(hand, joints(x, data), x[j:], data["object_pose"], data["surface"],
                                        data["material"], max_tilt)
-        return grasp, tilt
+        return grasp, (tilt, grasp.active)
 
     value = value_and_grad_builder(grasp_of, options, counts=lambda grasp: jnp.sum(grasp.active) >= 2)
 
@@ -76,12 +76,12 @@ def _compiled(hand, options: EvaluateOptions, max_tilt: float):
         return jnp.sum(jnp.maximum(depth, 0.0) ** 2) / PENETRATION_UNIT**2, jnp.max(depth)
 
     def core(x, data):
-        (v, (ev, tilt)), gv = value(x, data)
+        (v, (ev, (tilt, active))), gv = value(x, data)
         (p, deepest), gp = jax.value_and_grad(penalty, has_aux=True)(x, data)
-        return v, gv, p, jnp.where(jnp.isfinite(gp), gp, 0.0), ev, deepest, tilt, joints(x, data)
+        return v, gv, p, jnp.where(jnp.isfinite(gp), gp, 0.0), ev, deepest, tilt, joints(x, data), jnp.sum(active)
 
     leaf = jax.tree_util.tree_structure(0.0)
-    out_tree = jax.tree_util.treedef_tuple((leaf,) * 4 + (EVALUATION_TREE, leaf, leaf, leaf))
+    out_tree = jax.tree_util.treedef_tuple((leaf,) * 4 + (EVALUATION_TREE, leaf, leaf, leaf, leaf))
     # The hand's arrays are constants of the program: its digest stands for them.
     return StoredFunction(core, (hand.digest(), options, max_tilt), out_tree, name="tune-hand",
                           compiler_options=COMPILER_OPTIONS,
@@ -163,7 +163,7 @@ def hand_value(hand, qpos, mesh, *, wrist=None, object_pose=None, options: Evalu
     data["object_pose"] = _pose(object_pose, "object_pose")
     data["project"] = np.bool_(False)  # the value at qpos as given, as hand.grasp(qpos) makes it
     x = jnp.concatenate([jnp.asarray(hand.check_qpos(qpos)), _pose(wrist, "wrist")])
-    v, gv, _, _, ev, deepest, tilt, _ = _compiled(hand, options, float(max_tilt))(x, data)
+    v, gv, _, _, ev, deepest, tilt, _, _ = _compiled(hand, options, float(max_tilt))(x, data)
     j = hand.num_joints
     gv = np.asarray(gv)
     return HandValue(float(v), gv[:j], gv[j:], jax.tree_util.tree_map(np.asarray, ev), float(deepest), np.asarray(tilt))
@@ -171,21 +171,23 @@ def hand_value(hand, qpos, mesh, *, wrist=None, object_pose=None, options: Evalu
 
 class _Record:
     """Every iterate's value, deepest penetration and status; the best admissible one
-    (highest value with its deepest link sample at most ``max_penetration``)."""
+    (highest value with its deepest link sample at most ``max_penetration`` and at least
+    ``min_fingertips`` fingertips in contact)."""
 
-    def __init__(self, x0, aux, max_penetration: float):
-        self.limit = max_penetration
+    def __init__(self, x0, aux, max_penetration: float, min_fingertips: int = 2):
+        self.limit, self.fewest = max_penetration, min_fingertips
         self.history, self.depths, self.statuses = [], [], []
         self.best = None
         self.add(x0, aux)
 
     def add(self, x, aux) -> float:
-        v, ev, deepest, qpos = aux
+        v, ev, deepest, qpos, count = aux
         status = int(ev.status)
         self.history.append(float(v))
         self.depths.append(float(deepest))
         self.statuses.append(status)
-        ok = status in (GraspStatus.STABLE, GraspStatus.NOT_CONVERGED) and float(deepest) <= self.limit
+        ok = (status in (GraspStatus.STABLE, GraspStatus.NOT_CONVERGED) and float(deepest) <= self.limit
+              and int(count) >= self.fewest)
         if ok and (self.best is None or float(v) > self.best[0]):
             self.best = (float(v), np.array(x), ev, np.array(qpos))
         return float(v)
@@ -277,7 +279,7 @@ def _bounds(hand, q0, w0, tune_wrist: bool, wrist_bounds):
 def tune_hand(hand, mesh, qpos0, wrist0=None, *, object_pose=None, tune_wrist: bool = False,
               wrist_bounds=(0.01, 0.1), penetration_weight: float = 10.0, max_penetration: float = 1e-3,
               maxiter: int = 50, ftol: float = 1e-7, tol: float = 1e-6, options: EvaluateOptions = EvaluateOptions(),
-              max_tilt: float = DEFAULT_MAX_TILT, callback=None, **fields) -> HandTuneResult:
+              max_tilt: float = DEFAULT_MAX_TILT, min_fingertips: int = 2, callback=None, **fields) -> HandTuneResult:
     """Maximise the evaluation value of ``hand``'s grasp on ``mesh`` over its joint angles.
 
     Args:
@@ -293,6 +295,8 @@ def tune_hand(hand, mesh, qpos0, wrist0=None, *, object_pose=None, tune_wrist: b
             the value over the start's value, variables scaled to ``[0, 1]``).
         options: [`EvaluateOptions`][jaxgrasp.EvaluateOptions] of every evaluation.
         max_tilt: rad, see [`grasp`][jaxgrasp.Hand.grasp].
+        min_fingertips: the fewest fingertips in contact an accepted iterate has (the
+            start must have as many).
         callback: ``callback(iteration, value_J, x)`` after each iteration.
         fields: ``young_modulus``, ``friction``, ``max_force``, ``mass`` or ``density``,
             ``gravity``, ``center_of_mass``, ``units`` as for [`grasp`][jaxgrasp.Hand.grasp].
@@ -314,12 +318,12 @@ def tune_hand(hand, mesh, qpos0, wrist0=None, *, object_pose=None, tune_wrist: b
     _check_couplings(hand, q0)
     core = _compiled(hand, options, float(max_tilt))
     x0 = np.concatenate([q0, w0])
-    v0, _, _, _, ev0, deep0, _, p0 = core(jnp.asarray(x0), data)
-    _check_start(float(v0), ev0, float(deep0), max_penetration)
+    v0, _, _, _, ev0, deep0, _, p0, n0 = core(jnp.asarray(x0), data)
+    _check_start(float(v0), ev0, float(deep0), max_penetration, int(n0), min_fingertips)
     scale = {"value": float(v0)}
     vg = _objective(core, lo, hi, scale, penetration_weight)
     u0 = np.where(hi > lo, (x0 - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0)
-    rec = _Record(u0, (float(v0), ev0, float(deep0), p0), max_penetration)
+    rec = _Record(u0, (float(v0), ev0, float(deep0), p0, int(n0)), max_penetration, min_fingertips)
     status, iters, evals = run_search("scipy_lbfgsb", vg, u0, data, rec, maxiter=maxiter, tol=tol, ftol=ftol,
                                       patience=4, callback=callback)
     v_best, u_best, _, q_best = rec.best
@@ -350,8 +354,12 @@ def _check_couplings(hand, q0: np.ndarray) -> None:
             f"(Hand.project_joints gives a configuration within it)")
 
 
-def _check_start(v0: float, ev0, deep0: float, max_penetration: float) -> None:
-    """A start with value 0 or links too deep in the object is an error (one line)."""
+def _check_start(v0: float, ev0, deep0: float, max_penetration: float, count: int = 2, fewest: int = 2) -> None:
+    """A start with value 0, links too deep in the object or fewer than ``fewest`` fingertips
+    in contact (it has ``count``) is an error (one line)."""
+    if count < fewest:
+        raise GraspValueError(f"tune_hand: the start has {count} fingertips in contact, fewer than min_fingertips = "
+                              f"{fewest}")
     if not (v0 > 0.0 and math.isfinite(v0)):
         raise GraspValueError(
             f"tune_hand: the start has value {v0:g} J (status {GraspStatus(int(ev0.status)).label}): its gradient is 0, "
@@ -366,14 +374,15 @@ def _check_start(v0: float, ev0, deep0: float, max_penetration: float) -> None:
 
 def _objective(core, lo, hi, scale, weight: float):
     """``vg(u, data) -> ((f, (value, evaluation, deepest, qpos)), grad)`` on ``[0, 1]^(J + 6)``:
-    ``f = -value / start value + weight * penalty``, ``qpos`` the joints evaluated, for `run_search`."""
+    ``f = -value / start value + weight * penalty``, ``qpos`` the joints evaluated, ``in_contact``
+    the fingertips in contact there, for `run_search`."""
     span = jnp.asarray(hi - lo)
 
     def vg(u, data):
         x = jnp.asarray(lo) + span * jnp.asarray(u)
-        v, gv, p, gp, ev, deepest, _, qpos = core(x, data)
+        v, gv, p, gp, ev, deepest, _, qpos, count = core(x, data)
         f = -float(v) / scale["value"] + weight * float(p)
         g = (-np.asarray(gv) / scale["value"] + weight * np.asarray(gp)) * np.asarray(span)
-        return (jnp.float64(f), (float(v), ev, float(deepest), np.asarray(qpos))), jnp.asarray(g)
+        return (jnp.float64(f), (float(v), ev, float(deepest), np.asarray(qpos), int(count))), jnp.asarray(g)
 
     return vg
