@@ -14,8 +14,8 @@ packages, each importing only from those before it in this list:
 * `jaxgrasp.engine`: [`evaluate`][jaxgrasp.evaluate] and [`evaluate_batch`][jaxgrasp.evaluate_batch], compiled stages,
   the executable store, checkpoints;
 * `jaxgrasp.analysis`: [`sweep`][jaxgrasp.sweep], [`tune`][jaxgrasp.tune], [`epsilon`][jaxgrasp.epsilon], [`robust`][jaxgrasp.robust];
-* `jaxgrasp.planning`: [`plan`][jaxgrasp.plan], the best grasps on a mesh;
 * `jaxgrasp.hands`: [`Hand`][jaxgrasp.Hand] from MJCF (the ``hands`` extra), [`tune_hand`][jaxgrasp.tune_hand];
+* `jaxgrasp.planning`: [`plan`][jaxgrasp.plan], the best grasps on a mesh, by free fingertips or a hand;
 * `jaxgrasp.simulation`: [`simulate`][jaxgrasp.simulate], the grasp in MuJoCo (extra ``jaxgrasp[sim]``);
 * `jaxgrasp.plots` and `jaxgrasp.cli` (the ``jaxgrasp`` command).
 
@@ -118,8 +118,8 @@ __all__ = [
 
 _load, _dir, _LAZY = _startup.attach(__name__)  # _LAZY: each name -> (its package face, the name)
 
-_SUBMODULES = ("solver", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "planning",
-               "hands", "simulation", "plots", "cli")
+_SUBMODULES = ("solver", "model", "surface", "presets", "io", "tolerance", "engine", "analysis", "hands",
+               "planning", "simulation", "plots", "cli")
 """The packages (and the module ``presets``) that ``jaxgrasp.<name>`` loads when first used."""
 
 

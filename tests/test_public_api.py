@@ -421,7 +421,7 @@ def built_results(tmp_path) -> dict[str, list]:
                                    Uncertainty)
     from jaxgrasp.engine import BatchResult
     from jaxgrasp.hands import HandTuneResult, HandValue
-    from jaxgrasp.planning import PlanResult, PlanStatus
+    from jaxgrasp.planning import HandPlanResult, PlanResult, PlanStatus
     from jaxgrasp.simulation import SimulationResult, SimulationStatus, Trial
     from jaxgrasp.solver import SolverResult
 
@@ -463,6 +463,11 @@ def built_results(tmp_path) -> dict[str, list]:
         epsilon=np.array([0.026]), refined=np.array([False]), mesh_positions=np.zeros((1, 2, 3)), sampled=10,
         valid=4, rule_failures={"flatness": 6}, stable=1, dropped=0, refine_tried=0, refine_kept=0, seed=0,
         elapsed_s=1.25, settings={"fingers": 2, "gravity": np.array([0.0, 0.0, -9.81])})
+    hand_plan = HandPlanResult(
+        status=PlanStatus.FOUND, grasps=(None,), values=np.array([1e-3]), statuses=np.array([0]), active=np.array([3]),
+        penetration=np.array([-2e-4]), epsilon=np.array([0.1]), refined=np.array([True]), qpos=np.zeros((1, 4)),
+        wrist=np.zeros((1, 6)), candidates=64, evaluated=60, eligible=50, stable=5, refine_tried=3, refine_kept=2,
+        seed=0, elapsed_s=12.5, timings={"close": 5.0}, settings={"objective": "value", "gravity": np.zeros(3)})
     hold = Trial(kind="hold", success=True, max_displacement_m=1e-4, max_rotation_rad=1e-3, slipped_contact=None,
                  slip_time_s=None, time_s=np.array([0.0, 0.5]), displacement_m=np.array([0.0, 1e-4]),
                  rotation_rad=np.array([0.0, 1e-3]), max_sliding_m=np.zeros(2))
@@ -487,6 +492,8 @@ def built_results(tmp_path) -> dict[str, list]:
         "RobustBatch": [robust],
         "RobustResult": [robust[0], robust[1]],
         "PlanResult": [plan, dataclasses.replace(plan, status=PlanStatus.NO_VALID, grasps=(), values=np.zeros(0))],
+        "HandPlanResult": [hand_plan, dataclasses.replace(hand_plan, status=PlanStatus.NO_VALID, grasps=(),
+                                                          values=np.zeros(0))],
         "SimulationResult": [simulated, not_simulated],
         "EpsilonResult": [jaxgrasp.epsilon(cube), EpsilonResult(np.array([0.1, -0.2]), np.array([True, False]),
                                                                 np.array([0.05, 0.05]), 8, True)],

@@ -31,6 +31,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
     from jaxgrasp.hands._datasets import DEXGRASPBENCH_MESH, PREGRASP_FACTOR, SQUEEZE_FACTOR
     from jaxgrasp.hands._file import hand_grasp_toml, is_hand_grasp_file
+    from jaxgrasp.hands._grasp import Material, contact_grasp, material
 
 __all__ = [
     "Hand",

@@ -18,6 +18,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.planning._limits import SAMPLERS
     from jaxgrasp.planning._plan import plan
     from jaxgrasp.planning._progress import PlanProgress
+    from jaxgrasp.planning._hand_result import HAND_RESULT_COLUMNS, HandPlanResult
     from jaxgrasp.planning._result import PlanResult, PlanStatus
 
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
@@ -28,11 +29,12 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
         PLAN_REFINE_WHAT,
         PLAN_SAMPLES_WHAT,
     )
+    from jaxgrasp.planning._hand_plan import OBJECTIVES, check_hand_plan
     from jaxgrasp.planning._plan import check_plan
 
     # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
     from jaxgrasp.planning._plan import CHUNK, draw_valid, grasps_of, setup
 
-__all__ = ["plan", "PlanResult", "PlanStatus", "PlanProgress", "SAMPLERS"]
+__all__ = ["plan", "PlanResult", "HandPlanResult", "PlanStatus", "PlanProgress", "SAMPLERS"]
 
 __getattr__, __dir__, _LAZY = _startup.attach(__name__)

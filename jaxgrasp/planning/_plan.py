@@ -51,6 +51,10 @@ from jaxgrasp.planning._limits import (
     PLAN_SAMPLES_WHAT,
     SAMPLERS,
 )
+from jaxgrasp.planning._hand_close import CloseSettings
+from jaxgrasp.planning._hand_plan import _planned as plan_hand_checked
+from jaxgrasp.planning._hand_plan import check_hand_plan
+from jaxgrasp.planning._hand_result import HandPlanResult
 from jaxgrasp.planning._progress import PlanProgress
 from jaxgrasp.planning._result import PlanResult, PlanStatus
 from jaxgrasp.planning._sampling import antipodal_pairs, spread_tuples, surface_points
@@ -99,19 +103,22 @@ class _Setup:
 
 
 def plan(
-    mesh, fingers: int = 2, *, radius: float, young_modulus: float, friction: float, max_force: float,
-    mass: float | None = None, density: float | None = None, center_of_mass=None, gravity=DEFAULT_GRAVITY,
-    units: str = "m", samples: int = 150, top: int = 10, refine: int = 3, seed: int = 0,
-    rules: ContactRules | None = None, sampler: str | None = None, tune_maxiter: int = 30,
-    robust: Uncertainty | None = None, robust_samples: int = 64, progress=None,
-) -> PlanResult:
-    """Find the grasps of a meshed object by ``fingers`` fingertips that tolerate the most energy.
+    mesh, fingers: int | None = None, *, radius: float | None = None, young_modulus: float, friction: float,
+    max_force: float, mass: float | None = None, density: float | None = None, center_of_mass=None,
+    gravity=DEFAULT_GRAVITY, units: str = "m", samples: int | None = None, top: int = 10, refine: int = 3,
+    seed: int = 0, rules: ContactRules | None = None, sampler: str | None = None, tune_maxiter: int = 30,
+    robust: Uncertainty | None = None, robust_samples: int = 64, hand=None, fingertips=None,
+    min_fingertips: int = 2, objective: str = "value", max_penetration: float = 1e-3, progress=None,
+) -> PlanResult | HandPlanResult:
+    """Find the grasps of a meshed object that tolerate the most energy: by ``fingers`` free
+    fingertips, or by a robot ``hand``.
 
     Args:
         mesh: ``trimesh.Trimesh`` or mesh file (STL, OBJ, PLY, OFF, GLB), vertices in ``units``.
-        fingers: number of fingertips, 2 to 8.
-        radius, young_modulus, friction, max_force: every fingertip's radius (m), Young's
-            modulus (Pa), friction coefficient and force limit (N).
+        fingers: number of free fingertips, 2 to 8 (default 2; not with ``hand``).
+        radius, young_modulus, friction, max_force: every fingertip's radius (m; free
+            fingertips only: a hand's are its own), Young's modulus (Pa), friction
+            coefficient and force limit (N).
         mass, density, center_of_mass: the object's mass (kg) or density (kg/m^3), and its
             centre of mass (m, mesh frame; default the watertight mesh's), as
             [`jaxgrasp.from_mesh`][jaxgrasp.from_mesh].
@@ -121,24 +128,33 @@ def plan(
         top: ranked grasps to return. refine: of the best, how many to tune. seed: of every
             random draw: equal seeds give equal plans.
         rules: the rules' tolerances (default ``ContactRules()``, [`ContactRules`][jaxgrasp.surface.ContactRules]).
-        sampler: one of `SAMPLERS` (default ``antipodal`` for two fingers, else ``spread``).
-        tune_maxiter: iterations of each refinement.
-        robust: an [`Uncertainty`][jaxgrasp.analysis.Uncertainty]: rank the ``top`` grasps by their robust
-            value instead (the mean value over ``robust_samples`` perturbed copies,
-            [`jaxgrasp.robust_batch`][jaxgrasp.robust_batch]; ties in the order of their values); ``None``: by
-            the value.
+        sampler: one of `SAMPLERS` (default ``antipodal`` for two, else ``spread``). tune_maxiter: per refinement.
+        robust: an [`Uncertainty`][jaxgrasp.analysis.Uncertainty]: rank the ``top`` by the mean value over ``robust_samples``
+            perturbed copies ([`jaxgrasp.robust_batch`][jaxgrasp.robust_batch]; ties by value); ``None``: by the value.
         robust_samples: perturbed copies of each ranked grasp. progress: ``progress(stage,
             done, total)`` (stage ``"draw"``, ``"evaluate"``, ``"refine"``, ``"robust"``);
             default a `PlanProgress`: records on the ``"jaxgrasp"`` logger.
+        hand: a [`Hand`][jaxgrasp.Hand], or its MJCF or URDF file with ``fingertips`` (names, as
+            [`Hand.from_file`][jaxgrasp.Hand.from_file]): plan the hand's configurations instead
+            (`jaxgrasp.planning._hand_plan`); ``samples`` (default 256) counts its closed candidates.
+        min_fingertips, objective, max_penetration: with a hand, the fewest fingertips in contact
+            of a ranked grasp; what is maximised, ``"value"`` or ``"epsilon"`` (the Ferrari-Canny
+            epsilon); how deep (m) its other links may lie in the object.
 
     Returns:
-        A [`PlanResult`][jaxgrasp.planning.PlanResult].
+        A [`PlanResult`][jaxgrasp.planning.PlanResult]; with a hand a [`HandPlanResult`][jaxgrasp.planning.HandPlanResult].
 
     Raises:
-        GraspValueError: bad arguments or mesh (one line), before anything is computed
-            (`check_plan`).
+        GraspValueError: bad arguments or mesh (one line), before anything is computed.
     """
     t0 = time.perf_counter()
+    if hand is not None:
+        return _with_hand(mesh, hand, fingertips, (fingers, radius, rules, sampler, robust), progress, t0, dict(
+            young_modulus=young_modulus, friction=friction, max_force=max_force, mass=mass, density=density,
+            center_of_mass=center_of_mass, gravity=gravity, units=units, samples=256 if samples is None else samples,
+            top=top, refine=refine, seed=seed, min_fingertips=min_fingertips, objective=objective,
+            tune_maxiter=tune_maxiter, max_penetration=max_penetration))
+    fingers, samples = _free_defaults(fingers, samples, radius, fingertips)
     checked = check_plan(mesh, fingers, radius=radius, young_modulus=young_modulus, friction=friction,
                          max_force=max_force, mass=mass, density=density, center_of_mass=center_of_mass,
                          gravity=gravity, units=units, samples=samples, top=top, refine=refine, seed=seed,
@@ -146,6 +162,29 @@ def plan(
                          robust_samples=robust_samples)
     progress = PlanProgress(t0) if progress is None else progress
     return _planned(checked, fingers, samples, top, refine, seed, tune_maxiter, robust, robust_samples, progress, t0)
+
+
+def _free_defaults(fingers, samples, radius, fingertips) -> tuple[int, int]:
+    """``(fingers, samples)`` of a plan by free fingertips (defaults 2 and 150); one line for
+    a missing ``radius`` or a ``fingertips`` without a hand."""
+    if fingertips is not None:
+        raise GraspValueError("plan: fingertips= names a hand's fingertips; give hand= too")
+    if radius is None:
+        raise GraspValueError("plan: radius= (m, every fingertip's) is needed without a hand")
+    return 2 if fingers is None else fingers, 150 if samples is None else samples
+
+
+def _with_hand(mesh, hand, fingertips, free: tuple, progress, t0: float, kwargs: dict) -> HandPlanResult:
+    """[`plan`][jaxgrasp.plan] with a hand: the options of free fingertips ``free`` (fingers,
+    radius, rules, sampler, robust) refused (one line), the rest checked, then planned."""
+    for name, v in zip(("fingers", "radius", "rules", "sampler", "robust"), free):
+        if v is not None:
+            raise GraspValueError(f"plan: {name}= is for free fingertips, not with hand= (a hand has its own)")
+    inputs = check_hand_plan(mesh, hand, fingertips, **kwargs)
+    progress = PlanProgress(t0) if progress is None else progress
+    k = kwargs
+    return plan_hand_checked(inputs, k["samples"], k["top"], k["refine"], k["seed"], k["min_fingertips"],
+                             k["objective"], k["tune_maxiter"], k["max_penetration"], CloseSettings(), progress, t0)
 
 
 def _planned(checked: "PlanInputs", fingers, samples, top, refine, seed, tune_maxiter, robust, robust_samples,

@@ -23,7 +23,8 @@ class PlanProgress:
     """
 
     WORDS = {"draw": "valid candidates found", "evaluate": "candidates evaluated", "refine": "best refined",
-             "robust": "perturbed copies evaluated"}
+             "robust": "perturbed copies evaluated", "grid": "points of the object's distance grid",
+             "close": "hand candidates closed onto the object"}
     """What each stage counts, in words."""
 
     def __init__(self, t0: float | None = None, show: bool = True):

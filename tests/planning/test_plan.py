@@ -185,11 +185,15 @@ def test_cli_plan_bad_input_creates_nothing(bad_inputs, tmp_path, run_cli, mesh,
 def test_plan_and_check_plan_take_the_same_arguments():
     import inspect
 
+    from jaxgrasp.planning import check_hand_plan
     from jaxgrasp.planning._plan import check_plan
 
     params = dict(inspect.signature(plan).parameters)
     params.pop("progress")
-    assert list(inspect.signature(check_plan).parameters.values()) == list(params.values())
+    hand_only = ("hand", "fingertips", "min_fingertips", "objective", "max_penetration")
+    # plan's defaults of fingers, radius and samples are None: resolved for free fingertips or a hand
+    assert list(inspect.signature(check_plan).parameters) == [n for n in params if n not in hand_only]
+    assert set(inspect.signature(check_hand_plan).parameters) <= set(params)
 
 
 def test_density_zero_is_a_weightless_object(bad_inputs, tmp_path, run_cli, monkeypatch):
