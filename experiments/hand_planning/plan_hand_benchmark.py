@@ -1,0 +1,81 @@
+"""Plan with the Shadow hand on real objects: how often a stable grasp, with how many fingertips, in what time.
+
+Each of pybullet's generated objects (``pybullet_data/random_urdfs/NNN``) scaled so its longest
+side is ``--size`` mm, written as an STL in mm, planned by ``jaxgrasp.plan(hand=...)`` with the
+Shadow hand of ``examples/hands/shadow/`` and its five distal capsules as fingertips
+(E = 3e5 Pa, mu = 0.8, f_max = 15 N, 500 kg/m^3). One line per object, then the shares and
+the median time, with the load average at the start and the end.
+
+    python experiments/hand_planning/plan_hand_benchmark.py [--objects 10] [--samples 256] [--objective value]
+"""
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import jaxgrasp
+
+ROOT = Path(__file__).resolve().parents[2]
+HAND = ROOT / "examples" / "hands" / "shadow" / "shadow_hand.xml"
+TIPS = [f"robot0:C_{f}distal" for f in ("ff", "mf", "rf", "lf", "th")]
+FIELDS = dict(young_modulus=3e5, friction=0.8, max_force=15.0, density=500.0, units="mm")
+
+
+def object_file(index: int, size_mm: float, folder: str) -> str:
+    """pybullet's object ``index`` scaled to ``size_mm`` on its longest side, as an STL in mm."""
+    import pybullet_data
+    import trimesh
+
+    name = f"{index:03d}"
+    mesh = trimesh.load(os.path.join(pybullet_data.getDataPath(), "random_urdfs", name, f"{name}.obj"), force="mesh")
+    mesh.apply_scale(size_mm / float(mesh.extents.max()))
+    path = os.path.join(folder, f"{name}.stl")
+    mesh.export(path)
+    return path
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--objects", type=int, default=10)
+    ap.add_argument("--first", type=int, default=0)
+    ap.add_argument("--samples", type=int, default=256)
+    ap.add_argument("--size", type=float, default=70.0, help="longest side, mm")
+    ap.add_argument("--objective", default="value", choices=("value", "epsilon"))
+    ap.add_argument("--json", default=None, help="write one JSON line per object here")
+    args = ap.parse_args()
+    hand = jaxgrasp.Hand.from_file(HAND, TIPS)
+    print(f"load average at start {os.getloadavg()}; {args.objects} objects, {args.samples} candidates, "
+          f"objective {args.objective}", flush=True)
+    rows = []
+    with tempfile.TemporaryDirectory() as folder:
+        for k in range(args.first, args.first + args.objects):
+            path = object_file(k, args.size, folder)
+            t0 = time.perf_counter()
+            res = jaxgrasp.plan(path, hand=hand, samples=args.samples, objective=args.objective, seed=k,
+                                progress=lambda *a: None, **FIELDS)
+            row = dict(object=k, status=res.status_name, seconds=time.perf_counter() - t0,
+                       stable=bool(len(res.statuses) and res.statuses[0] == 0),
+                       active=int(res.active[0]) if len(res.active) else 0,
+                       penetration_mm=float(res.penetration[0]) * 1e3 if len(res.active) else None,
+                       value_J=res.value, epsilon=float(res.epsilon[0]) if len(res.epsilon) else None,
+                       candidates_stable=res.stable, timings={a: round(b, 1) for a, b in res.timings.items()})
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+            if args.json:
+                with open(args.json, "a") as fh:
+                    fh.write(json.dumps(row) + "\n")
+    n = len(rows)
+    stable = sum(r["stable"] for r in rows)
+    three = sum(r["stable"] and r["active"] >= 3 for r in rows)
+    print(f"objects {n}: stable best {stable} ({100 * stable / n:.0f} %), stable with >= 3 fingertips {three} "
+          f"({100 * three / n:.0f} %), median {statistics.median(r['seconds'] for r in rows):.1f} s per object; "
+          f"load average at end {os.getloadavg()}", flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
