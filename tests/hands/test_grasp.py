@@ -129,6 +129,8 @@ def test_tune_hand_raises_the_value_within_limits(hand, cube):
     assert res.value == pytest.approx(float(jaxgrasp.evaluate(res.grasp.grasp).value), rel=1e-9)
     with pytest.raises(jaxgrasp.GraspValueError, match="value 0"):
         jaxgrasp.tune_hand(hand, cube, np.array([-0.02, 0.0, 0.0, 0.0005, 0.0, 0.0]), **FIELDS)
+    with pytest.raises(jaxgrasp.GraspValueError, match="the start has 2 fingertips in contact, fewer than min_fingertips = 3"):
+        jaxgrasp.tune_hand(hand, cube, CONFIGS[0], maxiter=3, min_fingertips=3, **FIELDS)
 
 
 def test_hand_digest_follows_the_content_not_the_path(hand, tmp_path):
