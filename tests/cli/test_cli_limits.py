@@ -282,7 +282,9 @@ def test_tune_and_batch_print_a_first_line_within_a_second(tmp_path):
     ]:
         t0 = time.perf_counter()
         subprocess.run([sys.executable, "-c", "import jaxgrasp.cli"], cwd=ROOT, env=env, check=True)
-        budget = max(1.0, time.perf_counter() - t0 + 0.6)
+        # the import's own time varies under the suite's load as much as the command's: a margin
+        # in proportion to it (a first line after compiling would come 10 s or more late)
+        budget = max(1.0, 1.3 * (time.perf_counter() - t0) + 0.6)
         seconds, line = _first_line_seconds(argv, env, wait=budget + 5)
         assert line.startswith(start), line
         assert seconds < budget, (argv[0], seconds, budget)
