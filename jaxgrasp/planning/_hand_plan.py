@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
+from functools import lru_cache
 
 import jax
 import jax.numpy as jnp
@@ -38,6 +39,7 @@ from jaxgrasp.io import load_mesh
 from jaxgrasp.model import DEFAULT_GRAVITY, GraspValueError
 from jaxgrasp.planning._hand_close import CloseSettings, close_hands, hand_starts, unpack
 from jaxgrasp.planning._hand_result import HandPlanResult
+from jaxgrasp.planning._progress import stage as _stage
 from jaxgrasp.planning._limits import MAX_PLAN_REFINE, MAX_PLAN_SAMPLES, PLAN_REFINE_WHAT, PLAN_SAMPLES_WHAT
 from jaxgrasp.planning._result import PlanStatus
 from jaxgrasp.surface import PAD_FACES, Surface, distance_grid, mass_properties
@@ -154,10 +156,6 @@ def _object(mesh, units, mass, density, center_of_mass, gravity, hand, fields) -
     return HandPlanInputs(hand, m, source, units, np.asarray(com, np.float64), float(kg), g, fields)
 
 
-def _stage(progress, name: str):
-    return None if progress is None else (lambda done, total: progress(name, done, total))
-
-
 def _surfaces(inputs: HandPlanInputs, progress) -> tuple:
     """``(surface, grid)``: the padded exact surface and its distance grid over the
     object's box and `_GRID_MARGIN` (stage 1)."""
@@ -198,10 +196,16 @@ def _close(inputs: HandPlanInputs, surface, grid, samples: int, rng, settings: C
     return np.asarray(q), np.asarray(w)
 
 
+@lru_cache(maxsize=8)
+def _depth_function(hand):
+    """``fn(surface, q (S, J), w (S, 6)) -> (S,)``, compiled once per hand (the surface an argument)."""
+    return jax.jit(jax.vmap(lambda s, a, b: jnp.max(hand.link_depths(a, b, jnp.zeros(6), s)), in_axes=(None, 0, 0)))
+
+
 def _depths(hand, surface, q, w) -> np.ndarray:
     """``(S,)`` m, the deepest link sample of each configuration on the exact surface."""
-    fn = jax.jit(jax.vmap(lambda a, b: jnp.max(hand.link_depths(a, b, jnp.zeros(6), surface))))
-    return np.concatenate([np.asarray(fn(q[i:i + CLOSE_CHUNK], w[i:i + CLOSE_CHUNK]))
+    fn = _depth_function(hand)
+    return np.concatenate([np.asarray(fn(surface, q[i:i + CLOSE_CHUNK], w[i:i + CLOSE_CHUNK]))
                            for i in range(0, len(q), CLOSE_CHUNK)])
 
 
@@ -230,13 +234,22 @@ def _contact_grasps(inputs: HandPlanInputs, surface, q, w):
     """The batched [`Grasp`][jaxgrasp.Grasp] ``(S, F, ...)`` of configurations ``q`` ``(S, J)``,
     ``w`` ``(S, 6)`` on the exact ``surface`` (`jaxgrasp.hands.contact_grasp`), its
     ``active`` the fingertips in contact."""
-    from jaxgrasp.hands import contact_grasp, material
+    from jaxgrasp.hands import material
 
     hand, f = inputs.hand, inputs.fields
     mat = material(hand.num_fingertips, inputs.mesh, f["young_modulus"], f["friction"], f["max_force"], inputs.mass,
                    None, inputs.gravity, inputs.com)
-    fn = jax.jit(jax.vmap(lambda a, b: contact_grasp(hand, a, b, jnp.zeros(6), surface, mat)[0]))
-    return fn(jnp.asarray(q), jnp.asarray(w))
+    return _contact_function(hand)(surface, mat, jnp.asarray(q), jnp.asarray(w))
+
+
+@lru_cache(maxsize=8)
+def _contact_function(hand):
+    """``fn(surface, material, q (S, J), w (S, 6))`` -> the batched grasp, compiled once per hand:
+    the epsilon search calls it at every step."""
+    from jaxgrasp.hands import contact_grasp
+
+    one = lambda s, m, a, b: contact_grasp(hand, a, b, jnp.zeros(6), s, m)[0]  # noqa: E731
+    return jax.jit(jax.vmap(one, in_axes=(None, None, 0, 0)))
 
 
 def _epsilons(inputs: HandPlanInputs, surface, q, w) -> np.ndarray:

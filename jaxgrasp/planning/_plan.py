@@ -56,6 +56,7 @@ from jaxgrasp.planning._hand_plan import _planned as plan_hand_checked
 from jaxgrasp.planning._hand_plan import check_hand_plan
 from jaxgrasp.planning._hand_result import HandPlanResult
 from jaxgrasp.planning._progress import PlanProgress
+from jaxgrasp.planning._progress import stage as _stage
 from jaxgrasp.planning._result import PlanResult, PlanStatus
 from jaxgrasp.planning._sampling import antipodal_pairs, spread_tuples, surface_points
 from jaxgrasp.surface import (
@@ -339,9 +340,6 @@ def setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_mod
                   units)
 
 
-def _stage(progress, name: str):
-    """``progress(done, total)`` of one stage, or ``None``."""
-    return None if progress is None else (lambda done, total: progress(name, done, total))
 
 
 # ------------------------------------------------------------------------------ draw, keep

@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import time
 
-__all__ = ["PlanProgress"]
+__all__ = ["PlanProgress", "stage"]
 
 LOGGER = logging.getLogger("jaxgrasp")
 """The logger of every jaxgrasp message (`jaxgrasp.engine._progress`)."""
@@ -37,3 +37,9 @@ class PlanProgress:
             return
         self.stage, self.last = stage, now
         LOGGER.info(f"jaxgrasp: plan: {done}/{total} {self.WORDS.get(stage, stage)}, elapsed {now - self.t0:.1f} s")
+
+
+def stage(progress, name: str):
+    """``progress(done, total)`` of one stage ``name`` of a plan's ``progress(stage, done,
+    total)``, or ``None``."""
+    return None if progress is None else (lambda done, total: progress(name, done, total))
