@@ -43,7 +43,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", type=int, default=10)
     ap.add_argument("--first", type=int, default=0)
-    ap.add_argument("--samples", type=int, default=256)
+    ap.add_argument("--samples", type=int, default=None, help="closed candidates (default: the planner's)")
     ap.add_argument("--size", type=float, default=70.0, help="longest side, mm")
     ap.add_argument("--objective", default="value", choices=("value", "epsilon"))
     ap.add_argument("--json", default=None, help="write one JSON line per object here")

@@ -58,6 +58,7 @@ _BAND = (0.25, 0.5, 0.4)  # dr* drawn in [0.25, 0.5] dr_max, its band 0.4 dr_max
 _EPSILON_STEP = (0.02, 0.002, 0.02)  # the epsilon search's steps: joint range fraction, wrist m, wrist rad
 
 PREFERRED_FINGERTIPS = 3
+HAND_SAMPLES = 128  # closed candidates by default: 6-10 % of them close stable, so about ten per object
 """Fingertips in contact a plan prefers: of its eligible grasps, those with at least this many
 (or all the hand's, if it has fewer) rank first, stable ones before them by the value."""
 
@@ -111,7 +112,7 @@ def _hand_of(hand, fingertips):
 
 
 def check_hand_plan(mesh, hand, fingertips=None, *, young_modulus, friction, max_force, mass=None, density=None,
-                    center_of_mass=None, gravity=DEFAULT_GRAVITY, units: str = "m", samples: int = 256, top: int = 10,
+                    center_of_mass=None, gravity=DEFAULT_GRAVITY, units: str = "m", samples: int = HAND_SAMPLES, top: int = 10,
                     refine: int = 3, seed: int = 0, min_fingertips: int = 2, objective: str = "value",
                     tune_maxiter: int = 30, max_penetration: float = 1e-3) -> HandPlanInputs:
     """Check a hand plan's arguments, read the hand and the mesh, computing nothing else
@@ -358,7 +359,7 @@ def _pool(inputs, surface, q, w, m, eligible, objective, top, refine, maxiter, r
 
 
 def plan_hand(mesh, hand, fingertips=None, *, young_modulus, friction, max_force, mass=None, density=None,
-              center_of_mass=None, gravity=DEFAULT_GRAVITY, units: str = "m", samples: int = 256, top: int = 10,
+              center_of_mass=None, gravity=DEFAULT_GRAVITY, units: str = "m", samples: int = HAND_SAMPLES, top: int = 10,
               refine: int = 3, seed: int = 0, min_fingertips: int = 2, objective: str = "value",
               tune_maxiter: int = 30, max_penetration: float = 1e-3, settings: CloseSettings = CloseSettings(),
               progress=None) -> HandPlanResult:

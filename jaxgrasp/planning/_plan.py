@@ -53,7 +53,7 @@ from jaxgrasp.planning._limits import (
 )
 from jaxgrasp.planning._hand_close import CloseSettings
 from jaxgrasp.planning._hand_plan import _planned as plan_hand_checked
-from jaxgrasp.planning._hand_plan import check_hand_plan
+from jaxgrasp.planning._hand_plan import HAND_SAMPLES, check_hand_plan
 from jaxgrasp.planning._hand_result import HandPlanResult
 from jaxgrasp.planning._progress import PlanProgress
 from jaxgrasp.planning._progress import stage as _stage
@@ -137,7 +137,7 @@ def plan(
             default a `PlanProgress`: records on the ``"jaxgrasp"`` logger.
         hand: a [`Hand`][jaxgrasp.Hand], or its MJCF or URDF file with ``fingertips`` (names, as
             [`Hand.from_file`][jaxgrasp.Hand.from_file]): plan the hand's configurations instead
-            (`jaxgrasp.planning._hand_plan`); ``samples`` (default 256) counts its closed candidates.
+            (`jaxgrasp.planning._hand_plan`); ``samples`` (default 128) counts its closed candidates.
         min_fingertips, objective, max_penetration: with a hand, the fewest fingertips in contact
             of a ranked grasp; what is maximised, ``"value"`` or ``"epsilon"`` (the Ferrari-Canny
             epsilon); how deep (m) its other links may lie in the object.
@@ -152,7 +152,7 @@ def plan(
     if hand is not None:
         return _with_hand(mesh, hand, fingertips, (fingers, radius, rules, sampler, robust), progress, t0, dict(
             young_modulus=young_modulus, friction=friction, max_force=max_force, mass=mass, density=density,
-            center_of_mass=center_of_mass, gravity=gravity, units=units, samples=256 if samples is None else samples,
+            center_of_mass=center_of_mass, gravity=gravity, units=units, samples=HAND_SAMPLES if samples is None else samples,
             top=top, refine=refine, seed=seed, min_fingertips=min_fingertips, objective=objective,
             tune_maxiter=tune_maxiter, max_penetration=max_penetration))
     fingers, samples = _free_defaults(fingers, samples, radius, fingertips)
