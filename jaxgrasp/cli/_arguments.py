@@ -59,6 +59,7 @@ __all__ = [
     "MAX_TOP",
     "DEFAULT_ROBUST",
     "PLAN_DEFAULTS",
+    "plan_fields",
     "MAGNIFICATION_RANGE",
 ]
 
@@ -466,6 +467,26 @@ def add_tune(sub) -> None:
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
+def plan_fields(args) -> dict:
+    """The fingertip and object keyword arguments of [`jaxgrasp.plan`][jaxgrasp.plan], checked (``radius``
+    ``None`` where not given)."""
+    parts = args.gravity.split(",")
+    if len(parts) != 3:
+        raise UsageError(f"--gravity {args.gravity!r}: give three numbers GX,GY,GZ in m/s^2")
+    gravity = [parse_number("--gravity", p, "component") for p in parts]
+    for name in ("radius", "young_modulus", "friction", "max_force", "density", "mass"):
+        v = getattr(args, name)
+        zero = name in ("density", "mass")  # 0: a weightless object (the model's default mass), honoured
+        if v is not None and not (math.isfinite(v) and (v > 0 or (zero and v == 0))):
+            raise UsageError(f"--{name.replace('_', '-')} must be a finite number {'>=' if zero else '>'} 0, got {v:g}")
+    if args.mass is not None:
+        mass = dict(mass=args.mass)
+    else:
+        mass = dict(density=PLAN_DEFAULTS["density"] if args.density is None else args.density)
+    return dict(radius=args.radius, young_modulus=args.young_modulus, friction=args.friction,
+                max_force=args.max_force, gravity=gravity, units=args.units, **mass)
+
+
 def add_plan(sub) -> None:
     """Add the ``plan`` command to the ``jaxgrasp`` sub-parsers."""
 
@@ -475,17 +496,23 @@ def add_plan(sub) -> None:
         description=(
             "Draw candidate grasps on the object's mesh, keep those the model describes (flat contact "
             "patch, fingertips apart, one contact each, deformation in range), evaluate them, refine the "
-            "best by gradient tuning along the surface, and write them ranked into --out."
+            "best by gradient tuning along the surface, and write them ranked into --out. With --hand, "
+            "close a robot hand's configurations onto the object instead, keep those with enough fingertips in "
+            "contact and the other links out, refine the best over joints and wrist."
         ),
-        epilog="Example: jaxgrasp plan part.obj --units mm --fingers 3 --out plan-part",
+        epilog=("Examples: jaxgrasp plan part.obj --units mm --fingers 3 --out plan-part; "
+                "jaxgrasp plan part.obj --units mm --hand shadow/shadow_hand.xml "
+                "--fingertips robot0:C_ffdistal,robot0:C_thdistal --out plan-hand"),
     )
     d = PLAN_DEFAULTS
     sp.add_argument("mesh", help="the object's mesh file (STL, OBJ, PLY, OFF or GLB)")
-    sp.add_argument("--fingers", type=Count("--fingers", MAX_FINGERS, "fingertips"), default=d["fingers"], metavar="N",
-                    help=f"fingertips, 2 to {MAX_FINGERS} (default 2)")
+    sp.add_argument("--fingers", type=Count("--fingers", MAX_FINGERS, "fingertips"), default=None, metavar="N",
+                    help=f"free fingertips, 2 to {MAX_FINGERS} (default 2; not with --hand)")
     sp.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="the mesh's length unit (default m)")
-    for opt, key, unit in (("--radius", "radius", "m"), ("--young-modulus", "young_modulus", "Pa"),
-                           ("--friction", "friction", ""), ("--max-force", "max_force", "N")):
+    sp.add_argument("--radius", type=float, default=None, metavar="M",
+                    help=f"every free fingertip's radius, m (default {d['radius']:g}; with --hand: the hand's own)")
+    for opt, key, unit in (("--young-modulus", "young_modulus", "Pa"), ("--friction", "friction", ""),
+                           ("--max-force", "max_force", "N")):
         sp.add_argument(opt, dest=key, type=float, default=d[key], metavar=unit.upper() or "MU",
                         help=f"every fingertip's {key.replace('_', ' ')}" + (f", {unit}" if unit else "")
                         + f" (default {d[key]:g})")
@@ -495,8 +522,9 @@ def add_plan(sub) -> None:
     mass.add_argument("--mass", type=float, default=None, metavar="KG", help="object mass, kg")
     sp.add_argument("--gravity", default="0,0,-9.81", metavar="GX,GY,GZ",
                     help="gravity in the mesh's axes, m/s^2 (default 0,0,-9.81)")
-    sp.add_argument("--samples", type=Count("--samples", MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT), default=150, metavar="N",
-                    help=f"valid candidates to evaluate, at most {MAX_PLAN_SAMPLES:,} (default 150)")
+    sp.add_argument("--samples", type=Count("--samples", MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT), default=None, metavar="N",
+                    help=f"valid candidates to evaluate, at most {MAX_PLAN_SAMPLES:,} (default 150; with --hand: "
+                    "closed hand configurations, default 128)")
     sp.add_argument("--top", type=Count("--top", MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT), default=10, metavar="K",
                     help="ranked grasps to write (default 10)")
     sp.add_argument("--refine", type=Count("--refine", MAX_PLAN_REFINE, PLAN_REFINE_WHAT), default=3, metavar="K",
@@ -504,8 +532,10 @@ def add_plan(sub) -> None:
     sp.add_argument("--seed", type=int, default=0, help="seed of the random draws (default 0)")
     sp.add_argument("--sampler", choices=SAMPLERS, default=None,
                     help="candidate generator (default antipodal for 2 fingers, spread for more)")
-    sp.add_argument("--flatness", type=float, default=25.0, metavar="DEG",
-                    help="largest angle between the contact normal and a face under the fingertip (default 25)")
+    sp.add_argument("--flatness", type=float, default=None, metavar="DEG",
+                    help="largest angle between the contact normal and a face under the fingertip (default 25; "
+                    "not with --hand)")
+    _add_plan_hand(sp)
     sp.add_argument("--rank", choices=("value", "robust"), default="value",
                     help="rank by the value, or by the robust value (the mean over perturbed copies) (default value)")
     sp.add_argument("--robust", default=None, metavar="SPEC",
@@ -516,6 +546,21 @@ def add_plan(sub) -> None:
     sp.add_argument("--out", default="plan", metavar="DIR", help="output folder (default ./plan)")
     sp.add_argument("--no-plot", action="store_true", help="do not write best.png")
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def _add_plan_hand(sp) -> None:
+    """The options of ``plan --hand``."""
+    hand = sp.add_argument_group("with a hand", "plan a robot hand's joints and wrist (jaxgrasp.plan(hand=...))")
+    hand.add_argument("--hand", default=None, metavar="HAND", help="the hand's MJCF or URDF file")
+    hand.add_argument("--fingertips", default=None, metavar="A,B,C",
+                      help="the hand's fingertip geoms, bodies or links, comma-separated")
+    hand.add_argument("--min-fingertips", type=int, default=None, metavar="K",
+                      help="the fewest fingertips in contact of a ranked grasp (default 2)")
+    hand.add_argument("--objective", choices=("value", "epsilon"), default=None,
+                      help="what the plan maximises: the value (energy tolerance) or the Ferrari-Canny epsilon "
+                      "(default value)")
+    hand.add_argument("--max-penetration", type=float, default=None, metavar="M",
+                      help="how deep the hand's other links may lie in the object, m (default 0.001)")
 
 
 def add_show(sub) -> None:

@@ -14,23 +14,27 @@ before any computation, `jaxgrasp.storage.write_set`):
   quantile over perturbed copies, the ranking's key);
 * ``best.png``: the ``jaxgrasp show`` picture of the best grasp;
 * the mesh file itself, unless it is in ``DIR`` already, so that ``DIR`` holds all the files name.
+
+With ``--hand HAND --fingertips A,B,C`` the plan is a hand's (`jaxgrasp.cli._plan_hand`).
 """
 
 from __future__ import annotations
 
 import json
-import math
 import time
 from pathlib import Path
 
-from jaxgrasp.cli._arguments import DEFAULT_ROBUST, PLAN_DEFAULTS, parse_number
+from jaxgrasp.cli._arguments import DEFAULT_ROBUST, PLAN_DEFAULTS, plan_fields
 from jaxgrasp.cli._common import UsageError, check_out, lock_out, replaced_text, say
 from jaxgrasp import storage
 
-__all__ = ["run", "RESULT_COLUMNS"]
+__all__ = ["run", "RESULT_COLUMNS", "FREE_DEFAULTS"]
 
 RESULT_COLUMNS = ("rank", "value_J", "status", "limiting_kind", "limiting_contact", "epsilon", "refined")
 """The columns of ``results.csv``; with ``--rank robust`` also `ROBUST_COLUMNS`."""
+
+FREE_DEFAULTS = {"samples": 150, "flatness": 25.0}
+"""Defaults of ``--samples`` and ``--flatness`` for free fingertips (without ``--hand``)."""
 
 ROBUST_COLUMNS = ("p_stable", "value_mean_J", "value_q05_J")
 """The robust columns of ``results.csv`` (``--rank robust``)."""
@@ -39,18 +43,26 @@ ROBUST_COLUMNS = ("p_stable", "value_mean_J", "value_q05_J")
 def run(args) -> int:
     """Check every option and the mesh (`jaxgrasp.planning._plan.check_plan`), then
     create and lock ``--out``, plan, write the set, print one summary line."""
+    if args.hand is not None:
+        from jaxgrasp.cli._plan_hand import run_hand
+
+        return run_hand(args)
     from jaxgrasp.planning import PlanProgress, check_plan, plan
 
     out = Path(args.out)
+    for option in ("--fingertips", "--min-fingertips", "--objective", "--max-penetration"):
+        if getattr(args, option[2:].replace("-", "_")) is not None:
+            raise UsageError(f"{option}: for a plan with a hand; add --hand HAND or drop it")
     check_out(out)
+    fingers = PLAN_DEFAULTS["fingers"] if args.fingers is None else args.fingers
     kwargs = _plan_options(args)
-    check_plan(args.mesh, args.fingers, **kwargs)  # bad input: one line, nothing created or printed
+    check_plan(args.mesh, fingers, **kwargs)  # bad input: one line, nothing created or printed
     if not args.quiet:
-        say(f"jaxgrasp: plan {args.mesh}: {args.samples} valid {args.fingers}-finger candidates to find and "
+        say(f"jaxgrasp: plan {args.mesh}: {kwargs['samples']} valid {fingers}-finger candidates to find and "
             "evaluate, the best refined; compiling (or loading from the cache) first")
     with lock_out(out):
         t0 = time.perf_counter()
-        res = plan(args.mesh, args.fingers, progress=PlanProgress(t0, show=not args.quiet), **kwargs)
+        res = plan(args.mesh, fingers, progress=PlanProgress(t0, show=not args.quiet), **kwargs)
         written, replaced = _write(res, out, args)
     print(f"plan {args.mesh}: {res.summary()}; wrote {out}/{{{','.join(written)}}}" + replaced_text(replaced, ()))
     return 0
@@ -61,9 +73,13 @@ def _plan_options(args) -> dict:
     that are the command's own checked."""
     from jaxgrasp.surface import ContactRules
 
-    return dict(samples=args.samples, top=args.top, refine=args.refine, seed=args.seed,
-                rules=ContactRules(flatness_deg=args.flatness), sampler=args.sampler,
-                **_object_options(args), **_robust_options(args))
+    flatness = FREE_DEFAULTS["flatness"] if args.flatness is None else args.flatness
+    samples = FREE_DEFAULTS["samples"] if args.samples is None else args.samples
+    fields = plan_fields(args)
+    if fields["radius"] is None:
+        fields["radius"] = PLAN_DEFAULTS["radius"]
+    return dict(samples=samples, top=args.top, refine=args.refine, seed=args.seed,
+                rules=ContactRules(flatness_deg=flatness), sampler=args.sampler, **fields, **_robust_options(args))
 
 
 def _robust_options(args) -> dict:
@@ -77,25 +93,6 @@ def _robust_options(args) -> dict:
     if args.robust_samples < 2:
         raise UsageError(f"--robust-samples must be >= 2, got {args.robust_samples}")
     return dict(robust=parse_spec(args.robust or DEFAULT_ROBUST), robust_samples=args.robust_samples)
-
-
-def _object_options(args) -> dict:
-    """The fingertip and object keyword arguments of [`jaxgrasp.plan`][jaxgrasp.plan], checked."""
-    parts = args.gravity.split(",")
-    if len(parts) != 3:
-        raise UsageError(f"--gravity {args.gravity!r}: give three numbers GX,GY,GZ in m/s^2")
-    gravity = [parse_number("--gravity", p, "component") for p in parts]
-    for name in ("radius", "young_modulus", "friction", "max_force", "density", "mass"):
-        v = getattr(args, name)
-        zero = name in ("density", "mass")  # 0: a weightless object (the model's default mass), honoured
-        if v is not None and not (math.isfinite(v) and (v > 0 or (zero and v == 0))):
-            raise UsageError(f"--{name.replace('_', '-')} must be a finite number {'>=' if zero else '>'} 0, got {v:g}")
-    if args.mass is not None:
-        mass = dict(mass=args.mass)
-    else:
-        mass = dict(density=PLAN_DEFAULTS["density"] if args.density is None else args.density)
-    return dict(radius=args.radius, young_modulus=args.young_modulus, friction=args.friction,
-                max_force=args.max_force, gravity=gravity, units=args.units, **mass)
 
 
 def _write(res, out: Path, args) -> tuple[list[str], list[str]]:

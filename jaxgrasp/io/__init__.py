@@ -30,7 +30,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
 
     # For jaxgrasp's other packages: not in __all__, not promised to users (see the docstring).
     from jaxgrasp.io._dataset import GraspColumns, GraspRows, load_share, padded_set, share_rows
-    from jaxgrasp.io._grasp_file import dict_to_toml, mesh_grasp_to_dict, mesh_reference, to_text
+    from jaxgrasp.io._grasp_file import copied_mesh, dict_to_toml, mesh_grasp_to_dict, mesh_reference, to_text
     from jaxgrasp.io._inputs import MAX_GRASP_FILE_BYTES, allowed_folders, check_path_text, confine, read_input
     from jaxgrasp.io._mesh import load_mesh
     from jaxgrasp.io._safe_npy import load_npy

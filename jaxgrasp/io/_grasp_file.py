@@ -53,7 +53,7 @@ from jaxgrasp.io._mesh import MeshReader, from_mesh, load_mesh
 from jaxgrasp.model import FIELD, FIELDS, FINGERTIP, Grasp, GraspValueError, check_grasp_inputs
 from jaxgrasp.surface import MeshGrasp
 
-__all__ = ["checked_fields", "dict_to_text", "dict_to_toml", "grasp_from_dict", "grasp_to_dict", "load", "mesh_grasp_to_dict", "mesh_reference", "save", "to_text", "to_toml"]
+__all__ = ["checked_fields", "dict_to_text", "dict_to_toml", "grasp_from_dict", "grasp_to_dict", "load", "copied_mesh", "mesh_grasp_to_dict", "mesh_reference", "save", "to_text", "to_toml"]
 
 TOP_KEYS = ("fingertip", "object", "contacts")
 FINGERTIP_KEYS = tuple(FIELD[name].file_key for name in FINGERTIP)
@@ -543,10 +543,22 @@ def mesh_reference(mesh_grasp: MeshGrasp, folder, copy: bool) -> tuple[str, byte
         name, raw = "mesh.stl", trimesh.exchange.stl.export_stl(mesh_grasp.mesh)
     elif not copy:
         return os.path.relpath(os.path.abspath(source), os.path.abspath(folder)), None
-    elif Path(source).resolve().parent == folder.resolve():
-        return Path(source).name, None
     else:
-        name, raw = Path(source).name, read_input(source, MAX_MESH_BYTES, "mesh")
+        return copied_mesh(source, folder)
+    dest = folder / name
+    if dest.is_file() and dest.read_bytes() == raw:
+        return name, None
+    return name, raw
+
+
+def copied_mesh(source: str | os.PathLike, folder) -> tuple[str, bytes | None]:
+    """``(name, bytes)``: the mesh file ``source`` as a file in ``folder`` names it (its own
+    name), and the bytes of the copy to write there as ``folder / name`` (``None``: the file,
+    or an identical copy, is there already)."""
+    folder = Path(folder)
+    if Path(source).resolve().parent == folder.resolve():
+        return Path(source).name, None
+    name, raw = Path(source).name, read_input(source, MAX_MESH_BYTES, "mesh")
     dest = folder / name
     if dest.is_file() and dest.read_bytes() == raw:
         return name, None

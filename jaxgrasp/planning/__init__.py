@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
         PLAN_REFINE_WHAT,
         PLAN_SAMPLES_WHAT,
     )
-    from jaxgrasp.planning._hand_plan import OBJECTIVES, check_hand_plan
+    from jaxgrasp.planning._hand_plan import HAND_SAMPLES, OBJECTIVES, check_hand_plan
     from jaxgrasp.planning._plan import check_plan
 
     # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).

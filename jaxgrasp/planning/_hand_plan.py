@@ -58,7 +58,7 @@ _BAND = (0.25, 0.5, 0.4)  # dr* drawn in [0.25, 0.5] dr_max, its band 0.4 dr_max
 _EPSILON_STEP = (0.02, 0.002, 0.02)  # the epsilon search's steps: joint range fraction, wrist m, wrist rad
 
 PREFERRED_FINGERTIPS = 3
-HAND_SAMPLES = 128  # closed candidates by default: 6-10 % of them close stable, so about ten per object
+HAND_SAMPLES = 128  # closed candidates by default: several close stable on most objects (experiments/hand_planning)
 """Fingertips in contact a plan prefers: of its eligible grasps, those with at least this many
 (or all the hand's, if it has fewer) rank first, stable ones before them by the value."""
 
