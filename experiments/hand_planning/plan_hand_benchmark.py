@@ -4,9 +4,22 @@ Each of pybullet's generated objects (``pybullet_data/random_urdfs/NNN``) scaled
 side is ``--size`` mm, written as an STL in mm, planned by ``jaxgrasp.plan(hand=...)`` with the
 Shadow hand of ``examples/hands/shadow/`` and its five distal capsules as fingertips
 (E = 3e5 Pa, mu = 0.8, f_max = 15 N, 500 kg/m^3). One line per object, then the shares and
-the median time, with the load average at the start and the end.
+the median time, with the load average at the start and the end. Each object's best grasp
+is checked: its joints within their limits and the hand's tendon couplings
+(``Hand.coupling_violation``), its other links' depth.
 
-    python experiments/hand_planning/plan_hand_benchmark.py [--objects 10] [--samples 256] [--objective value]
+Objectives (``--objective``):
+
+* ``value``: ``jaxgrasp.plan(hand=...)`` as it is, maximising the energy tolerance;
+* ``epsilon``: the same planner (the same candidates: the same seed) maximising the
+  Ferrari-Canny epsilon, its refinement a local random search of the same budget;
+* ``random``: plain random sampling of closed-hand grasps under the same rules, with
+  ``--random-factor`` (10) times the candidates: the planner's random wrist poses and
+  pre-shapes, each closed by pressing its fingertips into the surface with its links kept
+  out (the closing search without its facing and balance terms), evaluated, the eligible
+  ranked by the value, none refined.
+
+    python experiments/hand_planning/plan_hand_benchmark.py [--objects 10] [--objective value|epsilon|random]
 """
 
 import argparse
@@ -18,7 +31,10 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 import jaxgrasp
+from jaxgrasp.planning import HAND_SAMPLES, CloseSettings, plan_hand
 
 ROOT = Path(__file__).resolve().parents[2]
 HAND = ROOT / "examples" / "hands" / "shadow" / "shadow_hand.xml"
@@ -39,13 +55,36 @@ def object_file(index: int, size_mm: float, folder: str) -> str:
     return path
 
 
+def _plan(path: str, hand, args, seed: int):
+    """The plan of one object by ``args.objective`` (module doc)."""
+    if args.objective != "random":
+        return jaxgrasp.plan(path, hand=hand, samples=args.samples, objective=args.objective, seed=seed,
+                             progress=lambda *a: None, **FIELDS)
+    plain = CloseSettings(face=0.0, balance=0.0)  # closed onto the surface, nothing aimed at a good grasp
+    return plan_hand(path, hand, samples=args.random_factor * (args.samples or HAND_SAMPLES), refine=0, seed=seed,
+                     settings=plain, progress=lambda *a: None, **FIELDS)
+
+
+def _joints_check(hand, res) -> dict:
+    """The best grasp's joints (rad), wrist, and how far outside the joint limits and the
+    couplings they are (0: within)."""
+    if not len(res.qpos):
+        return {}
+    q = np.asarray(res.qpos[0])
+    limits = float(np.max(np.r_[hand.lower - q, q - hand.upper, 0.0]))
+    couplings = float(np.max(np.r_[np.asarray(hand.coupling_violation(q)), 0.0]))
+    return dict(limits_violation=limits, couplings_violation=couplings, qpos=q.tolist(),
+                wrist=np.asarray(res.wrist[0]).tolist())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", type=int, default=10)
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--samples", type=int, default=None, help="closed candidates (default: the planner's)")
     ap.add_argument("--size", type=float, default=70.0, help="longest side, mm")
-    ap.add_argument("--objective", default="value", choices=("value", "epsilon"))
+    ap.add_argument("--objective", default="value", choices=("value", "epsilon", "random"))
+    ap.add_argument("--random-factor", type=int, default=10, help="candidates of the random arm per planner candidate")
     ap.add_argument("--json", default=None, help="write one JSON line per object here")
     args = ap.parse_args()
     hand = jaxgrasp.Hand.from_file(HAND, TIPS)
@@ -56,14 +95,14 @@ def main() -> None:
         for k in range(args.first, args.first + args.objects):
             path = object_file(k, args.size, folder)
             t0 = time.perf_counter()
-            res = jaxgrasp.plan(path, hand=hand, samples=args.samples, objective=args.objective, seed=k,
-                                progress=lambda *a: None, **FIELDS)
-            row = dict(object=k, status=res.status_name, seconds=time.perf_counter() - t0,
+            res = _plan(path, hand, args, k)
+            row = dict(object=k, objective=args.objective, status=res.status_name, seconds=time.perf_counter() - t0,
                        stable=bool(len(res.statuses) and res.statuses[0] == 0),
                        active=int(res.active[0]) if len(res.active) else 0,
                        penetration_mm=float(res.penetration[0]) * 1e3 if len(res.active) else None,
                        value_J=res.value, epsilon=float(res.epsilon[0]) if len(res.epsilon) else None,
-                       candidates_stable=res.stable, timings={a: round(b, 1) for a, b in res.timings.items()})
+                       candidates=res.candidates, candidates_stable=res.stable,
+                       timings={a: round(b, 1) for a, b in res.timings.items()}, **_joints_check(hand, res))
             rows.append(row)
             print(json.dumps(row), flush=True)
             if args.json:

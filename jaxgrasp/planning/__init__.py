@@ -34,6 +34,8 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
 
     # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
     from jaxgrasp.planning._plan import CHUNK, draw_valid, grasps_of, setup
+    from jaxgrasp.planning._hand_close import CloseSettings
+    from jaxgrasp.planning._hand_plan import plan_hand
 
 __all__ = ["plan", "PlanResult", "HandPlanResult", "PlanStatus", "PlanProgress", "SAMPLERS"]
 

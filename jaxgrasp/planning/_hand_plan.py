@@ -45,7 +45,7 @@ from jaxgrasp.planning._result import PlanStatus
 from jaxgrasp.surface import PAD_FACES, Surface, distance_grid, mass_properties
 from jaxgrasp.tolerance import GraspStatus
 
-__all__ = ["plan_hand", "check_hand_plan", "HandPlanInputs", "OBJECTIVES", "CLOSE_CHUNK"]
+__all__ = ["plan_hand", "check_hand_plan", "HandPlanInputs", "OBJECTIVES", "CLOSE_CHUNK", "HAND_SAMPLES"]
 
 OBJECTIVES = ("value", "epsilon")
 """What a hand plan maximises: the paper's value (energy tolerance, J) or the Ferrari-Canny epsilon."""
@@ -370,13 +370,13 @@ def plan_hand(mesh, hand, fingertips=None, *, young_modulus, friction, max_force
                              gravity=gravity, units=units, samples=samples, top=top, refine=refine, seed=seed,
                              min_fingertips=min_fingertips, objective=objective, tune_maxiter=tune_maxiter,
                              max_penetration=max_penetration)
-    return _planned(inputs, samples, top, refine, seed, min_fingertips, objective, tune_maxiter, max_penetration,
-                    settings, progress, t0)
+    return plan_hand_stages(inputs, samples, top, refine, seed, min_fingertips, objective, tune_maxiter,
+                            max_penetration, settings, progress, t0)
 
 
-def _planned(inputs, samples, top, refine, seed, min_fingertips, objective, tune_maxiter, max_penetration, settings,
-             progress, t0) -> HandPlanResult:
-    """`plan_hand` on its checked inputs: the six stages, timed."""
+def plan_hand_stages(inputs, samples, top, refine, seed, min_fingertips, objective, tune_maxiter, max_penetration,
+                     settings, progress, t0) -> HandPlanResult:
+    """`plan_hand` on its checked inputs (`check_hand_plan`): the six stages, timed."""
     rng, rules, times = np.random.default_rng(seed), (min_fingertips, max_penetration), {}
     clock = [time.perf_counter()]
 

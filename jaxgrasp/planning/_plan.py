@@ -52,7 +52,7 @@ from jaxgrasp.planning._limits import (
     SAMPLERS,
 )
 from jaxgrasp.planning._hand_close import CloseSettings
-from jaxgrasp.planning._hand_plan import _planned as plan_hand_checked
+from jaxgrasp.planning._hand_plan import plan_hand_stages as plan_hand_checked
 from jaxgrasp.planning._hand_plan import HAND_SAMPLES, check_hand_plan
 from jaxgrasp.planning._hand_result import HandPlanResult
 from jaxgrasp.planning._progress import PlanProgress
