@@ -49,7 +49,7 @@ def compare(arms: dict) -> list[str]:
     if both:
         value_ratio = np.array([e[k]["value_J"] / v[k]["value_J"] for k in both])
         eps_ratio = np.array([v[k]["epsilon"] / e[k]["epsilon"] for k in both])
-        same = sum(np.allclose(v[k].get("qpos", [0]), e[k].get("qpos", [1]), atol=1e-9) for k in both)
+        same = sum(v[k]["value_J"] == e[k]["value_J"] and v[k]["epsilon"] == e[k]["epsilon"] for k in both)
         lines.append(
             f"value against epsilon on {len(both)} objects: the same best grasp on {same}; the epsilon-picked grasp's "
             f"energy tolerance is {np.median(value_ratio):.2f} (median; quartiles {np.quantile(value_ratio, 0.25):.2f}-"
