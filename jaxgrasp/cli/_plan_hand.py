@@ -7,7 +7,7 @@ into ``DIR`` (`jaxgrasp.storage.write_set`, all or none) is self-contained:
 
 * ``best.toml``: the best grasp as a hand grasp file (`jaxgrasp.hands._file`): the hand's
   model (copied into ``DIR/hand/``), its fingertips, ``qpos`` and ``wrist``; the object's
-  mesh (copied beside it), units and density or mass; the fingertips' fields.
+  mesh (copied beside it), units, pose and mass (kg); the fingertips' fields.
   ``jaxgrasp evaluate DIR/best.toml`` gives the value of ``results.csv``'s first row;
 * ``ranked.jsonl``: the ranked grasps, best first, one JSON object per line (the columns
   of ``results.csv`` with ``qpos``, rad or m, and ``wrist``: translation m, rotation vector
@@ -184,19 +184,15 @@ def _write(res, out: Path, args, folder: dict[str, bytes]) -> tuple[list[str], l
 
 def _best_toml(res, args, model: str, mesh: str) -> str:
     """The hand grasp file of the best grasp: the hand copied at ``model``, the mesh at ``mesh``
-    (both relative to ``DIR``), the object's units and density (or mass), the fields."""
-    from jaxgrasp.cli._arguments import PLAN_DEFAULTS
+    (both relative to ``DIR``), the object's units, pose (the mesh frame is the world's) and
+    mass (kg: ``--mass``, or ``--density`` times the mesh's volume), the fingertips' fields."""
     from jaxgrasp.hands import hand_grasp_toml
 
-    d = PLAN_DEFAULTS
-    field = lambda k: float(getattr(args, k) if getattr(args, k) is not None else d[k])  # noqa: E731
-    mass = ({"mass": float(args.mass)} if args.mass is not None
-            else {"density": float(args.density if args.density is not None else d["density"])})
+    s = res.settings
     return hand_grasp_toml({
-        "hand": {"model": model, "fingertips": _tips(args), "qpos": res.qpos[0],
-                 "wrist": res.wrist[0]},
-        "object": {"mesh": mesh, "units": args.units, **mass},
-        "fingertip": {k: field(k) for k in ("young_modulus", "friction", "max_force")},
+        "hand": {"model": model, "fingertips": _tips(args), "qpos": res.qpos[0], "wrist": res.wrist[0]},
+        "object": {"mesh": mesh, "units": args.units, "pose": [0.0] * 6, "mass": float(s["mass"])},
+        "fingertip": {k: float(s[k]) for k in ("young_modulus", "friction", "max_force")},
     })
 
 
