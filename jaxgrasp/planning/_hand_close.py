@@ -123,12 +123,11 @@ def _rotation_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def hand_starts(hand, center_of_mass, count: int, rng, open_range=(0.15, 0.5)):
-    """``(x0 (count, J + 6), approach (count, 3))``: the search's start variables (joints as
-    fractions of their ranges, drawn in ``open_range``; the wrist translation in cm and
-    rotation vector, rad) and each candidate's approach direction (unit, mesh frame, from
-    the object towards the palm), from the generator ``rng``: each pre-shape's mean
-    fingertip centre on the centre of mass, the way from its palm to that centre along
-    ``-approach``, a random roll about it."""
+    """``x0 (count, J + 6)``: the search's start variables (joints as fractions of their
+    ranges, drawn in ``open_range``; the wrist translation in cm and rotation vector, rad),
+    from the generator ``rng``: each pre-shape's mean fingertip centre on the centre of
+    mass, the way from its palm to that centre along ``-approach`` (a random unit direction,
+    mesh frame, from the object towards the palm), a random roll about it."""
     from scipy.spatial.transform import Rotation
 
     j = hand.num_joints
@@ -145,7 +144,7 @@ def hand_starts(hand, center_of_mass, count: int, rng, open_range=(0.15, 0.5)):
         x0[b, :j] = u[b]
         x0[b, j:j + 3] = (np.asarray(center_of_mass) - rot.apply(centre[b])) / _TRANSLATION_UNIT
         x0[b, j + 3:] = rot.as_rotvec()
-    return x0, approach
+    return x0
 
 
 def unpack(hand, x):

@@ -179,7 +179,7 @@ def _targets(inputs: HandPlanInputs, count: int, rng) -> tuple[np.ndarray, float
 def _close(inputs: HandPlanInputs, surface, grid, samples: int, rng, settings: CloseSettings, progress):
     """``(qpos (S, J), wrist (S, 6))``: the ``samples`` candidates closed (stage 2)."""
     hand = inputs.hand
-    x0, _ = hand_starts(hand, inputs.com, samples, rng)
+    x0 = hand_starts(hand, inputs.com, samples, rng)
     target, band = _targets(inputs, samples, rng)
     settings = dataclasses.replace(settings, band=band)
     data = dict(surface=surface, grid=grid, center_of_mass=jnp.asarray(inputs.com),
