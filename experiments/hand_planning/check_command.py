@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from plan_hand_benchmark import HAND, TIPS, object_file  # noqa: E402
+from plan_hand_benchmark import HAND, TIPS, object_file, objects  # noqa: E402
 
 import jaxgrasp  # noqa: E402
 
@@ -34,20 +34,21 @@ COMMAND = ["--units", "mm", "--hand", str(HAND), "--fingertips", ",".join(TIPS),
 
 def check(k: int, folder: str, hand) -> dict:
     """Plan object ``k`` by the command and check what it wrote."""
-    path, out = object_file(k, 70.0, folder), os.path.join(folder, f"plan-{k:03d}")
+    obj = objects(k + 1)[k]
+    path, out = object_file(obj, 70.0, folder), os.path.join(folder, f"plan-{k:03d}")
     t0 = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "jaxgrasp", "plan", path, *COMMAND, "--seed", str(k), "--out", out],
                           capture_output=True, text=True)
     seconds = time.perf_counter() - t0
     if done.returncode != 0:
-        return dict(object=k, seconds=seconds, error=done.stderr.strip().splitlines()[-1:])
+        return dict(object=obj, seconds=seconds, error=done.stderr.strip().splitlines()[-1:])
     with open(os.path.join(out, "results.csv")) as fh:
         top = next(csv.DictReader(fh))
     ev = json.loads(subprocess.run([sys.executable, "-m", "jaxgrasp", "evaluate", os.path.join(out, "best.toml"),
                                     "--json"], capture_output=True, text=True, check=True).stdout)
     with open(os.path.join(out, "best.toml"), "rb") as fh:
         q = np.asarray(tomllib.load(fh)["hand"]["qpos"])
-    return dict(object=k, seconds=round(seconds, 1), status=top["status"], active=int(top["active"]),
+    return dict(object=obj, seconds=round(seconds, 1), status=top["status"], active=int(top["active"]),
                 value_J=float(top["value_J"]), evaluate_value_J=ev["value"], evaluate_status=ev["status"],
                 equal=ev["value"] == float(top["value_J"]) and ev["status"] == top["status"],
                 penetration_mm=float(top["penetration_mm"]),

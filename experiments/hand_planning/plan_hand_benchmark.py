@@ -1,7 +1,7 @@
 """Plan with the Shadow hand on real objects: how often a stable grasp, with how many fingertips, in what time.
 
-Each of pybullet's generated objects (``pybullet_data/random_urdfs/NNN``) scaled so its longest
-side is ``--size`` mm, written as an STL in mm, planned by ``jaxgrasp.plan(hand=...)`` with the
+Each of pybullet's generated objects (``pybullet_data/random_urdfs/NNN``, the watertight
+ones), then its duck, bunny and teddy, scaled so its longest side is ``--size`` mm, written as an STL in mm, planned by ``jaxgrasp.plan(hand=...)`` with the
 Shadow hand of ``examples/hands/shadow/`` and its five distal capsules as fingertips
 (E = 3e5 Pa, mu = 0.8, f_max = 15 N, 500 kg/m^3). One line per object, then the shares and
 the median time, with the load average at the start and the end. Each object's best grasp
@@ -42,13 +42,30 @@ TIPS = [f"robot0:C_{f}distal" for f in ("ff", "mf", "rf", "lf", "th")]
 FIELDS = dict(young_modulus=3e5, friction=0.8, max_force=15.0, density=500.0, units="mm")
 
 
-def object_file(index: int, size_mm: float, folder: str) -> str:
-    """pybullet's object ``index`` scaled to ``size_mm`` on its longest side, as an STL in mm."""
+NAMED = ("duck_vhacd", "bunny", "teddy2_VHACD_CHs")
+"""pybullet_data's named objects of the study, after its generated ones."""
+SKIPPED = (37,)
+"""Generated objects left out: not watertight (no centre of mass of their own; plan refuses them)."""
+
+
+def objects(count: int) -> list:
+    """The study's first ``count`` objects: pybullet's generated ones (their index, ``SKIPPED``
+    left out) up to ``count - 3``, then the duck, the bunny and the teddy (their names)."""
+    generated = [k for k in range(count + len(SKIPPED)) if k not in SKIPPED][:max(count - len(NAMED), 0)]
+    return generated + list(NAMED[:count - len(generated)])
+
+
+def object_file(obj, size_mm: float, folder: str) -> str:
+    """pybullet's object ``obj`` (an index of ``random_urdfs`` or a name) scaled to ``size_mm``
+    on its longest side, as an STL in mm."""
     import pybullet_data
     import trimesh
 
-    name = f"{index:03d}"
-    mesh = trimesh.load(os.path.join(pybullet_data.getDataPath(), "random_urdfs", name, f"{name}.obj"), force="mesh")
+    name = f"{obj:03d}" if isinstance(obj, int) else obj
+    data = pybullet_data.getDataPath()
+    source = os.path.join(data, "random_urdfs", name, f"{name}.obj") if isinstance(obj, int) else os.path.join(
+        data, f"{name}.obj")
+    mesh = trimesh.load(source, force="mesh")
     mesh.apply_scale(size_mm / float(mesh.extents.max()))
     path = os.path.join(folder, f"{name}.stl")
     mesh.export(path)
@@ -80,7 +97,7 @@ def _joints_check(hand, res) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", type=int, default=10)
-    ap.add_argument("--first", type=int, default=0)
+    ap.add_argument("--first", type=int, default=0, help="start at this position of the object list")
     ap.add_argument("--samples", type=int, default=None, help="closed candidates (default: the planner's)")
     ap.add_argument("--size", type=float, default=70.0, help="longest side, mm")
     ap.add_argument("--objective", default="value", choices=("value", "epsilon", "random"))
@@ -92,10 +109,10 @@ def main() -> None:
           f"objective {args.objective}", flush=True)
     rows = []
     with tempfile.TemporaryDirectory() as folder:
-        for k in range(args.first, args.first + args.objects):
+        for i, k in enumerate(objects(args.first + args.objects)[args.first:], start=args.first):
             path = object_file(k, args.size, folder)
             t0 = time.perf_counter()
-            res = _plan(path, hand, args, k)
+            res = _plan(path, hand, args, i)
             row = dict(object=k, objective=args.objective, status=res.status_name, seconds=time.perf_counter() - t0,
                        stable=bool(len(res.statuses) and res.statuses[0] == 0),
                        active=int(res.active[0]) if len(res.active) else 0,
