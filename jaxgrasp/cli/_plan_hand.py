@@ -118,6 +118,7 @@ def _hand_folder(args, hand) -> dict[str, bytes]:
     every regular file under it (symbolic links and ``--out`` left out), at most
     `MAX_HAND_FOLDER_BYTES`; a `UsageError` if the copy does not load to the same hand."""
     from jaxgrasp.hands import Hand
+    from jaxgrasp.model import GraspValueError
 
     root = Path(args.hand).resolve().parent
     skip = Path(args.out).resolve()
@@ -138,8 +139,10 @@ def _hand_folder(args, hand) -> dict[str, bytes]:
         for name, raw in files.items():
             Path(tmp, name).parent.mkdir(parents=True, exist_ok=True)
             Path(tmp, name).write_bytes(raw)
-        copy = Path(tmp, Path(args.hand).resolve().relative_to(root))
-        same = Hand.from_file(copy, _tips(args)).digest() == hand.digest()
+        try:
+            same = Hand.from_file(Path(tmp, Path(args.hand).resolve().name), _tips(args)).digest() == hand.digest()
+        except GraspValueError:  # the copy misses a file the model names (one behind a link)
+            same = False
     if not same:
         raise UsageError(f"--hand {args.hand}: a copy of its folder {str(root)!r} reads as another hand (a "
                          "symbolic link in it?); put the model and the meshes it names in a folder of their own")
@@ -157,7 +160,7 @@ def _write(res, out: Path, args, folder: dict[str, bytes]) -> tuple[list[str], l
     if not res.grasps:
         raise UsageError(f"plan {args.mesh} --hand {args.hand}: {res.status.message}; nothing written")
     name, raw = copied_mesh(args.mesh, out)
-    model = Path("hand", Path(args.hand).resolve().relative_to(Path(args.hand).resolve().parent)).as_posix()
+    model = f"hand/{Path(args.hand).resolve().name}"
     ranked = res.to_dict()["ranked"]
     members = {out / "hand" / n: b for n, b in folder.items()}
     members.update({
