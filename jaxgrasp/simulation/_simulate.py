@@ -28,6 +28,7 @@ import numpy as np
 
 from jaxgrasp.model import GraspValueError
 from jaxgrasp.simulation._options import check_kick_travel, check_number, check_options, check_steps
+from jaxgrasp.simulation._protocols import check_protocol
 from jaxgrasp.simulation._result import SimulationResult, SimulationStatus
 from jaxgrasp.simulation._scene import IMPEDANCE, build_scene, load_mujoco
 from jaxgrasp.simulation._trials import Runner, least_energy_direction, warnings_recorded
@@ -43,9 +44,22 @@ _UNITS = {
 def simulate(
     grasp, *, evaluation=None, friction=None, nominal_mass=0.1, damping_ratio=0.05, timestep=None,
     kick_scales=(0.5, 0.9, 1.1, 2.0), random_kicks=2, seed=0, simulate_unstable=False, slip_threshold=None,
-    **durations,
+    protocol="jaxgrasp", allowed_dirs=None, **durations,
 ) -> SimulationResult:
     """A second opinion from MuJoCo: the grasp held, disturbed and kicked in a physics engine.
+
+    Two protocols (`jaxgrasp.simulation._protocols`). ``"jaxgrasp"`` (below): the
+    fingertips as fixed spheres; a [`HandGrasp`][jaxgrasp.hands.HandGrasp] is simulated as
+    its fingertip contacts. ``"dexgraspbench"``: a [`HandGrasp`][jaxgrasp.hands.HandGrasp]
+    only, the whole hand in MuJoCo (its MJCF; a URDF hand is refused), the object's
+    collision shape its convex decomposition, DexGraspBench's settings, the hand squeezed
+    until each fingertip in contact presses with the model's normal force (eq. 4) and six
+    pushes of ``10 m`` N for 2 s from a fresh reset each; every grasp is simulated
+    (``simulate_unstable`` has no part), ``friction`` replaces the protocol's sliding
+    friction 0.6 (its torsional 0.02 m scaled alike), and the options of the trials below
+    (``timestep``, ``kick_scales``, the durations ...) are the jaxgrasp protocol's.
+    ``allowed_dirs``: the folders the hand's files may lie in besides its own (as for
+    [`Hand.from_file`][jaxgrasp.Hand.from_file]).
 
     The scene (`jaxgrasp.simulation._scene`): the object (its mesh, or the contacts'
     hull) at jaxgrasp's equilibrium pose, each fingertip a sphere fixed at ``p_i + (r -
@@ -87,6 +101,9 @@ def simulate(
         GraspValueError: a bad grasp or option (one line naming it; options before evaluating).
     """
     load_mujoco()
+    grasp = _for_protocol(grasp, check_protocol(protocol))
+    if protocol == "dexgraspbench":
+        return _dexgraspbench(grasp, evaluation, friction, allowed_dirs, timestep, durations)
     opts = check_options(friction=friction, nominal_mass=nominal_mass, damping_ratio=damping_ratio, timestep=timestep,
                          kick_scales=kick_scales, random_kicks=random_kicks, **durations)
     slip_threshold = None if slip_threshold is None else check_number("slip_threshold", slip_threshold)
@@ -99,6 +116,37 @@ def simulate(
     if skip is not None:
         return _not_simulated(plain, evaluation, skip, opts)
     return _simulated(grasp, plain, evaluation, opts, seed, slip_threshold)
+
+
+def _for_protocol(grasp, protocol: str):
+    """``grasp``, or a hand grasp's fingertip contacts under the jaxgrasp protocol; a
+    one-line error for a plain grasp under ``dexgraspbench``."""
+    from jaxgrasp.hands import HandGrasp
+
+    if isinstance(grasp, HandGrasp):
+        return grasp if protocol == "dexgraspbench" else grasp.mesh_grasp()
+    if protocol == "dexgraspbench":
+        raise GraspValueError(f"the dexgraspbench protocol simulates a hand: give a jaxgrasp.hands.HandGrasp "
+                              f"(jaxgrasp.hands.load_hand_grasp), got {type(grasp).__name__}")
+    return grasp
+
+
+def _dexgraspbench(hg, evaluation, friction, allowed_dirs, timestep, durations) -> SimulationResult:
+    """The hand grasp ``hg`` under DexGraspBench's protocol (`simulate_hand`)."""
+    from jaxgrasp.simulation._hand_simulate import simulate_hand
+
+    given = [*sorted(durations), *(["timestep"] if timestep is not None else [])]
+    if given:
+        raise GraspValueError(f"{given[0]} is an option of the jaxgrasp protocol; the dexgraspbench protocol runs "
+                              "with its own settings")
+    if hg.num_active < 1:
+        raise GraspValueError("the hand grasp has no fingertip in contact: nothing to squeeze")
+    friction = None if friction is None else check_number("friction", friction)
+    if evaluation is None:
+        from jaxgrasp.engine import evaluate
+
+        evaluation = evaluate(hg.grasp)
+    return simulate_hand(hg, evaluation=evaluation, friction=friction, allowed_dirs=allowed_dirs)
 
 
 def _one_grasp(grasp):
