@@ -73,7 +73,7 @@ class HandScene:
 def hand_mjcf(hand, allowed_dirs=None):
     """The checked MJCF source (`jaxgrasp.hands._mjcf_files.HandSource`) of ``hand``'s file;
     a one-line error for a URDF hand (module notes)."""
-    from jaxgrasp.hands._mjcf_files import check_mjcf, open_hand_file
+    from jaxgrasp.hands import check_mjcf, open_hand_file
     from jaxgrasp.io import allowed_folders
 
     path = hand.tree.source

@@ -22,7 +22,7 @@ every fingertip presses within `FORCE_TOL` of ``f*`` or `MAX_ROUNDS` rounds.
 
 Trials (DexGraspBench's ``fc_mocap``): for each of ``+x ... -z``, from a fresh reset at
 the pregrasp: grasp, squeeze, then a force ``10 m`` N on the object for ``outer x inner``
-steps (2 s), its pose checked after each ``inner`` steps against its pose at the start;
+steps, its pose checked after each ``inner`` steps against its pose at the start;
 the trial fails at the first check where it moved 5 cm or turned 15 degrees.
 """
 

@@ -47,7 +47,7 @@ DEXGRASPBENCH = {
 """DexGraspBench's settings (module doc: where each is read). ``stage_steps``: ``(outer,
 inner)``, the hand's targets moved in ``outer`` equal steps from one stage's to the next,
 each held for ``inner`` MuJoCo steps (pregrasp -> grasp, then grasp -> squeeze);
-``disturbance_steps``: the force held for ``outer x inner`` steps (2 s), the object's
+``disturbance_steps``: the force held for ``outer x inner`` steps, the object's
 pose checked after each ``inner``; ``hand_solref``/``hand_solimp``: set on every geom of
 the hand (the object's keep MuJoCo's defaults, mixed with them as MuJoCo mixes a pair's);
 ``max_penetration_m``: a hand that overlaps the object (or itself) more than this at the
