@@ -638,3 +638,8 @@ def add_simulate(sub) -> None:
                          "(default: from the contact stiffness)"))
     p.add_argument("--simulate-unstable", action="store_true",
                    help="also simulate an unstable grasp from its equilibrium pose")
+    p.add_argument("--protocol", default="jaxgrasp", metavar="NAME",
+                   help=("jaxgrasp (default: the fingertips as fixed spheres, the options above) or dexgraspbench: "
+                         "a hand grasp file's whole hand (MJCF) in MuJoCo with DexGraspBench's settings, squeezed to "
+                         "the model's normal forces and pushed with 10 m N along +-x, +-y, +-z for 2 s; --friction MU "
+                         "replaces its sliding friction 0.6"))

@@ -1,6 +1,16 @@
 """``jaxgrasp simulate``: the grasp in MuJoCo (``jaxgrasp[sim]``): results.json and a plot.
 
-A hand grasp file is simulated as its contacts (each fingertip a fixed sphere, as for any
+``--protocol dexgraspbench`` (a hand grasp file only): the whole hand in MuJoCo
+(`jaxgrasp.simulation._hand_simulate`); ``--friction MU`` is then the protocol's sliding
+friction (the grasp's own friction has no part in it), the other field overrides are
+refused as for any hand grasp file, and ``--timestep``, ``--sim-friction`` and
+``--simulate-unstable`` (the jaxgrasp protocol's) are refused; the trial durations and
+kicks are the jaxgrasp protocol's and not used. ``results.json`` is the result's
+``to_dict()`` (its per-fingertip lists one entry per fingertip, ``null`` where not in
+contact) with ``hand`` (`jaxgrasp.cli._hand_files.hand_fields`); the picture shows each
+push's displacement and rotation.
+
+Under the jaxgrasp protocol a hand grasp file is simulated as its contacts (each fingertip a fixed sphere, as for any
 grasp; the hand's links are not in the simulation). The simulator numbers only the
 contacts it simulates, the fingertips in contact; ``results.json`` numbers them by
 fingertip (contact ``k`` is fingertip ``k``, `jaxgrasp.cli._hand_files`), ``null`` for a
@@ -49,6 +59,65 @@ def _options(args) -> dict:
     return opts | {"simulate_unstable": args.simulate_unstable}
 
 
+def _protocol(args) -> str:
+    """``--protocol``, checked with the options it refuses (module notes)."""
+    from jaxgrasp.simulation import PROTOCOLS
+
+    if args.protocol not in PROTOCOLS:
+        raise UsageError(f"--protocol must be one of {', '.join(PROTOCOLS)}, got {args.protocol!r}")
+    if args.protocol == "dexgraspbench":
+        given = [o for o, v in (("--timestep", args.timestep), ("--sim-friction", args.sim_friction),
+                                ("--simulate-unstable", args.simulate_unstable or None)) if v is not None]
+        if given:
+            raise UsageError(f"{given[0]}: an option of --protocol jaxgrasp; with dexgraspbench the protocol's "
+                             "settings hold (--friction MU sets its friction)")
+        if not is_hand_file(args):
+            raise UsageError(f"--protocol dexgraspbench simulates a hand: {grasp_source(args)} is not a hand grasp "
+                             "file")
+    return args.protocol
+
+
+def _run_hand(args, out: Path) -> int:
+    """``--protocol dexgraspbench``: the hand grasp file's whole hand in MuJoCo."""
+    from jaxgrasp.engine import evaluate
+    from jaxgrasp.simulation import simulate
+
+    import math
+
+    friction, args.friction = args.friction, None  # the protocol's friction, not the grasp's field
+    if friction is not None and not (math.isfinite(friction) and friction > 0):
+        raise UsageError(f"--friction must be finite and > 0, got {friction:g}")
+    hand = load_hand(args)
+    source = grasp_source(args)
+    say(f"jaxgrasp: simulate {source}: evaluating (compiling the evaluator or loading it from the cache)")
+    evaluation = evaluate(hand.grasp)
+    say(f"jaxgrasp: simulate {source}: {evaluation.status_name}, value {float(evaluation.value):.6e} J; running "
+        "MuJoCo (the whole hand, DexGraspBench's protocol)")
+    result = simulate(hand, protocol="dexgraspbench", evaluation=evaluation, friction=friction,
+                      allowed_dirs=getattr(args, "allow_dir", None))
+    d = {**result.to_dict(), "hand": hand_fields(hand)}
+    members = {out / RESULTS: (json.dumps(d, indent=1, allow_nan=False) + "\n").encode()}
+    if result.six_axis:
+        members[out / PLOT] = _plot_bytes(result)
+    with lock_out(out):
+        replaced = storage.write_set(members, remove=[] if result.six_axis else [out / PLOT])
+    print(_hand_summary(source, result) + f"; wrote {', '.join(str(p) for p in members)}"
+          + replaced_text([p.name for p in replaced], []))
+    return 0
+
+
+def _hand_summary(source: str, result) -> str:
+    import numpy as np
+
+    line = f"simulate {source} (dexgraspbench): {'success' if result.success else 'failure'}"
+    if result.six_axis:
+        line += f", {sum(t.success for t in result.six_axis)}/6 pushes held"
+        err = np.abs(result.normal_force_error)
+        if np.any(np.isfinite(err)):
+            line += f"; settled normal forces within {100 * np.nanmax(err):.2g} % of eq. 4"
+    return line if result.simulated else f"{line} ({result.reason})"
+
+
 def run(args) -> int:
     """Check the options and the output folder, evaluate, simulate, write results.json and
     the plot as one set."""
@@ -62,6 +131,8 @@ def run(args) -> int:
         raise UsageError(str(exc)) from None
     out = Path(args.out)
     check_out(out)
+    if _protocol(args) == "dexgraspbench":
+        return _run_hand(args, out)
     opts = _options(args)
     hand = load_hand(args) if is_hand_file(args) else None
     grasp = hand.mesh_grasp() if hand is not None else load_grasp(args, keep_mesh=True)

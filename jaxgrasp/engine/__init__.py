@@ -45,7 +45,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.engine._prefetch import prefetch
     from jaxgrasp.engine._runner import GraspSource, Stacked, plan_source, run_batch, start_progress
     from jaxgrasp.engine._settling import INLINE, RETRY
-    from jaxgrasp.engine._store import enable_from_environment, log_lines_on_stderr, matplotlib_dir
+    from jaxgrasp.engine._store import default_dir, enable_from_environment, log_lines_on_stderr, matplotlib_dir
 
     # For the studies in experiments/ (instruments): not in __all__, not promised to users (see the docstring).
     from jaxgrasp.engine._compile import clear_compiled

@@ -32,6 +32,7 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.hands._datasets import DEXGRASPBENCH_MESH, PREGRASP_FACTOR, SQUEEZE_FACTOR
     from jaxgrasp.hands._file import hand_grasp_toml, is_hand_grasp_file
     from jaxgrasp.hands._grasp import Material, contact_grasp, material
+    from jaxgrasp.hands._mjcf_files import check_mjcf, open_hand_file
 
 __all__ = [
     "Hand",

@@ -1,10 +1,13 @@
 """A second opinion from a physics engine: the grasp in MuJoCo (optional extra ``jaxgrasp[sim]``).
 
-[`simulate`][jaxgrasp.simulate] builds the grasp as a MuJoCo scene with the paper's fingertips calibrated
+Under the ``"jaxgrasp"`` protocol (`_protocols`), [`simulate`][jaxgrasp.simulate] builds the grasp as a MuJoCo scene with the paper's fingertips calibrated
 into it (`_scene`), holds it under gravity, disturbs it along six axes and kicks it
 with kinetic energies that are multiples of the evaluation value (`_trials`), and
 returns a [`SimulationResult`][jaxgrasp.simulation.SimulationResult] (`_result`); its options are checked before
-anything is evaluated (`_options`). MuJoCo is imported only when
+anything is evaluated (`_options`). Under ``"dexgraspbench"`` it puts the whole hand of a
+[`HandGrasp`][jaxgrasp.hands.HandGrasp] in MuJoCo with the object's convex pieces
+(`_hand_scene`, `_convex`), squeezes it to the model's normal forces and pushes the object
+along six axes (`_hand_trials`, `_hand_simulate`). MuJoCo is imported only when
 [`simulate`][jaxgrasp.simulate] runs.
 
 ``__all__`` lists the names promised to users; the names imported below it are for
@@ -18,6 +21,7 @@ from jaxgrasp import _startup
 
 if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from its module when first used
     from jaxgrasp.simulation._options import DEFAULTS
+    from jaxgrasp.simulation._protocols import DEXGRASPBENCH, PROTOCOLS
     from jaxgrasp.simulation._result import AXES, DIRECTIONS, SimulationResult, SimulationStatus, Trial
     from jaxgrasp.simulation._simulate import simulate
 
@@ -25,8 +29,10 @@ if TYPE_CHECKING:  # read by _startup.attach (below): each name is loaded from i
     from jaxgrasp.simulation._limits import (MAX_KICK_SCALE, MAX_KICK_TRAVEL, MAX_SIMULATED_S, MAX_STEPS,
                                              TIMESTEP_FRACTION)
     from jaxgrasp.simulation._options import check_options
+    from jaxgrasp.simulation._protocols import check_protocol
     from jaxgrasp.simulation._scene import load_mujoco
 
-__all__ = ["AXES", "DEFAULTS", "DIRECTIONS", "SimulationResult", "SimulationStatus", "Trial", "simulate"]
+__all__ = ["AXES", "DEFAULTS", "DEXGRASPBENCH", "DIRECTIONS", "PROTOCOLS", "SimulationResult", "SimulationStatus",
+           "Trial", "simulate"]
 
 __getattr__, __dir__, _LAZY = _startup.attach(__name__)

@@ -24,7 +24,9 @@ class SimulationStatus(Coded):
     ``SIMULATED``: the grasp was simulated (its trials are in the result). ``DIVERGED``:
     it was simulated, but in at least one trial MuJoCo met a state beyond its limits and
     reset it; those trials say ``diverged`` and are never a success (where the hold
-    diverged, no other trial is run: there is no settled state to start from). The others
+    diverged, no other trial is run: there is no settled state to start from).
+    ``PENETRATING`` (the ``dexgraspbench`` protocol): the hand overlapped the object or
+    itself by more than the protocol's limit at the start, a failure. The others
     name the evaluation's status that kept it out of the simulator: ``UNSTABLE`` and
     ``NOT_CONVERGED`` (simulated only with ``simulate_unstable=True``) and ``INFEASIBLE``
     (never: there is no equilibrium pose to start from and calibrate at).
@@ -40,6 +42,10 @@ class SimulationStatus(Coded):
     DIVERGED = 4, (
         "the simulator diverged in at least one trial (a state beyond MuJoCo's limits, which it reset): those "
         "trials are marked diverged, never held"
+    )
+    PENETRATING = 5, (
+        "the hand overlaps the object (or itself) at the pregrasp more than the protocol allows: a failure, "
+        "not simulated (DexGraspBench's rule)"
     )
 
 
@@ -149,15 +155,20 @@ class SimulationResult:
         value: the evaluation value, J (eq. 1).
         reason: why the grasp was not simulated (the evaluation's explanation), or which
             trials diverged and what MuJoCo said (status ``DIVERGED``), or ``""``.
-        hold: the hold trial (``None`` when not simulated).
+        hold: the hold trial (``None`` when not simulated, and in the ``dexgraspbench``
+            protocol, which has none).
         six_axis: the six disturbance trials, in the order of `AXES`.
         kicks: the energy kicks, for each scale: the least-energy direction, then the random ones.
         settled_normal_force_N: ``(N,)`` each fingertip's normal force in the simulator at
-            the end of the hold (mean over its last quarter), N (``nan`` when not simulated).
+            the end of the hold (mean over its last quarter), N (``nan`` when not simulated);
+            a hand's (``dexgraspbench``): ``(F,)`` one per fingertip at the end of the
+            calibrated squeeze (``nan`` for a fingertip not in contact).
         model_normal_force_N: ``(N,)`` the model's normal force at jaxgrasp's equilibrium,
-            ``pi E d^2 / cos^2 phi`` (eq. 4, 13, 14), N (``nan`` where there is none).
+            ``pi E d^2 / cos^2 phi`` (eq. 4, 13, 14), N (``nan`` where there is none); a
+            hand's: ``(F,)``, at ``dr`` where the evaluation found no equilibrium.
         parameters: every parameter of the simulation (timestep, calibration, damping,
             friction, tolerances), SI units; the key ``units`` names them.
+        protocol: ``"jaxgrasp"`` or ``"dexgraspbench"`` (`jaxgrasp.simulation._protocols`).
     """
 
     status: SimulationStatus
@@ -170,6 +181,7 @@ class SimulationResult:
     settled_normal_force_N: np.ndarray
     model_normal_force_N: np.ndarray
     parameters: dict
+    protocol: str = "jaxgrasp"
 
     def __post_init__(self):
         object.__setattr__(self, "status", SimulationStatus(int(self.status)))
@@ -195,15 +207,38 @@ class SimulationResult:
         """All six disturbances withstood (``None`` when not simulated)."""
         return all(t.success for t in self.six_axis) if self.six_axis else None
 
+    @property
+    def success(self) -> bool | None:
+        """The protocol's verdict: ``dexgraspbench``, all six pushes withstood (``False``
+        where the hand penetrated at the start); ``jaxgrasp``, the hold and the six axes
+        withstood (the kicks are reported apart). ``None`` when not simulated."""
+        if self.status is SimulationStatus.PENETRATING:
+            return False
+        if not self.simulated:
+            return None
+        held = self.six_axis_success
+        return bool(held) if self.hold is None else bool(held and self.hold.success)
+
+    @property
+    def normal_force_error(self) -> np.ndarray:
+        """``settled / model - 1`` per contact: the settled normal force's relative error
+        against the model's (eq. 4), ``nan`` where either is missing."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.asarray(self.settled_normal_force_N, float) / np.asarray(self.model_normal_force_N, float) - 1.0
+
     def summary(self) -> str:
         """A few lines: the status and the evaluation's, the value (J), then each trial
         (hold, the six disturbances, the kicks) withstood or not, or why the grasp was not
         simulated."""
         head = f"{self.status_name} (evaluation {self.grasp_status}): value {self.value:.6e} J"
+        if self.protocol != "jaxgrasp":
+            head += f"; protocol {self.protocol}: {'success' if self.success else 'failure'}"
         if not self.simulated:
             return f"{head}\nnot simulated: {self.reason}"
         said = lambda t, *words: t.label if t.diverged else f"{t.label} {t.outcome(*words)}"  # noqa: E731
-        lines = [head, f"hold: {self.hold.outcome()}, moved {self.hold.max_displacement_m * 1e3:.3f} mm"]
+        lines = [head]
+        if self.hold is not None:
+            lines.append(f"hold: {self.hold.outcome()}, moved {self.hold.max_displacement_m * 1e3:.3f} mm")
         if self.reason:
             lines.append(self.reason)
         if self.six_axis:
@@ -216,7 +251,9 @@ class SimulationResult:
         """``results.json``'s content: every field, JSON-ready (``null`` for ``nan``);
         the value's key is ``value_J`` there (the file's units in its names)."""
         return {
+            "protocol": self.protocol,
             "status": self.status_name,
+            "success": self.success,
             "grasp_status": self.grasp_status,
             "value_J": float(self.value),
             "reason": self.reason,
@@ -226,5 +263,6 @@ class SimulationResult:
             "kicks": [t.to_dict() for t in self.kicks],
             "settled_normal_force_N": json_floats(self.settled_normal_force_N),
             "model_normal_force_N": json_floats(self.model_normal_force_N),
+            "normal_force_relative_error": json_floats(self.normal_force_error),
             "parameters": self.parameters,
         }

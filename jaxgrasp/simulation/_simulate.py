@@ -28,6 +28,7 @@ import numpy as np
 
 from jaxgrasp.model import GraspValueError
 from jaxgrasp.simulation._options import check_kick_travel, check_number, check_options, check_steps
+from jaxgrasp.simulation._protocols import check_protocol
 from jaxgrasp.simulation._result import SimulationResult, SimulationStatus
 from jaxgrasp.simulation._scene import IMPEDANCE, build_scene, load_mujoco
 from jaxgrasp.simulation._trials import Runner, least_energy_direction, warnings_recorded
@@ -43,11 +44,12 @@ _UNITS = {
 def simulate(
     grasp, *, evaluation=None, friction=None, nominal_mass=0.1, damping_ratio=0.05, timestep=None,
     kick_scales=(0.5, 0.9, 1.1, 2.0), random_kicks=2, seed=0, simulate_unstable=False, slip_threshold=None,
-    **durations,
+    protocol="jaxgrasp", allowed_dirs=None, **durations,
 ) -> SimulationResult:
     """A second opinion from MuJoCo: the grasp held, disturbed and kicked in a physics engine.
 
-    The scene (`jaxgrasp.simulation._scene`): the object (its mesh, or the contacts'
+    ``protocol="dexgraspbench"``: a hand grasp's whole hand (`_dexgraspbench`). Else (a hand
+    grasp as its fingertip contacts) the scene (`jaxgrasp.simulation._scene`): the object (its mesh, or the contacts'
     hull) at jaxgrasp's equilibrium pose, each fingertip a sphere fixed at ``p_i + (r -
     dr_i) n_i``, condim 4, elliptic cones, friction ``mu`` and ``mu e_i`` (eq. 9, 10), normal
     springs through eq. 4 at ``dr`` and at the equilibrium, gravity. The trials (module
@@ -56,14 +58,13 @@ def simulate(
     least-energy boundary's direction and random ones (success: no contact slips).
 
     Args:
-        grasp: a [`Grasp`][jaxgrasp.Grasp] or [`MeshGrasp`][jaxgrasp.MeshGrasp] (SI units).
+        grasp: a [`Grasp`][jaxgrasp.Grasp], [`MeshGrasp`][jaxgrasp.MeshGrasp] or [`HandGrasp`][jaxgrasp.hands.HandGrasp] (SI units).
         evaluation: its [`Evaluation`][jaxgrasp.Evaluation] (default: [`jaxgrasp.evaluate`][jaxgrasp.evaluate]).
         friction: the simulator's friction coefficient instead of the grasp's (a what-if).
         nominal_mass: kg, the simulated mass of a weightless grasp (mass 0: no gravity).
         damping_ratio: of each contact's normal spring against the object's mass (light:
             the paper's model has no damping at all).
-        timestep: s, at most 1/100 of the shortest trial (default: resolves the stiffest
-            contact mode, at most ``_scene.MAX_TIMESTEP``).
+        timestep: s, at most 1/100 of the shortest trial (default: resolves the stiffest contact mode).
         kick_scales: the ``s`` of the energy kicks, each ``>= 0`` and at most
             ``_limits.MAX_KICK_SCALE``; a scale whose kick would move the contacts more
             than ``_limits.MAX_KICK_TRAVEL`` fingertip radii per timestep is refused once
@@ -87,18 +88,60 @@ def simulate(
         GraspValueError: a bad grasp or option (one line naming it; options before evaluating).
     """
     load_mujoco()
+    grasp = _for_protocol(grasp, check_protocol(protocol))
+    if protocol == "dexgraspbench":
+        return _dexgraspbench(grasp, evaluation, friction, allowed_dirs, timestep, durations)
     opts = check_options(friction=friction, nominal_mass=nominal_mass, damping_ratio=damping_ratio, timestep=timestep,
                          kick_scales=kick_scales, random_kicks=random_kicks, **durations)
     slip_threshold = None if slip_threshold is None else check_number("slip_threshold", slip_threshold)
     plain = _one_grasp(grasp)
-    if evaluation is None:
-        from jaxgrasp.engine import evaluate
-
-        evaluation = evaluate(plain)
+    evaluation = _evaluated(plain, evaluation)
     skip = _skip_status(evaluation, simulate_unstable)
     if skip is not None:
         return _not_simulated(plain, evaluation, skip, opts)
     return _simulated(grasp, plain, evaluation, opts, seed, slip_threshold)
+
+
+def _evaluated(plain, evaluation):
+    """``evaluation``, or [`jaxgrasp.evaluate`][jaxgrasp.evaluate] of ``plain`` where it is ``None``."""
+    if evaluation is not None:
+        return evaluation
+    from jaxgrasp.engine import evaluate
+
+    return evaluate(plain)
+
+
+def _for_protocol(grasp, protocol: str):
+    """``grasp``, or a hand grasp's fingertip contacts under the jaxgrasp protocol; a
+    one-line error for a plain grasp under ``dexgraspbench``."""
+    from jaxgrasp.hands import HandGrasp
+
+    if isinstance(grasp, HandGrasp):
+        return grasp if protocol == "dexgraspbench" else grasp.mesh_grasp()
+    if protocol == "dexgraspbench":
+        raise GraspValueError(f"the dexgraspbench protocol simulates a hand: give a jaxgrasp.hands.HandGrasp "
+                              f"(jaxgrasp.hands.load_hand_grasp), got {type(grasp).__name__}")
+    return grasp
+
+
+def _dexgraspbench(hg, evaluation, friction, allowed_dirs, timestep, durations) -> SimulationResult:
+    """The hand grasp ``hg`` under DexGraspBench's protocol (`jaxgrasp.simulation._hand_simulate`):
+    its whole hand (MJCF; a URDF hand is refused) under the benchmark's settings, squeezed
+    to the model's normal forces (eq. 4) and pushed along six axes. Every grasp is
+    simulated (``simulate_unstable`` has no part); ``friction`` replaces the protocol's
+    sliding friction (its torsional one scaled alike); ``allowed_dirs``: the folders the
+    hand's files may lie in besides its own (as for [`Hand.from_file`][jaxgrasp.Hand.from_file]);
+    the jaxgrasp protocol's ``timestep`` and durations are refused."""
+    from jaxgrasp.simulation._hand_simulate import simulate_hand
+
+    given = [*sorted(durations), *(["timestep"] if timestep is not None else [])]
+    if given:
+        raise GraspValueError(f"{given[0]} is an option of the jaxgrasp protocol; the dexgraspbench protocol runs "
+                              "with its own settings")
+    if hg.num_active < 1:
+        raise GraspValueError("the hand grasp has no fingertip in contact: nothing to squeeze")
+    friction = None if friction is None else check_number("friction", friction)
+    return simulate_hand(hg, evaluation=_evaluated(hg.grasp, evaluation), friction=friction, allowed_dirs=allowed_dirs)
 
 
 def _one_grasp(grasp):
