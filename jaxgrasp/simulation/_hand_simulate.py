@@ -68,9 +68,30 @@ def _runner(hg, scene, settings, target):
     load_mujoco().mj_comPos(scene.model, d)
     dr = np.broadcast_to(np.asarray(g.initial_deformation, float), (len(hg.active),))[active]
     stiffness = target[active] / (SQUEEZE_FACTOR * dr)
-    kp = gains(*runner.jacobians(), stiffness, hg.hand.tree.jnt_type == 2)
+    jac, jac_n = runner.jacobians()
+    other = _idle_jacobian(runner, scene, hg)
+    kp = gains(np.concatenate([jac, other]), np.concatenate([jac_n, np.sqrt(np.sum(other**2, axis=1))]),
+               np.r_[stiffness, np.full(len(other), np.min(stiffness))], hg.hand.tree.jnt_type == 2)
     runner.set_gains(kp)
     return runner, stiffness, kp
+
+
+def _idle_jacobian(runner, scene, hg) -> np.ndarray:
+    """``(I, 3, J)``: the velocity of each inactive fingertip's centre per unit joint velocity.
+
+    A fingertip the model leaves out (its cylinder, not its cap, meets the object, or it
+    does not reach it) is still part of the hand and may touch the object: its joints get
+    the gains of a fingertip as stiff as the softest active one (`gains`), so that it
+    presses no harder than the model's contacts do, rather than the stiffness of the
+    wrist's lever (which would make it press the object out of the hand)."""
+    mj, m, d = runner.mujoco, runner.model, runner.data
+    idle = np.flatnonzero(~np.asarray(hg.active, dtype=bool))
+    pos, rot = runner.object_pose()
+    jacp, out = np.zeros((3, m.nv)), np.zeros((len(idle), 3, runner.J))
+    for a, i in enumerate(idle):
+        mj.mj_jac(m, d, jacp, None, pos + rot @ np.asarray(hg.centers[i], float), int(scene.fingertip_bodies[i]))
+        out[a] = jacp[:, :runner.J]
+    return out
 
 
 def simulate_hand(hg, *, evaluation, friction=None, allowed_dirs=None) -> SimulationResult:
@@ -78,6 +99,7 @@ def simulate_hand(hg, *, evaluation, friction=None, allowed_dirs=None) -> Simula
     (`jaxgrasp.simulation._protocols`; ``friction``: the sliding coefficient instead of
     its 0.6, the torsional one scaled alike)."""
     from jaxgrasp.simulation._hand_scene import build_hand_scene
+    from jaxgrasp.simulation._hand_trials import clear_pregrasp
 
     settings = DEXGRASPBENCH
     mu = _friction(friction, settings)
@@ -93,6 +115,7 @@ def simulate_hand(hg, *, evaluation, friction=None, allowed_dirs=None) -> Simula
             return _result(hg, evaluation, SimulationStatus.PENETRATING, (), np.full(len(active), np.nan), target,
                            params, f"the hand overlaps the object or itself by {1e3 * max(pene):.3g} mm at the "
                            f"pregrasp, more than the protocol's {1e3 * settings['max_penetration_m']:g} mm")
+        runner.q_pre = clear_pregrasp(runner, hg.hand, runner.q_pre)
         cal = runner.calibrate(target[active])
         six = [runner.push(axis, cal["squeeze"], scene.mass) for axis in AXES]
     settled = np.full(len(active), np.nan)

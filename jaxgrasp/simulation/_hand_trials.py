@@ -2,14 +2,21 @@
 
 Stages (DexGraspBench's ``_control_hand_with_interp``): the actuators' targets move from
 one stage's joints to the next in ``outer`` equal steps, each held ``inner`` MuJoCo steps.
-The pregrasp is the grasp with every joint at `PREGRASP_FACTOR` times its angle (within
-the joint limits: DexGraspBench's own conversion of grasps that carry none).
+The pregrasp is the grasp with every finger joint at `PREGRASP_FACTOR` times its angle
+(within the joint limits: DexGraspBench's own conversion of grasps that carry none; the
+wrist's joints, those on every fingertip's chain, kept). The protocol's penetration check
+is made there; then, where a link still overlaps or nearly touches the object (a
+fingertip that meets the surface with the side of its cap opens along the surface, not
+away from it), the fingers are opened further until every link stands `CLEARANCE` off
+(`clear_pregrasp`): the object is free and weightless, and an overlap at the start
+would throw it out of the hand before the fingers close.
 
 Squeeze, and the actuators' gains. Each joint is a position actuator ``tau = kp (ctrl -
 q) - kv qdot``. The protocol's contacts are nearly rigid, so the fingertips' softness of
 the paper lives in the joints: the gains make each fingertip in contact about as stiff
 along its normal as the secant of eq. 4 from no deformation to ``SQUEEZE_FACTOR * dr``,
-``k_i = pi E dr_i / SQUEEZE_FACTOR`` (N/m), each joint ``kp_j = max_i m_i k_i J_ij^2``
+``k_i = pi E dr_i / SQUEEZE_FACTOR`` (N/m) (an inactive fingertip as stiff as the softest
+active one, at its centre), each joint ``kp_j = max_i m_i k_i J_ij^2``
 over the fingertips it moves (``J_ij`` the fingertip's contact point's velocity along its
 inward normal per unit joint velocity; ``m_i`` the joints that move fingertip ``i``, so
 that its compliance ``sum_j J_ij^2 / kp_j`` is ``1 / k_i``), the joints that move none as
@@ -17,8 +24,9 @@ stiff as the stiffest (`gains`). ``kv = DAMPING_STEPS dt kp`` (`DAMPING_STEPS`).
 overlap ``dr``, pressing with about ``pi E dr^2 / SQUEEZE_FACTOR``; the squeeze moves the
 targets further into the object by ``kp^-1 J^T (f* - f)`` (`calibrate`), ``f*`` the
 model's normal force (eq. 4) at the equilibrium jaxgrasp finds (at ``dr`` where it
-finds none), ``f`` the settled force, and again from the grasp's settled state until
-every fingertip presses within `FORCE_TOL` of ``f*`` or `MAX_ROUNDS` rounds.
+finds none), ``f`` the settled force, by Newton steps on the measured response of the
+settled forces (`HandRunner.calibrate`), from the state at the end of the grasp stage,
+until every fingertip presses within `FORCE_TOL` of ``f*`` or `MAX_ROUNDS` squeezes.
 
 Trials (DexGraspBench's ``fc_mocap``): for each of ``+x ... -z``, from a fresh reset at
 the pregrasp: grasp, squeeze, then a force ``10 m`` N on the object for ``outer x inner``
@@ -35,14 +43,15 @@ from jaxgrasp.simulation._result import AXES, Trial
 from jaxgrasp.simulation._scene import load_mujoco, rotation_matrix_of_quat
 from jaxgrasp.simulation._trials import rotation_angle
 
-__all__ = ["FORCE_TOL", "HandRunner", "MAX_ROUNDS", "SETTLE_STEPS", "gains", "pregrasp"]
+__all__ = ["CLEARANCE", "FORCE_TOL", "HandRunner", "MAX_ROUNDS", "SETTLE_STEPS", "clear_pregrasp", "gains", "pregrasp",
+           "wrist_joints"]
 
 FORCE_TOL = 0.02
 """The squeeze is calibrated until each fingertip's settled normal force is within this
 fraction of its target."""
 
-MAX_ROUNDS = 6
-"""At most this many squeezes are tried in the calibration."""
+MAX_ROUNDS = 24
+"""At most this many squeezes are tried in the calibration (the finite differences' included)."""
 
 DAMPING_STEPS = 10.0
 """Each joint's damping ``kv = DAMPING_STEPS * dt * kp``: its spring's relaxation time is this
@@ -54,9 +63,26 @@ SETTLE_STEPS = 100
 """Steps held after the grasp and after a calibration squeeze before the forces are read
 (their mean over the last quarter)."""
 
+def wrist_joints(hand) -> np.ndarray:
+    """``(J,)`` bool: the joints on every fingertip's chain (a wrist joint of the hand's own
+    file, such as the Shadow hand's ``WRJ1``, ``WRJ0``): they move the whole hand, not a finger."""
+    tree = hand.tree
+    chains = []
+    for body in np.asarray(hand.fingertip_body, dtype=int):
+        on = np.zeros(hand.num_joints, dtype=bool)
+        while body > 0:
+            on[list(tree.body_joints[body])] = True
+            body = int(tree.body_parent[body])
+        chains.append(on)
+    return np.logical_and.reduce(chains) if chains else np.zeros(hand.num_joints, dtype=bool)
+
+
 def pregrasp(hand, qpos, factor: float) -> np.ndarray:
-    """``(J,)`` the pregrasp: every joint at ``factor`` times its grasp position, within the limits."""
-    return np.clip(factor * np.asarray(qpos, dtype=np.float64), hand.lower, hand.upper)
+    """``(J,)`` the pregrasp: every finger joint at ``factor`` times its grasp position, within
+    the limits; the wrist's joints (`wrist_joints`) kept at the grasp, as DexGraspBench keeps
+    the wrist (scaling a wrist joint would swing the whole hand, not open it)."""
+    q = np.asarray(qpos, dtype=np.float64)
+    return np.where(wrist_joints(hand), q, np.clip(factor * q, hand.lower, hand.upper))
 
 
 def gains(jac, jac_normal, stiffness, slide) -> np.ndarray:
@@ -72,6 +98,54 @@ def gains(jac, jac_normal, stiffness, slide) -> np.ndarray:
     hinge_lever2 = float(np.max(lever2[:, ~slide], initial=0.0)) or 0.01
     floor = np.where(slide, np.max(stiffness), np.max(stiffness) * hinge_lever2)
     return np.where(kp > 0, kp, floor)
+
+
+CLEARANCE = 0.005
+"""m: how far the pregrasp's links stand from the object (`clear_pregrasp`)."""
+
+CLEAR_ITERATIONS = 8
+"""At most this many Gauss-Newton steps of `clear_pregrasp`."""
+
+
+def _overlaps(runner, q, clearance):
+    """``(rows (C, J), gaps (C,))`` at the hand's joints ``q``, the object at its start: each
+    hand-object pair nearer than ``clearance``, its separation's rate per joint velocity and
+    how far it is from ``clearance`` (m)."""
+    mj, m, d, body = runner.mujoco, runner.model, runner.data, runner.scene.object_body
+    d.qpos[:runner.J], d.qpos[runner.J:runner.J + 7] = q, runner.scene.object_start
+    saved = m.geom_margin[runner.scene.object_geoms].copy()
+    m.geom_margin[runner.scene.object_geoms] = clearance
+    mj.mj_forward(m, d)
+    m.geom_margin[runner.scene.object_geoms] = saved
+    rows, gaps, jacp = [], [], np.zeros((3, m.nv))
+    for j in range(d.ncon):
+        c = d.contact[j]
+        ends = (int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2]))
+        if (ends[0] == body) == (ends[1] == body) or c.dist >= clearance:
+            continue
+        hand_body, sign = (ends[1], 1.0) if ends[0] == body else (ends[0], -1.0)  # normal: geom1 -> geom2
+        mj.mj_jac(m, d, jacp, None, c.pos, hand_body)
+        rows.append(sign * c.frame[:3] @ jacp[:, :runner.J])
+        gaps.append(clearance - c.dist)
+    return np.array(rows).reshape(-1, runner.J), np.array(gaps)
+
+
+def clear_pregrasp(runner, hand, q, clearance: float = CLEARANCE) -> np.ndarray:
+    """``(J,)`` the pregrasp ``q`` with the fingers opened until no link of the hand is nearer
+    the object than ``clearance`` (damped Gauss-Newton steps on the pairs' separations, the
+    wrist's joints kept, within the joint limits), as a planner's pregrasp stands off its
+    grasp (BODex's, which DexGraspBench replays): the object is free and, without gravity,
+    any overlap at the start throws it out of the hand before the fingers close."""
+    q = np.asarray(q, dtype=np.float64).copy()
+    moving = ~wrist_joints(hand)
+    for _ in range(CLEAR_ITERATIONS):
+        rows, gaps = _overlaps(runner, q, clearance)
+        if not len(gaps) or np.max(gaps) <= 0.1 * clearance:
+            break
+        rows = rows * moving
+        step = rows.T @ np.linalg.solve(rows @ rows.T + 1e-6 * np.eye(len(gaps)), gaps)
+        q = np.clip(q + step, hand.lower, hand.upper)
+    return q
 
 
 class HandRunner:
@@ -204,31 +278,55 @@ class HandRunner:
                 forces.append(self.normal_forces())
         return np.mean(forces, axis=0)
 
+    def squeezed(self, held, squeeze) -> np.ndarray:
+        """From the state ``held`` (the grasp's targets reached), the squeeze's targets
+        ``squeeze`` ``(J,)``: ``(A,)`` N the settled normal forces (`settle`)."""
+        self.restore(held)
+        self.stage(self.q_grasp, squeeze)
+        return self.settle()
+
+    def within_limits(self, q) -> np.ndarray:
+        """``q`` ``(J,)`` clipped to the limited joints' ranges (a target past a limit only
+        presses the joint into it)."""
+        m = self.model
+        lo, hi = m.jnt_range[:self.J, 0], m.jnt_range[:self.J, 1]
+        limited = np.asarray(m.jnt_limited[:self.J], dtype=bool)
+        return np.where(limited, np.clip(q, lo, hi), q)
+
     def calibrate(self, target) -> dict:
         """The squeeze's targets (module notes): ``{"squeeze", "settled", "rounds", "grasp_settled"}``:
-        ``(J,)`` joint targets, ``(A,)`` N the settled normal forces of the last squeeze,
+        ``(J,)`` joint targets, ``(A,)`` N the settled normal forces of the squeeze kept,
         how many squeezes were tried, ``(A,)`` N the forces at the grasp's targets.
 
-        Each round moves the targets by ``kp^-1 J^T (f* - f) / rho``: ``rho`` the share of
-        the last move's intended change of force that came (fingers that press against
-        each other through the object each get a part of a move), from 1 at the start."""
+        The squeeze is ``q_grasp + D a``, ``D = kp^-1 Jn^T`` (each column: fingertip ``i``'s
+        joints moved as if to press it 1 N harder against a fixed object), ``a`` ``(A,)`` N.
+        The object is free, so one fingertip's push moves it and changes every force: the
+        settled forces' response ``S = df/da`` is measured by finite differences (one squeeze
+        per fingertip), then Newton steps ``S da = f* - f`` (each at most twice the largest
+        target, ``S`` updated by Broyden's rule after each; a step that makes the largest
+        relative error worse is not taken), the best squeeze kept."""
         target = np.asarray(target, dtype=np.float64)
         kp = self.model.actuator_gainprm[:self.J, 0].copy()
         self.reset()
         self.stage(self.q_pre, self.q_grasp)
-        settled = self.settle()
-        held, at_grasp = self.save(), settled
-        squeeze, rho, rounds = self.q_grasp.copy(), 1.0, 0
-        while rounds < MAX_ROUNDS:
-            want = target - settled
-            squeeze = squeeze + self.normal_jacobian().T @ (want / rho) / kp
-            self.restore(held)
-            self.stage(self.q_grasp, squeeze)
-            before, (settled, rounds) = settled, (self.settle(), rounds + 1)
-            if np.all(np.abs(settled - target) <= FORCE_TOL * target) or self.diverged():
-                break
-            rho = float(np.clip(np.dot(settled - before, want) / max(np.dot(want, want), 1e-300) * rho, 0.1, 10.0))
-        return {"squeeze": squeeze, "settled": settled, "rounds": rounds, "grasp_settled": at_grasp}
+        held = self.save()
+        basis = self.normal_jacobian().T / kp[:, None]  # (J, A)
+        run = lambda a: self.squeezed(held, self.within_limits(self.q_grasp + basis @ a))  # noqa: E731
+        a = np.zeros(len(target))
+        f = at_grasp = run(a)  # the same path as every squeeze: the forces at the same time after the grasp
+        h = 0.25 * np.maximum(target, 1e-3)
+        slope = np.stack([(run(h[i] * np.eye(len(target))[i]) - f) / h[i] for i in range(len(target))], axis=1)
+        best, rounds = (np.max(np.abs(f - target) / target), a, f), len(target)
+        while rounds < MAX_ROUNDS and best[0] > FORCE_TOL and not self.diverged():
+            step = np.linalg.lstsq(slope, target - f, rcond=1e-3)[0]
+            step *= min(1.0, 2.0 * np.max(target) / max(np.max(np.abs(step)), 1e-300))
+            f_new, rounds = run(a + step), rounds + 1
+            err = np.max(np.abs(f_new - target) / target)
+            slope += np.outer(f_new - f - slope @ step, step) / max(np.dot(step, step), 1e-300)
+            if err < best[0]:
+                a, f, best = a + step, f_new, (err, a + step, f_new)
+        squeeze = self.within_limits(self.q_grasp + basis @ best[1])
+        return {"squeeze": squeeze, "settled": best[2], "rounds": rounds, "grasp_settled": at_grasp}
 
     # ---------------------------------------------------------------- trials
     def push(self, axis: str, squeeze, mass: float) -> Trial:
