@@ -260,8 +260,27 @@ def _epsilons(inputs: HandPlanInputs, surface, q, w) -> np.ndarray:
     active = np.asarray(grasps.active).sum(axis=1)
     out = np.zeros(len(q))
     for i in np.flatnonzero(active >= 2):
-        out[i] = epsilon(jax.tree_util.tree_map(lambda a: a[i], grasps)).value
+        out[i] = _epsilon(jax.tree_util.tree_map(lambda a: a[i], grasps))
     return out
+
+
+def _epsilon(grasp) -> float:
+    """The Ferrari-Canny epsilon of ``grasp``; 0 for one the model refuses (two fingertips
+    touching the surface at the same point: near a mesh corner, several fingertip centres
+    have that corner as their closest point)."""
+    try:
+        return float(epsilon(grasp).value)
+    except GraspValueError:
+        return 0.0
+
+
+def _evaluated(grasp):
+    """[`jaxgrasp.evaluate`][jaxgrasp.evaluate] of ``grasp``, or ``None`` for one the model refuses
+    (as `_epsilon`): such a configuration is never ranked."""
+    try:
+        return evaluate(grasp)
+    except GraspValueError:
+        return None
 
 
 def _grasp(inputs: HandPlanInputs, q, w):
@@ -300,7 +319,7 @@ def _refine_epsilon(inputs: HandPlanInputs, surface, q, w, maxiter: int, rng, ru
         g = jax.tree_util.tree_map(lambda a: a[0], _contact_grasps(inputs, surface, cq[None], cw[None]))
         if int(np.sum(np.asarray(g.active))) < rules[0] or _depths(hand, surface, cq[None], cw[None])[0] > rules[1]:
             continue
-        e = epsilon(g).value
+        e = _epsilon(g)
         if e > best:
             best_q, best_w, best = cq, cw, e
     return best_q, best_w
@@ -313,12 +332,12 @@ def _final(inputs: HandPlanInputs, surface, pool: list, top: int, objective: str
     q = np.array([p[0] for p in pool]).reshape(len(pool), inputs.hand.num_joints)
     w = np.array([p[1] for p in pool]).reshape(len(pool), 6)
     grasps = [_grasp(inputs, a, b) for a, b in zip(q, w)]
-    evs = [evaluate(g.grasp) if g.num_active >= 2 else None for g in grasps]
+    evs = [_evaluated(g.grasp) if g.num_active >= 2 else None for g in grasps]
     values = np.array([float(e.value) if e is not None else 0.0 for e in evs])
     statuses = np.array([int(e.status) if e is not None else -1 for e in evs])
     m = dict(value=values, status=statuses, active=np.array([g.num_active for g in grasps]),
              depth=_depths(inputs.hand, surface, q, w) if len(pool) else np.zeros(0))
-    eps = np.array([epsilon(g.grasp).value if g.num_active >= 2 else 0.0 for g in grasps])
+    eps = np.array([_epsilon(g.grasp) if g.num_active >= 2 else 0.0 for g in grasps])
     order = _order(inputs, np.flatnonzero(_eligible(m, *rules)), m, values if objective == "value" else eps,
                    objective)[:top]
     return dict(grasps=tuple(grasps[i] for i in order), values=values[order], statuses=statuses[order],

@@ -131,3 +131,16 @@ def test_the_command_refuses_bad_hand_options_in_one_line_creating_nothing(extra
     assert cli.main([str(a) for a in ["plan", CUBE, "--units", "mm", *extra, "--out", out]]) == 2
     err = capsys.readouterr().err.strip()
     assert words in err and "\n" not in err and not out.exists()
+
+
+def test_two_fingertips_on_one_point_are_never_ranked_not_a_crash():
+    # near a mesh corner several fingertip centres share the corner as their closest point: the model refuses
+    # such a grasp (two contacts at one position); the planner gives it epsilon 0 and no evaluation
+    import dataclasses
+
+    from jaxgrasp.planning._hand_plan import _epsilon, _evaluated
+
+    g = jaxgrasp.presets.cube(6e5, 0.002)
+    assert _epsilon(g) > 0 and _evaluated(g) is not None
+    one_point = dataclasses.replace(g, positions=g.positions.at[1].set(g.positions[0]))
+    assert _epsilon(one_point) == 0.0 and _evaluated(one_point) is None
