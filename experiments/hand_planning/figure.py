@@ -45,27 +45,32 @@ def compare(arms: dict) -> list[str]:
                          f"median {statistics.median(secs):.1f} s per object (max {max(secs):.1f}), candidates "
                          f"{next(iter(rows.values())).get('candidates')}")
     v, e = arms["value"], arms["epsilon"]
-    both = sorted(k for k in v if k in e and v[k]["value_J"] > 0 and e[k]["value_J"] > 0)
+    both = sorted((k for k in v if k in e and v[k]["value_J"] > 0), key=str)
     if both:
         value_ratio = np.array([e[k]["value_J"] / v[k]["value_J"] for k in both])
         eps_ratio = np.array([v[k]["epsilon"] / e[k]["epsilon"] for k in both])
         same = sum(v[k]["value_J"] == e[k]["value_J"] and v[k]["epsilon"] == e[k]["epsilon"] for k in both)
         lines.append(
             f"value against epsilon on {len(both)} objects: the same best grasp on {same}; the epsilon-picked grasp's "
-            f"energy tolerance is {np.median(value_ratio):.2f} (median; quartiles {np.quantile(value_ratio, 0.25):.2f}-"
-            f"{np.quantile(value_ratio, 0.75):.2f}) of the value-picked one's, below it on "
+            f"energy tolerance is {np.median(value_ratio):.3f} (median, 0 where it is unstable: "
+            f"{int(np.sum(value_ratio == 0))} objects; quartiles {np.quantile(value_ratio, 0.25):.3f}-"
+            f"{np.quantile(value_ratio, 0.75):.3f}) of the value-picked one's, below it on "
             f"{int(np.sum(value_ratio < 1))}; the value-picked grasp's epsilon is {np.median(eps_ratio):.2f} (median; "
             f"quartiles {np.quantile(eps_ratio, 0.25):.2f}-{np.quantile(eps_ratio, 0.75):.2f}) of the epsilon-picked "
             f"one's")
     r = arms["random"]
-    common = sorted(k for k in r if k in v)
+    common = sorted((k for k in r if k in v), key=str)
     if common:
         lines.append(f"value planner against random closed-hand sampling on the {len(common)} objects of both: stable best "
                      f"{sum(v[k]['stable'] for k in common)} against {sum(r[k]['stable'] for k in common)}, with >= 3 "
                      f"fingertips {sum(v[k]['stable'] and v[k]['active'] >= 3 for k in common)} against "
                      f"{sum(r[k]['stable'] and r[k]['active'] >= 3 for k in common)}; median best value "
                      f"{np.median([v[k]['value_J'] for k in common]):.3e} J against "
-                     f"{np.median([r[k]['value_J'] for k in common]):.3e} J")
+                     f"{np.median([r[k]['value_J'] for k in common]):.3e} J; the planner's best over random's: median "
+                     f"{np.median([v[k]['value_J'] / r[k]['value_J'] for k in common]):.2f}, least "
+                     f"{min(v[k]['value_J'] / r[k]['value_J'] for k in common):.2f}; median time "
+                     f"{np.median([v[k]['seconds'] for k in common]):.0f} s against "
+                     f"{np.median([r[k]['seconds'] for k in common]):.0f} s")
     return lines
 
 
@@ -87,10 +92,11 @@ def figure(arms: dict, path: Path) -> None:
     ax[0].legend(loc="lower right", fontsize=8)
     ax[0].set_title("(a) share of objects")
     v, e = arms["value"], arms["epsilon"]
-    both = sorted(k for k in v if k in e and v[k]["value_J"] > 0 and e[k]["value_J"] > 0)
+    both = sorted((k for k in v if k in e and v[k]["value_J"] > 0 and e[k]["value_J"] > 0), key=str)
     for a, key, title, unit in ((ax[1], "value_J", "(b) energy tolerance of the pick", "J"),
                                 (ax[2], "epsilon", "(c) epsilon of the pick", "")):
-        xs, ys = np.array([v[k][key] for k in both]), np.array([e[k][key] for k in both])
+        keys = both if key == "value_J" else sorted((k for k in v if k in e), key=str)
+        xs, ys = np.array([v[k][key] for k in keys]), np.array([e[k][key] for k in keys])
         a.scatter(xs, ys, s=14)
         lo, hi = min(xs.min(), ys.min()), max(xs.max(), ys.max())
         a.plot([lo, hi], [lo, hi], "k--", lw=0.8, label="equal")
@@ -99,7 +105,8 @@ def figure(arms: dict, path: Path) -> None:
             a.set_yscale("log")
         a.set_xlabel(f"picked by the value{', ' + unit if unit else ''}")
         a.set_ylabel(f"picked by epsilon{', ' + unit if unit else ''}")
-        a.set_title(title)
+        a.set_title(title + (f" ({sum(e[k]['value_J'] == 0 for k in v if k in e)} epsilon picks unstable: "
+                             "value 0, not drawn)" if key == "value_J" else ""), fontsize=9)
         a.legend(fontsize=8)
     for arm in present:
         secs = sorted(r["seconds"] for r in arms[arm].values())
