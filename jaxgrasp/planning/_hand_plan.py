@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.analysis import MAX_TUNE_ITERATIONS, TUNE_ITERATIONS_WHAT, epsilon
+from jaxgrasp.analysis import MAX_ROBUST_SAMPLES, MAX_TUNE_ITERATIONS, ROBUST_SAMPLES_WHAT, TUNE_ITERATIONS_WHAT, epsilon
 from jaxgrasp.base import over_limit
 from jaxgrasp.engine import evaluate, evaluate_dataset
 from jaxgrasp.io import load_mesh
@@ -45,7 +45,7 @@ from jaxgrasp.planning._result import PlanStatus
 from jaxgrasp.surface import PAD_FACES, Surface, distance_grid, mass_properties
 from jaxgrasp.tolerance import GraspStatus
 
-__all__ = ["plan_hand", "check_hand_plan", "HandPlanInputs", "OBJECTIVES", "CLOSE_CHUNK", "HAND_SAMPLES"]
+__all__ = ["plan_hand", "check_caps", "check_hand_plan", "HandPlanInputs", "OBJECTIVES", "CLOSE_CHUNK", "HAND_SAMPLES"]
 
 OBJECTIVES = ("value", "epsilon")
 """What a hand plan maximises: the paper's value (energy tolerance, J) or the Ferrari-Canny epsilon."""
@@ -111,6 +111,20 @@ def _hand_of(hand, fingertips):
     return Hand.from_file(hand, list(fingertips))
 
 
+def check_caps(samples, top, refine, tune_maxiter, robust_samples=None) -> None:
+    """Every count of a plan at most its cap (`jaxgrasp.planning._limits`; ``robust_samples``
+    where given), before the mesh is read: a one-line `GraspValueError` naming the first over it."""
+    counts = [("samples", samples, MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT), ("top", top, MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT),
+              ("refine", refine, MAX_PLAN_REFINE, PLAN_REFINE_WHAT),
+              ("tune_maxiter", tune_maxiter, MAX_TUNE_ITERATIONS, TUNE_ITERATIONS_WHAT)]
+    if robust_samples is not None:
+        counts.append(("robust_samples", robust_samples, MAX_ROBUST_SAMPLES, ROBUST_SAMPLES_WHAT))
+    for name, v, cap, what in counts:
+        problem = over_limit(f"plan: {name}", v, cap, what)
+        if problem:
+            raise GraspValueError(problem)
+
+
 def check_hand_plan(mesh, hand, fingertips=None, *, young_modulus, friction, max_force, mass=None, density=None,
                     center_of_mass=None, gravity=DEFAULT_GRAVITY, units: str = "m", samples: int = HAND_SAMPLES, top: int = 10,
                     refine: int = 3, seed: int = 0, min_fingertips: int = 2, objective: str = "value",
@@ -122,13 +136,7 @@ def check_hand_plan(mesh, hand, fingertips=None, *, young_modulus, friction, max
                         ("min_fingertips", min_fingertips, 2), ("tune_maxiter", tune_maxiter, 1)):
         if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo):
             raise GraspValueError(f"plan: {name} must be an integer >= {lo}, got {v!r}")
-    for name, v, cap, what in (("samples", samples, MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT),
-                               ("top", top, MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT),
-                               ("refine", refine, MAX_PLAN_REFINE, PLAN_REFINE_WHAT),
-                               ("tune_maxiter", tune_maxiter, MAX_TUNE_ITERATIONS, TUNE_ITERATIONS_WHAT)):
-        problem = over_limit(f"plan: {name}", v, cap, what)
-        if problem:
-            raise GraspValueError(problem)
+    check_caps(samples, top, refine, tune_maxiter)
     if objective not in OBJECTIVES:
         raise GraspValueError(f"plan: objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
     _number("max_penetration", max_penetration, zero_ok=True)

@@ -29,31 +29,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrasp.analysis import (
-    MAX_ROBUST_SAMPLES,
-    MAX_TUNE_ITERATIONS,
-    ROBUST_SAMPLES_WHAT,
-    TUNE_ITERATIONS_WHAT,
-    Uncertainty,
-    epsilon,
-    robust_batch,
-    tune,
-)
-from jaxgrasp.base import over_limit
+from jaxgrasp.analysis import Uncertainty, epsilon, robust_batch, tune
 from jaxgrasp.engine import evaluate, evaluate_in_chunks
 from jaxgrasp.io import from_mesh, load_mesh
 from jaxgrasp.model import DEFAULT_GRAVITY, Grasp, GraspValueError
-from jaxgrasp.planning._limits import (
-    MAX_FINGERS,
-    MAX_PLAN_REFINE,
-    MAX_PLAN_SAMPLES,
-    PLAN_REFINE_WHAT,
-    PLAN_SAMPLES_WHAT,
-    SAMPLERS,
-)
+from jaxgrasp.planning._limits import MAX_FINGERS, SAMPLERS
 from jaxgrasp.planning._hand_close import CloseSettings
 from jaxgrasp.planning._hand_plan import plan_hand_stages as plan_hand_checked
-from jaxgrasp.planning._hand_plan import HAND_SAMPLES, check_hand_plan
+from jaxgrasp.planning._hand_plan import HAND_SAMPLES, check_caps, check_hand_plan
 from jaxgrasp.planning._hand_result import HandPlanResult
 from jaxgrasp.planning._progress import PlanProgress
 from jaxgrasp.planning._progress import stage as _stage
@@ -270,7 +253,7 @@ def check_plan(
     for name, v, lo in (("tune_maxiter", tune_maxiter, 1), ("robust_samples", robust_samples, 2)):
         if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo):
             raise GraspValueError(f"plan: {name} must be an integer >= {lo}, got {v!r}")
-    _check_caps(samples, top, refine, tune_maxiter, robust_samples)
+    check_caps(samples, top, refine, tune_maxiter, robust_samples)
     if robust is not None and not isinstance(robust, Uncertainty):
         raise GraspValueError(f"plan: robust must be an Uncertainty or None, got {type(robust).__name__}")
     rules = ContactRules() if rules is None else rules
@@ -295,18 +278,6 @@ def _checked_args(fingers, samples, top, refine, seed, sampler) -> str:
     if sampler == "antipodal" and fingers != 2:
         raise GraspValueError(f"plan: the antipodal sampler makes two-finger grasps, not {fingers}")
     return sampler
-
-
-def _check_caps(samples, top, refine, tune_maxiter, robust_samples) -> None:
-    """Every count at most its cap (`jaxgrasp.planning._limits`), before the mesh is read."""
-    for name, v, cap, what in (("samples", samples, MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT),
-                               ("top", top, MAX_PLAN_SAMPLES, PLAN_SAMPLES_WHAT),
-                               ("refine", refine, MAX_PLAN_REFINE, PLAN_REFINE_WHAT),
-                               ("tune_maxiter", tune_maxiter, MAX_TUNE_ITERATIONS, TUNE_ITERATIONS_WHAT),
-                               ("robust_samples", robust_samples, MAX_ROBUST_SAMPLES, ROBUST_SAMPLES_WHAT)):
-        problem = over_limit(f"plan: {name}", v, cap, what)
-        if problem:
-            raise GraspValueError(problem)
 
 
 def setup(mesh, units, mass, density, center_of_mass, gravity, radius, young_modulus, friction, max_force) -> _Setup:
