@@ -465,7 +465,7 @@ def built_results(tmp_path) -> dict[str, list]:
         elapsed_s=1.25, settings={"fingers": 2, "gravity": np.array([0.0, 0.0, -9.81])})
     hand_plan = HandPlanResult(
         status=PlanStatus.FOUND, grasps=(None,), values=np.array([1e-3]), statuses=np.array([0]), active=np.array([3]),
-        penetration=np.array([-2e-4]), epsilon=np.array([0.1]), refined=np.array([True]), qpos=np.zeros((1, 4)),
+        penetration=np.array([-2e-4]), self_overlap=np.array([-1e-3]), epsilon=np.array([0.1]), refined=np.array([True]), qpos=np.zeros((1, 4)),
         wrist=np.zeros((1, 6)), candidates=64, evaluated=60, eligible=50, stable=5, refine_tried=3, refine_kept=2,
         seed=0, elapsed_s=12.5, timings={"close": 5.0}, settings={"objective": "value", "gravity": np.zeros(3)})
     hold = Trial(kind="hold", success=True, max_displacement_m=1e-4, max_rotation_rad=1e-3, slipped_contact=None,

@@ -117,6 +117,7 @@ def main() -> None:
                        stable=bool(len(res.statuses) and res.statuses[0] == 0),
                        active=int(res.active[0]) if len(res.active) else 0,
                        penetration_mm=float(res.penetration[0]) * 1e3 if len(res.active) else None,
+                       self_overlap_mm=float(res.self_overlap[0]) * 1e3 if len(res.active) else None,
                        value_J=res.value, epsilon=float(res.epsilon[0]) if len(res.epsilon) else None,
                        candidates=res.candidates, candidates_stable=res.stable,
                        timings={a: round(b, 1) for a, b in res.timings.items()}, **_joints_check(hand, res))

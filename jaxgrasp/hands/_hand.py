@@ -22,7 +22,7 @@ from jaxgrasp.hands import _couplings
 from jaxgrasp.hands._fingertips import resolve_fingertips
 from jaxgrasp.hands._grasp import finite_vector
 from jaxgrasp.hands._kinematics import body_frames, geom_frames
-from jaxgrasp.hands._links import link_depths, link_samples
+from jaxgrasp.hands._links import link_depths, link_samples, self_overlap, self_segments
 from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER, SPHERE, KinematicTree, read_model
 
 __all__ = ["Hand"]
@@ -50,6 +50,8 @@ class Hand:
             meshes and planes are left out).
         link_points: ``(geom (P,), points (P, 3) m, radius (P,) m)``, their samples
             (`link_samples`).
+        self_segments: the hand's own collision pairs as swept spheres (`self_segments`),
+            for [`self_overlap`][jaxgrasp.Hand.self_overlap].
     """
 
     tree: KinematicTree
@@ -61,6 +63,7 @@ class Hand:
     fingertip_geoms: tuple
     links: np.ndarray
     link_points: tuple
+    self_segments: tuple = ()
 
     @classmethod
     def from_file(cls, path: str | os.PathLike, fingertips: Sequence, allowed_dirs=None) -> "Hand":
@@ -106,7 +109,7 @@ class Hand:
                    np.array([t.center for t in tips], dtype=np.float64).reshape(-1, 3),
                    np.array([t.axis for t in tips], dtype=np.float64).reshape(-1, 3),
                    np.array([t.radius for t in tips], dtype=np.float64), tuple(t.geoms for t in tips), links,
-                   link_samples(tree, links))
+                   link_samples(tree, links), self_segments(tree))
 
     def digest(self) -> str:
         """SHA-256 (hex) of the hand's content: every array, name and number of its
@@ -200,6 +203,14 @@ class Hand:
         (negative: clear of it), the object's [`jaxgrasp.surface.Surface`][jaxgrasp.surface.Surface] in its mesh
         frame placed by ``object_pose`` ``(6,)``; see `jaxgrasp.hands._links`. Traceable."""
         return link_depths(self, qpos, wrist, object_pose, surface)
+
+    def self_overlap(self, qpos, wrist=None):
+        """``(P,)`` m: how deep each pair of the hand's geoms that MuJoCo would collide
+        (``tree.collision_pairs`` less those with a mesh) overlap at ``qpos`` (positive;
+        negative: their clearance), spheres and capsules in closed form, boxes by their
+        samples (`jaxgrasp.hands._links.self_overlap`); ``(1,)`` of -1 m for a hand
+        without such pairs. Traceable and differentiable."""
+        return self_overlap(self, qpos, wrist)
 
     def grasp(self, qpos, mesh, **kwargs):
         """The grasp this configuration makes on ``mesh``: see `hand_grasp`."""

@@ -20,7 +20,7 @@ import numpy as np
 
 from jaxgrasp.model import GraspValueError
 
-__all__ = ["KinematicTree", "coupling_rows", "read_model", "read_mjcf", "require_mujoco", "INSTALL_HINT",
+__all__ = ["KinematicTree", "collision_pairs", "coupling_rows", "read_model", "read_mjcf", "require_mujoco", "INSTALL_HINT",
            "HINGE", "SLIDE", "SPHERE", "CAPSULE", "BOX", "CYLINDER"]
 
 INSTALL_HINT = 'jaxgrasp.Hand needs MuJoCo: pip install "jaxgrasp[hands]"'
@@ -71,6 +71,8 @@ class KinematicTree:
         coupling_upper: ``(C,)`` its upper bound (equal to the lower one for an equality).
         coupling_names: ``(C,)`` the tendon's or equality's name (``"tendon 3"``,
             ``"equality 0"`` where unnamed).
+        collision_pairs: ``(P, 2)`` the geom pairs ``(g1 < g2)`` MuJoCo would test for
+            contact within the hand (`collision_pairs`).
         source: the file it was read from.
     """
 
@@ -95,6 +97,7 @@ class KinematicTree:
     coupling_lower: np.ndarray
     coupling_upper: np.ndarray
     coupling_names: tuple
+    collision_pairs: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2), dtype=int))
     source: str = ""
 
     @property
@@ -201,8 +204,35 @@ def tree_of(model, source: str = "<MjModel>", kind: str = "mjcf") -> KinematicTr
         geom_body=np.array(model.geom_bodyid, dtype=int), geom_pos=f(model.geom_pos), geom_quat=f(model.geom_quat),
         geom_type=np.array(model.geom_type, dtype=int), geom_size=f(model.geom_size),
         geom_names=_names(model, mujoco.mjtObj.mjOBJ_GEOM, model.ngeom), **coupling_rows(model, source, kind),
-        source=source,
+        collision_pairs=collision_pairs(model), source=source,
     )
+
+
+def collision_pairs(model) -> np.ndarray:
+    """``(P, 2)`` the geom pairs ``(g1 < g2)``, sorted, that MuJoCo's collision pipeline
+    would test in a compiled ``mujoco.MjModel``: its explicit ``<contact><pair>``s, and the
+    pairs whose ``contype``/``conaffinity`` bitmasks match (either way round), whose
+    bodies are not welded together, nor parent and child (welded bodies counted as one;
+    unless the model disables ``filterparent``; the world's children are not filtered),
+    nor a ``<contact><exclude>`` body pair."""
+    import mujoco
+
+    pairs = {(min(int(a), int(b)), max(int(a), int(b))) for a, b in zip(model.pair_geom1, model.pair_geom2)}
+    excluded = {int(s) for s in model.exclude_signature}
+    filterparent = not (int(model.opt.disableflags) & int(mujoco.mjtDisableBit.mjDSBL_FILTERPARENT))
+    weld, parent = np.asarray(model.body_weldid), np.asarray(model.body_parentid)
+    ctype, caff, body = model.geom_contype, model.geom_conaffinity, model.geom_bodyid
+    for g1 in range(model.ngeom):
+        for g2 in range(g1 + 1, model.ngeom):
+            if not (int(ctype[g1]) & int(caff[g2]) or int(ctype[g2]) & int(caff[g1])):
+                continue
+            w1, w2 = int(weld[body[g1]]), int(weld[body[g2]])
+            b1, b2 = sorted((int(body[g1]), int(body[g2])))
+            related = w1 == int(weld[parent[w2]]) or w2 == int(weld[parent[w1]])
+            if w1 == w2 or (filterparent and w1 != 0 and w2 != 0 and related) or {(b1 << 16) + b2, (b2 << 16) + b1} & excluded:
+                continue
+            pairs.add((g1, g2))
+    return np.array(sorted(pairs), dtype=int).reshape(-1, 2)
 
 
 def coupling_rows(model, source: str = "<MjModel>", kind: str = "mjcf") -> dict:

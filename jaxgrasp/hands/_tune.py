@@ -21,7 +21,9 @@ cannot hold, and is refused.
 
 Penetration: the hand's other links are sampled ([`link_depths`][jaxgrasp.Hand.link_depths],
 `jaxgrasp.hands._links`), each sample's depth in the object measured by the signed
-distance to the same surface the contacts use; the objective adds
+distance to the same surface the contacts use, and the hand's own collision pairs'
+overlaps ([`Hand.self_overlap`][jaxgrasp.Hand.self_overlap]: fingers passing through each other) count as
+depths too; the objective adds
 ``penetration_weight * sum(max(depth, 0)^2) / (1 mm)^2`` to minus the value over the
 start's value, and the best iterate is the one of highest value whose deepest sample is
 at most ``max_penetration``.
@@ -72,7 +74,8 @@ def _compiled(hand, options: EvaluateOptions, max_tilt: float):
     value = value_and_grad_builder(grasp_of, options, counts=lambda grasp: jnp.sum(grasp.active) >= 2)
 
     def penalty(x, data):
-        depth = hand.link_depths(joints(x, data), x[j:], data["object_pose"], data["surface"])
+        q = joints(x, data)
+        depth = jnp.concatenate([hand.link_depths(q, x[j:], data["object_pose"], data["surface"]), hand.self_overlap(q)])
         return jnp.sum(jnp.maximum(depth, 0.0) ** 2) / PENETRATION_UNIT**2, jnp.max(depth)
 
     def core(x, data):
@@ -97,7 +100,8 @@ class HandValue:
         grad_qpos: ``(J,)`` J/rad (J/m for slides), its gradient with respect to ``qpos``.
         grad_wrist: ``(6,)`` its gradient with respect to the wrist pose.
         evaluation: the [`Evaluation`][jaxgrasp.Evaluation].
-        deepest: m, the deepest penetration of the hand's other links (negative: clear).
+        deepest: m, the deepest penetration of the hand's other links in the object or of two of
+            its links in each other (negative: clear).
         tilt: ``(F,)`` rad, each fingertip's tilt.
     """
 
@@ -204,7 +208,8 @@ class HandTuneResult:
         grasp: the [`HandGrasp`][jaxgrasp.hands.HandGrasp] there.
         value: its evaluation value, J. start_value: the start's (the value before
             tuning), J.
-        deepest: m, the deepest penetration of the other links there (negative: clear).
+        deepest: m, the deepest penetration of the other links there, in the object or of two
+            links in each other (`HandValue`; negative: clear).
         start_deepest: m, the same at the start.
         history: ``(iterations + 1,)`` value at the start and after each iteration, J.
         depth_history: ``(iterations + 1,)`` deepest link penetration there, m.

@@ -19,7 +19,9 @@ at once (``jit(vmap(scan))``):
 * **clear**: the hand's other links (`jaxgrasp.hands.link_samples`) out of the object,
   ``(max(depth + 0.5 mm, 0) / 1 mm)^2``, read from a [`DistanceGrid`][jaxgrasp.surface.DistanceGrid]
   of the object (the exact search for a few hundred samples at every step is what the
-  grid saves); the fingertips read the exact surface.
+  grid saves); the fingertips read the exact surface;
+* **apart**: the hand's own links out of each other (the pairs MuJoCo would collide,
+  [`Hand.self_overlap`][jaxgrasp.Hand.self_overlap]), ``(max(overlap + 0.5 mm, 0) / 1 mm)^2``.
 
 The joints are ``hand.project_joints`` of the search's variables (the limits and the
 model's couplings, `jaxgrasp.hands._couplings`), so every iterate is one the hand can hold.
@@ -49,8 +51,9 @@ class CloseSettings:
         steps: Adam steps. rate_joints, rate_translation, rate_rotation: Adam's step
             sizes for the joints' unit-range variables, the wrist translation (cm) and
             its rotation vector (rad).
-        press, face, balance, clear: the terms' weights.
-        clearance: m, how far out of the object the links are pushed.
+        press, face, balance, clear, apart: the terms' weights.
+        clearance: m, how far out of the object the links, and apart the hand's own
+            colliding links, are pushed.
         band: m, the width of each fingertip's band of deformations ``[dr*, dr* + band]``.
         unit: m, the length the press and clear terms are measured in.
     """
@@ -63,6 +66,7 @@ class CloseSettings:
     face: float = 5.0
     balance: float = 20.0
     clear: float = 10.0
+    apart: float = 10.0
     clearance: float = 0.5e-3
     band: float = 1.5e-3
     unit: float = 1e-3
@@ -158,7 +162,7 @@ def unpack(hand, x):
 
 
 def _terms(hand, s: CloseSettings, x, target_dr, data):
-    """``(4,)`` the press, face, balance and clear terms at ``x`` (module notes)."""
+    """``(5,)`` the press, face, balance, clear and apart terms at ``x`` (module notes)."""
     q, wrist = unpack(hand, x)
     centers, axes = hand.fingertip_frames(q, wrist)
     hit = data["surface"].closest(centers)
@@ -179,13 +183,14 @@ def _terms(hand, s: CloseSettings, x, target_dr, data):
     points = xpos[row] + jnp.einsum("pij,pj->pi", xmat[row], jnp.asarray(local))
     depth = jnp.asarray(radius) - data["grid"](points)
     clear = jnp.sum((jnp.maximum(depth + s.clearance, 0.0) / s.unit) ** 2)
-    return jnp.stack([press, face, balance, clear])
+    apart = jnp.sum((jnp.maximum(hand.self_overlap(q) + s.clearance, 0.0) / s.unit) ** 2)
+    return jnp.stack([press, face, balance, clear, apart])
 
 
 def _close_one(hand, s: CloseSettings, x0, target_dr, data):
-    """``(x, terms (4,))``: one candidate after ``s.steps`` Adam steps (module notes)."""
+    """``(x, terms (5,))``: one candidate after ``s.steps`` Adam steps (module notes)."""
     j = hand.num_joints
-    weights = jnp.asarray([s.press, s.face, s.balance, s.clear])
+    weights = jnp.asarray([s.press, s.face, s.balance, s.clear, s.apart])
     rate = jnp.concatenate([jnp.full(j, s.rate_joints), jnp.full(3, s.rate_translation), jnp.full(3, s.rate_rotation)])
 
     def loss(x):
@@ -210,7 +215,7 @@ def _close_one(hand, s: CloseSettings, x0, target_dr, data):
 
 
 def close_hands(hand, settings: CloseSettings, x0, target_dr, data):
-    """``(x (B, J + 6), terms (B, 4))``: the candidates ``x0`` (B, J + 6) closed onto the
+    """``(x (B, J + 6), terms (B, 5))``: the candidates ``x0`` (B, J + 6) closed onto the
     object, each towards its target deformations ``target_dr`` ``(B, F)`` m (module
     notes). ``data``: ``surface`` (mesh frame), ``grid`` (its `DistanceGrid`),
     ``center_of_mass`` ``(3,)`` m, ``young_modulus`` ``(F,)`` Pa and ``size`` m (the

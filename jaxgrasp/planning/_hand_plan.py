@@ -12,7 +12,8 @@
 3. **evaluate** them all ([`jaxgrasp.hands.hand_batch`][jaxgrasp.hands.hand_batch] on the exact surface, then the
    engine's runner) and measure how deep the hand's other links lie in the object;
 4. **keep** the eligible ones: at least ``min_fingertips`` fingertips in contact, links at
-   most ``max_penetration`` inside, a settled evaluation;
+   most ``max_penetration`` inside the object and inside each other (the pairs MuJoCo
+   would collide, [`Hand.self_overlap`][jaxgrasp.Hand.self_overlap]), a settled evaluation;
 5. **refine** the best ``refine`` by the objective: the value by its exact gradient over
    joints and wrist ([`tune_hand`][jaxgrasp.tune_hand], within the joint limits and couplings, links
    kept out), or epsilon (which has no gradient here) by a local random search of as
@@ -211,6 +212,18 @@ def _depth_function(hand):
     return jax.jit(jax.vmap(lambda s, a, b: jnp.max(hand.link_depths(a, b, jnp.zeros(6), s)), in_axes=(None, 0, 0)))
 
 
+@lru_cache(maxsize=8)
+def _overlap_function(hand):
+    """``fn(q (S, J)) -> (S,)``, the deepest self-overlap of each, compiled once per hand."""
+    return jax.jit(jax.vmap(lambda a: jnp.max(hand.self_overlap(a))))
+
+
+def _overlaps(hand, q) -> np.ndarray:
+    """``(S,)`` m, the deepest overlap of two of the hand's own links in each configuration."""
+    fn = _overlap_function(hand)
+    return np.concatenate([np.asarray(fn(q[i:i + CLOSE_CHUNK])) for i in range(0, len(q), CLOSE_CHUNK)] + [np.zeros(0)])
+
+
 def _depths(hand, surface, q, w) -> np.ndarray:
     """``(S,)`` m, the deepest link sample of each configuration on the exact surface."""
     fn = _depth_function(hand)
@@ -220,7 +233,8 @@ def _depths(hand, surface, q, w) -> np.ndarray:
 
 def _measure(inputs: HandPlanInputs, surface, q, w, progress) -> dict:
     """Stage 3: ``value`` (S,) J, ``status`` (S,) (-1: fewer than two fingertips in contact,
-    not evaluated), ``active`` (S,) fingertips in contact, ``depth`` (S,) m."""
+    not evaluated), ``active`` (S,) fingertips in contact, ``depth`` (S,) m, ``self`` (S,) m
+    (the deepest self-overlap)."""
     from jaxgrasp.hands import hand_batch
 
     hb = hand_batch(inputs.hand, inputs.mesh, q, wrist=w, **inputs.grasp_kwargs())
@@ -230,13 +244,15 @@ def _measure(inputs: HandPlanInputs, surface, q, w, progress) -> dict:
         res, _ = evaluate_dataset(hb.grasps, progress=_stage(progress, "evaluate"))
         ok = active >= 2
         value[ok], status[ok] = np.asarray(res.value)[ok], np.asarray(res.status)[ok]
-    return dict(value=value, status=status, active=active, depth=_depths(inputs.hand, surface, q, w))
+    return dict(value=value, status=status, active=active, depth=_depths(inputs.hand, surface, q, w),
+                self=_overlaps(inputs.hand, q))
 
 
 def _eligible(m: dict, min_fingertips: int, max_penetration: float) -> np.ndarray:
     """Stage 4: the candidates a plan may rank (module notes)."""
     settled = (m["status"] >= 0) & (m["status"] != GraspStatus.NOT_CONVERGED)
-    return settled & (m["active"] >= min_fingertips) & (m["depth"] <= max_penetration)
+    clear = (m["depth"] <= max_penetration) & (m["self"] <= max_penetration)
+    return settled & (m["active"] >= min_fingertips) & clear
 
 
 def _contact_grasps(inputs: HandPlanInputs, surface, q, w):
@@ -325,7 +341,8 @@ def _refine_epsilon(inputs: HandPlanInputs, surface, q, w, maxiter: int, rng, ru
         cq = np.asarray(hand.project_joints(jnp.asarray(np.clip(best_q + step[:hand.num_joints], lo, hi))))
         cw = best_w + step[hand.num_joints:]
         g = jax.tree_util.tree_map(lambda a: a[0], _contact_grasps(inputs, surface, cq[None], cw[None]))
-        if int(np.sum(np.asarray(g.active))) < rules[0] or _depths(hand, surface, cq[None], cw[None])[0] > rules[1]:
+        deep = max(_depths(hand, surface, cq[None], cw[None])[0], _overlaps(hand, cq[None])[0])
+        if int(np.sum(np.asarray(g.active))) < rules[0] or deep > rules[1]:
             continue
         e = _epsilon(g)
         if e > best:
@@ -344,12 +361,13 @@ def _final(inputs: HandPlanInputs, surface, pool: list, top: int, objective: str
     values = np.array([float(e.value) if e is not None else 0.0 for e in evs])
     statuses = np.array([int(e.status) if e is not None else -1 for e in evs])
     m = dict(value=values, status=statuses, active=np.array([g.num_active for g in grasps]),
-             depth=_depths(inputs.hand, surface, q, w) if len(pool) else np.zeros(0))
+             depth=_depths(inputs.hand, surface, q, w) if len(pool) else np.zeros(0), self=_overlaps(inputs.hand, q))
     eps = np.array([_epsilon(g.grasp) if g.num_active >= 2 else 0.0 for g in grasps])
     order = _order(inputs, np.flatnonzero(_eligible(m, *rules)), m, values if objective == "value" else eps,
                    objective)[:top]
     return dict(grasps=tuple(grasps[i] for i in order), values=values[order], statuses=statuses[order],
-                active=m["active"][order], penetration=m["depth"][order], epsilon=eps[order],
+                active=m["active"][order], penetration=m["depth"][order],
+                self_overlap=m["self"][order], epsilon=eps[order],
                 refined=np.array([pool[i][2] for i in order], dtype=bool), qpos=q[order], wrist=w[order])
 
 

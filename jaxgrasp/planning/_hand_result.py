@@ -11,7 +11,7 @@ from jaxgrasp.planning._result import PlanStatus, _plain
 
 __all__ = ["HandPlanResult", "HAND_RESULT_COLUMNS"]
 
-HAND_RESULT_COLUMNS = ("rank", "value_J", "status", "active", "penetration_mm", "epsilon", "refined")
+HAND_RESULT_COLUMNS = ("rank", "value_J", "status", "active", "penetration_mm", "self_overlap_mm", "epsilon", "refined")
 """The columns of [`HandPlanResult.rows`][jaxgrasp.planning.HandPlanResult.rows] (``results.csv`` of ``jaxgrasp plan --hand``)."""
 
 
@@ -23,13 +23,17 @@ class HandPlanResult:
         status: a [`PlanStatus`][jaxgrasp.planning.PlanStatus]: ``found`` when the best is stable.
         grasps: ``K`` [`HandGrasp`][jaxgrasp.hands.HandGrasp], best first (by ``objective``), each
             with its ``qpos`` and ``wrist``; only grasps with at least ``min_fingertips``
-            fingertips in contact, links at most ``max_penetration`` deep and a settled
+            fingertips in contact, links at most ``max_penetration`` deep in the object and
+            in each other, and a settled
             evaluation are ranked.
         values: ``(K,)`` J, each one's value ([`jaxgrasp.evaluate`][jaxgrasp.evaluate] of its grasp).
         statuses: ``(K,)`` int [`GraspStatus`][jaxgrasp.GraspStatus] codes.
         active: ``(K,)`` fingertips in contact.
         penetration: ``(K,)`` m, the deepest of the hand's other links inside the object
             (negative: clear of it), on the exact surface.
+        self_overlap: ``(K,)`` m, the deepest overlap of two of the hand's own links that
+            MuJoCo would collide ([`Hand.self_overlap`][jaxgrasp.Hand.self_overlap]; negative: the
+            smallest clearance); at most ``max_penetration``.
         epsilon: ``(K,)`` each one's Ferrari-Canny epsilon ([`jaxgrasp.epsilon`][jaxgrasp.epsilon]).
         refined: ``(K,)`` bool, the grasp came out of refinement.
         qpos: ``(K, J)`` rad (m for slides), within the limits and couplings. wrist: ``(K, 6)``
@@ -50,6 +54,7 @@ class HandPlanResult:
     statuses: np.ndarray
     active: np.ndarray
     penetration: np.ndarray
+    self_overlap: np.ndarray
     epsilon: np.ndarray
     refined: np.ndarray
     qpos: np.ndarray
@@ -91,11 +96,13 @@ class HandPlanResult:
     def rows(self) -> list[dict]:
         """One dict per ranked grasp with the columns `HAND_RESULT_COLUMNS`: rank (1-based),
         value_J, status (its name), active, penetration_mm (deepest link, mm, negative:
+        clear), self_overlap_mm (deepest overlap of the hand's own links, mm, negative:
         clear), epsilon, refined."""
         from jaxgrasp.tolerance import GraspStatus
 
         return [{"rank": i + 1, "value_J": float(self.values[i]), "status": GraspStatus(int(self.statuses[i])).label,
                  "active": int(self.active[i]), "penetration_mm": float(self.penetration[i]) * 1e3,
+                 "self_overlap_mm": float(self.self_overlap[i]) * 1e3,
                  "epsilon": float(self.epsilon[i]), "refined": bool(self.refined[i])} for i in range(len(self.grasps))]
 
     def to_dict(self) -> dict[str, Any]:

@@ -4,7 +4,8 @@ MJCF test hand on its 60 mm cube.
 What must hold whatever the search finds: every ranked grasp is exactly the grasp its
 configuration makes (its value is `jaxgrasp.evaluate` of `Hand.grasp` at its qpos and
 wrist, as a hand grasp file loads it), within the joint limits, with its links at most
-max_penetration deep and at least min_fingertips fingertips in contact; ranked best first
+max_penetration deep in the object and in each other (the two fingers' pairs MuJoCo would
+collide, `Hand.self_overlap` recomputed) and at least min_fingertips fingertips in contact; ranked best first
 by the objective; a seed gives the same plan (the command's, run with the same seed, is the
 library's); ``jaxgrasp evaluate DIR/best.toml`` of the command's output is its first row; bad
 arguments are one line before any work.
@@ -54,6 +55,8 @@ def test_ranked_grasps_are_the_grasps_their_configurations_make(hand, planned):
         assert np.all(q >= hand.lower - 1e-12) and np.all(q <= hand.upper + 1e-12)
         deepest = float(np.max(np.asarray(hand.link_depths(q, w, np.zeros(6), Surface.from_trimesh(hg.mesh)))))
         assert deepest == pytest.approx(res.penetration[k], abs=1e-12) and deepest <= 1e-3
+        overlap = float(np.max(np.asarray(hand.self_overlap(q))))
+        assert overlap == pytest.approx(res.self_overlap[k], abs=1e-12) and overlap <= 1e-3
         assert res.epsilon[k] == pytest.approx(jaxgrasp.epsilon(hg.grasp).value, rel=1e-12)
     stable = res.statuses == 0
     assert np.all(np.diff(stable.astype(int)) <= 0)  # stable grasps first
