@@ -51,7 +51,7 @@ def check(k: int, folder: str, hand) -> dict:
     return dict(object=obj, seconds=round(seconds, 1), status=top["status"], active=int(top["active"]),
                 value_J=float(top["value_J"]), evaluate_value_J=ev["value"], evaluate_status=ev["status"],
                 equal=ev["value"] == float(top["value_J"]) and ev["status"] == top["status"],
-                penetration_mm=float(top["penetration_mm"]),
+                penetration_mm=float(top["penetration_mm"]), self_overlap_mm=float(top["self_overlap_mm"]),
                 limits_violation=float(np.max(np.r_[hand.lower - q, q - hand.upper, 0.0])),
                 couplings_violation=float(np.max(np.r_[np.asarray(hand.coupling_violation(q)), 0.0])))
 
@@ -71,7 +71,8 @@ def main() -> None:
     ok = [r for r in rows if "error" not in r]
     print(f"objects {len(rows)}: evaluate equals the first row on {sum(r['equal'] for r in ok)}, stable "
           f"{sum(r['status'] == 'stable' for r in ok)}, >= 3 fingertips {sum(r['active'] >= 3 for r in ok)}, "
-          f"deepest link {max(r['penetration_mm'] for r in ok):.3f} mm, joints outside limits by at most "
+          f"deepest link {max(r['penetration_mm'] for r in ok):.3f} mm, deepest self-overlap "
+          f"{max(r['self_overlap_mm'] for r in ok):.3f} mm, joints outside limits by at most "
           f"{max(r['limits_violation'] for r in ok):.1e}, couplings by at most "
           f"{max(r['couplings_violation'] for r in ok):.1e}; median {statistics.median(r['seconds'] for r in rows):.1f} "
           f"s per command; load average at end {os.getloadavg()}", flush=True)

@@ -13,7 +13,8 @@ into ``DIR`` (`jaxgrasp.storage.write_set`, all or none) is self-contained:
   of ``results.csv`` with ``qpos``, rad or m, and ``wrist``: translation m, rotation vector
   rad, the hand's model frame in the mesh's);
 * ``results.csv``: `HAND_RESULT_COLUMNS` (rank, ``value_J``, status, fingertips in contact,
-  the deepest link's penetration in mm, epsilon, refined);
+  the deepest link's penetration in mm, the deepest overlap of two of the hand's own
+  links in mm, epsilon, refined);
 * ``best.png``: the ``jaxgrasp show`` picture of the best grasp;
 * ``dexgraspbench/``: the ranked grasps in DexGraspBench's input format (``0.npy`` ...,
   `jaxgrasp.hands.save_dexgraspbench`) with the object at ``dexgraspbench/OBJECT/mesh/simplified.obj``

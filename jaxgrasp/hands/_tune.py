@@ -360,7 +360,7 @@ def _check_couplings(hand, q0: np.ndarray) -> None:
 
 
 def _check_start(v0: float, ev0, deep0: float, max_penetration: float, count: int = 2, fewest: int = 2) -> None:
-    """A start with value 0, links too deep in the object or fewer than ``fewest`` fingertips
+    """A start with value 0, links too deep in the object or in each other, or fewer than ``fewest`` fingertips
     in contact (it has ``count``) is an error (one line)."""
     if not (v0 > 0.0 and math.isfinite(v0)):
         raise GraspValueError(
@@ -369,8 +369,9 @@ def _check_start(v0: float, ev0, deep0: float, max_penetration: float, count: in
         )
     if deep0 > max_penetration:
         raise GraspValueError(
-            f"tune_hand: at the start a link lies {deep0 * 1e3:.3g} mm deep in the object "
-            f"(max_penetration {max_penetration * 1e3:.3g} mm): start from a configuration whose links are clear"
+            f"tune_hand: at the start a link lies {deep0 * 1e3:.3g} mm deep in the object or in another of the "
+            f"hand's links (max_penetration {max_penetration * 1e3:.3g} mm; Hand.link_depths, Hand.self_overlap): "
+            "start from a configuration whose links are clear"
         )
     if count < fewest:
         raise GraspValueError(f"tune_hand: the start has {count} fingertips in contact, fewer than min_fingertips = "

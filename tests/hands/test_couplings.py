@@ -265,6 +265,7 @@ def test_tune_hand_keeps_the_shadow_hands_couplings(shadow):
     t = hand.tree
     k = hand.coupling_names.index("robot0:T_FFJ1c")
     start = SHADOW_QPOS.copy()
+    start[2] = 0.0  # FFJ3 (abduction) at -0.336 rad puts the index 12.7 mm inside the middle finger (MuJoCo agrees)
     start[5] = 1.0  # FFJ0: T_FFJ1c = 0.00705 - 0.00805 * 1.157 = -2.3 mm, projected onto its lower bound
     q0 = np.asarray(hand.project_joints(start))
     assert t.coupling_matrix[k] @ q0 == pytest.approx(t.coupling_lower[k], abs=1e-15)
