@@ -22,7 +22,7 @@ from jaxgrasp.hands import _couplings
 from jaxgrasp.hands._fingertips import resolve_fingertips
 from jaxgrasp.hands._grasp import finite_vector
 from jaxgrasp.hands._kinematics import body_frames, geom_frames
-from jaxgrasp.hands._links import link_depths, link_samples, self_overlap, self_segments
+from jaxgrasp.hands._links import link_depths, link_positions, link_samples, self_overlap, self_segments
 from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER, SPHERE, KinematicTree, read_model
 
 __all__ = ["Hand"]
@@ -197,6 +197,11 @@ class Hand:
     def body_frames(self, qpos, wrist=None):
         """``(xpos (B, 3) m, xmat (B, 3, 3))``: world frames of every body."""
         return body_frames(self.tree, qpos, wrist)
+
+    def link_positions(self, qpos, wrist=None):
+        """``(P, 3)`` m: the world positions of the other links' samples (``link_points``,
+        each with its radius there) at ``qpos``. Traceable."""
+        return link_positions(self, qpos, wrist)
 
     def link_depths(self, qpos, wrist, object_pose, surface):
         """``(P,)`` m: how deep each sample of the other links lies in the object

@@ -24,7 +24,7 @@ import numpy as np
 from jaxgrasp.hands._kinematics import wrist_transform
 from jaxgrasp.hands._mjcf import BOX, CAPSULE, CYLINDER, KinematicTree
 
-__all__ = ["link_samples", "link_depths", "segment_distance", "self_overlap", "self_segments"]
+__all__ = ["link_samples", "link_positions", "link_depths", "segment_distance", "self_overlap", "self_segments"]
 
 _SAFE = 1e-24  # m^2: below it a distance's square root is taken of this instead (finite gradient)
 
@@ -60,16 +60,25 @@ def _box_sheet(half: np.ndarray) -> np.ndarray:
     return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
 
 
+def link_positions(hand, qpos, wrist):
+    """``(P, 3)`` m: the world positions of the hand's link samples (`link_samples`, the
+    ``hand.link_points``) at ``qpos`` with the model frame at ``wrist`` (a pose ``(6,)`` or
+    None). Traceable."""
+    geom, local, _ = hand.link_points
+    used = np.unique(geom)
+    xpos, xmat = hand.geom_frames(qpos, wrist, used)
+    row = np.searchsorted(used, geom)
+    return xpos[row] + jnp.einsum("pij,pj->pi", xmat[row], jnp.asarray(local))
+
+
 def link_depths(hand, qpos, wrist, object_pose, surface):
     """``(P,)`` m: how deep each of the hand's link samples (`link_samples`) lies in
     the object whose surface is ``surface`` (mesh frame) at ``object_pose`` ``(6,)`` (negative:
     outside); ``(1,)`` of -1 m for a hand without other links. Traceable."""
-    geom, local, radius = hand.link_points
-    if len(geom) == 0:
+    radius = hand.link_points[2]
+    if len(radius) == 0:
         return jnp.zeros(1) - 1.0
-    xpos, xmat = hand.geom_frames(qpos, wrist, np.unique(geom))
-    row = np.searchsorted(np.unique(geom), geom)
-    world = xpos[row] + jnp.einsum("pij,pj->pi", xmat[row], jnp.asarray(local))
+    world = link_positions(hand, qpos, wrist)
     rot, t = wrist_transform(object_pose)  # a pose (6,): translation m, rotation vector rad
     return jnp.asarray(radius) - surface.closest((world - t) @ rot).signed_distance
 

@@ -177,11 +177,7 @@ def _terms(hand, s: CloseSettings, x, target_dr, data):
     total = jnp.sum(squeeze) + 1e-3
     torque = jnp.cross(hit.point - data["center_of_mass"], push)
     balance = (jnp.sum(jnp.sum(push, 0) ** 2) + jnp.sum(jnp.sum(torque, 0) ** 2) / data["size"] ** 2) / total**2
-    geom, local, radius = hand.link_points
-    xpos, xmat = hand.geom_frames(q, wrist, np.unique(geom))
-    row = np.searchsorted(np.unique(geom), geom)
-    points = xpos[row] + jnp.einsum("pij,pj->pi", xmat[row], jnp.asarray(local))
-    depth = jnp.asarray(radius) - data["grid"](points)
+    depth = jnp.asarray(hand.link_points[2]) - data["grid"](hand.link_positions(q, wrist))
     clear = jnp.sum((jnp.maximum(depth + s.clearance, 0.0) / s.unit) ** 2)
     apart = jnp.sum((jnp.maximum(hand.self_overlap(q) + s.clearance, 0.0) / s.unit) ** 2)
     return jnp.stack([press, face, balance, clear, apart])
