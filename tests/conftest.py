@@ -447,18 +447,30 @@ SLOW_FIXTURES = frozenset({"evaluate_many", "ipopt_reference", "warm_cache"})
 process, or fill a cache folder in a cold process: a test that uses one is slow."""
 
 
-LONG_MODULES = (
-    "tests/tolerance/test_gradients.py",
-    "tests/tolerance/test_degenerate.py",
+LONG_MODULES = (  # ordered by each module's setups and calls together, measured in one run of the suite
     "tests/test_docs.py",
-    "tests/simulation/test_simulate.py",
-    "tests/planning/test_plan.py",
-    "tests/engine/test_padding.py",
-    "tests/solver/test_dense.py",
-    "tests/cli/test_batch_processes.py",
+    "tests/tolerance/test_gradients.py",
+    "tests/tolerance/test_evaluate.py",
+    "tests/planning/test_hand_plan.py",
+    "tests/tolerance/test_degenerate.py",
     "tests/cli/test_interrupts.py",
+    "tests/solver/test_solver.py",
+    "tests/planning/test_plan.py",
+    "tests/tolerance/test_settle_real.py",
+    "tests/engine/test_padding.py",
+    "tests/tolerance/test_properties.py",
+    "tests/hands/test_couplings.py",
+    "tests/analysis/test_tune_mesh.py",
+    "tests/engine/test_batch.py",
+    "tests/cli/test_batch_processes.py",
+    "tests/solver/test_dense.py",
+    "tests/tolerance/test_starts.py",
+    "tests/simulation/test_simulate.py",
 )
-"""The test modules that take longest (each pays its own compilations), collected first."""
+"""The test modules that take longest (each pays its own compilations), longest first: xdist's
+``loadfile`` hands whole modules to whichever worker is free in this order, so that the
+last modules are short and neither worker waits long for the other at the end (the
+``tolerance`` folder, collected last otherwise, holds three of them)."""
 
 
 @pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects
