@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from plan_hand_benchmark import HAND, TIPS, object_file, objects  # noqa: E402
+from plan_hand_benchmark import HAND, TIPS, object_file, objects, seed_of  # noqa: E402
 
 import jaxgrasp  # noqa: E402
 
@@ -32,12 +32,12 @@ COMMAND = ["--units", "mm", "--hand", str(HAND), "--fingertips", ",".join(TIPS),
            "--friction", "0.8", "--max-force", "15", "--density", "500", "--quiet"]
 
 
-def check(k: int, folder: str, hand) -> dict:
-    """Plan object ``k`` by the command and check what it wrote."""
-    obj = objects(k + 1)[k]
+def check(k: int, obj, folder: str, hand) -> dict:
+    """Plan ``obj`` (an object of `objects`, ``k`` its position in this run; seed `seed_of`) by the command and
+    check what it wrote."""
     path, out = object_file(obj, 70.0, folder), os.path.join(folder, f"plan-{k:03d}")
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "jaxgrasp", "plan", path, *COMMAND, "--seed", str(k), "--out", out],
+    done = subprocess.run([sys.executable, "-m", "jaxgrasp", "plan", path, *COMMAND, "--seed", str(seed_of(obj)), "--out", out],
                           capture_output=True, text=True)
     seconds = time.perf_counter() - t0
     if done.returncode != 0:
@@ -65,8 +65,8 @@ def main() -> None:
     print(f"load average at start {os.getloadavg()}", flush=True)
     rows = []
     with tempfile.TemporaryDirectory() as folder:
-        for k in range(args.first, args.first + args.objects):
-            rows.append(check(k, folder, hand))
+        for k, obj in enumerate(objects(args.first + args.objects)[args.first:], start=args.first):
+            rows.append(check(k, obj, folder, hand))
             print(json.dumps(rows[-1]), flush=True)
     ok = [r for r in rows if "error" not in r]
     print(f"objects {len(rows)}: evaluate equals the first row on {sum(r['equal'] for r in ok)}, stable "

@@ -55,6 +55,16 @@ def objects(count: int) -> list:
     return generated + list(NAMED[:count - len(generated)])
 
 
+STUDY_OBJECTS = 50
+"""The study's objects: ``objects(STUDY_OBJECTS)``."""
+
+
+def seed_of(obj) -> int:
+    """The plan's seed for ``obj``: its position among the study's objects, whichever arm
+    and however few objects a run takes, so that every arm plans it from the same candidates."""
+    return objects(STUDY_OBJECTS).index(obj)
+
+
 def object_file(obj, size_mm: float, folder: str) -> str:
     """pybullet's object ``obj`` (an index of ``random_urdfs`` or a name) scaled to ``size_mm``
     on its longest side, as an STL in mm."""
@@ -112,7 +122,7 @@ def main() -> None:
         for i, k in enumerate(objects(args.first + args.objects)[args.first:], start=args.first):
             path = object_file(k, args.size, folder)
             t0 = time.perf_counter()
-            res = _plan(path, hand, args, i)
+            res = _plan(path, hand, args, seed_of(k))
             row = dict(object=k, objective=args.objective, status=res.status_name, seconds=time.perf_counter() - t0,
                        stable=bool(len(res.statuses) and res.statuses[0] == 0),
                        active=int(res.active[0]) if len(res.active) else 0,

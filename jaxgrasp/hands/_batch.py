@@ -230,14 +230,15 @@ def _meshes(mesh, objects, b: int, units: str) -> tuple[list, np.ndarray]:
 def _scaled_contacts(fn, hand, base, s: float, q, w, p, progress, young_modulus, friction, max_force, mass, density,
                      gravity, center_of_mass) -> dict[str, np.ndarray]:
     """The contacts of rows ``q, w, p`` on ``base`` scaled by ``s`` (`_contacts`)."""
-    from jaxgrasp.surface import Surface
+    from jaxgrasp.surface import PAD_FACES, Surface
 
     mesh = base.copy()
     if s != 1.0:
         mesh.apply_scale(s)
     com = None if center_of_mass is None else s * np.asarray(finite_vector(center_of_mass, 3, "center_of_mass", "m"))
     mat = material(len(hand.fingertip_names), mesh, young_modulus, friction, max_force, mass, density, gravity, com)
-    return _contacts(fn, Surface.from_trimesh(mesh), mat, q, w, p, progress)
+    # padded: meshes of similar size share one shape, so the contacts' program is compiled once for them
+    return _contacts(fn, Surface.from_trimesh(mesh, pad_to=PAD_FACES), mat, q, w, p, progress)
 
 
 def _batch_of(out: dict[str, np.ndarray], hand, source: str, source_sha256: str | None) -> HandBatch:

@@ -224,14 +224,15 @@ def hand_grasp(hand, qpos, mesh, *, wrist=None, object_pose=None, young_modulus,
         GraspValueError: a malformed ``qpos``, pose or field; one line naming it.
     """
     from jaxgrasp.io import load_mesh
-    from jaxgrasp.surface import Surface
+    from jaxgrasp.surface import PAD_FACES, Surface
 
     if not isinstance(qpos, jax.core.Tracer):
         qpos = jnp.asarray(hand.check_qpos(qpos))
     wrist, object_pose = _pose(wrist, "wrist"), _pose(object_pose, "object_pose")
     mesh = load_mesh(mesh, units)
     mat = material(hand.num_fingertips, mesh, young_modulus, friction, max_force, mass, density, gravity, center_of_mass)
-    grasp, tilt, centers = contact_grasp(hand, qpos, wrist, object_pose, Surface.from_trimesh(mesh), mat, max_tilt)
+    surface = Surface.from_trimesh(mesh, pad_to=PAD_FACES)  # one shape for meshes of similar size: compiled once for them
+    grasp, tilt, centers = contact_grasp(hand, qpos, wrist, object_pose, surface, mat, max_tilt)
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((grasp, qpos, wrist, object_pose)))
     status = "grasp" if traced or int(np.sum(np.asarray(grasp.active))) >= 2 else "too_few_contacts"
     return HandGrasp(grasp, grasp.active, tilt, centers, mesh, mat.center_of_mass, object_pose, qpos, wrist, hand, status)

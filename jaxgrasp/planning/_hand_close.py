@@ -32,6 +32,7 @@ surface with the paper's value.
 from __future__ import annotations
 
 import dataclasses
+from functools import lru_cache
 
 import jax
 import jax.numpy as jnp
@@ -95,6 +96,14 @@ def palm_body(hand) -> int:
 def _shape_frames(hand, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(centre (B, 3), palm (B, 3))`` m, the hand's model frame: the mean fingertip centre
     and the palm body's origin at the pre-shapes ``u`` ``(B, J)`` (fractions of the ranges)."""
+    centre, origin = _shape_frames_function(hand)(jnp.asarray(u))
+    return np.array(centre), np.array(origin)
+
+
+@lru_cache(maxsize=8)
+def _shape_frames_function(hand):
+    """`_shape_frames`' compiled function, one per hand (jitted anew at every call, it was
+    compiled again for every plan)."""
     lo, hi = _limits(hand)
     palm = palm_body(hand)
 
@@ -102,8 +111,7 @@ def _shape_frames(hand, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         q = hand.project_joints(jnp.asarray(lo) + jnp.asarray(hi - lo) * v)
         return hand.fingertip_centers(q).mean(0), hand.body_frames(q)[0][palm]
 
-    centre, origin = jax.jit(jax.vmap(one))(jnp.asarray(u))
-    return np.array(centre), np.array(origin)
+    return jax.jit(jax.vmap(one))
 
 
 def _limits(hand) -> tuple[np.ndarray, np.ndarray]:

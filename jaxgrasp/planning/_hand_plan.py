@@ -202,8 +202,25 @@ def _close(inputs: HandPlanInputs, surface, grid, samples: int, rng, settings: C
         out[rows] = np.asarray(x)[: len(rows)]
         if progress is not None:
             progress("close", int(rows[-1]) + 1, samples)
-    q, w = jax.jit(jax.vmap(lambda x: unpack(hand, x)))(jnp.asarray(out))
+    q, w = _unpack_function(hand)(jnp.asarray(out))
     return np.asarray(q), np.asarray(w)
+
+
+@lru_cache(maxsize=8)
+def _unpack_function(hand):
+    """``fn(x (S, J + 6)) -> (qpos (S, J), wrist (S, 6))``, compiled once per hand."""
+    return jax.jit(jax.vmap(lambda x: unpack(hand, x)))
+
+
+def _in_chunks(fn, *arrays) -> np.ndarray:
+    """``fn`` of ``arrays`` (each ``(S, ...)``) in chunks of `CLOSE_CHUNK` rows, the last padded by
+    repeating its last row: one shape whatever ``S``, so one compilation."""
+    n = len(arrays[0])
+    out = []
+    for i in range(0, n, CLOSE_CHUNK):
+        rows = np.minimum(np.arange(i, i + CLOSE_CHUNK), n - 1)
+        out.append(np.asarray(fn(*(a[rows] for a in arrays)))[: min(CLOSE_CHUNK, n - i)])
+    return np.concatenate(out + [np.zeros(0)])
 
 
 @lru_cache(maxsize=8)
@@ -220,15 +237,13 @@ def _overlap_function(hand):
 
 def _overlaps(hand, q) -> np.ndarray:
     """``(S,)`` m, the deepest overlap of two of the hand's own links in each configuration."""
-    fn = _overlap_function(hand)
-    return np.concatenate([np.asarray(fn(q[i:i + CLOSE_CHUNK])) for i in range(0, len(q), CLOSE_CHUNK)] + [np.zeros(0)])
+    return _in_chunks(_overlap_function(hand), np.asarray(q))
 
 
 def _depths(hand, surface, q, w) -> np.ndarray:
     """``(S,)`` m, the deepest link sample of each configuration on the exact surface."""
     fn = _depth_function(hand)
-    return np.concatenate([np.asarray(fn(surface, q[i:i + CLOSE_CHUNK], w[i:i + CLOSE_CHUNK]))
-                           for i in range(0, len(q), CLOSE_CHUNK)])
+    return _in_chunks(lambda a, b: fn(surface, a, b), np.asarray(q), np.asarray(w))
 
 
 def _measure(inputs: HandPlanInputs, surface, q, w, progress) -> dict:

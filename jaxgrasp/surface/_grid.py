@@ -67,6 +67,14 @@ class DistanceGrid:
         return total + outside
 
 
+@jax.jit
+def _signed_distance(surface, points):
+    """``(P,)`` m: the signed distance of ``points`` ``(P, 3)`` m to ``surface``. One jitted
+    function for every grid, so that surfaces of one padded shape share its executable
+    (a function jitted inside `distance_grid` compiled again for every grid)."""
+    return surface.closest(points).signed_distance
+
+
 def distance_grid(surface, lower, upper, points_per_axis: int = GRID_POINTS_PER_AXIS,
                   progress: Callable[[int, int], object] | None = None) -> DistanceGrid:
     """The [`DistanceGrid`][jaxgrasp.surface.DistanceGrid] of ``surface`` (a
@@ -85,12 +93,11 @@ def distance_grid(surface, lower, upper, points_per_axis: int = GRID_POINTS_PER_
     origin = 0.5 * (lower + upper) - 0.5 * spacing * (n - 1)
     axes = [origin[k] + spacing * np.arange(n) for k in range(3)]
     points = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    signed = jax.jit(lambda s, p: s.closest(p).signed_distance)
     out = np.empty(len(points))
     for start in range(0, len(points), _CHUNK):
         part = points[start:start + _CHUNK]
         padded = np.concatenate([part, np.repeat(part[-1:], _CHUNK - len(part), 0)]) if len(part) < _CHUNK else part
-        out[start:start + len(part)] = np.asarray(signed(surface, jnp.asarray(padded)))[: len(part)]
+        out[start:start + len(part)] = np.asarray(_signed_distance(surface, jnp.asarray(padded)))[: len(part)]
         if progress is not None:
             progress(start + len(part), len(points))
     return DistanceGrid(jnp.asarray(origin), jnp.asarray(spacing), jnp.asarray(out.reshape(n, n, n)))
