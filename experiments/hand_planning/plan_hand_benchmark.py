@@ -119,7 +119,7 @@ def main() -> None:
           f"objective {args.objective}", flush=True)
     rows = []
     with tempfile.TemporaryDirectory() as folder:
-        for i, k in enumerate(objects(args.first + args.objects)[args.first:], start=args.first):
+        for k in objects(args.first + args.objects)[args.first:]:
             path = object_file(k, args.size, folder)
             t0 = time.perf_counter()
             res = _plan(path, hand, args, seed_of(k))
