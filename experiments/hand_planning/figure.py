@@ -79,6 +79,7 @@ def figure(arms: dict, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     fig, ax = plt.subplots(1, 4, figsize=(17, 4.2))
     present = [a for a in ARMS if arms[a]]
@@ -103,6 +104,7 @@ def figure(arms: dict, path: Path) -> None:
         if key == "value_J":
             a.set_xscale("log")
             a.set_yscale("log")
+            a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # the minor labels overlapped
         a.set_xlabel(f"picked by the value{', ' + unit if unit else ''}")
         a.set_ylabel(f"picked by epsilon{', ' + unit if unit else ''}")
         a.set_title(title + (f" ({sum(e[k]['value_J'] == 0 for k in v if k in e)} epsilon picks unstable: "
@@ -116,8 +118,9 @@ def figure(arms: dict, path: Path) -> None:
     ax[3].set_ylabel("fraction of objects")
     ax[3].set_title("(d) time per object")
     ax[3].legend(fontsize=8)
-    fig.suptitle("Shadow hand on pybullet objects (70 mm): planning for the energy tolerance, for epsilon, "
-                 "and random closed-hand sampling")
+    names = {"value": "planning for the energy tolerance", "epsilon": "for epsilon",
+             "random": "random closed-hand sampling"}
+    fig.suptitle("Shadow hand on pybullet objects (70 mm): " + ", ".join(names[a] for a in present))
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 

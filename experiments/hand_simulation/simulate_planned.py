@@ -1,6 +1,6 @@
 """Planned Shadow-hand grasps in MuJoCo under DexGraspBench's protocol: do they hold, and do the fingertips press as the model says?
 
-Each line of the JSONL file (default: ``planned_grasps.jsonl`` beside this script, the 13
+Each line of the JSONL file (default: ``planned_grasps.jsonl`` beside this script, the 49
 stable best grasps of ``experiments/hand_planning/plan_hand_benchmark.py --objective value``)
 holds a pybullet object (an index of ``random_urdfs`` or a name), the grasp's ``qpos`` and
 ``wrist``. The object is rebuilt as the planner had it (70 mm, in mm, E = 3e5 Pa, mu = 0.8,
