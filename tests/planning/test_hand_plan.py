@@ -90,6 +90,34 @@ def test_the_command_plans_as_the_library_and_best_toml_evaluates_to_its_first_r
 
 
 @pytest.mark.slow
+def test_a_second_object_of_one_padded_size_lowers_no_new_program(hand, planned, tmp_path):
+    """Many objects planned in one process: once a plan has run, another object whose surface
+    pads to the same size reuses every program. Functions jitted anew inside a plan, or
+    shapes that follow the mesh, lowered new programs for every object, and the Shadow-hand
+    study ran out of memory maps at its 50th object."""
+    import jax
+    import trimesh
+
+    mesh = trimesh.load(CUBE, force="mesh")
+    mesh.apply_scale(1.1)  # 66 mm: another object, the same 12 faces
+    path = tmp_path / "cube66.stl"
+    mesh.export(path)
+    lowered = []
+
+    def listen(event, duration, **kwargs):
+        if event == "/jax/core/compile/jaxpr_to_mlir_module_duration":  # one per program lowered
+            lowered.append(kwargs.get("fun_name", "?"))
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        res = jaxgrasp.plan(path, hand=hand, progress=lambda *a: None, **PLAN, **FIELDS)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert len(res.grasps) >= 1, res.summary()
+    assert lowered == []
+
+
+@pytest.mark.slow
 def test_epsilon_ranks_by_epsilon(hand):
     eps = jaxgrasp.plan(CUBE, hand=hand, objective="epsilon", tune_maxiter=5, progress=lambda *a: None, **PLAN,
                         **FIELDS)

@@ -1,8 +1,8 @@
 """A planned Shadow-hand grasp under DexGraspBench's protocol (issue 68).
 
-The grasp is the planner's best on pybullet's generated object 041 (70 mm, E = 3e5 Pa,
-mu = 0.8, f_max = 15 N, 500 kg/m^3: ``experiments/hand_simulation``, line 3 of its
-``planned_grasps.jsonl``), four fingertips in contact. Its convex pieces are CoACD's,
+The grasp is a planner's best on pybullet's generated object 041 (70 mm, E = 3e5 Pa,
+mu = 0.8, f_max = 15 N, 500 kg/m^3; ``tests/data/shadow_041/grasp.json``, kept here so that
+reruns of ``experiments/hand_simulation`` do not change the test), four fingertips in contact. Its convex pieces are CoACD's,
 computed once and stored beside the mesh (``tests/data/shadow_041``) so that the test does
 not run CoACD.
 """
@@ -27,8 +27,7 @@ TIPS = [f"robot0:C_{f}distal" for f in ("ff", "mf", "rf", "lf", "th")]
 
 @pytest.fixture(scope="module")
 def planned():
-    row = json.loads((ROOT / "experiments" / "hand_simulation" / "planned_grasps.jsonl").read_text().splitlines()[3])
-    assert row["object"] == 41
+    row = json.loads((DATA / "grasp.json").read_text())
     hand = jaxgrasp.Hand.from_file(ROOT / "examples" / "hands" / "shadow" / "shadow_hand.xml", TIPS)
     hg = hand.grasp(row["qpos"], DATA / "041.stl", wrist=row["wrist"], young_modulus=3e5, friction=0.8,
                     max_force=15.0, density=500.0, units="mm")
