@@ -90,8 +90,9 @@ def self_segments(tree: KinematicTree):
 
     A capsule is its axis segment with its radius (exact), a cylinder the capsule of its
     radius and half-length (rounded ends: it over-reaches its flat ends by up to a radius),
-    a sphere a segment of length 0, a box its `link_samples` spheres (the box with its
-    edges rounded by its smallest half-size: it falls short of the box's edges and corners);
+    a sphere a segment of length 0, a box the capsules of `_box_segments` (the box with its
+    edges rounded by its smallest half-size, the union of `link_samples`' spheres and the
+    gaps between them along its longest axis: it falls short of the box's edges and corners);
     pairs with a mesh or plane geom are left out. Each row ``r`` pairs the swept sphere
     ``row_a[r]`` of the first geom with ``row_b[r]`` of the second, of pair ``row_pair[r]``.
     """
@@ -106,9 +107,11 @@ def self_segments(tree: KinematicTree):
         size = tree.geom_size[g]
         if tree.geom_type[g] in (CAPSULE, CYLINDER):
             pts, rad = np.array([[[0.0, 0.0, -size[1]], [0.0, 0.0, size[1]]]]), np.array([size[0]])
-        else:
-            _, centres, rad = link_samples(tree, [g])
-            pts = np.repeat(centres[:, None, :], 2, axis=1)
+        elif tree.geom_type[g] == BOX:
+            pts = _box_segments(size[:3])
+            rad = np.full(len(pts), np.min(size[:3]))
+        else:  # a sphere
+            pts, rad = np.zeros((1, 2, 3)), np.array([size[0]])
         geoms += [int(g)] * len(rad)
         ends += list(pts)
         radii += list(rad)
@@ -118,6 +121,23 @@ def self_segments(tree: KinematicTree):
     rows = np.array(rows, dtype=int).reshape(-1, 3)
     return (pairs, np.array(geoms, dtype=int), np.array(ends, dtype=np.float64).reshape(-1, 2, 3),
             np.array(radii, dtype=np.float64), rows[:, 0], rows[:, 1], rows[:, 2])
+
+
+def _box_segments(half: np.ndarray) -> np.ndarray:
+    """``(K, 2, 3)`` m: the segments whose capsules of the box's smallest half-size ``r``
+    make the box of half-sizes ``half`` (3,) with its edges rounded by ``r``: the lines of
+    `_box_sheet`'s grid along the box's longest axis, each from end to end of the sheet.
+    As many capsules as the grid has lines, not points: a pair of boxes costs the product
+    of their lines, where their spheres' product ran to tens of thousands of rows."""
+    r = float(np.min(half))
+    inner = np.maximum(np.asarray(half, np.float64) - r, 0.0)
+    long = int(np.argmax(inner))
+    across = np.array(half, np.float64)
+    across[long] = r  # the sheet's grid collapsed to one point along the long axis
+    centres = _box_sheet(across)
+    step = np.zeros(3)
+    step[long] = inner[long]
+    return np.stack([centres - step, centres + step], axis=1)
 
 
 def segment_distance(p1, q1, p2, q2):
